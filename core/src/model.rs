@@ -1,0 +1,363 @@
+//! The data that flows between stages: layers, contour trees, sub-regions with their
+//! compositions, materials and parts, blocks and work cycles, toolpaths, and the plan of
+//! one layer that exporters receive.
+
+use serde::{Deserialize, Serialize};
+
+use crate::error::{Error, Result};
+use crate::geom::{Contour, Point2, Polygon};
+
+/// Where and how thick one layer is, before it is cut.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct LayerSlot {
+    /// Position in build order, from 0.
+    pub index: usize,
+    /// Height of the layer's top surface (mm).
+    pub z: f64,
+    /// Layer thickness (mm); the layer spans `z - thickness .. z`.
+    pub thickness: f64,
+    /// Height at which the mesh is cut for this layer (mm).
+    pub cut_z: f64,
+}
+
+/// One cut of one mesh: closed contours, outer counter-clockwise, holes clockwise.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+pub struct Layer {
+    pub index: usize,
+    pub z: f64,
+    pub thickness: f64,
+    pub contours: Vec<Contour>,
+    /// What the slicer repaired or dropped in this layer, for the user.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub warnings: Vec<String>,
+}
+
+impl Layer {
+    pub fn from_slot(slot: &LayerSlot) -> Self {
+        Self {
+            index: slot.index,
+            z: slot.z,
+            thickness: slot.thickness,
+            contours: Vec::new(),
+            warnings: Vec::new(),
+        }
+    }
+}
+
+/// A contour's place in the containment hierarchy of its layer.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+pub struct ContourNode {
+    /// Index into the layer's contours.
+    pub contour: usize,
+    /// Nesting depth: 0 for outermost contours; even levels bound material from outside,
+    /// odd levels are holes.
+    pub level: usize,
+    pub parent: Option<usize>,
+    pub children: Vec<usize>,
+}
+
+/// One solid area: a contour at an even level and its direct children (its holes).
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+pub struct Family {
+    pub outer: usize,
+    pub holes: Vec<usize>,
+}
+
+/// The containment hierarchy of a layer's contours. `nodes[i]` describes contour `i`.
+#[derive(Debug, Clone, Default, PartialEq, Eq, Serialize, Deserialize)]
+pub struct ContourTree {
+    pub nodes: Vec<ContourNode>,
+    pub families: Vec<Family>,
+}
+
+impl ContourTree {
+    /// The polygon of family `f` built from the layer's contours.
+    pub fn family_polygon(&self, contours: &[Contour], f: usize) -> Polygon {
+        let fam = &self.families[f];
+        Polygon::new(
+            contours[fam.outer].clone().oriented(true),
+            fam.holes
+                .iter()
+                .map(|&h| contours[h].clone().oriented(false))
+                .collect(),
+        )
+    }
+
+    /// Contours with no parent.
+    pub fn roots(&self) -> impl Iterator<Item = usize> + '_ {
+        self.nodes
+            .iter()
+            .enumerate()
+            .filter(|(_, n)| n.parent.is_none())
+            .map(|(i, _)| i)
+    }
+}
+
+/// A sub-region of constant material inside one family.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Region {
+    /// Family index in the layer's contour tree.
+    pub family: usize,
+    /// Order from the grading reference outward-in: 0, 1, ..., n-1.
+    pub index: usize,
+    /// Number of sub-regions the family was divided into (N_R).
+    pub count: usize,
+    /// Normalised level r in [0, 1]: 0 at the grading reference, 1 at the far end.
+    pub level: f64,
+    pub polygon: Polygon,
+    /// Circumferential cell index when the region is split along its length.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub cell: Option<usize>,
+    /// Reference point for graders that vary with position (cell centre, centroid).
+    pub reference: Point2,
+    /// The material composition, once graded.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub composition: Option<Composition>,
+}
+
+impl Region {
+    pub fn area(&self) -> f64 {
+        self.polygon.area()
+    }
+}
+
+/// Tolerance for a composition's sum.
+pub const COMPOSITION_TOLERANCE: f64 = 1e-9;
+
+/// Volume fractions over the part's primary materials (same order), each in [0, 1],
+/// summing to 1.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(transparent)]
+pub struct Composition {
+    pub fractions: Vec<f64>,
+}
+
+impl Composition {
+    /// Checks that every fraction lies in [0, 1] and that they sum to 1 (1e-9).
+    pub fn new(fractions: Vec<f64>) -> Result<Self> {
+        Self::check(&fractions)?;
+        Ok(Self { fractions })
+    }
+
+    /// A pure material `i` of `n`.
+    pub fn pure(i: usize, n: usize) -> Self {
+        let mut fractions = vec![0.0; n];
+        if let Some(f) = fractions.get_mut(i) {
+            *f = 1.0;
+        }
+        Self { fractions }
+    }
+
+    /// Two materials: `f` of the first and `1 - f` of the second.
+    pub fn binary(f: f64) -> Result<Self> {
+        Self::new(vec![f, 1.0 - f])
+    }
+
+    pub fn check(fractions: &[f64]) -> Result<()> {
+        if fractions.is_empty() {
+            return Err(Error::Composition("no fractions".into()));
+        }
+        for (i, &f) in fractions.iter().enumerate() {
+            if !f.is_finite() || !(-COMPOSITION_TOLERANCE..=1.0 + COMPOSITION_TOLERANCE).contains(&f) {
+                return Err(Error::Composition(format!(
+                    "fraction {i} is {f}, outside [0, 1] (fractions {fractions:?})"
+                )));
+            }
+        }
+        let sum: f64 = fractions.iter().sum();
+        if (sum - 1.0).abs() > COMPOSITION_TOLERANCE {
+            return Err(Error::Composition(format!(
+                "fractions {fractions:?} sum to {sum}, not 1"
+            )));
+        }
+        Ok(())
+    }
+
+    /// The fraction-weighted blend of the materials' property colours (Eq. 13 of the
+    /// topological-hierarchy paper), each channel rounded half away from zero.
+    pub fn colour(&self, materials: &[Material]) -> [u8; 3] {
+        let mut rgb = [0.0f64; 3];
+        for (f, m) in self.fractions.iter().zip(materials) {
+            for (c, &mc) in rgb.iter_mut().zip(&m.colour) {
+                *c += f * f64::from(mc);
+            }
+        }
+        rgb.map(|c| c.round().clamp(0.0, 255.0) as u8)
+    }
+}
+
+/// A primary material.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Material {
+    pub name: String,
+    /// Property colour used in previews and in the modified CLI file.
+    pub colour: [u8; 3],
+    /// Preferred layer thickness (mm), for per-material layer thickness.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub layer_thickness: Option<f64>,
+}
+
+/// A part of the object: one mesh (or one family of a mesh), its materials (indices into
+/// the pipeline's materials) and how it is graded.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct PartInfo {
+    pub name: String,
+    /// Indices into the pipeline's materials, in the order compositions use.
+    pub materials: Vec<usize>,
+    /// Index of the part's mesh among the loaded meshes.
+    pub mesh: usize,
+    /// Height range of the part's mesh (mm).
+    pub z_min: f64,
+    pub z_max: f64,
+}
+
+/// A slab of the object between two cutting planes, holding whole material regions.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Block {
+    pub z_start: f64,
+    pub z_end: f64,
+    /// Material regions present in the block (indices into the sequence's regions).
+    pub regions: Vec<usize>,
+    pub cycle: WorkCycle,
+}
+
+/// A region of the object that wants its own layer thickness.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct MaterialRegion {
+    pub name: String,
+    /// Layer thickness in integer micrometres (exact arithmetic).
+    pub thickness_um: u64,
+    pub z_start: f64,
+    pub z_end: f64,
+}
+
+/// The repeating unit of deposition in a block: its height is the least common multiple
+/// of the thicknesses present.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct WorkCycle {
+    pub height_um: u64,
+    pub steps: Vec<CycleStep>,
+}
+
+/// One deposition step: at `height_um` above the cycle's base, deposit one layer of
+/// `region` (thickness `thickness_um`).
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+pub struct CycleStep {
+    pub height_um: u64,
+    pub region: usize,
+    pub thickness_um: u64,
+}
+
+/// The fabrication sequence of the object.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+pub struct Sequence {
+    pub regions: Vec<MaterialRegion>,
+    pub blocks: Vec<Block>,
+}
+
+/// A tool: one per material or per mixture on a mixing head.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Tool {
+    pub index: usize,
+    pub name: String,
+    /// Materials this tool deposits (indices into the pipeline's materials).
+    pub materials: Vec<usize>,
+}
+
+/// A point of a timed path.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct TimedPoint {
+    pub p: Point2,
+    /// Seconds from the start of the layer.
+    pub t: f64,
+}
+
+/// What a path segment does.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum PathKind {
+    Extrude,
+    Travel,
+    Pause,
+}
+
+/// One continuous move of one tool in a layer.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Toolpath {
+    pub tool: usize,
+    pub kind: PathKind,
+    pub points: Vec<TimedPoint>,
+    /// Extrusion width (mm); 0 for travel.
+    pub width: f64,
+    /// Composition deposited along the path (over the part's materials), if extruding.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub composition: Option<Composition>,
+    /// Part and region the path fills, if any.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub part: Option<usize>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub region: Option<usize>,
+}
+
+impl Toolpath {
+    pub fn length(&self) -> f64 {
+        self.points.windows(2).map(|w| (w[1].p - w[0].p).norm()).sum()
+    }
+}
+
+/// One part's share of a layer.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct PartLayer {
+    pub part: usize,
+    pub contours: Vec<Contour>,
+    pub tree: ContourTree,
+    /// Families of the tree that belong to this part (all, unless selected by point).
+    pub families: Vec<usize>,
+    pub regions: Vec<Region>,
+}
+
+/// Everything planned for one layer: what exporters receive, in build order.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct LayerPlan {
+    pub index: usize,
+    pub z: f64,
+    pub thickness: f64,
+    pub parts: Vec<PartLayer>,
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub toolpaths: Vec<Toolpath>,
+    /// Build time of the layer in seconds, when planned.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub build_time: Option<f64>,
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub warnings: Vec<String>,
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn mat(name: &str, colour: [u8; 3]) -> Material {
+        Material {
+            name: name.into(),
+            colour,
+            layer_thickness: None,
+        }
+    }
+
+    #[test]
+    fn composition_checks_bounds_and_sum() {
+        assert!(Composition::new(vec![0.25, 0.75]).is_ok());
+        assert!(Composition::new(vec![0.5, 0.4]).is_err());
+        assert!(Composition::new(vec![1.5, -0.5]).is_err());
+        assert!(Composition::new(vec![f64::NAN, 1.0]).is_err());
+        assert!(Composition::new(vec![]).is_err());
+    }
+
+    #[test]
+    fn colour_is_fraction_weighted_blend() {
+        let m = [mat("red", [255, 0, 0]), mat("green", [0, 255, 0])];
+        let c = Composition::binary(0.5).expect("valid");
+        assert_eq!(c.colour(&m), [128, 128, 0]);
+        assert_eq!(Composition::pure(1, 2).colour(&m), [0, 255, 0]);
+    }
+}

@@ -1,0 +1,717 @@
+//! Pipeline files: the TOML a user writes to assemble stages, parsed with spans so that
+//! every error names file, line and column, and `--set` overrides applied on top.
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+
+use serde::Deserialize;
+use serde::de::DeserializeOwned;
+use toml::Spanned;
+use toml::de::{DeTable, DeValue};
+
+use crate::error::{Error, Result};
+use crate::model::Material;
+use crate::source::{Location, SourceFile, Span};
+use crate::stage::StageKind;
+
+/// One step of a path from the document root to a table.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum PathElem {
+    Key(String),
+    Index(usize),
+}
+
+impl std::fmt::Display for PathElem {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            PathElem::Key(k) => f.write_str(k),
+            PathElem::Index(i) => write!(f, "{i}"),
+        }
+    }
+}
+
+fn key(k: &str) -> PathElem {
+    PathElem::Key(k.to_string())
+}
+
+/// A table of a pipeline file together with where it came from, so that a stage can
+/// deserialise its options and point errors at the right key.
+#[derive(Debug, Clone)]
+pub struct TableRef {
+    /// The table as it is after `--set` overrides.
+    pub table: toml::Table,
+    file: Arc<SourceFile>,
+    path: Vec<PathElem>,
+    /// True when an override changed something in this table: spans then no longer
+    /// describe the values, and errors name the override instead.
+    overridden: bool,
+    /// Keys the host consumes before the stage sees the table (`use`, placement).
+    host_keys: &'static [&'static str],
+}
+
+impl TableRef {
+    /// A table that did not come from a file (tests, examples, generated pipelines).
+    pub fn detached(name: &str, table: toml::Table) -> Self {
+        let text = toml::to_string(&table).unwrap_or_default();
+        Self {
+            table,
+            file: SourceFile::new(format!("<{name}>"), text),
+            path: Vec::new(),
+            overridden: false,
+            host_keys: &["use"],
+        }
+    }
+
+    /// Parses `text` as the body of one table (e.g. a stage's example snippet).
+    pub fn parse_snippet(name: &str, text: &str) -> Result<Self> {
+        let file = SourceFile::new(format!("<{name}>"), text);
+        let table: toml::Table = toml::from_str(text).map_err(|e| toml_error(&file, &e))?;
+        Ok(Self {
+            table,
+            file,
+            path: Vec::new(),
+            overridden: false,
+            host_keys: &["use"],
+        })
+    }
+
+    pub fn file(&self) -> &Arc<SourceFile> {
+        &self.file
+    }
+
+    /// The dotted path of this table in its file (`slice`, `parts.0.grade`).
+    pub fn path_string(&self) -> String {
+        self.path
+            .iter()
+            .map(ToString::to_string)
+            .collect::<Vec<_>>()
+            .join(".")
+    }
+
+    /// The `use = "name"` of a stage table.
+    pub fn use_name(&self) -> Option<&str> {
+        self.table.get("use").and_then(|v| v.as_str())
+    }
+
+    pub fn get(&self, k: &str) -> Option<&toml::Value> {
+        self.table.get(k)
+    }
+
+    /// Same table with a different set of host-consumed keys.
+    pub fn with_host_keys(mut self, keys: &'static [&'static str]) -> Self {
+        self.host_keys = keys;
+        self
+    }
+
+    /// Deserialises the table, less the host's keys, into `T`. Errors point at the key
+    /// or value in the file.
+    pub fn parse<T: DeserializeOwned>(&self) -> Result<T> {
+        if !self.overridden
+            && let Ok(doc) = DeTable::parse(&self.file.text)
+            && let Some(value) = navigate_de(doc, &self.path)
+        {
+            let span = value.span();
+            let mut inner = value.into_inner();
+            if let DeValue::Table(t) = &mut inner {
+                let host: Vec<_> = t
+                    .iter()
+                    .filter(|(k, _)| self.host_keys.contains(&k.get_ref().as_ref()))
+                    .map(|(k, _)| k.clone())
+                    .collect();
+                for k in host {
+                    t.remove(&k);
+                }
+            }
+            let de = toml::de::ValueDeserializer::from(Spanned::new(span, inner));
+            return T::deserialize(de).map_err(|e| self.de_error(&e));
+        }
+        let mut table = self.table.clone();
+        for k in self.host_keys {
+            table.remove(*k);
+        }
+        T::deserialize(toml::Value::Table(table)).map_err(|e| {
+            Error::config(format!(
+                "[{}] (after --set overrides): {}",
+                self.path_string(),
+                e.message()
+            ))
+        })
+    }
+
+    fn de_error(&self, e: &toml::de::Error) -> Error {
+        let location = e
+            .span()
+            .map(|s| Location::new(self.file.clone(), s))
+            .or_else(|| self.location_of(None));
+        Error::Config {
+            location,
+            message: format!("[{}] {}", self.path_string(), e.message().trim()),
+            help: None,
+        }
+    }
+
+    /// Where `key` of this table is written, or the table itself when `key` is `None` or
+    /// absent.
+    pub fn location_of(&self, key: Option<&str>) -> Option<Location> {
+        let doc = DeTable::parse(&self.file.text).ok()?;
+        let value = navigate_de(doc, &self.path)?;
+        let table_span = value.span();
+        if let (Some(k), DeValue::Table(t)) = (key, value.get_ref())
+            && let Some((kk, _)) = t.iter().find(|(kk, _)| kk.get_ref().as_ref() == k)
+        {
+            return Some(Location::new(self.file.clone(), kk.span()));
+        }
+        Some(Location::new(self.file.clone(), table_span))
+    }
+
+    /// A configuration error at `key` of this table.
+    pub fn error_at(&self, key: &str, message: impl Into<String>) -> Error {
+        let message = format!("[{}] {}: {}", self.path_string(), key, message.into());
+        match (self.overridden, self.location_of(Some(key))) {
+            (false, Some(loc)) => Error::config_at(loc, message),
+            _ => Error::config(message),
+        }
+    }
+}
+
+fn navigate_de<'i>(doc: Spanned<DeTable<'i>>, path: &[PathElem]) -> Option<Spanned<DeValue<'i>>> {
+    let span = doc.span();
+    let mut cur = Spanned::new(span, DeValue::Table(doc.into_inner()));
+    for elem in path {
+        let next = match (cur.into_inner(), elem) {
+            (DeValue::Table(mut t), PathElem::Key(k)) => {
+                let found = t
+                    .iter()
+                    .find(|(kk, _)| kk.get_ref().as_ref() == k.as_str())?
+                    .0
+                    .clone();
+                t.remove(&found)?
+            }
+            (DeValue::Array(a), PathElem::Index(i)) => a.get(*i)?.clone(),
+            _ => return None,
+        };
+        cur = next;
+    }
+    Some(cur)
+}
+
+/// Converts a TOML syntax or type error of the whole file into a located error.
+fn toml_error(file: &Arc<SourceFile>, e: &toml::de::Error) -> Error {
+    Error::Config {
+        location: e.span().map(|s| Location::new(file.clone(), s)),
+        message: e.message().trim().to_string(),
+        help: None,
+    }
+}
+
+/// A `--set TABLE.KEY=VALUE` override.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Override {
+    pub path: Vec<PathElem>,
+    pub value: toml::Value,
+}
+
+impl std::str::FromStr for Override {
+    type Err = Error;
+
+    /// `slice.thickness=0.3`, `parts.0.grade.use="xy"`; a value that is not valid TOML
+    /// is taken as a string.
+    fn from_str(s: &str) -> Result<Self> {
+        let (path, value) = s
+            .split_once('=')
+            .ok_or_else(|| Error::config(format!("--set {s}: expected TABLE.KEY=VALUE")))?;
+        let path: Vec<PathElem> = path
+            .trim()
+            .split('.')
+            .map(|p| match p.parse::<usize>() {
+                Ok(i) => PathElem::Index(i),
+                Err(_) => key(p.trim()),
+            })
+            .collect();
+        if path.iter().any(|p| matches!(p, PathElem::Key(k) if k.is_empty())) {
+            return Err(Error::config(format!("--set {s}: empty key in path")));
+        }
+        let value = value.trim();
+        let value = toml::from_str::<toml::Table>(&format!("v = {value}"))
+            .ok()
+            .and_then(|mut t| t.remove("v"))
+            .unwrap_or_else(|| toml::Value::String(value.to_string()));
+        Ok(Override { path, value })
+    }
+}
+
+impl Override {
+    fn apply(&self, root: &mut toml::Value) -> Result<()> {
+        let err = |m: &str| {
+            let p: Vec<String> = self.path.iter().map(ToString::to_string).collect();
+            Error::config(format!("--set {}: {m}", p.join(".")))
+        };
+        let (last, init) = self.path.split_last().ok_or_else(|| err("empty path"))?;
+        let mut cur = root;
+        for elem in init {
+            cur = match (cur, elem) {
+                (toml::Value::Table(t), PathElem::Key(k)) => t
+                    .entry(k.clone())
+                    .or_insert_with(|| toml::Value::Table(toml::Table::new())),
+                (toml::Value::Array(a), PathElem::Index(i)) => {
+                    a.get_mut(*i).ok_or_else(|| err("index out of range"))?
+                }
+                _ => return Err(err("path does not lead to a table")),
+            };
+        }
+        match (cur, last) {
+            (toml::Value::Table(t), PathElem::Key(k)) => {
+                t.insert(k.clone(), self.value.clone());
+            }
+            (toml::Value::Array(a), PathElem::Index(i)) => {
+                *a.get_mut(*i).ok_or_else(|| err("index out of range"))? = self.value.clone();
+            }
+            _ => return Err(err("path does not lead to a table")),
+        }
+        Ok(())
+    }
+}
+
+/// Whether `a` is a prefix of `b` or `b` of `a`.
+fn paths_touch(a: &[PathElem], b: &[PathElem]) -> bool {
+    a.iter().zip(b).all(|(x, y)| x == y)
+}
+
+/// A material colour: `[r, g, b]` or `"#rrggbb"`.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(untagged)]
+enum RawColour {
+    Rgb([u8; 3]),
+    Hex(String),
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawMaterial {
+    colour: RawColour,
+    layer_thickness: Option<f64>,
+    #[serde(default)]
+    #[expect(dead_code, reason = "documentation for the reader of the pipeline")]
+    description: Option<String>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawPipeline {
+    name: Option<String>,
+    #[serde(default)]
+    #[expect(dead_code, reason = "documentation for the reader of the pipeline")]
+    description: Option<String>,
+    #[serde(default)]
+    plugins: Vec<String>,
+    model: Option<toml::Table>,
+    #[serde(default)]
+    materials: toml::Table,
+    #[serde(default)]
+    parts: Vec<toml::Table>,
+    slice: Option<toml::Table>,
+    sort: Option<toml::Table>,
+    discretise: Option<toml::Table>,
+    grade: Option<toml::Table>,
+    sequence: Option<toml::Table>,
+    plan: Option<toml::Table>,
+    #[serde(default)]
+    output: Vec<toml::Table>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawPart {
+    name: Option<String>,
+    materials: Option<Vec<String>>,
+    mesh: Option<usize>,
+    #[serde(default)]
+    #[expect(dead_code, reason = "read through its TableRef")]
+    model: Option<toml::Table>,
+    #[serde(default)]
+    #[expect(dead_code, reason = "read through its TableRef")]
+    discretise: Option<toml::Table>,
+    #[serde(default)]
+    #[expect(dead_code, reason = "read through its TableRef")]
+    grade: Option<toml::Table>,
+}
+
+/// How the `[model]` table places meshes on the bed; consumed by the host.
+#[derive(Debug, Clone, Copy, PartialEq, Deserialize, Default)]
+#[serde(rename_all = "lowercase")]
+pub enum Placement {
+    /// Keep the file's coordinates.
+    Keep,
+    /// Drop the lowest point to z = 0, keep x and y.
+    #[default]
+    Bed,
+    /// Drop to z = 0 and centre x and y on the origin.
+    Centre,
+}
+
+/// Keys of a `[model]` table that the host reads itself.
+pub const MODEL_HOST_KEYS: &[&str] = &["use", "scale", "place"];
+
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawModelHost {
+    #[serde(default = "one")]
+    scale: f64,
+    #[serde(default)]
+    place: Placement,
+}
+
+fn one() -> f64 {
+    1.0
+}
+
+/// A part as the pipeline describes it.
+#[derive(Debug, Clone)]
+pub struct PartSpec {
+    pub name: String,
+    /// Indices into [`Pipeline::materials`].
+    pub materials: Vec<usize>,
+    /// The part's own model; when absent, the pipeline's `[model]`.
+    pub model: Option<ModelSpec>,
+    /// Which mesh of the model; `None` takes all its meshes as one.
+    pub mesh: Option<usize>,
+    pub discretise: Option<TableRef>,
+    pub grade: Option<TableRef>,
+    pub table: Option<TableRef>,
+}
+
+/// A model table with the host's placement settings read out.
+#[derive(Debug, Clone)]
+pub struct ModelSpec {
+    pub table: TableRef,
+    pub scale: f64,
+    pub place: Placement,
+}
+
+/// A parsed pipeline: what to make, from what, and with which stages.
+#[derive(Debug, Clone)]
+pub struct Pipeline {
+    pub file: Arc<SourceFile>,
+    /// Folder of the pipeline file; relative paths resolve against it.
+    pub base_dir: PathBuf,
+    pub name: String,
+    /// Dynamic plugin libraries to load, resolved against `base_dir`.
+    pub plugins: Vec<PathBuf>,
+    pub model: Option<ModelSpec>,
+    pub materials: Vec<Material>,
+    pub parts: Vec<PartSpec>,
+    /// Stage tables by kind (slice, sort, discretise, grade, sequence, plan).
+    pub stages: BTreeMap<StageKind, TableRef>,
+    /// `[[output]]` tables, one exporter each.
+    pub outputs: Vec<TableRef>,
+}
+
+impl Pipeline {
+    /// Reads and parses a pipeline file, applying `--set` overrides.
+    pub fn load(path: &Path, overrides: &[Override]) -> Result<Pipeline> {
+        let file = SourceFile::read(path)?;
+        let base_dir = path
+            .parent()
+            .map(Path::to_path_buf)
+            .filter(|p| !p.as_os_str().is_empty())
+            .unwrap_or_else(|| PathBuf::from("."));
+        Self::parse(file, base_dir, overrides)
+    }
+
+    /// Parses pipeline text; `base_dir` resolves relative paths.
+    pub fn parse(file: Arc<SourceFile>, base_dir: PathBuf, overrides: &[Override]) -> Result<Pipeline> {
+        let doc: toml::Table = toml::from_str(&file.text).map_err(|e| toml_error(&file, &e))?;
+        let mut root = toml::Value::Table(doc);
+        for o in overrides {
+            o.apply(&mut root)?;
+        }
+        let toml::Value::Table(doc) = root else {
+            return Err(Error::config("pipeline root is not a table"));
+        };
+        let table_ref = |path: Vec<PathElem>, table: toml::Table| TableRef {
+            table,
+            file: file.clone(),
+            overridden: overrides.iter().any(|o| paths_touch(&o.path, &path)),
+            path,
+            host_keys: &["use"],
+        };
+        let root_ref = table_ref(Vec::new(), doc.clone()).with_host_keys(&[]);
+        let raw: RawPipeline = root_ref.parse()?;
+
+        let model = match raw.model {
+            Some(t) => {
+                let tr = table_ref(vec![key("model")], t).with_host_keys(MODEL_HOST_KEYS);
+                Some(model_spec(tr)?)
+            }
+            None => None,
+        };
+
+        let mut materials = Vec::new();
+        for (name, _) in &raw.materials {
+            let tr = table_ref(
+                vec![key("materials"), key(name)],
+                raw.materials
+                    .get(name)
+                    .and_then(|v| v.as_table())
+                    .cloned()
+                    .ok_or_else(|| root_ref.error_at("materials", format!("`{name}` must be a table")))?,
+            )
+            .with_host_keys(&[]);
+            let m: RawMaterial = tr.parse()?;
+            let colour = match m.colour {
+                RawColour::Rgb(c) => c,
+                RawColour::Hex(h) => {
+                    parse_hex(&h).ok_or_else(|| tr.error_at("colour", format!("`{h}` is not #rrggbb")))?
+                }
+            };
+            if let Some(t) = m.layer_thickness
+                && !(t.is_finite() && t > 0.0)
+            {
+                return Err(tr.error_at("layer_thickness", "must be a positive number of mm"));
+            }
+            materials.push(Material {
+                name: name.clone(),
+                colour,
+                layer_thickness: m.layer_thickness,
+            });
+        }
+
+        let mut parts = Vec::new();
+        for (i, t) in raw.parts.iter().enumerate() {
+            let path = vec![key("parts"), PathElem::Index(i)];
+            let tr = table_ref(path.clone(), t.clone()).with_host_keys(&[]);
+            let p: RawPart = tr.parse()?;
+            let sub = |k: &str, host: &'static [&'static str]| {
+                t.get(k).and_then(|v| v.as_table()).map(|st| {
+                    let mut p = path.clone();
+                    p.push(key(k));
+                    table_ref(p, st.clone()).with_host_keys(host)
+                })
+            };
+            let part_materials = match &p.materials {
+                Some(names) => names
+                    .iter()
+                    .map(|n| {
+                        materials.iter().position(|m| &m.name == n).ok_or_else(|| {
+                            tr.error_at("materials", format!("no material named `{n}` in [materials]"))
+                        })
+                    })
+                    .collect::<Result<Vec<_>>>()?,
+                None => (0..materials.len()).collect(),
+            };
+            if part_materials.is_empty() {
+                return Err(tr.error_at("materials", "a part needs at least one material"));
+            }
+            parts.push(PartSpec {
+                name: p.name.unwrap_or_else(|| format!("part{i}")),
+                materials: part_materials,
+                model: sub("model", MODEL_HOST_KEYS).map(model_spec).transpose()?,
+                mesh: p.mesh,
+                discretise: sub("discretise", &["use"]),
+                grade: sub("grade", &["use"]),
+                table: Some(tr),
+            });
+        }
+        if materials.is_empty() {
+            return Err(root_ref
+                .error_at("materials", "the pipeline names no materials")
+                .with_help("add e.g. [materials.red] colour = [255, 0, 0]"));
+        }
+        if parts.is_empty() {
+            parts.push(PartSpec {
+                name: "part".into(),
+                materials: (0..materials.len()).collect(),
+                model: None,
+                mesh: None,
+                discretise: None,
+                grade: None,
+                table: None,
+            });
+        }
+        if model.is_none() && parts.iter().any(|p| p.model.is_none()) {
+            return Err(Error::config_at(
+                Location::new(file.clone(), Span::default()),
+                "no [model] table, and a part has no model of its own",
+            ));
+        }
+
+        let mut stages = BTreeMap::new();
+        for (kind, t) in [
+            (StageKind::Slice, raw.slice),
+            (StageKind::Sort, raw.sort),
+            (StageKind::Discretise, raw.discretise),
+            (StageKind::Grade, raw.grade),
+            (StageKind::Sequence, raw.sequence),
+            (StageKind::Plan, raw.plan),
+        ] {
+            if let Some(t) = t {
+                stages.insert(kind, table_ref(vec![key(kind.name())], t));
+            }
+        }
+        let outputs = raw
+            .output
+            .into_iter()
+            .enumerate()
+            .map(|(i, t)| table_ref(vec![key("output"), PathElem::Index(i)], t))
+            .collect();
+        let name = raw.name.unwrap_or_else(|| {
+            file.path
+                .file_stem()
+                .map(|s| s.to_string_lossy().into_owned())
+                .unwrap_or_else(|| "pipeline".into())
+        });
+        let plugins = raw.plugins.iter().map(|p| base_dir.join(p)).collect();
+        Ok(Pipeline {
+            file,
+            base_dir,
+            name,
+            plugins,
+            model,
+            materials,
+            parts,
+            stages,
+            outputs,
+        })
+    }
+}
+
+/// Reads the host's placement keys of a model table.
+pub fn model_spec(table: TableRef) -> Result<ModelSpec> {
+    let host_only = TableRef {
+        table: table
+            .table
+            .iter()
+            .filter(|(k, _)| ["scale", "place"].contains(&k.as_str()))
+            .map(|(k, v)| (k.clone(), v.clone()))
+            .collect(),
+        ..table.clone()
+    };
+    // Parse from the owned subset: spans of these two keys are found by error_at.
+    let host: RawModelHost =
+        toml::Value::Table(host_only.table.clone())
+            .try_into()
+            .map_err(|e: toml::de::Error| {
+                let k = if e.message().contains("place") {
+                    "place"
+                } else {
+                    "scale"
+                };
+                table.error_at(k, e.message().trim())
+            })?;
+    if !(host.scale.is_finite() && host.scale > 0.0) {
+        return Err(table.error_at("scale", "must be a positive number"));
+    }
+    Ok(ModelSpec {
+        table,
+        scale: host.scale,
+        place: host.place,
+    })
+}
+
+fn parse_hex(h: &str) -> Option<[u8; 3]> {
+    let h = h.strip_prefix('#')?;
+    if h.len() != 6 || !h.is_ascii() {
+        return None;
+    }
+    let c = |i: usize| u8::from_str_radix(&h[i..i + 2], 16).ok();
+    Some([c(0)?, c(2)?, c(4)?])
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const GOOD: &str = r##"
+name = "t"
+[model]
+use = "cube"
+size = 2.0
+
+[materials.red]
+colour = [255, 0, 0]
+[materials.green]
+colour = "#00ff00"
+layer_thickness = 0.5
+
+[slice]
+use = "uniform"
+thickness = 0.2
+
+[[output]]
+use = "json"
+path = "out.json"
+"##;
+
+    fn parse(text: &str, overrides: &[Override]) -> Result<Pipeline> {
+        Pipeline::parse(SourceFile::new("p.toml", text), PathBuf::from("."), overrides)
+    }
+
+    #[test]
+    fn parses_a_pipeline() {
+        let p = parse(GOOD, &[]).expect("parses");
+        assert_eq!(p.materials.len(), 2);
+        assert_eq!(p.materials[1].colour, [0, 255, 0]);
+        assert_eq!(p.parts.len(), 1);
+        assert_eq!(p.parts[0].materials, vec![0, 1]);
+        assert_eq!(p.stages[&StageKind::Slice].use_name(), Some("uniform"));
+        assert_eq!(p.outputs.len(), 1);
+    }
+
+    #[test]
+    fn unknown_top_level_key_names_line_and_column() {
+        let text = GOOD.replace("[slice]", "[slise]");
+        let e = parse(&text, &[]).expect_err("must fail");
+        let loc = e.location().expect("located");
+        assert_eq!(loc.line_col(), (13, 2), "{e}");
+    }
+
+    #[test]
+    fn stage_options_errors_point_at_key() {
+        #[derive(Deserialize, Debug)]
+        #[serde(deny_unknown_fields)]
+        #[expect(dead_code, reason = "only parsed")]
+        struct Opts {
+            thickness: f64,
+        }
+        let text = GOOD.replace("thickness = 0.2", "thicknes = 0.2");
+        let p = parse(&text, &[]).expect("parses");
+        let e = p.stages[&StageKind::Slice]
+            .parse::<Opts>()
+            .expect_err("unknown key");
+        let (line, col) = e.location().expect("located").line_col();
+        assert_eq!((line, col), (15, 1), "{e}");
+        let text = GOOD.replace("thickness = 0.2", "thickness = \"thin\"");
+        let p = parse(&text, &[]).expect("parses");
+        let e = p.stages[&StageKind::Slice]
+            .parse::<Opts>()
+            .expect_err("wrong type");
+        assert_eq!(e.location().expect("located").line_col().0, 15, "{e}");
+    }
+
+    #[test]
+    fn overrides_replace_values() {
+        let o: Override = "slice.thickness=0.3".parse().expect("override");
+        let p = parse(GOOD, &[o]).expect("parses");
+        assert_eq!(
+            p.stages[&StageKind::Slice]
+                .get("thickness")
+                .and_then(|v| v.as_float()),
+            Some(0.3)
+        );
+        let o: Override = "output.0.path=other.json".parse().expect("override");
+        let p = parse(GOOD, &[o]).expect("parses");
+        assert_eq!(
+            p.outputs[0].get("path").and_then(|v| v.as_str()),
+            Some("other.json")
+        );
+    }
+
+    #[test]
+    fn unknown_material_in_part_is_located() {
+        let text = format!("{GOOD}\n[[parts]]\nname = \"a\"\nmaterials = [\"blue\"]\n");
+        let e = parse(&text, &[]).expect_err("unknown material");
+        assert!(e.to_string().contains("blue"), "{e}");
+        assert!(e.location().is_some());
+    }
+}

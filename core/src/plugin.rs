@@ -1,0 +1,390 @@
+//! Dynamic plugins: third-party crates built as `cdylib` and loaded with `libloading`.
+//!
+//! A plugin exports one C-ABI entry symbol, [`ENTRY_SYMBOL`], returning a `#[repr(C)]`
+//! [`PluginDescriptor`]. The descriptor's first four fields (magic, ABI major, ABI
+//! minor, struct size) keep their layout forever, so any host can read them and refuse
+//! a plugin of another ABI with a message naming both versions. Stage factories are
+//! Rust values: they are used only when the plugin was built against the same
+//! lamina-core version by the same compiler.
+//!
+//! `inventory` registrations made inside a loaded library land in that library's own
+//! copy of the registry, so the entry point collects them there and hands them over.
+//! Every call into a plugin's stages goes through `catch_unwind`: a panicking plugin
+//! yields an error, not an aborted host. Libraries are never unloaded, since their code
+//! and statics back the factories handed over.
+
+use std::ffi::{CStr, CString, c_char};
+use std::panic::{AssertUnwindSafe, catch_unwind};
+use std::path::{Path, PathBuf};
+use std::sync::{Arc, Mutex};
+
+use crate::error::{Error, Result};
+use crate::mesh::Mesh;
+use crate::model::*;
+use crate::registry::{Origin, Registry, StageFactory};
+use crate::stage::*;
+
+/// `b"LAMINAPL"` as a little-endian integer: marks a Lamina plugin descriptor.
+pub const PLUGIN_MAGIC: u64 = u64::from_le_bytes(*b"LAMINAPL");
+/// Incremented when the meaning of the descriptor or of the stage traits changes.
+pub const ABI_MAJOR: u32 = 1;
+/// Incremented for additions a host of the same major can ignore.
+pub const ABI_MINOR: u32 = 0;
+/// The entry symbol; `v1` is the version of the descriptor's frozen prefix.
+pub const ENTRY_SYMBOL: &str = "lamina_plugin_entry_v1";
+/// The compiler that built this copy of lamina-core.
+pub const RUSTC_VERSION: &str = env!("LAMINA_RUSTC_VERSION");
+
+/// What a plugin's entry symbol returns. Never constructed by hand: use
+/// [`export_plugin!`](crate::export_plugin).
+#[repr(C)]
+#[derive(Debug)]
+pub struct PluginDescriptor {
+    pub magic: u64,
+    pub abi_major: u32,
+    pub abi_minor: u32,
+    /// `size_of::<PluginDescriptor>()` as the plugin saw it.
+    pub struct_size: usize,
+    /// NUL-terminated lamina-core version the plugin was built against.
+    pub core_version: *const c_char,
+    /// NUL-terminated `rustc --version` of the plugin's compiler.
+    pub rustc_version: *const c_char,
+    /// NUL-terminated plugin name.
+    pub name: *const c_char,
+    pub stages: *const &'static StageFactory,
+    pub stage_count: usize,
+}
+
+/// The frozen prefix of [`PluginDescriptor`], readable whatever the plugin's ABI.
+#[repr(C)]
+#[derive(Debug, Clone, Copy)]
+struct DescriptorPrefix {
+    magic: u64,
+    abi_major: u32,
+    abi_minor: u32,
+    struct_size: usize,
+}
+
+/// Signature of the entry symbol.
+pub type EntryFn = unsafe extern "C" fn() -> *const PluginDescriptor;
+
+/// Declares a crate's entry symbol: the crate becomes a loadable plugin whose stages are
+/// those it registered with [`register_stage!`](crate::register_stage).
+#[macro_export]
+macro_rules! export_plugin {
+    ($name:expr) => {
+        /// Entry point read by Lamina's plugin loader.
+        #[unsafe(no_mangle)]
+        pub extern "C" fn lamina_plugin_entry_v1() -> *const $crate::plugin::PluginDescriptor {
+            $crate::plugin::describe_linked($name)
+        }
+    };
+}
+
+/// Builds the descriptor of the library this code is linked into, from that library's
+/// own `inventory` registrations. Returns null if anything panics.
+pub fn describe_linked(name: &'static str) -> *const PluginDescriptor {
+    catch_unwind(|| {
+        let stages: Vec<&'static StageFactory> = inventory::iter::<StageFactory>.into_iter().collect();
+        let stages: &'static [&'static StageFactory] = Box::leak(stages.into_boxed_slice());
+        let leak = |s: &str| CString::new(s).unwrap_or_default().into_raw().cast_const();
+        let d = PluginDescriptor {
+            magic: PLUGIN_MAGIC,
+            abi_major: ABI_MAJOR,
+            abi_minor: ABI_MINOR,
+            struct_size: std::mem::size_of::<PluginDescriptor>(),
+            core_version: leak(crate::VERSION),
+            rustc_version: leak(RUSTC_VERSION),
+            name: leak(name),
+            stages: stages.as_ptr(),
+            stage_count: stages.len(),
+        };
+        Box::leak(Box::new(d)) as *const PluginDescriptor
+    })
+    .unwrap_or(std::ptr::null())
+}
+
+/// Libraries loaded so far, by canonical path, with their name and factories. Kept for
+/// the life of the process: nothing is ever unloaded.
+static LOADED: Mutex<Vec<LoadedPlugin>> = Mutex::new(Vec::new());
+
+#[derive(Debug, Clone)]
+struct LoadedPlugin {
+    path: PathBuf,
+    name: String,
+    stages: Vec<&'static StageFactory>,
+}
+
+fn refuse(path: &Path, message: impl Into<String>) -> Error {
+    Error::Plugin {
+        path: path.to_path_buf(),
+        message: message.into(),
+    }
+}
+
+/// Reads a NUL-terminated string from a plugin.
+///
+/// # Safety
+/// `p` must be null or point to a NUL-terminated string that outlives the call.
+unsafe fn plugin_str(p: *const c_char) -> Option<String> {
+    if p.is_null() {
+        return None;
+    }
+    // SAFETY: the caller guarantees a valid NUL-terminated string.
+    Some(unsafe { CStr::from_ptr(p) }.to_string_lossy().into_owned())
+}
+
+/// Loads a plugin library and adds its stages to `registry`. Loading the same file
+/// twice adds its stages once per registry.
+pub fn load(registry: &mut Registry, path: &Path) -> Result<String> {
+    let canonical = path
+        .canonicalize()
+        .map_err(|e| refuse(path, format!("cannot open: {e}")))?;
+    let mut loaded = LOADED.lock().unwrap_or_else(|e| e.into_inner());
+    let plugin = match loaded.iter().find(|p| p.path == canonical) {
+        Some(p) => p.clone(),
+        None => {
+            let p = open(&canonical)?;
+            loaded.push(p.clone());
+            p
+        }
+    };
+    drop(loaded);
+    for f in &plugin.stages {
+        registry.add(
+            f,
+            Origin::Dynamic {
+                path: canonical.clone(),
+                plugin: plugin.name.clone(),
+            },
+        )?;
+    }
+    Ok(plugin.name)
+}
+
+fn open(path: &Path) -> Result<LoadedPlugin> {
+    // SAFETY: loading a library runs its initialisers; plugins are code the user chose to
+    // run, like the pipeline that names them.
+    let lib = unsafe { libloading::Library::new(path) }
+        .map_err(|e| refuse(path, format!("cannot load library: {e}")))?;
+    let symbol = format!("{ENTRY_SYMBOL}\0");
+    // SAFETY: the symbol, if present, has the signature `export_plugin!` gives it.
+    let entry: EntryFn = unsafe { lib.get::<EntryFn>(symbol.as_bytes()) }
+        .map(|s| *s)
+        .map_err(|_| {
+            refuse(
+                path,
+                format!(
+                    "not a Lamina plugin: it exports no `{ENTRY_SYMBOL}` (use lamina_core::export_plugin!)"
+                ),
+            )
+        })?;
+    // SAFETY: calling the entry is the plugin contract; a panic inside it is caught by
+    // `describe_linked` on the plugin's side.
+    let ptr = unsafe { entry() };
+    if ptr.is_null() {
+        return Err(refuse(path, "the plugin's entry point failed"));
+    }
+    // SAFETY: every Lamina descriptor starts with the frozen prefix.
+    let prefix = unsafe { std::ptr::read(ptr.cast::<DescriptorPrefix>()) };
+    if prefix.magic != PLUGIN_MAGIC {
+        return Err(refuse(
+            path,
+            "entry point returned something that is not a Lamina plugin descriptor",
+        ));
+    }
+    if prefix.abi_major != ABI_MAJOR || prefix.abi_minor > ABI_MINOR {
+        return Err(refuse(
+            path,
+            format!(
+                "built for plugin ABI {}.{}, this lamina {} supports ABI {}.{}: rebuild the plugin against lamina-core {}",
+                prefix.abi_major,
+                prefix.abi_minor,
+                crate::VERSION,
+                ABI_MAJOR,
+                ABI_MINOR,
+                crate::VERSION
+            ),
+        ));
+    }
+    if prefix.struct_size < std::mem::size_of::<PluginDescriptor>() {
+        return Err(refuse(
+            path,
+            format!(
+                "descriptor is {} bytes, expected at least {}",
+                prefix.struct_size,
+                std::mem::size_of::<PluginDescriptor>()
+            ),
+        ));
+    }
+    // SAFETY: magic, ABI and size checked: the full descriptor is there.
+    let d = unsafe { &*ptr };
+    // SAFETY: the descriptor's strings are leaked NUL-terminated strings.
+    let (core_version, rustc_version, name) = unsafe {
+        (
+            plugin_str(d.core_version).unwrap_or_default(),
+            plugin_str(d.rustc_version).unwrap_or_default(),
+            plugin_str(d.name).unwrap_or_else(|| "unnamed".into()),
+        )
+    };
+    if core_version != crate::VERSION {
+        return Err(refuse(
+            path,
+            format!(
+                "plugin `{name}` was built against lamina-core {core_version}, this lamina is {}: rebuild it",
+                crate::VERSION
+            ),
+        ));
+    }
+    if rustc_version != RUSTC_VERSION {
+        return Err(refuse(
+            path,
+            format!(
+                "plugin `{name}` was built by `{rustc_version}`, this lamina by `{RUSTC_VERSION}`: rebuild it with the same compiler"
+            ),
+        ));
+    }
+    let stages = if d.stage_count == 0 || d.stages.is_null() {
+        Vec::new()
+    } else {
+        // SAFETY: same core version and compiler: the table is `stage_count` valid
+        // `&'static StageFactory` kept alive by the never-unloaded library.
+        unsafe { std::slice::from_raw_parts(d.stages, d.stage_count) }.to_vec()
+    };
+    // Never unloaded: the factories point into the library.
+    std::mem::forget(lib);
+    Ok(LoadedPlugin {
+        path: path.to_path_buf(),
+        name,
+        stages,
+    })
+}
+
+/// Runs `f`, turning a panic into an error naming `label`.
+pub fn guard_call<T>(label: &str, f: impl FnOnce() -> Result<T>) -> Result<T> {
+    catch_unwind(AssertUnwindSafe(f)).unwrap_or_else(|payload| {
+        let message = payload
+            .downcast_ref::<&str>()
+            .map(|s| s.to_string())
+            .or_else(|| payload.downcast_ref::<String>().cloned())
+            .unwrap_or_else(|| "unknown panic".into());
+        Err(Error::Panic {
+            stage: label.to_string(),
+            message,
+        })
+    })
+}
+
+/// A stage of a dynamic plugin: every call is guarded.
+struct Guarded<T: ?Sized> {
+    label: Arc<str>,
+    inner: Box<T>,
+}
+
+impl<T: ?Sized> Guarded<T> {
+    fn wrap<U: ?Sized>(&self, inner: Box<U>) -> Guarded<U> {
+        Guarded {
+            label: self.label.clone(),
+            inner,
+        }
+    }
+}
+
+/// Wraps a stage built by a dynamic plugin so that its panics become errors.
+pub fn guard_stage(label: String, stage: AnyStage) -> AnyStage {
+    let label: Arc<str> = label.into();
+    macro_rules! g {
+        ($inner:expr) => {
+            Box::new(Guarded {
+                label: label.clone(),
+                inner: $inner,
+            })
+        };
+    }
+    match stage {
+        AnyStage::Model(s) => AnyStage::Model(g!(s)),
+        AnyStage::Slice(s) => AnyStage::Slice(g!(s)),
+        AnyStage::Sort(s) => AnyStage::Sort(g!(s)),
+        AnyStage::Discretise(s) => AnyStage::Discretise(g!(s)),
+        AnyStage::Grade(s) => AnyStage::Grade(g!(s)),
+        AnyStage::Sequence(s) => AnyStage::Sequence(g!(s)),
+        AnyStage::Plan(s) => AnyStage::Plan(g!(s)),
+        AnyStage::Export(s) => AnyStage::Export(g!(s)),
+    }
+}
+
+impl ModelSource for Guarded<dyn ModelSource> {
+    fn load(&self, base_dir: &Path) -> Result<Vec<Mesh>> {
+        guard_call(&self.label, || self.inner.load(base_dir))
+    }
+}
+
+impl Slicer for Guarded<dyn Slicer> {
+    fn layers(
+        &self,
+        meshes: &[Arc<Mesh>],
+        info: &RunInfo,
+        sequence: Option<&Sequence>,
+    ) -> Result<Vec<LayerSlot>> {
+        guard_call(&self.label, || self.inner.layers(meshes, info, sequence))
+    }
+
+    fn prepare(&self, mesh: Arc<Mesh>) -> Result<Box<dyn MeshSlicer>> {
+        let inner = guard_call(&self.label, || self.inner.prepare(mesh))?;
+        Ok(Box::new(self.wrap(inner)))
+    }
+}
+
+impl MeshSlicer for Guarded<dyn MeshSlicer> {
+    fn slice(&self, slot: &LayerSlot) -> Result<Layer> {
+        guard_call(&self.label, || self.inner.slice(slot))
+    }
+}
+
+impl Sorter for Guarded<dyn Sorter> {
+    fn sort(&self, layer: &Layer) -> Result<ContourTree> {
+        guard_call(&self.label, || self.inner.sort(layer))
+    }
+}
+
+impl Discretiser for Guarded<dyn Discretiser> {
+    fn discretise(&self, ctx: &FamilyContext<'_>) -> Result<Vec<Region>> {
+        guard_call(&self.label, || self.inner.discretise(ctx))
+    }
+}
+
+impl Grader for Guarded<dyn Grader> {
+    fn grade(&self, ctx: &FamilyContext<'_>, regions: &mut [Region]) -> Result<()> {
+        guard_call(&self.label, || self.inner.grade(ctx, regions))
+    }
+}
+
+impl Sequencer for Guarded<dyn Sequencer> {
+    fn sequence(&self, info: &RunInfo) -> Result<Sequence> {
+        guard_call(&self.label, || self.inner.sequence(info))
+    }
+}
+
+impl Planner for Guarded<dyn Planner> {
+    fn plan(&self, info: &RunInfo, plan: &mut LayerPlan) -> Result<()> {
+        guard_call(&self.label, || self.inner.plan(info, plan))
+    }
+}
+
+impl Exporter for Guarded<dyn Exporter> {
+    fn open(&self, ctx: &mut ExportContext<'_>) -> Result<Box<dyn LayerSink>> {
+        let inner = guard_call(&self.label, || self.inner.open(ctx))?;
+        Ok(Box::new(self.wrap(inner)))
+    }
+}
+
+impl LayerSink for Guarded<dyn LayerSink> {
+    fn layer(&mut self, info: &RunInfo, plan: &LayerPlan) -> Result<()> {
+        guard_call(&self.label, || self.inner.layer(info, plan))
+    }
+
+    fn finish(self: Box<Self>, info: &RunInfo) -> Result<()> {
+        let Guarded { label, inner } = *self;
+        guard_call(&label, || inner.finish(info))
+    }
+}

@@ -1,0 +1,174 @@
+//! The registry of named stage factories: `(kind, name) -> build(table)`. Built-in and
+//! linked plugins register with `inventory`; dynamic plugins hand their factories over
+//! when loaded (see [`crate::plugin`]).
+
+use std::path::{Path, PathBuf};
+
+use crate::error::{Error, Result};
+use crate::pipeline::TableRef;
+use crate::script::ScriptHost;
+use crate::stage::{AnyStage, StageConfig, StageInfo, StageKind};
+
+/// A named stage implementation: its self-description and how to build it from its
+/// pipeline table.
+#[derive(Debug)]
+pub struct StageFactory {
+    pub info: StageInfo,
+    pub build: fn(&StageConfig<'_>) -> Result<AnyStage>,
+}
+
+inventory::collect!(StageFactory);
+
+/// Registers a [`StageFactory`] with the registry of the crate that links this one.
+///
+/// ```ignore
+/// lamina_core::register_stage!(StageFactory { info: INFO, build: build_uniform });
+/// ```
+#[macro_export]
+macro_rules! register_stage {
+    ($factory:expr) => {
+        $crate::inventory::submit! { $factory }
+    };
+}
+
+/// Where a factory came from.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum Origin {
+    /// Linked into this program.
+    Linked,
+    /// Loaded from a dynamic library.
+    Dynamic { path: PathBuf, plugin: String },
+}
+
+/// A factory in the registry.
+#[derive(Debug, Clone)]
+pub struct Registered {
+    pub factory: &'static StageFactory,
+    pub origin: Origin,
+}
+
+impl Registered {
+    pub fn info(&self) -> &StageInfo {
+        &self.factory.info
+    }
+
+    /// `kind:name`, for messages.
+    pub fn label(&self) -> String {
+        format!("{}:{}", self.factory.info.kind, self.factory.info.name)
+    }
+}
+
+/// All stage factories known to a run.
+#[derive(Debug, Default, Clone)]
+pub struct Registry {
+    entries: Vec<Registered>,
+}
+
+impl Registry {
+    /// An empty registry.
+    pub fn new() -> Self {
+        Self::default()
+    }
+
+    /// Every factory linked into this program (built-in plugins and linked third-party
+    /// crates).
+    pub fn linked() -> Result<Self> {
+        let mut r = Self::new();
+        for f in inventory::iter::<StageFactory> {
+            r.add(f, Origin::Linked)?;
+        }
+        Ok(r)
+    }
+
+    /// Adds a factory; a second factory with the same kind and name is refused.
+    pub fn add(&mut self, factory: &'static StageFactory, origin: Origin) -> Result<()> {
+        if let Some(existing) = self.get(factory.info.kind, factory.info.name) {
+            return Err(Error::config(format!(
+                "two {} stages are named `{}` ({:?} and {:?})",
+                factory.info.kind, factory.info.name, existing.origin, origin
+            )));
+        }
+        self.entries.push(Registered { factory, origin });
+        Ok(())
+    }
+
+    pub fn get(&self, kind: StageKind, name: &str) -> Option<&Registered> {
+        self.entries
+            .iter()
+            .find(|e| e.factory.info.kind == kind && e.factory.info.name == name)
+    }
+
+    /// Factories of one kind (or all), sorted by kind then name.
+    pub fn list(&self, kind: Option<StageKind>) -> Vec<&Registered> {
+        let mut v: Vec<_> = self
+            .entries
+            .iter()
+            .filter(|e| kind.is_none_or(|k| e.factory.info.kind == k))
+            .collect();
+        v.sort_by_key(|e| (e.factory.info.kind, e.factory.info.name));
+        v
+    }
+
+    fn names(&self, kind: StageKind) -> String {
+        self.list(Some(kind))
+            .iter()
+            .map(|e| e.factory.info.name)
+            .collect::<Vec<_>>()
+            .join(", ")
+    }
+
+    /// Builds the stage a table names with `use = "..."`.
+    pub fn build(
+        &self,
+        kind: StageKind,
+        table: &TableRef,
+        scripts: &ScriptHost,
+        base_dir: &Path,
+    ) -> Result<AnyStage> {
+        let name = match table.get("use") {
+            Some(toml::Value::String(s)) => s.as_str(),
+            Some(_) => return Err(table.error_at("use", "must be a string naming the stage")),
+            None => {
+                return Err(table
+                    .error_at("use", format!("missing: which {kind} stage to use?"))
+                    .with_help(format!("available: {}", self.names(kind))));
+            }
+        };
+        let entry = self.get(kind, name).ok_or_else(|| {
+            table
+                .error_at("use", format!("no {kind} stage named `{name}`"))
+                .with_help(format!("available: {}", self.names(kind)))
+        })?;
+        self.build_entry(entry, table, scripts, base_dir)
+    }
+
+    /// Builds a stage from a given registry entry.
+    pub fn build_entry(
+        &self,
+        entry: &Registered,
+        table: &TableRef,
+        scripts: &ScriptHost,
+        base_dir: &Path,
+    ) -> Result<AnyStage> {
+        let config = StageConfig {
+            table,
+            scripts,
+            base_dir,
+        };
+        let stage = match &entry.origin {
+            Origin::Linked => (entry.factory.build)(&config)?,
+            Origin::Dynamic { plugin, .. } => {
+                let label = format!("{plugin}/{}", entry.label());
+                let stage = crate::plugin::guard_call(&label, || (entry.factory.build)(&config))?;
+                crate::plugin::guard_stage(label, stage)
+            }
+        };
+        if stage.kind() != entry.factory.info.kind {
+            return Err(Error::stage(
+                entry.label(),
+                format!("factory built a {} stage", stage.kind()),
+            ));
+        }
+        Ok(stage)
+    }
+}

@@ -1,0 +1,797 @@
+//! The runtime: builds the stages a pipeline names, loads the model, and drives the
+//! layers through slice → sort → discretise → grade → plan in parallel, handing the
+//! finished layers to the exporters in build order.
+//!
+//! Layers are independent, so they are processed in windows of a few layers per thread
+//! on a rayon pool; each window is collected in order and streamed to the exporters
+//! before the next one starts. Memory therefore stays bounded by a window plus the
+//! meshes, and the output does not depend on the number of threads.
+
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::time::{Duration, Instant};
+
+use rayon::prelude::*;
+
+use crate::error::{Error, Result};
+use crate::geom::Vector2;
+use crate::mesh::{BBox3, Mesh, Vector3};
+use crate::model::{Composition, Layer, LayerPlan, LayerSlot, PartInfo, PartLayer, Region};
+use crate::output::AtomicOutputs;
+use crate::pipeline::{ModelSpec, Pipeline, Placement, TableRef};
+use crate::registry::Registry;
+use crate::script::{ScriptHost, ScriptLimits};
+use crate::stage::*;
+
+/// How a run is carried out (as opposed to what it makes, which the pipeline says).
+#[derive(Debug, Clone, Default)]
+pub struct RunOptions {
+    /// Worker threads; `None` uses every core.
+    pub threads: Option<usize>,
+    /// Replaces the model file of a single-part pipeline.
+    pub model: Option<PathBuf>,
+    /// Dynamic plugins to load in addition to the pipeline's `plugins`.
+    pub plugins: Vec<PathBuf>,
+    /// Limits applied to every Rhai script.
+    pub script_limits: ScriptLimits,
+}
+
+/// Receives progress from a run. Only the CLI knows the terminal: the runtime reports
+/// here and never prints.
+pub trait Observer: Send + Sync {
+    /// The run is about to process `layers` layers.
+    fn started(&self, _layers: usize) {}
+    /// Layer `index` was handed to the exporters.
+    fn layer_done(&self, _index: usize) {}
+    /// Something was repaired or ignored; the run goes on.
+    fn warning(&self, _message: &str) {}
+}
+
+/// An observer that ignores everything.
+#[derive(Debug, Default, Clone, Copy)]
+pub struct Silent;
+
+impl Observer for Silent {}
+
+/// Time spent in each stage kind, summed over all threads.
+#[derive(Debug, Default)]
+pub struct Timings {
+    nanos: [AtomicU64; StageKind::ALL.len()],
+    wall: AtomicU64,
+}
+
+impl Timings {
+    fn add(&self, kind: StageKind, d: Duration) {
+        let i = StageKind::ALL.iter().position(|k| *k == kind).unwrap_or(0);
+        self.nanos[i].fetch_add(d.as_nanos() as u64, Ordering::Relaxed);
+    }
+
+    fn time<T>(&self, kind: StageKind, f: impl FnOnce() -> T) -> T {
+        let start = Instant::now();
+        let out = f();
+        self.add(kind, start.elapsed());
+        out
+    }
+
+    /// Time spent in `kind`, summed over threads.
+    pub fn get(&self, kind: StageKind) -> Duration {
+        let i = StageKind::ALL.iter().position(|k| *k == kind).unwrap_or(0);
+        Duration::from_nanos(self.nanos[i].load(Ordering::Relaxed))
+    }
+
+    /// Wall-clock time of the whole run.
+    pub fn wall(&self) -> Duration {
+        Duration::from_nanos(self.wall.load(Ordering::Relaxed))
+    }
+
+    /// `(stage, time)` for every stage kind that took any time.
+    pub fn entries(&self) -> Vec<(StageKind, Duration)> {
+        StageKind::ALL
+            .into_iter()
+            .map(|k| (k, self.get(k)))
+            .filter(|(_, d)| !d.is_zero())
+            .collect()
+    }
+}
+
+/// What a finished run produced.
+#[derive(Debug)]
+pub struct RunReport {
+    pub layers: usize,
+    pub regions: usize,
+    /// Files written, under their final names.
+    pub files: Vec<PathBuf>,
+    pub warnings: usize,
+    pub timings: Timings,
+    /// Sum of the planned layer build times (s), when a planner ran.
+    pub build_time: Option<f64>,
+}
+
+struct ModelStage {
+    source: Box<dyn ModelSource>,
+    spec: ModelSpec,
+    /// The replacement file given with `--model`, if any.
+    label: String,
+}
+
+struct PartStages {
+    name: String,
+    materials: Vec<usize>,
+    /// Index into `Engine::models`.
+    model: usize,
+    mesh: Option<usize>,
+    discretiser: Option<Box<dyn Discretiser>>,
+    grader: Option<Box<dyn Grader>>,
+}
+
+/// A pipeline with every stage built, ready to run.
+pub struct Engine {
+    pipeline: Pipeline,
+    threads: Option<usize>,
+    models: Vec<ModelStage>,
+    parts: Vec<PartStages>,
+    slicer: Box<dyn Slicer>,
+    sorter: Box<dyn Sorter>,
+    sequencer: Option<Box<dyn Sequencer>>,
+    planner: Option<Box<dyn Planner>>,
+    exporters: Vec<Box<dyn Exporter>>,
+}
+
+impl std::fmt::Debug for Engine {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Engine")
+            .field("pipeline", &self.pipeline.name)
+            .field("parts", &self.parts.len())
+            .field("exporters", &self.exporters.len())
+            .finish()
+    }
+}
+
+/// Default stage used when a pipeline has no table for a required kind.
+const DEFAULT_SLICER: &str = "uniform";
+const DEFAULT_SORTER: &str = "hierarchy";
+
+fn build_default(
+    registry: &Registry,
+    kind: StageKind,
+    pipeline: &Pipeline,
+    scripts: &ScriptHost,
+    default: &str,
+) -> Result<AnyStage> {
+    match pipeline.stages.get(&kind) {
+        Some(t) => registry.build(kind, t, scripts, &pipeline.base_dir),
+        None => {
+            let mut table = toml::Table::new();
+            table.insert("use".into(), toml::Value::String(default.into()));
+            let t = TableRef::detached(kind.name(), table);
+            registry
+                .build(kind, &t, scripts, &pipeline.base_dir)
+                .map_err(|e| {
+                    Error::config(format!(
+                        "the pipeline has no [{kind}] table and the default {kind} stage \
+                         `{default}` could not be built: {e}"
+                    ))
+                })
+        }
+    }
+}
+
+fn build_optional(
+    registry: &Registry,
+    kind: StageKind,
+    table: Option<&TableRef>,
+    scripts: &ScriptHost,
+    base_dir: &Path,
+) -> Result<Option<AnyStage>> {
+    table
+        .map(|t| registry.build(kind, t, scripts, base_dir))
+        .transpose()
+}
+
+macro_rules! expect_kind {
+    ($stage:expr, $variant:ident) => {
+        match $stage {
+            AnyStage::$variant(s) => s,
+            other => {
+                return Err(Error::stage(
+                    stringify!($variant),
+                    format!("expected a {} stage, got {}", stringify!($variant), other.kind()),
+                ));
+            }
+        }
+    };
+}
+
+/// Builds the model source a model table names: `use = "..."`, or a reader chosen by
+/// the extension of `file`.
+fn build_model(
+    registry: &Registry,
+    spec: &ModelSpec,
+    scripts: &ScriptHost,
+    base_dir: &Path,
+) -> Result<Box<dyn ModelSource>> {
+    let table = &spec.table;
+    let stage = if table.get("use").is_some() {
+        registry.build(StageKind::Model, table, scripts, base_dir)?
+    } else {
+        let file = table.get("file").and_then(|v| v.as_str()).ok_or_else(|| {
+            table
+                .error_at("use", "a model table needs `use = \"...\"` or `file = \"...\"`")
+                .with_help("e.g. file = \"part.stl\", or use = \"gear\" for a generated model")
+        })?;
+        let ext = Path::new(file)
+            .extension()
+            .map(|e| e.to_string_lossy().to_ascii_lowercase())
+            .unwrap_or_default();
+        let entry = registry.get(StageKind::Model, &ext).ok_or_else(|| {
+            table
+                .error_at("file", format!("no model reader for `.{ext}` files"))
+                .with_help("name the reader with `use = \"...\"`; see `lamina plugins model`")
+        })?;
+        registry.build_entry(entry, table, scripts, base_dir)?
+    };
+    Ok(expect_kind!(stage, Model))
+}
+
+/// A model spec whose file is replaced by `path` (the `--model` option).
+fn replace_model_file(spec: &ModelSpec, path: &Path) -> Result<ModelSpec> {
+    let abs = std::path::absolute(path).map_err(|e| Error::io(path, e))?;
+    let mut table = toml::Table::new();
+    table.insert(
+        "file".into(),
+        toml::Value::String(abs.to_string_lossy().into_owned()),
+    );
+    Ok(ModelSpec {
+        table: TableRef::detached("--model", table).with_host_keys(crate::pipeline::MODEL_HOST_KEYS),
+        scale: spec.scale,
+        place: spec.place,
+    })
+}
+
+impl Engine {
+    /// Loads plugins and builds every stage of `pipeline`. Scripts are compiled here, so
+    /// a pipeline that builds is a pipeline whose configuration is valid.
+    pub fn build(pipeline: Pipeline, mut registry: Registry, options: &RunOptions) -> Result<Engine> {
+        for path in pipeline.plugins.iter().chain(&options.plugins) {
+            crate::plugin::load(&mut registry, path)?;
+        }
+        let scripts = ScriptHost::new(&pipeline.base_dir, options.script_limits);
+        let base = pipeline.base_dir.clone();
+
+        if options.model.is_some() && pipeline.parts.len() > 1 {
+            return Err(Error::config(format!(
+                "--model replaces the model of a single-part pipeline, and `{}` has {} parts",
+                pipeline.file.path.display(),
+                pipeline.parts.len()
+            )));
+        }
+
+        let mut models = Vec::new();
+        let global_model = match &pipeline.model {
+            Some(spec) => {
+                let spec = match &options.model {
+                    Some(p) => replace_model_file(spec, p)?,
+                    None => spec.clone(),
+                };
+                models.push(ModelStage {
+                    source: build_model(&registry, &spec, &scripts, &base)?,
+                    label: describe_model(&spec),
+                    spec,
+                });
+                Some(0)
+            }
+            None => None,
+        };
+
+        let mut parts = Vec::new();
+        for part in &pipeline.parts {
+            let model = match &part.model {
+                Some(spec) => {
+                    let spec = match &options.model {
+                        Some(p) => replace_model_file(spec, p)?,
+                        None => spec.clone(),
+                    };
+                    models.push(ModelStage {
+                        source: build_model(&registry, &spec, &scripts, &base)?,
+                        label: describe_model(&spec),
+                        spec,
+                    });
+                    models.len() - 1
+                }
+                None => {
+                    global_model.ok_or_else(|| Error::config(format!("part `{}` has no model", part.name)))?
+                }
+            };
+            let discretiser = build_optional(
+                &registry,
+                StageKind::Discretise,
+                part.discretise
+                    .as_ref()
+                    .or(pipeline.stages.get(&StageKind::Discretise)),
+                &scripts,
+                &base,
+            )?
+            .map(|s| -> Result<_> { Ok(expect_kind!(s, Discretise)) })
+            .transpose()?;
+            let grade_table = part.grade.as_ref().or(pipeline.stages.get(&StageKind::Grade));
+            let grader = build_optional(&registry, StageKind::Grade, grade_table, &scripts, &base)?
+                .map(|s| -> Result<_> { Ok(expect_kind!(s, Grade)) })
+                .transpose()?;
+            if grader.is_none() && part.materials.len() > 1 {
+                let names: Vec<_> = part
+                    .materials
+                    .iter()
+                    .map(|&m| pipeline.materials[m].name.as_str())
+                    .collect();
+                let err = Error::config(format!(
+                    "part `{}` has {} materials ({}) but no [grade] table says how to mix them",
+                    part.name,
+                    names.len(),
+                    names.join(", ")
+                ))
+                .with_help(
+                    "add a [grade] table, or give the part a single material with `materials = [\"...\"]`",
+                );
+                return Err(
+                    match part.table.as_ref().and_then(|t| t.location_of(Some("materials"))) {
+                        Some(loc) => Error::Config {
+                            location: Some(loc),
+                            message: err.to_string(),
+                            help: err.help().map(str::to_string),
+                        },
+                        None => err,
+                    },
+                );
+            }
+            parts.push(PartStages {
+                name: part.name.clone(),
+                materials: part.materials.clone(),
+                model,
+                mesh: part.mesh,
+                discretiser,
+                grader,
+            });
+        }
+
+        let slicer = expect_kind!(
+            build_default(&registry, StageKind::Slice, &pipeline, &scripts, DEFAULT_SLICER)?,
+            Slice
+        );
+        let sorter = expect_kind!(
+            build_default(&registry, StageKind::Sort, &pipeline, &scripts, DEFAULT_SORTER)?,
+            Sort
+        );
+        let sequencer = build_optional(
+            &registry,
+            StageKind::Sequence,
+            pipeline.stages.get(&StageKind::Sequence),
+            &scripts,
+            &base,
+        )?
+        .map(|s| -> Result<_> { Ok(expect_kind!(s, Sequence)) })
+        .transpose()?;
+        let planner = build_optional(
+            &registry,
+            StageKind::Plan,
+            pipeline.stages.get(&StageKind::Plan),
+            &scripts,
+            &base,
+        )?
+        .map(|s| -> Result<_> { Ok(expect_kind!(s, Plan)) })
+        .transpose()?;
+        let mut exporters = Vec::new();
+        for t in &pipeline.outputs {
+            exporters.push(expect_kind!(
+                registry.build(StageKind::Export, t, &scripts, &base)?,
+                Export
+            ));
+        }
+
+        Ok(Engine {
+            threads: options.threads,
+            pipeline,
+            models,
+            parts,
+            slicer,
+            sorter,
+            sequencer,
+            planner,
+            exporters,
+        })
+    }
+
+    pub fn pipeline(&self) -> &Pipeline {
+        &self.pipeline
+    }
+
+    /// Short descriptions of what will run, for `lamina check`.
+    pub fn summary(&self) -> Vec<String> {
+        let mut lines = Vec::new();
+        for m in &self.models {
+            lines.push(format!("model: {}", m.label));
+        }
+        for p in &self.parts {
+            let mats: Vec<_> = p
+                .materials
+                .iter()
+                .map(|&m| self.pipeline.materials[m].name.as_str())
+                .collect();
+            lines.push(format!(
+                "part `{}`: materials {}; discretise: {}; grade: {}",
+                p.name,
+                mats.join(", "),
+                if p.discretiser.is_some() {
+                    "yes"
+                } else {
+                    "whole families"
+                },
+                if p.grader.is_some() {
+                    "yes"
+                } else {
+                    "pure material"
+                },
+            ));
+        }
+        lines.push(format!("outputs: {}", self.exporters.len()));
+        lines
+    }
+
+    /// Loads and places the meshes, one entry per model stage.
+    fn load_models(&self, timings: &Timings) -> Result<Vec<Vec<Mesh>>> {
+        let mut out = Vec::new();
+        for m in &self.models {
+            let mut meshes = timings.time(StageKind::Model, || m.source.load(&self.pipeline.base_dir))?;
+            if meshes.is_empty() || meshes.iter().all(|m| m.triangles.is_empty()) {
+                return Err(Error::config(format!("model {} holds no triangles", m.label)));
+            }
+            place(&mut meshes, m.spec.scale, m.spec.place);
+            out.push(meshes);
+        }
+        Ok(out)
+    }
+
+    /// Runs the pipeline, writing the outputs into `out_dir`. Outputs appear only when
+    /// the whole run succeeds.
+    pub fn run(&self, out_dir: &Path, observer: &dyn Observer) -> Result<RunReport> {
+        let started = Instant::now();
+        let timings = Timings::default();
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(self.threads.unwrap_or(0))
+            .build()
+            .map_err(|e| Error::config(format!("cannot start worker threads: {e}")))?;
+
+        // Meshes: one per part (a part takes one mesh of its model, or all merged).
+        let loaded = self.load_models(&timings)?;
+        let mut meshes: Vec<Arc<Mesh>> = Vec::new();
+        let mut part_mesh = Vec::new();
+        let mut parts_info = Vec::new();
+        for (pi, p) in self.parts.iter().enumerate() {
+            let model = &loaded[p.model];
+            let mesh = match p.mesh {
+                Some(i) => model.get(i).cloned().ok_or_else(|| {
+                    Error::config(format!(
+                        "part `{}` asks for mesh {i}, but its model holds {} meshes",
+                        p.name,
+                        model.len()
+                    ))
+                })?,
+                None => merge(model, &p.name),
+            };
+            // Parts sharing one mesh (e.g. selected by family) slice it once.
+            let idx = match meshes.iter().position(|m| **m == mesh) {
+                Some(i) => i,
+                None => {
+                    meshes.push(Arc::new(mesh));
+                    meshes.len() - 1
+                }
+            };
+            let bb = meshes[idx].bbox();
+            part_mesh.push(idx);
+            parts_info.push(PartInfo {
+                name: p.name.clone(),
+                materials: p.materials.clone(),
+                mesh: idx,
+                z_min: bb.min.z,
+                z_max: bb.max.z,
+            });
+            let _ = pi;
+        }
+        let bbox = meshes.iter().fold(BBox3::EMPTY, |b, m| b.union(&m.bbox()));
+        let info = RunInfo {
+            base_dir: self.pipeline.base_dir.clone(),
+            materials: self.pipeline.materials.clone(),
+            parts: parts_info,
+            z_min: bbox.min.z,
+            z_max: bbox.max.z,
+        };
+
+        let sequence = match &self.sequencer {
+            Some(s) => Some(timings.time(StageKind::Sequence, || s.sequence(&info))?),
+            None => None,
+        };
+        let slots = timings.time(StageKind::Slice, || {
+            self.slicer.layers(&meshes, &info, sequence.as_ref())
+        })?;
+        let prepared: Vec<Box<dyn MeshSlicer>> = pool.install(|| {
+            meshes
+                .par_iter()
+                .map(|m| timings.time(StageKind::Slice, || self.slicer.prepare(m.clone())))
+                .collect::<Result<Vec<_>>>()
+        })?;
+
+        let mut outputs = AtomicOutputs::new(out_dir);
+        let mut sinks = Vec::new();
+        for e in &self.exporters {
+            let mut ctx = ExportContext {
+                info: &info,
+                sequence: sequence.as_ref(),
+                layer_count: slots.len(),
+                pipeline_name: &self.pipeline.name,
+                files: &mut outputs,
+            };
+            sinks.push(timings.time(StageKind::Export, || e.open(&mut ctx))?);
+        }
+
+        observer.started(slots.len());
+        let window = pool.current_num_threads().max(1) * 4;
+        let mut regions = 0;
+        let mut warnings = 0;
+        let mut build_time: Option<f64> = None;
+        for chunk in slots.chunks(window) {
+            let plans: Vec<Result<LayerPlan>> = pool.install(|| {
+                chunk
+                    .par_iter()
+                    .map(|slot| {
+                        self.process_layer(slot, &info, &prepared, &part_mesh, &timings)
+                            .map_err(|e| e.in_layer(slot.index, slot.z))
+                    })
+                    .collect()
+            });
+            for plan in plans {
+                let plan = plan?;
+                for w in &plan.warnings {
+                    observer.warning(&format!("layer {} (z = {:.4} mm): {w}", plan.index, plan.z));
+                }
+                warnings += plan.warnings.len();
+                regions += plan.parts.iter().map(|p| p.regions.len()).sum::<usize>();
+                if let Some(t) = plan.build_time {
+                    *build_time.get_or_insert(0.0) += t;
+                }
+                for sink in &mut sinks {
+                    timings.time(StageKind::Export, || sink.layer(&info, &plan))?;
+                }
+                observer.layer_done(plan.index);
+            }
+        }
+        for sink in sinks {
+            timings.time(StageKind::Export, || sink.finish(&info))?;
+        }
+        let files = outputs.commit()?;
+        timings
+            .wall
+            .store(started.elapsed().as_nanos() as u64, Ordering::Relaxed);
+        Ok(RunReport {
+            layers: slots.len(),
+            regions,
+            files,
+            warnings,
+            timings,
+            build_time,
+        })
+    }
+
+    /// Slices, sorts, discretises, grades and plans one layer.
+    fn process_layer(
+        &self,
+        slot: &LayerSlot,
+        info: &RunInfo,
+        prepared: &[Box<dyn MeshSlicer>],
+        part_mesh: &[usize],
+        timings: &Timings,
+    ) -> Result<LayerPlan> {
+        // Each distinct mesh is cut and sorted once per layer.
+        let mut cut: Vec<Option<(Layer, crate::model::ContourTree)>> =
+            (0..prepared.len()).map(|_| None).collect();
+        let mut warnings = Vec::new();
+        let mut parts = Vec::new();
+        for (pi, p) in self.parts.iter().enumerate() {
+            let mi = part_mesh[pi];
+            if cut[mi].is_none() {
+                let layer = timings
+                    .time(StageKind::Slice, || prepared[mi].slice(slot))
+                    .map_err(|e| e.in_part(&p.name))?;
+                let tree = timings
+                    .time(StageKind::Sort, || self.sorter.sort(&layer))
+                    .map_err(|e| e.in_part(&p.name))?;
+                check_tree(&layer, &tree).map_err(|e| e.in_part(&p.name))?;
+                warnings.extend(layer.warnings.iter().map(|w| format!("part `{}`: {w}", p.name)));
+                cut[mi] = Some((layer, tree));
+            }
+            let Some((layer, tree)) = &cut[mi] else { continue };
+            let part_layer = self
+                .process_part(pi, p, layer, tree, info, timings)
+                .map_err(|e| e.in_part(&p.name))?;
+            parts.push(part_layer);
+        }
+        let mut plan = LayerPlan {
+            index: slot.index,
+            z: slot.z,
+            thickness: slot.thickness,
+            parts,
+            toolpaths: Vec::new(),
+            build_time: None,
+            warnings,
+        };
+        if let Some(planner) = &self.planner {
+            timings.time(StageKind::Plan, || planner.plan(info, &mut plan))?;
+        }
+        Ok(plan)
+    }
+
+    fn process_part(
+        &self,
+        pi: usize,
+        p: &PartStages,
+        layer: &Layer,
+        tree: &crate::model::ContourTree,
+        info: &RunInfo,
+        timings: &Timings,
+    ) -> Result<PartLayer> {
+        let n_materials = p.materials.len();
+        let mut regions = Vec::new();
+        let families: Vec<usize> = (0..tree.families.len()).collect();
+        for &f in &families {
+            let ctx = FamilyContext {
+                info,
+                layer,
+                tree,
+                part: pi,
+                family: f,
+            };
+            let mut family_regions = match &p.discretiser {
+                Some(d) => timings.time(StageKind::Discretise, || d.discretise(&ctx))?,
+                None => vec![whole_family(tree, layer, f)],
+            };
+            match &p.grader {
+                Some(g) => timings.time(StageKind::Grade, || g.grade(&ctx, &mut family_regions))?,
+                None => {
+                    for r in &mut family_regions {
+                        r.composition = Some(Composition::pure(0, n_materials));
+                    }
+                }
+            }
+            for r in &family_regions {
+                let c = r.composition.as_ref().ok_or_else(|| {
+                    Error::stage(
+                        "grade",
+                        format!("region {} of family {f} was left without a composition", r.index),
+                    )
+                })?;
+                if c.fractions.len() != n_materials {
+                    return Err(Error::stage(
+                        "grade",
+                        format!(
+                            "region {} of family {f} has {} fractions, the part has {n_materials} materials",
+                            r.index,
+                            c.fractions.len()
+                        ),
+                    ));
+                }
+                Composition::check(&c.fractions)
+                    .map_err(|e| Error::stage("grade", format!("region {} of family {f}: {e}", r.index)))?;
+            }
+            regions.extend(family_regions);
+        }
+        Ok(PartLayer {
+            part: pi,
+            contours: layer.contours.clone(),
+            tree: tree.clone(),
+            families,
+            regions,
+        })
+    }
+}
+
+/// The single region of a family that is not discretised.
+fn whole_family(tree: &crate::model::ContourTree, layer: &Layer, f: usize) -> Region {
+    let polygon = tree.family_polygon(&layer.contours, f);
+    let reference = polygon
+        .outer
+        .interior_point()
+        .unwrap_or_else(|| polygon.bbox().center());
+    Region {
+        family: f,
+        index: 0,
+        count: 1,
+        level: 0.0,
+        polygon,
+        cell: None,
+        reference,
+        composition: None,
+    }
+}
+
+/// A sorter's output must describe the layer it was given.
+fn check_tree(layer: &Layer, tree: &crate::model::ContourTree) -> Result<()> {
+    if tree.nodes.len() != layer.contours.len() {
+        return Err(Error::stage(
+            "sort",
+            format!(
+                "tree has {} nodes for {} contours",
+                tree.nodes.len(),
+                layer.contours.len()
+            ),
+        ));
+    }
+    let n = layer.contours.len();
+    for fam in &tree.families {
+        if fam.outer >= n || fam.holes.iter().any(|&h| h >= n) {
+            return Err(Error::stage(
+                "sort",
+                "a family names a contour the layer does not have",
+            ));
+        }
+    }
+    Ok(())
+}
+
+/// Merges the meshes of a model into one, keeping per-triangle materials.
+fn merge(meshes: &[Mesh], name: &str) -> Mesh {
+    if meshes.len() == 1 {
+        return meshes[0].clone();
+    }
+    let mut out = Mesh::new(name, Vec::new(), Vec::new());
+    for m in meshes {
+        let base = out.vertices.len() as u32;
+        out.vertices.extend_from_slice(&m.vertices);
+        out.triangles.extend(
+            m.triangles
+                .iter()
+                .map(|t| [t[0] + base, t[1] + base, t[2] + base]),
+        );
+    }
+    out
+}
+
+/// Applies a model table's `scale` and `place` to all meshes of the model together, so
+/// the meshes of an assembly keep their relative positions.
+pub fn place(meshes: &mut [Mesh], scale: f64, placement: Placement) {
+    for m in meshes.iter_mut() {
+        m.transform(scale, Vector3::zeros());
+    }
+    let bbox = meshes.iter().fold(BBox3::EMPTY, |b, m| b.union(&m.bbox()));
+    if bbox.is_empty() {
+        return;
+    }
+    let offset = match placement {
+        Placement::Keep => return,
+        Placement::Bed => Vector3::new(0.0, 0.0, -bbox.min.z),
+        Placement::Centre => {
+            let c = Vector2::new(bbox.min.x + bbox.max.x, bbox.min.y + bbox.max.y) * 0.5;
+            Vector3::new(-c.x, -c.y, -bbox.min.z)
+        }
+    };
+    for m in meshes.iter_mut() {
+        m.transform(1.0, offset);
+    }
+}
+
+fn describe_model(spec: &ModelSpec) -> String {
+    match (
+        spec.table.use_name(),
+        spec.table.get("file").and_then(|v| v.as_str()),
+    ) {
+        (Some(u), Some(f)) => format!("{u} ({f})"),
+        (Some(u), None) => u.to_string(),
+        (None, Some(f)) => f.to_string(),
+        (None, None) => "?".into(),
+    }
+}
+
+/// Convenience for tests and embedders: parse, build and run a pipeline file.
+pub fn run_file(path: &Path, out_dir: &Path, options: &RunOptions) -> Result<RunReport> {
+    let pipeline = Pipeline::load(path, &[])?;
+    let engine = Engine::build(pipeline, Registry::linked()?, options)?;
+    engine.run(out_dir, &Silent)
+}

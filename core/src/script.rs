@@ -1,0 +1,579 @@
+//! Rhai scripting for user grading functions: each script compiled once per run, run in
+//! a sandbox (operation, depth, size and time limits; no modules, no files, no network),
+//! and its results checked as volume fractions before anyone uses them.
+//!
+//! A script is either an inline expression of the pipeline (`f = "sin(r * PI)"`) or a
+//! function in a `.rhai` file beside it (`f = "grading.rhai#ceramic"`). Functions receive
+//! their parameters by name from the variables the caller offers (r, d, x, y, z, layer,
+//! part), so `fn f(r)` and `fn f(z, r)` both work.
+
+use std::cell::Cell;
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+
+use rhai::{AST, CallFnOptions, Dynamic, Engine, EvalAltResult, FLOAT, INT, Position, Scope};
+
+use crate::error::{Error, Result};
+use crate::model::COMPOSITION_TOLERANCE;
+use crate::source::{Location, SourceFile};
+
+/// Sandbox limits of every script call.
+#[derive(Debug, Clone, Copy)]
+pub struct ScriptLimits {
+    pub max_operations: u64,
+    pub max_call_levels: usize,
+    pub max_expr_depth: usize,
+    pub max_string_size: usize,
+    pub max_array_size: usize,
+    /// Wall-clock budget of one call.
+    pub time_limit: Duration,
+}
+
+impl Default for ScriptLimits {
+    fn default() -> Self {
+        Self {
+            max_operations: 5_000_000,
+            max_call_levels: 48,
+            max_expr_depth: 64,
+            max_string_size: 64 * 1024,
+            max_array_size: 100_000,
+            time_limit: Duration::from_millis(500),
+        }
+    }
+}
+
+thread_local! {
+    /// Deadline of the script call running on this thread.
+    static DEADLINE: Cell<Option<Instant>> = const { Cell::new(None) };
+}
+
+/// The names a script may read; anything else is refused when the script is compiled.
+pub const SCRIPT_VARIABLES: &[&str] = &["r", "d", "x", "y", "z", "layer", "part"];
+
+/// Values offered to a script call.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct ScriptArgs<'a> {
+    /// Normalised level in [0, 1].
+    pub r: f64,
+    /// A distance (mm), e.g. to a grading source.
+    pub d: f64,
+    pub x: f64,
+    pub y: f64,
+    pub z: f64,
+    pub layer: i64,
+    pub part: &'a str,
+}
+
+impl ScriptArgs<'_> {
+    fn value(&self, name: &str) -> Option<Dynamic> {
+        Some(match name {
+            "r" => Dynamic::from_float(self.r),
+            "d" => Dynamic::from_float(self.d),
+            "x" => Dynamic::from_float(self.x),
+            "y" => Dynamic::from_float(self.y),
+            "z" => Dynamic::from_float(self.z),
+            "layer" => Dynamic::from_int(self.layer),
+            "part" => Dynamic::from(self.part.to_string()),
+            _ => return None,
+        })
+    }
+}
+
+/// Compiles scripts for the stages of one run. Cheap to share between threads.
+#[derive(Clone)]
+pub struct ScriptHost {
+    engine: Arc<Engine>,
+    base_dir: PathBuf,
+    time_limit: Duration,
+}
+
+impl std::fmt::Debug for ScriptHost {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("ScriptHost")
+            .field("base_dir", &self.base_dir)
+            .finish()
+    }
+}
+
+fn as_number(v: &Dynamic) -> Option<f64> {
+    v.as_float().ok().or_else(|| v.as_int().ok().map(|i| i as f64))
+}
+
+fn num(v: Dynamic, what: &str) -> std::result::Result<f64, Box<EvalAltResult>> {
+    as_number(&v).ok_or_else(|| format!("{what}: expected a number, got {}", v.type_name()).into())
+}
+
+impl ScriptHost {
+    pub fn new(base_dir: impl Into<PathBuf>, limits: ScriptLimits) -> Self {
+        let mut engine = Engine::new();
+        engine
+            .set_max_operations(limits.max_operations)
+            .set_max_call_levels(limits.max_call_levels)
+            .set_max_expr_depths(limits.max_expr_depth, limits.max_expr_depth)
+            .set_max_string_size(limits.max_string_size)
+            .set_max_array_size(limits.max_array_size)
+            .set_max_map_size(limits.max_array_size)
+            .set_max_modules(0)
+            .set_module_resolver(rhai::module_resolvers::DummyModuleResolver::new())
+            .disable_symbol("eval")
+            .on_print(|_| {})
+            .on_debug(|_, _, _| {});
+        engine.on_progress(|ops| {
+            if ops % 1024 != 0 {
+                return None;
+            }
+            let late = DEADLINE.with(|d| d.get().is_some_and(|t| Instant::now() > t));
+            late.then(|| Dynamic::from("time limit exceeded".to_string()))
+        });
+        // Constants usable everywhere, including inside script functions, which cannot
+        // see the caller's scope.
+        #[expect(deprecated, reason = "on_var is marked volatile, not deprecated")]
+        engine.on_var(|name, _, _| {
+            Ok(match name {
+                "PI" => Some(Dynamic::from_float(std::f64::consts::PI)),
+                "E" => Some(Dynamic::from_float(std::f64::consts::E)),
+                "TAU" => Some(Dynamic::from_float(std::f64::consts::TAU)),
+                _ => None,
+            })
+        });
+        // The control functions of the papers, accepting integers or floats.
+        engine.register_fn("linear", |mu: Dynamic, lambda: Dynamic, r: Dynamic| {
+            Ok::<FLOAT, Box<EvalAltResult>>(
+                num(mu, "linear mu")? * num(r, "linear r")? + num(lambda, "linear lambda")?,
+            )
+        });
+        engine.register_fn("wave", |mu: Dynamic, lambda: Dynamic, r: Dynamic| {
+            Ok::<FLOAT, Box<EvalAltResult>>(
+                num(mu, "wave mu")? * (num(lambda, "wave lambda")? * num(r, "wave r")?).sin(),
+            )
+        });
+        engine.register_fn("power", |alpha: Dynamic, d: Dynamic, k: Dynamic| {
+            Ok::<FLOAT, Box<EvalAltResult>>(
+                (num(alpha, "power alpha")? * num(d, "power d")?).powf(num(k, "power k")?),
+            )
+        });
+        engine.register_fn("clamp01", |v: Dynamic| {
+            Ok::<FLOAT, Box<EvalAltResult>>(num(v, "clamp01")?.clamp(0.0, 1.0))
+        });
+        engine.register_fn("lerp", |a: Dynamic, b: Dynamic, t: Dynamic| {
+            let (a, b, t) = (num(a, "lerp a")?, num(b, "lerp b")?, num(t, "lerp t")?);
+            Ok::<FLOAT, Box<EvalAltResult>>(a + (b - a) * t)
+        });
+        // Rhai's math functions take floats only; accept integers as well.
+        for f in ["sin", "cos", "tan", "sqrt", "exp", "ln", "abs_f"] {
+            let op: fn(f64) -> f64 = match f {
+                "sin" => f64::sin,
+                "cos" => f64::cos,
+                "tan" => f64::tan,
+                "sqrt" => f64::sqrt,
+                "exp" => f64::exp,
+                "ln" => f64::ln,
+                _ => f64::abs,
+            };
+            engine.register_fn(f, move |v: INT| op(v as f64));
+        }
+        engine.register_fn("pow", |a: Dynamic, b: Dynamic| {
+            Ok::<FLOAT, Box<EvalAltResult>>(num(a, "pow")?.powf(num(b, "pow")?))
+        });
+        Self {
+            engine: Arc::new(engine),
+            base_dir: base_dir.into(),
+            time_limit: limits.time_limit,
+        }
+    }
+
+    /// Compiles a script reference from a pipeline: `file.rhai#function` names a
+    /// function in a file beside the pipeline; anything else is an inline expression.
+    /// `origin` is where the reference is written (for error positions).
+    pub fn compile(&self, spec: &str, origin: Option<Location>) -> Result<ScriptFn> {
+        match spec.split_once('#') {
+            Some((file, function)) if file.trim_end().ends_with(".rhai") => {
+                self.function(&self.base_dir.join(file.trim()), function.trim(), origin)
+            }
+            _ => self.expression(spec, origin),
+        }
+    }
+
+    /// Compiles an inline expression. Its variables are those of [`SCRIPT_VARIABLES`].
+    pub fn expression(&self, text: &str, origin: Option<Location>) -> Result<ScriptFn> {
+        let source = match &origin {
+            Some(o) => o.file.clone(),
+            None => SourceFile::new("<expression>", text),
+        };
+        let base = origin
+            .as_ref()
+            .and_then(|o| inline_base(&o.file.text, o.span.start));
+        let ast = self
+            .engine
+            .compile_with_scope(&script_scope(&ScriptArgs::default()), text)
+            .map_err(|e| {
+                let pos = e.position();
+                script_error(
+                    &source,
+                    base,
+                    pos,
+                    format!("does not compile: {}", e.err_type()),
+                    None,
+                )
+            })?;
+        Ok(ScriptFn {
+            engine: self.engine.clone(),
+            time_limit: self.time_limit,
+            ast: Arc::new(ast),
+            function: None,
+            source,
+            base,
+            definition: origin.map_or(0, |o| o.span.start),
+        })
+    }
+
+    /// Compiles a `.rhai` file and selects one of its functions.
+    pub fn function(&self, path: &Path, name: &str, origin: Option<Location>) -> Result<ScriptFn> {
+        let source = SourceFile::read(path).map_err(|e| match origin.clone() {
+            Some(o) => Error::config_at(o, format!("cannot read script: {e}")),
+            None => e,
+        })?;
+        let ast = self.engine.compile(&source.text).map_err(|e| {
+            script_error(
+                &source,
+                None,
+                e.position(),
+                format!("does not compile: {}", e.err_type()),
+                None,
+            )
+        })?;
+        let meta = ast.iter_functions().find(|f| f.name == name).ok_or_else(|| {
+            let names: Vec<_> = ast.iter_functions().map(|f| f.name.to_string()).collect();
+            let msg = format!(
+                "{} has no function `{name}` (it has: {})",
+                path.display(),
+                names.join(", ")
+            );
+            match origin.clone() {
+                Some(o) => Error::config_at(o, msg),
+                None => Error::config(msg),
+            }
+        })?;
+        let params: Vec<String> = meta.params.iter().map(|p| p.to_string()).collect();
+        if let Some(bad) = params.iter().find(|p| !SCRIPT_VARIABLES.contains(&p.as_str())) {
+            return Err(script_error(
+                &source,
+                None,
+                Position::NONE,
+                format!(
+                    "function `{name}` has parameter `{bad}`; parameters must be among {}",
+                    SCRIPT_VARIABLES.join(", ")
+                ),
+                None,
+            ));
+        }
+        let definition = find_definition(&source.text, name);
+        Ok(ScriptFn {
+            engine: self.engine.clone(),
+            time_limit: self.time_limit,
+            ast: Arc::new(ast),
+            function: Some((name.to_string(), params)),
+            source,
+            base: None,
+            definition,
+        })
+    }
+}
+
+/// Offset of the first character inside a TOML string literal starting at `start`.
+fn inline_base(text: &str, start: usize) -> Option<usize> {
+    let rest = text.get(start..)?;
+    let quote = rest.find(['"', '\''])?;
+    let q = &rest[quote..];
+    let skip = if q.starts_with("\"\"\"") || q.starts_with("'''") {
+        3
+    } else {
+        1
+    };
+    Some(start + quote + skip)
+}
+
+fn find_definition(text: &str, name: &str) -> usize {
+    let pattern = format!("fn {name}");
+    text.match_indices(&pattern)
+        .find(|(i, _)| {
+            text[i + pattern.len()..]
+                .chars()
+                .next()
+                .is_some_and(|c| c == '(' || c.is_whitespace())
+        })
+        .map_or(0, |(i, _)| i)
+}
+
+fn script_scope(args: &ScriptArgs<'_>) -> Scope<'static> {
+    let mut scope = Scope::new();
+    for name in SCRIPT_VARIABLES {
+        if let Some(v) = args.value(name) {
+            scope.push_dynamic(*name, v);
+        }
+    }
+    scope
+}
+
+fn script_error(
+    source: &Arc<SourceFile>,
+    base: Option<usize>,
+    pos: Position,
+    message: String,
+    context: Option<String>,
+) -> Error {
+    let offset = match (pos.line(), base) {
+        (Some(1), Some(base)) => Some(base + pos.position().unwrap_or(1) - 1),
+        (Some(_), Some(base)) => Some(base),
+        (Some(line), None) => Some(source.offset_of(line, pos.position().unwrap_or(1))),
+        (None, Some(base)) => Some(base),
+        (None, None) => None,
+    };
+    Error::Script {
+        location: Some(Location::new(
+            source.clone(),
+            offset.unwrap_or(0)..offset.unwrap_or(0),
+        )),
+        message,
+        context,
+    }
+}
+
+/// A compiled script: call it as often as needed, from any thread.
+#[derive(Clone)]
+pub struct ScriptFn {
+    engine: Arc<Engine>,
+    time_limit: Duration,
+    ast: Arc<AST>,
+    /// Function name and parameter names; `None` for an inline expression.
+    function: Option<(String, Vec<String>)>,
+    source: Arc<SourceFile>,
+    /// Offset of an inline expression inside `source`.
+    base: Option<usize>,
+    /// Offset of the function definition (or expression) for value errors.
+    definition: usize,
+}
+
+impl std::fmt::Debug for ScriptFn {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("ScriptFn")
+            .field("source", &self.source.path)
+            .field("function", &self.function)
+            .finish()
+    }
+}
+
+/// Clears the deadline when a call ends, however it ends.
+struct DeadlineGuard;
+
+impl Drop for DeadlineGuard {
+    fn drop(&mut self) {
+        DEADLINE.with(|d| d.set(None));
+    }
+}
+
+impl ScriptFn {
+    /// Runs the script with `args`, within the host's limits.
+    pub fn call(&self, args: &ScriptArgs<'_>, context: &str) -> Result<Dynamic> {
+        DEADLINE.with(|d| d.set(Some(Instant::now() + self.time_limit)));
+        let _guard = DeadlineGuard;
+        let result = match &self.function {
+            None => {
+                let mut scope = script_scope(args);
+                self.engine.eval_ast_with_scope::<Dynamic>(&mut scope, &self.ast)
+            }
+            Some((name, params)) => {
+                let values: Vec<Dynamic> = params.iter().filter_map(|p| args.value(p)).collect();
+                let mut scope = Scope::new();
+                let options = CallFnOptions::new().eval_ast(false).rewind_scope(true);
+                self.engine
+                    .call_fn_with_options::<Dynamic>(options, &mut scope, &self.ast, name, values)
+            }
+        };
+        result.map_err(|e| {
+            let pos = e.position();
+            let message = match *e {
+                EvalAltResult::ErrorTerminated(..) => "stopped: time limit exceeded".to_string(),
+                EvalAltResult::ErrorTooManyOperations(..) => {
+                    "stopped: too many operations (an endless loop?)".to_string()
+                }
+                other => format!("failed: {other}"),
+            };
+            script_error(&self.source, self.base, pos, message, Some(context.to_string()))
+        })
+    }
+
+    /// An error about the value the script returned, pointed at its definition.
+    fn value_error(&self, message: String, context: &str) -> Error {
+        Error::Script {
+            location: Some(Location::new(
+                self.source.clone(),
+                self.definition..self.definition,
+            )),
+            message,
+            context: Some(context.to_string()),
+        }
+    }
+
+    /// Calls the script for a single number (any finite value).
+    pub fn number(&self, args: &ScriptArgs<'_>, context: &str) -> Result<f64> {
+        let v = self.call(args, context)?;
+        match as_number(&v) {
+            Some(f) if f.is_finite() => Ok(f),
+            _ => Err(self.value_error(
+                format!("returned {v} ({}), expected a finite number", v.type_name()),
+                context,
+            )),
+        }
+    }
+
+    /// Calls the script for the volume fractions of `n` materials. A single number `f`
+    /// means `[f, 1 - f]` when `n == 2`; otherwise an array of `n` numbers is expected.
+    /// Every fraction must lie in [0, 1] and they must sum to 1 (1e-9).
+    pub fn fractions(&self, args: &ScriptArgs<'_>, n: usize, context: &str) -> Result<Vec<f64>> {
+        let v = self.call(args, context)?;
+        let fractions = if let Some(f) = as_number(&v) {
+            match n {
+                1 => vec![f],
+                2 => vec![f, 1.0 - f],
+                _ => {
+                    return Err(self.value_error(
+                        format!("returned one number {f}, expected an array of {n} fractions"),
+                        context,
+                    ));
+                }
+            }
+        } else if let Some(arr) = v.clone().try_cast::<rhai::Array>() {
+            let values: Option<Vec<f64>> = arr.iter().map(as_number).collect();
+            match values {
+                Some(values) if values.len() == n => values,
+                _ => {
+                    return Err(
+                        self.value_error(format!("returned {v}, expected an array of {n} numbers"), context)
+                    );
+                }
+            }
+        } else {
+            return Err(self.value_error(
+                format!("returned {v} ({}), expected fractions", v.type_name()),
+                context,
+            ));
+        };
+        check_fractions(&fractions).map_err(|m| self.value_error(m, context))?;
+        // Fractions within tolerance of the bounds are snapped into [0, 1].
+        Ok(fractions.into_iter().map(|f| f.clamp(0.0, 1.0)).collect())
+    }
+}
+
+fn check_fractions(fractions: &[f64]) -> std::result::Result<(), String> {
+    for (i, f) in fractions.iter().enumerate() {
+        if !f.is_finite() || *f < -COMPOSITION_TOLERANCE || *f > 1.0 + COMPOSITION_TOLERANCE {
+            return Err(format!("fraction {i} is {f}, outside [0, 1]"));
+        }
+    }
+    let sum: f64 = fractions.iter().sum();
+    if (sum - 1.0).abs() > COMPOSITION_TOLERANCE {
+        return Err(format!("fractions {fractions:?} sum to {sum}, not 1"));
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn host() -> ScriptHost {
+        ScriptHost::new(".", ScriptLimits::default())
+    }
+
+    #[test]
+    fn inline_expression_sees_variables_and_constants() {
+        let f = host().expression("sin(r * PI)", None).expect("compiles");
+        let args = ScriptArgs {
+            r: 0.5,
+            ..Default::default()
+        };
+        assert!((f.number(&args, "t").expect("runs") - 1.0).abs() < 1e-12);
+        let f = host().expression("1", None).expect("compiles");
+        assert_eq!(f.fractions(&args, 2, "t").expect("int accepted"), vec![1.0, 0.0]);
+    }
+
+    #[test]
+    fn integer_arguments_are_accepted() {
+        let f = host()
+            .expression("linear(1, 0, r) + sin(0)", None)
+            .expect("compiles");
+        let args = ScriptArgs {
+            r: 0.25,
+            ..Default::default()
+        };
+        assert_eq!(f.number(&args, "t").expect("runs"), 0.25);
+    }
+
+    #[test]
+    fn functions_take_parameters_by_name() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let path = dir.path().join("g.rhai");
+        std::fs::write(&path, "let big = 1000;\nfn f(z, r) { [r, 1.0 - r - z] }\n").expect("write");
+        let f = host().function(&path, "f", None).expect("compiles");
+        let args = ScriptArgs {
+            r: 0.25,
+            z: 0.0,
+            ..Default::default()
+        };
+        assert_eq!(f.fractions(&args, 2, "t").expect("runs"), vec![0.25, 0.75]);
+    }
+
+    #[test]
+    fn endless_loop_is_stopped_quickly() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let path = dir.path().join("g.rhai");
+        std::fs::write(&path, "fn f(r) {\n  loop { }\n}\n").expect("write");
+        let f = host().function(&path, "f", None).expect("compiles");
+        let t = Instant::now();
+        let e = f
+            .fractions(&ScriptArgs::default(), 2, "layer 3")
+            .expect_err("stopped");
+        assert!(t.elapsed() < Duration::from_secs(1), "took {:?}", t.elapsed());
+        assert!(e.to_string().contains("stopped"), "{e}");
+    }
+
+    #[test]
+    fn fractions_not_summing_to_one_are_refused_with_position() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let path = dir.path().join("g.rhai");
+        std::fs::write(&path, "// grading\n\nfn bad(r) { [0.5, 0.4] }\n").expect("write");
+        let f = host().function(&path, "bad", None).expect("compiles");
+        let e = f
+            .fractions(&ScriptArgs::default(), 2, "layer 2, region 1")
+            .expect_err("refused");
+        let loc = e.location().expect("located");
+        assert_eq!(loc.line_col(), (3, 1));
+        let text = e.to_string();
+        assert!(
+            text.contains("0.9") && text.contains("layer 2, region 1"),
+            "{text}"
+        );
+    }
+
+    #[test]
+    fn scripts_cannot_import_or_eval() {
+        assert!(
+            host().expression("import \"x\" as y; 1", None).is_err()
+                || host()
+                    .expression("import \"x\" as y; 1", None)
+                    .and_then(|f| f.number(&ScriptArgs::default(), "t"))
+                    .is_err()
+        );
+        assert!(host().expression("eval(\"1\")", None).is_err());
+    }
+
+    #[test]
+    fn unknown_parameter_is_refused() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let path = dir.path().join("g.rhai");
+        std::fs::write(&path, "fn f(q) { q }\n").expect("write");
+        assert!(host().function(&path, "f", None).is_err());
+    }
+}

@@ -1,0 +1,286 @@
+//! One trait per stage kind, the self-description every stage implementation carries,
+//! and the contexts stages receive. All stage traits are object safe and `Send + Sync`:
+//! the runtime holds them as `Box<dyn ...>` and calls them from many threads at once.
+
+use std::fmt;
+use std::io::Write;
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+
+use serde::{Deserialize, Serialize};
+
+use crate::error::Result;
+use crate::mesh::Mesh;
+use crate::model::*;
+use crate::script::ScriptHost;
+
+/// The kinds of stage a pipeline is made of, in the order data flows.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum StageKind {
+    /// Produces meshes: file readers and model generators.
+    Model,
+    Slice,
+    Sort,
+    Discretise,
+    Grade,
+    Sequence,
+    Plan,
+    Export,
+}
+
+impl StageKind {
+    pub const ALL: [StageKind; 8] = [
+        StageKind::Model,
+        StageKind::Slice,
+        StageKind::Sort,
+        StageKind::Discretise,
+        StageKind::Grade,
+        StageKind::Sequence,
+        StageKind::Plan,
+        StageKind::Export,
+    ];
+
+    /// The pipeline table that configures a stage of this kind.
+    pub fn name(self) -> &'static str {
+        match self {
+            StageKind::Model => "model",
+            StageKind::Slice => "slice",
+            StageKind::Sort => "sort",
+            StageKind::Discretise => "discretise",
+            StageKind::Grade => "grade",
+            StageKind::Sequence => "sequence",
+            StageKind::Plan => "plan",
+            StageKind::Export => "export",
+        }
+    }
+
+    pub fn parse(s: &str) -> Option<StageKind> {
+        StageKind::ALL.into_iter().find(|k| k.name() == s)
+    }
+}
+
+impl fmt::Display for StageKind {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+/// One option a stage accepts, for documentation and validation.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+pub struct OptionSpec {
+    pub name: &'static str,
+    /// The TOML type, e.g. `float`, `integer`, `string`, `bool`, `array of float`.
+    pub ty: &'static str,
+    /// The default as a TOML literal; `None` when the option is required.
+    pub default: Option<&'static str>,
+    pub doc: &'static str,
+}
+
+impl OptionSpec {
+    /// An option the user must give.
+    pub const fn required(name: &'static str, ty: &'static str, doc: &'static str) -> Self {
+        Self {
+            name,
+            ty,
+            default: None,
+            doc,
+        }
+    }
+
+    /// An option with a default (written as a TOML literal).
+    pub const fn new(name: &'static str, ty: &'static str, default: &'static str, doc: &'static str) -> Self {
+        Self {
+            name,
+            ty,
+            default: Some(default),
+            doc,
+        }
+    }
+}
+
+/// What a stage implementation says about itself: shown by `lamina plugins` and used
+/// to generate the pipeline reference.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+pub struct StageInfo {
+    pub kind: StageKind,
+    pub name: &'static str,
+    /// One line.
+    pub doc: &'static str,
+    pub options: &'static [OptionSpec],
+    /// A complete table for this stage (without the `[kind]` header) that a test builds
+    /// and runs.
+    pub example: &'static str,
+}
+
+/// A stage built from its pipeline table.
+pub enum AnyStage {
+    Model(Box<dyn ModelSource>),
+    Slice(Box<dyn Slicer>),
+    Sort(Box<dyn Sorter>),
+    Discretise(Box<dyn Discretiser>),
+    Grade(Box<dyn Grader>),
+    Sequence(Box<dyn Sequencer>),
+    Plan(Box<dyn Planner>),
+    Export(Box<dyn Exporter>),
+}
+
+impl AnyStage {
+    pub fn kind(&self) -> StageKind {
+        match self {
+            AnyStage::Model(_) => StageKind::Model,
+            AnyStage::Slice(_) => StageKind::Slice,
+            AnyStage::Sort(_) => StageKind::Sort,
+            AnyStage::Discretise(_) => StageKind::Discretise,
+            AnyStage::Grade(_) => StageKind::Grade,
+            AnyStage::Sequence(_) => StageKind::Sequence,
+            AnyStage::Plan(_) => StageKind::Plan,
+            AnyStage::Export(_) => StageKind::Export,
+        }
+    }
+}
+
+impl fmt::Debug for AnyStage {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "AnyStage({})", self.kind())
+    }
+}
+
+/// Read-only facts about the run every stage may consult.
+#[derive(Debug, Clone)]
+pub struct RunInfo {
+    /// Folder of the pipeline file: relative paths resolve against it.
+    pub base_dir: PathBuf,
+    pub materials: Vec<Material>,
+    pub parts: Vec<PartInfo>,
+    /// Height range of all parts (mm).
+    pub z_min: f64,
+    pub z_max: f64,
+}
+
+impl RunInfo {
+    pub fn resolve(&self, path: &Path) -> PathBuf {
+        self.base_dir.join(path)
+    }
+
+    /// Materials of a part, in the part's order.
+    pub fn part_materials(&self, part: usize) -> Vec<Material> {
+        self.parts[part]
+            .materials
+            .iter()
+            .map(|&m| self.materials[m].clone())
+            .collect()
+    }
+}
+
+/// Produces the meshes of a model: a file reader or a generator.
+pub trait ModelSource: Send + Sync {
+    fn load(&self, base_dir: &Path) -> Result<Vec<Mesh>>;
+}
+
+/// Decides the layer heights, then cuts meshes into layers.
+pub trait Slicer: Send + Sync {
+    /// Layer slots over `z_min..z_max`, following the sequence's work cycles when the
+    /// slicer is adaptive and a sequence is given.
+    fn layers(
+        &self,
+        meshes: &[Arc<Mesh>],
+        info: &RunInfo,
+        sequence: Option<&Sequence>,
+    ) -> Result<Vec<LayerSlot>>;
+
+    /// Prepares one mesh for cutting (indexes, repairs); the result is shared by all
+    /// threads.
+    fn prepare(&self, mesh: Arc<Mesh>) -> Result<Box<dyn MeshSlicer>>;
+}
+
+/// A mesh prepared for cutting.
+pub trait MeshSlicer: Send + Sync {
+    fn slice(&self, slot: &LayerSlot) -> Result<Layer>;
+}
+
+/// Orders a layer's contours into their containment hierarchy.
+pub trait Sorter: Send + Sync {
+    fn sort(&self, layer: &Layer) -> Result<ContourTree>;
+}
+
+/// What a discretiser or grader knows about the family it works on.
+#[derive(Debug, Clone, Copy)]
+pub struct FamilyContext<'a> {
+    pub info: &'a RunInfo,
+    pub layer: &'a Layer,
+    pub tree: &'a ContourTree,
+    pub part: usize,
+    pub family: usize,
+}
+
+/// Divides one contour family into sub-regions of constant material that tile it.
+pub trait Discretiser: Send + Sync {
+    fn discretise(&self, ctx: &FamilyContext<'_>) -> Result<Vec<Region>>;
+}
+
+/// Gives every sub-region of a family its composition.
+pub trait Grader: Send + Sync {
+    /// Sets `composition` on every region; fractions are over the part's materials.
+    fn grade(&self, ctx: &FamilyContext<'_>, regions: &mut [Region]) -> Result<()>;
+}
+
+/// Plans the fabrication sequence of the whole object, before slicing.
+pub trait Sequencer: Send + Sync {
+    fn sequence(&self, info: &RunInfo) -> Result<Sequence>;
+}
+
+/// Plans toolpaths for one layer.
+pub trait Planner: Send + Sync {
+    /// Fills `plan.toolpaths` (and `plan.build_time`).
+    fn plan(&self, info: &RunInfo, plan: &mut LayerPlan) -> Result<()>;
+}
+
+/// What an exporter knows when it opens its output.
+pub struct ExportContext<'a> {
+    pub info: &'a RunInfo,
+    pub sequence: Option<&'a Sequence>,
+    pub layer_count: usize,
+    pub pipeline_name: &'a str,
+    /// Creates output files that appear under their final name only when the whole run
+    /// succeeds.
+    pub files: &'a mut dyn OutputFiles,
+}
+
+/// Creates output files for an exporter. The names are relative to the output folder.
+pub trait OutputFiles {
+    fn create(&mut self, name: &Path) -> Result<Box<dyn Write + Send>>;
+}
+
+/// Writes one kind of output.
+pub trait Exporter: Send + Sync {
+    fn open(&self, ctx: &mut ExportContext<'_>) -> Result<Box<dyn LayerSink>>;
+}
+
+/// Receives the layers of a run in build order, as they are finished.
+pub trait LayerSink: Send {
+    fn layer(&mut self, info: &RunInfo, plan: &LayerPlan) -> Result<()>;
+    /// Completes the output (trailers, flushing).
+    fn finish(self: Box<Self>, info: &RunInfo) -> Result<()>;
+}
+
+/// The configuration a stage factory receives: its pipeline table and the services it
+/// may need (scripts compiled by the host).
+pub struct StageConfig<'a> {
+    pub table: &'a crate::pipeline::TableRef,
+    pub scripts: &'a ScriptHost,
+    pub base_dir: &'a Path,
+}
+
+impl StageConfig<'_> {
+    /// Deserialises the table into the stage's options struct (use
+    /// `#[serde(deny_unknown_fields)]`); errors point at the offending key or value.
+    pub fn parse<T: serde::de::DeserializeOwned>(&self) -> Result<T> {
+        self.table.parse()
+    }
+
+    /// An error pointing at `key` of this stage's table.
+    pub fn error(&self, key: &str, message: impl Into<String>) -> crate::Error {
+        self.table.error_at(key, message)
+    }
+}

@@ -1,0 +1,315 @@
+//! `json`: the whole plan as one JSON document, or as JSON Lines (one header line, then
+//! one line per layer) for tools that stream. The schema is documented in
+//! docs/formats.md; it is what tools built on Lamina read.
+
+use std::collections::BTreeMap;
+use std::io::Write;
+use std::path::PathBuf;
+
+use lamina_core::stage::{
+    AnyStage, ExportContext, Exporter, LayerSink, OptionSpec, StageConfig, StageInfo, StageKind,
+};
+use lamina_core::{Contour, Error, LayerPlan, Polygon, Result, RunInfo, StageFactory, Toolpath};
+use serde::{Deserialize, Serialize};
+
+/// Version of the JSON schema; bumped on incompatible changes.
+pub const SCHEMA_VERSION: u32 = 1;
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize)]
+#[serde(rename_all = "lowercase")]
+enum Form {
+    Document,
+    Lines,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct Options {
+    #[serde(default = "d_path")]
+    path: PathBuf,
+    #[serde(default = "d_form")]
+    form: Form,
+    #[serde(default)]
+    pretty: bool,
+    #[serde(default = "d_true")]
+    toolpaths: bool,
+}
+
+fn d_path() -> PathBuf {
+    PathBuf::from("plan.json")
+}
+fn d_form() -> Form {
+    Form::Document
+}
+fn d_true() -> bool {
+    true
+}
+
+#[derive(Serialize)]
+struct Header<'a> {
+    lamina: &'a str,
+    schema: u32,
+    pipeline: &'a str,
+    layer_count: usize,
+    materials: &'a [lamina_core::Material],
+    parts: Vec<PartHeader<'a>>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    sequence: Option<&'a lamina_core::Sequence>,
+}
+
+#[derive(Serialize)]
+struct PartHeader<'a> {
+    name: &'a str,
+    materials: Vec<&'a str>,
+    z_min: f64,
+    z_max: f64,
+}
+
+#[derive(Serialize)]
+struct LayerOut<'a> {
+    index: usize,
+    z: f64,
+    thickness: f64,
+    parts: Vec<PartOut<'a>>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    toolpaths: Option<&'a [Toolpath]>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    build_time: Option<f64>,
+    #[serde(skip_serializing_if = "<[String]>::is_empty")]
+    warnings: &'a [String],
+}
+
+#[derive(Serialize)]
+struct PartOut<'a> {
+    part: &'a str,
+    families: Vec<FamilyOut<'a>>,
+}
+
+#[derive(Serialize)]
+struct FamilyOut<'a> {
+    /// Level of the outer contour in the layer's hierarchy.
+    level: usize,
+    outer: &'a Contour,
+    holes: Vec<&'a Contour>,
+    area: f64,
+    regions: Vec<RegionOut<'a>>,
+}
+
+#[derive(Serialize)]
+struct RegionOut<'a> {
+    index: usize,
+    count: usize,
+    level: f64,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    cell: Option<usize>,
+    reference: [f64; 2],
+    polygon: &'a Polygon,
+    area: f64,
+    composition: BTreeMap<&'a str, f64>,
+    colour: [u8; 3],
+}
+
+fn layer_out<'a>(info: &'a RunInfo, plan: &'a LayerPlan, toolpaths: bool) -> LayerOut<'a> {
+    let parts = plan
+        .parts
+        .iter()
+        .map(|pl| {
+            let part = &info.parts[pl.part];
+            let materials = info.part_materials(pl.part);
+            let families = pl
+                .families
+                .iter()
+                .map(|&f| {
+                    let fam = &pl.tree.families[f];
+                    let regions = pl
+                        .regions
+                        .iter()
+                        .filter(|r| r.family == f)
+                        .map(|r| {
+                            let composition = r
+                                .composition
+                                .as_ref()
+                                .map(|c| {
+                                    part.materials
+                                        .iter()
+                                        .zip(&c.fractions)
+                                        .map(|(&m, &x)| (info.materials[m].name.as_str(), x))
+                                        .collect()
+                                })
+                                .unwrap_or_default();
+                            RegionOut {
+                                index: r.index,
+                                count: r.count,
+                                level: r.level,
+                                cell: r.cell,
+                                reference: [r.reference.x, r.reference.y],
+                                polygon: &r.polygon,
+                                area: r.area(),
+                                composition,
+                                colour: r.composition.as_ref().map_or([0; 3], |c| c.colour(&materials)),
+                            }
+                        })
+                        .collect();
+                    FamilyOut {
+                        level: pl.tree.nodes[fam.outer].level,
+                        outer: &pl.contours[fam.outer],
+                        holes: fam.holes.iter().map(|&h| &pl.contours[h]).collect(),
+                        area: pl.tree.family_polygon(&pl.contours, f).area(),
+                        regions,
+                    }
+                })
+                .collect();
+            PartOut {
+                part: &part.name,
+                families,
+            }
+        })
+        .collect();
+    LayerOut {
+        index: plan.index,
+        z: plan.z,
+        thickness: plan.thickness,
+        parts,
+        toolpaths: (toolpaths && !plan.toolpaths.is_empty()).then_some(plan.toolpaths.as_slice()),
+        build_time: plan.build_time,
+        warnings: &plan.warnings,
+    }
+}
+
+struct Json {
+    options: Options,
+}
+
+struct Sink {
+    out: Box<dyn Write + Send>,
+    path: PathBuf,
+    form: Form,
+    pretty: bool,
+    toolpaths: bool,
+    first: bool,
+}
+
+fn io(path: &std::path::Path) -> impl Fn(std::io::Error) -> Error + '_ {
+    move |e| Error::io(path, e)
+}
+
+fn json_err(path: &std::path::Path) -> impl Fn(serde_json::Error) -> Error + '_ {
+    move |e| Error::io(path, std::io::Error::other(e))
+}
+
+impl Exporter for Json {
+    fn open(&self, ctx: &mut ExportContext<'_>) -> Result<Box<dyn LayerSink>> {
+        let mut out = ctx.files.create(&self.options.path)?;
+        let header = Header {
+            lamina: lamina_core::VERSION,
+            schema: SCHEMA_VERSION,
+            pipeline: ctx.pipeline_name,
+            layer_count: ctx.layer_count,
+            materials: &ctx.info.materials,
+            parts: ctx
+                .info
+                .parts
+                .iter()
+                .map(|p| PartHeader {
+                    name: &p.name,
+                    materials: p
+                        .materials
+                        .iter()
+                        .map(|&m| ctx.info.materials[m].name.as_str())
+                        .collect(),
+                    z_min: p.z_min,
+                    z_max: p.z_max,
+                })
+                .collect(),
+            sequence: ctx.sequence,
+        };
+        let path = self.options.path.clone();
+        let text = if self.options.pretty && self.options.form == Form::Document {
+            serde_json::to_string_pretty(&header)
+        } else {
+            serde_json::to_string(&header)
+        }
+        .map_err(json_err(&path))?;
+        match self.options.form {
+            Form::Document => {
+                // The header's fields, then the layers array, streamed.
+                let body = text.strip_suffix('}').unwrap_or(&text);
+                write!(out, "{body},\"layers\":[").map_err(io(&path))?;
+            }
+            Form::Lines => writeln!(out, "{text}").map_err(io(&path))?,
+        }
+        Ok(Box::new(Sink {
+            out,
+            path,
+            form: self.options.form,
+            pretty: self.options.pretty,
+            toolpaths: self.options.toolpaths,
+            first: true,
+        }))
+    }
+}
+
+impl LayerSink for Sink {
+    fn layer(&mut self, info: &RunInfo, plan: &LayerPlan) -> Result<()> {
+        let layer = layer_out(info, plan, self.toolpaths);
+        let path = self.path.clone();
+        match self.form {
+            Form::Document => {
+                if !self.first {
+                    self.out.write_all(b",").map_err(io(&path))?;
+                }
+                if self.pretty {
+                    self.out.write_all(b"\n").map_err(io(&path))?;
+                    serde_json::to_writer_pretty(&mut self.out, &layer).map_err(json_err(&path))?;
+                } else {
+                    serde_json::to_writer(&mut self.out, &layer).map_err(json_err(&path))?;
+                }
+            }
+            Form::Lines => {
+                serde_json::to_writer(&mut self.out, &layer).map_err(json_err(&path))?;
+                self.out.write_all(b"\n").map_err(io(&path))?;
+            }
+        }
+        self.first = false;
+        Ok(())
+    }
+
+    fn finish(mut self: Box<Self>, _info: &RunInfo) -> Result<()> {
+        let path = self.path.clone();
+        if self.form == Form::Document {
+            self.out.write_all(b"]}\n").map_err(io(&path))?;
+        }
+        self.out.flush().map_err(io(&path))
+    }
+}
+
+fn build(config: &StageConfig<'_>) -> Result<AnyStage> {
+    let options: Options = config.parse()?;
+    Ok(AnyStage::Export(Box::new(Json { options })))
+}
+
+lamina_core::register_stage!(StageFactory {
+    info: StageInfo {
+        kind: StageKind::Export,
+        name: "json",
+        doc: "The plan as JSON: materials, parts, sequence, and per layer the families, sub-regions with compositions and colours, and toolpaths.",
+        options: &[
+            OptionSpec::new(
+                "path",
+                "string",
+                "\"plan.json\"",
+                "output file, relative to the output folder"
+            ),
+            OptionSpec::new(
+                "form",
+                "string",
+                "\"document\"",
+                "\"document\" (one JSON value) or \"lines\" (JSON Lines: header, then one line per layer)"
+            ),
+            OptionSpec::new("pretty", "bool", "false", "indent the document"),
+            OptionSpec::new("toolpaths", "bool", "true", "include planned toolpaths"),
+        ],
+        example: "use = \"json\"\npath = \"plan.json\"",
+    },
+    build,
+});

@@ -1,0 +1,14 @@
+//! Model sources for Lamina: readers for STL (binary and ASCII) and OBJ meshes, and
+//! generators for the parametric models the examples and tests use (gears, tubes,
+//! boxes, cylinders), so that the project ships no mesh files of its own.
+
+pub mod extrude;
+pub mod obj;
+pub mod profile;
+pub mod stl;
+pub mod weld;
+
+mod stages;
+
+pub use extrude::extrude;
+pub use weld::{Soup, WeldReport};

@@ -1,0 +1,454 @@
+//! The model stages this crate registers.
+
+use std::path::{Path, PathBuf};
+
+use lamina_core::stage::{AnyStage, ModelSource, OptionSpec, StageConfig, StageInfo, StageKind};
+use lamina_core::{Error, Mesh, Point2, Result, StageFactory};
+use serde::Deserialize;
+
+use crate::extrude::extrude;
+use crate::profile::{GearProfile, circle, polygon, rectangle};
+use crate::weld::{Soup, weld};
+
+const WELD_DOC: &str = "vertices closer than this (mm) are merged";
+
+// ---------------------------------------------------------------- file readers
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct FileOptions {
+    file: PathBuf,
+    #[serde(default = "default_weld")]
+    weld: f64,
+}
+
+fn default_weld() -> f64 {
+    1e-5
+}
+
+#[derive(Debug, Clone, Copy)]
+enum Format {
+    Stl,
+    Obj,
+}
+
+struct FileSource {
+    file: PathBuf,
+    weld: f64,
+    format: Format,
+}
+
+fn read(path: &Path) -> Result<Vec<u8>> {
+    std::fs::read(path).map_err(|e| Error::io(path, e))
+}
+
+impl ModelSource for FileSource {
+    fn load(&self, base_dir: &Path) -> Result<Vec<Mesh>> {
+        let path = base_dir.join(&self.file);
+        let bytes = read(&path)?;
+        let soups: Vec<(String, Soup)> = match self.format {
+            Format::Stl => crate::stl::parse(&path, &bytes)?,
+            Format::Obj => {
+                let text = String::from_utf8_lossy(&bytes);
+                crate::obj::parse(&path, &text)?
+                    .into_iter()
+                    .map(|m| {
+                        let soup = Soup {
+                            triangles: (0..m.triangles.len()).map(|i| m.triangle(i)).collect(),
+                        };
+                        (m.name, soup)
+                    })
+                    .collect()
+            }
+        };
+        Ok(soups
+            .into_iter()
+            .map(|(name, soup)| weld(&name, &soup, self.weld).0)
+            .collect())
+    }
+}
+
+fn build_file(config: &StageConfig<'_>, format: Format) -> Result<AnyStage> {
+    let o: FileOptions = config.parse()?;
+    if !(o.weld.is_finite() && o.weld >= 0.0) {
+        return Err(config.error("weld", "must be a non-negative number of mm"));
+    }
+    Ok(AnyStage::Model(Box::new(FileSource {
+        file: o.file,
+        weld: o.weld,
+        format,
+    })))
+}
+
+const FILE_OPTIONS: &[OptionSpec] = &[
+    OptionSpec::required("file", "string", "mesh file, relative to the pipeline file"),
+    OptionSpec::new("weld", "float", "1e-5", WELD_DOC),
+];
+
+lamina_core::register_stage!(StageFactory {
+    info: StageInfo {
+        kind: StageKind::Model,
+        name: "stl",
+        doc: "Reads a binary or ASCII STL file (chosen automatically for `file = \"*.stl\"`).",
+        options: FILE_OPTIONS,
+        example: "use = \"stl\"\nfile = \"part.stl\"",
+    },
+    build: |c| build_file(c, Format::Stl),
+});
+
+lamina_core::register_stage!(StageFactory {
+    info: StageInfo {
+        kind: StageKind::Model,
+        name: "obj",
+        doc: "Reads a Wavefront OBJ file; each `o` object is one mesh (chosen automatically for `file = \"*.obj\"`).",
+        options: FILE_OPTIONS,
+        example: "use = \"obj\"\nfile = \"part.obj\"",
+    },
+    build: |c| build_file(c, Format::Obj),
+});
+
+// ---------------------------------------------------------------- generators
+
+struct Generated(Vec<Mesh>);
+
+impl ModelSource for Generated {
+    fn load(&self, _base_dir: &Path) -> Result<Vec<Mesh>> {
+        Ok(self.0.clone())
+    }
+}
+
+fn positive(config: &StageConfig<'_>, key: &str, v: f64) -> Result<()> {
+    if v.is_finite() && v > 0.0 {
+        Ok(())
+    } else {
+        Err(config.error(key, format!("must be a positive number, not {v}")))
+    }
+}
+
+fn segments_ok(config: &StageConfig<'_>, v: usize) -> Result<()> {
+    if (3..=100_000).contains(&v) {
+        Ok(())
+    } else {
+        Err(config.error("segments", "must lie in 3..=100000"))
+    }
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct GearOptions {
+    #[serde(default = "d_teeth")]
+    teeth: usize,
+    #[serde(default = "d_tip")]
+    tip_radius: f64,
+    #[serde(default = "d_root")]
+    root_radius: f64,
+    #[serde(default = "d_bore")]
+    bore: f64,
+    #[serde(default = "d_gear_height")]
+    height: f64,
+    #[serde(default = "d_tip_share")]
+    tip_share: f64,
+    #[serde(default = "d_root_share")]
+    root_share: f64,
+    #[serde(default = "d_arc")]
+    arc_segments: usize,
+    /// gear-shaft only
+    #[serde(default)]
+    shaft_length: Option<f64>,
+    #[serde(default = "d_clearance")]
+    clearance: f64,
+}
+
+fn d_teeth() -> usize {
+    20
+}
+fn d_tip() -> f64 {
+    20.0
+}
+fn d_root() -> f64 {
+    16.0
+}
+fn d_bore() -> f64 {
+    5.0
+}
+fn d_gear_height() -> f64 {
+    8.0
+}
+fn d_tip_share() -> f64 {
+    0.3
+}
+fn d_root_share() -> f64 {
+    0.55
+}
+fn d_arc() -> usize {
+    4
+}
+fn d_clearance() -> f64 {
+    0.2
+}
+
+const GEAR_OPTIONS: &[OptionSpec] = &[
+    OptionSpec::new("teeth", "integer", "20", "number of teeth"),
+    OptionSpec::new("tip_radius", "float", "20.0", "radius of the tooth tips (mm)"),
+    OptionSpec::new("root_radius", "float", "16.0", "radius of the tooth roots (mm)"),
+    OptionSpec::new(
+        "bore",
+        "float",
+        "5.0",
+        "radius of the central bore (mm); 0 for none",
+    ),
+    OptionSpec::new("height", "float", "8.0", "thickness of the gear (mm)"),
+    OptionSpec::new(
+        "tip_share",
+        "float",
+        "0.3",
+        "share of the pitch a tooth takes at its tip",
+    ),
+    OptionSpec::new(
+        "root_share",
+        "float",
+        "0.55",
+        "share of the pitch a tooth takes at its root",
+    ),
+    OptionSpec::new("arc_segments", "integer", "4", "vertices per tip or root land"),
+];
+
+const GEAR_SHAFT_OPTIONS: &[OptionSpec] = &[
+    OptionSpec::new("teeth", "integer", "20", "number of teeth"),
+    OptionSpec::new("tip_radius", "float", "20.0", "radius of the tooth tips (mm)"),
+    OptionSpec::new("root_radius", "float", "16.0", "radius of the tooth roots (mm)"),
+    OptionSpec::new(
+        "bore",
+        "float",
+        "5.0",
+        "radius of the gear's bore (mm); the shaft fills it",
+    ),
+    OptionSpec::new("height", "float", "8.0", "thickness of the gear (mm)"),
+    OptionSpec::new(
+        "tip_share",
+        "float",
+        "0.3",
+        "share of the pitch a tooth takes at its tip",
+    ),
+    OptionSpec::new(
+        "root_share",
+        "float",
+        "0.55",
+        "share of the pitch a tooth takes at its root",
+    ),
+    OptionSpec::new("arc_segments", "integer", "4", "vertices per tip or root land"),
+    OptionSpec::new(
+        "shaft_length",
+        "float",
+        "2 * height",
+        "length of the shaft from the bed (mm)",
+    ),
+    OptionSpec::new(
+        "clearance",
+        "float",
+        "0.2",
+        "radial gap between shaft and bore (mm)",
+    ),
+];
+
+fn gear_profile(config: &StageConfig<'_>, o: &GearOptions) -> Result<GearProfile> {
+    if o.teeth < 3 || o.teeth > 10_000 {
+        return Err(config.error("teeth", "must lie in 3..=10000"));
+    }
+    positive(config, "tip_radius", o.tip_radius)?;
+    positive(config, "root_radius", o.root_radius)?;
+    positive(config, "height", o.height)?;
+    if o.root_radius >= o.tip_radius {
+        return Err(config.error("root_radius", "must be smaller than tip_radius"));
+    }
+    if !(o.bore >= 0.0 && o.bore < o.root_radius * 0.95) {
+        return Err(config.error("bore", "must lie in [0, 0.95 root_radius)"));
+    }
+    for (k, v) in [("tip_share", o.tip_share), ("root_share", o.root_share)] {
+        if !(v > 0.0 && v < 1.0) {
+            return Err(config.error(k, "must lie in (0, 1)"));
+        }
+    }
+    if o.tip_share > o.root_share {
+        return Err(config.error(
+            "tip_share",
+            "must not exceed root_share (teeth narrow towards the tip)",
+        ));
+    }
+    if o.arc_segments == 0 || o.arc_segments > 1000 {
+        return Err(config.error("arc_segments", "must lie in 1..=1000"));
+    }
+    Ok(GearProfile {
+        teeth: o.teeth,
+        tip_radius: o.tip_radius,
+        root_radius: o.root_radius,
+        tip_share: o.tip_share,
+        root_share: o.root_share,
+        arc_segments: o.arc_segments,
+    })
+}
+
+fn bore_segments(o: &GearOptions) -> usize {
+    (o.teeth * (2 * o.arc_segments + 2)).clamp(32, 512)
+}
+
+fn build_gear(config: &StageConfig<'_>) -> Result<AnyStage> {
+    let o: GearOptions = config.parse()?;
+    if o.shaft_length.is_some() {
+        return Err(config.error("shaft_length", "only the `gear-shaft` model has a shaft"));
+    }
+    let g = gear_profile(config, &o)?;
+    let holes = if o.bore > 0.0 {
+        vec![circle(Point2::origin(), o.bore, bore_segments(&o))]
+    } else {
+        vec![]
+    };
+    let mesh = extrude("gear", &polygon(g.outline(), holes), 0.0, o.height)?;
+    Ok(AnyStage::Model(Box::new(Generated(vec![mesh]))))
+}
+
+fn build_gear_shaft(config: &StageConfig<'_>) -> Result<AnyStage> {
+    let o: GearOptions = config.parse()?;
+    let g = gear_profile(config, &o)?;
+    if o.bore <= 0.0 {
+        return Err(config.error("bore", "the gear of a gear-shaft assembly needs a bore"));
+    }
+    if !(o.clearance >= 0.0 && o.clearance < o.bore * 0.5) {
+        return Err(config.error("clearance", "must lie in [0, bore / 2)"));
+    }
+    let length = o.shaft_length.unwrap_or(2.0 * o.height);
+    positive(config, "shaft_length", length)?;
+    let seg = bore_segments(&o);
+    let gear = extrude(
+        "gear",
+        &polygon(g.outline(), vec![circle(Point2::origin(), o.bore, seg)]),
+        0.0,
+        o.height,
+    )?;
+    let shaft = extrude(
+        "shaft",
+        &polygon(circle(Point2::origin(), o.bore - o.clearance, seg), vec![]),
+        0.0,
+        length,
+    )?;
+    Ok(AnyStage::Model(Box::new(Generated(vec![gear, shaft]))))
+}
+
+lamina_core::register_stage!(StageFactory {
+    info: StageInfo {
+        kind: StageKind::Model,
+        name: "gear",
+        doc: "Generates a spur gear with trapezoidal teeth and an optional bore, standing on the bed.",
+        options: GEAR_OPTIONS,
+        example: "use = \"gear\"\nteeth = 12\nheight = 4.0",
+    },
+    build: build_gear,
+});
+
+lamina_core::register_stage!(StageFactory {
+    info: StageInfo {
+        kind: StageKind::Model,
+        name: "gear-shaft",
+        doc: "Generates a gear (mesh 0) on a shaft through its bore (mesh 1): a two-part assembly.",
+        options: GEAR_SHAFT_OPTIONS,
+        example: "use = \"gear-shaft\"\nteeth = 12\nheight = 4.0\nshaft_length = 10.0",
+    },
+    build: build_gear_shaft,
+});
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct TubeOptions {
+    #[serde(default = "d_outer")]
+    outer_radius: f64,
+    #[serde(default = "d_inner")]
+    inner_radius: f64,
+    #[serde(default = "d_tube_height")]
+    height: f64,
+    #[serde(default = "d_segments")]
+    segments: usize,
+}
+
+fn d_outer() -> f64 {
+    10.0
+}
+fn d_inner() -> f64 {
+    7.0
+}
+fn d_tube_height() -> f64 {
+    20.0
+}
+fn d_segments() -> usize {
+    128
+}
+
+fn build_tube(config: &StageConfig<'_>) -> Result<AnyStage> {
+    let o: TubeOptions = config.parse()?;
+    positive(config, "outer_radius", o.outer_radius)?;
+    positive(config, "height", o.height)?;
+    segments_ok(config, o.segments)?;
+    if !(o.inner_radius >= 0.0 && o.inner_radius < o.outer_radius) {
+        return Err(config.error("inner_radius", "must lie in [0, outer_radius)"));
+    }
+    let holes = if o.inner_radius > 0.0 {
+        vec![circle(Point2::origin(), o.inner_radius, o.segments)]
+    } else {
+        vec![]
+    };
+    let outer = circle(Point2::origin(), o.outer_radius, o.segments);
+    let mesh = extrude("tube", &polygon(outer, holes), 0.0, o.height)?;
+    Ok(AnyStage::Model(Box::new(Generated(vec![mesh]))))
+}
+
+lamina_core::register_stage!(StageFactory {
+    info: StageInfo {
+        kind: StageKind::Model,
+        name: "tube",
+        doc: "Generates a round tube (or a rod with inner_radius = 0) standing on the bed.",
+        options: &[
+            OptionSpec::new("outer_radius", "float", "10.0", "outer radius (mm)"),
+            OptionSpec::new("inner_radius", "float", "7.0", "inner radius (mm); 0 makes a rod"),
+            OptionSpec::new("height", "float", "20.0", "height (mm)"),
+            OptionSpec::new("segments", "integer", "128", "vertices per circle"),
+        ],
+        example: "use = \"tube\"\nouter_radius = 10.0\ninner_radius = 7.0\nheight = 5.0",
+    },
+    build: build_tube,
+});
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct BoxOptions {
+    #[serde(default = "d_size")]
+    size: [f64; 3],
+}
+
+fn d_size() -> [f64; 3] {
+    [20.0, 20.0, 10.0]
+}
+
+fn build_box(config: &StageConfig<'_>) -> Result<AnyStage> {
+    let o: BoxOptions = config.parse()?;
+    for v in o.size {
+        positive(config, "size", v)?;
+    }
+    let r = rectangle(Point2::new(0.0, 0.0), Point2::new(o.size[0], o.size[1]));
+    let mesh = extrude("box", &polygon(r, vec![]), 0.0, o.size[2])?;
+    Ok(AnyStage::Model(Box::new(Generated(vec![mesh]))))
+}
+
+lamina_core::register_stage!(StageFactory {
+    info: StageInfo {
+        kind: StageKind::Model,
+        name: "box",
+        doc: "Generates a rectangular box with one corner at the origin.",
+        options: &[OptionSpec::new(
+            "size",
+            "array of float",
+            "[20.0, 20.0, 10.0]",
+            "size along x, y, z (mm)"
+        )],
+        example: "use = \"box\"\nsize = [10.0, 5.0, 2.0]",
+    },
+    build: build_box,
+});

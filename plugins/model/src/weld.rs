@@ -1,0 +1,90 @@
+//! Turning a triangle soup (STL stores every corner again) into an indexed mesh:
+//! vertices closer than a tolerance are merged and triangles that collapse are dropped.
+//! Slicing relies on shared vertex indices to chain the cut segments into loops.
+
+use std::collections::HashMap;
+
+use lamina_core::{Mesh, Point3};
+
+/// Triangles as three corners each, before welding.
+#[derive(Debug, Default, Clone)]
+pub struct Soup {
+    pub triangles: Vec<[Point3; 3]>,
+}
+
+/// What welding changed.
+#[derive(Debug, Default, Clone, Copy, PartialEq, Eq)]
+pub struct WeldReport {
+    pub corners: usize,
+    pub vertices: usize,
+    pub degenerate: usize,
+}
+
+/// Welds a soup into an indexed mesh. Corners are snapped to a grid of cell
+/// `tolerance`: corners in the same cell become one vertex, which merges the exact
+/// duplicates STL files are made of and the tiny rounding differences some exporters
+/// leave. Triangles with two equal corners after welding are dropped.
+pub fn weld(name: &str, soup: &Soup, tolerance: f64) -> (Mesh, WeldReport) {
+    let inv = if tolerance > 0.0 { 1.0 / tolerance } else { 0.0 };
+    let mut index: HashMap<[i64; 3], u32> = HashMap::with_capacity(soup.triangles.len());
+    let mut vertices = Vec::with_capacity(soup.triangles.len() / 2 + 3);
+    let mut triangles = Vec::with_capacity(soup.triangles.len());
+    let mut degenerate = 0;
+    for tri in &soup.triangles {
+        let mut ids = [0u32; 3];
+        for (id, p) in ids.iter_mut().zip(tri) {
+            let key = if inv > 0.0 {
+                [
+                    (p.x * inv).round() as i64,
+                    (p.y * inv).round() as i64,
+                    (p.z * inv).round() as i64,
+                ]
+            } else {
+                [p.x.to_bits() as i64, p.y.to_bits() as i64, p.z.to_bits() as i64]
+            };
+            *id = *index.entry(key).or_insert_with(|| {
+                vertices.push(*p);
+                (vertices.len() - 1) as u32
+            });
+        }
+        if ids[0] == ids[1] || ids[1] == ids[2] || ids[0] == ids[2] {
+            degenerate += 1;
+            continue;
+        }
+        triangles.push(ids);
+    }
+    let report = WeldReport {
+        corners: soup.triangles.len() * 3,
+        vertices: vertices.len(),
+        degenerate,
+    };
+    let mut mesh = Mesh::new(name, vertices, triangles);
+    if degenerate > 0 {
+        mesh.warnings.push(format!(
+            "{name}: dropped {degenerate} degenerate triangle(s) (corners closer than {tolerance} mm)"
+        ));
+    }
+    (mesh, report)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn shared_corners_become_one_vertex_and_slivers_are_dropped() {
+        let p = |x: f64, y: f64| Point3::new(x, y, 0.0);
+        let soup = Soup {
+            triangles: vec![
+                [p(0.0, 0.0), p(1.0, 0.0), p(0.0, 1.0)],
+                [p(1.0, 0.0), p(1.0, 1.0), p(0.0, 1.0 + 1e-9)],
+                [p(0.0, 0.0), p(1e-9, 0.0), p(0.5, 0.5)],
+            ],
+        };
+        let (mesh, report) = weld("t", &soup, 1e-6);
+        assert_eq!(mesh.vertices.len(), 5);
+        assert_eq!(mesh.triangles.len(), 2);
+        assert_eq!(report.degenerate, 1);
+        assert_eq!(mesh.warnings.len(), 1);
+    }
+}

@@ -1,0 +1,425 @@
+//! Cutting a triangle mesh with a horizontal plane.
+//!
+//! Robustness comes from topology, not from comparing floating-point points: a vertex
+//! lying exactly in the plane is treated as lying above it (symbolic perturbation), so
+//! every triangle crossing the plane has exactly two edges that cross it and yields one
+//! segment whose ends are identified by the crossing edges (pairs of vertex indices).
+//! Neighbouring triangles share those edges, so segments chain into loops without any
+//! tolerance. Faces lying in the plane produce nothing, and vertices or edges in the
+//! plane produce segments through them. What does not close (open meshes, non-manifold
+//! edges) is joined across small gaps, and reported when it cannot be.
+
+use std::collections::HashMap;
+use std::sync::Arc;
+
+use lamina_core::{Contour, Layer, LayerSlot, Mesh, Point2, Result};
+
+/// How the cut treats defects.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct CutOptions {
+    /// Open chains whose ends are closer than this (mm) are joined.
+    pub close_gaps: f64,
+    /// Loops enclosing less area than this (mm²) are dropped as noise.
+    pub min_area: f64,
+}
+
+impl Default for CutOptions {
+    fn default() -> Self {
+        Self {
+            close_gaps: 0.05,
+            min_area: 1e-8,
+        }
+    }
+}
+
+/// A mesh indexed by height for repeated cuts.
+#[derive(Debug)]
+pub struct CutMesh {
+    mesh: Arc<Mesh>,
+    /// Sign of the mesh's volume: +1 when triangles wind outward, -1 when inside out.
+    orientation: f64,
+    /// Triangle z ranges.
+    ranges: Vec<(f64, f64)>,
+    /// Buckets of triangle indices by z.
+    z0: f64,
+    bucket: f64,
+    buckets: Vec<Vec<u32>>,
+    options: CutOptions,
+}
+
+/// One cut segment: its two ends, each an edge key and a point, and the direction the
+/// triangle's winding gives it.
+#[derive(Debug, Clone, Copy)]
+struct Segment {
+    keys: [u64; 2],
+    points: [Point2; 2],
+}
+
+fn edge_key(a: u32, b: u32) -> u64 {
+    let (lo, hi) = if a < b { (a, b) } else { (b, a) };
+    (u64::from(lo) << 32) | u64::from(hi)
+}
+
+impl CutMesh {
+    pub fn new(mesh: Arc<Mesh>, options: CutOptions) -> Self {
+        let ranges: Vec<(f64, f64)> = (0..mesh.triangles.len())
+            .map(|i| {
+                let [a, b, c] = mesh.triangle(i);
+                (a.z.min(b.z).min(c.z), a.z.max(b.z).max(c.z))
+            })
+            .collect();
+        let bb = mesh.bbox();
+        let (z0, z1) = if bb.is_empty() {
+            (0.0, 1.0)
+        } else {
+            (bb.min.z, bb.max.z)
+        };
+        let height = (z1 - z0).max(1e-9);
+        // Bucket height near the typical triangle height keeps each triangle in few
+        // buckets; the count is capped so memory stays linear in the mesh.
+        let mut extents: Vec<f64> = ranges.iter().map(|(lo, hi)| hi - lo).collect();
+        let median = if extents.is_empty() {
+            height
+        } else {
+            let mid = extents.len() / 2;
+            *extents.select_nth_unstable_by(mid, f64::total_cmp).1
+        };
+        let count = ((height / median.max(height / 65536.0)).ceil() as usize).clamp(1, 65536);
+        let bucket = height / count as f64;
+        let mut buckets = vec![Vec::new(); count];
+        for (i, &(lo, hi)) in ranges.iter().enumerate() {
+            let b0 = (((lo - z0) / bucket).floor().max(0.0) as usize).min(count - 1);
+            let b1 = (((hi - z0) / bucket).floor().max(0.0) as usize).min(count - 1);
+            for b in &mut buckets[b0..=b1] {
+                b.push(i as u32);
+            }
+        }
+        let orientation = if mesh.signed_volume() < 0.0 { -1.0 } else { 1.0 };
+        Self {
+            mesh,
+            orientation,
+            ranges,
+            z0,
+            bucket,
+            buckets,
+            options,
+        }
+    }
+
+    pub fn mesh(&self) -> &Arc<Mesh> {
+        &self.mesh
+    }
+
+    /// The segments of the plane `z`.
+    fn segments(&self, z: f64) -> Vec<Segment> {
+        let b = ((z - self.z0) / self.bucket).floor();
+        if b < 0.0
+            || b as usize >= self.buckets.len() && z > self.z0 + self.bucket * self.buckets.len() as f64
+        {
+            return Vec::new();
+        }
+        let b = (b as usize).min(self.buckets.len() - 1);
+        let mut out = Vec::new();
+        for &t in &self.buckets[b] {
+            let (lo, hi) = self.ranges[t as usize];
+            if !(lo < z && hi >= z) {
+                continue;
+            }
+            let ids = self.mesh.triangles[t as usize];
+            let pts = self.mesh.triangle(t as usize);
+            let above = pts.map(|p| p.z >= z);
+            // The lone vertex on its side, and the two edges leaving it.
+            let lone = match above {
+                [a, b, c] if a != b && a != c => 0,
+                [a, b, c] if b != a && b != c => 1,
+                [_, _, _] => 2,
+            };
+            let (i1, i2) = ((lone + 1) % 3, (lone + 2) % 3);
+            let cross = |i: usize, j: usize| {
+                let (p, q) = (pts[i], pts[j]);
+                let s = (z - p.z) / (q.z - p.z);
+                Point2::new(p.x + (q.x - p.x) * s, p.y + (q.y - p.y) * s)
+            };
+            let pa = cross(lone, i1);
+            let pb = cross(lone, i2);
+            let ka = edge_key(ids[lone], ids[i1]);
+            let kb = edge_key(ids[lone], ids[i2]);
+            // Material lies to the left of the segment when the mesh winds outward:
+            // a lone vertex below the plane means the walk goes from edge (lone, i1)
+            // to edge (lone, i2) with the solid on the left... decided by the normal.
+            let n = (pts[1] - pts[0]).cross(&(pts[2] - pts[0])) * self.orientation;
+            // Direction z × n has the solid on its left.
+            let want = lamina_core::Vector2::new(-n.y, n.x);
+            let d = pb - pa;
+            if d.dot(&want) >= 0.0 {
+                out.push(Segment {
+                    keys: [ka, kb],
+                    points: [pa, pb],
+                });
+            } else {
+                out.push(Segment {
+                    keys: [kb, ka],
+                    points: [pb, pa],
+                });
+            }
+        }
+        out
+    }
+
+    /// Cuts the mesh for one layer slot.
+    pub fn cut(&self, slot: &LayerSlot) -> Result<Layer> {
+        let mut layer = Layer::from_slot(slot);
+        let segments = self.segments(slot.cut_z);
+        let (loops, open) = chain(&segments);
+        let mut contours = Vec::new();
+        let mut closed_gaps = 0;
+        for mut lp in loops.into_iter().chain(close_open(
+            open,
+            self.options.close_gaps,
+            &mut layer.warnings,
+            &mut closed_gaps,
+        )) {
+            lp.points.dedup_by(|a, b| (*a - *b).norm() <= 1e-12);
+            while lp.points.len() > 1 && (lp.points[0] - lp.points[lp.points.len() - 1]).norm() <= 1e-12 {
+                lp.points.pop();
+            }
+            if lp.points.len() < 3 || lp.area() < self.options.min_area {
+                continue;
+            }
+            contours.push(lp);
+        }
+        if closed_gaps > 0 {
+            layer.warnings.push(format!(
+                "closed {closed_gaps} gap(s) below {} mm",
+                self.options.close_gaps
+            ));
+        }
+        layer.contours = contours;
+        Ok(layer)
+    }
+}
+
+/// Chains segments into closed loops by their edge keys. Returns the loops (oriented
+/// by the majority of their segments' directions) and the chains that did not close.
+fn chain(segments: &[Segment]) -> (Vec<Contour>, Vec<Vec<Point2>>) {
+    // Each edge key is the end of (normally) two segments.
+    let mut at: HashMap<u64, Vec<u32>> = HashMap::with_capacity(segments.len());
+    for (i, s) in segments.iter().enumerate() {
+        for k in s.keys {
+            at.entry(k).or_default().push(i as u32);
+        }
+    }
+    let mut used = vec![false; segments.len()];
+    let mut loops = Vec::new();
+    let mut open = Vec::new();
+    for start in 0..segments.len() {
+        if used[start] {
+            continue;
+        }
+        used[start] = true;
+        let s = segments[start];
+        let mut points = vec![s.points[0], s.points[1]];
+        let mut votes = 1i64;
+        let first_key = s.keys[0];
+        let mut key = s.keys[1];
+        let mut closed = false;
+        // Walk forward.
+        loop {
+            if key == first_key {
+                closed = true;
+                break;
+            }
+            let Some(next) = at
+                .get(&key)
+                .and_then(|v| v.iter().copied().find(|&j| !used[j as usize]))
+            else {
+                break;
+            };
+            used[next as usize] = true;
+            let seg = segments[next as usize];
+            let (p, k, v) = if seg.keys[0] == key {
+                (seg.points[1], seg.keys[1], 1)
+            } else {
+                (seg.points[0], seg.keys[0], -1)
+            };
+            votes += v;
+            points.push(p);
+            key = k;
+        }
+        if closed {
+            points.pop();
+            let mut c = Contour::new(points);
+            if votes < 0 {
+                c.reverse();
+            }
+            loops.push(c);
+            continue;
+        }
+        // Walk backward from the start to complete the open chain.
+        let mut back = Vec::new();
+        let mut key = first_key;
+        while let Some(next) = at
+            .get(&key)
+            .and_then(|v| v.iter().copied().find(|&j| !used[j as usize]))
+        {
+            used[next as usize] = true;
+            let seg = segments[next as usize];
+            let (p, k, v) = if seg.keys[1] == key {
+                (seg.points[0], seg.keys[0], 1)
+            } else {
+                (seg.points[1], seg.keys[1], -1)
+            };
+            votes += v;
+            back.push(p);
+            key = k;
+        }
+        back.reverse();
+        back.extend(points);
+        if votes < 0 {
+            back.reverse();
+        }
+        open.push(back);
+    }
+    (loops, open)
+}
+
+/// Joins open chains end to start across gaps smaller than `tolerance`; chains that
+/// still do not close are reported and dropped (stray sheets).
+fn close_open(
+    mut open: Vec<Vec<Point2>>,
+    tolerance: f64,
+    warnings: &mut Vec<String>,
+    closed_gaps: &mut usize,
+) -> Vec<Contour> {
+    let mut out = Vec::new();
+    while let Some(mut chain) = open.pop() {
+        loop {
+            let (first, last) = (chain[0], chain[chain.len() - 1]);
+            if (last - first).norm() <= tolerance && chain.len() > 2 {
+                *closed_gaps += 1;
+                out.push(Contour::new(chain));
+                break;
+            }
+            // The nearest chain start (or end, reversed) to our end.
+            let mut best: Option<(usize, bool, f64)> = None;
+            for (i, c) in open.iter().enumerate() {
+                for (rev, p) in [(false, c[0]), (true, c[c.len() - 1])] {
+                    let d = (p - last).norm();
+                    if d <= tolerance && best.is_none_or(|b| d < b.2) {
+                        best = Some((i, rev, d));
+                    }
+                }
+            }
+            match best {
+                Some((i, rev, _)) => {
+                    let mut next = open.swap_remove(i);
+                    if rev {
+                        next.reverse();
+                    }
+                    *closed_gaps += 1;
+                    chain.extend(next);
+                }
+                None => {
+                    let gap = (last - first).norm();
+                    warnings.push(format!(
+                        "dropped an open chain of {} points from ({:.3}, {:.3}) to ({:.3}, {:.3}): gap of {gap:.3} mm (open mesh?)",
+                        chain.len(),
+                        first.x,
+                        first.y,
+                        last.x,
+                        last.y
+                    ));
+                    break;
+                }
+            }
+        }
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use lamina_core::Point3;
+
+    /// An axis-aligned box made of 12 outward triangles.
+    fn cube(size: f64) -> Mesh {
+        let v: Vec<Point3> = (0..8)
+            .map(|i| {
+                Point3::new(
+                    if i & 1 != 0 { size } else { 0.0 },
+                    if i & 2 != 0 { size } else { 0.0 },
+                    if i & 4 != 0 { size } else { 0.0 },
+                )
+            })
+            .collect();
+        let quads = [
+            [0, 2, 3, 1], // bottom (z = 0), facing down
+            [4, 5, 7, 6], // top
+            [0, 1, 5, 4], // y = 0
+            [2, 6, 7, 3], // y = size
+            [0, 4, 6, 2], // x = 0
+            [1, 3, 7, 5], // x = size
+        ];
+        let mut t = Vec::new();
+        for q in quads {
+            t.push([q[0], q[1], q[2]]);
+            t.push([q[0], q[2], q[3]]);
+        }
+        Mesh::new("cube", v, t)
+    }
+
+    fn slot(z: f64) -> LayerSlot {
+        LayerSlot {
+            index: 0,
+            z,
+            thickness: 0.1,
+            cut_z: z,
+        }
+    }
+
+    #[test]
+    fn cube_cuts_into_one_ccw_square() {
+        let m = Arc::new(cube(2.0));
+        assert!(m.signed_volume() > 0.0);
+        let c = CutMesh::new(m, CutOptions::default());
+        let l = c.cut(&slot(1.0)).expect("cut");
+        assert_eq!(l.contours.len(), 1);
+        assert!(l.contours[0].is_ccw());
+        assert!((l.contours[0].area() - 4.0).abs() < 1e-12);
+    }
+
+    #[test]
+    fn planes_through_vertices_and_faces_are_handled() {
+        let c = CutMesh::new(Arc::new(cube(2.0)), CutOptions::default());
+        // Through the bottom face: the bottom vertices count as above, nothing below.
+        assert_eq!(c.cut(&slot(0.0)).expect("cut").contours.len(), 0);
+        // Exactly through the top face: the side walls end there; a loop remains.
+        let top = c.cut(&slot(2.0)).expect("cut");
+        assert_eq!(top.contours.len(), 1, "{top:?}");
+        assert!((top.contours[0].area() - 4.0).abs() < 1e-12);
+        assert!(top.warnings.is_empty());
+    }
+
+    #[test]
+    fn inside_out_mesh_still_gives_ccw_outer() {
+        let mut m = cube(1.0);
+        for t in &mut m.triangles {
+            t.swap(1, 2);
+        }
+        let c = CutMesh::new(Arc::new(m), CutOptions::default());
+        let l = c.cut(&slot(0.5)).expect("cut");
+        assert!(l.contours[0].is_ccw());
+    }
+
+    #[test]
+    fn open_sheet_is_reported() {
+        let mut m = cube(1.0);
+        // Remove one side wall: the cut leaves an open chain with a 1 mm gap.
+        m.triangles.drain(4..6);
+        let c = CutMesh::new(Arc::new(m), CutOptions::default());
+        let l = c.cut(&slot(0.5)).expect("cut");
+        assert!(l.contours.is_empty());
+        assert_eq!(l.warnings.len(), 1, "{:?}", l.warnings);
+    }
+}

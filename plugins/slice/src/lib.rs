@@ -1,0 +1,7 @@
+//! Slicers for Lamina. [`cut`] turns a mesh into the closed contours of one plane;
+//! the stages decide where the planes go (`uniform`).
+
+pub mod cut;
+mod uniform;
+
+pub use cut::{CutMesh, CutOptions};

@@ -1,0 +1,201 @@
+//! `uniform`: layers of one thickness from the bottom of the model to its top.
+
+use std::sync::Arc;
+
+use lamina_core::stage::{AnyStage, MeshSlicer, OptionSpec, Slicer, StageConfig, StageInfo, StageKind};
+use lamina_core::{Error, Layer, LayerSlot, Mesh, Result, RunInfo, Sequence, StageFactory};
+use serde::Deserialize;
+
+use crate::cut::{CutMesh, CutOptions};
+
+/// Where in its thickness a layer is cut.
+#[derive(Debug, Clone, Copy, PartialEq, Deserialize)]
+#[serde(untagged)]
+enum CutAt {
+    Named(CutName),
+    /// Fraction of the thickness above the layer's bottom, in [0, 1].
+    Fraction(f64),
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Deserialize)]
+#[serde(rename_all = "lowercase")]
+enum CutName {
+    Bottom,
+    Mid,
+    Top,
+}
+
+impl CutAt {
+    fn fraction(self) -> f64 {
+        match self {
+            CutAt::Named(CutName::Bottom) => 0.0,
+            CutAt::Named(CutName::Mid) => 0.5,
+            CutAt::Named(CutName::Top) => 1.0,
+            CutAt::Fraction(f) => f,
+        }
+    }
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct Options {
+    #[serde(default = "d_thickness")]
+    thickness: f64,
+    #[serde(default = "d_cut")]
+    cut: CutAt,
+    #[serde(default = "d_close_gaps")]
+    close_gaps: f64,
+    /// Upper bound on the layer count, against a mistyped thickness.
+    #[serde(default = "d_max_layers")]
+    max_layers: usize,
+}
+
+fn d_thickness() -> f64 {
+    0.2
+}
+fn d_cut() -> CutAt {
+    CutAt::Named(CutName::Mid)
+}
+fn d_close_gaps() -> f64 {
+    0.05
+}
+fn d_max_layers() -> usize {
+    1_000_000
+}
+
+pub(crate) struct Uniform {
+    thickness: f64,
+    cut: f64,
+    close_gaps: f64,
+    max_layers: usize,
+}
+
+/// Slots of equal thickness `t` covering `z_min..z_max`; the last layer's top is at
+/// or above `z_max`.
+pub fn uniform_slots(z_min: f64, z_max: f64, t: f64, cut: f64, max_layers: usize) -> Result<Vec<LayerSlot>> {
+    let height = z_max - z_min;
+    if height.is_nan() || height <= 0.0 {
+        return Ok(Vec::new());
+    }
+    // Tolerate a height that is a whole number of layers up to rounding.
+    let n = ((height / t) - 1e-9).ceil().max(1.0);
+    if n > max_layers as f64 {
+        return Err(Error::stage(
+            "slice:uniform",
+            format!("{n} layers of {t} mm exceed max_layers = {max_layers}"),
+        ));
+    }
+    let n = n as usize;
+    Ok((0..n)
+        .map(|i| {
+            let top = z_min + t * (i + 1) as f64;
+            let bottom = z_min + t * i as f64;
+            LayerSlot {
+                index: i,
+                z: top,
+                thickness: t,
+                cut_z: (bottom + t * cut).min(z_max),
+            }
+        })
+        .collect())
+}
+
+impl Slicer for Uniform {
+    fn layers(
+        &self,
+        _meshes: &[Arc<Mesh>],
+        info: &RunInfo,
+        _sequence: Option<&Sequence>,
+    ) -> Result<Vec<LayerSlot>> {
+        uniform_slots(info.z_min, info.z_max, self.thickness, self.cut, self.max_layers)
+    }
+
+    fn prepare(&self, mesh: Arc<Mesh>) -> Result<Box<dyn MeshSlicer>> {
+        Ok(Box::new(Prepared(CutMesh::new(
+            mesh,
+            CutOptions {
+                close_gaps: self.close_gaps,
+                ..CutOptions::default()
+            },
+        ))))
+    }
+}
+
+pub(crate) struct Prepared(pub CutMesh);
+
+impl MeshSlicer for Prepared {
+    fn slice(&self, slot: &LayerSlot) -> Result<Layer> {
+        self.0.cut(slot)
+    }
+}
+
+fn build(config: &StageConfig<'_>) -> Result<AnyStage> {
+    let o: Options = config.parse()?;
+    if !(o.thickness.is_finite() && o.thickness > 0.0) {
+        return Err(config.error("thickness", "must be a positive number of mm"));
+    }
+    let cut = o.cut.fraction();
+    if !(0.0..=1.0).contains(&cut) {
+        return Err(config.error(
+            "cut",
+            "must be \"bottom\", \"mid\", \"top\" or a fraction in [0, 1]",
+        ));
+    }
+    if !(o.close_gaps.is_finite() && o.close_gaps >= 0.0) {
+        return Err(config.error("close_gaps", "must be a non-negative number of mm"));
+    }
+    Ok(AnyStage::Slice(Box::new(Uniform {
+        thickness: o.thickness,
+        cut,
+        close_gaps: o.close_gaps,
+        max_layers: o.max_layers,
+    })))
+}
+
+lamina_core::register_stage!(StageFactory {
+    info: StageInfo {
+        kind: StageKind::Slice,
+        name: "uniform",
+        doc: "Layers of one thickness from the bottom of the model to its top, each cut at a chosen height within it.",
+        options: &[
+            OptionSpec::new("thickness", "float", "0.2", "layer thickness (mm)"),
+            OptionSpec::new(
+                "cut",
+                "string or float",
+                "\"mid\"",
+                "where a layer is cut: \"bottom\", \"mid\", \"top\" or a fraction of its thickness"
+            ),
+            OptionSpec::new(
+                "close_gaps",
+                "float",
+                "0.05",
+                "open chains whose ends are closer than this (mm) are joined"
+            ),
+            OptionSpec::new(
+                "max_layers",
+                "integer",
+                "1000000",
+                "refuse to make more layers than this"
+            ),
+        ],
+        example: "use = \"uniform\"\nthickness = 0.5\ncut = \"mid\"",
+    },
+    build,
+});
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn slots_cover_the_height() {
+        let s = uniform_slots(0.0, 1.0, 0.2, 0.5, 100).expect("slots");
+        assert_eq!(s.len(), 5);
+        assert!((s[4].z - 1.0).abs() < 1e-12);
+        assert!((s[0].cut_z - 0.1).abs() < 1e-12);
+        let s = uniform_slots(0.0, 1.05, 0.2, 1.0, 100).expect("slots");
+        assert_eq!(s.len(), 6);
+        assert!((s[5].cut_z - 1.05).abs() < 1e-12);
+        assert!(uniform_slots(0.0, 1.0, 1e-9, 0.5, 100).is_err());
+    }
+}

@@ -1,0 +1,166 @@
+//! `lamina`: the command line of Lamina. Parses arguments, runs pipelines through
+//! lamina-core, and is the only part of Lamina that knows about the terminal.
+
+mod catalogue;
+mod progress;
+mod report;
+
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+use clap::{Parser, Subcommand};
+use lamina_core::pipeline::{Override, Pipeline};
+use lamina_core::runtime::{Engine, RunOptions};
+use lamina_core::{Registry, StageKind};
+
+// Built-in stages register themselves with `inventory`; referencing each crate keeps
+// the linker from dropping those registrations.
+use lamina_export as _;
+use lamina_model as _;
+use lamina_slice as _;
+use lamina_sort as _;
+
+#[derive(Debug, Parser)]
+#[command(name = "lamina", version = lamina_core::VERSION, about = "Plans the layered manufacturing of functionally graded multi-material objects")]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Debug, clap::Args)]
+struct PipelineArgs {
+    /// The pipeline file (TOML).
+    pipeline: PathBuf,
+    /// Replaces the model file of a single-part pipeline.
+    #[arg(long, value_name = "PATH")]
+    model: Option<PathBuf>,
+    /// Overrides a pipeline value, e.g. `--set slice.thickness=0.1` (repeatable).
+    #[arg(long = "set", value_name = "TABLE.KEY=VALUE")]
+    set: Vec<Override>,
+    /// Loads a plugin library in addition to the pipeline's `plugins` (repeatable).
+    #[arg(long = "plugin", value_name = "PATH")]
+    plugins: Vec<PathBuf>,
+}
+
+#[derive(Debug, Subcommand)]
+enum Command {
+    /// Runs a pipeline and writes its outputs.
+    Run {
+        #[command(flatten)]
+        args: PipelineArgs,
+        /// Output folder (default: `out` beside the current directory).
+        #[arg(long, value_name = "DIR", default_value = "out")]
+        out: PathBuf,
+        /// Worker threads (default: all cores).
+        #[arg(long, value_name = "N")]
+        threads: Option<usize>,
+        /// No progress bar and no summary.
+        #[arg(long, short)]
+        quiet: bool,
+        /// Prints the time spent in each stage.
+        #[arg(long)]
+        timings: bool,
+    },
+    /// Validates a pipeline (stages, options, scripts, plugins) without running it.
+    Check {
+        #[command(flatten)]
+        args: PipelineArgs,
+    },
+    /// Lists the available stages with their documentation and options.
+    Plugins {
+        /// Only stages of this kind (model, slice, sort, discretise, grade, sequence, plan, export).
+        kind: Option<String>,
+        /// Machine-readable output.
+        #[arg(long, conflicts_with = "markdown")]
+        json: bool,
+        /// The pipeline reference in Markdown (docs/pipeline-reference.md).
+        #[arg(long)]
+        markdown: bool,
+        /// Loads a plugin library first (repeatable).
+        #[arg(long = "plugin", value_name = "PATH")]
+        plugins: Vec<PathBuf>,
+    },
+}
+
+fn main() -> ExitCode {
+    let cli = Cli::parse();
+    match execute(cli) {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            report::print(&e);
+            ExitCode::from(if e.is_usage() { 2 } else { 1 })
+        }
+    }
+}
+
+fn engine(args: &PipelineArgs, threads: Option<usize>) -> lamina_core::Result<Engine> {
+    let pipeline = Pipeline::load(&args.pipeline, &args.set)?;
+    let options = RunOptions {
+        threads,
+        model: args.model.clone(),
+        plugins: args.plugins.clone(),
+        ..RunOptions::default()
+    };
+    Engine::build(pipeline, Registry::linked()?, &options)
+}
+
+fn execute(cli: Cli) -> lamina_core::Result<()> {
+    match cli.command {
+        Command::Run {
+            args,
+            out,
+            threads,
+            quiet,
+            timings,
+        } => {
+            if threads == Some(0) {
+                return Err(lamina_core::Error::config("--threads must be at least 1"));
+            }
+            let engine = engine(&args, threads)?;
+            let observer = progress::Progress::new(quiet);
+            let report = engine.run(&out, &observer)?;
+            observer.finish();
+            if !quiet {
+                progress::summary(&report, timings);
+            } else if timings {
+                progress::timings(&report);
+            }
+            Ok(())
+        }
+        Command::Check { args } => {
+            let engine = engine(&args, None)?;
+            println!("{}: ok", args.pipeline.display());
+            for line in engine.summary() {
+                println!("  {line}");
+            }
+            Ok(())
+        }
+        Command::Plugins {
+            kind,
+            json,
+            markdown,
+            plugins,
+        } => {
+            let mut registry = Registry::linked()?;
+            for p in &plugins {
+                lamina_core::plugin::load(&mut registry, p)?;
+            }
+            let kind = match kind.as_deref() {
+                Some(k) => Some(StageKind::parse(k).ok_or_else(|| {
+                    lamina_core::Error::config(format!("no stage kind `{k}`"))
+                        .with_help(format!("kinds: {}", StageKind::ALL.map(|k| k.name()).join(", ")))
+                })?),
+                None => None,
+            };
+            let text = if json {
+                catalogue::json(&registry, kind)
+            } else if markdown {
+                catalogue::markdown(&registry, kind)
+            } else {
+                catalogue::text(&registry, kind)
+            };
+            print!("{text}");
+            Ok(())
+        }
+    }
+}

@@ -1,0 +1,90 @@
+//! Progress and summaries on the terminal: a progress bar when stderr is a terminal,
+//! nothing otherwise; warnings are printed above the bar.
+
+use std::io::IsTerminal;
+
+use indicatif::{ProgressBar, ProgressStyle};
+use lamina_core::runtime::{Observer, RunReport};
+
+pub struct Progress {
+    bar: Option<ProgressBar>,
+    quiet: bool,
+}
+
+impl Progress {
+    pub fn new(quiet: bool) -> Self {
+        Self { bar: None, quiet }.with_bar()
+    }
+
+    fn with_bar(mut self) -> Self {
+        if !self.quiet && std::io::stderr().is_terminal() {
+            let bar = ProgressBar::hidden();
+            bar.set_style(
+                ProgressStyle::with_template("{spinner} layers {pos}/{len} [{bar:40}] {elapsed} (eta {eta})")
+                    .unwrap_or_else(|_| ProgressStyle::default_bar())
+                    .progress_chars("=> "),
+            );
+            self.bar = Some(bar);
+        }
+        self
+    }
+
+    pub fn finish(&self) {
+        if let Some(bar) = &self.bar {
+            bar.finish_and_clear();
+        }
+    }
+}
+
+impl Observer for Progress {
+    fn started(&self, layers: usize) {
+        if let Some(bar) = &self.bar {
+            bar.set_length(layers as u64);
+            bar.set_draw_target(indicatif::ProgressDrawTarget::stderr());
+        }
+    }
+
+    fn layer_done(&self, _index: usize) {
+        if let Some(bar) = &self.bar {
+            bar.inc(1);
+        }
+    }
+
+    fn warning(&self, message: &str) {
+        if self.quiet {
+            return;
+        }
+        match &self.bar {
+            Some(bar) => bar.suspend(|| eprintln!("warning: {message}")),
+            None => eprintln!("warning: {message}"),
+        }
+    }
+}
+
+pub fn summary(report: &RunReport, timings: bool) {
+    eprintln!(
+        "{} layers, {} regions, {} warnings in {:.2} s",
+        report.layers,
+        report.regions,
+        report.warnings,
+        report.timings.wall().as_secs_f64()
+    );
+    if let Some(t) = report.build_time {
+        eprintln!("planned build time: {t:.1} s");
+    }
+    for f in &report.files {
+        eprintln!("wrote {}", f.display());
+    }
+    if timings {
+        self::timings(report);
+    }
+}
+
+/// Per-stage times (summed over threads) and the wall time, on stdout.
+pub fn timings(report: &RunReport) {
+    println!("stage        time (s, summed over threads)");
+    for (kind, d) in report.timings.entries() {
+        println!("{:<12} {:.4}", kind.name(), d.as_secs_f64());
+    }
+    println!("{:<12} {:.4}", "wall", report.timings.wall().as_secs_f64());
+}

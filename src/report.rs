@@ -1,0 +1,89 @@
+//! Error rendering: errors that point into a file are shown with the offending line
+//! and a label (miette); the others as a chain of causes.
+
+use std::error::Error as _;
+
+use lamina_core::Error;
+use miette::{Diagnostic, GraphicalReportHandler, GraphicalTheme, LabeledSpan, NamedSource, SourceSpan};
+
+#[derive(Debug)]
+struct Located {
+    message: String,
+    help: Option<String>,
+    source: NamedSource<String>,
+    span: SourceSpan,
+}
+
+impl std::fmt::Display for Located {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(&self.message)
+    }
+}
+
+impl std::error::Error for Located {}
+
+impl Diagnostic for Located {
+    fn help<'a>(&'a self) -> Option<Box<dyn std::fmt::Display + 'a>> {
+        self.help
+            .as_ref()
+            .map(|h| Box::new(h) as Box<dyn std::fmt::Display>)
+    }
+
+    fn source_code(&self) -> Option<&dyn miette::SourceCode> {
+        Some(&self.source)
+    }
+
+    fn labels(&self) -> Option<Box<dyn Iterator<Item = LabeledSpan> + '_>> {
+        Some(Box::new(std::iter::once(LabeledSpan::new_with_span(
+            Some("here".into()),
+            self.span,
+        ))))
+    }
+}
+
+/// Prints `e` to stderr. The first line always reads `error: FILE:LINE:COL: message`
+/// when the error has a place, so scripts and tests can rely on it.
+pub fn print(e: &Error) {
+    let mut message = e.to_string();
+    let mut cause = e.source();
+    while let Some(c) = cause {
+        let s = c.to_string();
+        if !message.contains(&s) {
+            message.push_str(": ");
+            message.push_str(&s);
+        }
+        cause = c.source();
+    }
+    eprintln!("error: {message}");
+    let Some(loc) = e.location() else {
+        if let Some(h) = e.help() {
+            eprintln!("help: {h}");
+        }
+        return;
+    };
+    let text = loc.file.text.clone();
+    let start = loc.span.start.min(text.len());
+    let len = loc
+        .span
+        .end
+        .saturating_sub(loc.span.start)
+        .min(text.len() - start);
+    let diag = Located {
+        message: "here:".into(),
+        help: e.help().map(str::to_string),
+        source: NamedSource::new(loc.file.path.display().to_string(), text),
+        span: (start, len).into(),
+    };
+    let theme = if std::io::IsTerminal::is_terminal(&std::io::stderr()) {
+        GraphicalTheme::unicode()
+    } else {
+        GraphicalTheme::unicode_nocolor()
+    };
+    let mut out = String::new();
+    if GraphicalReportHandler::new_themed(theme)
+        .render_report(&mut out, &diag)
+        .is_ok()
+    {
+        eprint!("{out}");
+    }
+}

@@ -1,0 +1,218 @@
+//! Acceptance over the real meshes in ../shared/models (or $LAMINA_MODELS): every model
+//! is sliced and sorted, and the invariants every layer must keep are checked. The tests
+//! are `#[ignore]`d in the ordinary suite and run by .ci/run in release mode; they skip
+//! with a printed note when the models are absent.
+
+use std::path::PathBuf;
+use std::sync::Arc;
+
+use lamina_core::stage::{MeshSlicer, Slicer, StageConfig};
+use lamina_core::{Contour, Mesh, Point2, Registry, RunInfo, StageKind};
+
+fn models_dir() -> Option<PathBuf> {
+    let dir = std::env::var_os("LAMINA_MODELS")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../shared/models"));
+    if dir.is_dir() {
+        Some(dir)
+    } else {
+        println!("note: {} not found; acceptance test skipped", dir.display());
+        None
+    }
+}
+
+fn registry() -> Registry {
+    // Reference the plugin crates so their stages are linked into this test.
+    use lamina_model as _;
+    use lamina_slice as _;
+    use lamina_sort as _;
+    Registry::linked().expect("registry")
+}
+
+fn load(dir: &std::path::Path, file: &str, scale: f64) -> Mesh {
+    let table = lamina_core::pipeline::TableRef::parse_snippet("model", &format!("use = \"stl\"\nfile = \"{file}\""))
+        .expect("snippet");
+    let scripts = lamina_core::script::ScriptHost::new(dir, Default::default());
+    let stage = registry()
+        .build(StageKind::Model, &table, &scripts, dir)
+        .expect("builds");
+    let lamina_core::AnyStage::Model(source) = stage else {
+        panic!("not a model source")
+    };
+    let mut meshes = source.load(dir).expect("loads");
+    lamina_core::runtime::place(&mut meshes, scale, lamina_core::pipeline::Placement::Bed);
+    assert_eq!(meshes.len(), 1);
+    meshes.remove(0)
+}
+
+fn slicer(thickness: f64) -> Box<dyn Slicer> {
+    let table = lamina_core::pipeline::TableRef::parse_snippet(
+        "slice",
+        &format!("use = \"uniform\"\nthickness = {thickness}"),
+    )
+    .expect("snippet");
+    let scripts = lamina_core::script::ScriptHost::new(".", Default::default());
+    let _ = StageConfig {
+        table: &table,
+        scripts: &scripts,
+        base_dir: std::path::Path::new("."),
+    };
+    match registry()
+        .build(StageKind::Slice, &table, &scripts, std::path::Path::new("."))
+        .expect("slicer")
+    {
+        lamina_core::AnyStage::Slice(s) => s,
+        _ => panic!("not a slicer"),
+    }
+}
+
+fn sorter() -> Box<dyn lamina_core::stage::Sorter> {
+    let table = lamina_core::pipeline::TableRef::parse_snippet("sort", "use = \"hierarchy\"").expect("snippet");
+    let scripts = lamina_core::script::ScriptHost::new(".", Default::default());
+    match registry()
+        .build(StageKind::Sort, &table, &scripts, std::path::Path::new("."))
+        .expect("sorter")
+    {
+        lamina_core::AnyStage::Sort(s) => s,
+        _ => panic!("not a sorter"),
+    }
+}
+
+/// Proper crossings between edges of the given contours (shared endpoints excluded),
+/// found through a uniform grid so large layers stay fast.
+fn crossings(contours: &[Contour]) -> usize {
+    let edges: Vec<(Point2, Point2)> = contours.iter().flat_map(|c| c.edges()).collect();
+    if edges.is_empty() {
+        return 0;
+    }
+    let bb = contours.iter().fold(lamina_core::BBox2::EMPTY, |b, c| b.union(&c.bbox()));
+    let cells = (edges.len() as f64).sqrt().ceil().max(1.0) as usize;
+    let cw = (bb.width() / cells as f64).max(1e-9);
+    let ch = (bb.height() / cells as f64).max(1e-9);
+    let mut grid: Vec<Vec<u32>> = vec![Vec::new(); cells * cells];
+    let cell = |p: Point2| {
+        (
+            (((p.x - bb.min.x) / cw) as usize).min(cells - 1),
+            (((p.y - bb.min.y) / ch) as usize).min(cells - 1),
+        )
+    };
+    for (i, (a, b)) in edges.iter().enumerate() {
+        let (x0, y0) = cell(Point2::new(a.x.min(b.x), a.y.min(b.y)));
+        let (x1, y1) = cell(Point2::new(a.x.max(b.x), a.y.max(b.y)));
+        for y in y0..=y1 {
+            for x in x0..=x1 {
+                grid[y * cells + x].push(i as u32);
+            }
+        }
+    }
+    let orient = |a: Point2, b: Point2, c: Point2| (b - a).perp(&(c - a));
+    let mut pairs = std::collections::HashSet::new();
+    for bucket in &grid {
+        for (k, &i) in bucket.iter().enumerate() {
+            for &j in &bucket[k + 1..] {
+                let (a, b) = edges[i as usize];
+                let (c, d) = edges[j as usize];
+                if a == c || a == d || b == c || b == d {
+                    continue;
+                }
+                let (o1, o2) = (orient(a, b, c), orient(a, b, d));
+                let (o3, o4) = (orient(c, d, a), orient(c, d, b));
+                if o1 * o2 < 0.0 && o3 * o4 < 0.0 {
+                    pairs.insert((i.min(j), i.max(j)));
+                }
+            }
+        }
+    }
+    pairs.len()
+}
+
+struct Expect {
+    file: &'static str,
+    scale: f64,
+    /// Loops at 10/30/50/70/90 % of the height, where the reference checker agrees.
+    loops: Option<[usize; 5]>,
+    max_level: Option<usize>,
+}
+
+const MODELS: &[Expect] = &[
+    Expect { file: "xyz_calibration_cube_20mm.stl", scale: 1.0, loops: Some([1, 1, 1, 1, 1]), max_level: Some(0) },
+    Expect { file: "tube_round.stl", scale: 1.0, loops: Some([2, 2, 2, 2, 2]), max_level: Some(1) },
+    Expect { file: "gearwheel_40t_keyed_bore.ascii.stl", scale: 1.0, loops: Some([2, 2, 2, 2, 2]), max_level: Some(1) },
+    Expect { file: "planetary_gear_bearing.ascii.stl", scale: 1.0, loops: Some([9, 9, 9, 9, 9]), max_level: Some(3) },
+    Expect { file: "turbine_blade_vtk.stl", scale: 1.0, loops: Some([1, 1, 1, 1, 1]), max_level: Some(0) },
+    Expect { file: "3DBenchy.stl", scale: 1.0, loops: None, max_level: None },
+    Expect { file: "stanford_bunny.stl", scale: 1000.0, loops: None, max_level: None },
+    Expect { file: "octagonal_pocket_plate.stl", scale: 1000.0, loops: None, max_level: None },
+    Expect { file: "openfoam_buildings_400k.stl", scale: 1.0, loops: None, max_level: None },
+    Expect { file: "broken_extra_surface.ascii.stl", scale: 1.0, loops: None, max_level: None },
+];
+
+#[test]
+#[ignore = "needs ../shared/models; run by .ci/run"]
+fn real_models_slice_into_closed_simple_nested_contours() {
+    let Some(dir) = models_dir() else { return };
+    let sorter = sorter();
+    for m in MODELS {
+        let path = dir.join(m.file);
+        if !path.exists() {
+            println!("note: {} absent, skipped", path.display());
+            continue;
+        }
+        let start = std::time::Instant::now();
+        let mesh = Arc::new(load(&dir, m.file, m.scale));
+        let bb = mesh.bbox();
+        let height = bb.max.z - bb.min.z;
+        let slicer = slicer(height / 100.0);
+        let prepared: Box<dyn MeshSlicer> = slicer.prepare(mesh.clone()).expect("prepare");
+        let info = RunInfo {
+            base_dir: dir.clone(),
+            materials: Vec::new(),
+            parts: Vec::new(),
+            z_min: bb.min.z,
+            z_max: bb.max.z,
+        };
+        let slots = slicer.layers(&[mesh.clone()], &info, None).expect("slots");
+        let mut warnings = 0;
+        let mut layer_crossings = 0;
+        for slot in &slots {
+            let layer = prepared.slice(slot).expect("slices");
+            warnings += layer.warnings.len();
+            let tree = sorter.sort(&layer).expect("sorts");
+            for c in &layer.contours {
+                assert!(c.len() >= 3, "{}: a contour with {} points", m.file, c.len());
+                assert!(c.area() > 0.0);
+            }
+            for (f, fam) in tree.families.iter().enumerate() {
+                let poly = tree.family_polygon(&layer.contours, f);
+                assert!(poly.area() > 0.0, "{}: family {f} of layer {} has no area", m.file, slot.index);
+                for &h in &fam.holes {
+                    let p = layer.contours[h].interior_point().expect("hole has an inside");
+                    assert!(layer.contours[fam.outer].contains(p), "{}: hole outside its outer", m.file);
+                    assert_eq!(tree.nodes[h].level, tree.nodes[fam.outer].level + 1);
+                }
+            }
+            if layer_crossings == 0 {
+                layer_crossings += crossings(&layer.contours);
+                if layer_crossings > 0 && m.loops.is_some() {
+                    panic!("{}: contours of layer {} cross", m.file, slot.index);
+                }
+            }
+            if let (Some(loops), Some(max_level)) = (m.loops, m.max_level) {
+                let k = [10, 30, 50, 70, 90].iter().position(|&p| slot.index == p);
+                if let Some(k) = k {
+                    assert_eq!(layer.contours.len(), loops[k], "{}: loops at layer {}", m.file, slot.index);
+                    let deepest = tree.nodes.iter().map(|n| n.level).max().unwrap_or(0);
+                    assert_eq!(deepest, max_level, "{}: depth at layer {}", m.file, slot.index);
+                }
+            }
+        }
+        println!(
+            "{:<36} {:>7} triangles {:>4} layers {:>4} warnings {:>8.1} ms",
+            m.file,
+            mesh.triangles.len(),
+            slots.len(),
+            warnings,
+            start.elapsed().as_secs_f64() * 1e3
+        );
+    }
+}

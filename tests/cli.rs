@@ -1,0 +1,131 @@
+//! The `lamina` command line as users and scripts rely on it: exit codes, error
+//! positions, listings, and outputs that do not depend on the thread count.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+fn lamina(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_lamina"))
+        .args(args)
+        .output()
+        .expect("lamina runs")
+}
+
+fn pipelines() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("pipelines")
+}
+
+fn text(out: &[u8]) -> String {
+    String::from_utf8_lossy(out).into_owned()
+}
+
+#[test]
+fn version_is_printed() {
+    let out = lamina(&["--version"]);
+    assert!(out.status.success());
+    assert!(text(&out.stdout).contains(env!("CARGO_PKG_VERSION")));
+}
+
+#[test]
+fn plugins_lists_the_built_in_stages_of_every_kind() {
+    let out = lamina(&["plugins", "--json"]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let list: serde_json::Value = serde_json::from_slice(&out.stdout).expect("json");
+    let names: Vec<String> = list
+        .as_array()
+        .expect("array")
+        .iter()
+        .map(|e| format!("{}:{}", e["kind"].as_str().unwrap_or(""), e["name"].as_str().unwrap_or("")))
+        .collect();
+    for expected in [
+        "model:stl",
+        "model:obj",
+        "model:gear",
+        "model:gear-shaft",
+        "model:tube",
+        "model:box",
+        "slice:uniform",
+        "sort:hierarchy",
+        "export:json",
+    ] {
+        assert!(names.contains(&expected.to_string()), "{expected} missing from {names:?}");
+    }
+    for e in list.as_array().expect("array") {
+        assert!(!e["doc"].as_str().unwrap_or("").is_empty(), "undocumented stage {e}");
+    }
+}
+
+#[test]
+fn misspelled_key_is_located_and_exits_2() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let path = dir.path().join("bad.toml");
+    std::fs::write(
+        &path,
+        "[model]\nuse = \"box\"\n\n[materials.a]\ncolour = [1, 2, 3]\n\n[slice]\nuse = \"uniform\"\nthicknes = 0.3\n",
+    )
+    .expect("write");
+    let out = lamina(&["check", path.to_str().expect("utf-8")]);
+    assert_eq!(out.status.code(), Some(2));
+    let err = text(&out.stderr);
+    assert!(err.contains("bad.toml:9:1"), "{err}");
+    assert!(err.contains("thicknes"), "{err}");
+}
+
+#[test]
+fn unknown_stage_lists_the_available_ones() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let path = dir.path().join("p.toml");
+    std::fs::write(&path, "[model]\nuse = \"box\"\n[materials.a]\ncolour = [1, 2, 3]\n[slice]\nuse = \"unifrom\"\n")
+        .expect("write");
+    let out = lamina(&["check", path.to_str().expect("utf-8")]);
+    assert_eq!(out.status.code(), Some(2));
+    let err = text(&out.stderr);
+    assert!(err.contains("p.toml:6:1"), "{err}");
+    assert!(err.contains("uniform"), "{err}");
+}
+
+#[test]
+fn missing_model_file_fails_with_exit_1_and_leaves_nothing() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let path = dir.path().join("p.toml");
+    std::fs::write(
+        &path,
+        "[model]\nfile = \"nothing.stl\"\n[materials.a]\ncolour = [1, 2, 3]\n[[output]]\nuse = \"json\"\n",
+    )
+    .expect("write");
+    let out_dir = dir.path().join("out");
+    let out = lamina(&[
+        "run",
+        path.to_str().expect("utf-8"),
+        "--out",
+        out_dir.to_str().expect("utf-8"),
+    ]);
+    assert_eq!(out.status.code(), Some(1), "{}", text(&out.stderr));
+    assert!(text(&out.stderr).contains("nothing.stl"));
+    assert!(!out_dir.join("plan.json").exists());
+}
+
+#[test]
+fn thread_count_does_not_change_the_output() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let pipeline = pipelines().join("assembly.toml");
+    let mut outputs = Vec::new();
+    for threads in ["1", "2"] {
+        let out_dir = dir.path().join(threads);
+        let out = lamina(&[
+            "run",
+            pipeline.to_str().expect("utf-8"),
+            "--out",
+            out_dir.to_str().expect("utf-8"),
+            "--threads",
+            threads,
+            "--quiet",
+            "--set",
+            "slice.thickness=0.1",
+        ]);
+        assert!(out.status.success(), "{}", text(&out.stderr));
+        outputs.push(std::fs::read(out_dir.join("assembly.json")).expect("written"));
+    }
+    assert!(!outputs[0].is_empty());
+    assert!(outputs[0] == outputs[1], "outputs differ between 1 and 2 threads");
+}
