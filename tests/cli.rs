@@ -35,7 +35,13 @@ fn plugins_lists_the_built_in_stages_of_every_kind() {
         .as_array()
         .expect("array")
         .iter()
-        .map(|e| format!("{}:{}", e["kind"].as_str().unwrap_or(""), e["name"].as_str().unwrap_or("")))
+        .map(|e| {
+            format!(
+                "{}:{}",
+                e["kind"].as_str().unwrap_or(""),
+                e["name"].as_str().unwrap_or("")
+            )
+        })
         .collect();
     for expected in [
         "model:stl",
@@ -48,10 +54,16 @@ fn plugins_lists_the_built_in_stages_of_every_kind() {
         "sort:hierarchy",
         "export:json",
     ] {
-        assert!(names.contains(&expected.to_string()), "{expected} missing from {names:?}");
+        assert!(
+            names.contains(&expected.to_string()),
+            "{expected} missing from {names:?}"
+        );
     }
     for e in list.as_array().expect("array") {
-        assert!(!e["doc"].as_str().unwrap_or("").is_empty(), "undocumented stage {e}");
+        assert!(
+            !e["doc"].as_str().unwrap_or("").is_empty(),
+            "undocumented stage {e}"
+        );
     }
 }
 
@@ -75,8 +87,11 @@ fn misspelled_key_is_located_and_exits_2() {
 fn unknown_stage_lists_the_available_ones() {
     let dir = tempfile::tempdir().expect("tempdir");
     let path = dir.path().join("p.toml");
-    std::fs::write(&path, "[model]\nuse = \"box\"\n[materials.a]\ncolour = [1, 2, 3]\n[slice]\nuse = \"unifrom\"\n")
-        .expect("write");
+    std::fs::write(
+        &path,
+        "[model]\nuse = \"box\"\n[materials.a]\ncolour = [1, 2, 3]\n[slice]\nuse = \"unifrom\"\n",
+    )
+    .expect("write");
     let out = lamina(&["check", path.to_str().expect("utf-8")]);
     assert_eq!(out.status.code(), Some(2));
     let err = text(&out.stderr);

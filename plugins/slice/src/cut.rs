@@ -14,6 +14,19 @@ use std::sync::Arc;
 
 use lamina_core::{Contour, Layer, LayerSlot, Mesh, Point2, Result};
 
+/// How overlapping or self-crossing loops are resolved into simple contours.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum FillRule {
+    /// Inside where the loops wind around a point at all: overlapping shells merge,
+    /// holes (wound the other way) subtract. Right for meshes with consistent winding.
+    #[default]
+    NonZero,
+    /// Inside where an odd number of loops surround a point, whatever their winding:
+    /// for meshes whose winding cannot be trusted.
+    EvenOdd,
+}
+
 /// How the cut treats defects.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct CutOptions {
@@ -21,6 +34,7 @@ pub struct CutOptions {
     pub close_gaps: f64,
     /// Loops enclosing less area than this (mm²) are dropped as noise.
     pub min_area: f64,
+    pub fill_rule: FillRule,
 }
 
 impl Default for CutOptions {
@@ -28,6 +42,7 @@ impl Default for CutOptions {
         Self {
             close_gaps: 0.05,
             min_area: 1e-8,
+            fill_rule: FillRule::NonZero,
         }
     }
 }
@@ -194,9 +209,47 @@ impl CutMesh {
                 self.options.close_gaps
             ));
         }
-        layer.contours = contours;
+        layer.contours = simple_contours(&contours, self.options);
         Ok(layer)
     }
+}
+
+/// Resolves the loops into simple, non-crossing contours (outer counter-clockwise,
+/// holes clockwise) with a boolean union under the fill rule: overlapping shells merge,
+/// self-touching or slightly self-crossing loops (near-coincident vertices that were not
+/// welded) are cut apart. Coordinates move by at most the integer grid of the overlay
+/// (about 1e-7 of the layer's extent).
+fn simple_contours(loops: &[Contour], options: CutOptions) -> Vec<Contour> {
+    use i_overlay::core::fill_rule::FillRule as Rule;
+    use i_overlay::core::solver::Solver;
+    use i_overlay::float::overlay::OverlayOptions;
+    use i_overlay::float::simplify::SimplifyShape;
+
+    if loops.is_empty() {
+        return Vec::new();
+    }
+    let paths: Vec<Vec<[f64; 2]>> = loops
+        .iter()
+        .map(|c| c.points.iter().map(|p| [p.x, p.y]).collect())
+        .collect();
+    let rule = match options.fill_rule {
+        FillRule::NonZero => Rule::NonZero,
+        FillRule::EvenOdd => Rule::EvenOdd,
+    };
+    let mut overlay_options = OverlayOptions::<f64>::default();
+    overlay_options.min_output_area = options.min_area;
+    // The runtime already runs layers in parallel; the overlay stays on this thread.
+    let solver = Solver {
+        multithreading: None,
+        ..Solver::default()
+    };
+    let shapes = paths.simplify_shape_custom(rule, overlay_options, solver);
+    shapes
+        .into_iter()
+        .flatten()
+        .filter(|path| path.len() >= 3)
+        .map(|path| Contour::new(path.into_iter().map(|[x, y]| Point2::new(x, y)).collect()))
+        .collect()
 }
 
 /// Chains segments into closed loops by their edge keys. Returns the loops (oriented

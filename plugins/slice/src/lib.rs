@@ -4,4 +4,4 @@
 pub mod cut;
 mod uniform;
 
-pub use cut::{CutMesh, CutOptions};
+pub use cut::{CutMesh, CutOptions, FillRule};

@@ -45,6 +45,8 @@ struct Options {
     cut: CutAt,
     #[serde(default = "d_close_gaps")]
     close_gaps: f64,
+    #[serde(default)]
+    fill_rule: crate::cut::FillRule,
     /// Upper bound on the layer count, against a mistyped thickness.
     #[serde(default = "d_max_layers")]
     max_layers: usize,
@@ -67,6 +69,7 @@ pub(crate) struct Uniform {
     thickness: f64,
     cut: f64,
     close_gaps: f64,
+    fill_rule: crate::cut::FillRule,
     max_layers: usize,
 }
 
@@ -115,6 +118,7 @@ impl Slicer for Uniform {
             mesh,
             CutOptions {
                 close_gaps: self.close_gaps,
+                fill_rule: self.fill_rule,
                 ..CutOptions::default()
             },
         ))))
@@ -148,6 +152,7 @@ fn build(config: &StageConfig<'_>) -> Result<AnyStage> {
         thickness: o.thickness,
         cut,
         close_gaps: o.close_gaps,
+        fill_rule: o.fill_rule,
         max_layers: o.max_layers,
     })))
 }

@@ -80,7 +80,7 @@ pub fn hierarchy(contours: &[Contour]) -> ContourTree {
         }
     }
     let families = (0..n)
-        .filter(|&i| level[i] % 2 == 0)
+        .filter(|&i| level[i].is_multiple_of(2))
         .map(|i| Family {
             outer: i,
             holes: nodes[i].children.clone(),
