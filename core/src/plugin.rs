@@ -53,6 +53,27 @@ pub struct PluginDescriptor {
     pub name: *const c_char,
     pub stages: *const &'static StageFactory,
     pub stage_count: usize,
+    /// Builds a stage inside the plugin, guarded by the plugin's own `catch_unwind`.
+    pub build: GuardedBuild,
+}
+
+/// Builds one of a plugin's stages on the plugin's side of the boundary.
+///
+/// A plugin links its own copy of the standard library, and a panic raised by one copy
+/// cannot be caught by another (it is a foreign exception there). So the guard must run
+/// in the plugin's code: the descriptor carries this function, compiled into the
+/// plugin, which builds the stage under the plugin's `catch_unwind` and wraps it so that
+/// every later call is guarded the same way.
+pub type GuardedBuild = fn(&'static StageFactory, &str, &StageConfig<'_>) -> Result<AnyStage>;
+
+/// The [`GuardedBuild`] of the copy of lamina-core it is compiled into.
+pub fn build_guarded(
+    factory: &'static StageFactory,
+    label: &str,
+    config: &StageConfig<'_>,
+) -> Result<AnyStage> {
+    let stage = guard_call(label, || (factory.build)(config))?;
+    Ok(guard_stage(label.to_string(), stage))
 }
 
 /// The frozen prefix of [`PluginDescriptor`], readable whatever the plugin's ABI.
@@ -98,6 +119,7 @@ pub fn describe_linked(name: &'static str) -> *const PluginDescriptor {
             name: leak(name),
             stages: stages.as_ptr(),
             stage_count: stages.len(),
+            build: build_guarded,
         };
         Box::leak(Box::new(d)) as *const PluginDescriptor
     })
@@ -113,6 +135,7 @@ struct LoadedPlugin {
     path: PathBuf,
     name: String,
     stages: Vec<&'static StageFactory>,
+    build: GuardedBuild,
 }
 
 fn refuse(path: &Path, message: impl Into<String>) -> Error {
@@ -151,12 +174,13 @@ pub fn load(registry: &mut Registry, path: &Path) -> Result<String> {
     };
     drop(loaded);
     for f in &plugin.stages {
-        registry.add(
+        registry.add_dynamic(
             f,
             Origin::Dynamic {
                 path: canonical.clone(),
                 plugin: plugin.name.clone(),
             },
+            plugin.build,
         )?;
     }
     Ok(plugin.name)
@@ -257,6 +281,7 @@ fn open(path: &Path) -> Result<LoadedPlugin> {
         path: path.to_path_buf(),
         name,
         stages,
+        build: d.build,
     })
 }
 

@@ -45,6 +45,8 @@ pub enum Origin {
 pub struct Registered {
     pub factory: &'static StageFactory,
     pub origin: Origin,
+    /// For dynamic plugins: builds the stage inside the plugin, guarded there.
+    guarded_build: Option<crate::plugin::GuardedBuild>,
 }
 
 impl Registered {
@@ -82,13 +84,48 @@ impl Registry {
 
     /// Adds a factory; a second factory with the same kind and name is refused.
     pub fn add(&mut self, factory: &'static StageFactory, origin: Origin) -> Result<()> {
+        self.insert(factory, origin, None)
+    }
+
+    /// Adds a factory of a dynamic plugin with the plugin's guarded builder.
+    pub fn add_dynamic(
+        &mut self,
+        factory: &'static StageFactory,
+        origin: Origin,
+        build: crate::plugin::GuardedBuild,
+    ) -> Result<()> {
+        self.insert(factory, origin, Some(build))
+    }
+
+    fn insert(
+        &mut self,
+        factory: &'static StageFactory,
+        origin: Origin,
+        guarded_build: Option<crate::plugin::GuardedBuild>,
+    ) -> Result<()> {
         if let Some(existing) = self.get(factory.info.kind, factory.info.name) {
-            return Err(Error::config(format!(
-                "two {} stages are named `{}` ({:?} and {:?})",
-                factory.info.kind, factory.info.name, existing.origin, origin
-            )));
+            let describe = |o: &Origin| match o {
+                Origin::Linked => "built in".to_string(),
+                Origin::Dynamic { path, .. } => path.display().to_string(),
+            };
+            return Err(Error::Plugin {
+                path: match &origin {
+                    Origin::Dynamic { path, .. } => path.clone(),
+                    Origin::Linked => PathBuf::from("<linked>"),
+                },
+                message: format!(
+                    "a {} stage named `{}` exists already ({})",
+                    factory.info.kind,
+                    factory.info.name,
+                    describe(&existing.origin)
+                ),
+            });
         }
-        self.entries.push(Registered { factory, origin });
+        self.entries.push(Registered {
+            factory,
+            origin,
+            guarded_build,
+        });
         Ok(())
     }
 
@@ -155,13 +192,11 @@ impl Registry {
             scripts,
             base_dir,
         };
-        let stage = match &entry.origin {
-            Origin::Linked => (entry.factory.build)(&config)?,
-            Origin::Dynamic { plugin, .. } => {
-                let label = format!("{plugin}/{}", entry.label());
-                let stage = crate::plugin::guard_call(&label, || (entry.factory.build)(&config))?;
-                crate::plugin::guard_stage(label, stage)
+        let stage = match (&entry.origin, entry.guarded_build) {
+            (Origin::Dynamic { plugin, .. }, Some(build)) => {
+                build(entry.factory, &format!("{plugin}/{}", entry.label()), &config)?
             }
+            _ => (entry.factory.build)(&config)?,
         };
         if stage.kind() != entry.factory.info.kind {
             return Err(Error::stage(
