@@ -16,6 +16,7 @@ use lamina_core::{Registry, StageKind};
 // Built-in stages register themselves with `inventory`; referencing each crate keeps
 // the linker from dropping those registrations.
 use lamina_export as _;
+use lamina_grade as _;
 use lamina_model as _;
 use lamina_slice as _;
 use lamina_sort as _;
@@ -82,29 +83,48 @@ enum Command {
     },
 }
 
+/// A failure and whether it lies in what the user asked for (exit code 2) rather than
+/// in running it (exit code 1).
+struct Failure {
+    error: lamina_core::Error,
+    usage: bool,
+}
+
+impl From<lamina_core::Error> for Failure {
+    fn from(error: lamina_core::Error) -> Self {
+        let usage = error.is_usage();
+        Self { error, usage }
+    }
+}
+
 fn main() -> ExitCode {
     let cli = Cli::parse();
     match execute(cli) {
         Ok(()) => ExitCode::SUCCESS,
-        Err(e) => {
-            report::print(&e);
-            ExitCode::from(if e.is_usage() { 2 } else { 1 })
+        Err(f) => {
+            report::print(&f.error);
+            ExitCode::from(if f.usage { 2 } else { 1 })
         }
     }
 }
 
-fn engine(args: &PipelineArgs, threads: Option<usize>) -> lamina_core::Result<Engine> {
-    let pipeline = Pipeline::load(&args.pipeline, &args.set)?;
-    let options = RunOptions {
-        threads,
-        model: args.model.clone(),
-        plugins: args.plugins.clone(),
-        ..RunOptions::default()
+/// Parses and builds the pipeline. Everything that fails here (options, scripts that do
+/// not compile, plugins) is a usage error.
+fn engine(args: &PipelineArgs, threads: Option<usize>) -> Result<Engine, Failure> {
+    let build = || {
+        let pipeline = Pipeline::load(&args.pipeline, &args.set)?;
+        let options = RunOptions {
+            threads,
+            model: args.model.clone(),
+            plugins: args.plugins.clone(),
+            ..RunOptions::default()
+        };
+        Engine::build(pipeline, Registry::linked()?, &options)
     };
-    Engine::build(pipeline, Registry::linked()?, &options)
+    build().map_err(|error| Failure { error, usage: true })
 }
 
-fn execute(cli: Cli) -> lamina_core::Result<()> {
+fn execute(cli: Cli) -> Result<(), Failure> {
     match cli.command {
         Command::Run {
             args,
@@ -114,7 +134,7 @@ fn execute(cli: Cli) -> lamina_core::Result<()> {
             timings,
         } => {
             if threads == Some(0) {
-                return Err(lamina_core::Error::config("--threads must be at least 1"));
+                return Err(lamina_core::Error::config("--threads must be at least 1").into());
             }
             let engine = engine(&args, threads)?;
             let observer = progress::Progress::new(quiet);

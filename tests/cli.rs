@@ -144,3 +144,76 @@ fn thread_count_does_not_change_the_output() {
     assert!(!outputs[0].is_empty());
     assert!(outputs[0] == outputs[1], "outputs differ between 1 and 2 threads");
 }
+
+fn write(dir: &Path, name: &str, text: &str) -> PathBuf {
+    let p = dir.join(name);
+    std::fs::write(&p, text).expect("write");
+    p
+}
+
+const SCRIPTED: &str = "[model]\nuse = \"tube\"\nheight = 1.0\n[materials.a]\ncolour = [255, 0, 0]\n[materials.b]\ncolour = [0, 255, 0]\n[slice]\nuse = \"uniform\"\nthickness = 0.5\n[grade]\nuse = \"script\"\nf = \"g.rhai#f\"\n[[output]]\nuse = \"json\"\n";
+
+#[test]
+fn endless_script_is_stopped_within_a_second() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    write(dir.path(), "g.rhai", "fn f(r) {\n    loop { }\n}\n");
+    let p = write(dir.path(), "p.toml", SCRIPTED);
+    let out_dir = dir.path().join("out");
+    let start = std::time::Instant::now();
+    let out = lamina(&[
+        "run",
+        p.to_str().expect("utf-8"),
+        "--out",
+        out_dir.to_str().expect("utf-8"),
+        "--threads",
+        "1",
+    ]);
+    assert!(start.elapsed().as_secs_f64() < 1.5, "took {:?}", start.elapsed());
+    assert_eq!(out.status.code(), Some(1));
+    let err = text(&out.stderr);
+    assert!(err.contains("stopped"), "{err}");
+    assert!(err.contains("g.rhai:"), "{err}");
+    assert!(!out_dir.join("plan.json").exists());
+}
+
+#[test]
+fn fractions_summing_to_0_9_are_refused_with_their_position() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    write(
+        dir.path(),
+        "g.rhai",
+        "// two materials\n\nfn f(r) {\n    [0.5, 0.4]\n}\n",
+    );
+    let p = write(dir.path(), "p.toml", SCRIPTED);
+    let out = lamina(&[
+        "run",
+        p.to_str().expect("utf-8"),
+        "--out",
+        dir.path().join("o").to_str().expect("utf-8"),
+    ]);
+    assert_eq!(out.status.code(), Some(1));
+    let err = text(&out.stderr);
+    assert!(err.contains("g.rhai:3:1"), "{err}");
+    assert!(err.contains("sum to 0.9"), "{err}");
+    assert!(err.contains("layer 0"), "{err}");
+}
+
+#[test]
+fn script_that_does_not_compile_is_a_usage_error() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let p = write(dir.path(), "p.toml", &SCRIPTED.replace("g.rhai#f", "sin(r * PI"));
+    let out = lamina(&["check", p.to_str().expect("utf-8")]);
+    assert_eq!(out.status.code(), Some(2), "{}", text(&out.stderr));
+    assert!(text(&out.stderr).contains("p.toml:13:"), "{}", text(&out.stderr));
+}
+
+#[test]
+fn example_pipelines_check() {
+    for entry in std::fs::read_dir(pipelines()).expect("pipelines") {
+        let path = entry.expect("entry").path();
+        if path.extension().is_some_and(|e| e == "toml") {
+            let out = lamina(&["check", path.to_str().expect("utf-8")]);
+            assert!(out.status.success(), "{}: {}", path.display(), text(&out.stderr));
+        }
+    }
+}

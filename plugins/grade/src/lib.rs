@@ -1,0 +1,9 @@
+//! Graders for Lamina: they give every sub-region of a family its composition, the
+//! volume fractions of the part's primary materials.
+//!
+//! - `script`: fractions from a Rhai expression or function of the region's level r,
+//!   its reference point (x, y), the layer's height z and index, and the part's name;
+//! - `constant`: one composition for the whole part (a discrete part of an assembly).
+
+mod constant;
+mod script;

@@ -1,0 +1,65 @@
+//! `script`: compositions from a user's Rhai expression or function, evaluated once per
+//! sub-region (never per point), with the result checked: each fraction in [0, 1] and
+//! their sum 1.
+
+use lamina_core::script::{ScriptArgs, ScriptFn};
+use lamina_core::stage::{AnyStage, FamilyContext, Grader, OptionSpec, StageConfig, StageInfo, StageKind};
+use lamina_core::{Composition, Region, Result, StageFactory};
+use serde::Deserialize;
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct Options {
+    f: String,
+}
+
+struct Script {
+    f: ScriptFn,
+}
+
+impl Grader for Script {
+    fn grade(&self, ctx: &FamilyContext<'_>, regions: &mut [Region]) -> Result<()> {
+        let part = &ctx.info.parts[ctx.part];
+        let n = part.materials.len();
+        for region in regions.iter_mut() {
+            let args = ScriptArgs {
+                r: region.level,
+                d: 0.0,
+                x: region.reference.x,
+                y: region.reference.y,
+                z: ctx.layer.z,
+                layer: ctx.layer.index as i64,
+                part: &part.name,
+            };
+            let context = format!(
+                "part `{}`, layer {} (z = {:.4}), family {}, region {} (r = {})",
+                part.name, ctx.layer.index, ctx.layer.z, ctx.family, region.index, region.level
+            );
+            let fractions = self.f.fractions(&args, n, &context)?;
+            region.composition = Some(Composition::new(fractions)?);
+        }
+        Ok(())
+    }
+}
+
+fn build(config: &StageConfig<'_>) -> Result<AnyStage> {
+    let o: Options = config.parse()?;
+    let origin = config.table.location_of(Some("f"));
+    let f = config.scripts.compile(&o.f, origin)?;
+    Ok(AnyStage::Grade(Box::new(Script { f })))
+}
+
+lamina_core::register_stage!(StageFactory {
+    info: StageInfo {
+        kind: StageKind::Grade,
+        name: "script",
+        doc: "Fractions from a Rhai expression or `file.rhai#function` of r, x, y, z, layer and part, once per sub-region.",
+        options: &[OptionSpec::required(
+            "f",
+            "string",
+            "an expression (e.g. \"sin(r * PI)\") or \"file.rhai#name\"; one number f means [f, 1 - f] for two materials, else an array of one fraction per material"
+        )],
+        example: "use = \"script\"\nf = \"clamp01(z / 2.0)\"",
+    },
+    build,
+});
