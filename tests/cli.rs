@@ -217,3 +217,65 @@ fn example_pipelines_check() {
         }
     }
 }
+
+#[test]
+fn model_option_replaces_the_model_of_a_single_part_pipeline() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    // An ASCII STL cube of 2 mm, placed away from the origin: `place = "bed"` drops it.
+    let mut stl = String::from("solid cube\n");
+    let v = |i: usize| {
+        [
+            if i & 1 != 0 { 12.0 } else { 10.0 },
+            if i & 2 != 0 { 2.0 } else { 0.0 },
+            if i & 4 != 0 { 7.0 } else { 5.0 },
+        ]
+    };
+    for q in [
+        [0, 2, 3, 1],
+        [4, 5, 7, 6],
+        [0, 1, 5, 4],
+        [2, 6, 7, 3],
+        [0, 4, 6, 2],
+        [1, 3, 7, 5],
+    ] {
+        for t in [[q[0], q[1], q[2]], [q[0], q[2], q[3]]] {
+            stl.push_str("facet normal 0 0 0\nouter loop\n");
+            for i in t {
+                let p = v(i);
+                stl.push_str(&format!("vertex {} {} {}\n", p[0], p[1], p[2]));
+            }
+            stl.push_str("endloop\nendfacet\n");
+        }
+    }
+    stl.push_str("endsolid cube\n");
+    let model = write(dir.path(), "cube.stl", &stl);
+    let out_dir = dir.path().join("out");
+    let out = lamina(&[
+        "run",
+        pipelines().join("tube-gradient.toml").to_str().expect("utf-8"),
+        "--model",
+        model.to_str().expect("utf-8"),
+        "--out",
+        out_dir.to_str().expect("utf-8"),
+        "--quiet",
+    ]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let plan: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(out_dir.join("tube-gradient.json")).expect("written"))
+            .expect("json");
+    let layers = plan["layers"].as_array().expect("layers");
+    assert_eq!(layers.len(), 4, "2 mm at 0.5 mm");
+    let area = layers[0]["parts"][0]["families"][0]["area"]
+        .as_f64()
+        .expect("area");
+    assert!((area - 4.0).abs() < 1e-6, "{area}");
+
+    // Several parts: refused.
+    let out = lamina(&[
+        "check",
+        pipelines().join("assembly.toml").to_str().expect("utf-8"),
+        "--model",
+        model.to_str().expect("utf-8"),
+    ]);
+    assert_eq!(out.status.code(), Some(2));
+}

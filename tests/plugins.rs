@@ -19,17 +19,9 @@ fn libraries() -> &'static Path {
         let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
         let status = Command::new(cargo)
             .current_dir(root())
-            .args([
-                "build",
-                "--quiet",
-                "-p",
-                "lamina-zigzag",
-                "-p",
-                "lamina-fixture-bad-abi",
-                "-p",
-                "lamina-fixture-panic",
-                "--target-dir",
-            ])
+            // The whole workspace's libraries: the same feature set as `cargo test
+            // --workspace` built, so nothing but the plugins is compiled again.
+            .args(["build", "--quiet", "--workspace", "--lib", "--target-dir"])
             .arg(&target)
             .status()
             .expect("cargo runs");
