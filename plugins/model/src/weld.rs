@@ -2,8 +2,6 @@
 //! vertices closer than a tolerance are merged and triangles that collapse are dropped.
 //! Slicing relies on shared vertex indices to chain the cut segments into loops.
 
-use std::collections::HashMap;
-
 use lamina_core::{Mesh, Point3};
 
 /// Triangles as three corners each, before welding.
@@ -26,7 +24,8 @@ pub struct WeldReport {
 /// leave. Triangles with two equal corners after welding are dropped.
 pub fn weld(name: &str, soup: &Soup, tolerance: f64) -> (Mesh, WeldReport) {
     let inv = if tolerance > 0.0 { 1.0 / tolerance } else { 0.0 };
-    let mut index: HashMap<[i64; 3], u32> = HashMap::with_capacity(soup.triangles.len());
+    let mut index: rustc_hash::FxHashMap<[i64; 3], u32> =
+        rustc_hash::FxHashMap::with_capacity_and_hasher(soup.triangles.len(), Default::default());
     let mut vertices = Vec::with_capacity(soup.triangles.len() / 2 + 3);
     let mut triangles = Vec::with_capacity(soup.triangles.len());
     let mut degenerate = 0;

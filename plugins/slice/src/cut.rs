@@ -9,7 +9,6 @@
 //! plane produce segments through them. What does not close (open meshes, non-manifold
 //! edges) is joined across small gaps, and reported when it cannot be.
 
-use std::collections::HashMap;
 use std::sync::Arc;
 
 use lamina_core::{Contour, Layer, LayerSlot, Mesh, Point2, Result};
@@ -255,13 +254,15 @@ fn simple_contours(loops: &[Contour], options: CutOptions) -> Vec<Contour> {
 /// Chains segments into closed loops by their edge keys. Returns the loops (oriented
 /// by the majority of their segments' directions) and the chains that did not close.
 fn chain(segments: &[Segment]) -> (Vec<Contour>, Vec<Vec<Point2>>) {
-    // Each edge key is the end of (normally) two segments.
-    let mut at: HashMap<u64, Vec<u32>> = HashMap::with_capacity(segments.len());
+    // Each edge key is the end of (normally) two segments: pairs (key, segment) sorted
+    // by key put them side by side.
+    let mut ends: Vec<(u64, u32)> = Vec::with_capacity(2 * segments.len());
     for (i, s) in segments.iter().enumerate() {
-        for k in s.keys {
-            at.entry(k).or_default().push(i as u32);
-        }
+        ends.push((s.keys[0], i as u32));
+        ends.push((s.keys[1], i as u32));
     }
+    ends.sort_unstable();
+    let at = Ends(&ends);
     let mut used = vec![false; segments.len()];
     let mut loops = Vec::new();
     let mut open = Vec::new();
@@ -282,10 +283,7 @@ fn chain(segments: &[Segment]) -> (Vec<Contour>, Vec<Vec<Point2>>) {
                 closed = true;
                 break;
             }
-            let Some(next) = at
-                .get(&key)
-                .and_then(|v| v.iter().copied().find(|&j| !used[j as usize]))
-            else {
+            let Some(next) = at.unused(key, &used) else {
                 break;
             };
             used[next as usize] = true;
@@ -311,10 +309,7 @@ fn chain(segments: &[Segment]) -> (Vec<Contour>, Vec<Vec<Point2>>) {
         // Walk backward from the start to complete the open chain.
         let mut back = Vec::new();
         let mut key = first_key;
-        while let Some(next) = at
-            .get(&key)
-            .and_then(|v| v.iter().copied().find(|&j| !used[j as usize]))
-        {
+        while let Some(next) = at.unused(key, &used) {
             used[next as usize] = true;
             let seg = segments[next as usize];
             let (p, k, v) = if seg.keys[1] == key {
@@ -334,6 +329,21 @@ fn chain(segments: &[Segment]) -> (Vec<Contour>, Vec<Vec<Point2>>) {
         open.push(back);
     }
     (loops, open)
+}
+
+/// Segment ends sorted by edge key.
+struct Ends<'a>(&'a [(u64, u32)]);
+
+impl Ends<'_> {
+    /// A segment ending at `key` that is not used yet.
+    fn unused(&self, key: u64, used: &[bool]) -> Option<u32> {
+        let start = self.0.partition_point(|&(k, _)| k < key);
+        self.0[start..]
+            .iter()
+            .take_while(|&&(k, _)| k == key)
+            .map(|&(_, s)| s)
+            .find(|&s| !used[s as usize])
+    }
 }
 
 /// Joins open chains end to start across gaps smaller than `tolerance`; chains that
