@@ -26,7 +26,11 @@ fn stage(kind: StageKind, text: &str, dir: &Path) -> AnyStage {
 }
 
 fn load(dir: &Path, file: &str) -> Mesh {
-    let AnyStage::Model(source) = stage(StageKind::Model, &format!("use = \"stl\"\nfile = \"{file}\""), dir) else {
+    let AnyStage::Model(source) = stage(
+        StageKind::Model,
+        &format!("use = \"stl\"\nfile = \"{file}\""),
+        dir,
+    ) else {
         unreachable!()
     };
     let mut meshes = source.load(dir).expect("loads");
@@ -70,8 +74,11 @@ fn run(dir: &Path, file: &str, mesh: Option<&Mesh>, thickness: f64) -> Times {
     });
     let load_time = start.elapsed();
     let start = Instant::now();
-    let AnyStage::Slice(slicer) = stage(StageKind::Slice, &format!("use = \"uniform\"\nthickness = {thickness}"), dir)
-    else {
+    let AnyStage::Slice(slicer) = stage(
+        StageKind::Slice,
+        &format!("use = \"uniform\"\nthickness = {thickness}"),
+        dir,
+    ) else {
         unreachable!()
     };
     let AnyStage::Sort(sorter) = stage(StageKind::Sort, "use = \"hierarchy\"", dir) else {
@@ -85,7 +92,9 @@ fn run(dir: &Path, file: &str, mesh: Option<&Mesh>, thickness: f64) -> Times {
         z_min: bb.min.z,
         z_max: bb.max.z,
     };
-    let slots = slicer.layers(std::slice::from_ref(&mesh), &info, None).expect("slots");
+    let slots = slicer
+        .layers(std::slice::from_ref(&mesh), &info, None)
+        .expect("slots");
     let prepared: Box<dyn MeshSlicer> = slicer.prepare(mesh.clone()).expect("prepare");
     let sorter: &dyn Sorter = sorter.as_ref();
     let contours: usize = slots

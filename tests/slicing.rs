@@ -1,0 +1,116 @@
+//! Slicing the generated models: they are watertight, their layers have the areas of
+//! their profiles, and they fall into the expected families.
+
+use std::path::Path;
+use std::sync::Arc;
+
+use lamina_core::stage::{MeshSlicer, Sorter};
+use lamina_core::{AnyStage, LayerSlot, Mesh, Registry, StageKind};
+
+fn stage(kind: StageKind, text: &str) -> AnyStage {
+    use lamina_model as _;
+    use lamina_slice as _;
+    use lamina_sort as _;
+    let table = lamina_core::pipeline::TableRef::parse_snippet(kind.name(), text).expect("snippet");
+    let scripts = lamina_core::script::ScriptHost::new(".", Default::default());
+    Registry::linked()
+        .expect("registry")
+        .build(kind, &table, &scripts, Path::new("."))
+        .expect("builds")
+}
+
+fn model(text: &str) -> Vec<Mesh> {
+    let AnyStage::Model(m) = stage(StageKind::Model, text) else {
+        unreachable!()
+    };
+    m.load(Path::new(".")).expect("loads")
+}
+
+fn cut(mesh: &Mesh, z: f64) -> (lamina_core::Layer, lamina_core::ContourTree) {
+    let AnyStage::Slice(s) = stage(StageKind::Slice, "use = \"uniform\"") else {
+        unreachable!()
+    };
+    let AnyStage::Sort(sorter) = stage(StageKind::Sort, "use = \"hierarchy\"") else {
+        unreachable!()
+    };
+    let prepared: Box<dyn MeshSlicer> = s.prepare(Arc::new(mesh.clone())).expect("prepare");
+    let layer = prepared
+        .slice(&LayerSlot {
+            index: 0,
+            z,
+            thickness: 0.2,
+            cut_z: z,
+        })
+        .expect("slice");
+    let sorter: &dyn Sorter = sorter.as_ref();
+    let tree = sorter.sort(&layer).expect("sort");
+    (layer, tree)
+}
+
+fn watertight(mesh: &Mesh) -> bool {
+    let mut edges = std::collections::HashMap::new();
+    for t in &mesh.triangles {
+        for k in 0..3 {
+            let (a, b) = (t[k], t[(k + 1) % 3]);
+            *edges.entry((a.min(b), a.max(b))).or_insert(0i32) += if a < b { 1 } else { -1 };
+        }
+    }
+    edges.values().all(|&v| v == 0)
+}
+
+#[test]
+fn tube_layers_have_the_ring_area_and_one_family_with_a_hole() {
+    let meshes =
+        model("use = \"tube\"\nouter_radius = 10.0\ninner_radius = 7.0\nheight = 5.0\nsegments = 96");
+    assert!(watertight(&meshes[0]));
+    let ngon = |r: f64| 0.5 * 96.0 * r * r * (std::f64::consts::TAU / 96.0).sin();
+    let expected = ngon(10.0) - ngon(7.0);
+    for z in [0.1, 1.0, 2.5, 4.9, 5.0] {
+        let (layer, tree) = cut(&meshes[0], z);
+        assert_eq!(layer.contours.len(), 2, "z = {z}");
+        assert_eq!(tree.families.len(), 1);
+        assert_eq!(tree.families[0].holes.len(), 1);
+        let area = tree.family_polygon(&layer.contours, 0).area();
+        assert!(
+            (area - expected).abs() < 1e-6 * expected,
+            "z = {z}: {area} vs {expected}"
+        );
+    }
+}
+
+#[test]
+fn gear_shaft_assembly_is_two_watertight_parts_in_three_contours() {
+    let meshes = model("use = \"gear-shaft\"\nteeth = 16\nheight = 5.0\nshaft_length = 9.0");
+    assert_eq!(meshes.len(), 2);
+    assert!(meshes.iter().all(watertight));
+    assert!(meshes.iter().all(|m| m.signed_volume() > 0.0));
+    // Both meshes in one layer: gear (outer + bore) and the shaft inside the bore.
+    let mut both = meshes[0].clone();
+    let base = both.vertices.len() as u32;
+    both.vertices.extend_from_slice(&meshes[1].vertices);
+    both.triangles.extend(
+        meshes[1]
+            .triangles
+            .iter()
+            .map(|t| [t[0] + base, t[1] + base, t[2] + base]),
+    );
+    let (layer, tree) = cut(&both, 2.5);
+    assert_eq!(layer.contours.len(), 3);
+    assert_eq!(tree.families.len(), 2, "gear with its bore, and the shaft");
+    let max_level = tree.nodes.iter().map(|n| n.level).max();
+    assert_eq!(max_level, Some(2));
+    // Above the gear only the shaft remains.
+    let (layer, tree) = cut(&both, 7.0);
+    assert_eq!(layer.contours.len(), 1);
+    assert_eq!(tree.families.len(), 1);
+}
+
+#[test]
+fn box_layers_are_exact() {
+    let meshes = model("use = \"box\"\nsize = [3.0, 2.0, 1.0]");
+    assert!(watertight(&meshes[0]));
+    let (layer, _) = cut(&meshes[0], 0.5);
+    assert_eq!(layer.contours.len(), 1);
+    assert!((layer.contours[0].area() - 6.0).abs() < 1e-9);
+    assert!(layer.contours[0].is_ccw());
+}
