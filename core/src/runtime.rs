@@ -463,10 +463,17 @@ impl Engine {
 
         // Meshes: one per part (a part takes one mesh of its model, or all merged).
         let loaded = self.load_models(&timings)?;
+        let mut warnings = 0;
+        for mesh in loaded.iter().flatten() {
+            for w in &mesh.warnings {
+                observer.warning(w);
+                warnings += 1;
+            }
+        }
         let mut meshes: Vec<Arc<Mesh>> = Vec::new();
         let mut part_mesh = Vec::new();
         let mut parts_info = Vec::new();
-        for (pi, p) in self.parts.iter().enumerate() {
+        for p in &self.parts {
             let model = &loaded[p.model];
             let mesh = match p.mesh {
                 Some(i) => model.get(i).cloned().ok_or_else(|| {
@@ -495,7 +502,6 @@ impl Engine {
                 z_min: bb.min.z,
                 z_max: bb.max.z,
             });
-            let _ = pi;
         }
         let bbox = meshes.iter().fold(BBox3::EMPTY, |b, m| b.union(&m.bbox()));
         let info = RunInfo {
@@ -536,7 +542,6 @@ impl Engine {
         observer.started(slots.len());
         let window = pool.current_num_threads().max(1) * 4;
         let mut regions = 0;
-        let mut warnings = 0;
         let mut build_time: Option<f64> = None;
         for chunk in slots.chunks(window) {
             let plans: Vec<Result<LayerPlan>> = pool.install(|| {
