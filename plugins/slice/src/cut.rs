@@ -89,16 +89,17 @@ impl CutMesh {
             (bb.min.z, bb.max.z)
         };
         let height = (z1 - z0).max(1e-9);
-        // Bucket height near the typical triangle height keeps each triangle in few
-        // buckets; the count is capped so memory stays linear in the mesh.
-        let mut extents: Vec<f64> = ranges.iter().map(|(lo, hi)| hi - lo).collect();
-        let median = if extents.is_empty() {
-            height
+        // Each triangle is listed in every bucket its z range touches, so the entries
+        // number about n + sum(extent) * count / height. The count is chosen so that
+        // this stays below 4 n (flat caps and tall walls alike), and at most 65536.
+        let n = ranges.len().max(1) as f64;
+        let total_extent: f64 = ranges.iter().map(|(lo, hi)| hi - lo).sum();
+        let by_entries = if total_extent > 0.0 {
+            3.0 * n * height / total_extent
         } else {
-            let mid = extents.len() / 2;
-            *extents.select_nth_unstable_by(mid, f64::total_cmp).1
+            n
         };
-        let count = ((height / median.max(height / 65536.0)).ceil() as usize).clamp(1, 65536);
+        let count = (by_entries.min(n).floor() as usize).clamp(1, 65536);
         let bucket = height / count as f64;
         let mut buckets = vec![Vec::new(); count];
         for (i, &(lo, hi)) in ranges.iter().enumerate() {
