@@ -279,3 +279,69 @@ fn model_option_replaces_the_model_of_a_single_part_pipeline() {
     ]);
     assert_eq!(out.status.code(), Some(2));
 }
+
+#[test]
+fn family_at_splits_one_mesh_into_parts_followed_through_the_layers() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    // Gear and shaft merged into one mesh: the parts are told apart by a point each.
+    let p = write(
+        dir.path(),
+        "p.toml",
+        "[model]\nuse = \"gear-shaft\"\nteeth = 16\nheight = 5.0\nshaft_length = 9.0\n\
+         [materials.bronze]\ncolour = [205, 127, 50]\n[materials.steel]\ncolour = [140, 140, 150]\n\
+         [[parts]]\nname = \"gear\"\nmaterials = [\"bronze\"]\nfamily_at = [18.0, 0.0, 2.0]\n\
+         [[parts]]\nname = \"shaft\"\nmaterials = [\"steel\"]\n\
+         [slice]\nuse = \"uniform\"\nthickness = 0.5\n[[output]]\nuse = \"json\"\n",
+    );
+    let out_dir = dir.path().join("out");
+    let out = lamina(&[
+        "run",
+        p.to_str().expect("utf-8"),
+        "--out",
+        out_dir.to_str().expect("utf-8"),
+        "--quiet",
+    ]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let plan: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(out_dir.join("plan.json")).expect("written")).expect("json");
+    let layers = plan["layers"].as_array().expect("layers");
+    assert_eq!(layers.len(), 18);
+    for layer in layers {
+        let z = layer["z"].as_f64().expect("z");
+        let families = |part: usize| {
+            layer["parts"][part]["families"]
+                .as_array()
+                .expect("families")
+                .len()
+        };
+        let holes = |part: usize| {
+            layer["parts"][part]["families"][0]["holes"]
+                .as_array()
+                .map_or(0, Vec::len)
+        };
+        if z <= 5.0 {
+            assert_eq!((families(0), families(1)), (1, 1), "z = {z}");
+            assert_eq!(holes(0), 1, "the gear keeps its bore");
+            assert_eq!(holes(1), 0, "the shaft is solid");
+        } else {
+            assert_eq!((families(0), families(1)), (0, 1), "z = {z}");
+        }
+    }
+
+    // A point in no solid is an error at the key.
+    let text_bad = std::fs::read_to_string(&p)
+        .expect("read")
+        .replace("[18.0, 0.0, 2.0]", "[50.0, 0.0, 2.0]");
+    std::fs::write(&p, text_bad).expect("write");
+    let out = lamina(&[
+        "run",
+        p.to_str().expect("utf-8"),
+        "--out",
+        out_dir.to_str().expect("utf-8"),
+    ]);
+    let err = text(&out.stderr);
+    assert!(
+        err.contains("no solid at family_at") && err.contains("p.toml:13:"),
+        "{err}"
+    );
+}

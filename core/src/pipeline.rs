@@ -326,6 +326,7 @@ struct RawPart {
     name: Option<String>,
     materials: Option<Vec<String>>,
     mesh: Option<usize>,
+    family_at: Option<[f64; 3]>,
     #[serde(default)]
     #[expect(dead_code, reason = "read through its TableRef")]
     model: Option<toml::Table>,
@@ -376,6 +377,9 @@ pub struct PartSpec {
     pub model: Option<ModelSpec>,
     /// Which mesh of the model; `None` takes all its meshes as one.
     pub mesh: Option<usize>,
+    /// Selects the family containing this point (x, y at height z) and the families
+    /// that overlap it layer after layer, instead of every family of the mesh.
+    pub family_at: Option<[f64; 3]>,
     pub discretise: Option<TableRef>,
     pub grade: Option<TableRef>,
     pub table: Option<TableRef>,
@@ -508,6 +512,11 @@ impl Pipeline {
                 materials: part_materials,
                 model: sub("model", MODEL_HOST_KEYS).map(model_spec).transpose()?,
                 mesh: p.mesh,
+                family_at: match p.family_at {
+                    Some(at) if at.iter().all(|v| v.is_finite()) => Some(at),
+                    Some(_) => return Err(tr.error_at("family_at", "must be three finite numbers [x, y, z]")),
+                    None => None,
+                },
                 discretise: sub("discretise", &["use"]),
                 grade: sub("grade", &["use"]),
                 table: Some(tr),
@@ -524,6 +533,7 @@ impl Pipeline {
                 materials: (0..materials.len()).collect(),
                 model: None,
                 mesh: None,
+                family_at: None,
                 discretise: None,
                 grade: None,
                 table: None,

@@ -15,7 +15,7 @@ use std::time::{Duration, Instant};
 use rayon::prelude::*;
 
 use crate::error::{Error, Result};
-use crate::geom::Vector2;
+use crate::geom::{Point2, Vector2};
 use crate::mesh::{BBox3, Mesh, Vector3};
 use crate::model::{Composition, Layer, LayerPlan, LayerSlot, PartInfo, PartLayer, Region};
 use crate::output::AtomicOutputs;
@@ -117,6 +117,9 @@ struct ModelStage {
 
 struct PartStages {
     name: String,
+    family_at: Option<[f64; 3]>,
+    /// Where `family_at` is written, for errors.
+    family_at_location: Option<crate::source::Location>,
     materials: Vec<usize>,
     /// Index into `Engine::models`.
     model: usize,
@@ -346,6 +349,8 @@ impl Engine {
             }
             parts.push(PartStages {
                 name: part.name.clone(),
+                family_at: part.family_at,
+                family_at_location: part.table.as_ref().and_then(|t| t.location_of(Some("family_at"))),
                 materials: part.materials.clone(),
                 model,
                 mesh: part.mesh,
@@ -472,6 +477,7 @@ impl Engine {
         }
         let mut meshes: Vec<Arc<Mesh>> = Vec::new();
         let mut part_mesh = Vec::new();
+        let mut mesh_keys: Vec<(usize, Option<usize>)> = Vec::new();
         let mut parts_info = Vec::new();
         for p in &self.parts {
             let model = &loaded[p.model];
@@ -483,12 +489,15 @@ impl Engine {
                         model.len()
                     ))
                 })?,
-                None => merge(model, &p.name),
+                None => merge(model, &self.models[p.model].label),
             };
-            // Parts sharing one mesh (e.g. selected by family) slice it once.
-            let idx = match meshes.iter().position(|m| **m == mesh) {
+            // Parts taking the same mesh of the same model (told apart by `family_at`)
+            // share it: it is cut once per layer.
+            let key = (p.model, p.mesh);
+            let idx = match mesh_keys.iter().position(|k| *k == key) {
                 Some(i) => i,
                 None => {
+                    mesh_keys.push(key);
                     meshes.push(Arc::new(mesh));
                     meshes.len() - 1
                 }
@@ -526,6 +535,8 @@ impl Engine {
                 .collect::<Result<Vec<_>>>()
         })?;
 
+        let selections = self.select_families(&slots, &prepared, &part_mesh, &pool, &timings)?;
+
         let mut outputs = AtomicOutputs::new(out_dir);
         let mut sinks = Vec::new();
         for e in &self.exporters {
@@ -548,7 +559,7 @@ impl Engine {
                 chunk
                     .par_iter()
                     .map(|slot| {
-                        self.process_layer(slot, &info, &prepared, &part_mesh, &timings)
+                        self.process_layer(slot, &info, &prepared, &part_mesh, &selections, &timings)
                             .map_err(|e| e.in_layer(slot.index, slot.z))
                     })
                     .collect()
@@ -593,6 +604,7 @@ impl Engine {
         info: &RunInfo,
         prepared: &[Box<dyn MeshSlicer>],
         part_mesh: &[usize],
+        selections: &Selections,
         timings: &Timings,
     ) -> Result<LayerPlan> {
         // Each distinct mesh is cut and sorted once per layer.
@@ -614,8 +626,9 @@ impl Engine {
                 cut[mi] = Some((layer, tree));
             }
             let Some((layer, tree)) = &cut[mi] else { continue };
+            let families = selections.families(pi, slot.index, layer, tree, part_mesh);
             let part_layer = self
-                .process_part(pi, p, layer, tree, info, timings)
+                .process_part(pi, layer, tree, families, info, timings)
                 .map_err(|e| e.in_part(&p.name))?;
             parts.push(part_layer);
         }
@@ -637,15 +650,15 @@ impl Engine {
     fn process_part(
         &self,
         pi: usize,
-        p: &PartStages,
         layer: &Layer,
         tree: &crate::model::ContourTree,
+        families: Vec<usize>,
         info: &RunInfo,
         timings: &Timings,
     ) -> Result<PartLayer> {
+        let p = &self.parts[pi];
         let n_materials = p.materials.len();
         let mut regions = Vec::new();
-        let families: Vec<usize> = (0..tree.families.len()).collect();
         for &f in &families {
             let ctx = FamilyContext {
                 info,
@@ -696,6 +709,162 @@ impl Engine {
             regions,
         })
     }
+}
+
+/// Which families of each layer belong to parts that select theirs with `family_at`:
+/// per part, per layer, one sample point inside each selected family.
+struct Selections {
+    /// `None` for parts without `family_at`.
+    samples: Vec<Option<Vec<Vec<Point2>>>>,
+}
+
+impl Selections {
+    /// The families of `layer` that belong to part `pi`.
+    fn families(
+        &self,
+        pi: usize,
+        layer_index: usize,
+        layer: &Layer,
+        tree: &crate::model::ContourTree,
+        part_mesh: &[usize],
+    ) -> Vec<usize> {
+        let polygons: Vec<_> = (0..tree.families.len())
+            .map(|f| tree.family_polygon(&layer.contours, f))
+            .collect();
+        let owned_by = |part: usize| -> Vec<usize> {
+            let samples = self.samples[part]
+                .as_ref()
+                .and_then(|s| s.get(layer_index))
+                .map(Vec::as_slice)
+                .unwrap_or(&[]);
+            (0..polygons.len())
+                .filter(|&f| samples.iter().any(|&p| polygons[f].contains(p)))
+                .collect()
+        };
+        if self.samples[pi].is_some() {
+            return owned_by(pi);
+        }
+        // A part without `family_at` takes what the selecting parts on its mesh leave.
+        let taken: Vec<usize> = (0..self.samples.len())
+            .filter(|&o| o != pi && part_mesh[o] == part_mesh[pi] && self.samples[o].is_some())
+            .flat_map(owned_by)
+            .collect();
+        (0..polygons.len()).filter(|f| !taken.contains(f)).collect()
+    }
+}
+
+/// A family's polygon and a point inside it.
+type FamilySample = (crate::geom::Polygon, Point2);
+
+/// Per layer, its families with their points.
+type LayerFamilies = Vec<Vec<FamilySample>>;
+
+/// Two families of neighbouring layers overlap when either holds a point of the other.
+fn overlaps(a: &FamilySample, b: &FamilySample) -> bool {
+    a.0.contains(b.1) || b.0.contains(a.1)
+}
+
+impl Engine {
+    /// Follows each `family_at` selection through the layers: the family containing the
+    /// point in the layer at its height, then in each neighbouring layer the families
+    /// overlapping those selected in the layer before, upward and downward.
+    fn select_families(
+        &self,
+        slots: &[LayerSlot],
+        prepared: &[Box<dyn MeshSlicer>],
+        part_mesh: &[usize],
+        pool: &rayon::ThreadPool,
+        timings: &Timings,
+    ) -> Result<Selections> {
+        let mut samples: Vec<Option<Vec<Vec<Point2>>>> = vec![None; self.parts.len()];
+        if self.parts.iter().all(|p| p.family_at.is_none()) || slots.is_empty() {
+            return Ok(Selections { samples });
+        }
+        // Families (polygon and inner point) of every layer of the meshes concerned.
+        let mut by_mesh: Vec<Option<LayerFamilies>> = (0..prepared.len()).map(|_| None).collect();
+        for (pi, p) in self.parts.iter().enumerate() {
+            let mi = part_mesh[pi];
+            if p.family_at.is_none() || by_mesh[mi].is_some() {
+                continue;
+            }
+            let layers: Vec<Vec<FamilySample>> = pool.install(|| {
+                slots
+                    .par_iter()
+                    .map(|slot| {
+                        let layer = timings.time(StageKind::Slice, || prepared[mi].slice(slot))?;
+                        let tree = timings.time(StageKind::Sort, || self.sorter.sort(&layer))?;
+                        check_tree(&layer, &tree)?;
+                        Ok((0..tree.families.len())
+                            .map(|f| {
+                                let poly = tree.family_polygon(&layer.contours, f);
+                                let inside = poly
+                                    .outer
+                                    .interior_point()
+                                    .unwrap_or(Point2::new(f64::NAN, f64::NAN));
+                                (poly, inside)
+                            })
+                            .collect())
+                    })
+                    .collect::<Result<Vec<_>>>()
+            })?;
+            by_mesh[mi] = Some(layers);
+        }
+        for (pi, p) in self.parts.iter().enumerate() {
+            let Some([x, y, z]) = p.family_at else { continue };
+            let Some(layers) = &by_mesh[part_mesh[pi]] else {
+                continue;
+            };
+            // The layer whose thickness spans z, else the nearest.
+            let start = slots
+                .iter()
+                .position(|s| s.z - s.thickness <= z && z <= s.z)
+                .unwrap_or_else(|| {
+                    (0..slots.len())
+                        .min_by(|&a, &b| (slots[a].cut_z - z).abs().total_cmp(&(slots[b].cut_z - z).abs()))
+                        .unwrap_or(0)
+                });
+            let point = Point2::new(x, y);
+            let first: Vec<usize> = (0..layers[start].len())
+                .filter(|&f| layers[start][f].0.contains(point))
+                .collect();
+            if first.is_empty() {
+                let message = format!(
+                    "part `{}`: no solid at family_at = [{x}, {y}, {z}] (layer {} at z = {:.4} mm has {} families)",
+                    p.name,
+                    start,
+                    slots[start].z,
+                    layers[start].len()
+                );
+                return Err(match &p.family_at_location {
+                    Some(loc) => Error::config_at(loc.clone(), message),
+                    None => Error::config(message),
+                });
+            }
+            let mut selected: Vec<Vec<usize>> = vec![Vec::new(); slots.len()];
+            selected[start] = first;
+            for k in start + 1..slots.len() {
+                selected[k] = next_selection(&layers[k - 1], &selected[k - 1], &layers[k]);
+            }
+            for k in (0..start).rev() {
+                selected[k] = next_selection(&layers[k + 1], &selected[k + 1], &layers[k]);
+            }
+            samples[pi] = Some(
+                selected
+                    .iter()
+                    .zip(layers)
+                    .map(|(sel, fams)| sel.iter().map(|&f| fams[f].1).collect())
+                    .collect(),
+            );
+        }
+        Ok(Selections { samples })
+    }
+}
+
+/// Families of `next` overlapping the `selected` families of `prev`.
+fn next_selection(prev: &[FamilySample], selected: &[usize], next: &[FamilySample]) -> Vec<usize> {
+    (0..next.len())
+        .filter(|&f| selected.iter().any(|&s| overlaps(&prev[s], &next[f])))
+        .collect()
 }
 
 /// The single region of a family that is not discretised.
