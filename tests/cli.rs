@@ -46,6 +46,7 @@ fn plugins_lists_the_built_in_stages_of_every_kind() {
     for expected in [
         "model:stl",
         "model:obj",
+        "model:3mf",
         "model:gear",
         "model:gear-shaft",
         "model:tube",

@@ -42,6 +42,8 @@ fn write_models(dir: &Path) {
         obj.push_str(&format!("f {} {} {}\n", t[0] + 1, t[1] + 1, t[2] + 1));
     }
     std::fs::write(dir.join("part.obj"), obj).expect("write obj");
+    let package = lamina_model::threemf::write(std::slice::from_ref(&mesh)).expect("3mf");
+    std::fs::write(dir.join("part.3mf"), package).expect("write 3mf");
 }
 
 fn pipeline_for(kind: StageKind, example: &str) -> String {
@@ -135,6 +137,7 @@ fn the_expected_built_in_stages_are_registered() {
     for (kind, name) in [
         (StageKind::Model, "stl"),
         (StageKind::Model, "obj"),
+        (StageKind::Model, "3mf"),
         (StageKind::Model, "gear"),
         (StageKind::Model, "gear-shaft"),
         (StageKind::Model, "tube"),

@@ -1,4 +1,4 @@
-//! Model sources for Lamina: readers for STL (binary and ASCII) and OBJ meshes, and
+//! Model sources for Lamina: readers for STL (binary and ASCII), OBJ and 3MF meshes, and
 //! generators for the parametric models the examples and tests use (gears, tubes,
 //! boxes, cylinders), so that the project ships no mesh files of its own.
 
@@ -6,6 +6,7 @@ pub mod extrude;
 pub mod obj;
 pub mod profile;
 pub mod stl;
+pub mod threemf;
 pub mod weld;
 
 mod stages;

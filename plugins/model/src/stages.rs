@@ -30,6 +30,7 @@ fn default_weld() -> f64 {
 enum Format {
     Stl,
     Obj,
+    ThreeMf,
 }
 
 struct FileSource {
@@ -47,6 +48,12 @@ impl ModelSource for FileSource {
         let path = base_dir.join(&self.file);
         let bytes = read(&path)?;
         let soups: Vec<(String, Soup)> = match self.format {
+            Format::ThreeMf => {
+                return Ok(crate::threemf::read(&path, &bytes)?
+                    .iter()
+                    .map(|m| crate::weld::weld_mesh(m, self.weld))
+                    .collect());
+            }
             Format::Stl => crate::stl::parse(&path, &bytes)?,
             Format::Obj => {
                 let text = String::from_utf8_lossy(&bytes);
@@ -105,6 +112,17 @@ lamina_core::register_stage!(StageFactory {
         example: "use = \"obj\"\nfile = \"part.obj\"",
     },
     build: |c| build_file(c, Format::Obj),
+});
+
+lamina_core::register_stage!(StageFactory {
+    info: StageInfo {
+        kind: StageKind::Model,
+        name: "3mf",
+        doc: "Reads a 3MF package: one mesh per build item, in millimetres, with its base materials per triangle (chosen automatically for `file = \"*.3mf\"`).",
+        options: FILE_OPTIONS,
+        example: "use = \"3mf\"\nfile = \"part.3mf\"",
+    },
+    build: |c| build_file(c, Format::ThreeMf),
 });
 
 // ---------------------------------------------------------------- generators

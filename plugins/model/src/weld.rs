@@ -23,13 +23,33 @@ pub struct WeldReport {
 /// duplicates STL files are made of and the tiny rounding differences some exporters
 /// leave. Triangles with two equal corners after welding are dropped.
 pub fn weld(name: &str, soup: &Soup, tolerance: f64) -> (Mesh, WeldReport) {
+    let (mesh, report, _) = weld_kept(name, soup, tolerance);
+    (mesh, report)
+}
+
+/// Welds a mesh, keeping its per-triangle materials in step with the triangles kept.
+pub fn weld_mesh(mesh: &Mesh, tolerance: f64) -> Mesh {
+    let soup = Soup {
+        triangles: (0..mesh.triangles.len()).map(|i| mesh.triangle(i)).collect(),
+    };
+    let (mut out, _, kept) = weld_kept(&mesh.name, &soup, tolerance);
+    if mesh.triangle_materials.len() == mesh.triangles.len() {
+        out.triangle_materials = kept.iter().map(|&i| mesh.triangle_materials[i]).collect();
+        out.material_names = mesh.material_names.clone();
+    }
+    out
+}
+
+/// [`weld`], also returning the indices of the soup triangles kept.
+fn weld_kept(name: &str, soup: &Soup, tolerance: f64) -> (Mesh, WeldReport, Vec<usize>) {
     let inv = if tolerance > 0.0 { 1.0 / tolerance } else { 0.0 };
     let mut index: rustc_hash::FxHashMap<[i64; 3], u32> =
         rustc_hash::FxHashMap::with_capacity_and_hasher(soup.triangles.len(), Default::default());
     let mut vertices = Vec::with_capacity(soup.triangles.len() / 2 + 3);
     let mut triangles = Vec::with_capacity(soup.triangles.len());
+    let mut kept = Vec::with_capacity(soup.triangles.len());
     let mut degenerate = 0;
-    for tri in &soup.triangles {
+    for (t, tri) in soup.triangles.iter().enumerate() {
         let mut ids = [0u32; 3];
         for (id, p) in ids.iter_mut().zip(tri) {
             let key = if inv > 0.0 {
@@ -51,6 +71,7 @@ pub fn weld(name: &str, soup: &Soup, tolerance: f64) -> (Mesh, WeldReport) {
             continue;
         }
         triangles.push(ids);
+        kept.push(t);
     }
     let report = WeldReport {
         corners: soup.triangles.len() * 3,
@@ -63,7 +84,7 @@ pub fn weld(name: &str, soup: &Soup, tolerance: f64) -> (Mesh, WeldReport) {
             "{name}: dropped {degenerate} degenerate triangle(s) (corners closer than {tolerance} mm)"
         ));
     }
-    (mesh, report)
+    (mesh, report, kept)
 }
 
 #[cfg(test)]

@@ -1,0 +1,538 @@
+//! 3MF: the ZIP package's model part (`3D/3dmodel.model`, or the part named by the
+//! package relationships), its meshes, components and build items with their
+//! transforms, the model's unit, and the base materials of the materials extension as
+//! per-triangle material names.
+//!
+//! Nothing is sized from the file's numbers: vectors grow with what is actually read,
+//! the model part is read through a size cap, and component nesting is bounded.
+
+use std::collections::HashMap;
+use std::io::Read;
+use std::path::Path;
+
+use lamina_core::{Error, Mesh, Point3, Result};
+use quick_xml::events::{BytesStart, Event};
+
+/// Largest model part read (bytes, uncompressed): a guard against ZIP bombs.
+const MAX_MODEL_BYTES: u64 = 4 << 30;
+/// Deepest component nesting followed.
+const MAX_DEPTH: usize = 32;
+
+fn err(path: &Path, message: impl Into<String>) -> Error {
+    Error::Model {
+        path: path.to_path_buf(),
+        message: message.into(),
+    }
+}
+
+/// A 3x4 affine transform in 3MF's order (row vectors: p' = p M).
+type Transform = [f64; 12];
+
+const IDENTITY: Transform = [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0];
+
+fn apply(m: &Transform, p: Point3) -> Point3 {
+    Point3::new(
+        p.x * m[0] + p.y * m[3] + p.z * m[6] + m[9],
+        p.x * m[1] + p.y * m[4] + p.z * m[7] + m[10],
+        p.x * m[2] + p.y * m[5] + p.z * m[8] + m[11],
+    )
+}
+
+/// `a` then `b`.
+fn compose(a: &Transform, b: &Transform) -> Transform {
+    let mut out = [0.0; 12];
+    for row in 0..4 {
+        for col in 0..3 {
+            let mut v = if row == 3 { b[9 + col] } else { 0.0 };
+            for k in 0..3 {
+                v += a[row * 3 + k] * b[k * 3 + col];
+            }
+            out[row * 3 + col] = v;
+        }
+    }
+    out
+}
+
+#[derive(Default)]
+struct Object {
+    name: Option<String>,
+    vertices: Vec<Point3>,
+    triangles: Vec<[u32; 3]>,
+    /// Per triangle: (property group id, index) when set.
+    properties: Vec<Option<(u32, u32)>>,
+    default_property: Option<(u32, u32)>,
+    components: Vec<(u32, Transform)>,
+}
+
+/// Reads a 3MF file into one mesh per build item.
+pub fn read(path: &Path, bytes: &[u8]) -> Result<Vec<Mesh>> {
+    let mut archive = zip::ZipArchive::new(std::io::Cursor::new(bytes))
+        .map_err(|e| err(path, format!("not a 3MF (ZIP) package: {e}")))?;
+    let model_name = model_part_name(&mut archive).unwrap_or_else(|| "3D/3dmodel.model".to_string());
+    let mut text = String::new();
+    {
+        let entry = archive
+            .by_name(model_name.trim_start_matches('/'))
+            .map_err(|e| err(path, format!("no model part `{model_name}`: {e}")))?;
+        entry
+            .take(MAX_MODEL_BYTES)
+            .read_to_string(&mut text)
+            .map_err(|e| err(path, format!("{model_name}: cannot read: {e}")))?;
+    }
+    parse_model(path, &model_name, &text)
+}
+
+/// The model part named by `_rels/.rels` (the 3D model relationship), if any.
+fn model_part_name(archive: &mut zip::ZipArchive<std::io::Cursor<&[u8]>>) -> Option<String> {
+    let mut rels = String::new();
+    archive
+        .by_name("_rels/.rels")
+        .ok()?
+        .take(1 << 20)
+        .read_to_string(&mut rels)
+        .ok()?;
+    let mut reader = quick_xml::Reader::from_str(&rels);
+    loop {
+        match reader.read_event() {
+            Ok(Event::Empty(e) | Event::Start(e)) if e.local_name().as_ref() == "Relationship" => {
+                let attrs = attributes(&e).ok()?;
+                if attrs.get("Type").is_some_and(|t| t.ends_with("/3dmodel")) {
+                    return attrs.get("Target").cloned();
+                }
+            }
+            Ok(Event::Eof) | Err(_) => return None,
+            _ => {}
+        }
+    }
+}
+
+fn attributes(e: &BytesStart<'_>) -> std::result::Result<HashMap<String, String>, String> {
+    let mut out = HashMap::new();
+    for a in e.attributes() {
+        let a = a.map_err(|e| e.to_string())?;
+        let key = a.key.local_name().as_ref().to_string();
+        let value = a
+            .normalized_value(quick_xml::XmlVersion::Implicit1_0)
+            .map_err(|e| e.to_string())?
+            .into_owned();
+        out.insert(key, value);
+    }
+    Ok(out)
+}
+
+fn unit_scale(unit: &str) -> Option<f64> {
+    Some(match unit {
+        "micron" => 0.001,
+        "millimeter" => 1.0,
+        "centimeter" => 10.0,
+        "inch" => 25.4,
+        "foot" => 304.8,
+        "meter" => 1000.0,
+        _ => return None,
+    })
+}
+
+fn parse_model(path: &Path, part: &str, text: &str) -> Result<Vec<Mesh>> {
+    let mut reader = quick_xml::Reader::from_str(text);
+    let line_of = |pos: u64| {
+        text.as_bytes()[..(pos as usize).min(text.len())]
+            .iter()
+            .filter(|&&b| b == b'\n')
+            .count()
+            + 1
+    };
+    let mut scale = 1.0;
+    let mut objects: HashMap<u32, Object> = HashMap::new();
+    let mut current: Option<(u32, Object)> = None;
+    let mut base_groups: HashMap<u32, Vec<String>> = HashMap::new();
+    let mut current_group: Option<(u32, Vec<String>)> = None;
+    let mut items: Vec<(u32, Transform)> = Vec::new();
+    loop {
+        let pos = reader.buffer_position();
+        let event = reader
+            .read_event()
+            .map_err(|e| err(path, format!("{part} line {}: malformed XML: {e}", line_of(pos))))?;
+        let at = |m: String| err(path, format!("{part} line {}: {m}", line_of(pos)));
+        match event {
+            Event::Start(e) | Event::Empty(e) => {
+                let attrs = attributes(&e).map_err(&at)?;
+                let num = |k: &str| -> Result<f64> {
+                    let v = attrs
+                        .get(k)
+                        .ok_or_else(|| at(format!("missing attribute `{k}`")))?;
+                    let f: f64 = v
+                        .trim()
+                        .parse()
+                        .map_err(|_| at(format!("`{k}` = `{v}` is not a number")))?;
+                    if f.is_finite() {
+                        Ok(f)
+                    } else {
+                        Err(at(format!("`{k}` is not finite")))
+                    }
+                };
+                let id = |k: &str| -> Result<u32> {
+                    let v = attrs
+                        .get(k)
+                        .ok_or_else(|| at(format!("missing attribute `{k}`")))?;
+                    v.trim()
+                        .parse()
+                        .map_err(|_| at(format!("`{k}` = `{v}` is not an index")))
+                };
+                let transform = || -> Result<Transform> {
+                    match attrs.get("transform") {
+                        None => Ok(IDENTITY),
+                        Some(t) => {
+                            let v: Vec<f64> = t
+                                .split_ascii_whitespace()
+                                .filter_map(|x| x.parse().ok())
+                                .collect();
+                            if v.len() != 12 || v.iter().any(|x| !x.is_finite()) {
+                                return Err(at(format!("transform `{t}` is not 12 finite numbers")));
+                            }
+                            let mut m = [0.0; 12];
+                            m.copy_from_slice(&v);
+                            Ok(m)
+                        }
+                    }
+                };
+                match e.local_name().as_ref() {
+                    "model" => {
+                        if let Some(u) = attrs.get("unit") {
+                            scale = unit_scale(u).ok_or_else(|| at(format!("unknown unit `{u}`")))?;
+                        }
+                    }
+                    "basematerials" => current_group = Some((id("id")?, Vec::new())),
+                    "base" => {
+                        if let Some((_, names)) = &mut current_group {
+                            names.push(
+                                attrs
+                                    .get("name")
+                                    .cloned()
+                                    .unwrap_or_else(|| format!("material {}", names.len())),
+                            );
+                        }
+                    }
+                    "object" => {
+                        let mut o = Object {
+                            name: attrs.get("name").cloned(),
+                            ..Object::default()
+                        };
+                        if attrs.contains_key("pid") {
+                            o.default_property =
+                                Some((id("pid")?, attrs.get("pindex").map_or(Ok(0), |_| id("pindex"))?));
+                        }
+                        current = Some((id("id")?, o));
+                    }
+                    "vertex" => {
+                        let (_, o) = current
+                            .as_mut()
+                            .ok_or_else(|| at("vertex outside an object".into()))?;
+                        o.vertices.push(Point3::new(num("x")?, num("y")?, num("z")?));
+                    }
+                    "triangle" => {
+                        let (_, o) = current
+                            .as_mut()
+                            .ok_or_else(|| at("triangle outside an object".into()))?;
+                        let t = [id("v1")?, id("v2")?, id("v3")?];
+                        if t.iter().any(|&v| v as usize >= o.vertices.len()) {
+                            return Err(at(format!(
+                                "triangle {t:?} names a vertex beyond the {} read",
+                                o.vertices.len()
+                            )));
+                        }
+                        o.triangles.push(t);
+                        let prop = if attrs.contains_key("pid") || attrs.contains_key("p1") {
+                            let pid = match attrs.get("pid") {
+                                Some(_) => id("pid")?,
+                                None => o.default_property.map_or(0, |d| d.0),
+                            };
+                            Some((pid, id("p1")?))
+                        } else {
+                            o.default_property
+                        };
+                        o.properties.push(prop);
+                    }
+                    "component" => {
+                        let (_, o) = current
+                            .as_mut()
+                            .ok_or_else(|| at("component outside an object".into()))?;
+                        o.components.push((id("objectid")?, transform()?));
+                    }
+                    "item" => items.push((id("objectid")?, transform()?)),
+                    _ => {}
+                }
+            }
+            Event::End(e) => match e.local_name().as_ref() {
+                "object" => {
+                    if let Some((id, o)) = current.take() {
+                        objects.insert(id, o);
+                    }
+                }
+                "basematerials" => {
+                    if let Some((id, names)) = current_group.take() {
+                        base_groups.insert(id, names);
+                    }
+                }
+                _ => {}
+            },
+            Event::Eof => break,
+            _ => {}
+        }
+    }
+    if items.is_empty() {
+        return Err(err(path, format!("{part}: the build has no items")));
+    }
+    // All base materials, numbered across groups in id order.
+    let mut group_ids: Vec<u32> = base_groups.keys().copied().collect();
+    group_ids.sort_unstable();
+    let mut material_names = Vec::new();
+    let mut group_offset = HashMap::new();
+    for g in group_ids {
+        group_offset.insert(g, material_names.len() as u32);
+        material_names.extend(base_groups[&g].iter().cloned());
+    }
+    let units: Transform = [scale, 0.0, 0.0, 0.0, scale, 0.0, 0.0, 0.0, scale, 0.0, 0.0, 0.0];
+    let mut meshes = Vec::new();
+    for (n, (object, transform)) in items.iter().enumerate() {
+        let mut mesh = Mesh::new(format!("item {n}"), Vec::new(), Vec::new());
+        let mut any_material = false;
+        let mut tri_materials = Vec::new();
+        collect(
+            path,
+            &objects,
+            *object,
+            &compose(transform, &units),
+            0,
+            &mut mesh,
+            &mut tri_materials,
+            &group_offset,
+            &base_groups,
+            &mut any_material,
+        )?;
+        if let Some(name) = objects.get(object).and_then(|o| o.name.clone()) {
+            mesh.name = name;
+        }
+        if any_material {
+            mesh.triangle_materials = tri_materials;
+            mesh.material_names = material_names.clone();
+        }
+        meshes.push(mesh);
+    }
+    Ok(meshes)
+}
+
+#[allow(clippy::too_many_arguments)]
+fn collect(
+    path: &Path,
+    objects: &HashMap<u32, Object>,
+    id: u32,
+    transform: &Transform,
+    depth: usize,
+    mesh: &mut Mesh,
+    tri_materials: &mut Vec<u32>,
+    group_offset: &HashMap<u32, u32>,
+    groups: &HashMap<u32, Vec<String>>,
+    any_material: &mut bool,
+) -> Result<()> {
+    if depth > MAX_DEPTH {
+        return Err(err(
+            path,
+            format!("components nest deeper than {MAX_DEPTH} (a cycle?)"),
+        ));
+    }
+    let o = objects
+        .get(&id)
+        .ok_or_else(|| err(path, format!("the build names object {id}, which is not defined")))?;
+    let base = mesh.vertices.len() as u32;
+    mesh.vertices
+        .extend(o.vertices.iter().map(|&p| apply(transform, p)));
+    for (t, prop) in o.triangles.iter().zip(&o.properties) {
+        mesh.triangles.push([t[0] + base, t[1] + base, t[2] + base]);
+        let material = prop
+            .and_then(|(pid, p)| {
+                let names = groups.get(&pid)?;
+                ((p as usize) < names.len()).then(|| group_offset[&pid] + p)
+            })
+            .inspect(|_| *any_material = true)
+            .unwrap_or(u32::MAX);
+        tri_materials.push(material);
+    }
+    for (child, t) in &o.components {
+        collect(
+            path,
+            objects,
+            *child,
+            &compose(t, transform),
+            depth + 1,
+            mesh,
+            tri_materials,
+            group_offset,
+            groups,
+            any_material,
+        )?;
+    }
+    Ok(())
+}
+
+/// Writes meshes as a 3MF package (millimetres, one object and build item per mesh,
+/// base materials when the mesh carries them).
+pub fn write(meshes: &[Mesh]) -> std::io::Result<Vec<u8>> {
+    use std::fmt::Write as _;
+    use std::io::Write as _;
+    let mut model = String::from(
+        "<?xml version=\"1.0\" encoding=\"UTF-8\"?>\n<model unit=\"millimeter\" xml:lang=\"en-US\" \
+         xmlns=\"http://schemas.microsoft.com/3dmanufacturing/core/2015/02\">\n <resources>\n",
+    );
+    let escape = |s: &str| {
+        s.replace('&', "&amp;")
+            .replace('<', "&lt;")
+            .replace('"', "&quot;")
+    };
+    let mut items = Vec::new();
+    for (k, mesh) in meshes.iter().enumerate() {
+        // Ids 2k + 1 for the mesh's materials, 2k + 2 for its object.
+        let group = (!mesh.material_names.is_empty()
+            && mesh.triangle_materials.len() == mesh.triangles.len())
+        .then(|| {
+            let id = 2 * k + 1;
+            let _ = write!(model, "  <basematerials id=\"{id}\">");
+            for name in &mesh.material_names {
+                let _ = write!(
+                    model,
+                    "<base name=\"{}\" displaycolor=\"#808080\"/>",
+                    escape(name)
+                );
+            }
+            model.push_str("</basematerials>\n");
+            id
+        });
+        let id = 2 * k + 2;
+        let _ = write!(
+            model,
+            "  <object id=\"{id}\" type=\"model\" name=\"{}\">\n   <mesh>\n    <vertices>\n",
+            escape(&mesh.name)
+        );
+        for v in &mesh.vertices {
+            let _ = writeln!(model, "     <vertex x=\"{}\" y=\"{}\" z=\"{}\"/>", v.x, v.y, v.z);
+        }
+        model.push_str("    </vertices>\n    <triangles>\n");
+        for (i, t) in mesh.triangles.iter().enumerate() {
+            let _ = write!(
+                model,
+                "     <triangle v1=\"{}\" v2=\"{}\" v3=\"{}\"",
+                t[0], t[1], t[2]
+            );
+            if let (Some(g), Some(&m)) = (group, mesh.triangle_materials.get(i))
+                && m != u32::MAX
+            {
+                let _ = write!(model, " pid=\"{g}\" p1=\"{m}\"");
+            }
+            model.push_str("/>\n");
+        }
+        model.push_str("    </triangles>\n   </mesh>\n  </object>\n");
+        items.push(id);
+    }
+    model.push_str(" </resources>\n <build>\n");
+    for id in items {
+        let _ = writeln!(model, "  <item objectid=\"{id}\"/>");
+    }
+    model.push_str(" </build>\n</model>\n");
+
+    let mut out = std::io::Cursor::new(Vec::new());
+    let mut zip = zip::ZipWriter::new(&mut out);
+    let options = zip::write::SimpleFileOptions::default();
+    let zerr = |e: zip::result::ZipError| std::io::Error::other(e);
+    zip.start_file("[Content_Types].xml", options).map_err(zerr)?;
+    zip.write_all(
+        b"<?xml version=\"1.0\" encoding=\"UTF-8\"?>\n<Types xmlns=\"http://schemas.openxmlformats.org/package/2006/content-types\">\
+<Default Extension=\"rels\" ContentType=\"application/vnd.openxmlformats-package.relationships+xml\"/>\
+<Default Extension=\"model\" ContentType=\"application/vnd.ms-package.3dmanufacturing-3dmodel+xml\"/></Types>\n",
+    )?;
+    zip.start_file("_rels/.rels", options).map_err(zerr)?;
+    zip.write_all(
+        b"<?xml version=\"1.0\" encoding=\"UTF-8\"?>\n<Relationships xmlns=\"http://schemas.openxmlformats.org/package/2006/relationships\">\
+<Relationship Target=\"/3D/3dmodel.model\" Id=\"rel0\" Type=\"http://schemas.microsoft.com/3dmanufacturing/2013/01/3dmodel\"/></Relationships>\n",
+    )?;
+    zip.start_file("3D/3dmodel.model", options).map_err(zerr)?;
+    zip.write_all(model.as_bytes())?;
+    zip.finish().map_err(zerr)?;
+    Ok(out.into_inner())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::io::Write;
+
+    fn package(model: &str) -> Vec<u8> {
+        let mut out = std::io::Cursor::new(Vec::new());
+        let mut zip = zip::ZipWriter::new(&mut out);
+        let options = zip::write::SimpleFileOptions::default();
+        zip.start_file("3D/3dmodel.model", options).expect("entry");
+        zip.write_all(model.as_bytes()).expect("write");
+        zip.finish().expect("finish");
+        out.into_inner()
+    }
+
+    const TETRA: &str = r##"<?xml version="1.0" encoding="UTF-8"?>
+<model unit="centimeter" xmlns="http://schemas.microsoft.com/3dmanufacturing/core/2015/02">
+ <resources>
+  <basematerials id="1"><base name="ceramic" displaycolor="#FFFFFF"/><base name="metal" displaycolor="#808080"/></basematerials>
+  <object id="2" type="model" pid="1" pindex="0">
+   <mesh>
+    <vertices><vertex x="0" y="0" z="0"/><vertex x="1" y="0" z="0"/><vertex x="0" y="1" z="0"/><vertex x="0" y="0" z="1"/></vertices>
+    <triangles><triangle v1="0" v2="2" v3="1"/><triangle v1="0" v2="1" v3="3" pid="1" p1="1"/><triangle v1="1" v2="2" v3="3"/><triangle v1="0" v2="3" v3="2"/></triangles>
+   </mesh>
+  </object>
+  <object id="3" type="model"><components><component objectid="2" transform="1 0 0 0 1 0 0 0 1 5 0 0"/></components></object>
+ </resources>
+ <build><item objectid="2"/><item objectid="3" transform="1 0 0 0 1 0 0 0 1 0 0 2"/></build>
+</model>"##;
+
+    #[test]
+    fn items_components_units_and_materials_are_read() {
+        let meshes = read(Path::new("t.3mf"), &package(TETRA)).expect("reads");
+        assert_eq!(meshes.len(), 2);
+        let m = &meshes[0];
+        assert_eq!(m.triangles.len(), 4);
+        // centimetres to millimetres
+        assert!((m.bbox().max.x - 10.0).abs() < 1e-12);
+        assert!(m.signed_volume() > 0.0);
+        assert_eq!(m.material_names, vec!["ceramic".to_string(), "metal".to_string()]);
+        assert_eq!(m.triangle_materials, vec![0, 1, 0, 0]);
+        // component offset 5 cm in x, then the item 2 cm up
+        let b = meshes[1].bbox();
+        assert!(
+            (b.min.x - 50.0).abs() < 1e-12 && (b.min.z - 20.0).abs() < 1e-12,
+            "{b:?}"
+        );
+    }
+
+    #[test]
+    fn written_packages_read_back() {
+        let meshes = read(Path::new("t.3mf"), &package(TETRA)).expect("reads");
+        let again = read(Path::new("w.3mf"), &write(&meshes).expect("writes")).expect("reads back");
+        assert_eq!(again.len(), 2);
+        assert_eq!(again[0].vertices, meshes[0].vertices);
+        let names = |m: &Mesh| -> Vec<String> {
+            m.triangle_materials
+                .iter()
+                .map(|&i| m.material_names[i as usize].clone())
+                .collect()
+        };
+        assert_eq!(names(&again[0]), names(&meshes[0]));
+        assert_eq!(names(&again[1]), names(&meshes[1]));
+    }
+
+    #[test]
+    fn bad_packages_are_errors() {
+        assert!(read(Path::new("t.3mf"), b"not a zip").is_err());
+        let bad = TETRA.replace("v3=\"1\"", "v3=\"9\"");
+        let e = read(Path::new("t.3mf"), &package(&bad)).expect_err("bad index");
+        assert!(e.to_string().contains("line 8"), "{e}");
+        let bad = TETRA.replace("x=\"1\"", "x=\"nan\"");
+        assert!(read(Path::new("t.3mf"), &package(&bad)).is_err());
+        let cyclic = TETRA.replace("component objectid=\"2\"", "component objectid=\"3\"");
+        assert!(read(Path::new("t.3mf"), &package(&cyclic)).is_err());
+    }
+}
