@@ -1,6 +1,7 @@
 //! Slicers for Lamina. [`cut`] turns a mesh into the closed contours of one plane;
-//! the stages decide where the planes go (`uniform`).
+//! the stages decide where the planes go (`uniform`, `adaptive`).
 
+mod adaptive;
 pub mod cut;
 mod uniform;
 

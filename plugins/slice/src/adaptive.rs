@@ -1,0 +1,292 @@
+//! `adaptive`: layer thickness that follows the surface, as variable layer height does
+//! in PrusaSlicer or Cura. A layer of thickness t on a facet whose normal makes angle θ
+//! with the build direction leaves a stair step (cusp) of height t |cos θ|; each layer is
+//! as thick as the facets it spans allow for the chosen cusp, within [min, max]. Layers
+//! end exactly on horizontal faces when the thickness bounds let them.
+
+use std::sync::Arc;
+
+use lamina_core::stage::{AnyStage, MeshSlicer, OptionSpec, Slicer, StageConfig, StageInfo, StageKind};
+use lamina_core::{Error, LayerSlot, Mesh, Result, RunInfo, Sequence, StageFactory};
+use serde::Deserialize;
+
+use crate::cut::{CutMesh, CutOptions, FillRule};
+use crate::uniform::Prepared;
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct Options {
+    #[serde(default = "d_min")]
+    min_thickness: f64,
+    #[serde(default = "d_max")]
+    max_thickness: f64,
+    #[serde(default = "d_cusp")]
+    cusp: f64,
+    #[serde(default = "d_close_gaps")]
+    close_gaps: f64,
+    #[serde(default)]
+    fill_rule: FillRule,
+    #[serde(default = "d_max_layers")]
+    max_layers: usize,
+}
+
+fn d_min() -> f64 {
+    0.05
+}
+fn d_max() -> f64 {
+    0.3
+}
+fn d_cusp() -> f64 {
+    0.05
+}
+fn d_close_gaps() -> f64 {
+    0.05
+}
+fn d_max_layers() -> usize {
+    1_000_000
+}
+
+struct Adaptive {
+    min: f64,
+    max: f64,
+    cusp: f64,
+    close_gaps: f64,
+    fill_rule: FillRule,
+    max_layers: usize,
+}
+
+/// A facet as the height planner sees it.
+#[derive(Debug, Clone, Copy)]
+struct Facet {
+    lo: f64,
+    hi: f64,
+    /// |cos θ| of the facet normal with the build direction.
+    nz: f64,
+}
+
+/// Facets closer to horizontal than this are flat faces: layers end on them instead of
+/// thinning around them.
+const FLAT: f64 = 1.0 - 1e-9;
+
+/// Layer slots over `z_min..z_max` for the given facets.
+fn plan_heights(
+    facets: &mut [Facet],
+    z_min: f64,
+    z_max: f64,
+    min: f64,
+    max: f64,
+    cusp: f64,
+    max_layers: usize,
+) -> Result<Vec<LayerSlot>> {
+    facets.sort_by(|a, b| a.lo.total_cmp(&b.lo));
+    let mut flats: Vec<f64> = facets.iter().filter(|f| f.nz >= FLAT).map(|f| f.lo).collect();
+    flats.sort_by(f64::total_cmp);
+    flats.dedup_by(|a, b| (*a - *b).abs() < 1e-9);
+    let mut slots = Vec::new();
+    let mut active: Vec<Facet> = Vec::new();
+    let mut next = 0;
+    let mut z = z_min;
+    while z < z_max - 1e-9 {
+        // Facets reaching into (z, z + max].
+        while next < facets.len() && facets[next].lo < z + max {
+            active.push(facets[next]);
+            next += 1;
+        }
+        active.retain(|f| f.hi > z);
+        let mut t = max;
+        for f in &active {
+            if f.lo < z + t && f.nz < FLAT && f.nz > 0.0 {
+                t = t.min(cusp / f.nz);
+            }
+        }
+        t = t.clamp(min, max);
+        // End on a flat face inside the layer when that keeps the thickness legal.
+        let first_flat = flats.partition_point(|&h| h <= z + 1e-9);
+        if let Some(&h) = flats.get(first_flat)
+            && h < z + t - 1e-9
+            && h - z >= min
+        {
+            t = h - z;
+        }
+        let remaining = z_max - z;
+        if remaining <= t + 1e-9 {
+            t = remaining;
+        } else if remaining - t < min {
+            // Do not leave a sliver thinner than `min` for the last layer.
+            t = if remaining <= max + 1e-9 {
+                remaining
+            } else {
+                remaining / 2.0
+            };
+        }
+        if slots.len() >= max_layers {
+            return Err(Error::stage(
+                "slice:adaptive",
+                format!("more than max_layers = {max_layers} layers"),
+            ));
+        }
+        slots.push(LayerSlot {
+            index: slots.len(),
+            z: z + t,
+            thickness: t,
+            cut_z: z + t / 2.0,
+        });
+        z += t;
+    }
+    Ok(slots)
+}
+
+impl Slicer for Adaptive {
+    fn layers(
+        &self,
+        meshes: &[Arc<Mesh>],
+        info: &RunInfo,
+        _sequence: Option<&Sequence>,
+    ) -> Result<Vec<LayerSlot>> {
+        let mut facets = Vec::new();
+        for m in meshes {
+            for i in 0..m.triangles.len() {
+                let [a, b, c] = m.triangle(i);
+                let n = (b - a).cross(&(c - a));
+                let len = n.norm();
+                if len <= 0.0 {
+                    continue;
+                }
+                facets.push(Facet {
+                    lo: a.z.min(b.z).min(c.z),
+                    hi: a.z.max(b.z).max(c.z),
+                    nz: (n.z / len).abs(),
+                });
+            }
+        }
+        plan_heights(
+            &mut facets,
+            info.z_min,
+            info.z_max,
+            self.min,
+            self.max,
+            self.cusp,
+            self.max_layers,
+        )
+    }
+
+    fn prepare(&self, mesh: Arc<Mesh>) -> Result<Box<dyn MeshSlicer>> {
+        Ok(Box::new(Prepared(CutMesh::new(
+            mesh,
+            CutOptions {
+                close_gaps: self.close_gaps,
+                fill_rule: self.fill_rule,
+                ..CutOptions::default()
+            },
+        ))))
+    }
+}
+
+fn build(config: &StageConfig<'_>) -> Result<AnyStage> {
+    let o: Options = config.parse()?;
+    for (k, v) in [
+        ("min_thickness", o.min_thickness),
+        ("max_thickness", o.max_thickness),
+        ("cusp", o.cusp),
+    ] {
+        if !(v.is_finite() && v > 0.0) {
+            return Err(config.error(k, "must be a positive number of mm"));
+        }
+    }
+    if o.min_thickness > o.max_thickness {
+        return Err(config.error("min_thickness", "must not exceed max_thickness"));
+    }
+    if !(o.close_gaps.is_finite() && o.close_gaps >= 0.0) {
+        return Err(config.error("close_gaps", "must be a non-negative number of mm"));
+    }
+    Ok(AnyStage::Slice(Box::new(Adaptive {
+        min: o.min_thickness,
+        max: o.max_thickness,
+        cusp: o.cusp,
+        close_gaps: o.close_gaps,
+        fill_rule: o.fill_rule,
+        max_layers: o.max_layers,
+    })))
+}
+
+lamina_core::register_stage!(StageFactory {
+    info: StageInfo {
+        kind: StageKind::Slice,
+        name: "adaptive",
+        doc: "Layer thickness from the surface slope: thin where a stair step would show, thick on steep walls, ending on flat faces.",
+        options: &[
+            OptionSpec::new("min_thickness", "float", "0.05", "thinnest layer (mm)"),
+            OptionSpec::new("max_thickness", "float", "0.3", "thickest layer (mm)"),
+            OptionSpec::new(
+                "cusp",
+                "float",
+                "0.05",
+                "largest stair-step height allowed on sloped surfaces (mm)"
+            ),
+            OptionSpec::new(
+                "close_gaps",
+                "float",
+                "0.05",
+                "open chains whose ends are closer than this (mm) are joined"
+            ),
+            OptionSpec::new(
+                "fill_rule",
+                "string",
+                "\"nonzero\"",
+                "how overlapping loops combine: \"nonzero\" or \"evenodd\""
+            ),
+            OptionSpec::new(
+                "max_layers",
+                "integer",
+                "1000000",
+                "refuse to make more layers than this"
+            ),
+        ],
+        example: "use = \"adaptive\"\nmin_thickness = 0.1\nmax_thickness = 0.5\ncusp = 0.1",
+    },
+    build,
+});
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn facet(lo: f64, hi: f64, nz: f64) -> Facet {
+        Facet { lo, hi, nz }
+    }
+
+    #[test]
+    fn vertical_walls_get_the_thickest_layers() {
+        let mut f = vec![facet(0.0, 3.0, 0.0), facet(0.0, 0.0, 1.0), facet(3.0, 3.0, 1.0)];
+        let s = plan_heights(&mut f, 0.0, 3.0, 0.05, 0.3, 0.05, 1000).expect("plans");
+        assert_eq!(s.len(), 10, "{s:?}");
+        assert!(s.iter().all(|l| (l.thickness - 0.3).abs() < 1e-9));
+        assert!((s[9].z - 3.0).abs() < 1e-9);
+    }
+
+    #[test]
+    fn slopes_thin_the_layers_by_the_cusp() {
+        // A 45° slope from z = 1 to 2 between vertical walls.
+        let c = std::f64::consts::FRAC_1_SQRT_2;
+        let mut f = vec![facet(0.0, 3.0, 0.0), facet(1.0, 2.0, c)];
+        let s = plan_heights(&mut f, 0.0, 3.0, 0.05, 0.3, 0.1, 1000).expect("plans");
+        let on_slope: Vec<_> = s
+            .iter()
+            .filter(|l| l.z - l.thickness >= 1.0 && l.z <= 2.0)
+            .collect();
+        assert!(!on_slope.is_empty());
+        for l in on_slope {
+            assert!((l.thickness - 0.1 / c).abs() < 1e-9, "{l:?}");
+        }
+        assert!((s.last().expect("layers").z - 3.0).abs() < 1e-9);
+        let total: f64 = s.iter().map(|l| l.thickness).sum();
+        assert!((total - 3.0).abs() < 1e-9);
+    }
+
+    #[test]
+    fn layers_end_on_flat_faces() {
+        let mut f = vec![facet(0.0, 2.0, 0.0), facet(1.05, 1.05, 1.0)];
+        let s = plan_heights(&mut f, 0.0, 2.0, 0.05, 0.3, 0.05, 1000).expect("plans");
+        assert!(s.iter().any(|l| (l.z - 1.05).abs() < 1e-9), "{s:?}");
+    }
+}
