@@ -111,7 +111,7 @@ pub struct RunReport {
 struct ModelStage {
     source: Box<dyn ModelSource>,
     spec: ModelSpec,
-    /// The replacement file given with `--model`, if any.
+    /// What the model is, for messages: the generator or the file.
     label: String,
 }
 
