@@ -50,8 +50,7 @@ struct Adaptive {
     min: f64,
     max: f64,
     cusp: f64,
-    close_gaps: f64,
-    fill_rule: FillRule,
+    options: CutOptions,
     max_layers: usize,
 }
 
@@ -171,14 +170,7 @@ impl Slicer for Adaptive {
     }
 
     fn prepare(&self, mesh: Arc<Mesh>) -> Result<Box<dyn MeshSlicer>> {
-        Ok(Box::new(Prepared(CutMesh::new(
-            mesh,
-            CutOptions {
-                close_gaps: self.close_gaps,
-                fill_rule: self.fill_rule,
-                ..CutOptions::default()
-            },
-        ))))
+        Ok(Box::new(Prepared(CutMesh::new(mesh, self.options))))
     }
 }
 
@@ -196,15 +188,11 @@ fn build(config: &StageConfig<'_>) -> Result<AnyStage> {
     if o.min_thickness > o.max_thickness {
         return Err(config.error("min_thickness", "must not exceed max_thickness"));
     }
-    if !(o.close_gaps.is_finite() && o.close_gaps >= 0.0) {
-        return Err(config.error("close_gaps", "must be a non-negative number of mm"));
-    }
     Ok(AnyStage::Slice(Box::new(Adaptive {
         min: o.min_thickness,
         max: o.max_thickness,
         cusp: o.cusp,
-        close_gaps: o.close_gaps,
-        fill_rule: o.fill_rule,
+        options: CutOptions::from_table(config, o.close_gaps, o.fill_rule)?,
         max_layers: o.max_layers,
     })))
 }

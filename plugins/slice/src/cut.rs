@@ -36,6 +36,24 @@ pub struct CutOptions {
     pub fill_rule: FillRule,
 }
 
+impl CutOptions {
+    /// The options a slicer's table gives, checked; errors point at the key.
+    pub fn from_table(
+        config: &lamina_core::stage::StageConfig<'_>,
+        close_gaps: f64,
+        fill_rule: FillRule,
+    ) -> Result<Self> {
+        if !(close_gaps.is_finite() && close_gaps >= 0.0) {
+            return Err(config.error("close_gaps", "must be a non-negative number of mm"));
+        }
+        Ok(Self {
+            close_gaps,
+            fill_rule,
+            ..Self::default()
+        })
+    }
+}
+
 impl Default for CutOptions {
     fn default() -> Self {
         Self {

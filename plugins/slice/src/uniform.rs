@@ -68,8 +68,7 @@ fn d_max_layers() -> usize {
 pub(crate) struct Uniform {
     thickness: f64,
     cut: f64,
-    close_gaps: f64,
-    fill_rule: crate::cut::FillRule,
+    options: CutOptions,
     max_layers: usize,
 }
 
@@ -114,14 +113,7 @@ impl Slicer for Uniform {
     }
 
     fn prepare(&self, mesh: Arc<Mesh>) -> Result<Box<dyn MeshSlicer>> {
-        Ok(Box::new(Prepared(CutMesh::new(
-            mesh,
-            CutOptions {
-                close_gaps: self.close_gaps,
-                fill_rule: self.fill_rule,
-                ..CutOptions::default()
-            },
-        ))))
+        Ok(Box::new(Prepared(CutMesh::new(mesh, self.options))))
     }
 }
 
@@ -145,14 +137,10 @@ fn build(config: &StageConfig<'_>) -> Result<AnyStage> {
             "must be \"bottom\", \"mid\", \"top\" or a fraction in [0, 1]",
         ));
     }
-    if !(o.close_gaps.is_finite() && o.close_gaps >= 0.0) {
-        return Err(config.error("close_gaps", "must be a non-negative number of mm"));
-    }
     Ok(AnyStage::Slice(Box::new(Uniform {
         thickness: o.thickness,
         cut,
-        close_gaps: o.close_gaps,
-        fill_rule: o.fill_rule,
+        options: CutOptions::from_table(config, o.close_gaps, o.fill_rule)?,
         max_layers: o.max_layers,
     })))
 }
