@@ -728,6 +728,11 @@ impl Selections {
         tree: &crate::model::ContourTree,
         part_mesh: &[usize],
     ) -> Vec<usize> {
+        let selecting_on_mesh = |o: usize| part_mesh[o] == part_mesh[pi] && self.samples[o].is_some();
+        if !(0..self.samples.len()).any(selecting_on_mesh) {
+            // Nobody selects on this mesh: the part has every family.
+            return (0..tree.families.len()).collect();
+        }
         let polygons: Vec<_> = (0..tree.families.len())
             .map(|f| tree.family_polygon(&layer.contours, f))
             .collect();

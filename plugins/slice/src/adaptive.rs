@@ -22,11 +22,11 @@ struct Options {
     max_thickness: f64,
     #[serde(default = "d_cusp")]
     cusp: f64,
-    #[serde(default = "d_close_gaps")]
+    #[serde(default = "crate::cut::default_close_gaps")]
     close_gaps: f64,
     #[serde(default)]
     fill_rule: FillRule,
-    #[serde(default = "d_max_layers")]
+    #[serde(default = "crate::cut::default_max_layers")]
     max_layers: usize,
 }
 
@@ -38,12 +38,6 @@ fn d_max() -> f64 {
 }
 fn d_cusp() -> f64 {
     0.05
-}
-fn d_close_gaps() -> f64 {
-    0.05
-}
-fn d_max_layers() -> usize {
-    1_000_000
 }
 
 struct Adaptive {
@@ -211,24 +205,9 @@ lamina_core::register_stage!(StageFactory {
                 "0.05",
                 "largest stair-step height allowed on sloped surfaces (mm)"
             ),
-            OptionSpec::new(
-                "close_gaps",
-                "float",
-                "0.05",
-                "open chains whose ends are closer than this (mm) are joined"
-            ),
-            OptionSpec::new(
-                "fill_rule",
-                "string",
-                "\"nonzero\"",
-                "how overlapping loops combine: \"nonzero\" or \"evenodd\""
-            ),
-            OptionSpec::new(
-                "max_layers",
-                "integer",
-                "1000000",
-                "refuse to make more layers than this"
-            ),
+            crate::cut::CLOSE_GAPS_OPTION,
+            crate::cut::FILL_RULE_OPTION,
+            crate::cut::MAX_LAYERS_OPTION,
         ],
         example: "use = \"adaptive\"\nmin_thickness = 0.1\nmax_thickness = 0.5\ncusp = 0.1",
     },

@@ -36,6 +36,34 @@ pub struct CutOptions {
     pub fill_rule: FillRule,
 }
 
+/// Options every slicer takes, documented once.
+pub(crate) const CLOSE_GAPS_OPTION: lamina_core::stage::OptionSpec = lamina_core::stage::OptionSpec::new(
+    "close_gaps",
+    "float",
+    "0.05",
+    "open chains whose ends are closer than this (mm) are joined",
+);
+pub(crate) const FILL_RULE_OPTION: lamina_core::stage::OptionSpec = lamina_core::stage::OptionSpec::new(
+    "fill_rule",
+    "string",
+    "\"nonzero\"",
+    "how overlapping loops combine: \"nonzero\" (shells merge) or \"evenodd\" (winding ignored)",
+);
+pub(crate) const MAX_LAYERS_OPTION: lamina_core::stage::OptionSpec = lamina_core::stage::OptionSpec::new(
+    "max_layers",
+    "integer",
+    "1000000",
+    "refuse to make more layers than this",
+);
+
+pub(crate) fn default_close_gaps() -> f64 {
+    CutOptions::default().close_gaps
+}
+
+pub(crate) fn default_max_layers() -> usize {
+    1_000_000
+}
+
 impl CutOptions {
     /// The options a slicer's table gives, checked; errors point at the key.
     pub fn from_table(

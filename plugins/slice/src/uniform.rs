@@ -43,12 +43,12 @@ struct Options {
     thickness: f64,
     #[serde(default = "d_cut")]
     cut: CutAt,
-    #[serde(default = "d_close_gaps")]
+    #[serde(default = "crate::cut::default_close_gaps")]
     close_gaps: f64,
     #[serde(default)]
     fill_rule: crate::cut::FillRule,
     /// Upper bound on the layer count, against a mistyped thickness.
-    #[serde(default = "d_max_layers")]
+    #[serde(default = "crate::cut::default_max_layers")]
     max_layers: usize,
 }
 
@@ -57,12 +57,6 @@ fn d_thickness() -> f64 {
 }
 fn d_cut() -> CutAt {
     CutAt::Named(CutName::Mid)
-}
-fn d_close_gaps() -> f64 {
-    0.05
-}
-fn d_max_layers() -> usize {
-    1_000_000
 }
 
 pub(crate) struct Uniform {
@@ -158,18 +152,9 @@ lamina_core::register_stage!(StageFactory {
                 "\"mid\"",
                 "where a layer is cut: \"bottom\", \"mid\", \"top\" or a fraction of its thickness"
             ),
-            OptionSpec::new(
-                "close_gaps",
-                "float",
-                "0.05",
-                "open chains whose ends are closer than this (mm) are joined"
-            ),
-            OptionSpec::new(
-                "max_layers",
-                "integer",
-                "1000000",
-                "refuse to make more layers than this"
-            ),
+            crate::cut::CLOSE_GAPS_OPTION,
+            crate::cut::FILL_RULE_OPTION,
+            crate::cut::MAX_LAYERS_OPTION,
         ],
         example: "use = \"uniform\"\nthickness = 0.5\ncut = \"mid\"",
     },
