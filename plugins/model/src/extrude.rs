@@ -57,12 +57,36 @@ pub fn extrude(name: &str, profile: &Polygon, z0: f64, z1: f64) -> Result<Mesh> 
     Ok(Mesh::new(name, vertices, triangles))
 }
 
+/// The first defect that keeps `mesh` from being a closed, consistently wound surface,
+/// or `None`: every directed edge must occur exactly once and its reverse exactly once,
+/// so every edge has two triangles that agree on the inside. (A balance of the two
+/// directions alone would accept an edge shared by four triangles.)
+pub fn edge_defect(mesh: &Mesh) -> Option<String> {
+    let mut directed: rustc_hash::FxHashMap<(u32, u32), u32> = rustc_hash::FxHashMap::default();
+    for (i, t) in mesh.triangles.iter().enumerate() {
+        if t[0] == t[1] || t[1] == t[2] || t[0] == t[2] {
+            return Some(format!("triangle {i} repeats a vertex"));
+        }
+        for k in 0..3 {
+            *directed.entry((t[k], t[(k + 1) % 3])).or_default() += 1;
+        }
+    }
+    for (&(a, b), &n) in &directed {
+        if n > 1 {
+            return Some(format!("edge {a}-{b} is used {n} times in the same direction"));
+        }
+        if !directed.contains_key(&(b, a)) {
+            return Some(format!("edge {a}-{b} has no triangle on its other side"));
+        }
+    }
+    None
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
     use crate::profile::{circle, polygon};
     use lamina_core::Point2;
-    use std::collections::HashMap;
 
     #[test]
     fn extruded_tube_is_watertight_with_the_right_volume() {
@@ -71,16 +95,19 @@ mod tests {
             vec![circle(Point2::origin(), 6.0, 64)],
         );
         let m = extrude("tube", &p, 0.0, 5.0).expect("extrudes");
-        let mut edges: HashMap<(u32, u32), i32> = HashMap::new();
-        for t in &m.triangles {
-            for k in 0..3 {
-                let (a, b) = (t[k], t[(k + 1) % 3]);
-                *edges.entry((a.min(b), a.max(b))).or_default() += if a < b { 1 } else { -1 };
-            }
-        }
-        // Each undirected edge used once in each direction: closed and consistently wound.
-        assert!(edges.values().all(|&v| v == 0));
+        assert_eq!(edge_defect(&m), None);
         let expected = p.area() * 5.0;
         assert!((m.signed_volume() - expected).abs() < 1e-6 * expected);
+    }
+
+    #[test]
+    fn edge_defects_are_found() {
+        let p = polygon(circle(Point2::origin(), 1.0, 8), vec![]);
+        let mut m = extrude("rod", &p, 0.0, 1.0).expect("extrudes");
+        let last = m.triangles.len() - 1;
+        m.triangles[last].swap(0, 1);
+        assert!(edge_defect(&m).is_some(), "a flipped triangle");
+        m.triangles.pop();
+        assert!(edge_defect(&m).expect("open").contains("other side"));
     }
 }

@@ -6,6 +6,7 @@ use lamina_core::stage::{AnyStage, ModelSource, OptionSpec, StageConfig, StageIn
 use lamina_core::{Error, Mesh, Point2, Result, StageFactory};
 use serde::Deserialize;
 
+use crate::blade::{Blade, Naca};
 use crate::extrude::extrude;
 use crate::profile::{GearProfile, circle, polygon, rectangle};
 use crate::weld::{Soup, weld};
@@ -432,6 +433,208 @@ lamina_core::register_stage!(StageFactory {
         example: "use = \"tube\"\nouter_radius = 10.0\ninner_radius = 7.0\nheight = 5.0",
     },
     build: build_tube,
+});
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct CubeOptions {
+    #[serde(default = "d_cube")]
+    size: f64,
+}
+
+fn d_cube() -> f64 {
+    20.0
+}
+
+/// A box with equal sides; its own stage so that `size` is one number.
+fn build_cube(config: &StageConfig<'_>) -> Result<AnyStage> {
+    let o: CubeOptions = config.parse()?;
+    positive(config, "size", o.size)?;
+    let r = rectangle(Point2::new(0.0, 0.0), Point2::new(o.size, o.size));
+    let mesh = extrude("cube", &polygon(r, vec![]), 0.0, o.size)?;
+    Ok(AnyStage::Model(Box::new(Generated(vec![mesh]))))
+}
+
+lamina_core::register_stage!(StageFactory {
+    info: StageInfo {
+        kind: StageKind::Model,
+        name: "cube",
+        doc: "Generates a cube with one corner at the origin.",
+        options: &[OptionSpec::new("size", "float", "20.0", "edge length (mm)")],
+        example: "use = \"cube\"\nsize = 5.0",
+    },
+    build: build_cube,
+});
+
+/// A NACA designation as written in TOML: `"2412"`, or `2412` (a code with leading
+/// zeros such as `0012` is no TOML integer and arrives as a string anyway).
+#[derive(Debug, Deserialize)]
+#[serde(untagged)]
+enum NacaCode {
+    Text(String),
+    Number(u32),
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct BladeOptions {
+    naca: Option<NacaCode>,
+    max_camber: Option<f64>,
+    camber_position: Option<f64>,
+    thickness: Option<f64>,
+    #[serde(default = "d_chord")]
+    chord: f64,
+    span: Option<f64>,
+    #[serde(default = "d_twist")]
+    twist: f64,
+    #[serde(default = "d_sections")]
+    sections: usize,
+    #[serde(default = "d_points")]
+    points: usize,
+    root_size: Option<[f64; 2]>,
+    root_height: Option<f64>,
+    #[serde(default)]
+    cavities: usize,
+    wall: Option<f64>,
+    rib: Option<f64>,
+}
+
+fn d_chord() -> f64 {
+    40.0
+}
+fn d_twist() -> f64 {
+    20.0
+}
+fn d_sections() -> usize {
+    21
+}
+fn d_points() -> usize {
+    48
+}
+
+fn build_blade(config: &StageConfig<'_>) -> Result<AnyStage> {
+    let o: BladeOptions = config.parse()?;
+    positive(config, "chord", o.chord)?;
+    let mut blade = Blade::with_chord(o.chord);
+    if let Some(code) = &o.naca {
+        let text = match code {
+            NacaCode::Text(t) => t.clone(),
+            NacaCode::Number(n) => format!("{n:04}"),
+        };
+        blade.profile = Naca::from_code(&text).ok_or_else(|| {
+            config.error(
+                "naca",
+                format!("`{text}` is not a 4-digit NACA code such as \"2412\""),
+            )
+        })?;
+    }
+    let p = &mut blade.profile;
+    p.m = o.max_camber.unwrap_or(p.m);
+    p.p = o.camber_position.unwrap_or(p.p);
+    p.t = o.thickness.unwrap_or(p.t);
+    blade.span = o.span.unwrap_or(blade.span);
+    blade.twist = o.twist;
+    blade.sections = o.sections;
+    blade.points = o.points;
+    blade.root_size = o.root_size.unwrap_or(blade.root_size);
+    blade.root_height = o.root_height.unwrap_or(blade.root_height);
+    blade.cavities = o.cavities;
+    blade.wall = o.wall.unwrap_or(blade.wall);
+    blade.rib = o.rib.unwrap_or(blade.wall);
+    let mesh = blade.mesh().map_err(|e| {
+        // The profile's checks name the parameters; a code sets all three.
+        let option = match e.option {
+            "max_camber" | "camber_position" | "thickness"
+                if o.naca.is_some() && config.table.get(e.option).is_none() =>
+            {
+                "naca"
+            }
+            other => other,
+        };
+        config.error(option, e.message)
+    })?;
+    Ok(AnyStage::Model(Box::new(Generated(vec![mesh]))))
+}
+
+lamina_core::register_stage!(StageFactory {
+    info: StageInfo {
+        kind: StageKind::Model,
+        name: "blade",
+        doc: "Generates a turbine-blade-like model: a NACA 4-digit airfoil twisted linearly along its span on a rectangular root block, with 0, 1 or 2 cooling cavities that run from the bed through the root and the airfoil and open at the tip (every layer is one area with `cavities` holes).",
+        options: &[
+            OptionSpec::new(
+                "naca",
+                "string",
+                "\"2412\"",
+                "4-digit NACA section: camber %, its position in tenths, thickness %"
+            ),
+            OptionSpec::new(
+                "max_camber",
+                "float",
+                "from naca",
+                "maximum camber (fraction of the chord); overrides naca's first digit"
+            ),
+            OptionSpec::new(
+                "camber_position",
+                "float",
+                "from naca",
+                "chordwise position of the maximum camber (fraction); overrides naca's second digit"
+            ),
+            OptionSpec::new(
+                "thickness",
+                "float",
+                "from naca",
+                "maximum thickness (fraction of the chord); overrides naca's last two digits"
+            ),
+            OptionSpec::new("chord", "float", "40.0", "chord length (mm)"),
+            OptionSpec::new(
+                "span",
+                "float",
+                "1.5 * chord",
+                "height of the airfoil above the root (mm)"
+            ),
+            OptionSpec::new(
+                "twist",
+                "float",
+                "20.0",
+                "rotation of the tip against the base (degrees, about the quarter-chord line), linear along the span"
+            ),
+            OptionSpec::new(
+                "sections",
+                "integer",
+                "21",
+                "airfoil sections along the span, both ends included"
+            ),
+            OptionSpec::new(
+                "points",
+                "integer",
+                "48",
+                "vertices per airfoil surface, cosine spaced"
+            ),
+            OptionSpec::new(
+                "root_size",
+                "array of float",
+                "[1.25 * chord, 0.5 * chord]",
+                "root block size along x and y (mm), centred under the airfoil"
+            ),
+            OptionSpec::new(
+                "root_height",
+                "float",
+                "0.25 * chord",
+                "root block height (mm); 0 for a bare airfoil"
+            ),
+            OptionSpec::new("cavities", "integer", "0", "cooling cavities: 0, 1 or 2"),
+            OptionSpec::new(
+                "wall",
+                "float",
+                "0.03 * chord",
+                "skin thickness around the cavities (mm)"
+            ),
+            OptionSpec::new("rib", "float", "wall", "rib thickness between two cavities (mm)"),
+        ],
+        example: "use = \"blade\"\ncavities = 2\nchord = 20.0\nspan = 10.0\nsections = 6",
+    },
+    build: build_blade,
 });
 
 #[derive(Debug, Deserialize)]
