@@ -15,6 +15,7 @@ use lamina_core::{Registry, StageKind};
 
 // Built-in stages register themselves with `inventory`; referencing each crate keeps
 // the linker from dropping those registrations.
+use lamina_discretise as _;
 use lamina_export as _;
 use lamina_grade as _;
 use lamina_model as _;

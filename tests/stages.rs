@@ -8,6 +8,7 @@ use lamina_core::runtime::{Engine, RunOptions, Silent};
 use lamina_core::{Registry, SourceFile, StageKind};
 
 fn registry() -> Registry {
+    use lamina_discretise as _;
     use lamina_export as _;
     use lamina_grade as _;
     use lamina_model as _;

@@ -1,0 +1,85 @@
+//! Nested bands: a shape cut into the rings between successive inner sets. Band k is
+//! `S_k - S_{k+1}` where `S_0` is the shape and `S_{k+1}` is the k+1-th inner set
+//! intersected with `S_k`, both read from one overlay graph. The bands are therefore
+//! disjoint and their union is the shape, whatever the inner sets are (offsets that
+//! poke out by a grid unit, iso-contours that cross the boundary).
+
+use i_overlay::core::extract::BooleanExtractionBuffer;
+use i_overlay::core::fill_rule::FillRule;
+use i_overlay::core::overlay::{IntOverlayOptions, Overlay};
+use i_overlay::core::overlay_rule::OverlayRule;
+use i_overlay::core::solver::Solver;
+use i_overlay::i_shape::int::shape::IntShapes;
+use lamina_core::Result;
+
+/// Pieces smaller than this many square grid units (about 4 um by 4 um at the finest
+/// scale) are rounding slivers, not sub-regions.
+const MIN_AREA: u64 = 64;
+
+/// OGC-valid output (holes touch their outer at most at single points, every ring
+/// simple), slivers dropped.
+pub fn options() -> IntOverlayOptions<u64> {
+    IntOverlayOptions {
+        ogc: true,
+        min_output_area: MIN_AREA,
+        ..IntOverlayOptions::default()
+    }
+}
+
+/// The runtime runs layers in parallel already: the overlay stays on the caller's thread.
+pub fn solver() -> Solver {
+    Solver {
+        multithreading: None,
+        ..Solver::default()
+    }
+}
+
+/// Resolves arbitrary contours (self-touching, slightly crossing, any orientation)
+/// into valid shapes under the non-zero rule.
+pub fn clean(shapes: &IntShapes<i32>) -> IntShapes<i32> {
+    let mut overlay = Overlay::from_subj_custom(shapes, options(), solver());
+    overlay.overlay(OverlayRule::Subject, FillRule::NonZero)
+}
+
+/// Cuts `base` (valid shapes) into at most `count` nested bands. `inner(k)` returns the
+/// raw k-th inner set for `k` in `1..count`; it is not called once the sets vanish.
+/// Returns the bands in order, outermost first, without the trailing empty ones.
+pub fn nested_bands(
+    base: &IntShapes<i32>,
+    count: usize,
+    mut inner: impl FnMut(usize) -> Result<IntShapes<i32>>,
+) -> Result<Vec<IntShapes<i32>>> {
+    let mut bands = Vec::with_capacity(count);
+    let mut current = base.clone();
+    let mut buffer = BooleanExtractionBuffer::default();
+    for k in 1..count {
+        if current.is_empty() {
+            break;
+        }
+        let raw = inner(k)?;
+        if raw.is_empty() {
+            bands.push(std::mem::take(&mut current));
+            break;
+        }
+        let mut overlay = Overlay::from_subj_and_clip_custom(&current, &raw, options(), solver());
+        match overlay.build_graph_view(FillRule::NonZero) {
+            Some(graph) => {
+                let ring = graph.extract_shapes(OverlayRule::Difference, &mut buffer);
+                let rest = graph.extract_shapes(OverlayRule::Intersect, &mut buffer);
+                bands.push(ring);
+                current = rest;
+            }
+            None => {
+                bands.push(std::mem::take(&mut current));
+                break;
+            }
+        }
+    }
+    if !current.is_empty() {
+        bands.push(current);
+    }
+    while bands.last().is_some_and(|b| b.is_empty()) {
+        bands.pop();
+    }
+    Ok(bands)
+}

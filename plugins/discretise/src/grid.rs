@@ -1,0 +1,134 @@
+//! The integer grid every boolean and offset of one family runs on: one origin and one
+//! power-of-two scale per family, so that offsets, differences and intersections of the
+//! same family share their vertices exactly and the sub-regions tile by construction.
+
+use i_overlay::i_float::int::point::IntPoint;
+use i_overlay::i_shape::int::shape::{IntContour, IntShape, IntShapes};
+use lamina_core::{Contour, Error, Point2, Polygon, Result};
+
+/// Largest coordinate magnitude put on the grid: far inside the i32 engine's safe range
+/// (2^30), leaving room for offset construction and for areas in i64.
+const HALF_RANGE: f64 = (1u64 << 26) as f64;
+
+/// Maps the family's plane to i32 grid points: `(p - origin) * scale`, rounded.
+#[derive(Debug, Clone, Copy)]
+pub struct Grid {
+    origin: Point2,
+    scale: f64,
+}
+
+impl Grid {
+    /// The grid for a polygon: origin at its bounding-box centre, the largest
+    /// power-of-two scale that keeps the polygon (and offsets inside it) in range.
+    /// Refuses non-finite or zero-extent geometry.
+    pub fn for_polygon(polygon: &Polygon, stage: &str) -> Result<Self> {
+        let bbox = polygon.bbox();
+        let finite = polygon
+            .contours()
+            .flat_map(|c| c.points.iter())
+            .all(|p| p.x.is_finite() && p.y.is_finite());
+        if !finite || bbox.is_empty() {
+            return Err(Error::stage(stage, "family has non-finite or no coordinates"));
+        }
+        let half = 0.5 * bbox.width().max(bbox.height());
+        if half <= 0.0 {
+            return Err(Error::stage(stage, "family has zero extent"));
+        }
+        let scale = 2f64.powi((HALF_RANGE / half).log2().floor() as i32);
+        Ok(Self {
+            origin: bbox.center(),
+            scale,
+        })
+    }
+
+    pub fn point(&self, p: Point2) -> IntPoint<i32> {
+        IntPoint::new(
+            ((p.x - self.origin.x) * self.scale).round() as i32,
+            ((p.y - self.origin.y) * self.scale).round() as i32,
+        )
+    }
+
+    pub fn unpoint(&self, p: IntPoint<i32>) -> Point2 {
+        Point2::new(
+            f64::from(p.x) / self.scale + self.origin.x,
+            f64::from(p.y) / self.scale + self.origin.y,
+        )
+    }
+
+    /// A distance in mm as grid units (at least 1 when positive).
+    pub fn length(&self, mm: f64) -> i32 {
+        let units = (mm * self.scale).round();
+        if mm > 0.0 {
+            units.max(1.0) as i32
+        } else {
+            units as i32
+        }
+    }
+
+    pub fn contour(&self, c: &Contour) -> IntContour<i32> {
+        let mut out: IntContour<i32> = Vec::with_capacity(c.len());
+        for &p in &c.points {
+            let q = self.point(p);
+            if out.last() != Some(&q) {
+                out.push(q);
+            }
+        }
+        while out.len() > 1 && out.first() == out.last() {
+            out.pop();
+        }
+        out
+    }
+
+    pub fn shape(&self, polygon: &Polygon) -> IntShape<i32> {
+        polygon.contours().map(|c| self.contour(c)).collect()
+    }
+
+    pub fn uncontour(&self, c: &[IntPoint<i32>]) -> Contour {
+        Contour::new(c.iter().map(|&p| self.unpoint(p)).collect())
+    }
+
+    /// Overlay shapes (outer counter-clockwise first, holes clockwise) as polygons.
+    pub fn polygons(&self, shapes: &IntShapes<i32>) -> Vec<Polygon> {
+        shapes
+            .iter()
+            .filter(|s| !s.is_empty())
+            .map(|s| {
+                Polygon::new(
+                    self.uncontour(&s[0]),
+                    s[1..].iter().map(|h| self.uncontour(h)).collect(),
+                )
+            })
+            .collect()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn round_trip_is_within_half_a_unit() {
+        let poly = Polygon::new(
+            Contour::new(vec![
+                Point2::new(100.0, 100.0),
+                Point2::new(160.0, 100.0),
+                Point2::new(160.0, 131.0),
+            ]),
+            vec![],
+        );
+        let g = Grid::for_polygon(&poly, "t").expect("grid");
+        for &p in &poly.outer.points {
+            let q = g.unpoint(g.point(p));
+            assert!((q - p).norm() <= 1.0 / g.scale);
+        }
+        assert!(g.scale * 30.0 <= HALF_RANGE && g.scale * 60.0 > HALF_RANGE);
+    }
+
+    #[test]
+    fn degenerate_input_is_an_error() {
+        let poly = Polygon::new(Contour::new(vec![Point2::new(1.0, 1.0); 3]), vec![]);
+        assert!(Grid::for_polygon(&poly, "t").is_err());
+        let nan = Polygon::new(Contour::new(vec![Point2::new(f64::NAN, 1.0); 3]), vec![]);
+        assert!(Grid::for_polygon(&nan, "t").is_err());
+    }
+}

@@ -1,0 +1,19 @@
+//! Discretisers for Lamina: they divide one contour family into sub-regions of constant
+//! material that tile it exactly, each with a level r in [0, 1] from the grading
+//! reference.
+//!
+//! - `offset`: rings between equally spaced inward offsets (Method 1 of the
+//!   topological-hierarchy paper, N_R = int(L_s / D_N)).
+//!
+//! All geometry of a family runs on one integer grid ([`grid`]); each region is the
+//! boolean difference of two nested sets read from one overlay graph ([`bands`]), so
+//! regions never overlap and add up to the family.
+
+mod bands;
+pub mod check;
+mod grid;
+mod inset;
+pub mod measure;
+mod offset;
+mod regions;
+pub mod shapes;

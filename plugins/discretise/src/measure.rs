@@ -1,0 +1,189 @@
+//! Measures of a family that decide how it is divided: the minimum distance between its
+//! contours (L_s of Eq. 14), its inradius (how deep an inward offset can go), and a
+//! point well inside a polygon for a region's reference.
+
+use std::cmp::Ordering;
+use std::collections::BinaryHeap;
+
+use lamina_core::geom::segment_distance;
+use lamina_core::{Contour, Point2, Polygon};
+
+/// Shortest distance between two contours that do not cross: attained at a vertex of
+/// one of them, so vertex-to-segment distances both ways are exact.
+pub fn contour_distance(a: &Contour, b: &Contour) -> f64 {
+    let one_way = |a: &Contour, b: &Contour| {
+        a.points
+            .iter()
+            .map(|&p| b.distance(p))
+            .fold(f64::INFINITY, f64::min)
+    };
+    one_way(a, b).min(one_way(b, a))
+}
+
+/// L_s: the minimum distance between any two contours of the family; `None` for a
+/// family without holes.
+pub fn min_contour_distance(polygon: &Polygon) -> Option<f64> {
+    let contours: Vec<&Contour> = polygon.contours().collect();
+    let boxes: Vec<_> = contours.iter().map(|c| c.bbox()).collect();
+    let mut best = f64::INFINITY;
+    for i in 0..contours.len() {
+        for j in i + 1..contours.len() {
+            // Boxes farther apart than the best distance so far cannot improve it.
+            let (a, b) = (&boxes[i], &boxes[j]);
+            let dx = (a.min.x - b.max.x).max(b.min.x - a.max.x).max(0.0);
+            let dy = (a.min.y - b.max.y).max(b.min.y - a.max.y).max(0.0);
+            if dx.hypot(dy) >= best {
+                continue;
+            }
+            best = best.min(contour_distance(contours[i], contours[j]));
+        }
+    }
+    (contours.len() > 1 && best.is_finite()).then_some(best)
+}
+
+/// A square cell of the pole search: centre, half size, distance of the centre to the
+/// boundary (negative outside) and the best distance any point of the cell can reach.
+struct Cell {
+    c: Point2,
+    h: f64,
+    d: f64,
+    max: f64,
+}
+
+impl Cell {
+    fn new(polygon: &Polygon, c: Point2, h: f64) -> Self {
+        let d = polygon.boundary_distance(c);
+        let d = if polygon.contains(c) { d } else { -d };
+        Self {
+            c,
+            h,
+            d,
+            max: d + h * std::f64::consts::SQRT_2,
+        }
+    }
+}
+
+impl PartialEq for Cell {
+    fn eq(&self, other: &Self) -> bool {
+        self.max == other.max
+    }
+}
+impl Eq for Cell {}
+impl PartialOrd for Cell {
+    fn partial_cmp(&self, other: &Self) -> Option<Ordering> {
+        Some(self.cmp(other))
+    }
+}
+impl Ord for Cell {
+    fn cmp(&self, other: &Self) -> Ordering {
+        self.max.total_cmp(&other.max)
+    }
+}
+
+/// The pole of inaccessibility (the interior point farthest from the boundary) within
+/// `precision`, and its distance to the boundary: the radius of the largest inscribed
+/// circle. Branch and bound over square cells; `None` for a polygon with no inside.
+pub fn pole(polygon: &Polygon, precision: f64) -> Option<(Point2, f64)> {
+    let bbox = polygon.bbox();
+    let size = bbox.width().min(bbox.height());
+    if size.is_nan() || size <= 0.0 {
+        return None;
+    }
+    let precision = precision.max(size * 1e-6);
+    let h = size / 2.0;
+    let mut heap = BinaryHeap::new();
+    let mut y = bbox.min.y;
+    while y < bbox.max.y {
+        let mut x = bbox.min.x;
+        while x < bbox.max.x {
+            heap.push(Cell::new(polygon, Point2::new(x + h, y + h), h));
+            x += size;
+        }
+        y += size;
+    }
+    let start = interior_point(polygon)?;
+    let mut best = Cell::new(polygon, start, 0.0);
+    // A bound on the work for pathological inputs: the answer stays a valid interior
+    // point, only less central.
+    let mut budget = 20_000;
+    while let Some(cell) = heap.pop() {
+        if cell.d > best.d {
+            best = Cell::new(polygon, cell.c, 0.0);
+        }
+        if cell.max - best.d <= precision || budget == 0 {
+            continue;
+        }
+        budget -= 1;
+        let h = cell.h / 2.0;
+        for (sx, sy) in [(-1.0, -1.0), (1.0, -1.0), (-1.0, 1.0), (1.0, 1.0)] {
+            heap.push(Cell::new(
+                polygon,
+                Point2::new(cell.c.x + sx * h, cell.c.y + sy * h),
+                h,
+            ));
+        }
+    }
+    (best.d > 0.0).then_some((best.c, best.d))
+}
+
+/// A point inside the polygon, central across its width: the midpoint of the widest
+/// inside interval of a few horizontal scan lines. Cheap (no distance queries); `None`
+/// when no scan line finds an inside.
+pub fn interior_point(polygon: &Polygon) -> Option<Point2> {
+    let bbox = polygon.bbox();
+    let mut best: Option<(f64, Point2)> = None;
+    let mut xs = Vec::new();
+    // Odd fractions avoid scanning exactly through vertices of axis-aligned shapes.
+    for f in [0.5013, 0.2507, 0.7493, 0.1249, 0.3751, 0.6249, 0.8751] {
+        let y = bbox.min.y + f * bbox.height();
+        xs.clear();
+        for c in polygon.contours() {
+            for (a, b) in c.edges() {
+                if (a.y <= y) != (b.y <= y) {
+                    xs.push(a.x + (y - a.y) / (b.y - a.y) * (b.x - a.x));
+                }
+            }
+        }
+        xs.sort_unstable_by(f64::total_cmp);
+        for pair in xs.chunks_exact(2) {
+            let width = pair[1] - pair[0];
+            if width > best.map_or(0.0, |b| b.0) {
+                best = Some((width, Point2::new(0.5 * (pair[0] + pair[1]), y)));
+            }
+        }
+        if best.is_some() && f < 0.5 {
+            // One line through the middle and one more are enough for a reference.
+            break;
+        }
+    }
+    best.map(|b| b.1)
+}
+
+/// Distance from `p` to the nearest of `contours`.
+pub fn distance_to(contours: &[&Contour], p: Point2) -> f64 {
+    contours
+        .iter()
+        .flat_map(|c| c.edges())
+        .map(|(a, b)| segment_distance(p, a, b))
+        .fold(f64::INFINITY, f64::min)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::shapes::{circle, rect};
+
+    #[test]
+    fn tube_distance_and_pole() {
+        let tube = Polygon::new(
+            circle(0.0, 0.0, 10.0, 256),
+            vec![circle(0.0, 0.0, 5.0, 256).oriented(false)],
+        );
+        let ls = min_contour_distance(&tube).expect("has holes");
+        assert!((ls - 5.0).abs() < 0.01, "{ls}");
+        let (_, r) = pole(&Polygon::new(rect(0.0, 0.0, 10.0, 4.0), vec![]), 1e-3).expect("pole");
+        assert!((r - 2.0).abs() < 2e-3, "{r}");
+        let p = interior_point(&tube).expect("inside");
+        assert!(tube.contains(p));
+    }
+}

@@ -1,0 +1,188 @@
+//! `offset` (Method 1, Eq. 14-16): inward offsets of the whole family at equal spacing;
+//! sub-region j is the ring between the j-th and (j+1)-th offsets, the last one the
+//! remaining core. N_R = int(reach / nozzle) unless `count` or `spacing` is given.
+
+use lamina_core::stage::{
+    AnyStage, Discretiser, FamilyContext, OptionSpec, StageConfig, StageInfo, StageKind,
+};
+use lamina_core::{Polygon, Region, Result, StageFactory};
+use serde::Deserialize;
+
+use crate::bands::{clean, nested_bands};
+use crate::grid::Grid;
+use crate::inset::{From, Inset, Join};
+use crate::measure::{min_contour_distance, pole};
+use crate::regions::{from_bands, uniform_level, whole};
+
+const STAGE: &str = "discretise:offset";
+
+/// More rings than any nozzle could deposit in a layer: a guard against typos.
+pub const MAX_COUNT: usize = 10_000;
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct Options {
+    #[serde(default = "default_nozzle")]
+    nozzle: f64,
+    #[serde(default)]
+    count: Option<usize>,
+    #[serde(default)]
+    spacing: Option<f64>,
+    #[serde(default)]
+    from: From,
+    #[serde(default)]
+    join: Join,
+    #[serde(default = "default_tolerance")]
+    tolerance: f64,
+}
+
+fn default_nozzle() -> f64 {
+    0.4
+}
+
+pub fn default_tolerance() -> f64 {
+    0.005
+}
+
+/// The offset discretiser with its checked options.
+#[derive(Debug, Clone, Copy)]
+pub struct Offset {
+    pub nozzle: f64,
+    pub count: Option<usize>,
+    pub spacing: Option<f64>,
+    pub inset: Inset,
+}
+
+/// How deep the offsets can go before they meet: L_s from the outer contour to the
+/// nearest hole, half of it when the holes move out too, the inradius without holes.
+pub fn reach(polygon: &Polygon, from: From, precision: f64) -> Option<f64> {
+    match (min_contour_distance(polygon), from) {
+        (Some(ls), From::Outer) => Some(ls),
+        (Some(ls), From::All) => Some(ls / 2.0),
+        (None, _) => pole(polygon, precision).map(|(_, r)| r),
+    }
+}
+
+impl Offset {
+    /// N_R and the spacing (mm) for a family.
+    pub fn plan(&self, polygon: &Polygon) -> Option<(usize, f64)> {
+        match (self.count, self.spacing) {
+            (Some(n), Some(s)) => Some((n, s)),
+            (Some(n), None) => reach(polygon, self.inset.from, self.nozzle * 0.05).map(|r| (n, r / n as f64)),
+            (None, Some(s)) => {
+                reach(polygon, self.inset.from, s * 0.05).map(|r| (((r / s) as usize).clamp(1, MAX_COUNT), s))
+            }
+            (None, None) => reach(polygon, self.inset.from, self.nozzle * 0.05).map(|r| {
+                let n = ((r / self.nozzle) as usize).clamp(1, MAX_COUNT);
+                (n, r / n as f64)
+            }),
+        }
+    }
+}
+
+impl Discretiser for Offset {
+    fn discretise(&self, ctx: &FamilyContext<'_>) -> Result<Vec<Region>> {
+        let polygon = ctx.tree.family_polygon(&ctx.layer.contours, ctx.family);
+        let Ok(grid) = Grid::for_polygon(&polygon, STAGE) else {
+            return Ok(whole(ctx, polygon));
+        };
+        let base = clean(&vec![grid.shape(&polygon)]);
+        if base.is_empty() {
+            return Ok(whole(ctx, polygon));
+        }
+        let Some((count, spacing)) = self.plan(&polygon) else {
+            return Ok(whole(ctx, polygon));
+        };
+        if spacing.is_nan() || spacing <= 0.0 || spacing.is_infinite() {
+            return Ok(whole(ctx, polygon));
+        }
+        let bands = nested_bands(&base, count, |k| {
+            self.inset.apply(&grid, &base, k as f64 * spacing, STAGE)
+        })?;
+        Ok(from_bands(ctx, &grid, &bands, count, |j| uniform_level(j, count)))
+    }
+}
+
+fn build(config: &StageConfig<'_>) -> Result<AnyStage> {
+    let o: Options = config.parse()?;
+    Ok(AnyStage::Discretise(Box::new(checked(&o, config)?)))
+}
+
+fn positive(config: &StageConfig<'_>, key: &str, v: f64) -> Result<f64> {
+    if v > 0.0 && v.is_finite() {
+        Ok(v)
+    } else {
+        Err(config.error(key, format!("`{key}` must be a positive number of mm, not {v}")))
+    }
+}
+
+fn checked(o: &Options, config: &StageConfig<'_>) -> Result<Offset> {
+    positive(config, "nozzle", o.nozzle)?;
+    positive(config, "tolerance", o.tolerance)?;
+    if let Some(s) = o.spacing {
+        positive(config, "spacing", s)?;
+    }
+    if let Some(n) = o.count
+        && !(1..=MAX_COUNT).contains(&n)
+    {
+        return Err(config.error("count", format!("`count` must be in 1..={MAX_COUNT}, not {n}")));
+    }
+    Ok(Offset {
+        nozzle: o.nozzle,
+        count: o.count,
+        spacing: o.spacing,
+        inset: Inset {
+            from: o.from,
+            join: o.join,
+            tolerance: o.tolerance,
+        },
+    })
+}
+
+lamina_core::register_stage!(StageFactory {
+    info: StageInfo {
+        kind: StageKind::Discretise,
+        name: "offset",
+        doc: "Method 1: rings between equally spaced inward offsets of the family (outer and holes), N_R = int(reach / nozzle).",
+        options: &[
+            OptionSpec::new(
+                "nozzle",
+                "float",
+                "0.4",
+                "nozzle diameter D_N (mm) for N_R = int(L_s / D_N)"
+            ),
+            OptionSpec::new(
+                "count",
+                "integer",
+                "none",
+                "number of sub-regions N_R instead of the nozzle rule"
+            ),
+            OptionSpec::new(
+                "spacing",
+                "float",
+                "none",
+                "distance between offsets (mm); default reach / N_R so the rings meet at the thinnest wall"
+            ),
+            OptionSpec::new(
+                "from",
+                "string",
+                "\"all\"",
+                "grading reference: `all` (outer and holes move in together, reach L_s / 2) or `outer` (toward the holes, reach L_s)"
+            ),
+            OptionSpec::new(
+                "join",
+                "string",
+                "\"round\"",
+                "offset corners: `round` (exact distance), `miter` or `bevel`"
+            ),
+            OptionSpec::new(
+                "tolerance",
+                "float",
+                "0.005",
+                "largest arc-to-chord distance of round corners (mm)"
+            ),
+        ],
+        example: "use = \"offset\"\nnozzle = 0.2",
+    },
+    build,
+});

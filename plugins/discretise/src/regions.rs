@@ -1,0 +1,60 @@
+//! Turning bands of a family into `Region`s: one region per polygon of a band (a band
+//! that splits into islands gives several regions of the same index and level), each
+//! with a reference point inside it.
+
+use i_overlay::i_shape::int::shape::IntShapes;
+use lamina_core::{FamilyContext, Polygon, Region};
+
+use crate::grid::Grid;
+use crate::measure::interior_point;
+
+/// Regions from bands (outermost first) with the given levels (one per band).
+pub fn from_bands(
+    ctx: &FamilyContext<'_>,
+    grid: &Grid,
+    bands: &[IntShapes<i32>],
+    count: usize,
+    level: impl Fn(usize) -> f64,
+) -> Vec<Region> {
+    let mut regions = Vec::new();
+    for (index, band) in bands.iter().enumerate() {
+        for polygon in grid.polygons(band) {
+            if polygon.outer.len() < 3 {
+                continue;
+            }
+            regions.push(region(ctx.family, index, count, level(index), polygon));
+        }
+    }
+    regions
+}
+
+/// One region with its reference point (a central point of its widest scan interval,
+/// the bounding-box centre if no scan line finds an inside).
+pub fn region(family: usize, index: usize, count: usize, level: f64, polygon: Polygon) -> Region {
+    let reference = interior_point(&polygon).unwrap_or_else(|| polygon.bbox().center());
+    Region {
+        family,
+        index,
+        count,
+        level,
+        polygon,
+        cell: None,
+        reference,
+        composition: None,
+    }
+}
+
+/// Level r_j = j / (N_R - 1) of Eq. 21; 0 for a single region.
+pub fn uniform_level(j: usize, count: usize) -> f64 {
+    if count <= 1 {
+        0.0
+    } else {
+        (j as f64 / (count - 1) as f64).min(1.0)
+    }
+}
+
+/// The family as one region: the fallback for a family the grid or the overlay cannot
+/// represent (no area at the grid's resolution).
+pub fn whole(ctx: &FamilyContext<'_>, polygon: Polygon) -> Vec<Region> {
+    vec![region(ctx.family, 0, 1, 0.0, polygon)]
+}

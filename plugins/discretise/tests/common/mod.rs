@@ -1,0 +1,130 @@
+//! Shared by the discretiser tests: families built from generated contours, stages built
+//! from TOML snippets through the registry, and the tiling assertion.
+
+#![allow(dead_code)]
+
+use lamina_core::stage::{Discretiser, FamilyContext};
+use lamina_core::{
+    AnyStage, Contour, ContourNode, ContourTree, Family, Layer, Polygon, Region, Registry, RunInfo, StageKind,
+};
+use lamina_discretise::check::tiling;
+
+pub use lamina_discretise::shapes::{circle, rect};
+
+pub fn stage(text: &str) -> Box<dyn Discretiser> {
+    let table = lamina_core::pipeline::TableRef::parse_snippet("discretise", text).expect("snippet");
+    let scripts = lamina_core::script::ScriptHost::new(".", Default::default());
+    match Registry::linked()
+        .expect("registry")
+        .build(StageKind::Discretise, &table, &scripts, std::path::Path::new("."))
+        .unwrap_or_else(|e| panic!("{text}: {e}"))
+    {
+        AnyStage::Discretise(d) => d,
+        _ => panic!("not a discretiser"),
+    }
+}
+
+pub fn build_error(text: &str) -> String {
+    let table = lamina_core::pipeline::TableRef::parse_snippet("discretise", text).expect("snippet");
+    let scripts = lamina_core::script::ScriptHost::new(".", Default::default());
+    match Registry::linked().expect("registry").build(
+        StageKind::Discretise,
+        &table,
+        &scripts,
+        std::path::Path::new("."),
+    ) {
+        Ok(_) => panic!("{text}: should be refused"),
+        Err(e) => e.to_string(),
+    }
+}
+
+/// One layer holding one family: `outer` and its holes.
+pub struct OneFamily {
+    pub info: RunInfo,
+    pub layer: Layer,
+    pub tree: ContourTree,
+}
+
+impl OneFamily {
+    pub fn new(outer: Contour, holes: Vec<Contour>) -> Self {
+        let n = holes.len();
+        let mut contours = vec![outer.oriented(true)];
+        contours.extend(holes.into_iter().map(|h| h.oriented(false)));
+        let mut nodes = vec![ContourNode {
+            contour: 0,
+            level: 0,
+            parent: None,
+            children: (1..=n).collect(),
+        }];
+        nodes.extend((1..=n).map(|i| ContourNode {
+            contour: i,
+            level: 1,
+            parent: Some(0),
+            children: vec![],
+        }));
+        Self {
+            info: RunInfo {
+                base_dir: ".".into(),
+                materials: vec![],
+                parts: vec![],
+                z_min: 0.0,
+                z_max: 1.0,
+            },
+            layer: Layer {
+                index: 0,
+                z: 0.2,
+                thickness: 0.2,
+                contours,
+                warnings: vec![],
+            },
+            tree: ContourTree {
+                nodes,
+                families: vec![Family {
+                    outer: 0,
+                    holes: (1..=n).collect(),
+                }],
+            },
+        }
+    }
+
+    pub fn polygon(&self) -> Polygon {
+        self.tree.family_polygon(&self.layer.contours, 0)
+    }
+
+    pub fn run(&self, d: &dyn Discretiser) -> Vec<Region> {
+        let ctx = FamilyContext {
+            info: &self.info,
+            layer: &self.layer,
+            tree: &self.tree,
+            part: 0,
+            family: 0,
+        };
+        d.discretise(&ctx).expect("discretises")
+    }
+}
+
+/// Asserts the regions tile the family (1e-3 of its area, no overlap, valid polygons)
+/// and that every reference point lies inside its region.
+pub fn assert_tiles(family: &Polygon, regions: &[Region]) {
+    assert!(!regions.is_empty());
+    let t = tiling(family, regions);
+    assert!(t.is_ok(1e-3), "{t:?}");
+    assert!(t.overlap < 1e-6, "{t:?}");
+    for r in regions {
+        assert!(
+            r.polygon.contains(r.reference),
+            "reference outside region {}",
+            r.index
+        );
+        assert!((0.0..=1.0).contains(&r.level));
+        assert!(r.index < r.count);
+        assert!(r.composition.is_none());
+    }
+}
+
+/// Distinct indices, in order.
+pub fn indices(regions: &[Region]) -> Vec<usize> {
+    let mut v: Vec<usize> = regions.iter().map(|r| r.index).collect();
+    v.dedup();
+    v
+}
