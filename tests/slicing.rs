@@ -35,12 +35,7 @@ fn cut(mesh: &Mesh, z: f64) -> (lamina_core::Layer, lamina_core::ContourTree) {
     };
     let prepared: Box<dyn MeshSlicer> = s.prepare(Arc::new(mesh.clone())).expect("prepare");
     let layer = prepared
-        .slice(&LayerSlot {
-            index: 0,
-            z,
-            thickness: 0.2,
-            cut_z: z,
-        })
+        .slice(&LayerSlot::new(0, z, 0.2, z))
         .expect("slice");
     let sorter: &dyn Sorter = sorter.as_ref();
     let tree = sorter.sort(&layer).expect("sort");

@@ -18,6 +18,23 @@ pub struct LayerSlot {
     pub thickness: f64,
     /// Height at which the mesh is cut for this layer (mm).
     pub cut_z: f64,
+    /// The material region of the fabrication sequence this layer deposits, when the
+    /// layers follow work cycles: only that region's parts are cut. `None`: every part.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub region: Option<usize>,
+}
+
+impl LayerSlot {
+    /// A layer of every part: top at `z`, spanning `z - thickness .. z`, cut at `cut_z`.
+    pub fn new(index: usize, z: f64, thickness: f64, cut_z: f64) -> Self {
+        Self {
+            index,
+            z,
+            thickness,
+            cut_z,
+            region: None,
+        }
+    }
 }
 
 /// One cut of one mesh: closed contours, outer counter-clockwise, holes clockwise.
@@ -211,6 +228,21 @@ pub struct PartInfo {
     pub z_max: f64,
 }
 
+/// A region of the object that wants its own layer thickness (a periodic
+/// microstructure, an FGM, a composite): one or more parts deposited together.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct MaterialRegion {
+    pub name: String,
+    /// The parts (indices into the run's parts) this region deposits.
+    pub parts: Vec<usize>,
+    /// Layer thickness in integer micrometres: work cycles are least common multiples,
+    /// which only exact arithmetic gets right.
+    pub thickness_um: u64,
+    /// Height range of the region (mm, rounded to whole micrometres).
+    pub z_start: f64,
+    pub z_end: f64,
+}
+
 /// A slab of the object between two cutting planes, holding whole material regions.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Block {
@@ -218,17 +250,12 @@ pub struct Block {
     pub z_end: f64,
     /// Material regions present in the block (indices into the sequence's regions).
     pub regions: Vec<usize>,
+    /// The repeating unit of the block's deposition.
     pub cycle: WorkCycle,
-}
-
-/// A region of the object that wants its own layer thickness.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct MaterialRegion {
-    pub name: String,
-    /// Layer thickness in integer micrometres (exact arithmetic).
-    pub thickness_um: u64,
-    pub z_start: f64,
-    pub z_end: f64,
+    /// Every deposition step of the block in build order, heights measured from
+    /// `z_start`: the cycle repeated up to the block's top, where each region's last
+    /// layer is trimmed so that it ends exactly there.
+    pub steps: Vec<CycleStep>,
 }
 
 /// The repeating unit of deposition in a block: its height is the least common multiple
@@ -236,23 +263,64 @@ pub struct MaterialRegion {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct WorkCycle {
     pub height_um: u64,
+    /// One step per height at which something is deposited (the worktable moves down
+    /// between steps).
     pub steps: Vec<CycleStep>,
 }
 
-/// One deposition step: at `height_um` above the cycle's base, deposit one layer of
-/// `region` (thickness `thickness_um`).
+/// One step of a work cycle: at `height_um` above the base, one layer of each listed
+/// region is deposited, one after another in the listed order.
 #[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
 pub struct CycleStep {
     pub height_um: u64,
+    pub deposits: Vec<Deposit>,
+}
+
+/// One layer of one material region within a step.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+pub struct Deposit {
+    /// Index into the sequence's regions.
     pub region: usize,
+    /// Thickness of this layer in micrometres; the region's own thickness except for a
+    /// trimmed last layer.
     pub thickness_um: u64,
 }
 
-/// The fabrication sequence of the object.
+/// The fabrication sequence of the object: its material regions and the blocks, in
+/// build order.
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
 pub struct Sequence {
     pub regions: Vec<MaterialRegion>,
     pub blocks: Vec<Block>,
+}
+
+impl Sequence {
+    /// Every layer the sequence deposits, in build order: one slot per deposit, cut at
+    /// mid-layer, restricted to the deposit's region.
+    pub fn slots(&self) -> Vec<LayerSlot> {
+        let mut slots = Vec::new();
+        for block in &self.blocks {
+            for step in &block.steps {
+                let z = block.z_start + um_to_mm(step.height_um);
+                for d in &step.deposits {
+                    let t = um_to_mm(d.thickness_um);
+                    slots.push(LayerSlot {
+                        index: slots.len(),
+                        z,
+                        thickness: t,
+                        cut_z: z - t / 2.0,
+                        region: Some(d.region),
+                    });
+                }
+            }
+        }
+        slots
+    }
+}
+
+/// Micrometres to millimetres.
+pub fn um_to_mm(um: u64) -> f64 {
+    um as f64 / 1000.0
 }
 
 /// A tool: one per material or per mixture on a mixing head.
@@ -322,6 +390,9 @@ pub struct LayerPlan {
     pub index: usize,
     pub z: f64,
     pub thickness: f64,
+    /// The material region this layer deposits when the layers follow work cycles.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub region: Option<usize>,
     pub parts: Vec<PartLayer>,
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub toolpaths: Vec<Toolpath>,

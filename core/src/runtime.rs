@@ -17,7 +17,7 @@ use rayon::prelude::*;
 use crate::error::{Error, Result};
 use crate::geom::{Point2, Vector2};
 use crate::mesh::{BBox3, Mesh, Vector3};
-use crate::model::{Composition, Layer, LayerPlan, LayerSlot, PartInfo, PartLayer, Region};
+use crate::model::{Composition, Layer, LayerPlan, LayerSlot, PartInfo, PartLayer, Region, Sequence};
 use crate::output::AtomicOutputs;
 use crate::pipeline::{ModelSpec, Pipeline, Placement, TableRef};
 use crate::registry::Registry;
@@ -550,6 +550,14 @@ impl Engine {
             sinks.push(timings.time(StageKind::Export, || e.open(&mut ctx))?);
         }
 
+        let shared = LayerShared {
+            info: &info,
+            sequence: sequence.as_ref(),
+            prepared: &prepared,
+            part_mesh: &part_mesh,
+            selections: &selections,
+            timings: &timings,
+        };
         observer.started(slots.len());
         let window = pool.current_num_threads().max(1) * 4;
         let mut regions = 0;
@@ -559,7 +567,7 @@ impl Engine {
                 chunk
                     .par_iter()
                     .map(|slot| {
-                        self.process_layer(slot, &info, &prepared, &part_mesh, &selections, &timings)
+                        self.process_layer(slot, &shared)
                             .map_err(|e| e.in_layer(slot.index, slot.z))
                     })
                     .collect()
@@ -598,21 +606,45 @@ impl Engine {
     }
 
     /// Slices, sorts, discretises, grades and plans one layer.
-    fn process_layer(
-        &self,
-        slot: &LayerSlot,
-        info: &RunInfo,
-        prepared: &[Box<dyn MeshSlicer>],
-        part_mesh: &[usize],
-        selections: &Selections,
-        timings: &Timings,
-    ) -> Result<LayerPlan> {
+    fn process_layer(&self, slot: &LayerSlot, shared: &LayerShared<'_>) -> Result<LayerPlan> {
+        let LayerShared {
+            info,
+            sequence,
+            prepared,
+            part_mesh,
+            selections,
+            timings,
+        } = *shared;
         // Each distinct mesh is cut and sorted once per layer.
         let mut cut: Vec<Option<(Layer, crate::model::ContourTree)>> =
             (0..prepared.len()).map(|_| None).collect();
         let mut warnings = Vec::new();
         let mut parts = Vec::new();
+        // A layer of a material region deposits only that region's parts.
+        let region_parts = match (slot.region, sequence) {
+            (Some(r), Some(seq)) => {
+                Some(seq.regions.get(r).map(|r| r.parts.as_slice()).ok_or_else(|| {
+                    Error::stage(
+                        "slice",
+                        format!(
+                            "layer names material region {r}, the sequence has {}",
+                            seq.regions.len()
+                        ),
+                    )
+                })?)
+            }
+            (Some(r), None) => {
+                return Err(Error::stage(
+                    "slice",
+                    format!("layer names material region {r}, but the pipeline has no [sequence]"),
+                ));
+            }
+            (None, _) => None,
+        };
         for (pi, p) in self.parts.iter().enumerate() {
+            if region_parts.is_some_and(|rp| !rp.contains(&pi)) {
+                continue;
+            }
             let mi = part_mesh[pi];
             if cut[mi].is_none() {
                 let layer = timings
@@ -636,6 +668,7 @@ impl Engine {
             index: slot.index,
             z: slot.z,
             thickness: slot.thickness,
+            region: slot.region,
             parts,
             toolpaths: Vec::new(),
             build_time: None,
@@ -709,6 +742,17 @@ impl Engine {
             regions,
         })
     }
+}
+
+/// What every layer of a run reads: the run's facts and what was prepared once.
+#[derive(Clone, Copy)]
+struct LayerShared<'a> {
+    info: &'a RunInfo,
+    sequence: Option<&'a Sequence>,
+    prepared: &'a [Box<dyn MeshSlicer>],
+    part_mesh: &'a [usize],
+    selections: &'a Selections,
+    timings: &'a Timings,
 }
 
 /// Which families of each layer belong to parts that select theirs with `family_at`:

@@ -70,6 +70,9 @@ struct LayerOut<'a> {
     index: usize,
     z: f64,
     thickness: f64,
+    /// Index into `sequence.regions` of the material region this layer deposits.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    region: Option<usize>,
     parts: Vec<PartOut<'a>>,
     #[serde(skip_serializing_if = "Option::is_none")]
     toolpaths: Option<&'a [Toolpath]>,
@@ -169,6 +172,7 @@ fn layer_out<'a>(info: &'a RunInfo, plan: &'a LayerPlan, toolpaths: bool) -> Lay
         index: plan.index,
         z: plan.z,
         thickness: plan.thickness,
+        region: plan.region,
         parts,
         toolpaths: (toolpaths && !plan.toolpaths.is_empty()).then_some(plan.toolpaths.as_slice()),
         build_time: plan.build_time,

@@ -3,6 +3,10 @@
 //! with the build direction leaves a stair step (cusp) of height t |cos θ|; each layer is
 //! as thick as the facets it spans allow for the chosen cusp, within [min, max]. Layers
 //! end exactly on horizontal faces when the thickness bounds let them.
+//!
+//! With a `[sequence]` whose material regions want their own thicknesses (work cycles),
+//! the layers follow the sequence instead: each region is cut at its own heights, with
+//! its own thickness, in the sequence's deposition order.
 
 use std::sync::Arc;
 
@@ -13,9 +17,25 @@ use serde::Deserialize;
 use crate::cut::{CutMesh, CutOptions, FillRule};
 use crate::uniform::Prepared;
 
+/// What decides the layer heights.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Deserialize)]
+#[serde(rename_all = "lowercase")]
+enum Mode {
+    /// The sequence's work cycles when the pipeline has a `[sequence]`, else the
+    /// surface slope.
+    #[default]
+    Auto,
+    /// The surface slope and the cusp height.
+    Surface,
+    /// The material regions' thicknesses, following the sequence's work cycles.
+    Material,
+}
+
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
 struct Options {
+    #[serde(default)]
+    mode: Mode,
     #[serde(default = "d_min")]
     min_thickness: f64,
     #[serde(default = "d_max")]
@@ -41,6 +61,7 @@ fn d_cusp() -> f64 {
 }
 
 struct Adaptive {
+    mode: Mode,
     min: f64,
     max: f64,
     cusp: f64,
@@ -118,12 +139,7 @@ fn plan_heights(
                 format!("more than max_layers = {max_layers} layers"),
             ));
         }
-        slots.push(LayerSlot {
-            index: slots.len(),
-            z: z + t,
-            thickness: t,
-            cut_z: z + t / 2.0,
-        });
+        slots.push(LayerSlot::new(slots.len(), z + t, t, z + t / 2.0));
         z += t;
     }
     Ok(slots)
@@ -134,8 +150,32 @@ impl Slicer for Adaptive {
         &self,
         meshes: &[Arc<Mesh>],
         info: &RunInfo,
-        _sequence: Option<&Sequence>,
+        sequence: Option<&Sequence>,
     ) -> Result<Vec<LayerSlot>> {
+        match (self.mode, sequence) {
+            (Mode::Material | Mode::Auto, Some(seq)) => {
+                let slots = seq.slots();
+                if slots.len() > self.max_layers {
+                    return Err(Error::stage(
+                        "slice:adaptive",
+                        format!(
+                            "the sequence deposits {} layers, more than max_layers = {}",
+                            slots.len(),
+                            self.max_layers
+                        ),
+                    ));
+                }
+                return Ok(slots);
+            }
+            (Mode::Material, None) => {
+                return Err(Error::stage(
+                    "slice:adaptive",
+                    "mode = \"material\" follows the work cycles of a [sequence] table, and the \
+                     pipeline has none",
+                ));
+            }
+            _ => {}
+        }
         let mut facets = Vec::new();
         for m in meshes {
             for i in 0..m.triangles.len() {
@@ -183,6 +223,7 @@ fn build(config: &StageConfig<'_>) -> Result<AnyStage> {
         return Err(config.error("min_thickness", "must not exceed max_thickness"));
     }
     Ok(AnyStage::Slice(Box::new(Adaptive {
+        mode: o.mode,
         min: o.min_thickness,
         max: o.max_thickness,
         cusp: o.cusp,
@@ -195,10 +236,26 @@ lamina_core::register_stage!(StageFactory {
     info: StageInfo {
         kind: StageKind::Slice,
         name: "adaptive",
-        doc: "Layer thickness from the surface slope: thin where a stair step would show, thick on steep walls, ending on flat faces.",
+        doc: "Layer thickness from the surface slope (thin where a stair step would show, ending on flat faces), or per material region following the work cycles of a [sequence].",
         options: &[
-            OptionSpec::new("min_thickness", "float", "0.05", "thinnest layer (mm)"),
-            OptionSpec::new("max_thickness", "float", "0.3", "thickest layer (mm)"),
+            OptionSpec::new(
+                "mode",
+                "string",
+                "\"auto\"",
+                "\"surface\" (slope and cusp), \"material\" (the [sequence]'s work cycles) or \"auto\" (material when there is a [sequence])"
+            ),
+            OptionSpec::new(
+                "min_thickness",
+                "float",
+                "0.05",
+                "thinnest layer (mm, surface mode)"
+            ),
+            OptionSpec::new(
+                "max_thickness",
+                "float",
+                "0.3",
+                "thickest layer (mm, surface mode)"
+            ),
             OptionSpec::new(
                 "cusp",
                 "float",

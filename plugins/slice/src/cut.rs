@@ -480,12 +480,7 @@ mod tests {
     }
 
     fn slot(z: f64) -> LayerSlot {
-        LayerSlot {
-            index: 0,
-            z,
-            thickness: 0.1,
-            cut_z: z,
-        }
+        LayerSlot::new(0, z, 0.1, z)
     }
 
     #[test]

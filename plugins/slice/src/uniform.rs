@@ -86,12 +86,7 @@ pub fn uniform_slots(z_min: f64, z_max: f64, t: f64, cut: f64, max_layers: usize
         .map(|i| {
             let top = z_min + t * (i + 1) as f64;
             let bottom = z_min + t * i as f64;
-            LayerSlot {
-                index: i,
-                z: top,
-                thickness: t,
-                cut_z: (bottom + t * cut).min(z_max),
-            }
+            LayerSlot::new(i, top, t, (bottom + t * cut).min(z_max))
         })
         .collect())
 }

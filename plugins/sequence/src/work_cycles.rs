@@ -1,0 +1,276 @@
+//! `work-cycles`: the fabrication sequence of an object whose material regions want
+//! different layer thicknesses (cmpm-process-planning 4.1). Each part (or group of
+//! parts) is a material region with its own thickness; the object is cut into blocks at
+//! the regions' heights, each block is deposited in work cycles, and the sequence lists
+//! every layer of every region in build order for the adaptive slicer to cut.
+
+use std::collections::BTreeMap;
+
+use lamina_core::pipeline::TableRef;
+use lamina_core::stage::{AnyStage, OptionSpec, Sequencer, StageConfig, StageInfo, StageKind};
+use lamina_core::{Error, MaterialRegion, Result, RunInfo, Sequence, StageFactory};
+use serde::Deserialize;
+
+use crate::cycle::{blocks, mm_to_um};
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct Options {
+    /// Layer thickness by part name (mm).
+    #[serde(default)]
+    thickness: BTreeMap<String, f64>,
+    /// Explicit regions grouping parts; default: one region per part.
+    #[serde(default)]
+    regions: Vec<RegionSpec>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RegionSpec {
+    name: String,
+    parts: Vec<String>,
+    #[serde(default)]
+    thickness: Option<f64>,
+}
+
+/// The longest work cycle accepted (1 m): thicknesses like 0.201 and 0.199 mm have a
+/// least common multiple of 40 mm, and worse choices quickly exceed any part.
+const MAX_CYCLE_UM: u64 = 1_000_000;
+
+struct WorkCycles {
+    options: Options,
+    table: TableRef,
+}
+
+/// A thickness in mm as whole micrometres, refused when it is not one.
+fn thickness_um(mm: f64) -> std::result::Result<u64, String> {
+    if !(mm.is_finite() && mm > 0.0) {
+        return Err(format!("{mm} is not a positive number of mm"));
+    }
+    let um = (mm * 1000.0).round();
+    if um < 1.0 || (mm * 1000.0 - um).abs() > 1e-6 || um > MAX_CYCLE_UM as f64 {
+        return Err(format!(
+            "{mm} mm is not a whole number of micrometres between 0.001 and {} mm",
+            MAX_CYCLE_UM / 1000
+        ));
+    }
+    Ok(um as u64)
+}
+
+impl WorkCycles {
+    /// The thickness of a part: the `thickness` table, else the thinnest preferred
+    /// thickness among its materials.
+    fn part_thickness(&self, info: &RunInfo, part: usize) -> Result<u64> {
+        let p = &info.parts[part];
+        if let Some(&t) = self.options.thickness.get(&p.name) {
+            return thickness_um(t)
+                .map_err(|m| self.table.error_at("thickness", format!("`{}`: {m}", p.name)));
+        }
+        let preferred = p
+            .materials
+            .iter()
+            .filter_map(|&m| info.materials[m].layer_thickness)
+            .fold(None, |acc: Option<f64>, t| Some(acc.map_or(t, |a| a.min(t))));
+        match preferred {
+            Some(t) => thickness_um(t).map_err(|m| {
+                Error::stage(
+                    "sequence:work-cycles",
+                    format!("layer_thickness of part `{}`'s materials: {m}", p.name),
+                )
+            }),
+            None => Err(self.table.error_at(
+                "thickness",
+                format!(
+                    "part `{}` has no layer thickness: give `thickness.{} = ...` here or \
+                     `layer_thickness` on one of its materials",
+                    p.name, p.name
+                ),
+            )),
+        }
+    }
+
+    fn part_index(&self, info: &RunInfo, name: &str) -> Result<usize> {
+        info.parts.iter().position(|p| p.name == name).ok_or_else(|| {
+            let known: Vec<&str> = info.parts.iter().map(|p| p.name.as_str()).collect();
+            self.table.error_at(
+                "regions",
+                format!("no part named `{name}` (parts: {})", known.join(", ")),
+            )
+        })
+    }
+
+    fn regions(&self, info: &RunInfo) -> Result<Vec<MaterialRegion>> {
+        for name in self.options.thickness.keys() {
+            if !info.parts.iter().any(|p| &p.name == name) {
+                return Err(self
+                    .table
+                    .error_at("thickness", format!("no part named `{name}`")));
+            }
+        }
+        let span = |parts: &[usize]| -> (f64, f64) {
+            let lo = parts
+                .iter()
+                .map(|&p| info.parts[p].z_min)
+                .fold(f64::INFINITY, f64::min);
+            let hi = parts
+                .iter()
+                .map(|&p| info.parts[p].z_max)
+                .fold(f64::NEG_INFINITY, f64::max);
+            (round_um(lo), round_um(hi))
+        };
+        if self.options.regions.is_empty() {
+            return (0..info.parts.len())
+                .map(|p| {
+                    let (z_start, z_end) = span(&[p]);
+                    Ok(MaterialRegion {
+                        name: info.parts[p].name.clone(),
+                        parts: vec![p],
+                        thickness_um: self.part_thickness(info, p)?,
+                        z_start,
+                        z_end,
+                    })
+                })
+                .collect();
+        }
+        let mut owner: Vec<Option<&str>> = vec![None; info.parts.len()];
+        let mut out = Vec::new();
+        for r in &self.options.regions {
+            if r.parts.is_empty() {
+                return Err(self
+                    .table
+                    .error_at("regions", format!("region `{}` lists no parts", r.name)));
+            }
+            let mut parts = Vec::new();
+            for name in &r.parts {
+                let p = self.part_index(info, name)?;
+                if let Some(other) = owner[p] {
+                    return Err(self.table.error_at(
+                        "regions",
+                        format!(
+                            "part `{name}` is in both region `{other}` and region `{}`",
+                            r.name
+                        ),
+                    ));
+                }
+                owner[p] = Some(&r.name);
+                parts.push(p);
+            }
+            let thickness = match r.thickness {
+                Some(t) => thickness_um(t).map_err(|m| {
+                    self.table
+                        .error_at("regions", format!("region `{}`: {m}", r.name))
+                })?,
+                None => {
+                    // The thinnest of its parts' thicknesses.
+                    let mut t = u64::MAX;
+                    for &p in &parts {
+                        t = t.min(self.part_thickness(info, p)?);
+                    }
+                    t
+                }
+            };
+            let (z_start, z_end) = span(&parts);
+            out.push(MaterialRegion {
+                name: r.name.clone(),
+                parts,
+                thickness_um: thickness,
+                z_start,
+                z_end,
+            });
+        }
+        if let Some(p) = owner.iter().position(Option::is_none) {
+            return Err(self.table.error_at(
+                "regions",
+                format!(
+                    "part `{}` is in no region and would never be deposited",
+                    info.parts[p].name
+                ),
+            ));
+        }
+        Ok(out)
+    }
+}
+
+fn round_um(mm: f64) -> f64 {
+    mm_to_um(mm) as f64 / 1000.0
+}
+
+impl Sequencer for WorkCycles {
+    fn sequence(&self, info: &RunInfo) -> Result<Sequence> {
+        let regions = self.regions(info)?;
+        let blocks = blocks(&regions)
+            .filter(|b| b.iter().all(|b| b.cycle.height_um <= MAX_CYCLE_UM))
+            .ok_or_else(|| {
+                let t: Vec<String> = regions
+                    .iter()
+                    .map(|r| format!("{} {} mm", r.name, r.thickness_um as f64 / 1000.0))
+                    .collect();
+                Error::stage(
+                    "sequence:work-cycles",
+                    format!(
+                        "the work cycle of {} is longer than {} mm: choose thicknesses with a \
+                         smaller common multiple",
+                        t.join(", "),
+                        MAX_CYCLE_UM / 1000
+                    ),
+                )
+            })?;
+        Ok(Sequence { regions, blocks })
+    }
+}
+
+fn build(config: &StageConfig<'_>) -> Result<AnyStage> {
+    let options: Options = config.parse()?;
+    for (name, &t) in &options.thickness {
+        thickness_um(t).map_err(|m| config.error("thickness", format!("`{name}`: {m}")))?;
+    }
+    for r in &options.regions {
+        if let Some(t) = r.thickness {
+            thickness_um(t).map_err(|m| config.error("regions", format!("region `{}`: {m}", r.name)))?;
+        }
+    }
+    Ok(AnyStage::Sequence(Box::new(WorkCycles {
+        options,
+        table: config.table.clone(),
+    })))
+}
+
+lamina_core::register_stage!(StageFactory {
+    info: StageInfo {
+        kind: StageKind::Sequence,
+        name: "work-cycles",
+        doc: "Material regions with their own layer thickness: blocks at the regions' heights, work cycles of the least common multiple, every region cut at its own heights (with the `adaptive` slicer).",
+        options: &[
+            OptionSpec::new(
+                "thickness",
+                "table of float",
+                "{}",
+                "layer thickness by part name (mm); default: the thinnest `layer_thickness` of the part's materials"
+            ),
+            OptionSpec::new(
+                "regions",
+                "array of table",
+                "[]",
+                "regions grouping parts: `{ name, parts = [...], thickness }`; default: one region per part"
+            ),
+        ],
+        example: "use = \"work-cycles\"\nthickness = { tube = 0.5 }",
+    },
+    build,
+});
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn thicknesses_must_be_whole_micrometres() {
+        assert_eq!(thickness_um(0.2), Ok(200));
+        assert_eq!(thickness_um(1.5), Ok(1500));
+        assert!(thickness_um(0.0002).is_err());
+        assert!(thickness_um(0.00025).is_err());
+        assert!(thickness_um(-1.0).is_err());
+        assert!(thickness_um(f64::NAN).is_err());
+        assert!(thickness_um(5000.0).is_err());
+    }
+}

@@ -1,0 +1,136 @@
+//! Fabrication sequences end to end: the three-region pipe of the CMPM process-planning
+//! paper (Fig. 11) is deposited in 3.0 mm work cycles of 18 steps, each region cut at
+//! its own heights and thickness.
+
+use std::path::Path;
+use std::process::Command;
+
+fn run_pipe(out: &Path) -> serde_json::Value {
+    let pipeline = Path::new(env!("CARGO_MANIFEST_DIR")).join("pipelines/pipe-work-cycles.toml");
+    let status = Command::new(env!("CARGO_BIN_EXE_lamina"))
+        .args(["run", "--quiet", "--out"])
+        .arg(out)
+        .arg(&pipeline)
+        .output()
+        .expect("lamina runs");
+    assert!(
+        status.status.success(),
+        "{}",
+        String::from_utf8_lossy(&status.stderr)
+    );
+    let text = std::fs::read_to_string(out.join("pipe-work-cycles.json")).expect("json written");
+    serde_json::from_str(&text).expect("valid json")
+}
+
+#[test]
+fn three_region_pipe_follows_the_work_cycles() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let plan = run_pipe(dir.path());
+    let seq = &plan["sequence"];
+    let regions: Vec<(&str, u64)> = seq["regions"]
+        .as_array()
+        .expect("regions")
+        .iter()
+        .map(|r| {
+            (
+                r["name"].as_str().expect("name"),
+                r["thickness_um"].as_u64().expect("um"),
+            )
+        })
+        .collect();
+    assert_eq!(regions, [("inner", 200), ("middle", 500), ("outer", 1500)]);
+    let blocks = seq["blocks"].as_array().expect("blocks");
+    assert_eq!(blocks.len(), 1, "all three regions span the same height");
+    assert_eq!(blocks[0]["cycle"]["height_um"], 3000);
+    assert_eq!(blocks[0]["cycle"]["steps"].as_array().expect("steps").len(), 18);
+    // Two cycles over 6 mm: 30 + 12 + 4 layers, in deposition order.
+    let layers = plan["layers"].as_array().expect("layers");
+    assert_eq!(layers.len(), 46);
+    assert_eq!(plan["layer_count"], 46);
+    let mut per_region = [0usize; 3];
+    let mut last_z = 0.0;
+    for (i, l) in layers.iter().enumerate() {
+        assert_eq!(l["index"], i);
+        let r = l["region"].as_u64().expect("each layer names its region") as usize;
+        per_region[r] += 1;
+        let z = l["z"].as_f64().expect("z");
+        let t = l["thickness"].as_f64().expect("thickness");
+        assert!(z >= last_z - 1e-12, "layers in build order");
+        last_z = z;
+        assert!((t - [0.2, 0.5, 1.5][r]).abs() < 1e-12, "layer {i}: {t} mm");
+        // A region's multiple of its thickness.
+        let k = z / t;
+        assert!(
+            (k - k.round()).abs() < 1e-9,
+            "layer {i} at z = {z} is not on its grid"
+        );
+        // Only the region's own part is cut in its layers.
+        let parts = l["parts"].as_array().expect("parts");
+        assert_eq!(parts.len(), 1);
+        assert_eq!(parts[0]["part"], regions[r].0);
+        let families = parts[0]["families"].as_array().expect("families");
+        assert_eq!(families.len(), 1);
+        let area = families[0]["area"].as_f64().expect("area");
+        let (ro, ri) = [(7.0, 5.0), (9.0, 7.0), (10.0, 9.0)][r];
+        let ring = std::f64::consts::PI * (ro * ro - ri * ri);
+        assert!((area - ring).abs() / ring < 0.01, "region {r}: {area} vs {ring}");
+    }
+    assert_eq!(per_region, [30, 12, 4]);
+    // Ties deposit in region order: at z = 1.5 the middle, then the outer region.
+    let at_1_5: Vec<u64> = layers
+        .iter()
+        .filter(|l| (l["z"].as_f64().unwrap_or(0.0) - 1.5).abs() < 1e-9)
+        .map(|l| l["region"].as_u64().unwrap_or(9))
+        .collect();
+    assert_eq!(at_1_5, [1, 2]);
+    let at_3: Vec<u64> = layers
+        .iter()
+        .filter(|l| (l["z"].as_f64().unwrap_or(0.0) - 3.0).abs() < 1e-9)
+        .map(|l| l["region"].as_u64().unwrap_or(9))
+        .collect();
+    assert_eq!(at_3, [0, 1, 2]);
+}
+
+#[test]
+fn material_mode_without_a_sequence_is_an_error() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let path = dir.path().join("p.toml");
+    std::fs::write(
+        &path,
+        "[model]\nuse = \"tube\"\nheight = 2.0\n[materials.a]\ncolour = [1, 2, 3]\n\
+         [slice]\nuse = \"adaptive\"\nmode = \"material\"\n",
+    )
+    .expect("write");
+    let out = Command::new(env!("CARGO_BIN_EXE_lamina"))
+        .args(["run", "--quiet", "--out"])
+        .arg(dir.path().join("out"))
+        .arg(&path)
+        .output()
+        .expect("lamina runs");
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("[sequence]"), "{err}");
+    assert!(!dir.path().join("out").exists(), "no partial output");
+}
+
+#[test]
+fn a_part_without_thickness_is_named() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let path = dir.path().join("p.toml");
+    std::fs::write(
+        &path,
+        "[model]\nuse = \"tube\"\nheight = 2.0\n[materials.a]\ncolour = [1, 2, 3]\n\
+         [[parts]]\nname = \"pipe\"\n[sequence]\nuse = \"work-cycles\"\n[slice]\nuse = \"adaptive\"\n",
+    )
+    .expect("write");
+    let out = Command::new(env!("CARGO_BIN_EXE_lamina"))
+        .args(["run", "--quiet", "--out"])
+        .arg(dir.path().join("out"))
+        .arg(&path)
+        .output()
+        .expect("lamina runs");
+    assert_eq!(out.status.code(), Some(2), "a configuration error");
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("part `pipe` has no layer thickness"), "{err}");
+    assert!(err.contains("p.toml"), "names the file: {err}");
+}
