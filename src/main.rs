@@ -19,6 +19,7 @@ use lamina_discretise as _;
 use lamina_export as _;
 use lamina_grade as _;
 use lamina_model as _;
+use lamina_orient as _;
 use lamina_sequence as _;
 use lamina_slice as _;
 use lamina_sort as _;

@@ -72,6 +72,25 @@ pub fn summary(report: &RunReport, timings: bool) {
     if let Some(t) = report.build_time {
         eprintln!("planned build time: {t:.1} s");
     }
+    if let Some(o) = &report.orientation {
+        let [x, y, z] = o.direction;
+        eprintln!(
+            "build direction [{x:.4}, {y:.4}, {z:.4}] (least {}), of {} candidates:",
+            o.criterion,
+            o.candidates.len()
+        );
+        eprintln!(
+            "  {:<14} {:>26} {:>14} {:>11} {:>17}",
+            "candidate", "direction", "cost", "height mm", "area x angle"
+        );
+        for c in o.candidates.iter().take(8) {
+            let [x, y, z] = c.direction;
+            eprintln!(
+                "  {:<14} [{x:>7.4}, {y:>7.4}, {z:>7.4}] {:>14.4} {:>11.3} {:>17.2}",
+                c.label, c.cost, c.height, c.surface_angle
+            );
+        }
+    }
     for f in &report.files {
         eprintln!("wrote {}", f.display());
     }

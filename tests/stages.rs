@@ -12,6 +12,7 @@ fn registry() -> Registry {
     use lamina_export as _;
     use lamina_grade as _;
     use lamina_model as _;
+    use lamina_orient as _;
     use lamina_sequence as _;
     use lamina_slice as _;
     use lamina_sort as _;

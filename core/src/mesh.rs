@@ -60,6 +60,14 @@ impl Mesh {
         }
     }
 
+    /// Rotates every vertex about the origin by a row-major 3x3 matrix.
+    pub fn rotate(&mut self, rotation: &[[f64; 3]; 3]) {
+        let r = nalgebra::Matrix3::from_fn(|i, j| rotation[i][j]);
+        for v in &mut self.vertices {
+            *v = Point3::from(r * v.coords);
+        }
+    }
+
     /// Signed volume by the divergence theorem (positive for outward winding).
     pub fn signed_volume(&self) -> f64 {
         (0..self.triangles.len())

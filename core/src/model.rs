@@ -323,6 +323,35 @@ pub fn um_to_mm(um: u64) -> f64 {
     um as f64 / 1000.0
 }
 
+/// The build direction chosen for the object and what it was weighed against.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Orientation {
+    /// What was minimised, e.g. `surface-angle` or `height`.
+    pub criterion: String,
+    /// The chosen build direction in the model's own coordinates (a unit vector): it
+    /// becomes +z.
+    pub direction: [f64; 3],
+    /// Row-major rotation applied to every vertex (maps `direction` to +z).
+    pub rotation: [[f64; 3]; 3],
+    /// Every candidate weighed, best first.
+    pub candidates: Vec<OrientationCandidate>,
+}
+
+/// One build direction an orienter weighed.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct OrientationCandidate {
+    /// Unit vector in the model's coordinates.
+    pub direction: [f64; 3],
+    /// Where the candidate came from (`+z`, `face 3`, `sample 17`).
+    pub label: String,
+    /// The criterion's value (lower is better).
+    pub cost: f64,
+    /// Build height along the direction (mm).
+    pub height: f64,
+    /// Sum over facets of area x the angle between facet and build direction (mm² rad).
+    pub surface_angle: f64,
+}
+
 /// A tool: one per material or per mixture on a mixing head.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Tool {

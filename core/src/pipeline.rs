@@ -310,6 +310,7 @@ struct RawPipeline {
     materials: toml::Table,
     #[serde(default)]
     parts: Vec<toml::Table>,
+    orient: Option<toml::Table>,
     slice: Option<toml::Table>,
     sort: Option<toml::Table>,
     discretise: Option<toml::Table>,
@@ -548,6 +549,7 @@ impl Pipeline {
 
         let mut stages = BTreeMap::new();
         for (kind, t) in [
+            (StageKind::Orient, raw.orient),
             (StageKind::Slice, raw.slice),
             (StageKind::Sort, raw.sort),
             (StageKind::Discretise, raw.discretise),

@@ -27,7 +27,7 @@ use crate::stage::*;
 /// `b"LAMINAPL"` as a little-endian integer: marks a Lamina plugin descriptor.
 pub const PLUGIN_MAGIC: u64 = u64::from_le_bytes(*b"LAMINAPL");
 /// Incremented when the meaning of the descriptor or of the stage traits changes.
-pub const ABI_MAJOR: u32 = 1;
+pub const ABI_MAJOR: u32 = 2;
 /// Incremented for additions a host of the same major can ignore.
 pub const ABI_MINOR: u32 = 0;
 /// The entry symbol; `v1` is the version of the descriptor's frozen prefix.
@@ -328,6 +328,7 @@ pub fn guard_stage(label: String, stage: AnyStage) -> AnyStage {
     }
     match stage {
         AnyStage::Model(s) => AnyStage::Model(g!(s)),
+        AnyStage::Orient(s) => AnyStage::Orient(g!(s)),
         AnyStage::Slice(s) => AnyStage::Slice(g!(s)),
         AnyStage::Sort(s) => AnyStage::Sort(g!(s)),
         AnyStage::Discretise(s) => AnyStage::Discretise(g!(s)),
@@ -341,6 +342,12 @@ pub fn guard_stage(label: String, stage: AnyStage) -> AnyStage {
 impl ModelSource for Guarded<dyn ModelSource> {
     fn load(&self, base_dir: &Path) -> Result<Vec<Mesh>> {
         guard_call(&self.label, || self.inner.load(base_dir))
+    }
+}
+
+impl Orienter for Guarded<dyn Orienter> {
+    fn orient(&self, meshes: &[&Mesh]) -> Result<Orientation> {
+        guard_call(&self.label, || self.inner.orient(meshes))
     }
 }
 

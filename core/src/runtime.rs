@@ -17,7 +17,9 @@ use rayon::prelude::*;
 use crate::error::{Error, Result};
 use crate::geom::{Point2, Vector2};
 use crate::mesh::{BBox3, Mesh, Vector3};
-use crate::model::{Composition, Layer, LayerPlan, LayerSlot, PartInfo, PartLayer, Region, Sequence};
+use crate::model::{
+    Composition, Layer, LayerPlan, LayerSlot, Orientation, PartInfo, PartLayer, Region, Sequence,
+};
 use crate::output::AtomicOutputs;
 use crate::pipeline::{ModelSpec, Pipeline, Placement, TableRef};
 use crate::registry::Registry;
@@ -106,6 +108,8 @@ pub struct RunReport {
     pub timings: Timings,
     /// Sum of the planned layer build times (s), when a planner ran.
     pub build_time: Option<f64>,
+    /// The build direction chosen by an `[orient]` stage and the alternatives weighed.
+    pub orientation: Option<Orientation>,
 }
 
 struct ModelStage {
@@ -136,6 +140,7 @@ pub struct Engine {
     parts: Vec<PartStages>,
     slicer: Box<dyn Slicer>,
     sorter: Box<dyn Sorter>,
+    orienter: Option<Box<dyn Orienter>>,
     sequencer: Option<Box<dyn Sequencer>>,
     planner: Option<Box<dyn Planner>>,
     exporters: Vec<Box<dyn Exporter>>,
@@ -367,6 +372,15 @@ impl Engine {
             build_default(&registry, StageKind::Sort, &pipeline, &scripts, DEFAULT_SORTER)?,
             Sort
         );
+        let orienter = build_optional(
+            &registry,
+            StageKind::Orient,
+            pipeline.stages.get(&StageKind::Orient),
+            &scripts,
+            &base,
+        )?
+        .map(|s| -> Result<_> { Ok(expect_kind!(s, Orient)) })
+        .transpose()?;
         let sequencer = build_optional(
             &registry,
             StageKind::Sequence,
@@ -400,6 +414,7 @@ impl Engine {
             parts,
             slicer,
             sorter,
+            orienter,
             sequencer,
             planner,
             exporters,
@@ -467,7 +482,11 @@ impl Engine {
             .map_err(|e| Error::config(format!("cannot start worker threads: {e}")))?;
 
         // Meshes: one per part (a part takes one mesh of its model, or all merged).
-        let loaded = self.load_models(&timings)?;
+        let mut loaded = self.load_models(&timings)?;
+        let orientation = match &self.orienter {
+            Some(o) => Some(timings.time(StageKind::Orient, || orient(o.as_ref(), &mut loaded))?),
+            None => None,
+        };
         let mut warnings = 0;
         for mesh in loaded.iter().flatten() {
             for w in &mesh.warnings {
@@ -543,6 +562,7 @@ impl Engine {
             let mut ctx = ExportContext {
                 info: &info,
                 sequence: sequence.as_ref(),
+                orientation: orientation.as_ref(),
                 layer_count: slots.len(),
                 pipeline_name: &self.pipeline.name,
                 files: &mut outputs,
@@ -602,6 +622,7 @@ impl Engine {
             warnings,
             timings,
             build_time,
+            orientation,
         })
     }
 
@@ -975,6 +996,44 @@ fn merge(meshes: &[Mesh], name: &str) -> Mesh {
         );
     }
     out
+}
+
+/// Turns every mesh of every model by the orienter's choice, rotating about the
+/// object's centre and putting the object back on the bed: the models keep their
+/// places relative to each other.
+fn orient(orienter: &dyn Orienter, models: &mut [Vec<Mesh>]) -> Result<Orientation> {
+    let all: Vec<&Mesh> = models.iter().flatten().collect();
+    let orientation = orienter.orient(&all)?;
+    let r = &orientation.rotation;
+    let m = nalgebra::Matrix3::from_fn(|i, j| r[i][j]);
+    let det = m.determinant();
+    if !((det - 1.0).abs() < 1e-6 && (m.transpose() * m - nalgebra::Matrix3::identity()).norm() < 1e-6) {
+        return Err(Error::stage(
+            "orient",
+            format!("the orienter returned a matrix that is not a rotation: {r:?}"),
+        ));
+    }
+    let bbox = models
+        .iter()
+        .flatten()
+        .fold(BBox3::EMPTY, |b, m| b.union(&m.bbox()));
+    if bbox.is_empty() {
+        return Ok(orientation);
+    }
+    let centre = (bbox.min.coords + bbox.max.coords) * 0.5;
+    for mesh in models.iter_mut().flatten() {
+        mesh.transform(1.0, -centre);
+        mesh.rotate(r);
+        mesh.transform(1.0, centre);
+    }
+    let after = models
+        .iter()
+        .flatten()
+        .fold(BBox3::EMPTY, |b, m| b.union(&m.bbox()));
+    for mesh in models.iter_mut().flatten() {
+        mesh.transform(1.0, Vector3::new(0.0, 0.0, -after.min.z));
+    }
+    Ok(orientation)
 }
 
 /// Applies a model table's `scale` and `place` to all meshes of the model together, so

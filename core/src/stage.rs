@@ -20,6 +20,8 @@ use crate::script::ScriptHost;
 pub enum StageKind {
     /// Produces meshes: file readers and model generators.
     Model,
+    /// Chooses the build direction of the whole object.
+    Orient,
     Slice,
     Sort,
     Discretise,
@@ -30,8 +32,9 @@ pub enum StageKind {
 }
 
 impl StageKind {
-    pub const ALL: [StageKind; 8] = [
+    pub const ALL: [StageKind; 9] = [
         StageKind::Model,
+        StageKind::Orient,
         StageKind::Slice,
         StageKind::Sort,
         StageKind::Discretise,
@@ -45,6 +48,7 @@ impl StageKind {
     pub fn name(self) -> &'static str {
         match self {
             StageKind::Model => "model",
+            StageKind::Orient => "orient",
             StageKind::Slice => "slice",
             StageKind::Sort => "sort",
             StageKind::Discretise => "discretise",
@@ -116,6 +120,7 @@ pub struct StageInfo {
 /// A stage built from its pipeline table.
 pub enum AnyStage {
     Model(Box<dyn ModelSource>),
+    Orient(Box<dyn Orienter>),
     Slice(Box<dyn Slicer>),
     Sort(Box<dyn Sorter>),
     Discretise(Box<dyn Discretiser>),
@@ -129,6 +134,7 @@ impl AnyStage {
     pub fn kind(&self) -> StageKind {
         match self {
             AnyStage::Model(_) => StageKind::Model,
+            AnyStage::Orient(_) => StageKind::Orient,
             AnyStage::Slice(_) => StageKind::Slice,
             AnyStage::Sort(_) => StageKind::Sort,
             AnyStage::Discretise(_) => StageKind::Discretise,
@@ -176,6 +182,13 @@ impl RunInfo {
 /// Produces the meshes of a model: a file reader or a generator.
 pub trait ModelSource: Send + Sync {
     fn load(&self, base_dir: &Path) -> Result<Vec<Mesh>>;
+}
+
+/// Chooses the build direction of the whole object (every mesh of every model, moved
+/// together) before it is sliced.
+pub trait Orienter: Send + Sync {
+    /// The rotation to apply and the alternatives weighed, for the report.
+    fn orient(&self, meshes: &[&Mesh]) -> Result<Orientation>;
 }
 
 /// Decides the layer heights, then cuts meshes into layers.
@@ -240,6 +253,8 @@ pub trait Planner: Send + Sync {
 pub struct ExportContext<'a> {
     pub info: &'a RunInfo,
     pub sequence: Option<&'a Sequence>,
+    /// The build direction chosen by an `[orient]` stage, if any.
+    pub orientation: Option<&'a Orientation>,
     pub layer_count: usize,
     pub pipeline_name: &'a str,
     /// Creates output files that appear under their final name only when the whole run

@@ -55,6 +55,8 @@ struct Header<'a> {
     parts: Vec<PartHeader<'a>>,
     #[serde(skip_serializing_if = "Option::is_none")]
     sequence: Option<&'a lamina_core::Sequence>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    orientation: Option<&'a lamina_core::Orientation>,
 }
 
 #[derive(Serialize)]
@@ -226,6 +228,7 @@ impl Exporter for Json {
                 })
                 .collect(),
             sequence: ctx.sequence,
+            orientation: ctx.orientation,
         };
         let path = self.options.path.clone();
         let text = if self.options.pretty && self.options.form == Form::Document {
