@@ -191,15 +191,27 @@ impl Composition {
     }
 
     /// The fraction-weighted blend of the materials' property colours (Eq. 13 of the
-    /// topological-hierarchy paper), each channel rounded half away from zero.
+    /// topological-hierarchy paper), in the paper's form: the last material's colour
+    /// plus the other materials' fractions times their difference from it, that sum
+    /// rounded half away from zero. This is what gives the paper's gear table
+    /// ([43, 212, 0] at a sixth red: 42.5 rounds up to 43 and 255 - 42.5 down to 212),
+    /// and the channels of a two-material blend always add back up to the pure colours.
     pub fn colour(&self, materials: &[Material]) -> [u8; 3] {
-        let mut rgb = [0.0f64; 3];
-        for (f, m) in self.fractions.iter().zip(materials) {
-            for (c, &mc) in rgb.iter_mut().zip(&m.colour) {
-                *c += f * f64::from(mc);
-            }
+        let n = self.fractions.len().min(materials.len());
+        let Some(last) = n.checked_sub(1).map(|i| &materials[i]) else {
+            return [0; 3];
+        };
+        let mut rgb = [0u8; 3];
+        for (c, out) in rgb.iter_mut().enumerate() {
+            let base = f64::from(last.colour[c]);
+            let delta: f64 = self.fractions[..n - 1]
+                .iter()
+                .zip(materials)
+                .map(|(f, m)| f * (f64::from(m.colour[c]) - base))
+                .sum();
+            *out = (base + delta.round()).clamp(0.0, 255.0) as u8;
         }
-        rgb.map(|c| c.round().clamp(0.0, 255.0) as u8)
+        rgb
     }
 }
 
@@ -453,11 +465,57 @@ mod tests {
         assert!(Composition::new(vec![]).is_err());
     }
 
+    /// topological-hierarchy-fgm, Fig. 3: gear layers 4..10 graded linearly from green
+    /// to red along Z (f_red = r_i, f_green = 1 - r_i).
+    #[test]
+    fn gear_colour_table_of_the_paper() {
+        let m = [mat("red", [255, 0, 0]), mat("green", [0, 255, 0])];
+        let expected = [
+            [0, 255, 0],
+            [43, 212, 0],
+            [85, 170, 0],
+            [128, 127, 0],
+            [170, 85, 0],
+            [213, 42, 0],
+            [255, 0, 0],
+        ];
+        for (i, e) in expected.iter().enumerate() {
+            let r = i as f64 / 6.0;
+            let c = Composition::new(vec![r, 1.0 - r]).expect("valid");
+            assert_eq!(c.colour(&m), *e, "layer {}", i + 4);
+        }
+    }
+
+    /// topological-hierarchy-fgm, Eq. 20-21: ten sub-regions from green to black.
+    #[test]
+    fn ten_sub_regions_green_to_black() {
+        let m = [mat("green", [0, 255, 0]), mat("black", [0, 0, 0])];
+        let greens: Vec<u8> = (0..10)
+            .map(|j| {
+                let f = 1.0 - j as f64 / 9.0;
+                Composition::new(vec![f, 1.0 - f]).expect("valid").colour(&m)[1]
+            })
+            .collect();
+        assert_eq!(greens, [255, 227, 198, 170, 142, 113, 85, 57, 28, 0]);
+    }
+
+    #[test]
+    fn colour_of_three_materials_blends_all() {
+        let m = [
+            mat("red", [255, 0, 0]),
+            mat("green", [0, 255, 0]),
+            mat("blue", [0, 0, 255]),
+        ];
+        let c = Composition::new(vec![0.25, 0.25, 0.5]).expect("valid");
+        assert_eq!(c.colour(&m), [64, 64, 127], "255 - 127.5 rounds to 127");
+    }
+
     #[test]
     fn colour_is_fraction_weighted_blend() {
         let m = [mat("red", [255, 0, 0]), mat("green", [0, 255, 0])];
         let c = Composition::binary(0.5).expect("valid");
-        assert_eq!(c.colour(&m), [128, 128, 0]);
+        assert_eq!(c.colour(&m), [128, 127, 0], "the paper's layer 7");
         assert_eq!(Composition::pure(1, 2).colour(&m), [0, 255, 0]);
+        assert_eq!(Composition::pure(0, 2).colour(&m), [255, 0, 0]);
     }
 }
