@@ -3,7 +3,12 @@
 //!
 //! - `script`: fractions from a Rhai expression or function of the region's level r,
 //!   its reference point (x, y), the layer's height z and index, and the part's name;
-//! - `constant`: one composition for the whole part (a discrete part of an assembly).
+//! - `constant`: one composition for the whole part (a discrete part of an assembly);
+//! - `z`: a control function of the layer's level between two layers or heights;
+//! - `xy`: a control function of the sub-region's level across the layer.
 
+mod along_z;
 mod constant;
+pub mod control;
+mod in_plane;
 mod script;

@@ -1,0 +1,153 @@
+//! Control functions f(r) (topological-hierarchy-fgm Eq. 10-12, grading-step-width's
+//! power law): the fraction of a part's first material as a function of a normalised
+//! level r. With two materials the second fraction is 1 - f; a Rhai function may return
+//! one fraction per material instead, for any number of materials.
+
+use lamina_core::script::{ScriptArgs, ScriptFn};
+use lamina_core::stage::StageConfig;
+use lamina_core::{Composition, Error, Result};
+use serde::Deserialize;
+
+/// The options every control-function grader takes.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ControlOptions {
+    /// `linear`, `constant`, `wave`, `power`, or a Rhai expression / `file.rhai#fn`.
+    pub f: Option<String>,
+    pub mu: Option<f64>,
+    pub lambda: Option<f64>,
+    pub alpha: Option<f64>,
+    pub k: Option<f64>,
+}
+
+/// A control function of r.
+pub enum Control {
+    /// mu r + lambda (Eq. 10).
+    Linear { mu: f64, lambda: f64 },
+    /// mu (Eq. 11).
+    Constant { mu: f64 },
+    /// mu sin(lambda r) (Eq. 12).
+    Wave { mu: f64, lambda: f64 },
+    /// (alpha r)^k.
+    Power { alpha: f64, k: f64 },
+    /// A user's Rhai function, compiled once.
+    Script(ScriptFn),
+}
+
+/// Option descriptions shared by the graders that take a control function.
+pub const CONTROL_OPTIONS: [lamina_core::stage::OptionSpec; 5] = [
+    lamina_core::stage::OptionSpec::new(
+        "f",
+        "string",
+        "\"linear\"",
+        "\"linear\" (mu r + lambda), \"constant\" (mu), \"wave\" (mu sin(lambda r)), \"power\" ((alpha r)^k), or a Rhai expression / \"file.rhai#fn\" of r, x, y, z, layer, part",
+    ),
+    lamina_core::stage::OptionSpec::new("mu", "float", "see f", "linear: 1; constant: 1; wave: 1"),
+    lamina_core::stage::OptionSpec::new("lambda", "float", "see f", "linear: 0; wave: pi"),
+    lamina_core::stage::OptionSpec::new("alpha", "float", "1.0", "power: scale of r"),
+    lamina_core::stage::OptionSpec::new("k", "float", "1.0", "power: exponent"),
+];
+
+impl Control {
+    /// Builds the control function from a stage's options; `default_linear` gives the
+    /// (mu, lambda) of `linear` when they are not set.
+    pub fn from_options(
+        config: &StageConfig<'_>,
+        o: &ControlOptions,
+        default_linear: (f64, f64),
+    ) -> Result<Self> {
+        let num = |key: &str, v: Option<f64>, default: f64| -> Result<f64> {
+            let v = v.unwrap_or(default);
+            if v.is_finite() {
+                Ok(v)
+            } else {
+                Err(config.error(key, "must be a finite number"))
+            }
+        };
+        let name = o.f.as_deref().unwrap_or("linear");
+        let unused = |keys: &[(&str, bool)]| -> Result<()> {
+            for (key, given) in keys {
+                if *given {
+                    return Err(config.error(key, format!("has no meaning for f = \"{name}\"")));
+                }
+            }
+            Ok(())
+        };
+        Ok(match name {
+            "linear" => {
+                unused(&[("alpha", o.alpha.is_some()), ("k", o.k.is_some())])?;
+                Control::Linear {
+                    mu: num("mu", o.mu, default_linear.0)?,
+                    lambda: num("lambda", o.lambda, default_linear.1)?,
+                }
+            }
+            "constant" => {
+                unused(&[
+                    ("lambda", o.lambda.is_some()),
+                    ("alpha", o.alpha.is_some()),
+                    ("k", o.k.is_some()),
+                ])?;
+                Control::Constant {
+                    mu: num("mu", o.mu, 1.0)?,
+                }
+            }
+            "wave" => {
+                unused(&[("alpha", o.alpha.is_some()), ("k", o.k.is_some())])?;
+                Control::Wave {
+                    mu: num("mu", o.mu, 1.0)?,
+                    lambda: num("lambda", o.lambda, std::f64::consts::PI)?,
+                }
+            }
+            "power" => {
+                unused(&[("mu", o.mu.is_some()), ("lambda", o.lambda.is_some())])?;
+                Control::Power {
+                    alpha: num("alpha", o.alpha, 1.0)?,
+                    k: num("k", o.k, 1.0)?,
+                }
+            }
+            script => {
+                unused(&[
+                    ("mu", o.mu.is_some()),
+                    ("lambda", o.lambda.is_some()),
+                    ("alpha", o.alpha.is_some()),
+                    ("k", o.k.is_some()),
+                ])?;
+                let origin = config.table.location_of(Some("f"));
+                Control::Script(config.scripts.compile(script, origin)?)
+            }
+        })
+    }
+
+    /// The composition at `args.r` over `n` materials; `context` names the place for
+    /// errors (part, layer, region).
+    pub fn composition(&self, args: &ScriptArgs<'_>, n: usize, context: &str) -> Result<Composition> {
+        let r = args.r;
+        let f = match self {
+            Control::Linear { mu, lambda } => mu * r + lambda,
+            Control::Constant { mu } => *mu,
+            Control::Wave { mu, lambda } => mu * (lambda * r).sin(),
+            Control::Power { alpha, k } => (alpha * r).powf(*k),
+            Control::Script(s) => return Composition::new(s.fractions(args, n, context)?),
+        };
+        // sin(pi) and friends leave a rounding residue just outside [0, 1].
+        let f = if (-1e-12..0.0).contains(&f) {
+            0.0
+        } else if (1.0..1.0 + 1e-12).contains(&f) {
+            1.0
+        } else {
+            f
+        };
+        match n {
+            1 if (f - 1.0).abs() <= 1e-9 => Ok(Composition::pure(0, 1)),
+            2 => Composition::binary(f)
+                .map_err(|e| Error::stage("grade", format!("{context}: f(r = {r}) = {f}: {e}"))),
+            _ => Err(Error::stage(
+                "grade",
+                format!(
+                    "{context}: a built-in control function grades two materials, the part has {n}; \
+                     use a Rhai function that returns {n} fractions"
+                ),
+            )),
+        }
+    }
+}

@@ -1,0 +1,95 @@
+//! The papers' grading numbers, end to end through the example pipelines: the gear's
+//! colour table along Z (topological-hierarchy-fgm Fig. 3) and the wave function of
+//! Fig. 4.
+
+use std::path::Path;
+use std::process::Command;
+
+fn run(pipeline: &str, json: &str) -> serde_json::Value {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let path = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("pipelines")
+        .join(pipeline);
+    let out = Command::new(env!("CARGO_BIN_EXE_lamina"))
+        .args(["run", "--quiet", "--out"])
+        .arg(dir.path())
+        .arg(&path)
+        .output()
+        .expect("lamina runs");
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let text = std::fs::read_to_string(dir.path().join(json)).expect("json written");
+    serde_json::from_str(&text).expect("valid json")
+}
+
+/// (colour, red fraction) of the gear's regions, per layer index.
+fn gear_layers(plan: &serde_json::Value) -> Vec<(u64, Vec<([u8; 3], f64)>)> {
+    plan["layers"]
+        .as_array()
+        .expect("layers")
+        .iter()
+        .filter_map(|l| {
+            let gear = l["parts"].as_array()?.iter().find(|p| p["part"] == "gear")?;
+            let regions = gear["families"]
+                .as_array()?
+                .iter()
+                .flat_map(|f| f["regions"].as_array().into_iter().flatten())
+                .map(|r| {
+                    let c = &r["colour"];
+                    let rgb = [0, 1, 2].map(|i| c[i].as_u64().unwrap_or(999) as u8);
+                    (rgb, r["composition"]["red"].as_f64().unwrap_or(f64::NAN))
+                })
+                .collect::<Vec<_>>();
+            (!regions.is_empty()).then(|| (l["index"].as_u64().unwrap_or(0), regions))
+        })
+        .collect()
+}
+
+#[test]
+fn gear_graded_along_z_gives_the_papers_colour_table() {
+    let plan = run("gear-z-gradient.toml", "gear-z-gradient.json");
+    let layers = gear_layers(&plan);
+    assert_eq!(layers.len(), 10, "the gear is 5 mm of 0.5 mm layers");
+    let expected = [
+        [0, 255, 0],
+        [43, 212, 0],
+        [85, 170, 0],
+        [128, 127, 0],
+        [170, 85, 0],
+        [213, 42, 0],
+        [255, 0, 0],
+    ];
+    for (index, regions) in &layers {
+        let want = expected[(*index as usize).saturating_sub(3).min(6)];
+        for (rgb, _) in regions {
+            assert_eq!(*rgb, want, "layer {index}");
+        }
+    }
+    // The shaft is blue throughout.
+    for l in plan["layers"].as_array().expect("layers") {
+        for p in l["parts"].as_array().expect("parts") {
+            if p["part"] == "shaft" {
+                for f in p["families"].as_array().expect("families") {
+                    for r in f["regions"].as_array().expect("regions") {
+                        assert_eq!(r["colour"], serde_json::json!([0, 0, 255]));
+                        assert_eq!(r["composition"]["blue"], 1.0);
+                    }
+                }
+            }
+        }
+    }
+}
+
+#[test]
+fn gear_graded_by_the_wave_function() {
+    let plan = run("gear-z-wave.toml", "gear-z-wave.json");
+    for (index, regions) in gear_layers(&plan) {
+        let r = ((index as f64 - 3.0) / 6.0).clamp(0.0, 1.0);
+        let want = (r * std::f64::consts::PI).sin();
+        for (_, red) in regions {
+            assert!(
+                (red - want).abs() < 1e-9,
+                "layer {index}: {red} vs sin({r} pi) = {want}"
+            );
+        }
+    }
+}
