@@ -2,6 +2,7 @@
 //! lamina-core, and is the only part of Lamina that knows about the terminal.
 
 mod catalogue;
+mod generate;
 mod progress;
 mod report;
 
@@ -69,6 +70,23 @@ enum Command {
     Check {
         #[command(flatten)]
         args: PipelineArgs,
+    },
+    /// Generates a model (gear, gear-shaft, tube, blade, cube, box) and writes it as STL,
+    /// OBJ or 3MF; the meshes of an assembly go into one file.
+    Generate {
+        /// The model stage; `lamina plugins model` lists them with their options.
+        model: String,
+        /// Output file; its extension chooses the format (.stl, .obj, .3mf).
+        #[arg(short, long, value_name = "FILE")]
+        output: Option<PathBuf>,
+        /// No summary.
+        #[arg(long, short)]
+        quiet: bool,
+        /// The model's options: `--key value`, `--key=value`, `key=value` or
+        /// `--set key=value`; values are TOML (`12`, `2.5`, `[50.0, 20.0]`), anything else
+        /// a string.
+        #[arg(trailing_var_arg = true, allow_hyphen_values = true, value_name = "OPTIONS")]
+        options: Vec<String>,
     },
     /// Lists the available stages with their documentation and options.
     Plugins {
@@ -155,6 +173,25 @@ fn execute(cli: Cli) -> Result<(), Failure> {
             println!("{}: ok", args.pipeline.display());
             for line in engine.summary() {
                 println!("  {line}");
+            }
+            Ok(())
+        }
+        Command::Generate {
+            model,
+            output,
+            quiet,
+            options,
+        } => {
+            // Everything before writing is about what the user asked for (exit code 2).
+            let usage = |error| Failure { error, usage: true };
+            let request = generate::request(&model, output, &options).map_err(usage)?;
+            let meshes = generate::meshes(&Registry::linked()?, &request).map_err(usage)?;
+            generate::write(&meshes, &request.output)?;
+            if !quiet {
+                println!("{}", request.output.display());
+                for line in generate::describe(&meshes) {
+                    println!("  {line}");
+                }
             }
             Ok(())
         }

@@ -34,9 +34,7 @@ fn cut(mesh: &Mesh, z: f64) -> (lamina_core::Layer, lamina_core::ContourTree) {
         unreachable!()
     };
     let prepared: Box<dyn MeshSlicer> = s.prepare(Arc::new(mesh.clone())).expect("prepare");
-    let layer = prepared
-        .slice(&LayerSlot::new(0, z, 0.2, z))
-        .expect("slice");
+    let layer = prepared.slice(&LayerSlot::new(0, z, 0.2, z)).expect("slice");
     let sorter: &dyn Sorter = sorter.as_ref();
     let tree = sorter.sort(&layer).expect("sort");
     (layer, tree)
@@ -108,4 +106,43 @@ fn box_layers_are_exact() {
     assert_eq!(layer.contours.len(), 1);
     assert!((layer.contours[0].area() - 6.0).abs() < 1e-9);
     assert!(layer.contours[0].is_ccw());
+}
+
+#[test]
+fn blade_layers_are_one_family_with_a_hole_per_cavity() {
+    // Root 10 mm, airfoil 10 to 70 mm in 20 bands of 3 mm.
+    for cavities in 0..=2 {
+        let meshes = model(&format!("use = \"blade\"\ncavities = {cavities}"));
+        assert!(watertight(&meshes[0]));
+        let mut areas = Vec::new();
+        for z in [0.1, 5.0, 9.9, 10.1, 13.0, 25.0, 40.0, 41.5, 55.55, 69.9, 70.0] {
+            let (layer, tree) = cut(&meshes[0], z);
+            assert_eq!(layer.contours.len(), 1 + cavities, "{cavities} cavities, z = {z}");
+            assert_eq!(tree.families.len(), 1, "z = {z}");
+            assert_eq!(tree.families[0].holes.len(), cavities, "z = {z}");
+            areas.push((z, tree.family_polygon(&layer.contours, 0).area()));
+        }
+        // Every section is the base section turned: the same area at each section
+        // height, a little less between sections (the ruled bands of a 1 degree twist
+        // per section bow inwards by a few micrometres), and the
+        // root's rectangle less the cavities below.
+        let at = |z: f64| areas.iter().find(|a| a.0 == z).map(|a| a.1).expect("sampled");
+        let section = at(13.0);
+        for z in [25.0, 40.0, 55.0 + 0.55, 70.0] {
+            let rel = if z == 55.55 { 5e-3 } else { 1e-7 };
+            assert!(
+                (at(z) - section).abs() < rel * section,
+                "z = {z}: {} vs {section}",
+                at(z)
+            );
+        }
+        assert!((at(41.5) - section).abs() < 5e-3 * section);
+        assert!(at(41.5) < section);
+        assert!(at(5.0) > at(13.0) && (at(0.1) - at(9.9)).abs() < 1e-7 * at(5.0));
+        println!(
+            "blade, {cavities} cavities: root layer {:.3} mm2, airfoil section {section:.3} mm2, mid-band {:.3} mm2",
+            at(5.0),
+            at(41.5)
+        );
+    }
 }
