@@ -5,10 +5,12 @@
 //!   its reference point (x, y), the layer's height z and index, and the part's name;
 //! - `constant`: one composition for the whole part (a discrete part of an assembly);
 //! - `z`: a control function of the layer's level between two layers or heights;
-//! - `xy`: a control function of the sub-region's level across the layer.
+//! - `xy`: a control function of the sub-region's level across the layer;
+//! - `idw`: inverse-distance weighting of materials carried by a family's contours.
 
 mod along_z;
 mod constant;
 pub mod control;
+mod idw;
 mod in_plane;
 mod script;

@@ -22,6 +22,8 @@ struct Options {
     /// Explicit regions grouping parts; default: one region per part.
     #[serde(default)]
     regions: Vec<RegionSpec>,
+    /// Thickness of parts that neither `thickness` nor their materials give one (mm).
+    default_thickness: Option<f64>,
 }
 
 #[derive(Debug, Deserialize)]
@@ -71,7 +73,7 @@ impl WorkCycles {
             .iter()
             .filter_map(|&m| info.materials[m].layer_thickness)
             .fold(None, |acc: Option<f64>, t| Some(acc.map_or(t, |a| a.min(t))));
-        match preferred {
+        match preferred.or(self.options.default_thickness) {
             Some(t) => thickness_um(t).map_err(|m| {
                 Error::stage(
                     "sequence:work-cycles",
@@ -81,8 +83,8 @@ impl WorkCycles {
             None => Err(self.table.error_at(
                 "thickness",
                 format!(
-                    "part `{}` has no layer thickness: give `thickness.{} = ...` here or \
-                     `layer_thickness` on one of its materials",
+                    "part `{}` has no layer thickness: give `thickness.{} = ...` or \
+                     `default_thickness` here, or `layer_thickness` on one of its materials",
                     p.name, p.name
                 ),
             )),
@@ -221,6 +223,9 @@ impl Sequencer for WorkCycles {
 
 fn build(config: &StageConfig<'_>) -> Result<AnyStage> {
     let options: Options = config.parse()?;
+    if let Some(t) = options.default_thickness {
+        thickness_um(t).map_err(|m| config.error("default_thickness", m))?;
+    }
     for (name, &t) in &options.thickness {
         thickness_um(t).map_err(|m| config.error("thickness", format!("`{name}`: {m}")))?;
     }
@@ -248,13 +253,19 @@ lamina_core::register_stage!(StageFactory {
                 "layer thickness by part name (mm); default: the thinnest `layer_thickness` of the part's materials"
             ),
             OptionSpec::new(
+                "default_thickness",
+                "float",
+                "none",
+                "thickness (mm) of parts that neither `thickness` nor their materials give one"
+            ),
+            OptionSpec::new(
                 "regions",
                 "array of table",
                 "[]",
                 "regions grouping parts: `{ name, parts = [...], thickness }`; default: one region per part"
             ),
         ],
-        example: "use = \"work-cycles\"\nthickness = { tube = 0.5 }",
+        example: "use = \"work-cycles\"\ndefault_thickness = 0.5",
     },
     build,
 });
