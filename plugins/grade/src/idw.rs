@@ -1,0 +1,217 @@
+//! `idw`: several contours of a family each carry a primary material, and a region's
+//! composition is the inverse-distance weighting of those materials at its reference
+//! point (topological-hierarchy-fgm Eq. 22-24): with d_k the shortest distance from
+//! the point to contour k, the weight of contour i is the product of the other
+//! distances over the sum of such products, which is (1/d_i) / sum_j (1/d_j) and
+//! gives a point on a contour that contour's material alone. With circumferential cells
+//! (each with its own reference point) the composition varies around the family too.
+
+use lamina_core::stage::{AnyStage, FamilyContext, Grader, OptionSpec, StageConfig, StageInfo, StageKind};
+use lamina_core::{Composition, Contour, Error, Point2, Region, Result, RunInfo, StageFactory};
+use serde::Deserialize;
+
+#[derive(Debug, Deserialize)]
+#[serde(untagged)]
+enum HolesSpec {
+    /// One material for every hole.
+    All(String),
+    /// Each hole takes the material of the listed point nearest to it.
+    Near(Vec<NearSpec>),
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct NearSpec {
+    near: [f64; 2],
+    material: String,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct Options {
+    outer: String,
+    holes: Option<HolesSpec>,
+    #[serde(default = "d_power")]
+    power: f64,
+}
+
+fn d_power() -> f64 {
+    1.0
+}
+
+struct Idw {
+    outer: String,
+    holes: Option<HolesSpec>,
+    power: f64,
+}
+
+/// Inverse-distance weights (Eq. 23 for `power` = 1): zero distances share the whole
+/// weight, so a point on a contour takes that contour's material.
+pub fn weights(distances: &[f64], power: f64) -> Vec<f64> {
+    let zeros = distances.iter().filter(|&&d| d <= 0.0).count();
+    if zeros > 0 {
+        let w = 1.0 / zeros as f64;
+        return distances
+            .iter()
+            .map(|&d| if d <= 0.0 { w } else { 0.0 })
+            .collect();
+    }
+    let inv: Vec<f64> = distances.iter().map(|d| d.powf(-power)).collect();
+    let sum: f64 = inv.iter().sum();
+    inv.iter().map(|w| w / sum).collect()
+}
+
+impl Idw {
+    /// Index among the part's materials of the material named `name`.
+    fn material(&self, info: &RunInfo, part: usize, name: &str) -> Result<usize> {
+        let p = &info.parts[part];
+        p.materials
+            .iter()
+            .position(|&m| info.materials[m].name == name)
+            .ok_or_else(|| Error::stage("grade:idw", format!("part `{}` has no material `{name}`", p.name)))
+    }
+
+    /// The material of each contour of the family: outer first, then the holes.
+    fn contour_materials(&self, ctx: &FamilyContext<'_>, contours: &[&Contour]) -> Result<Vec<usize>> {
+        let mut out = vec![self.material(ctx.info, ctx.part, &self.outer)?];
+        for hole in &contours[1..] {
+            let m = match &self.holes {
+                None => self.material(ctx.info, ctx.part, &self.outer)?,
+                Some(HolesSpec::All(name)) => self.material(ctx.info, ctx.part, name)?,
+                Some(HolesSpec::Near(list)) => {
+                    let nearest = list
+                        .iter()
+                        .min_by(|a, b| {
+                            let da = hole.distance(Point2::new(a.near[0], a.near[1]));
+                            let db = hole.distance(Point2::new(b.near[0], b.near[1]));
+                            da.total_cmp(&db)
+                        })
+                        .ok_or_else(|| Error::stage("grade:idw", "`holes` lists no material"))?;
+                    self.material(ctx.info, ctx.part, &nearest.material)?
+                }
+            };
+            out.push(m);
+        }
+        Ok(out)
+    }
+}
+
+impl Grader for Idw {
+    fn grade(&self, ctx: &FamilyContext<'_>, regions: &mut [Region]) -> Result<()> {
+        let family = &ctx.tree.families[ctx.family];
+        let contours: Vec<&Contour> = std::iter::once(family.outer)
+            .chain(family.holes.iter().copied())
+            .map(|c| &ctx.layer.contours[c])
+            .collect();
+        let materials = self.contour_materials(ctx, &contours)?;
+        let n = ctx.info.parts[ctx.part].materials.len();
+        for region in regions.iter_mut() {
+            let d: Vec<f64> = contours.iter().map(|c| c.distance(region.reference)).collect();
+            let w = weights(&d, self.power);
+            let mut fractions = vec![0.0; n];
+            for (m, w) in materials.iter().zip(&w) {
+                fractions[*m] += w;
+            }
+            // The weights sum to 1 up to rounding; make it exact for the check.
+            let sum: f64 = fractions.iter().sum();
+            fractions.iter_mut().for_each(|f| *f /= sum);
+            region.composition = Some(Composition::new(fractions).map_err(|e| {
+                Error::stage(
+                    "grade:idw",
+                    format!(
+                        "layer {}, family {}, region {}: {e}",
+                        ctx.layer.index, ctx.family, region.index
+                    ),
+                )
+            })?);
+        }
+        Ok(())
+    }
+}
+
+fn build(config: &StageConfig<'_>) -> Result<AnyStage> {
+    let o: Options = config.parse()?;
+    if !(o.power.is_finite() && o.power > 0.0) {
+        return Err(config.error("power", "must be a positive number"));
+    }
+    if let Some(HolesSpec::Near(list)) = &o.holes {
+        if list.is_empty() {
+            return Err(config.error("holes", "lists no material"));
+        }
+        if list.iter().any(|n| !n.near.iter().all(|v| v.is_finite())) {
+            return Err(config.error("holes", "`near` must be two finite numbers [x, y]"));
+        }
+    }
+    Ok(AnyStage::Grade(Box::new(Idw {
+        outer: o.outer,
+        holes: o.holes,
+        power: o.power,
+    })))
+}
+
+lamina_core::register_stage!(StageFactory {
+    info: StageInfo {
+        kind: StageKind::Grade,
+        name: "idw",
+        doc: "Each contour of a family carries a material; a region's composition is the inverse-distance weighting (Eq. 22-23) of them at its reference point (cell centre).",
+        options: &[
+            OptionSpec::required("outer", "string", "material of the family's outer contour"),
+            OptionSpec::new(
+                "holes",
+                "string or array of table",
+                "outer's material",
+                "material of every hole, or `[{ near = [x, y], material = \"m\" }, ...]`: each hole takes the material of the nearest listed point"
+            ),
+            OptionSpec::new(
+                "power",
+                "float",
+                "1.0",
+                "exponent of the distances (1 in the paper)"
+            ),
+        ],
+        example: "use = \"idw\"\nouter = \"red\"\nholes = \"green\"",
+    },
+    build,
+});
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Eq. 23 written as the paper does: the product of the other distances over the
+    /// sum of such products.
+    fn eq23(d: &[f64]) -> Vec<f64> {
+        let prod_except = |i: usize| -> f64 {
+            d.iter()
+                .enumerate()
+                .filter(|&(k, _)| k != i)
+                .map(|(_, v)| v)
+                .product()
+        };
+        let denom: f64 = (0..d.len()).map(prod_except).sum();
+        (0..d.len()).map(|i| prod_except(i) / denom).collect()
+    }
+
+    #[test]
+    fn weights_match_eq_23_for_three_and_four_contours() {
+        for d in [vec![1.0, 2.0, 3.0], vec![0.5, 4.0, 2.5, 1.25]] {
+            let w = weights(&d, 1.0);
+            let e = eq23(&d);
+            for (a, b) in w.iter().zip(&e) {
+                assert!((a - b).abs() < 1e-12, "{w:?} vs {e:?}");
+            }
+            assert!((w.iter().sum::<f64>() - 1.0).abs() < 1e-12);
+        }
+        // Three contours at 1, 2, 3: omega_1 = d2 d3 / (d1 d2 + d1 d3 + d2 d3) = 6/11.
+        let w = weights(&[1.0, 2.0, 3.0], 1.0);
+        assert!((w[0] - 6.0 / 11.0).abs() < 1e-12);
+        assert!((w[1] - 3.0 / 11.0).abs() < 1e-12);
+        assert!((w[2] - 2.0 / 11.0).abs() < 1e-12);
+    }
+
+    #[test]
+    fn a_point_on_a_contour_takes_its_material() {
+        assert_eq!(weights(&[0.0, 2.0, 3.0], 1.0), [1.0, 0.0, 0.0]);
+        assert_eq!(weights(&[0.0, 0.0, 3.0], 1.0), [0.5, 0.5, 0.0]);
+    }
+}
