@@ -595,7 +595,12 @@ impl Engine {
             for plan in plans {
                 let plan = plan?;
                 for w in &plan.warnings {
-                    observer.warning(&format!("layer {} (z = {:.4} mm): {w}", plan.index, plan.z));
+                    // Slice warnings name their layer already.
+                    if w.contains(&format!("layer {} (", plan.index)) {
+                        observer.warning(w);
+                    } else {
+                        observer.warning(&format!("layer {} (z = {:.4} mm): {w}", plan.index, plan.z));
+                    }
                 }
                 warnings += plan.warnings.len();
                 regions += plan.parts.iter().map(|p| p.regions.len()).sum::<usize>();

@@ -233,13 +233,9 @@ impl CutMesh {
         let segments = self.segments(slot.cut_z);
         let (loops, open) = chain(&segments);
         let mut contours = Vec::new();
-        let mut closed_gaps = 0;
-        for mut lp in loops.into_iter().chain(close_open(
-            open,
-            self.options.close_gaps,
-            &mut layer.warnings,
-            &mut closed_gaps,
-        )) {
+        let mut gaps = Gaps::default();
+        let closed = close_open(open, self.options.close_gaps, &mut gaps);
+        for mut lp in loops.into_iter().chain(closed) {
             lp.points.dedup_by(|a, b| (*a - *b).norm() <= 1e-12);
             while lp.points.len() > 1 && (lp.points[0] - lp.points[lp.points.len() - 1]).norm() <= 1e-12 {
                 lp.points.pop();
@@ -249,15 +245,53 @@ impl CutMesh {
             }
             contours.push(lp);
         }
-        if closed_gaps > 0 {
+        // Each warning names its layer and height, so it stands on its own wherever
+        // it is shown.
+        let place = format!(
+            "layer {} (z = {:.4} mm, cut at {:.4} mm)",
+            slot.index, slot.z, slot.cut_z
+        );
+        for d in &gaps.dropped {
             layer.warnings.push(format!(
-                "closed {closed_gaps} gap(s) below {} mm",
-                self.options.close_gaps
+                "{place}: dropped an open chain of {} points from ({:.3}, {:.3}) to ({:.3}, {:.3}): gap of {:.3} mm (open mesh?)",
+                d.points, d.first.x, d.first.y, d.last.x, d.last.y, d.gap
+            ));
+        }
+        if let Some((widest, at)) = gaps.widest {
+            layer.warnings.push(format!(
+                "{place}: closed {} gap(s) below {} mm, the widest ({widest:.2e} mm) at ({:.3}, {:.3})",
+                gaps.closed, self.options.close_gaps, at.x, at.y
             ));
         }
         layer.contours = simple_contours(&contours, self.options);
         Ok(layer)
     }
+}
+
+/// What joining open chains did in one layer.
+#[derive(Default)]
+struct Gaps {
+    closed: usize,
+    /// The widest gap closed and where (the end of the chain it was closed from).
+    widest: Option<(f64, Point2)>,
+    dropped: Vec<Dropped>,
+}
+
+impl Gaps {
+    fn close(&mut self, gap: f64, at: Point2) {
+        self.closed += 1;
+        if self.widest.is_none_or(|(w, _)| gap > w) {
+            self.widest = Some((gap, at));
+        }
+    }
+}
+
+/// An open chain that could not be closed.
+struct Dropped {
+    points: usize,
+    first: Point2,
+    last: Point2,
+    gap: f64,
 }
 
 /// Resolves the loops into simple, non-crossing contours (outer counter-clockwise,
@@ -395,18 +429,13 @@ impl Ends<'_> {
 
 /// Joins open chains end to start across gaps smaller than `tolerance`; chains that
 /// still do not close are reported and dropped (stray sheets).
-fn close_open(
-    mut open: Vec<Vec<Point2>>,
-    tolerance: f64,
-    warnings: &mut Vec<String>,
-    closed_gaps: &mut usize,
-) -> Vec<Contour> {
+fn close_open(mut open: Vec<Vec<Point2>>, tolerance: f64, gaps: &mut Gaps) -> Vec<Contour> {
     let mut out = Vec::new();
     while let Some(mut chain) = open.pop() {
         loop {
             let (first, last) = (chain[0], chain[chain.len() - 1]);
             if (last - first).norm() <= tolerance && chain.len() > 2 {
-                *closed_gaps += 1;
+                gaps.close((last - first).norm(), last);
                 out.push(Contour::new(chain));
                 break;
             }
@@ -421,24 +450,21 @@ fn close_open(
                 }
             }
             match best {
-                Some((i, rev, _)) => {
+                Some((i, rev, d)) => {
                     let mut next = open.swap_remove(i);
                     if rev {
                         next.reverse();
                     }
-                    *closed_gaps += 1;
+                    gaps.close(d, last);
                     chain.extend(next);
                 }
                 None => {
-                    let gap = (last - first).norm();
-                    warnings.push(format!(
-                        "dropped an open chain of {} points from ({:.3}, {:.3}) to ({:.3}, {:.3}): gap of {gap:.3} mm (open mesh?)",
-                        chain.len(),
-                        first.x,
-                        first.y,
-                        last.x,
-                        last.y
-                    ));
+                    gaps.dropped.push(Dropped {
+                        points: chain.len(),
+                        first,
+                        last,
+                        gap: (last - first).norm(),
+                    });
                     break;
                 }
             }
@@ -526,5 +552,11 @@ mod tests {
         let l = c.cut(&slot(0.5)).expect("cut");
         assert!(l.contours.is_empty());
         assert_eq!(l.warnings.len(), 1, "{:?}", l.warnings);
+        let w = &l.warnings[0];
+        assert!(
+            w.starts_with("layer 0 (z = 0.5000 mm, cut at 0.5000 mm): dropped an open chain"),
+            "{w}"
+        );
+        assert!(w.contains("gap of 1.000 mm"), "{w}");
     }
 }
