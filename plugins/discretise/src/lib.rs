@@ -3,7 +3,11 @@
 //! reference.
 //!
 //! - `offset`: rings between equally spaced inward offsets (Method 1 of the
-//!   topological-hierarchy paper, N_R = int(L_s / D_N)).
+//!   topological-hierarchy paper, N_R = int(L_s / D_N));
+//! - `step-width`: the grading step-width truncation, N_c = 1 / t_g + 1 regions at
+//!   levels 0, t_g, ..., 1 bounded by offsets at the half steps;
+//! - `distance-field`: iso-contours of a normalised distance field to a material
+//!   feature (boundary, outer, holes, centre, point), clipped to the family.
 //!
 //! All geometry of a family runs on one integer grid ([`grid`]); each region is the
 //! boolean difference of two nested sets read from one overlay graph ([`bands`]), so
@@ -11,9 +15,13 @@
 
 mod bands;
 pub mod check;
+mod distance_field;
+pub mod field;
 mod grid;
 mod inset;
+pub mod iso;
 pub mod measure;
 mod offset;
 mod regions;
 pub mod shapes;
+pub mod step_width;

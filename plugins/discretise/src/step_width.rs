@@ -1,0 +1,253 @@
+//! `step-width` (grading-step-width paper, 3.1): the grading function f of the normalised
+//! distance from the grading reference is truncated to the levels 0, t_g, 2 t_g, ..., 1:
+//! f = 0 below t_g / 2 and f = t_g (u + 1) for (u + 1/2) t_g <= f < (u + 3/2) t_g, which
+//! gives N_c = 1 / t_g + 1 homogeneous regions bounded by offsets at the half steps.
+
+use lamina_core::stage::{
+    AnyStage, Discretiser, FamilyContext, OptionSpec, StageConfig, StageInfo, StageKind,
+};
+use lamina_core::{Polygon, Region, Result, StageFactory};
+use serde::Deserialize;
+
+use crate::bands::{clean, nested_bands};
+use crate::grid::Grid;
+use crate::inset::{From, Inset, Join};
+use crate::measure::{contour_distance, pole};
+use crate::regions::{from_bands, whole};
+
+const STAGE: &str = "discretise:step-width";
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct Options {
+    #[serde(default = "default_step")]
+    step: f64,
+    #[serde(default = "default_power")]
+    power: f64,
+    #[serde(default)]
+    width: Option<f64>,
+    #[serde(default)]
+    from: From,
+    #[serde(default)]
+    join: Join,
+    #[serde(default = "crate::offset::default_tolerance")]
+    tolerance: f64,
+}
+
+fn default_step() -> f64 {
+    0.25
+}
+
+fn default_power() -> f64 {
+    1.0
+}
+
+/// The truncation: N_c levels, and the normalised distances where the level changes.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Truncation {
+    /// t_g.
+    pub step: f64,
+    /// N_c = 1 / t_g + 1.
+    pub count: usize,
+}
+
+impl Truncation {
+    /// Refuses a step outside (0, 1] or one that does not divide 1.
+    pub fn new(step: f64) -> std::result::Result<Self, String> {
+        if step.is_nan() || step <= 0.0 || step > 1.0 {
+            return Err(format!("the step t_g must lie in (0, 1], not {step}"));
+        }
+        let steps = (1.0 / step).round();
+        if (steps * step - 1.0).abs() > 1e-9 || steps > 10_000.0 {
+            return Err(format!(
+                "the step t_g = {step} must divide 1 (1 / t_g a whole number)"
+            ));
+        }
+        Ok(Self {
+            step,
+            count: steps as usize + 1,
+        })
+    }
+
+    /// Level of band k: k t_g.
+    pub fn level(&self, k: usize) -> f64 {
+        (k as f64 * self.step).min(1.0)
+    }
+
+    /// The values of f where band k - 1 ends and band k starts, k in 1..N_c:
+    /// (k - 1/2) t_g.
+    pub fn thresholds(&self) -> Vec<f64> {
+        (1..self.count).map(|k| (k as f64 - 0.5) * self.step).collect()
+    }
+
+    /// The truncated value of f (the level of the band f falls in).
+    pub fn truncate(&self, f: f64) -> f64 {
+        let k = self.thresholds().iter().filter(|&&t| f >= t).count();
+        self.level(k)
+    }
+}
+
+struct StepWidth {
+    truncation: Truncation,
+    power: f64,
+    width: Option<f64>,
+    inset: Inset,
+}
+
+/// The largest distance from the reference inside the family, which normalises d:
+/// the inradius when every boundary is a reference; with the outer contour alone, the
+/// farthest hole vertex from the outer (or the inradius without holes).
+fn far_end(polygon: &Polygon, from: From) -> Option<f64> {
+    let inradius = pole(polygon, polygon.bbox().diagonal() * 1e-3).map(|(_, r)| r);
+    match from {
+        From::All => inradius,
+        From::Outer => {
+            let hole_far = polygon
+                .holes
+                .iter()
+                .flat_map(|h| h.points.iter())
+                .map(|&p| polygon.outer.distance(p))
+                .fold(0.0f64, f64::max);
+            let near = polygon
+                .holes
+                .iter()
+                .map(|h| contour_distance(&polygon.outer, h))
+                .fold(f64::INFINITY, f64::min);
+            let far = if near.is_finite() { hole_far.max(near) } else { 0.0 };
+            match inradius {
+                Some(r) => Some(r.max(far)),
+                None => (far > 0.0).then_some(far),
+            }
+        }
+    }
+}
+
+impl Discretiser for StepWidth {
+    fn discretise(&self, ctx: &FamilyContext<'_>) -> Result<Vec<Region>> {
+        let polygon = ctx.tree.family_polygon(&ctx.layer.contours, ctx.family);
+        let Ok(grid) = Grid::for_polygon(&polygon, STAGE) else {
+            return Ok(whole(ctx, polygon));
+        };
+        let base = clean(&vec![grid.shape(&polygon)]);
+        let scale = match self.width {
+            Some(w) => Some(w),
+            None => far_end(&polygon, self.inset.from),
+        };
+        let Some(scale) = scale.filter(|s| *s > 0.0 && !base.is_empty()) else {
+            return Ok(whole(ctx, polygon));
+        };
+        // f(d) = (d / scale)^power: a threshold t on f is the distance scale t^(1 / power).
+        let distances: Vec<f64> = self
+            .truncation
+            .thresholds()
+            .iter()
+            .map(|t| scale * t.powf(1.0 / self.power))
+            .collect();
+        let count = self.truncation.count;
+        let bands = nested_bands(&base, count, |k| {
+            self.inset.apply(&grid, &base, distances[k - 1], STAGE)
+        })?;
+        Ok(from_bands(ctx, &grid, &bands, count, |k| {
+            self.truncation.level(k)
+        }))
+    }
+}
+
+fn build(config: &StageConfig<'_>) -> Result<AnyStage> {
+    let o: Options = config.parse()?;
+    let truncation = Truncation::new(o.step).map_err(|e| config.error("step", e))?;
+    if o.power.is_nan() || o.power <= 0.0 || o.power.is_infinite() {
+        return Err(config.error("power", format!("`power` must be positive, not {}", o.power)));
+    }
+    if let Some(w) = o.width
+        && (w.is_nan() || w <= 0.0 || w.is_infinite())
+    {
+        return Err(config.error(
+            "width",
+            format!("`width` must be a positive number of mm, not {w}"),
+        ));
+    }
+    if o.tolerance.is_nan() || o.tolerance <= 0.0 {
+        return Err(config.error("tolerance", "`tolerance` must be positive"));
+    }
+    Ok(AnyStage::Discretise(Box::new(StepWidth {
+        truncation,
+        power: o.power,
+        width: o.width,
+        inset: Inset {
+            from: o.from,
+            join: o.join,
+            tolerance: o.tolerance,
+        },
+    })))
+}
+
+lamina_core::register_stage!(StageFactory {
+    info: StageInfo {
+        kind: StageKind::Discretise,
+        name: "step-width",
+        doc: "Grading step-width truncation: N_c = 1 / t_g + 1 regions at levels 0, t_g, ..., 1, split at the half steps of f(d).",
+        options: &[
+            OptionSpec::new(
+                "step",
+                "float",
+                "0.25",
+                "grading step-width t_g in (0, 1]; 1 / t_g must be whole"
+            ),
+            OptionSpec::new(
+                "power",
+                "float",
+                "1.0",
+                "f(d) = (d / width)^power, the grading function of the distance"
+            ),
+            OptionSpec::new(
+                "width",
+                "float",
+                "none",
+                "grading width (mm): f = 1 beyond it; default the family's deepest point from the reference"
+            ),
+            OptionSpec::new(
+                "from",
+                "string",
+                "\"all\"",
+                "distance reference: `all` boundaries or the `outer` contour"
+            ),
+            OptionSpec::new(
+                "join",
+                "string",
+                "\"round\"",
+                "offset corners: `round` (exact distance), `miter` or `bevel`"
+            ),
+            OptionSpec::new(
+                "tolerance",
+                "float",
+                "0.005",
+                "largest arc-to-chord distance of round corners (mm)"
+            ),
+        ],
+        example: "use = \"step-width\"\nstep = 0.25",
+    },
+    build,
+});
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn quarter_steps_give_five_levels_with_half_step_thresholds() {
+        let t = Truncation::new(0.25).expect("valid");
+        assert_eq!(t.count, 5);
+        let levels: Vec<f64> = (0..t.count).map(|k| t.level(k)).collect();
+        assert_eq!(levels, vec![0.0, 0.25, 0.5, 0.75, 1.0]);
+        assert_eq!(t.thresholds(), vec![0.125, 0.375, 0.625, 0.875]);
+        assert_eq!(t.truncate(0.1), 0.0);
+        assert_eq!(t.truncate(0.125), 0.25);
+        assert_eq!(t.truncate(0.6), 0.5);
+        assert_eq!(t.truncate(0.9), 1.0);
+        assert_eq!(Truncation::new(1.0).expect("valid").count, 2);
+        assert!(Truncation::new(0.3).is_err());
+        assert!(Truncation::new(0.0).is_err());
+        assert!(Truncation::new(f64::NAN).is_err());
+    }
+}

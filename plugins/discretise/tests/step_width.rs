@@ -1,0 +1,81 @@
+//! The `step-width` discretiser: t_g = 0.25 gives the five levels 0, .25, .5, .75, 1
+//! with boundaries at the half steps, and the regions tile the family.
+
+mod common;
+
+use common::*;
+
+#[test]
+fn quarter_step_on_a_tube_gives_five_bands_at_half_steps() {
+    let fam = OneFamily::new(circle(0.0, 0.0, 10.0, 512), vec![circle(0.0, 0.0, 2.0, 512)]);
+    let regions = fam.run(&*stage("use = \"step-width\"\nstep = 0.25\nfrom = \"outer\""));
+    assert_tiles(&fam.polygon(), &regions);
+    assert_eq!(indices(&regions), vec![0, 1, 2, 3, 4]);
+    let levels: Vec<f64> = regions.iter().map(|r| r.level).collect();
+    assert_eq!(levels, vec![0.0, 0.25, 0.5, 0.75, 1.0]);
+    assert!(regions.iter().all(|r| r.count == 5));
+    // d is normalised by the wall (8 mm): boundaries at 1, 3, 5 and 7 mm from the outer.
+    let ring = |a: f64, b: f64| std::f64::consts::PI * (a * a - b * b);
+    let want = [
+        ring(10.0, 9.0),
+        ring(9.0, 7.0),
+        ring(7.0, 5.0),
+        ring(5.0, 3.0),
+        ring(3.0, 2.0),
+    ];
+    for (r, w) in regions.iter().zip(want) {
+        assert!(
+            (r.area() - w).abs() / w < 3e-3,
+            "band {}: {} vs {w}",
+            r.index,
+            r.area()
+        );
+    }
+}
+
+#[test]
+fn grading_width_and_power_move_the_boundaries() {
+    let fam = OneFamily::new(rect(0.0, 0.0, 40.0, 40.0), vec![]);
+    // f = (d / 4)^2: thresholds 0.25, 0.75 on f are d = 2 mm and d = 3.46 mm.
+    let regions = fam.run(&*stage(
+        "use = \"step-width\"\nstep = 0.5\nwidth = 4.0\npower = 2.0",
+    ));
+    assert_tiles(&fam.polygon(), &regions);
+    assert_eq!(indices(&regions), vec![0, 1, 2]);
+    let d1: f64 = 2.0;
+    let d2 = 4.0 * 0.75f64.sqrt();
+    let band0 = 1600.0 - (40.0 - 2.0 * d1).powi(2);
+    assert!(
+        (regions[0].area() - band0).abs() / band0 < 1e-6,
+        "{}",
+        regions[0].area()
+    );
+    let core = (40.0 - 2.0 * d2).powi(2);
+    assert!((regions[2].area() - core).abs() / core < 1e-6);
+}
+
+#[test]
+fn step_width_tiles_awkward_families() {
+    let fam = OneFamily::new(
+        rect(0.0, 0.0, 20.0, 20.0),
+        vec![
+            rect(1.0, 1.0, 8.0, 18.0),
+            rect(10.0, 1.0, 9.0, 9.0),
+            circle(15.0, 15.0, 3.0, 40),
+        ],
+    );
+    for text in [
+        "use = \"step-width\"",
+        "use = \"step-width\"\nstep = 0.1\nfrom = \"outer\"",
+        "use = \"step-width\"\nstep = 1.0",
+    ] {
+        let regions = fam.run(&*stage(text));
+        assert_tiles(&fam.polygon(), &regions);
+    }
+}
+
+#[test]
+fn steps_that_do_not_divide_one_are_refused() {
+    assert!(build_error("use = \"step-width\"\nstep = 0.3").contains("step"));
+    assert!(build_error("use = \"step-width\"\npower = 0.0").contains("power"));
+}
