@@ -23,6 +23,7 @@ fn models_dir() -> Option<PathBuf> {
 
 fn registry() -> Registry {
     // Reference the plugin crates so their stages are linked into this test.
+    use lamina_discretise as _;
     use lamina_model as _;
     use lamina_slice as _;
     use lamina_sort as _;
@@ -290,3 +291,98 @@ fn real_models_slice_into_closed_simple_nested_contours() {
         );
     }
 }
+
+fn discretiser(text: &str) -> Box<dyn lamina_core::stage::Discretiser> {
+    let table = lamina_core::pipeline::TableRef::parse_snippet("discretise", text).expect("snippet");
+    let scripts = lamina_core::script::ScriptHost::new(".", Default::default());
+    match registry()
+        .build(StageKind::Discretise, &table, &scripts, std::path::Path::new("."))
+        .expect("discretiser")
+    {
+        lamina_core::AnyStage::Discretise(d) => d,
+        _ => panic!("not a discretiser"),
+    }
+}
+
+/// Every discretiser's sub-regions tile every family of the sampled layers of every
+/// model at 0.2 mm: areas within 1e-3 of the family's, no overlap, simple polygons
+/// oriented outer counter-clockwise and holes clockwise. At most 24 layers per model,
+/// spread over its height, keep the run short.
+#[test]
+#[ignore = "needs ../shared/models; run by .ci/run"]
+fn real_models_discretise_into_tiling_sub_regions() {
+    let Some(dir) = models_dir() else { return };
+    let sorter = sorter();
+    let slicer = slicer(0.2);
+    let stages: Vec<(&str, Box<dyn lamina_core::stage::Discretiser>)> = DISCRETISERS
+        .iter()
+        .map(|&text| (text, discretiser(text)))
+        .collect();
+    for m in MODELS {
+        let path = dir.join(m.file);
+        if !path.exists() {
+            println!("note: {} absent, skipped", path.display());
+            continue;
+        }
+        let start = std::time::Instant::now();
+        let mesh = Arc::new(load(&dir, m.file, m.scale));
+        let bb = mesh.bbox();
+        let prepared: Box<dyn MeshSlicer> = slicer.prepare(mesh.clone()).expect("prepare");
+        let info = RunInfo {
+            base_dir: dir.clone(),
+            materials: Vec::new(),
+            parts: Vec::new(),
+            z_min: bb.min.z,
+            z_max: bb.max.z,
+        };
+        let slots = slicer
+            .layers(std::slice::from_ref(&mesh), &info, None)
+            .expect("slots");
+        let step = slots.len().div_ceil(24).max(1);
+        let (mut families, mut regions, mut worst_area, mut worst_overlap) = (0, 0, 0.0f64, 0.0f64);
+        for slot in slots.iter().step_by(step) {
+            let layer = prepared.slice(slot).expect("slices");
+            let tree = sorter.sort(&layer).expect("sorts");
+            for f in 0..tree.families.len() {
+                let family = tree.family_polygon(&layer.contours, f);
+                families += 1;
+                let ctx = lamina_core::stage::FamilyContext {
+                    info: &info,
+                    layer: &layer,
+                    tree: &tree,
+                    part: 0,
+                    family: f,
+                };
+                for (text, stage) in &stages {
+                    let out = stage.discretise(&ctx).expect("discretises");
+                    regions += out.len();
+                    let t = lamina_discretise::check::tiling(&family, &out);
+                    assert!(
+                        t.is_ok(1e-3),
+                        "{}: layer {} family {f} ({text}): {t:?}",
+                        m.file,
+                        slot.index
+                    );
+                    worst_area = worst_area.max(t.area_error);
+                    worst_overlap = worst_overlap.max(t.overlap);
+                }
+            }
+        }
+        println!(
+            "{:<36} {:>4} layers {:>5} families {:>7} regions  area error <= {:.1e}  overlap <= {:.1e} {:>8.1} ms",
+            m.file,
+            slots.len().div_ceil(step),
+            families,
+            regions,
+            worst_area,
+            worst_overlap,
+            start.elapsed().as_secs_f64() * 1e3
+        );
+    }
+}
+
+/// The discretisers the tiling acceptance runs on every family.
+const DISCRETISERS: &[&str] = &[
+    "use = \"offset\"\ncount = 10\nspacing = 0.4",
+    "use = \"offset\"\nnozzle = 0.4\nfrom = \"outer\"",
+];

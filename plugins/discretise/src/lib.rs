@@ -15,7 +15,7 @@
 
 mod bands;
 pub mod check;
-mod distance_field;
+pub mod distance_field;
 pub mod field;
 mod grid;
 mod inset;

@@ -1,0 +1,169 @@
+//! Discretising benchmark on 3DBenchy at 0.2 mm (from ../shared/models or
+//! $LAMINA_MODELS): the `offset` discretiser with N_R = 10 at 0.4 mm steps on every
+//! family of every layer (all threads), and a 512 x 512 distance field with 10
+//! iso-levels per layer (one thread). Slicing is done beforehand and not timed.
+//!
+//! Run: `cargo bench --bench discretise` (the median of 5 runs; `--quick` runs once).
+
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+
+use lamina_core::stage::{Discretiser, FamilyContext, MeshSlicer};
+use lamina_core::{AnyStage, ContourTree, Layer, Registry, RunInfo, StageKind};
+use lamina_discretise::distance_field::{DistanceField, Feature, Levels};
+use rayon::prelude::*;
+
+fn stage(kind: StageKind, text: &str, dir: &Path) -> AnyStage {
+    use lamina_discretise as _;
+    use lamina_model as _;
+    use lamina_slice as _;
+    use lamina_sort as _;
+    let table = lamina_core::pipeline::TableRef::parse_snippet(kind.name(), text).expect("snippet");
+    let scripts = lamina_core::script::ScriptHost::new(dir, Default::default());
+    Registry::linked()
+        .expect("registry")
+        .build(kind, &table, &scripts, dir)
+        .expect("stage builds")
+}
+
+/// Every layer of the model at 0.2 mm with its contour tree.
+fn layers(dir: &Path, file: &str) -> (RunInfo, Vec<(Layer, ContourTree)>) {
+    let AnyStage::Model(source) = stage(
+        StageKind::Model,
+        &format!("use = \"stl\"\nfile = \"{file}\""),
+        dir,
+    ) else {
+        unreachable!()
+    };
+    let mut meshes = source.load(dir).expect("loads");
+    lamina_core::runtime::place(&mut meshes, 1.0, lamina_core::pipeline::Placement::Bed);
+    let mesh = Arc::new(meshes.remove(0));
+    let AnyStage::Slice(slicer) = stage(StageKind::Slice, "use = \"uniform\"\nthickness = 0.2", dir) else {
+        unreachable!()
+    };
+    let AnyStage::Sort(sorter) = stage(StageKind::Sort, "use = \"hierarchy\"", dir) else {
+        unreachable!()
+    };
+    let bb = mesh.bbox();
+    let info = RunInfo {
+        base_dir: dir.to_path_buf(),
+        materials: Vec::new(),
+        parts: Vec::new(),
+        z_min: bb.min.z,
+        z_max: bb.max.z,
+    };
+    let slots = slicer
+        .layers(std::slice::from_ref(&mesh), &info, None)
+        .expect("slots");
+    let prepared: Box<dyn MeshSlicer> = slicer.prepare(mesh).expect("prepare");
+    let layers = slots
+        .par_iter()
+        .map(|s| {
+            let layer = prepared.slice(s).expect("slice");
+            let tree = sorter.sort(&layer).expect("sort");
+            (layer, tree)
+        })
+        .collect();
+    (info, layers)
+}
+
+fn median(mut v: Vec<Duration>) -> Duration {
+    v.sort();
+    v[v.len() / 2]
+}
+
+fn main() {
+    let quick = std::env::args().any(|a| a == "--quick");
+    let dir = std::env::var_os("LAMINA_MODELS")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../shared/models"));
+    if !dir.join("3DBenchy.stl").exists() {
+        println!(
+            "note: 3DBenchy.stl not found in {}; benchmark skipped",
+            dir.display()
+        );
+        return;
+    }
+    let runs = if quick { 1 } else { 5 };
+    let (info, layers) = layers(&dir, "3DBenchy.stl");
+    let vertices: usize = layers
+        .iter()
+        .flat_map(|(l, _)| &l.contours)
+        .map(|c| c.len())
+        .sum();
+    let families: usize = layers.iter().map(|(_, t)| t.families.len()).sum();
+    println!(
+        "3DBenchy.stl at 0.2 mm: {} layers, {families} families, {vertices} contour vertices",
+        layers.len()
+    );
+
+    let AnyStage::Discretise(offset) = stage(
+        StageKind::Discretise,
+        "use = \"offset\"\ncount = 10\nspacing = 0.4",
+        &dir,
+    ) else {
+        unreachable!()
+    };
+    let run_offset = |d: &dyn Discretiser| -> (Duration, usize) {
+        let start = Instant::now();
+        let regions: usize = layers
+            .par_iter()
+            .map(|(layer, tree)| {
+                (0..tree.families.len())
+                    .map(|family| {
+                        let ctx = FamilyContext {
+                            info: &info,
+                            layer,
+                            tree,
+                            part: 0,
+                            family,
+                        };
+                        d.discretise(&ctx).expect("discretises").len()
+                    })
+                    .sum::<usize>()
+            })
+            .sum();
+        (start.elapsed(), regions)
+    };
+    let _ = run_offset(offset.as_ref());
+    let mut times = Vec::new();
+    let mut regions = 0;
+    for _ in 0..runs {
+        let (t, n) = run_offset(offset.as_ref());
+        times.push(t);
+        regions = n;
+    }
+    println!(
+        "offset N_R = 10, 0.4 mm: {:>8.1} ms for the whole job on {} threads ({regions} regions; target <= 2000 ms)",
+        median(times).as_secs_f64() * 1e3,
+        rayon::current_num_threads()
+    );
+
+    let field = DistanceField {
+        feature: Feature::Boundary,
+        point: None,
+        levels: Levels::Equal(11),
+        cells: 512,
+        cell_size: None,
+    };
+    let mut per_layer = Vec::new();
+    for _ in 0..runs {
+        let start = Instant::now();
+        let mut loops = 0;
+        for (layer, tree) in &layers {
+            for f in 0..tree.families.len() {
+                let polygon = tree.family_polygon(&layer.contours, f);
+                if let Some((_, sets)) = field.iso_sets(&polygon) {
+                    loops += sets.iter().map(Vec::len).sum::<usize>();
+                }
+            }
+        }
+        per_layer.push(start.elapsed() / layers.len() as u32);
+        std::hint::black_box(loops);
+    }
+    println!(
+        "distance field 512 x 512 + 10 iso-levels: {:>6.2} ms per layer on one thread (target <= 5 ms)",
+        median(per_layer).as_secs_f64() * 1e3
+    );
+}
