@@ -21,8 +21,11 @@ fn run(pipeline: &str, json: &str) -> serde_json::Value {
     serde_json::from_str(&text).expect("valid json")
 }
 
-/// (colour, red fraction) of the gear's regions, per layer index.
-fn gear_layers(plan: &serde_json::Value) -> Vec<(u64, Vec<([u8; 3], f64)>)> {
+/// Colour and red fraction of one region.
+type Shade = ([u8; 3], f64);
+
+/// The shades of the gear's regions, per layer index.
+fn gear_layers(plan: &serde_json::Value) -> Vec<(u64, Vec<Shade>)> {
     plan["layers"]
         .as_array()
         .expect("layers")
