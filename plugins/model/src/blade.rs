@@ -183,6 +183,10 @@ pub struct Blade {
 /// Where the twist axis crosses the chord (the quarter chord, the usual stacking line).
 const TWIST_AXIS: f64 = 0.25;
 
+/// The largest twist between two sections: beyond it the ruled bands between sections
+/// stray too far from the airfoil to be a fair approximation.
+const MAX_STEP_DEGREES: f64 = 5.0;
+
 /// The cavities span the part of the chord where the room left inside the skin is at
 /// least this share of its maximum, which keeps them out of the thin leading and
 /// trailing edges.
@@ -348,29 +352,54 @@ impl Blade {
         self.twist.to_radians() / (self.sections - 1) as f64
     }
 
-    /// Checks the ruled band between the first two sections at a few heights: the
-    /// walls must neither cross nor come closer than `gap_needed`.
+    /// Checks the ruled band between the first two sections: the walls of different
+    /// rings must stay `gap_needed` apart and every ring simple.
+    ///
+    /// A horizontal section of the band is exact in the height fraction s: its vertices
+    /// move linearly with s. The distance between two segments changes by at most the
+    /// largest move of their end points, so with samples closer than `gap_needed` in
+    /// that move, walls at least `gap_needed` apart at every sample are apart at every
+    /// height in between: the skin and rib thicknesses are positive throughout, not
+    /// only at the samples. Each ring's own simplicity is checked at the samples, with
+    /// the twist per section capped so that a band stays close to its sections.
     fn check_bands(&self, rings: &[Vec<Point2>], gap_needed: f64) -> Result<(), Invalid> {
-        let (sin, cos) = self.step().sin_cos();
+        let step = self.step();
+        let too_far = |why: String| {
+            Invalid::new(
+                "sections",
+                format!(
+                    "a twist of {:.2} degrees per section bends the walls too far between sections \
+                     ({why}); use more sections",
+                    step.abs().to_degrees()
+                ),
+            )
+        };
+        if step.abs() > MAX_STEP_DEGREES.to_radians() {
+            return Err(too_far(format!("at most {MAX_STEP_DEGREES} degrees")));
+        }
+        let (sin, cos) = step.sin_cos();
         let rotate = |p: &Point2| Point2::new(cos * p.x - sin * p.y, sin * p.x + cos * p.y);
-        for s in [0.125, 0.25, 0.5, 0.75, 0.875] {
-            let loops: Vec<Vec<Point2>> = rings
-                .iter()
-                .map(|a| {
-                    let b: Vec<Point2> = a.iter().map(rotate).collect();
-                    band_section(a, &b, s)
-                })
-                .collect();
-            check_rings(&loops, gap_needed).map_err(|m| {
-                Invalid::new(
-                    "sections",
-                    format!(
-                        "a twist of {:.2} degrees per section bends the walls too far between \
-                         sections ({m}); use more sections",
-                        self.step().to_degrees()
-                    ),
-                )
-            })?;
+        let pairs: Vec<(&Vec<Point2>, Vec<Point2>)> = rings
+            .iter()
+            .map(|a| (a, a.iter().map(rotate).collect()))
+            .collect();
+        // The largest move of a section vertex over the band: to b_i or b_(i+1).
+        let travel = pairs
+            .iter()
+            .flat_map(|(a, b)| {
+                (0..a.len()).map(move |i| (b[i] - a[i]).norm().max((b[(i + 1) % a.len()] - a[i]).norm()))
+            })
+            .fold(0.0, f64::max);
+        let samples = if rings.len() > 1 {
+            (travel / gap_needed).ceil() as usize + 1
+        } else {
+            8
+        }
+        .clamp(4, 400);
+        for k in 1..samples {
+            let s = k as f64 / samples as f64;
+            let loops: Vec<Vec<Point2>> = pairs.iter().map(|(a, b)| band_section(a, b, s)).collect();
+            check_rings(&loops, gap_needed).map_err(too_far)?;
         }
         Ok(())
     }
@@ -672,6 +701,20 @@ mod tests {
         let b = blade(2);
         let rings = b.base_rings().expect("rings");
         let gap = check_rings(&rings, 0.0).expect("valid");
+        let (sin, cos) = b.step().sin_cos();
+        let mid: Vec<Vec<Point2>> = rings
+            .iter()
+            .map(|a| {
+                let turned: Vec<Point2> = a
+                    .iter()
+                    .map(|p| Point2::new(cos * p.x - sin * p.y, sin * p.x + cos * p.y))
+                    .collect();
+                band_section(a, &turned, 0.5)
+            })
+            .collect();
+        let mid_gap = check_rings(&mid, 0.0).expect("valid between sections");
+        println!("thinnest wall: {gap:.4} mm at a section, {mid_gap:.4} mm between sections");
+        assert!(mid_gap > 0.9 * b.wall.min(b.rib), "{mid_gap}");
         assert!(gap > 0.9 * b.wall.min(b.rib), "{gap}");
         // The outline and straight cavities of an untwisted blade are simple too.
         let straight = Blade { twist: 0.0, ..b };
@@ -729,6 +772,29 @@ mod tests {
             let e = b.mesh().err().unwrap_or_else(|| panic!("{option} accepted"));
             assert_eq!(e.option, option, "{e}");
         }
+    }
+
+    #[test]
+    fn steep_twists_keep_their_walls_or_are_refused() {
+        // 5 degrees per section, either way, at the limit.
+        for twist in [60.0, -60.0] {
+            let b = Blade {
+                twist,
+                sections: 13,
+                ..blade(2)
+            };
+            let m = b.mesh().expect("twisted blade");
+            assert_eq!(edge_defect(&m), None);
+        }
+        let e = Blade {
+            twist: 61.0,
+            sections: 13,
+            ..blade(2)
+        }
+        .mesh()
+        .err()
+        .map(|e| e.option);
+        assert_eq!(e, Some("sections"));
     }
 
     #[test]
