@@ -134,3 +134,66 @@ fn a_part_without_thickness_is_named() {
     assert!(err.contains("part `pipe` has no layer thickness"), "{err}");
     assert!(err.contains("p.toml"), "names the file: {err}");
 }
+
+#[test]
+fn the_pipes_microstructure_is_written_as_bitmap_layers() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let plan = run_pipe(dir.path());
+    let header = std::fs::read_to_string(dir.path().join("inner-bitmap.hdr")).expect("header");
+    let data = std::fs::read(dir.path().join("inner-bitmap.dat")).expect("data");
+    assert!(dir.path().join("pipe-work-cycles.cli").exists());
+    let records: Vec<Vec<f64>> = header
+        .lines()
+        .filter(|l| !l.starts_with('#'))
+        .map(|l| l.split_whitespace().map(|v| v.parse().expect("number")).collect())
+        .collect();
+    // One bitmap per layer of the inner region, in build order.
+    let inner_layers: Vec<u64> = plan["layers"]
+        .as_array()
+        .expect("layers")
+        .iter()
+        .filter(|l| l["region"] == 0)
+        .map(|l| l["index"].as_u64().expect("index"))
+        .collect();
+    assert_eq!(
+        records.iter().map(|r| r[0] as u64).collect::<Vec<_>>(),
+        inner_layers
+    );
+    let (pi, r_void, period) = (std::f64::consts::PI, 0.25, [1.0, 1.0, 0.6]);
+    for rec in &records {
+        let (cut_z, pixel, ox, oy) = (rec[3], rec[4], rec[5], rec[6]);
+        let (w, h, offset) = (rec[7] as usize, rec[8] as usize, rec[9] as usize);
+        let bits = &data[offset..offset + h * (w + 1)];
+        let bit = |col: usize, row: usize| bits[row * (w + 1) + col] == b'1';
+        let mut ones = 0usize;
+        for row in 0..h {
+            assert_eq!(bits[row * (w + 1) + w], b'\n');
+            for col in 0..w {
+                let (x, y) = (ox + (col as f64 + 0.5) * pixel, oy + (row as f64 + 0.5) * pixel);
+                let rad = x.hypot(y);
+                if bit(col, row) {
+                    ones += 1;
+                    assert!(
+                        (5.0 - pixel..=7.0 + pixel).contains(&rad),
+                        "material outside the ring"
+                    );
+                }
+            }
+        }
+        // The voids this layer cuts: lattice rows within the radius of the cut height.
+        let k = (cut_z / period[2]).round();
+        let dz = k * period[2] - cut_z;
+        let rc2 = r_void * r_void - dz * dz;
+        let ring = pi * (49.0 - 25.0);
+        let area = ones as f64 * pixel * pixel;
+        if rc2 > 0.0 {
+            // A void centre well inside the ring is empty: (6, 0) is a lattice point.
+            let (col, row) = (((6.0 - ox) / pixel) as usize, ((0.0 - oy) / pixel) as usize);
+            assert!(!bit(col, row), "void at (6, 0), z = {cut_z}");
+            // The voids take material away.
+            assert!(area < ring * 0.99, "{area} of {ring}");
+        } else {
+            assert!((area - ring).abs() < 0.01 * ring, "solid layer: {area} vs {ring}");
+        }
+    }
+}

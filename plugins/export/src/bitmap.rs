@@ -1,0 +1,456 @@
+//! `bitmap`: the bitmap layers of periodic-microstructure regions (cmpm-process-planning
+//! 4.3 and Fig. 10). A microstructure is an array of spherical voids at the inserting
+//! points of a lattice; each layer of the chosen parts is a grid of pixels, 1 where
+//! there is material and 0 in the voids or outside the part.
+//!
+//! Only the inserting points near the layer are visited: a void of radius r centred at
+//! height z_k meets the cutting plane z_c only when |z_k - z_c| < r, so the lattice rows
+//! k inside that narrow band (the paper's two auxiliary planes at distance L_max = r
+//! around the layer, Fig. 5) are computed directly instead of testing every cell.
+//!
+//! Two files stream out: a header with one line per layer (layer number, height,
+//! thickness, cut height, pixel size, origin, size and the offset of its bitmap in the
+//! data file), and the data file of all bitmaps, one row of `0`/`1` characters per
+//! pixel row from the origin's row upward.
+
+use std::io::Write;
+use std::path::PathBuf;
+
+use lamina_core::stage::{
+    AnyStage, ExportContext, Exporter, LayerSink, OptionSpec, StageConfig, StageInfo, StageKind,
+};
+use lamina_core::{BBox2, Contour, Error, LayerPlan, Result, RunInfo, StageFactory};
+use serde::Deserialize;
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct Options {
+    #[serde(default = "d_path")]
+    path: PathBuf,
+    #[serde(default)]
+    parts: Vec<String>,
+    #[serde(default = "d_pixel")]
+    pixel: f64,
+    #[serde(default = "d_period")]
+    period: [f64; 3],
+    #[serde(default)]
+    origin: [f64; 3],
+    #[serde(default = "d_radius")]
+    void_radius: f64,
+}
+
+fn d_path() -> PathBuf {
+    PathBuf::from("bitmap")
+}
+fn d_pixel() -> f64 {
+    0.05
+}
+fn d_period() -> [f64; 3] {
+    [1.0, 1.0, 1.0]
+}
+fn d_radius() -> f64 {
+    0.3
+}
+
+/// The most pixels one layer may have (a guard against a pixel size typed in metres).
+const MAX_PIXELS: f64 = 2.0e8;
+
+/// A lattice of spherical voids.
+#[derive(Debug, Clone, Copy)]
+pub struct Lattice {
+    pub period: [f64; 3],
+    pub origin: [f64; 3],
+    pub radius: f64,
+}
+
+impl Lattice {
+    /// Lattice rows k whose voids meet the plane at height `z`: the narrow band
+    /// |z_k - z| < r, found by arithmetic.
+    pub fn band(&self, z: f64) -> std::ops::RangeInclusive<i64> {
+        let (o, a, r) = (self.origin[2], self.period[2], self.radius);
+        let lo = ((z - r - o) / a).ceil() as i64;
+        let hi = ((z + r - o) / a).floor() as i64;
+        lo..=hi
+    }
+
+    /// Circles (centre x, centre y, radius) the voids cut in the plane at `z`, within
+    /// `bbox`.
+    pub fn circles(&self, z: f64, bbox: &BBox2) -> Vec<(f64, f64, f64)> {
+        let mut out = Vec::new();
+        for k in self.band(z) {
+            let dz = self.origin[2] + k as f64 * self.period[2] - z;
+            let rc2 = self.radius * self.radius - dz * dz;
+            if rc2 <= 0.0 {
+                continue;
+            }
+            let rc = rc2.sqrt();
+            let range = |axis: usize, lo: f64, hi: f64| {
+                let (o, a) = (self.origin[axis], self.period[axis]);
+                ((lo - rc - o) / a).ceil() as i64..=((hi + rc - o) / a).floor() as i64
+            };
+            for i in range(0, bbox.min.x, bbox.max.x) {
+                for j in range(1, bbox.min.y, bbox.max.y) {
+                    out.push((
+                        self.origin[0] + i as f64 * self.period[0],
+                        self.origin[1] + j as f64 * self.period[1],
+                        rc,
+                    ));
+                }
+            }
+        }
+        out
+    }
+}
+
+/// A pixel grid over a layer.
+pub struct Raster {
+    pub origin: [f64; 2],
+    pub pixel: f64,
+    pub width: usize,
+    pub height: usize,
+    pub bits: Vec<bool>,
+}
+
+impl Raster {
+    /// A grid aligned to multiples of `pixel` covering `bbox`.
+    pub fn covering(bbox: &BBox2, pixel: f64) -> Result<Self> {
+        let x0 = (bbox.min.x / pixel).floor();
+        let y0 = (bbox.min.y / pixel).floor();
+        let w = (bbox.max.x / pixel).ceil() - x0;
+        let h = (bbox.max.y / pixel).ceil() - y0;
+        // NaN (an empty box) fails the test too.
+        if (w * h).is_nan() || w * h > MAX_PIXELS {
+            return Err(Error::stage(
+                "export:bitmap",
+                format!("a layer would need {w} x {h} pixels of {pixel} mm: choose a larger pixel"),
+            ));
+        }
+        let (width, height) = (w.max(0.0) as usize, h.max(0.0) as usize);
+        Ok(Self {
+            origin: [x0 * pixel, y0 * pixel],
+            pixel,
+            width,
+            height,
+            bits: vec![false; width * height],
+        })
+    }
+
+    /// Sets the pixels whose centres lie inside the contours (even-odd), by scanlines:
+    /// each edge adds its crossing to the rows it spans.
+    pub fn fill(&mut self, contours: &[&Contour]) {
+        let mut crossings: Vec<Vec<f64>> = vec![Vec::new(); self.height];
+        for c in contours {
+            for (a, b) in c.edges() {
+                let (lo, hi) = if a.y < b.y { (a, b) } else { (b, a) };
+                // Rows whose centre y lies in [lo.y, hi.y).
+                let first = ((lo.y - self.origin[1]) / self.pixel - 0.5).ceil().max(0.0) as usize;
+                let last = ((hi.y - self.origin[1]) / self.pixel - 0.5).ceil().max(0.0) as usize;
+                for (row, xs) in crossings
+                    .iter_mut()
+                    .enumerate()
+                    .take(last.min(self.height))
+                    .skip(first)
+                {
+                    let y = self.origin[1] + (row as f64 + 0.5) * self.pixel;
+                    xs.push(lo.x + (y - lo.y) * (hi.x - lo.x) / (hi.y - lo.y));
+                }
+            }
+        }
+        for (row, xs) in crossings.iter_mut().enumerate() {
+            xs.sort_by(f64::total_cmp);
+            for pair in xs.chunks_exact(2) {
+                let (a, b) = (self.column(pair[0]), self.column(pair[1]));
+                let line = &mut self.bits[row * self.width..(row + 1) * self.width];
+                for bit in &mut line[a..b] {
+                    *bit = !*bit;
+                }
+            }
+        }
+    }
+
+    /// First column whose centre is at or right of `x`.
+    fn column(&self, x: f64) -> usize {
+        (((x - self.origin[0]) / self.pixel - 0.5).ceil().max(0.0) as usize).min(self.width)
+    }
+
+    /// Clears the pixels whose centres lie in the circle.
+    pub fn clear_circle(&mut self, cx: f64, cy: f64, r: f64) {
+        let row_of = |y: f64| (y - self.origin[1]) / self.pixel - 0.5;
+        let first = row_of(cy - r).ceil().max(0.0) as usize;
+        let last = (row_of(cy + r).floor() + 1.0).max(0.0) as usize;
+        for row in first..last.min(self.height) {
+            let y = self.origin[1] + (row as f64 + 0.5) * self.pixel;
+            let half = (r * r - (y - cy) * (y - cy)).max(0.0).sqrt();
+            let (a, b) = (self.column(cx - half), self.column(cx + half));
+            for bit in &mut self.bits[row * self.width + a..row * self.width + b.max(a)] {
+                *bit = false;
+            }
+        }
+    }
+
+    pub fn count(&self) -> usize {
+        self.bits.iter().filter(|&&b| b).count()
+    }
+}
+
+struct Bitmap {
+    options: Options,
+    lattice: Lattice,
+}
+
+struct Sink {
+    header: Box<dyn Write + Send>,
+    data: Box<dyn Write + Send>,
+    header_path: PathBuf,
+    data_path: PathBuf,
+    parts: Vec<usize>,
+    pixel: f64,
+    lattice: Lattice,
+    offset: u64,
+}
+
+fn io(path: &std::path::Path) -> impl Fn(std::io::Error) -> Error + '_ {
+    move |e| Error::io(path, e)
+}
+
+impl Exporter for Bitmap {
+    fn open(&self, ctx: &mut ExportContext<'_>) -> Result<Box<dyn LayerSink>> {
+        let parts = if self.options.parts.is_empty() {
+            (0..ctx.info.parts.len()).collect()
+        } else {
+            self.options
+                .parts
+                .iter()
+                .map(|name| {
+                    ctx.info
+                        .parts
+                        .iter()
+                        .position(|p| &p.name == name)
+                        .ok_or_else(|| {
+                            Error::stage(
+                                "export:bitmap",
+                                format!("`parts` names `{name}`, which is no part"),
+                            )
+                        })
+                })
+                .collect::<Result<Vec<_>>>()?
+        };
+        let header_path = self.options.path.with_extension("hdr");
+        let data_path = self.options.path.with_extension("dat");
+        let mut header = ctx.files.create(&header_path)?;
+        let data = ctx.files.create(&data_path)?;
+        let names: Vec<&str> = parts.iter().map(|&p| ctx.info.parts[p].name.as_str()).collect();
+        let l = &self.lattice;
+        writeln!(
+            header,
+            "# lamina bitmap layers 1: 1 = material, 0 = void or outside; data rows from the origin upward\n\
+             # parts: {}\n\
+             # voids: spheres of radius {} mm at origin [{}, {}, {}] + lattice period [{}, {}, {}] mm\n\
+             # layer z thickness cut_z pixel origin_x origin_y width height offset",
+            names.join(", "),
+            l.radius,
+            l.origin[0],
+            l.origin[1],
+            l.origin[2],
+            l.period[0],
+            l.period[1],
+            l.period[2]
+        )
+        .map_err(io(&header_path))?;
+        Ok(Box::new(Sink {
+            header,
+            data,
+            header_path,
+            data_path,
+            parts,
+            pixel: self.options.pixel,
+            lattice: self.lattice,
+            offset: 0,
+        }))
+    }
+}
+
+impl LayerSink for Sink {
+    fn layer(&mut self, _info: &RunInfo, plan: &LayerPlan) -> Result<()> {
+        let mut contours: Vec<&Contour> = Vec::new();
+        for pl in plan.parts.iter().filter(|pl| self.parts.contains(&pl.part)) {
+            for &f in &pl.families {
+                let fam = &pl.tree.families[f];
+                contours.push(&pl.contours[fam.outer]);
+                contours.extend(fam.holes.iter().map(|&h| &pl.contours[h]));
+            }
+        }
+        if contours.is_empty() {
+            return Ok(());
+        }
+        let bbox = contours.iter().fold(BBox2::EMPTY, |b, c| b.union(&c.bbox()));
+        let mut raster = Raster::covering(&bbox, self.pixel)?;
+        raster.fill(&contours);
+        // The voids are cut at the layer's mid-height, as the contours are.
+        let cut_z = plan.z - plan.thickness / 2.0;
+        for (cx, cy, r) in self.lattice.circles(cut_z, &bbox) {
+            raster.clear_circle(cx, cy, r);
+        }
+        writeln!(
+            self.header,
+            "{} {} {} {} {} {} {} {} {} {}",
+            plan.index,
+            plan.z,
+            plan.thickness,
+            cut_z,
+            self.pixel,
+            raster.origin[0],
+            raster.origin[1],
+            raster.width,
+            raster.height,
+            self.offset
+        )
+        .map_err(io(&self.header_path))?;
+        let mut row = Vec::with_capacity(raster.width + 1);
+        for r in 0..raster.height {
+            row.clear();
+            row.extend(
+                raster.bits[r * raster.width..(r + 1) * raster.width]
+                    .iter()
+                    .map(|&b| if b { b'1' } else { b'0' }),
+            );
+            row.push(b'\n');
+            self.data.write_all(&row).map_err(io(&self.data_path))?;
+        }
+        self.offset += (raster.height * (raster.width + 1)) as u64;
+        Ok(())
+    }
+
+    fn finish(mut self: Box<Self>, _info: &RunInfo) -> Result<()> {
+        self.header.flush().map_err(io(&self.header_path))?;
+        self.data.flush().map_err(io(&self.data_path))
+    }
+}
+
+fn build(config: &StageConfig<'_>) -> Result<AnyStage> {
+    let options: Options = config.parse()?;
+    if !(options.pixel.is_finite() && options.pixel > 0.0) {
+        return Err(config.error("pixel", "must be a positive number of mm"));
+    }
+    if !options.period.iter().all(|p| p.is_finite() && *p > 0.0) {
+        return Err(config.error("period", "must be three positive numbers of mm"));
+    }
+    if !options.origin.iter().all(|p| p.is_finite()) {
+        return Err(config.error("origin", "must be three finite numbers"));
+    }
+    if !(options.void_radius.is_finite() && options.void_radius >= 0.0) {
+        return Err(config.error("void_radius", "must be a non-negative number of mm"));
+    }
+    let lattice = Lattice {
+        period: options.period,
+        origin: options.origin,
+        radius: options.void_radius,
+    };
+    Ok(AnyStage::Export(Box::new(Bitmap { options, lattice })))
+}
+
+lamina_core::register_stage!(StageFactory {
+    info: StageInfo {
+        kind: StageKind::Export,
+        name: "bitmap",
+        doc: "Bitmap layers of periodic-microstructure parts: 1 for material, 0 for the lattice's spherical voids; one header and one data file.",
+        options: &[
+            OptionSpec::new(
+                "path",
+                "string",
+                "\"bitmap\"",
+                "output name: `<path>.hdr` (one line per layer) and `<path>.dat` (the bitmaps)"
+            ),
+            OptionSpec::new(
+                "parts",
+                "array of string",
+                "[]",
+                "the microstructure parts; default: all"
+            ),
+            OptionSpec::new("pixel", "float", "0.05", "pixel size (mm)"),
+            OptionSpec::new(
+                "period",
+                "array of float",
+                "[1.0, 1.0, 1.0]",
+                "lattice spacing in x, y, z (mm)"
+            ),
+            OptionSpec::new(
+                "origin",
+                "array of float",
+                "[0.0, 0.0, 0.0]",
+                "one inserting point of the lattice (mm)"
+            ),
+            OptionSpec::new(
+                "void_radius",
+                "float",
+                "0.3",
+                "radius of the spherical void at each inserting point (mm)"
+            ),
+        ],
+        example: "use = \"bitmap\"\npixel = 0.1\nperiod = [2.0, 2.0, 1.0]\nvoid_radius = 0.4",
+    },
+    build,
+});
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use lamina_core::Point2;
+
+    fn square(x0: f64, y0: f64, s: f64) -> Contour {
+        Contour::new(vec![
+            Point2::new(x0, y0),
+            Point2::new(x0 + s, y0),
+            Point2::new(x0 + s, y0 + s),
+            Point2::new(x0, y0 + s),
+        ])
+    }
+
+    #[test]
+    fn the_band_holds_only_the_rows_near_the_plane() {
+        let l = Lattice {
+            period: [1.0, 1.0, 0.5],
+            origin: [0.0, 0.0, 0.0],
+            radius: 0.3,
+        };
+        // Only the row at z = 1.0 lies within 0.3 of 1.15; at 1.25 the rows at 1.0 and 1.5.
+        assert_eq!(l.band(1.15), 2..=2);
+        assert_eq!(l.band(1.25), 2..=3);
+        let bbox = BBox2::from_points([Point2::new(0.0, 0.0), Point2::new(2.0, 2.0)]);
+        let circles = l.circles(1.25, &bbox);
+        // Two rows, each with the 3 x 3 lattice points of [0, 2]^2.
+        assert_eq!(circles.len(), 18);
+        assert!(
+            circles
+                .iter()
+                .all(|c| (c.2 - (0.09f64 - 0.0625).sqrt()).abs() < 1e-12)
+        );
+    }
+
+    #[test]
+    fn a_square_with_a_hole_fills_its_area() {
+        let outer = square(0.0, 0.0, 10.0);
+        let hole = square(3.0, 3.0, 4.0).oriented(false);
+        let bbox = outer.bbox();
+        let mut r = Raster::covering(&bbox, 0.1).expect("raster");
+        r.fill(&[&outer, &hole]);
+        assert_eq!(r.count(), 10_000 - 1_600);
+    }
+
+    #[test]
+    fn voids_remove_their_circles() {
+        let outer = square(0.0, 0.0, 10.0);
+        let mut r = Raster::covering(&outer.bbox(), 0.01).expect("raster");
+        r.fill(&[&outer]);
+        r.clear_circle(5.0, 5.0, 2.0);
+        let area = r.count() as f64 * 1e-4;
+        let want = 100.0 - std::f64::consts::PI * 4.0;
+        assert!((area - want).abs() < 2e-3 * want, "{area} vs {want}");
+    }
+
+    #[test]
+    fn huge_grids_are_refused() {
+        let bbox = BBox2::from_points([Point2::new(0.0, 0.0), Point2::new(1000.0, 1000.0)]);
+        assert!(Raster::covering(&bbox, 1e-4).is_err());
+    }
+}
