@@ -4,3 +4,4 @@
 pub mod bitmap;
 pub mod cli;
 pub mod json;
+pub mod threemf;
