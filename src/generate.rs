@@ -50,18 +50,29 @@ pub struct Request {
     pub model: String,
     pub options: Vec<Override>,
     pub output: PathBuf,
+    /// No summary.
+    pub quiet: bool,
 }
 
 /// Reads the option words after the model name: `--key value`, `--key=value`,
 /// `key=value`, `--set key=value` (also `--set model.key=value`), and `-o FILE` /
-/// `--output FILE` when clap left them among the options. Values are TOML (`12`,
+/// `--output FILE` and `-q` / `--quiet` when clap left them among the options. Values are TOML (`12`,
 /// `2.5`, `[50.0, 20.0]`, `"2412"`); anything that is not TOML is a string.
-pub fn request(model: &str, output: Option<PathBuf>, words: &[String]) -> Result<Request> {
-    let mut output = output;
+pub fn request(model: &str, output: Option<PathBuf>, quiet: bool, words: &[String]) -> Result<Request> {
+    let (mut output, mut quiet) = (output, quiet);
     let mut options = Vec::new();
     let mut words = words.iter();
     let usage = |m: String| Error::config(m).with_help("lamina generate MODEL [--key value ...] -o FILE");
     while let Some(word) = words.next() {
+        if word == "-q" || word == "--quiet" {
+            quiet = true;
+            continue;
+        }
+        if word == "-h" || word == "--help" {
+            return Err(usage(format!(
+                "`{model}` takes the options listed by `lamina plugins model`"
+            )));
+        }
         let (key, value) = if word == "-o" || word == "--output" {
             let path = words
                 .next()
@@ -122,6 +133,7 @@ pub fn request(model: &str, output: Option<PathBuf>, words: &[String]) -> Result
         model: model.to_string(),
         options,
         output,
+        quiet,
     })
 }
 
@@ -257,10 +269,12 @@ mod tests {
         let r = request(
             "blade",
             None,
-            &words("--cavities 2 --twist=30 naca=0012 --set root_size=[50.0,20.0] -o b.stl"),
+            false,
+            &words("--cavities 2 --twist=30 naca=0012 --set root_size=[50.0,20.0] -o b.stl -q"),
         )
         .expect("parses");
         assert_eq!(r.output, PathBuf::from("b.stl"));
+        assert!(r.quiet);
         let keys: Vec<String> = r
             .options
             .iter()
@@ -286,11 +300,12 @@ mod tests {
             "--a.b 2 -o x.stl",
             "--use gear -o x.stl",
             "-o x.step",
+            "--cavities 1 --help -o x.stl",
         ] {
-            let e = request("blade", None, &words(bad)).expect_err(bad);
+            let e = request("blade", None, false, &words(bad)).expect_err(bad);
             assert!(e.is_usage(), "{bad}: {e}");
         }
-        assert!(request("blade", Some("a.stl".into()), &words("-o b.stl")).is_err());
+        assert!(request("blade", Some("a.stl".into()), false, &words("-o b.stl")).is_err());
     }
 
     #[test]

@@ -184,10 +184,10 @@ fn execute(cli: Cli) -> Result<(), Failure> {
         } => {
             // Everything before writing is about what the user asked for (exit code 2).
             let usage = |error| Failure { error, usage: true };
-            let request = generate::request(&model, output, &options).map_err(usage)?;
+            let request = generate::request(&model, output, quiet, &options).map_err(usage)?;
             let meshes = generate::meshes(&Registry::linked()?, &request).map_err(usage)?;
             generate::write(&meshes, &request.output)?;
-            if !quiet {
+            if !request.quiet {
                 println!("{}", request.output.display());
                 for line in generate::describe(&meshes) {
                     println!("  {line}");
