@@ -306,7 +306,7 @@ fn discretiser(text: &str) -> Box<dyn lamina_core::stage::Discretiser> {
 
 /// Every discretiser's sub-regions tile every family of the sampled layers of every
 /// model at 0.2 mm: areas within 1e-3 of the family's, no overlap, simple polygons
-/// oriented outer counter-clockwise and holes clockwise. At most 24 layers per model,
+/// oriented outer counter-clockwise and holes clockwise. At most 12 layers per model,
 /// spread over its height, keep the run short.
 #[test]
 #[ignore = "needs ../shared/models; run by .ci/run"]
@@ -338,7 +338,7 @@ fn real_models_discretise_into_tiling_sub_regions() {
         let slots = slicer
             .layers(std::slice::from_ref(&mesh), &info, None)
             .expect("slots");
-        let step = slots.len().div_ceil(24).max(1);
+        let step = slots.len().div_ceil(12).max(1);
         let (mut families, mut regions, mut worst_area, mut worst_overlap) = (0, 0, 0.0f64, 0.0f64);
         for slot in slots.iter().step_by(step) {
             let layer = prepared.slice(slot).expect("slices");
