@@ -12,6 +12,7 @@
 use std::sync::Arc;
 
 use lamina_core::{Contour, Layer, LayerSlot, Mesh, Point2, Result};
+use rustc_hash::FxHashMap;
 
 /// How overlapping or self-crossing loops are resolved into simple contours.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Deserialize)]
@@ -335,15 +336,7 @@ fn simple_contours(loops: &[Contour], options: CutOptions) -> Vec<Contour> {
 /// Chains segments into closed loops by their edge keys. Returns the loops (oriented
 /// by the majority of their segments' directions) and the chains that did not close.
 fn chain(segments: &[Segment]) -> (Vec<Contour>, Vec<Vec<Point2>>) {
-    // Each edge key is the end of (normally) two segments: pairs (key, segment) sorted
-    // by key put them side by side.
-    let mut ends: Vec<(u64, u32)> = Vec::with_capacity(2 * segments.len());
-    for (i, s) in segments.iter().enumerate() {
-        ends.push((s.keys[0], i as u32));
-        ends.push((s.keys[1], i as u32));
-    }
-    ends.sort_unstable();
-    let at = Ends(&ends);
+    let at = Ends::new(segments);
     let mut used = vec![false; segments.len()];
     let mut loops = Vec::new();
     let mut open = Vec::new();
@@ -412,18 +405,43 @@ fn chain(segments: &[Segment]) -> (Vec<Contour>, Vec<Vec<Point2>>) {
     (loops, open)
 }
 
-/// Segment ends sorted by edge key.
-struct Ends<'a>(&'a [(u64, u32)]);
+/// The segments ending at each edge key: each key is the end of (normally) two
+/// segments. A map from key to the first of them, and a link from each segment end to
+/// the next with the same key, lists them in increasing order without sorting.
+struct Ends {
+    first: FxHashMap<u64, u32>,
+    /// For end `2 s + k` (key `k` of segment `s`): the next end with the same key.
+    next: Vec<u32>,
+}
 
-impl Ends<'_> {
-    /// A segment ending at `key` that is not used yet.
+impl Ends {
+    const NONE: u32 = u32::MAX;
+
+    fn new(segments: &[Segment]) -> Self {
+        let mut first: FxHashMap<u64, u32> =
+            FxHashMap::with_capacity_and_hasher(segments.len() + 1, Default::default());
+        let mut next = vec![Self::NONE; 2 * segments.len()];
+        // Backwards, so that each list comes out in increasing segment order.
+        for (i, s) in segments.iter().enumerate().rev() {
+            for k in [1, 0] {
+                let end = (2 * i + k) as u32;
+                next[end as usize] = first.insert(s.keys[k], end).unwrap_or(Self::NONE);
+            }
+        }
+        Self { first, next }
+    }
+
+    /// The first segment ending at `key` that is not used yet.
     fn unused(&self, key: u64, used: &[bool]) -> Option<u32> {
-        let start = self.0.partition_point(|&(k, _)| k < key);
-        self.0[start..]
-            .iter()
-            .take_while(|&&(k, _)| k == key)
-            .map(|&(_, s)| s)
-            .find(|&s| !used[s as usize])
+        let mut end = *self.first.get(&key)?;
+        while end != Self::NONE {
+            let s = end / 2;
+            if !used[s as usize] {
+                return Some(s);
+            }
+            end = self.next[end as usize];
+        }
+        None
     }
 }
 
