@@ -12,6 +12,7 @@
 use std::sync::Arc;
 
 use lamina_core::{Contour, Layer, LayerSlot, Mesh, Point2, Result};
+use rayon::prelude::*;
 use rustc_hash::FxHashMap;
 
 /// How overlapping or self-crossing loops are resolved into simple contours.
@@ -101,10 +102,12 @@ pub struct CutMesh {
     orientation: f64,
     /// Triangle z ranges.
     ranges: Vec<(f64, f64)>,
-    /// Buckets of triangle indices by z.
+    /// Buckets of triangle indices by z: bucket `b` spans `z0 + b * bucket` and holds
+    /// `entries[starts[b]..starts[b + 1]]`.
     z0: f64,
     bucket: f64,
-    buckets: Vec<Vec<u32>>,
+    starts: Vec<u32>,
+    entries: Vec<u32>,
     options: CutOptions,
 }
 
@@ -123,12 +126,21 @@ fn edge_key(a: u32, b: u32) -> u64 {
 
 impl CutMesh {
     pub fn new(mesh: Arc<Mesh>, options: CutOptions) -> Self {
-        let ranges: Vec<(f64, f64)> = (0..mesh.triangles.len())
-            .map(|i| {
-                let [a, b, c] = mesh.triangle(i);
-                (a.z.min(b.z).min(c.z), a.z.max(b.z).max(c.z))
+        // One parallel pass over the triangles gives their z ranges and their terms of
+        // the signed volume, summed below in triangle order as `Mesh::signed_volume` does.
+        let (ranges, volumes): (Vec<(f64, f64)>, Vec<f64>) = mesh
+            .triangles
+            .par_iter()
+            .with_min_len(4096)
+            .map(|&[a, b, c]| {
+                let v = &mesh.vertices;
+                let (a, b, c) = (v[a as usize], v[b as usize], v[c as usize]);
+                let range = (a.z.min(b.z).min(c.z), a.z.max(b.z).max(c.z));
+                (range, a.coords.dot(&b.coords.cross(&c.coords)) / 6.0)
             })
-            .collect();
+            .unzip();
+        let volume: f64 = volumes.iter().sum();
+        drop(volumes);
         let bb = mesh.bbox();
         let (z0, z1) = if bb.is_empty() {
             (0.0, 1.0)
@@ -140,7 +152,7 @@ impl CutMesh {
         // number about n + sum(extent) * count / height. The count is chosen so that
         // this stays below 4 n (flat caps and tall walls alike), and at most 65536.
         let n = ranges.len().max(1) as f64;
-        let total_extent: f64 = ranges.iter().map(|(lo, hi)| hi - lo).sum();
+        let total_extent: f64 = ranges.par_iter().with_min_len(4096).map(|(lo, hi)| hi - lo).sum();
         let by_entries = if total_extent > 0.0 {
             3.0 * n * height / total_extent
         } else {
@@ -148,24 +160,46 @@ impl CutMesh {
         };
         let count = (by_entries.min(n).floor() as usize).clamp(1, 65536);
         let bucket = height / count as f64;
-        let mut buckets = vec![Vec::new(); count];
-        for (i, &(lo, hi)) in ranges.iter().enumerate() {
-            let b0 = (((lo - z0) / bucket).floor().max(0.0) as usize).min(count - 1);
-            let b1 = (((hi - z0) / bucket).floor().max(0.0) as usize).min(count - 1);
-            for b in &mut buckets[b0..=b1] {
-                b.push(i as u32);
+        // `as usize` truncates like `floor` here and saturates negatives and NaN to 0.
+        let span = |(lo, hi): (f64, f64)| {
+            let b0 = (((lo - z0) / bucket).max(0.0) as usize).min(count - 1);
+            let b1 = (((hi - z0) / bucket).max(0.0) as usize).min(count - 1);
+            b0..=b1
+        };
+        // The buckets as one array (counted, then filled), each in triangle order.
+        let mut starts = vec![0u32; count + 1];
+        for &r in &ranges {
+            for b in span(r) {
+                starts[b + 1] += 1;
             }
         }
-        let orientation = if mesh.signed_volume() < 0.0 { -1.0 } else { 1.0 };
+        for b in 0..count {
+            starts[b + 1] += starts[b];
+        }
+        let mut entries = vec![0u32; starts[count] as usize];
+        let mut next = starts.clone();
+        for (i, &r) in ranges.iter().enumerate() {
+            for b in span(r) {
+                entries[next[b] as usize] = i as u32;
+                next[b] += 1;
+            }
+        }
+        let orientation = if volume < 0.0 { -1.0 } else { 1.0 };
         Self {
             mesh,
             orientation,
             ranges,
             z0,
             bucket,
-            buckets,
+            starts,
+            entries,
             options,
         }
+    }
+
+    /// The triangles whose z range touches bucket `b`, in increasing order.
+    fn bucket(&self, b: usize) -> &[u32] {
+        &self.entries[self.starts[b] as usize..self.starts[b + 1] as usize]
     }
 
     pub fn mesh(&self) -> &Arc<Mesh> {
@@ -176,13 +210,14 @@ impl CutMesh {
     fn segments(&self, z: f64) -> Vec<Segment> {
         let b = ((z - self.z0) / self.bucket).floor();
         if b < 0.0
-            || b as usize >= self.buckets.len() && z > self.z0 + self.bucket * self.buckets.len() as f64
+            || b as usize >= self.starts.len() - 1
+                && z > self.z0 + self.bucket * (self.starts.len() - 1) as f64
         {
             return Vec::new();
         }
-        let b = (b as usize).min(self.buckets.len() - 1);
+        let b = (b as usize).min(self.starts.len() - 2);
         let mut out = Vec::new();
-        for &t in &self.buckets[b] {
+        for &t in self.bucket(b) {
             let (lo, hi) = self.ranges[t as usize];
             if !(lo < z && hi >= z) {
                 continue;
