@@ -22,6 +22,7 @@ use lamina_grade as _;
 use lamina_model as _;
 use lamina_orient as _;
 use lamina_sequence as _;
+use lamina_sources as _;
 use lamina_slice as _;
 use lamina_sort as _;
 

@@ -14,6 +14,7 @@ fn registry() -> Registry {
     use lamina_model as _;
     use lamina_orient as _;
     use lamina_sequence as _;
+    use lamina_sources as _;
     use lamina_slice as _;
     use lamina_sort as _;
     Registry::linked().expect("registry")

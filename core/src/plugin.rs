@@ -383,6 +383,10 @@ impl Discretiser for Guarded<dyn Discretiser> {
     fn discretise(&self, ctx: &FamilyContext<'_>) -> Result<Vec<Region>> {
         guard_call(&self.label, || self.inner.discretise(ctx))
     }
+
+    fn grades(&self) -> bool {
+        guard_call(&self.label, || Ok(self.inner.grades())).unwrap_or(false)
+    }
 }
 
 impl Grader for Guarded<dyn Grader> {

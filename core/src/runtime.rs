@@ -326,7 +326,8 @@ impl Engine {
             let grader = build_optional(&registry, StageKind::Grade, grade_table, &scripts, &base)?
                 .map(|s| -> Result<_> { Ok(expect_kind!(s, Grade)) })
                 .transpose()?;
-            if grader.is_none() && part.materials.len() > 1 {
+            let discretiser_grades = discretiser.as_ref().is_some_and(|d| d.grades());
+            if grader.is_none() && !discretiser_grades && part.materials.len() > 1 {
                 let names: Vec<_> = part
                     .materials
                     .iter()
@@ -733,7 +734,9 @@ impl Engine {
             match &p.grader {
                 Some(g) => timings.time(StageKind::Grade, || g.grade(&ctx, &mut family_regions))?,
                 None => {
-                    for r in &mut family_regions {
+                    // A discretiser whose regions follow the material (grading sources)
+                    // grades them itself; the rest are the part's first material.
+                    for r in family_regions.iter_mut().filter(|r| r.composition.is_none()) {
                         r.composition = Some(Composition::pure(0, n_materials));
                     }
                 }

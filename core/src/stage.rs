@@ -227,9 +227,17 @@ pub struct FamilyContext<'a> {
     pub family: usize,
 }
 
-/// Divides one contour family into sub-regions of constant material that tile it.
+/// Divides one contour family into sub-regions of constant material that tile it. A
+/// discretiser whose regions follow the material (grading sources) may set their
+/// compositions too; a grader, when the pipeline has one, overrides them.
 pub trait Discretiser: Send + Sync {
     fn discretise(&self, ctx: &FamilyContext<'_>) -> Result<Vec<Region>>;
+
+    /// True when the regions come with their compositions, so a part of several
+    /// materials needs no grader.
+    fn grades(&self) -> bool {
+        false
+    }
 }
 
 /// Gives every sub-region of a family its composition.

@@ -1,0 +1,292 @@
+//! The sets {d < D} of a source in a layer plane as polygons (discs, ellipses, strips,
+//! half-planes, clipped to a box around the family), and the boolean operations that
+//! cut a family along them.
+
+use i_overlay::core::fill_rule::FillRule;
+use i_overlay::core::overlay_rule::OverlayRule;
+use i_overlay::float::single::SingleFloatOverlay;
+use lamina_core::{BBox2, Contour, Point2, Polygon};
+
+use crate::source::Datum;
+
+/// Polygons with holes as i_overlay takes them: shapes of contours, the first outer.
+pub type Shapes = Vec<Vec<Vec<[f64; 2]>>>;
+
+/// A set of the plane, kept symbolic when it is all or nothing.
+#[derive(Debug, Clone)]
+pub enum Set {
+    Empty,
+    Whole,
+    Shapes(Shapes),
+}
+
+pub fn intersect(a: &Shapes, b: &Shapes) -> Shapes {
+    if a.is_empty() || b.is_empty() {
+        return Vec::new();
+    }
+    a.overlay(b, OverlayRule::Intersect, FillRule::EvenOdd)
+}
+
+pub fn difference(a: &Shapes, b: &Shapes) -> Shapes {
+    if a.is_empty() || b.is_empty() {
+        return a.clone();
+    }
+    a.overlay(b, OverlayRule::Difference, FillRule::EvenOdd)
+}
+
+impl Set {
+    pub fn intersect(&self, a: &Shapes) -> Shapes {
+        match self {
+            Set::Empty => Vec::new(),
+            Set::Whole => a.clone(),
+            Set::Shapes(s) => intersect(a, s),
+        }
+    }
+
+    pub fn subtract_from(&self, a: &Shapes) -> Shapes {
+        match self {
+            Set::Empty => a.clone(),
+            Set::Whole => Vec::new(),
+            Set::Shapes(s) => difference(a, s),
+        }
+    }
+}
+
+pub fn polygon_shapes(p: &Polygon) -> Shapes {
+    vec![
+        p.contours()
+            .map(|c| c.points.iter().map(|q| [q.x, q.y]).collect())
+            .collect(),
+    ]
+}
+
+/// Polygons of a boolean result: outer counter-clockwise, holes clockwise.
+pub fn to_polygons(shapes: &Shapes) -> Vec<Polygon> {
+    let contour = |c: &Vec<[f64; 2]>| Contour::new(c.iter().map(|p| Point2::new(p[0], p[1])).collect());
+    shapes
+        .iter()
+        .filter(|s| !s.is_empty())
+        .map(|s| {
+            Polygon::new(
+                contour(&s[0]).oriented(true),
+                s[1..].iter().map(|h| contour(h).oriented(false)).collect(),
+            )
+        })
+        .collect()
+}
+
+/// Segments for an arc of radius `r` whose chords stray at most `tolerance`.
+fn segments(r: f64, tolerance: f64) -> usize {
+    let ratio = (1.0 - tolerance / r).clamp(-1.0, 1.0);
+    let step = 2.0 * ratio.acos();
+    ((std::f64::consts::TAU / step.max(1e-6)).ceil() as usize).clamp(16, 20_000)
+}
+
+/// An ellipse with semi-axes `a` along `e1` and `b` across it, as a polygon whose
+/// area is the ellipse's (its vertices sit slightly outside), so the steps' areas are
+/// right however coarse the polygon.
+fn ellipse(c: [f64; 2], e1: [f64; 2], a: f64, b: f64, tolerance: f64) -> Shapes {
+    let n = segments(a.max(b), tolerance);
+    let wedge = std::f64::consts::TAU / n as f64;
+    let grow = (wedge / wedge.sin()).sqrt();
+    let (a, b) = (a * grow, b * grow);
+    let m = [-e1[1], e1[0]];
+    let ring: Vec<[f64; 2]> = (0..n)
+        .map(|i| {
+            let t = std::f64::consts::TAU * i as f64 / n as f64;
+            let (u, v) = (a * t.cos(), b * t.sin());
+            [c[0] + u * e1[0] + v * m[0], c[1] + u * e1[1] + v * m[1]]
+        })
+        .collect();
+    vec![vec![ring]]
+}
+
+/// The box `b` cut to the side n . p < c (a convex polygon, Sutherland-Hodgman).
+fn half_plane(b: &BBox2, n: [f64; 2], c: f64) -> Set {
+    let corners = [
+        [b.min.x, b.min.y],
+        [b.max.x, b.min.y],
+        [b.max.x, b.max.y],
+        [b.min.x, b.max.y],
+    ];
+    let side = |p: &[f64; 2]| n[0] * p[0] + n[1] * p[1] - c;
+    let mut out = Vec::new();
+    for i in 0..4 {
+        let (p, q) = (corners[i], corners[(i + 1) % 4]);
+        let (sp, sq) = (side(&p), side(&q));
+        if sp < 0.0 {
+            out.push(p);
+        }
+        if (sp < 0.0) != (sq < 0.0) {
+            let t = sp / (sp - sq);
+            out.push([p[0] + t * (q[0] - p[0]), p[1] + t * (q[1] - p[1])]);
+        }
+    }
+    if out.len() < 3 {
+        return if side(&corners[0]) < 0.0 {
+            Set::Whole
+        } else {
+            Set::Empty
+        };
+    }
+    if out.len() == 4 && corners.iter().all(|p| side(p) < 0.0) {
+        return Set::Whole;
+    }
+    Set::Shapes(vec![vec![out]])
+}
+
+/// The points of the plane at height `z` (inside `bbox`) whose distance to the datum
+/// is below `d`.
+pub fn closer_than(datum: &Datum, d: f64, z: f64, bbox: &BBox2, tolerance: f64) -> Set {
+    match *datum {
+        Datum::Point(c) => {
+            let r2 = d * d - (z - c[2]).powi(2);
+            if r2 <= 0.0 {
+                return Set::Empty;
+            }
+            let r = r2.sqrt();
+            Set::Shapes(ellipse([c[0], c[1]], [1.0, 0.0], r, r, tolerance))
+        }
+        Datum::Axis { at, direction: u } => {
+            let h = u[0].hypot(u[1]);
+            let dz = z - at[2];
+            if h < 1e-12 {
+                return Set::Shapes(ellipse([at[0], at[1]], [1.0, 0.0], d, d, tolerance));
+            }
+            let e1 = [u[0] / h, u[1] / h];
+            if u[2].abs() < 1e-12 {
+                // A horizontal axis: a strip |m . s| < sqrt(d² - dz²).
+                let w2 = d * d - dz * dz;
+                if w2 <= 0.0 {
+                    return Set::Empty;
+                }
+                let w = w2.sqrt();
+                let m = [-e1[1], e1[0]];
+                let o = m[0] * at[0] + m[1] * at[1];
+                let below = half_plane(bbox, m, o + w);
+                let above = half_plane(bbox, [-m[0], -m[1]], -(o - w));
+                return match (below, above) {
+                    (Set::Empty, _) | (_, Set::Empty) => Set::Empty,
+                    (Set::Whole, s) | (s, Set::Whole) => s,
+                    (Set::Shapes(a), Set::Shapes(b)) => Set::Shapes(intersect(&a, &b)),
+                };
+            }
+            // dist² = b² + (u_z a - h dz)² in the frame (e1, m) at the axis' trace: an
+            // ellipse centred where a = h dz / u_z.
+            let a0 = h * dz / u[2];
+            let c = [at[0] + a0 * e1[0], at[1] + a0 * e1[1]];
+            Set::Shapes(ellipse(c, e1, d / u[2].abs(), d, tolerance))
+        }
+        Datum::Plane { at, normal: n } => {
+            // n_xy . (p - at_xy) < d - n_z (z - at_z)
+            let c = d - n[2] * (z - at[2]);
+            if n[0].hypot(n[1]) < 1e-12 {
+                return if c > 0.0 { Set::Whole } else { Set::Empty };
+            }
+            half_plane(bbox, [n[0], n[1]], c + n[0] * at[0] + n[1] * at[1])
+        }
+    }
+}
+
+/// A point inside the polygon (not in a hole), for graders that vary with position:
+/// the centroid when it is inside, else the middle of the widest inside span of a few
+/// horizontal lines.
+pub fn inside_point(p: &Polygon) -> Point2 {
+    let pts = &p.outer.points;
+    let n = pts.len() as f64;
+    let centroid = Point2::new(
+        pts.iter().map(|q| q.x).sum::<f64>() / n,
+        pts.iter().map(|q| q.y).sum::<f64>() / n,
+    );
+    if p.contains(centroid) && p.boundary_distance(centroid) > 0.0 {
+        return centroid;
+    }
+    let b = p.bbox();
+    let mut best = (f64::NEG_INFINITY, centroid);
+    for k in 1..8 {
+        let y = b.min.y + (b.max.y - b.min.y) * k as f64 / 8.0;
+        let mut xs: Vec<f64> = Vec::new();
+        for c in p.contours() {
+            for (a, q) in c.edges() {
+                if (a.y <= y) != (q.y <= y) {
+                    xs.push(a.x + (y - a.y) * (q.x - a.x) / (q.y - a.y));
+                }
+            }
+        }
+        xs.sort_by(f64::total_cmp);
+        for w in xs.chunks_exact(2) {
+            if w[1] - w[0] > best.0 {
+                best = (w[1] - w[0], Point2::new((w[0] + w[1]) / 2.0, y));
+            }
+        }
+    }
+    best.1
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn area(s: &Shapes) -> f64 {
+        to_polygons(s).iter().map(Polygon::area).sum()
+    }
+
+    fn bbox() -> BBox2 {
+        BBox2::from_points([Point2::new(-50.0, -50.0), Point2::new(50.0, 50.0)])
+    }
+
+    #[test]
+    fn a_point_cuts_a_disc_of_the_remaining_radius() {
+        let s = closer_than(&Datum::Point([0.0, 0.0, 3.0]), 5.0, 0.0, &bbox(), 1e-4);
+        let Set::Shapes(s) = s else { panic!("a disc") };
+        assert!((area(&s) - std::f64::consts::PI * 16.0).abs() < 1e-9);
+        assert!(matches!(
+            closer_than(&Datum::Point([0.0, 0.0, 6.0]), 5.0, 0.0, &bbox(), 1e-4),
+            Set::Empty
+        ));
+    }
+
+    #[test]
+    fn a_tilted_axis_cuts_an_ellipse() {
+        let s = 0.5f64.sqrt();
+        let axis = Datum::Axis {
+            at: [0.0, 0.0, 0.0],
+            direction: [s, 0.0, s],
+        };
+        let Set::Shapes(e) = closer_than(&axis, 2.0, 1.0, &bbox(), 1e-5) else {
+            panic!("an ellipse")
+        };
+        // Semi-axes 2 / cos 45° and 2.
+        let want = std::f64::consts::PI * 2.0 * 2.0 / s;
+        assert!((area(&e) - want).abs() < 1e-3 * want);
+        // Centred where the axis crosses z = 1: x = 1.
+        let c = inside_point(&to_polygons(&e)[0]);
+        assert!((c.x - 1.0).abs() < 1e-6 && c.y.abs() < 1e-6, "{c:?}");
+    }
+
+    #[test]
+    fn planes_cut_half_planes_and_horizontal_axes_strips() {
+        let plane = Datum::Plane {
+            at: [0.0; 3],
+            normal: [1.0, 0.0, 0.0],
+        };
+        let Set::Shapes(h) = closer_than(&plane, 10.0, 0.0, &bbox(), 1e-4) else {
+            panic!("a half plane")
+        };
+        assert!((area(&h) - 60.0 * 100.0).abs() < 1e-6);
+        let flat = Datum::Plane {
+            at: [0.0; 3],
+            normal: [0.0, 0.0, 1.0],
+        };
+        assert!(matches!(closer_than(&flat, 1.0, 0.5, &bbox(), 1e-4), Set::Whole));
+        assert!(matches!(closer_than(&flat, 1.0, 1.5, &bbox(), 1e-4), Set::Empty));
+        let axis = Datum::Axis {
+            at: [0.0, 0.0, 0.0],
+            direction: [1.0, 0.0, 0.0],
+        };
+        let Set::Shapes(strip) = closer_than(&axis, 5.0, 3.0, &bbox(), 1e-4) else {
+            panic!("a strip")
+        };
+        assert!((area(&strip) - 8.0 * 100.0).abs() < 1e-6);
+    }
+}

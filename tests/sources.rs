@@ -1,0 +1,122 @@
+//! Grading sources end to end: the steps of one source have the areas the geometry
+//! gives, and with three sources every region's composition is what Eq. 2 and 8 give
+//! at its reference point, recomputed here independently.
+
+use std::path::Path;
+use std::process::Command;
+
+fn run(pipeline_text: &str) -> serde_json::Value {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let path = dir.path().join("p.toml");
+    std::fs::write(&path, pipeline_text).expect("write");
+    let out = Command::new(env!("CARGO_BIN_EXE_lamina"))
+        .args(["run", "--quiet", "--out"])
+        .arg(dir.path().join("out"))
+        .arg(&path)
+        .output()
+        .expect("lamina runs");
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let json = std::fs::read_dir(dir.path().join("out"))
+        .expect("out")
+        .filter_map(|e| e.ok())
+        .find(|e| e.path().extension().is_some_and(|x| x == "json"))
+        .expect("a json output");
+    serde_json::from_str(&std::fs::read_to_string(json.path()).expect("read")).expect("valid json")
+}
+
+fn regions(layer: &serde_json::Value) -> Vec<&serde_json::Value> {
+    layer["parts"][0]["families"]
+        .as_array()
+        .expect("families")
+        .iter()
+        .flat_map(|f| f["regions"].as_array().expect("regions"))
+        .collect()
+}
+
+#[test]
+fn an_axis_source_steps_in_rings_of_the_right_area() {
+    let text = "[model]\nuse = \"box\"\nsize = [40.0, 40.0, 2.0]\nplace = \"centre\"\n\
+        [materials.a]\ncolour = [255, 0, 0]\n[materials.b]\ncolour = [0, 0, 255]\n\
+        [discretise]\nuse = \"sources\"\n\
+        sources = [{ kind = \"axis\", at = [0.0, 0.0, 0.0], width = 16.0, start = \"a\", end = \"b\", step = 0.25 }]\n\
+        [slice]\nuse = \"uniform\"\nthickness = 1.0\n\
+        [[output]]\nuse = \"json\"\npath = \"plan.json\"\n";
+    let plan = run(text);
+    let pi = std::f64::consts::PI;
+    // f = d / 16 truncated at .125, .375, .625, .875: radii 2, 6, 10, 14.
+    let want = [
+        (0.0, pi * 4.0),
+        (0.25, pi * 32.0),
+        (0.5, pi * 64.0),
+        (0.75, pi * 96.0),
+        (1.0, 1600.0 - pi * 196.0),
+    ];
+    for layer in plan["layers"].as_array().expect("layers") {
+        let rs = regions(layer);
+        assert_eq!(rs.len(), 5);
+        for (r, (level, area)) in rs.iter().zip(want) {
+            assert_eq!(r["level"].as_f64(), Some(level));
+            let a = r["area"].as_f64().expect("area");
+            assert!((a - area).abs() < 1e-6 * 1600.0, "level {level}: {a} vs {area}");
+            let c = &r["composition"];
+            assert!((c["a"].as_f64().expect("a") - (1.0 - level)).abs() < 1e-12);
+            assert!((c["b"].as_f64().expect("b") - level).abs() < 1e-12);
+        }
+    }
+}
+
+/// f(d) = d / width truncated in steps of t_g at the half steps (grading-step-width 3.1).
+fn truncated(d: f64, width: f64, step: f64) -> f64 {
+    let f = d / width;
+    let n = (1.0 / step - 1e-9).ceil() as usize;
+    let mut out = 0.0;
+    for u in 0..n {
+        let (lo, hi) = (u as f64 * step, ((u + 1) as f64 * step).min(1.0));
+        if f >= (lo + hi) / 2.0 {
+            out = hi;
+        }
+    }
+    out
+}
+
+#[test]
+fn three_sources_combine_by_eq_8_at_every_region() {
+    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("pipelines/grading-sources.toml");
+    let plan = run(&std::fs::read_to_string(path).expect("pipeline"));
+    for layer in plan["layers"].as_array().expect("layers") {
+        let z = layer["z"].as_f64().expect("z") - layer["thickness"].as_f64().expect("t") / 2.0;
+        let family: f64 = layer["parts"][0]["families"][0]["area"].as_f64().expect("area");
+        let rs = regions(layer);
+        let total: f64 = rs.iter().map(|r| r["area"].as_f64().expect("area")).sum();
+        assert!(
+            (total - family).abs() < 1e-6 * family,
+            "tiling: {total} vs {family}"
+        );
+        let mut seen = std::collections::HashSet::new();
+        for r in &rs {
+            let p = r["reference"].as_array().expect("reference");
+            let (x, y) = (p[0].as_f64().expect("x"), p[1].as_f64().expect("y"));
+            // Axis (weight 2): core -> skin over 16 mm from the centre line.
+            let fa = truncated(x.hypot(y), 16.0, 0.25);
+            // Point (weight 1): skin -> core over 20 mm from (20, 20, 3).
+            let fp = truncated(
+                ((x - 20.0).powi(2) + (y - 20.0).powi(2) + (z - 3.0).powi(2)).sqrt(),
+                20.0,
+                0.25,
+            );
+            // Plane (weight 1): skin -> core over 10 mm from x = -20.
+            let fl = truncated(x + 20.0, 10.0, 0.25);
+            let skin = (2.0 * fa + (1.0 - fp) + (1.0 - fl)) / 4.0;
+            let c = &r["composition"];
+            let got = c["skin"].as_f64().expect("skin");
+            assert!((got - skin).abs() < 1e-9, "region at ({x}, {y}): {got} vs {skin}");
+            assert!((got + c["core"].as_f64().expect("core") - 1.0).abs() < 1e-12);
+            seen.insert((fa.to_bits(), fp.to_bits(), fl.to_bits()));
+        }
+        assert!(
+            seen.len() > 10,
+            "the three sources' steps overlap in many ways: {}",
+            seen.len()
+        );
+    }
+}
