@@ -5,6 +5,8 @@
 use i_overlay::core::fill_rule::FillRule;
 use i_overlay::core::overlay_rule::OverlayRule;
 use i_overlay::float::single::SingleFloatOverlay;
+use i_overlay::mesh::float::outline::offset::OutlineOffset;
+use i_overlay::mesh::float::style::{LineJoin, OutlineStyle};
 use lamina_core::{BBox2, Contour, Point2, Polygon};
 
 use crate::source::Datum;
@@ -136,9 +138,21 @@ fn half_plane(b: &BBox2, n: [f64; 2], c: f64) -> Set {
 }
 
 /// The points of the plane at height `z` (inside `bbox`) whose distance to the datum
-/// is below `d`.
-pub fn closer_than(datum: &Datum, d: f64, z: f64, bbox: &BBox2, tolerance: f64) -> Set {
+/// is below `d`; for the outer surface, the points of `family` within `d` of its
+/// boundary.
+pub fn closer_than(datum: &Datum, d: f64, z: f64, bbox: &BBox2, tolerance: f64, family: &Shapes) -> Set {
     match *datum {
+        Datum::Surface => {
+            // Round joins whose chords stray at most `tolerance` at radius d.
+            let step = 2.0 * (1.0 - (tolerance / d).min(1.0)).acos();
+            let style = OutlineStyle::new(-d).line_join(LineJoin::Round(step.max(0.01)));
+            let inset: Shapes = family.outline(&style);
+            if inset.is_empty() {
+                Set::Whole
+            } else {
+                Set::Shapes(difference(family, &inset))
+            }
+        }
         Datum::Point(c) => {
             let r2 = d * d - (z - c[2]).powi(2);
             if r2 <= 0.0 {
@@ -237,11 +251,11 @@ mod tests {
 
     #[test]
     fn a_point_cuts_a_disc_of_the_remaining_radius() {
-        let s = closer_than(&Datum::Point([0.0, 0.0, 3.0]), 5.0, 0.0, &bbox(), 1e-4);
+        let s = closer_than(&Datum::Point([0.0, 0.0, 3.0]), 5.0, 0.0, &bbox(), 1e-4, &vec![]);
         let Set::Shapes(s) = s else { panic!("a disc") };
         assert!((area(&s) - std::f64::consts::PI * 16.0).abs() < 1e-9);
         assert!(matches!(
-            closer_than(&Datum::Point([0.0, 0.0, 6.0]), 5.0, 0.0, &bbox(), 1e-4),
+            closer_than(&Datum::Point([0.0, 0.0, 6.0]), 5.0, 0.0, &bbox(), 1e-4, &vec![]),
             Set::Empty
         ));
     }
@@ -253,7 +267,7 @@ mod tests {
             at: [0.0, 0.0, 0.0],
             direction: [s, 0.0, s],
         };
-        let Set::Shapes(e) = closer_than(&axis, 2.0, 1.0, &bbox(), 1e-5) else {
+        let Set::Shapes(e) = closer_than(&axis, 2.0, 1.0, &bbox(), 1e-5, &vec![]) else {
             panic!("an ellipse")
         };
         // Semi-axes 2 / cos 45° and 2.
@@ -270,7 +284,7 @@ mod tests {
             at: [0.0; 3],
             normal: [1.0, 0.0, 0.0],
         };
-        let Set::Shapes(h) = closer_than(&plane, 10.0, 0.0, &bbox(), 1e-4) else {
+        let Set::Shapes(h) = closer_than(&plane, 10.0, 0.0, &bbox(), 1e-4, &vec![]) else {
             panic!("a half plane")
         };
         assert!((area(&h) - 60.0 * 100.0).abs() < 1e-6);
@@ -278,15 +292,34 @@ mod tests {
             at: [0.0; 3],
             normal: [0.0, 0.0, 1.0],
         };
-        assert!(matches!(closer_than(&flat, 1.0, 0.5, &bbox(), 1e-4), Set::Whole));
-        assert!(matches!(closer_than(&flat, 1.0, 1.5, &bbox(), 1e-4), Set::Empty));
+        assert!(matches!(
+            closer_than(&flat, 1.0, 0.5, &bbox(), 1e-4, &vec![]),
+            Set::Whole
+        ));
+        assert!(matches!(
+            closer_than(&flat, 1.0, 1.5, &bbox(), 1e-4, &vec![]),
+            Set::Empty
+        ));
         let axis = Datum::Axis {
             at: [0.0, 0.0, 0.0],
             direction: [1.0, 0.0, 0.0],
         };
-        let Set::Shapes(strip) = closer_than(&axis, 5.0, 3.0, &bbox(), 1e-4) else {
+        let Set::Shapes(strip) = closer_than(&axis, 5.0, 3.0, &bbox(), 1e-4, &vec![]) else {
             panic!("a strip")
         };
         assert!((area(&strip) - 8.0 * 100.0).abs() < 1e-6);
+    }
+
+    #[test]
+    fn the_outer_surface_cuts_a_band_along_the_boundary() {
+        let square: Shapes = vec![vec![vec![[0.0, 0.0], [20.0, 0.0], [20.0, 20.0], [0.0, 20.0]]]];
+        let Set::Shapes(band) = closer_than(&Datum::Surface, 2.0, 0.0, &bbox(), 1e-4, &square) else {
+            panic!("a band")
+        };
+        assert!((area(&band) - (400.0 - 256.0)).abs() < 1e-6, "{}", area(&band));
+        assert!(matches!(
+            closer_than(&Datum::Surface, 11.0, 0.0, &bbox(), 1e-4, &square),
+            Set::Whole
+        ));
     }
 }

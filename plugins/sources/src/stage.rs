@@ -16,6 +16,7 @@ enum Kind {
     Point,
     Axis,
     Plane,
+    Surface,
 }
 
 #[derive(Debug, Clone, Deserialize)]
@@ -29,6 +30,7 @@ enum CompositionSpec {
 #[serde(deny_unknown_fields)]
 struct SourceSpec {
     kind: Kind,
+    #[serde(default)]
     at: [f64; 3],
     direction: Option<[f64; 3]>,
     width: Option<f64>,
@@ -120,12 +122,13 @@ impl Discretiser for Sources {
             sources.push(s);
         }
         // Cells of the overlay: a piece of the family and the step of each source.
-        let mut cells: Vec<(Shapes, Vec<usize>)> = vec![(polygon_shapes(&family), Vec::new())];
+        let family_shapes = polygon_shapes(&family);
+        let mut cells: Vec<(Shapes, Vec<usize>)> = vec![(family_shapes.clone(), Vec::new())];
         for s in &sources {
             let sets: Vec<_> = s
                 .thresholds()
                 .iter()
-                .map(|&d| closer_than(&s.datum, d, z, &bbox, self.tolerance))
+                .map(|&d| closer_than(&s.datum, d, z, &bbox, self.tolerance, &family_shapes))
                 .collect();
             let mut next = Vec::new();
             for (cell, steps) in cells {
@@ -228,6 +231,7 @@ fn build(config: &StageConfig<'_>) -> Result<AnyStage> {
                 direction: unit(s.direction.unwrap_or([0.0, 0.0, 1.0]))
                     .ok_or_else(|| bad("`direction` must be a non-zero vector"))?,
             },
+            Kind::Surface => Datum::Surface,
             Kind::Plane => Datum::Plane {
                 at: s.at,
                 normal: unit(s.direction.unwrap_or([0.0, 0.0, 1.0]))
@@ -281,12 +285,12 @@ lamina_core::register_stage!(StageFactory {
     info: StageInfo {
         kind: StageKind::Discretise,
         name: "sources",
-        doc: "Grading sources (point, axis, plane): f(d) = (alpha d)^k truncated in steps of t_g, regions cut along the steps and overlaid, compositions by Eq. 2 and 8.",
+        doc: "Grading sources (point, axis, plane, outer surface): f(d) = (alpha d)^k truncated in steps of t_g, regions cut along the steps and overlaid, compositions by Eq. 2 and 8.",
         options: &[
             OptionSpec::required(
                 "sources",
                 "array of table",
-                "each `{ kind = \"point\" | \"axis\" | \"plane\", at = [x, y, z], direction = [x, y, z] (axis direction or plane normal), width (or alpha), k = 1, start, end (material name or fractions), step = 0.25, weight = 1 }`"
+                "each `{ kind = \"point\" | \"axis\" | \"plane\" | \"surface\" (the layer's boundary), at = [x, y, z], direction = [x, y, z] (axis direction or plane normal), width (or alpha), k = 1, start, end (material name or fractions), step = 0.25, weight = 1 }`"
             ),
             OptionSpec::new(
                 "tolerance",
