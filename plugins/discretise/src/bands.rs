@@ -6,11 +6,13 @@
 
 use i_overlay::core::extract::BooleanExtractionBuffer;
 use i_overlay::core::fill_rule::FillRule;
-use i_overlay::core::overlay::{IntOverlayOptions, Overlay};
+use i_overlay::core::overlay::{IntOverlayOptions, Overlay, ShapeType};
 use i_overlay::core::overlay_rule::OverlayRule;
 use i_overlay::core::solver::Solver;
 use i_overlay::i_shape::int::shape::IntShapes;
 use lamina_core::Result;
+
+use crate::inset::{From, Inset, Scratch};
 
 /// Pieces smaller than this many square grid units (about 4 um by 4 um at the finest
 /// scale) are rounding slivers, not sub-regions.
@@ -41,28 +43,33 @@ pub fn clean(shapes: &IntShapes<i32>) -> IntShapes<i32> {
     overlay.overlay(OverlayRule::Subject, FillRule::NonZero)
 }
 
-/// Cuts `base` (valid shapes) into at most `count` nested bands. `inner(k)` returns the
-/// raw k-th inner set for `k` in `1..count`; it is not called once the sets vanish.
-/// Returns the bands in order, outermost first, without the trailing empty ones.
+/// Cuts `base` (valid shapes) into at most `count` nested bands. `inner(k, current,
+/// overlay)` adds to `overlay` (as clip paths, read with `fill`) the k-th inner set for
+/// `k` in `1..count`, given the current set S_k; it returns `false` when that set is
+/// empty, and is not called again once the sets vanish. One overlay and one extraction
+/// buffer serve every step. Returns the bands in order, outermost first, without the
+/// trailing empty ones.
 pub fn nested_bands(
     base: &IntShapes<i32>,
     count: usize,
-    mut inner: impl FnMut(usize) -> Result<IntShapes<i32>>,
+    fill: FillRule,
+    mut inner: impl FnMut(usize, &IntShapes<i32>, &mut Overlay<i32>) -> Result<bool>,
 ) -> Result<Vec<IntShapes<i32>>> {
     let mut bands = Vec::with_capacity(count);
     let mut current = base.clone();
     let mut buffer = BooleanExtractionBuffer::default();
+    let mut overlay = Overlay::new_custom(0, options(), solver());
     for k in 1..count {
         if current.is_empty() {
             break;
         }
-        let raw = inner(k)?;
-        if raw.is_empty() {
+        overlay.clear();
+        overlay.add_source(&current, ShapeType::Subject);
+        if !inner(k, &current, &mut overlay)? {
             bands.push(std::mem::take(&mut current));
             break;
         }
-        let mut overlay = Overlay::from_subj_and_clip_custom(&current, &raw, options(), solver());
-        match overlay.build_graph_view(FillRule::NonZero) {
+        match overlay.build_graph_view(fill) {
             Some(graph) => {
                 let ring = graph.extract_shapes(OverlayRule::Difference, &mut buffer);
                 let rest = graph.extract_shapes(OverlayRule::Intersect, &mut buffer);
@@ -82,4 +89,32 @@ pub fn nested_bands(
         bands.pop();
     }
     Ok(bands)
+}
+
+/// Bands between inward offsets at the cumulative distances `depth(k)` (mm, `depth(0)`
+/// = 0) of the family `base` on a grid of `scale` units per mm. From every boundary,
+/// each set is offset from the previous one by the difference (erosions by discs add
+/// up, and the sets shrink); from the outer contour alone the outer contours of `base`
+/// are offset by the whole depth, as the holes must not move.
+pub fn offset_bands(
+    base: &IntShapes<i32>,
+    scale: f64,
+    count: usize,
+    inset: &Inset,
+    depth: impl Fn(usize) -> f64,
+) -> Result<Vec<IntShapes<i32>>> {
+    let mut scratch = Scratch::default();
+    nested_bands(base, count, FillRule::Positive, |k, current, overlay| {
+        Ok(match inset.from {
+            From::All => inset.add_raw(
+                overlay,
+                current,
+                false,
+                depth(k) - depth(k - 1),
+                scale,
+                &mut scratch,
+            ),
+            From::Outer => inset.add_raw(overlay, base, true, depth(k), scale, &mut scratch),
+        })
+    })
 }

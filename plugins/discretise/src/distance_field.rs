@@ -10,6 +10,9 @@ use lamina_core::stage::{
 use lamina_core::{Contour, Point2, Polygon, Region, Result, StageFactory};
 use serde::Deserialize;
 
+use i_overlay::core::fill_rule::FillRule;
+use i_overlay::core::overlay::ShapeType;
+
 use crate::bands::{clean, nested_bands};
 use crate::field::Field;
 use crate::grid::Grid;
@@ -186,15 +189,18 @@ impl Discretiser for DistanceField {
             return Ok(whole(ctx, polygon));
         };
         let count = self.levels.count();
-        let bands = nested_bands(&base, count, |k| {
-            let shape: Vec<_> = sets[k - 1]
-                .iter()
-                .map(|c| grid.contour(c))
-                .filter(|c| c.len() >= 3)
-                .collect();
-            // Loops keep the set on their left: the non-zero rule in the band overlay
-            // reads them as outers and holes.
-            Ok(if shape.is_empty() { Vec::new() } else { vec![shape] })
+        // Loops keep the set on their left: the non-zero rule in the band overlay reads
+        // them as outers and holes.
+        let bands = nested_bands(&base, count, FillRule::NonZero, |k, _, overlay| {
+            let mut any = false;
+            for c in &sets[k - 1] {
+                let c = grid.contour(c);
+                if c.len() >= 3 {
+                    overlay.add_contour(&c, ShapeType::Clip);
+                    any = true;
+                }
+            }
+            Ok(any)
         })?;
         Ok(from_bands(ctx, &grid, &bands, count, |k| self.levels.level(k)))
     }

@@ -41,6 +41,11 @@ impl Grid {
         })
     }
 
+    /// Grid units per mm.
+    pub fn scale(&self) -> f64 {
+        self.scale
+    }
+
     pub fn point(&self, p: Point2) -> IntPoint<i32> {
         IntPoint::new(
             ((p.x - self.origin.x) * self.scale).round() as i32,
@@ -53,16 +58,6 @@ impl Grid {
             f64::from(p.x) / self.scale + self.origin.x,
             f64::from(p.y) / self.scale + self.origin.y,
         )
-    }
-
-    /// A distance in mm as grid units (at least 1 when positive).
-    pub fn length(&self, mm: f64) -> i32 {
-        let units = (mm * self.scale).round();
-        if mm > 0.0 {
-            units.max(1.0) as i32
-        } else {
-            units as i32
-        }
     }
 
     pub fn contour(&self, c: &Contour) -> IntContour<i32> {

@@ -1,17 +1,19 @@
-//! Inward offsets of a whole family on its integer grid (i_overlay's outline with a
-//! negative distance): the outer contour moves in, and the holes move out too unless
-//! only the outer boundary is the grading reference.
+//! Inward offsets of a whole family on its integer grid, built as raw offset loops whose
+//! points of positive winding are the offset set (the construction of Chen and McMains
+//! that Clipper and i_overlay use): each edge moves in by the distance, reflex corners
+//! get joins, convex corners a detour through the corner that the winding cancels.
+//!
+//! The loops are built here rather than by i_overlay's outline because at nearly
+//! straight convex corners (the chord points an STL slice leaves on a curve, turns of a
+//! few micro-radians) the detour's rounded ends no longer cross, and the detour stays as
+//! a zero-width spike from the offset back to the boundary that cuts the rings into
+//! pieces. Here those corners take the crossing point itself, and vertices within a
+//! small fraction of the tolerance of their neighbours' chord are dropped first.
 
-use i_overlay::i_float::int::angle::Angle;
+use i_overlay::core::overlay::{Overlay, ShapeType};
+use i_overlay::i_float::int::point::IntPoint;
 use i_overlay::i_shape::int::shape::IntShapes;
-use i_overlay::mesh::int::arc::ArcOptions;
-use i_overlay::mesh::int::outline::offset::IntOutlineOffset;
-use i_overlay::mesh::int::style::{IntLineJoin, IntOutlineStyle};
-use lamina_core::{Error, Result};
 use serde::Deserialize;
-
-use crate::bands::options;
-use crate::grid::Grid;
 
 /// Which boundaries the offsets start from: the grading reference.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Deserialize)]
@@ -31,7 +33,7 @@ pub enum Join {
     /// Arcs: the offset is the exact Euclidean erosion (within `tolerance`).
     #[default]
     Round,
-    /// Sharp corners (clipped below 5 degrees).
+    /// Sharp corners (bevelled where the corner's inside angle is below 5 degrees).
     Miter,
     /// Corners cut straight.
     Bevel,
@@ -46,37 +48,238 @@ pub struct Inset {
     pub tolerance: f64,
 }
 
+/// Buffers reused from one contour and one offset to the next.
+#[derive(Debug, Default)]
+pub struct Scratch {
+    points: Vec<[f64; 2]>,
+    dirs: Vec<[f64; 2]>,
+    lens: Vec<f64>,
+    out: Vec<IntPoint<i32>>,
+}
+
+/// Below this cosine of the turn (about 2.6 degrees) a convex corner takes the
+/// crossing point of its two offset edges instead of the detour through the corner.
+const NEARLY_STRAIGHT: f64 = 0.999;
+
+/// 2 sin^2(2.5 degrees): miter corners whose inside angle is below 5 degrees are
+/// bevelled instead, as their tip would reach far beyond the offset.
+const MITER_LIMIT: f64 = 0.003_805;
+
 impl Inset {
-    /// `base` (valid shapes on `grid`) offset inward by `distance` mm.
-    pub fn apply(
+    /// Adds to `overlay`, as clip paths, the raw loops of `shapes` (valid shapes on a
+    /// grid of `scale` units per mm) moved inward by `distance` mm: every contour, or
+    /// only the outer ones with `outer_only`. Returns whether any outer loop was added:
+    /// `false` means the offset set is empty.
+    pub fn add_raw(
         &self,
-        grid: &Grid,
-        base: &IntShapes<i32>,
+        overlay: &mut Overlay<i32>,
+        shapes: &IntShapes<i32>,
+        outer_only: bool,
         distance: f64,
-        stage: &str,
-    ) -> Result<IntShapes<i32>> {
-        let d = grid.length(distance);
-        let join = match self.join {
-            Join::Round => {
-                let ratio = (self.tolerance / distance).min(1.0);
-                let step = 2.0 * (1.0 - ratio).acos();
-                let max_step = Angle::from_radians(step).unwrap_or(ArcOptions::MAX_STEP);
-                IntLineJoin::Round(ArcOptions {
-                    max_step,
-                    ..ArcOptions::default()
-                })
+        scale: f64,
+        scratch: &mut Scratch,
+    ) -> bool {
+        let delta = distance * scale;
+        if delta.is_nan() || delta <= 0.0 || delta.is_infinite() {
+            return false;
+        }
+        // Vertices closer than this to their neighbours' chord change nothing the
+        // tolerance would notice; dropping them removes the nearly straight corners.
+        let eps = (self.tolerance * 0.02 * scale).max(2.0);
+        let step = arc_step(self.tolerance / distance);
+        let mut any = false;
+        for shape in shapes {
+            for (i, contour) in shape.iter().enumerate() {
+                if i > 0 && outer_only {
+                    break;
+                }
+                if i == 0 && !fits(contour, delta) {
+                    // The outer contour is narrower than twice the distance: nothing
+                    // of this shape is left (and its holes need no loops).
+                    break;
+                }
+                if self.contour(contour, delta, eps, step, scratch) {
+                    overlay.add_contour(&scratch.out, ShapeType::Clip);
+                    any |= i == 0;
+                }
             }
-            Join::Miter => {
-                IntLineJoin::Miter(Angle::from_radians(5f64.to_radians()).unwrap_or(ArcOptions::MAX_STEP))
+        }
+        any
+    }
+
+    /// The raw loop of one contour (material on its left) into `scratch.out`; `false`
+    /// for a contour with no area left after simplifying.
+    fn contour(&self, contour: &[IntPoint<i32>], delta: f64, eps: f64, step: f64, s: &mut Scratch) -> bool {
+        simplify(contour, eps, &mut s.points);
+        let n = s.points.len();
+        if n < 3 {
+            return false;
+        }
+        s.dirs.clear();
+        s.lens.clear();
+        for i in 0..n {
+            let (a, b) = (s.points[i], s.points[(i + 1) % n]);
+            let (dx, dy) = (b[0] - a[0], b[1] - a[1]);
+            let len = dx.hypot(dy);
+            s.lens.push(len);
+            s.dirs.push(if len > 0.0 {
+                [dx / len, dy / len]
+            } else {
+                [0.0, 0.0]
+            });
+        }
+        s.out.clear();
+        for i in 0..n {
+            let prev = (i + n - 1) % n;
+            let (dp, dn) = (s.dirs[prev], s.dirs[i]);
+            let (np, nn) = ([-dp[1], dp[0]], [-dn[1], dn[0]]);
+            let v = s.points[i];
+            let at = |n: [f64; 2], k: f64| [v[0] + n[0] * k, v[1] + n[1] * k];
+            let cross = dp[0] * dn[1] - dp[1] * dn[0];
+            let dot = dp[0] * dn[0] + dp[1] * dn[1];
+            let out = &mut s.out;
+            if cross > 0.0 {
+                // Convex corner: the two offset edges cross inside.
+                let half_tan = cross / (1.0 + dot);
+                if dot > NEARLY_STRAIGHT && delta * half_tan < 0.5 * s.lens[prev].min(s.lens[i]) {
+                    push(out, at([np[0] + nn[0], np[1] + nn[1]], delta / (1.0 + dot)));
+                } else {
+                    push(out, at(np, delta));
+                    push(out, v);
+                    push(out, at(nn, delta));
+                }
+                continue;
             }
-            Join::Bevel => IntLineJoin::Bevel,
-        };
-        let inner = match self.from {
-            From::All => -d,
-            From::Outer => 0,
-        };
-        let style = IntOutlineStyle::new(-d).inner_offset(inner).line_join(join);
-        base.outline_custom(&style, options())
-            .map_err(|e| Error::stage(stage, format!("offset by {distance} mm: {e}")))
+            // Reflex (or straight) corner: the offset edges part and a join fills in.
+            match self.join {
+                Join::Round => {
+                    let angle = (-cross).max(0.0).atan2(dot);
+                    let k = ((angle / step).ceil() as usize).max(1);
+                    let (sin, cos) = (angle / k as f64).sin_cos();
+                    let mut r = np;
+                    push(out, at(r, delta));
+                    for _ in 0..k {
+                        // Clockwise: the normal turns with the edge to the right.
+                        r = [r[0] * cos + r[1] * sin, r[1] * cos - r[0] * sin];
+                        push(out, at(r, delta));
+                    }
+                }
+                Join::Miter if 1.0 + dot > MITER_LIMIT => {
+                    push(out, at([np[0] + nn[0], np[1] + nn[1]], delta / (1.0 + dot)));
+                }
+                Join::Miter | Join::Bevel => {
+                    push(out, at(np, delta));
+                    push(out, at(nn, delta));
+                }
+            }
+        }
+        while s.out.len() > 1 && s.out.first() == s.out.last() {
+            s.out.pop();
+        }
+        s.out.len() >= 3
+    }
+}
+
+/// The angle of one chord of a round join whose chords stay within `ratio` times the
+/// radius of the arc: 2 acos(1 - ratio), kept between a hundredth and a quarter turn.
+fn arc_step(ratio: f64) -> f64 {
+    let ratio = if ratio.is_nan() {
+        1.0
+    } else {
+        ratio.clamp(0.0, 1.0)
+    };
+    (2.0 * (1.0 - ratio).acos()).clamp(0.01, std::f64::consts::FRAC_PI_2)
+}
+
+/// Whether an inward offset by `delta` can leave anything of the contour's inside: not
+/// when the bounding box is narrower than twice the distance. This also keeps the raw
+/// loops of large offsets inside the grid's range.
+fn fits(contour: &[IntPoint<i32>], delta: f64) -> bool {
+    let (mut x0, mut y0, mut x1, mut y1) = (i32::MAX, i32::MAX, i32::MIN, i32::MIN);
+    for p in contour {
+        x0 = x0.min(p.x);
+        y0 = y0.min(p.y);
+        x1 = x1.max(p.x);
+        y1 = y1.max(p.y);
+    }
+    let narrow = (f64::from(x1) - f64::from(x0)).min(f64::from(y1) - f64::from(y0));
+    2.0 * delta < narrow
+}
+
+fn push(out: &mut Vec<IntPoint<i32>>, p: [f64; 2]) {
+    let q = IntPoint::new(p[0].round() as i32, p[1].round() as i32);
+    if out.last() != Some(&q) {
+        out.push(q);
+    }
+}
+
+/// The contour without the vertices that lie within `eps` of the segment joining the
+/// last kept vertex and the next one. Starts at the sharpest corner so that the vertex
+/// kept unconditionally is a real one.
+fn simplify(contour: &[IntPoint<i32>], eps: f64, out: &mut Vec<[f64; 2]>) {
+    out.clear();
+    let n = contour.len();
+    if n < 3 {
+        return;
+    }
+    let p = |i: usize| {
+        let q = contour[i % n];
+        [f64::from(q.x), f64::from(q.y)]
+    };
+    let start = (0..n)
+        .max_by(|&a, &b| turn(p(a + n - 1), p(a), p(a + 1)).total_cmp(&turn(p(b + n - 1), p(b), p(b + 1))))
+        .unwrap_or(0);
+    out.push(p(start));
+    for k in 1..n {
+        let (v, next) = (p(start + k), p(start + k + 1));
+        let anchor = out[out.len() - 1];
+        if segment_distance(v, anchor, next) >= eps {
+            out.push(v);
+        }
+    }
+    // The last kept vertex against the chord back to the start.
+    while out.len() >= 3 && segment_distance(out[out.len() - 1], out[out.len() - 2], out[0]) < eps {
+        out.pop();
+    }
+}
+
+/// 1 - cos of the turn at `b`: 0 straight on, 2 turning back.
+fn turn(a: [f64; 2], b: [f64; 2], c: [f64; 2]) -> f64 {
+    let (u, v) = ([b[0] - a[0], b[1] - a[1]], [c[0] - b[0], c[1] - b[1]]);
+    let norm = u[0].hypot(u[1]) * v[0].hypot(v[1]);
+    if norm > 0.0 {
+        1.0 - (u[0] * v[0] + u[1] * v[1]) / norm
+    } else {
+        0.0
+    }
+}
+
+fn segment_distance(p: [f64; 2], a: [f64; 2], b: [f64; 2]) -> f64 {
+    let (ab, ap) = ([b[0] - a[0], b[1] - a[1]], [p[0] - a[0], p[1] - a[1]]);
+    let len2 = ab[0] * ab[0] + ab[1] * ab[1];
+    let t = if len2 > 0.0 {
+        ((ap[0] * ab[0] + ap[1] * ab[1]) / len2).clamp(0.0, 1.0)
+    } else {
+        0.0
+    };
+    (ap[0] - t * ab[0]).hypot(ap[1] - t * ab[1])
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn nearly_collinear_vertices_are_dropped() {
+        let square: Vec<IntPoint<i32>> = [(0, 0), (500, 1), (1000, 0), (1000, 1000), (0, 1000)]
+            .iter()
+            .map(|&(x, y)| IntPoint::new(x, y))
+            .collect();
+        let mut out = Vec::new();
+        simplify(&square, 2.0, &mut out);
+        assert_eq!(out.len(), 4);
+        simplify(&square, 0.5, &mut out);
+        assert_eq!(out.len(), 5);
+        assert!(fits(&square, 499.0) && !fits(&square, 500.0));
     }
 }

@@ -8,7 +8,7 @@ use lamina_core::stage::{
 use lamina_core::{Polygon, Region, Result, StageFactory};
 use serde::Deserialize;
 
-use crate::bands::{clean, nested_bands};
+use crate::bands::{clean, offset_bands};
 use crate::grid::Grid;
 use crate::inset::{From, Inset, Join};
 use crate::measure::{min_contour_distance, pole};
@@ -96,9 +96,7 @@ impl Discretiser for Offset {
         if spacing.is_nan() || spacing <= 0.0 || spacing.is_infinite() {
             return Ok(whole(ctx, polygon));
         }
-        let bands = nested_bands(&base, count, |k| {
-            self.inset.apply(&grid, &base, k as f64 * spacing, STAGE)
-        })?;
+        let bands = offset_bands(&base, grid.scale(), count, &self.inset, |k| k as f64 * spacing)?;
         Ok(from_bands(ctx, &grid, &bands, count, |j| uniform_level(j, count)))
     }
 }

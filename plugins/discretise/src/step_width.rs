@@ -9,7 +9,7 @@ use lamina_core::stage::{
 use lamina_core::{Polygon, Region, Result, StageFactory};
 use serde::Deserialize;
 
-use crate::bands::{clean, nested_bands};
+use crate::bands::{clean, offset_bands};
 use crate::grid::Grid;
 use crate::inset::{From, Inset, Join};
 use crate::measure::{contour_distance, pole};
@@ -144,9 +144,8 @@ impl Discretiser for StepWidth {
             .map(|t| scale * t.powf(1.0 / self.power))
             .collect();
         let count = self.truncation.count;
-        let bands = nested_bands(&base, count, |k| {
-            self.inset.apply(&grid, &base, distances[k - 1], STAGE)
-        })?;
+        let depth = |k: usize| if k == 0 { 0.0 } else { distances[k - 1] };
+        let bands = offset_bands(&base, grid.scale(), count, &self.inset, depth)?;
         Ok(from_bands(ctx, &grid, &bands, count, |k| {
             self.truncation.level(k)
         }))

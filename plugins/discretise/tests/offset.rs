@@ -166,3 +166,51 @@ fn bad_options_are_refused() {
     assert!(!build_error("use = \"offset\"\nfrom = \"inner\"").is_empty());
     assert!(build_error("use = \"offset\"\nspacing = 0.0").contains("spacing"));
 }
+
+/// A circle as an STL slice delivers it: the side of a triangulated cylinder cut at a
+/// quarter of its height gives a vertex on each vertical edge and one on each diagonal,
+/// a quarter along the chord, all rounded to f32. The nearly straight corners at the
+/// chord points are where offsets used to spike back to the boundary and cut the rings.
+fn sliced_circle(r: f64, n: usize) -> Contour {
+    let c = circle(0.0, 0.0, r, n);
+    let f = |p: Point2| Point2::new(f64::from(p.x as f32), f64::from(p.y as f32));
+    let mut points = Vec::with_capacity(2 * n);
+    for (a, b) in c.edges() {
+        points.push(f(a));
+        points.push(f(a + (b - a) * 0.25));
+    }
+    Contour::new(points)
+}
+
+#[test]
+fn tube_ring_split_into_pieces() {
+    for n in [128, 240, 256, 1000] {
+        let fam = OneFamily::new(sliced_circle(10.0, n), vec![sliced_circle(5.0, n)]);
+        for (text, rings) in [
+            ("use = \"offset\"\ncount = 10\nfrom = \"outer\"", 10),
+            ("use = \"offset\"\ncount = 10", 10),
+            ("use = \"offset\"\nnozzle = 0.4", 6),
+            ("use = \"step-width\"\nstep = 0.125", 9),
+        ] {
+            let regions = fam.run(&*stage(text));
+            assert_tiles(&fam.polygon(), &regions);
+            assert_eq!(indices(&regions), (0..rings).collect::<Vec<_>>(), "{text}");
+            for j in 0..rings {
+                let ring: Vec<_> = regions.iter().filter(|r| r.index == j).collect();
+                // From every boundary, the rings are pairs of annuli (one along the outer
+                // contour, one along the bore) until they meet in the last one.
+                let want = if text.contains("outer") || j + 1 == rings {
+                    1
+                } else {
+                    2
+                };
+                assert!(
+                    ring.len() == want && ring.iter().all(|r| r.polygon.holes.len() == 1),
+                    "{n}-gon, {text}: ring {j} is {} polygons with {:?} holes",
+                    ring.len(),
+                    ring.iter().map(|r| r.polygon.holes.len()).collect::<Vec<_>>()
+                );
+            }
+        }
+    }
+}
