@@ -16,7 +16,7 @@ use i_overlay::core::overlay::ShapeType;
 use crate::bands::{clean, nested_bands};
 use crate::field::Field;
 use crate::grid::Grid;
-use crate::iso::iso_loops;
+use crate::iso::iso_levels;
 use crate::measure::pole;
 use crate::regions::{from_bands, uniform_level, whole};
 use crate::step_width::Truncation;
@@ -168,12 +168,7 @@ impl DistanceField {
                 };
             }
         }
-        let sets = self
-            .levels
-            .thresholds()
-            .iter()
-            .map(|&t| iso_loops(&field, &field.values, t))
-            .collect();
+        let sets = iso_levels(&field, &field.values, &self.levels.thresholds());
         Some((field, sets))
     }
 }

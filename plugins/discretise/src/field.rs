@@ -169,11 +169,16 @@ impl Field {
                     continue;
                 }
                 let p = self.point(i, j);
-                let mut best = f64::INFINITY;
+                let own = seed_of[k];
+                let mut best = if own == u32::MAX {
+                    f64::INFINITY
+                } else {
+                    (p - near[own as usize]).norm_squared()
+                };
+                // Neighbours mostly share the sample's own seed: only others are measured.
                 for nj in j.saturating_sub(1)..(j + 2).min(ny) {
-                    for ni in i.saturating_sub(1)..(i + 2).min(nx) {
-                        let s = seed_of[nj * nx + ni];
-                        if s != u32::MAX {
+                    for &s in &seed_of[nj * nx + i.saturating_sub(1)..nj * nx + (i + 2).min(nx)] {
+                        if s != u32::MAX && s != own {
                             best = best.min((p - near[s as usize]).norm_squared());
                         }
                     }

@@ -8,105 +8,136 @@ use crate::field::Field;
 
 /// The loops of `{v >= t}` over `values` (laid out as `field`'s samples).
 pub fn iso_loops(field: &Field, values: &[f64], t: f64) -> Vec<Contour> {
+    iso_levels(field, values, &[t]).pop().unwrap_or_default()
+}
+
+/// The loops of `{v >= t}` for every level `t` of `levels`, in their order, from one
+/// pass over the cells: a cell is looked at for the levels between its lowest and
+/// highest corner only, so the cost is one scan plus the crossed cells. The links
+/// between cell edges are kept per level as sorted pairs rather than as a table over
+/// every edge, which would be cleared and allocated for each level.
+pub fn iso_levels(field: &Field, values: &[f64], levels: &[f64]) -> Vec<Vec<Contour>> {
     let (nx, ny) = (field.nx, field.ny);
+    let mut order: Vec<usize> = (0..levels.len()).filter(|&l| !levels[l].is_nan()).collect();
+    order.sort_unstable_by(|&a, &b| levels[a].total_cmp(&levels[b]));
+    let sorted: Vec<f64> = order.iter().map(|&l| levels[l]).collect();
+    let mut links: Vec<Vec<(u32, u32)>> = vec![Vec::new(); levels.len()];
+    if nx < 2 || ny < 2 || sorted.is_empty() {
+        return vec![Vec::new(); levels.len()];
+    }
+    let (t_min, t_max) = (sorted[0], sorted[sorted.len() - 1]);
     // Edge ids: horizontal edge (i, j)-(i+1, j) is j * (nx - 1) + i; vertical edge
     // (i, j)-(i, j+1) is horizontal count + j * nx + i.
     let horizontal = (nx - 1) * ny;
-    let mut next = vec![u32::MAX; horizontal + nx * (ny - 1)];
-    let mut starts = Vec::new();
-    let above = |k: usize| values[k] >= t;
     for j in 0..ny - 1 {
+        let (row, up) = (&values[j * nx..(j + 1) * nx], &values[(j + 1) * nx..(j + 2) * nx]);
         for i in 0..nx - 1 {
-            let k00 = j * nx + i;
-            let (k10, k01, k11) = (k00 + 1, k00 + nx, k00 + nx + 1);
-            let case = usize::from(above(k00))
-                | usize::from(above(k10)) << 1
-                | usize::from(above(k11)) << 2
-                | usize::from(above(k01)) << 3;
-            if case == 0 || case == 15 {
+            let v = [row[i], row[i + 1], up[i + 1], up[i]];
+            let lo = v[0].min(v[1]).min(v[2].min(v[3]));
+            let hi = v[0].max(v[1]).max(v[2].max(v[3]));
+            // A level crosses the cell when lo < t <= hi.
+            if hi < t_min || lo >= t_max {
                 continue;
             }
-            // The cell's edges counter-clockwise: bottom, right, top, left, each with
-            // the corner it starts from.
-            let edges = [
-                (j * (nx - 1) + i, case & 1 != 0),
-                (horizontal + j * nx + i + 1, case & 2 != 0),
-                ((j + 1) * (nx - 1) + i, case & 4 != 0),
-                (horizontal + j * nx + i, case & 8 != 0),
-            ];
-            // Walking counter-clockwise, an edge from an inside corner to an outside
-            // one is an exit; a segment runs from an exit to an entry.
-            let mut exits = [0usize; 2];
-            let mut entries = [0usize; 2];
-            let (mut ne, mut nn) = (0, 0);
-            for e in 0..4 {
-                let from_in = edges[e].1;
-                let to_in = edges[(e + 1) % 4].1;
-                if from_in && !to_in {
-                    exits[ne] = e;
-                    ne += 1;
-                } else if !from_in && to_in {
-                    entries[nn] = e;
-                    nn += 1;
-                }
+            let first = sorted.partition_point(|&t| t <= lo);
+            let last = sorted.partition_point(|&t| t <= hi);
+            for s in first..last {
+                cell(
+                    &v,
+                    sorted[s],
+                    [
+                        j * (nx - 1) + i,
+                        horizontal + j * nx + i + 1,
+                        (j + 1) * (nx - 1) + i,
+                        horizontal + j * nx + i,
+                    ],
+                    &mut links[order[s]],
+                );
             }
-            let mut link = |a: usize, b: usize| {
-                next[edges[a].0] = edges[b].0 as u32;
-                starts.push(edges[a].0);
+        }
+    }
+    links
+        .into_iter()
+        .enumerate()
+        .map(|(l, mut links)| {
+            let t = levels[l];
+            let point = |edge: usize| -> Point2 {
+                let (k0, k1) = if edge < horizontal {
+                    let (j, i) = (edge / (nx - 1), edge % (nx - 1));
+                    (j * nx + i, j * nx + i + 1)
+                } else {
+                    let e = edge - horizontal;
+                    (e, e + nx)
+                };
+                let (v0, v1) = (values[k0], values[k1]);
+                let s = if v1 != v0 {
+                    ((t - v0) / (v1 - v0)).clamp(0.0, 1.0)
+                } else {
+                    0.5
+                };
+                let p0 = field.point(k0 % nx, k0 / nx);
+                let p1 = field.point(k1 % nx, k1 / nx);
+                p0 + (p1 - p0) * s
             };
-            if ne == 1 {
-                link(exits[0], entries[0]);
-            } else {
-                let mean = 0.25 * (values[k00] + values[k10] + values[k11] + values[k01]);
-                // Inside corners joined through the centre: an exit meets the next
-                // entry counter-clockwise; apart: the previous one.
-                let joined = mean >= t;
-                for &x in &exits {
-                    let after = entries.iter().copied().min_by_key(|&n| (n + 4 - x) % 4);
-                    let before = entries.iter().copied().min_by_key(|&n| (x + 4 - n) % 4);
-                    if let Some(n) = if joined { after } else { before } {
-                        link(x, n);
+            links.sort_unstable_by_key(|l| l.0);
+            let mut used = vec![false; links.len()];
+            let mut loops = Vec::new();
+            for start in 0..links.len() {
+                let mut k = start;
+                let mut points = Vec::new();
+                while !used[k] {
+                    used[k] = true;
+                    let (from, to) = links[k];
+                    points.push(point(from as usize));
+                    match links.binary_search_by_key(&to, |l| l.0) {
+                        Ok(n) => k = n,
+                        Err(_) => break,
                     }
                 }
+                if points.len() >= 3 {
+                    loops.push(Contour::new(points));
+                }
+            }
+            loops
+        })
+        .collect()
+}
+
+/// The segments of level `t` in one cell with corner values `v` (counter-clockwise from
+/// the lower left) and edge ids `ids` (bottom, right, top, left), as links from the edge
+/// a segment leaves the set by to the edge it enters by.
+fn cell(v: &[f64; 4], t: f64, ids: [usize; 4], links: &mut Vec<(u32, u32)>) {
+    let inside = [v[0] >= t, v[1] >= t, v[2] >= t, v[3] >= t];
+    // Walking counter-clockwise, an edge from an inside corner to an outside one is an
+    // exit; a segment runs from an exit to an entry.
+    let mut exits = [0usize; 2];
+    let mut entries = [0usize; 2];
+    let (mut ne, mut nn) = (0, 0);
+    for e in 0..4 {
+        let (from_in, to_in) = (inside[e], inside[(e + 1) % 4]);
+        if from_in && !to_in && ne < 2 {
+            exits[ne] = e;
+            ne += 1;
+        } else if !from_in && to_in && nn < 2 {
+            entries[nn] = e;
+            nn += 1;
+        }
+    }
+    let mut link = |a: usize, b: usize| links.push((ids[a] as u32, ids[b] as u32));
+    if ne == 1 && nn == 1 {
+        link(exits[0], entries[0]);
+    } else if ne == 2 && nn == 2 {
+        // Saddle, resolved by the cell's mean: inside corners joined through the centre
+        // make an exit meet the next entry counter-clockwise; apart, the previous one.
+        let joined = 0.25 * (v[0] + v[1] + v[2] + v[3]) >= t;
+        for &x in &exits {
+            let after = entries.iter().copied().min_by_key(|&n| (n + 4 - x) % 4);
+            let before = entries.iter().copied().min_by_key(|&n| (x + 4 - n) % 4);
+            if let Some(n) = if joined { after } else { before } {
+                link(x, n);
             }
         }
     }
-    let point = |edge: usize| -> Point2 {
-        let (k0, k1) = if edge < horizontal {
-            let (j, i) = (edge / (nx - 1), edge % (nx - 1));
-            (j * nx + i, j * nx + i + 1)
-        } else {
-            let e = edge - horizontal;
-            (e, e + nx)
-        };
-        let (v0, v1) = (values[k0], values[k1]);
-        let s = if v1 != v0 {
-            ((t - v0) / (v1 - v0)).clamp(0.0, 1.0)
-        } else {
-            0.5
-        };
-        let p0 = field.point(k0 % nx, k0 / nx);
-        let p1 = field.point(k1 % nx, k1 / nx);
-        p0 + (p1 - p0) * s
-    };
-    let mut loops = Vec::new();
-    for s in starts {
-        if next[s] == u32::MAX {
-            continue;
-        }
-        let mut points = Vec::new();
-        let mut e = s;
-        while next[e] != u32::MAX {
-            points.push(point(e));
-            let n = next[e] as usize;
-            next[e] = u32::MAX;
-            e = n;
-        }
-        if points.len() >= 3 {
-            loops.push(Contour::new(points));
-        }
-    }
-    loops
 }
 
 #[cfg(test)]
