@@ -334,16 +334,46 @@ struct Dropped {
 /// holes clockwise) with a boolean union under the fill rule: overlapping shells merge,
 /// self-touching or slightly self-crossing loops (near-coincident vertices that were not
 /// welded) are cut apart. Coordinates move by at most the integer grid of the overlay
-/// (about 1e-7 of the layer's extent).
+/// (about 1e-7 of the layer's extent). Loops that are already simple, apart and wound
+/// as they nest are the union's answer as they stand, and are returned unchanged.
 fn simple_contours(loops: &[Contour], options: CutOptions) -> Vec<Contour> {
+    if loops.is_empty() {
+        return Vec::new();
+    }
+    if already_simple(loops) {
+        return loops.iter().map(drop_straight).collect();
+    }
+    union(loops, options)
+}
+
+/// The loop without the points that lie on the straight line between their
+/// neighbours, within 1e-9 of the loop's extent: the union drops them (its grid is about
+/// that fine), and a flat wall made of many triangles leaves one per triangle.
+fn drop_straight(c: &Contour) -> Contour {
+    let b = c.bbox();
+    let tol = b.width().max(b.height()) * 1e-9;
+    let pts = &c.points;
+    let n = pts.len();
+    let mut out: Vec<Point2> = Vec::with_capacity(n);
+    for (i, &p) in pts.iter().enumerate() {
+        let prev = out.last().copied().unwrap_or(pts[n - 1]);
+        if point_segment(p, prev, pts[(i + 1) % n]) > tol {
+            out.push(p);
+        }
+    }
+    if out.len() < 3 {
+        return c.clone();
+    }
+    Contour::new(out)
+}
+
+/// The boolean union of [`simple_contours`].
+fn union(loops: &[Contour], options: CutOptions) -> Vec<Contour> {
     use i_overlay::core::fill_rule::FillRule as Rule;
     use i_overlay::core::solver::Solver;
     use i_overlay::float::overlay::OverlayOptions;
     use i_overlay::float::simplify::SimplifyShape;
 
-    if loops.is_empty() {
-        return Vec::new();
-    }
     let paths: Vec<Vec<[f64; 2]>> = loops
         .iter()
         .map(|c| c.points.iter().map(|p| [p.x, p.y]).collect())
@@ -366,6 +396,182 @@ fn simple_contours(loops: &[Contour], options: CutOptions) -> Vec<Contour> {
         .filter(|path| path.len() >= 3)
         .map(|path| Contour::new(path.into_iter().map(|[x, y]| Point2::new(x, y)).collect()))
         .collect()
+}
+
+/// Whether the union would return `loops` unchanged (up to its integer grid and the
+/// points it drops on straight runs): every loop simple, no two loops touching, and
+/// each loop wound as its nesting says (counter-clockwise at even depth, clockwise at
+/// odd), so that both fill rules fill exactly the loops. Most layers of a sound mesh
+/// are like this, and the check costs a fraction of the union.
+///
+/// Closeness is judged with a margin of 1e-6 of the layer's extent, far above rounding
+/// and above the union's grid: segments (other than neighbours in a loop) must be
+/// farther apart than that, and neighbours must not fold back onto each other. Loops
+/// that cross, touch, or come near (the near-duplicate vertices of a badly welded mesh,
+/// overlapping shells) go to the union.
+fn already_simple(loops: &[Contour]) -> bool {
+    let bbox = loops
+        .iter()
+        .fold(lamina_core::BBox2::EMPTY, |b, c| b.union(&c.bbox()));
+    let extent = bbox.width().max(bbox.height());
+    if !(extent.is_finite() && extent > 0.0) {
+        return false;
+    }
+    let eps = extent * 1e-6;
+    // Every segment with its box grown by eps; neighbours in a loop must not fold back.
+    let mut segs = Vec::with_capacity(loops.iter().map(|c| c.points.len()).sum());
+    let mut length = 0.0;
+    for (l, c) in loops.iter().enumerate() {
+        let pts = &c.points;
+        if pts.len() < 3 {
+            return false;
+        }
+        for i in 0..pts.len() {
+            let (a, b, next) = (pts[i], pts[(i + 1) % pts.len()], pts[(i + 2) % pts.len()]);
+            if point_segment(next, a, b) <= eps || point_segment(a, b, next) <= eps {
+                return false;
+            }
+            length += (b - a).norm();
+            segs.push(Seg {
+                a,
+                b,
+                lo: Point2::new(a.x.min(b.x) - eps, a.y.min(b.y) - eps),
+                hi: Point2::new(a.x.max(b.x) + eps, a.y.max(b.y) + eps),
+                at: (l as u32, i as u32, pts.len() as u32),
+            });
+        }
+    }
+    let n = segs.len();
+    // A grid of square cells about twice the mean segment length, at most ~2 per segment;
+    // each segment is listed in the cells its grown box touches.
+    let (x0, y0) = (bbox.min.x - eps, bbox.min.y - eps);
+    let (w, h) = (bbox.width() + 2.0 * eps, bbox.height() + 2.0 * eps);
+    let cell = (2.0 * length / n as f64)
+        .max((w * h / (2 * n) as f64).sqrt())
+        .max(eps);
+    let nx = (w / cell) as usize + 1;
+    let ny = (h / cell) as usize + 1;
+    let cells = |s: &Seg| {
+        let c = |v: f64, o: f64, n: usize| (((v - o) / cell).max(0.0) as usize).min(n - 1);
+        (
+            c(s.lo.x, x0, nx)..=c(s.hi.x, x0, nx),
+            c(s.lo.y, y0, ny)..=c(s.hi.y, y0, ny),
+        )
+    };
+    let mut starts = vec![0u32; nx * ny + 1];
+    let mut listed = 0usize;
+    for s in &segs {
+        let (xs, ys) = cells(s);
+        listed += xs.clone().count() * ys.clone().count();
+        // Long segments over many cells: a layer unlike a sliced solid; leave it.
+        if listed > 16 * n + 64 {
+            return false;
+        }
+        for y in ys {
+            for x in xs.clone() {
+                starts[y * nx + x + 1] += 1;
+            }
+        }
+    }
+    for i in 0..nx * ny {
+        starts[i + 1] += starts[i];
+    }
+    let mut members = vec![0u32; listed];
+    let mut next = starts.clone();
+    for (g, s) in segs.iter().enumerate() {
+        let (xs, ys) = cells(s);
+        for y in ys {
+            for x in xs.clone() {
+                let slot = &mut next[y * nx + x];
+                members[*slot as usize] = g as u32;
+                *slot += 1;
+            }
+        }
+    }
+    let mut tests = 0usize;
+    for c in 0..nx * ny {
+        let here = &members[starts[c] as usize..starts[c + 1] as usize];
+        tests += here.len() * here.len().saturating_sub(1) / 2;
+        if tests > 64 * n + 1024 {
+            return false;
+        }
+        for (k, &g) in here.iter().enumerate() {
+            let s = &segs[g as usize];
+            for &h in &here[k + 1..] {
+                let t = &segs[h as usize];
+                if s.lo.x > t.hi.x || t.lo.x > s.hi.x || s.lo.y > t.hi.y || t.lo.y > s.hi.y {
+                    continue;
+                }
+                // Neighbours (checked above) share a point.
+                let ((l, i, len), (m, j, _)) = (s.at, t.at);
+                if l == m && (j == (i + 1) % len || i == (j + 1) % len) {
+                    continue;
+                }
+                if segments_within(s.a, s.b, t.a, t.b, eps) {
+                    return false;
+                }
+            }
+        }
+    }
+    // Loops neither cross nor touch, so one point tells whether a loop lies inside
+    // another; the depth must match the winding.
+    let boxes: Vec<lamina_core::BBox2> = loops.iter().map(Contour::bbox).collect();
+    loops.iter().enumerate().all(|(i, c)| {
+        let p = c.points[0];
+        let depth = loops
+            .iter()
+            .enumerate()
+            .filter(|&(j, o)| {
+                let (bi, bj) = (&boxes[i], &boxes[j]);
+                j != i
+                    && bj.min.x <= bi.min.x
+                    && bj.min.y <= bi.min.y
+                    && bj.max.x >= bi.max.x
+                    && bj.max.y >= bi.max.y
+                    && o.contains(p)
+            })
+            .count();
+        c.is_ccw() == depth.is_multiple_of(2)
+    })
+}
+
+/// A loop segment for [`already_simple`]: its ends, its box grown by the margin, and
+/// (loop, index in the loop, loop length).
+struct Seg {
+    a: Point2,
+    b: Point2,
+    lo: Point2,
+    hi: Point2,
+    at: (u32, u32, u32),
+}
+
+/// Distance from `p` to the segment `a b`.
+fn point_segment(p: Point2, a: Point2, b: Point2) -> f64 {
+    let d = b - a;
+    let len2 = d.norm_squared();
+    let t = if len2 > 0.0 {
+        ((p - a).dot(&d) / len2).clamp(0.0, 1.0)
+    } else {
+        0.0
+    };
+    (p - (a + d * t)).norm()
+}
+
+/// Whether segments `a b` and `c d` come within `eps` of each other (or cross).
+fn segments_within(a: Point2, b: Point2, c: Point2, d: Point2, eps: f64) -> bool {
+    if point_segment(a, c, d) <= eps
+        || point_segment(b, c, d) <= eps
+        || point_segment(c, a, b) <= eps
+        || point_segment(d, a, b) <= eps
+    {
+        return true;
+    }
+    // Every end is clear of the other segment, so a crossing is a proper one and the
+    // signs below are far from rounding.
+    let orient = |p: Point2, q: Point2, r: Point2| (q - p).perp(&(r - p));
+    let (o1, o2) = (orient(a, b, c), orient(a, b, d));
+    let (o3, o4) = (orient(c, d, a), orient(c, d, b));
+    (o1 > 0.0) != (o2 > 0.0) && (o3 > 0.0) != (o4 > 0.0)
 }
 
 /// Chains segments into closed loops by their edge keys. Returns the loops (oriented
@@ -611,5 +817,58 @@ mod tests {
             "{w}"
         );
         assert!(w.contains("gap of 1.000 mm"), "{w}");
+    }
+
+    fn square(x: f64, y: f64, half: f64, ccw: bool) -> Contour {
+        let mut c = Contour::new(vec![
+            Point2::new(x - half, y - half),
+            Point2::new(x + half, y - half),
+            Point2::new(x + half, y + half),
+            Point2::new(x - half, y + half),
+        ]);
+        if !ccw {
+            c.reverse();
+        }
+        c
+    }
+
+    #[test]
+    fn union_is_skipped_only_for_simple_disjoint_consistently_wound_loops() {
+        let outer = square(0.0, 0.0, 2.0, true);
+        let hole = square(0.0, 0.0, 1.0, false);
+        let island = square(0.0, 0.0, 0.5, true);
+        assert!(already_simple(&[outer.clone(), hole.clone(), island.clone()]));
+        assert!(already_simple(&[square(10.0, 0.0, 1.0, true), outer.clone()]));
+        // Nesting that disagrees with the winding: the union decides.
+        assert!(!already_simple(&[outer.clone(), square(0.0, 0.0, 1.0, true)]));
+        assert!(!already_simple(std::slice::from_ref(&hole)));
+        // Overlapping shells, a shell touching another, one a hair away.
+        assert!(!already_simple(&[outer.clone(), square(3.0, 0.0, 2.0, true)]));
+        assert!(!already_simple(&[outer.clone(), square(4.0, 0.0, 2.0, true)]));
+        assert!(!already_simple(&[
+            outer.clone(),
+            square(4.0 + 1e-9, 0.0, 2.0, true)
+        ]));
+        // A bow tie crosses itself; a spike folds back.
+        let bow = Contour::new(vec![
+            Point2::new(0.0, 0.0),
+            Point2::new(1.0, 1.0),
+            Point2::new(1.0, 0.0),
+            Point2::new(0.0, 1.0),
+        ]);
+        assert!(!already_simple(&[bow]));
+        let spike = Contour::new(vec![
+            Point2::new(0.0, 0.0),
+            Point2::new(2.0, 0.0),
+            Point2::new(1.0, 0.0),
+            Point2::new(1.0, 1.0),
+        ]);
+        assert!(!already_simple(&[spike]));
+        // Both ways give the same contours.
+        let loops = [outer, hole, island];
+        let union = union(&loops, CutOptions::default());
+        let area = |cs: &[Contour]| cs.iter().map(Contour::signed_area).sum::<f64>();
+        assert_eq!(union.len(), 3);
+        assert!((area(&union) - area(&loops)).abs() < 1e-9);
     }
 }
