@@ -13,6 +13,8 @@ fn registry() -> Registry {
     use lamina_grade as _;
     use lamina_model as _;
     use lamina_orient as _;
+    use lamina_plan as _;
+    use lamina_gcode as _;
     use lamina_sequence as _;
     use lamina_sources as _;
     use lamina_slice as _;
@@ -69,7 +71,9 @@ fn pipeline_for(kind: StageKind, example: &str) -> String {
     let mut text =
         String::from("[materials.red]\ncolour = [255, 0, 0]\n[materials.green]\ncolour = [0, 255, 0]\n\n");
     if kind != StageKind::Grade {
-        text.push_str("[[parts]]\nmaterials = [\"red\"]\n\n");
+        // Both materials stay on the part (a discretiser may name them) and a constant
+        // grader says how they mix.
+        text.push_str("[grade]\nuse = \"constant\"\nmaterial = \"red\"\n\n");
     }
     for (name, body) in tables {
         text.push_str(&format!("[{name}]\n{body}\n\n"));
@@ -146,10 +150,26 @@ fn the_expected_built_in_stages_are_registered() {
         (StageKind::Model, "gear-shaft"),
         (StageKind::Model, "tube"),
         (StageKind::Model, "box"),
+        (StageKind::Model, "cube"),
+        (StageKind::Model, "blade"),
+        (StageKind::Orient, "candidates"),
         (StageKind::Slice, "uniform"),
+        (StageKind::Slice, "adaptive"),
         (StageKind::Sort, "hierarchy"),
+        (StageKind::Discretise, "offset"),
+        (StageKind::Discretise, "step-width"),
+        (StageKind::Discretise, "distance-field"),
+        (StageKind::Discretise, "sources"),
         (StageKind::Grade, "script"),
+        (StageKind::Grade, "constant"),
+        (StageKind::Grade, "z"),
+        (StageKind::Grade, "xy"),
+        (StageKind::Grade, "idw"),
+        (StageKind::Sequence, "work-cycles"),
         (StageKind::Export, "json"),
+        (StageKind::Export, "cli"),
+        (StageKind::Export, "bitmap"),
+        (StageKind::Export, "3mf"),
     ] {
         assert!(
             registry.get(kind, name).is_some(),
