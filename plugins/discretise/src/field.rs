@@ -6,7 +6,6 @@
 //! interior found by scanning each row. The grid is padded so that its border samples
 //! lie outside the family.
 
-use lamina_core::geom::closest_on_segment;
 use lamina_core::{BBox2, Contour, Point2};
 
 /// Samples of a field over a padded bounding box.
@@ -83,172 +82,223 @@ impl Field {
     /// Fills `values` with the distance of every sample to the nearest of `contours`.
     pub fn distance_to(&mut self, contours: &[&Contour]) {
         let n = self.nx * self.ny;
+        let (nx, ny) = (self.nx, self.ny);
         let mut near = vec![Point2::origin(); n];
         let mut seed_d2 = vec![f64::INFINITY; n];
-        // Exact distances for the samples around each segment, found by walking it in
-        // half-cell steps and visiting the 4 x 4 samples about each step.
+        // Seeds are the samples within a cell of the boundary: a thin band keeps the
+        // nearest seed's boundary point close to the true nearest boundary point. Each
+        // segment visits, column by column, the samples of its cell-wide neighbourhood
+        // and measures them exactly.
+        let h = self.h;
+        let h2 = h * h;
+        let (ox, oy) = (self.origin.x, self.origin.y);
         for c in contours {
             for (a, b) in c.edges() {
-                let len = (b - a).norm();
-                let steps = ((len / (0.5 * self.h)).ceil() as usize).max(1);
-                for s in 0..=steps {
-                    let p = a + (b - a) * (s as f64 / steps as f64);
-                    let ci = ((p.x - self.origin.x) / self.h).floor() as isize;
-                    let cj = ((p.y - self.origin.y) / self.h).floor() as isize;
-                    for j in cj - 1..=cj + 2 {
-                        for i in ci - 1..=ci + 2 {
-                            if i < 0 || j < 0 || i as usize >= self.nx || j as usize >= self.ny {
-                                continue;
-                            }
-                            let k = j as usize * self.nx + i as usize;
-                            let q = self.point(i as usize, j as usize);
-                            let on = closest_on_segment(q, a, b);
-                            let d2 = (q - on).norm_squared();
-                            if d2 < seed_d2[k] {
-                                seed_d2[k] = d2;
-                                near[k] = on;
-                            }
+                let ab = b - a;
+                let len2 = ab.norm_squared();
+                let (x0, x1) = (a.x.min(b.x) - h, a.x.max(b.x) + h);
+                let i0 = ((x0 - ox) / h).ceil().max(0.0) as usize;
+                let i1 = (((x1 - ox) / h).floor().max(-1.0) + 1.0) as usize;
+                for i in i0..i1.min(nx) {
+                    let x = ox + i as f64 * h;
+                    // The segment's y-range where it is within h in x, widened by h.
+                    let (ya, yb) = if ab.x.abs() > 0.0 {
+                        let ta = ((x - h - a.x) / ab.x).clamp(0.0, 1.0);
+                        let tb = ((x + h - a.x) / ab.x).clamp(0.0, 1.0);
+                        (a.y + ab.y * ta, a.y + ab.y * tb)
+                    } else {
+                        (a.y, b.y)
+                    };
+                    let (y0, y1) = (ya.min(yb) - h, ya.max(yb) + h);
+                    let j0 = ((y0 - oy) / h).ceil().max(0.0) as usize;
+                    let j1 = (((y1 - oy) / h).floor().max(-1.0) + 1.0) as usize;
+                    for j in j0..j1.min(ny) {
+                        let q = Point2::new(x, oy + j as f64 * h);
+                        let t = if len2 > 0.0 {
+                            ((q - a).dot(&ab) / len2).clamp(0.0, 1.0)
+                        } else {
+                            0.0
+                        };
+                        let on = a + ab * t;
+                        let d2 = (q - on).norm_squared();
+                        let k = j * nx + i;
+                        if d2 <= h2 && d2 < seed_d2[k] {
+                            seed_d2[k] = d2;
+                            near[k] = on;
                         }
                     }
                 }
             }
         }
-        // Seeds are the samples within a cell of the boundary: a thin band keeps the
-        // nearest seed's boundary point close to the true nearest boundary point.
-        let h2 = self.h * self.h;
-        for d2 in &mut seed_d2 {
-            if *d2 > h2 {
-                *d2 = f64::INFINITY;
+        // Column pass: squared distance in samples to the nearest seed of the column,
+        // by a sweep up and a sweep down over whole rows (the seeds are all at 0, so
+        // the nearest in a column is the nearest below or above).
+        let seed: Vec<bool> = seed_d2.iter().map(|d| d.is_finite()).collect();
+        let mut g = vec![NONE; n];
+        let mut from_row = vec![u32::MAX; n];
+        let mut last = vec![u32::MAX; nx];
+        for j in 0..ny {
+            let row = j * nx..(j + 1) * nx;
+            for (((l, &s), g), r) in last
+                .iter_mut()
+                .zip(&seed[row.clone()])
+                .zip(&mut g[row.clone()])
+                .zip(&mut from_row[row])
+            {
+                if s {
+                    *l = j as u32;
+                }
+                if *l != u32::MAX {
+                    let d = (j - *l as usize) as i64;
+                    *g = d * d;
+                    *r = *l;
+                }
             }
         }
-        let (nx, ny) = (self.nx, self.ny);
-        // Column pass: squared distance in samples to the nearest seed of the column.
-        let mut g = vec![f64::INFINITY; n];
-        let mut from_row = vec![u32::MAX; n];
-        let mut scratch = Envelope::new(nx.max(ny));
-        let mut f = vec![0.0; ny];
-        let mut out = vec![0.0; ny];
-        let mut arg = vec![0u32; ny];
-        for i in 0..nx {
-            for j in 0..ny {
-                f[j] = if seed_d2[j * nx + i].is_finite() {
-                    0.0
-                } else {
-                    f64::INFINITY
-                };
-            }
-            scratch.transform(&f, &mut out, &mut arg);
-            for j in 0..ny {
-                g[j * nx + i] = out[j];
-                from_row[j * nx + i] = arg[j];
+        last.fill(u32::MAX);
+        for j in (0..ny).rev() {
+            let row = j * nx..(j + 1) * nx;
+            for (((l, &s), g), r) in last
+                .iter_mut()
+                .zip(&seed[row.clone()])
+                .zip(&mut g[row.clone()])
+                .zip(&mut from_row[row])
+            {
+                if s {
+                    *l = j as u32;
+                }
+                if *l != u32::MAX {
+                    let d = (*l as usize - j) as i64;
+                    if d * d < *g {
+                        *g = d * d;
+                        *r = *l;
+                    }
+                }
             }
         }
         // Row pass: over the column results; the argmin names the column, whose
         // column pass names the row of the nearest seed.
-        let mut out = vec![0.0; nx];
+        let mut scratch = Envelope::new(nx.max(ny));
         let mut arg = vec![0u32; nx];
         let mut seed_of = vec![u32::MAX; n];
         for j in 0..ny {
             let row = &g[j * nx..(j + 1) * nx];
-            scratch.transform(row, &mut out, &mut arg);
-            for i in 0..nx {
-                if out[i].is_finite() {
-                    let col = arg[i] as usize;
+            if scratch.transform(row, &mut arg) {
+                for (i, &col) in arg.iter().enumerate() {
+                    let col = col as usize;
                     seed_of[j * nx + i] = (from_row[j * nx + col] as usize * nx + col) as u32;
                 }
             }
         }
-        // Each sample takes the nearest of the boundary points its own and its eight
-        // neighbours' seeds found: near a medial axis the nearest seed in samples may
-        // sit on the farther boundary.
+        // Every sample measures its nearest seed's boundary point (seeds their own,
+        // exact); squared until the end.
+        let d2 = |k: usize, s: u32| {
+            if s == u32::MAX {
+                f64::INFINITY
+            } else {
+                let p = Point2::new(ox + (k % nx) as f64 * h, oy + (k / nx) as f64 * h);
+                (p - near[s as usize]).norm_squared()
+            }
+        };
+        for k in 0..n {
+            self.values[k] = if seed[k] { seed_d2[k] } else { d2(k, seed_of[k]) };
+        }
+        // Near a medial axis the nearest seed in samples may sit on the farther
+        // boundary. There adjacent samples take seeds on different stretches of the
+        // boundary (seeds more than two samples apart; a missing seed is far from all),
+        // and both samples also try the boundary points of their eight neighbours'
+        // seeds.
+        let refine = |k: usize, values: &mut [f64]| {
+            let (i, j) = (k % nx, k / nx);
+            let mut best = values[k];
+            for nj in j.saturating_sub(1)..(j + 2).min(ny) {
+                for &s in &seed_of[nj * nx + i.saturating_sub(1)..nj * nx + (i + 2).min(nx)] {
+                    best = best.min(d2(k, s));
+                }
+            }
+            values[k] = best;
+        };
+        let apart = |a: u32, b: u32| {
+            let (a, b) = (a as usize, b as usize);
+            a != b && (a % nx).abs_diff(b % nx).max((a / nx).abs_diff(b / nx)) > 2
+        };
         for j in 0..ny {
             for i in 0..nx {
                 let k = j * nx + i;
-                if seed_d2[k].is_finite() {
-                    self.values[k] = seed_d2[k].sqrt();
-                    continue;
+                let s = seed_of[k];
+                if i + 1 < nx && apart(seed_of[k + 1], s) {
+                    refine(k, &mut self.values);
+                    refine(k + 1, &mut self.values);
                 }
-                let p = self.point(i, j);
-                let own = seed_of[k];
-                let mut best = if own == u32::MAX {
-                    f64::INFINITY
-                } else {
-                    (p - near[own as usize]).norm_squared()
-                };
-                // Neighbours mostly share the sample's own seed: only others are measured.
-                for nj in j.saturating_sub(1)..(j + 2).min(ny) {
-                    for &s in &seed_of[nj * nx + i.saturating_sub(1)..nj * nx + (i + 2).min(nx)] {
-                        if s != u32::MAX && s != own {
-                            best = best.min((p - near[s as usize]).norm_squared());
-                        }
-                    }
+                if j + 1 < ny && apart(seed_of[k + nx], s) {
+                    refine(k, &mut self.values);
+                    refine(k + nx, &mut self.values);
                 }
-                self.values[k] = best.sqrt();
             }
+        }
+        for v in &mut self.values {
+            *v = v.sqrt();
         }
     }
 }
 
+/// No seed in the column: the column pass leaves this for the row pass to skip.
+const NONE: i64 = i64::MAX;
+
 /// The lower envelope of parabolas of the 1-D transform, with buffers kept across rows.
+/// Inputs are squared distances in samples, so every comparison of intersections is
+/// made exactly in integers by cross-multiplying instead of dividing.
 struct Envelope {
-    v: Vec<usize>,
-    z: Vec<f64>,
+    /// Vertices of the parabolas of the envelope and their heights f[p] + p^2.
+    v: Vec<i64>,
+    h: Vec<i64>,
 }
 
 impl Envelope {
     fn new(n: usize) -> Self {
         Self {
             v: vec![0; n],
-            z: vec![0.0; n + 1],
+            h: vec![0; n],
         }
     }
 
-    /// `out[q] = min_p (q - p)^2 + f[p]` and `arg[q]` the minimising p (Felzenszwalb and
-    /// Huttenlocher). Infinite f values are skipped; all infinite gives infinity.
-    fn transform(&mut self, f: &[f64], out: &mut [f64], arg: &mut [u32]) {
-        let n = f.len();
-        let mut k: isize = -1;
-        for q in 0..n {
-            if !f[q].is_finite() {
+    /// `arg[q]` = the p minimising `(q - p)^2 + f[p]` (Felzenszwalb and Huttenlocher).
+    /// `NONE` values are skipped; `false` (and `arg` untouched) when all are.
+    fn transform(&mut self, f: &[i64], arg: &mut [u32]) -> bool {
+        let mut k = 0usize;
+        for (q, &fq) in f.iter().enumerate() {
+            if fq == NONE {
                 continue;
             }
-            let fq = f[q] + (q * q) as f64;
-            loop {
-                if k < 0 {
-                    k = 0;
-                    self.v[0] = q;
-                    self.z[0] = f64::NEG_INFINITY;
-                    self.z[1] = f64::INFINITY;
+            let q = q as i64;
+            let hq = fq + q * q;
+            // Parabola k - 1 is hidden when the new one meets it left of where it
+            // meets parabola k - 2: (hq - h1) / (q - v1) <= (h1 - h0) / (v1 - v0).
+            while k > 1 {
+                let (v0, h0, v1, h1) = (self.v[k - 2], self.h[k - 2], self.v[k - 1], self.h[k - 1]);
+                if (hq - h1) * (v1 - v0) <= (h1 - h0) * (q - v1) {
+                    k -= 1;
+                } else {
                     break;
                 }
-                let p = self.v[k as usize];
-                let s = (fq - (f[p] + (p * p) as f64)) / (2.0 * (q as f64 - p as f64));
-                if s <= self.z[k as usize] {
-                    k -= 1;
-                    continue;
-                }
-                k += 1;
-                self.v[k as usize] = q;
-                self.z[k as usize] = s;
-                self.z[k as usize + 1] = f64::INFINITY;
-                break;
             }
+            self.v[k] = q;
+            self.h[k] = hq;
+            k += 1;
         }
-        if k < 0 {
-            out.fill(f64::INFINITY);
-            arg.fill(0);
-            return;
+        if k == 0 {
+            return false;
         }
-        let mut k = 0usize;
-        for q in 0..n {
-            while self.z[k + 1] < q as f64 {
-                k += 1;
+        let mut m = 0usize;
+        for (q, a) in arg.iter_mut().enumerate() {
+            let q = q as i64;
+            // Move on while the next parabola is lower at q: h2 - 2 q v2 < h1 - 2 q v1.
+            while m + 1 < k && self.h[m + 1] - 2 * q * self.v[m + 1] < self.h[m] - 2 * q * self.v[m] {
+                m += 1;
             }
-            let p = self.v[k];
-            let d = q as f64 - p as f64;
-            out[q] = d * d + f[p];
-            arg[q] = p as u32;
+            *a = self.v[m] as u32;
         }
+        true
     }
 }
 

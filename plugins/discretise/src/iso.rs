@@ -25,23 +25,35 @@ pub fn iso_levels(field: &Field, values: &[f64], levels: &[f64]) -> Vec<Vec<Cont
     if nx < 2 || ny < 2 || sorted.is_empty() {
         return vec![Vec::new(); levels.len()];
     }
-    let (t_min, t_max) = (sorted[0], sorted[sorted.len() - 1]);
+    // Each sample's band: how many levels lie at or below it (levels s with s < band
+    // have the sample inside). A cell is crossed by the levels from its lowest corner's
+    // band to its highest's, and by none when they agree.
+    let band: Vec<u16> = if sorted.len() <= 32 {
+        values
+            .iter()
+            .map(|&v| sorted.iter().map(|&t| u16::from(t <= v)).sum())
+            .collect()
+    } else {
+        values
+            .iter()
+            .map(|&v| sorted.partition_point(|&t| t <= v) as u16)
+            .collect()
+    };
     // Edge ids: horizontal edge (i, j)-(i+1, j) is j * (nx - 1) + i; vertical edge
     // (i, j)-(i, j+1) is horizontal count + j * nx + i.
     let horizontal = (nx - 1) * ny;
     for j in 0..ny - 1 {
-        let (row, up) = (&values[j * nx..(j + 1) * nx], &values[(j + 1) * nx..(j + 2) * nx]);
+        let (row, up) = (&band[j * nx..(j + 1) * nx], &band[(j + 1) * nx..(j + 2) * nx]);
         for i in 0..nx - 1 {
-            let v = [row[i], row[i + 1], up[i + 1], up[i]];
-            let lo = v[0].min(v[1]).min(v[2].min(v[3]));
-            let hi = v[0].max(v[1]).max(v[2].max(v[3]));
-            // A level crosses the cell when lo < t <= hi.
-            if hi < t_min || lo >= t_max {
+            let b = [row[i], row[i + 1], up[i + 1], up[i]];
+            let lo = b[0].min(b[1]).min(b[2].min(b[3]));
+            let hi = b[0].max(b[1]).max(b[2].max(b[3]));
+            if lo == hi {
                 continue;
             }
-            let first = sorted.partition_point(|&t| t <= lo);
-            let last = sorted.partition_point(|&t| t <= hi);
-            for s in first..last {
+            let k = j * nx + i;
+            let v = [values[k], values[k + 1], values[k + nx + 1], values[k + nx]];
+            for s in usize::from(lo)..usize::from(hi) {
                 cell(
                     &v,
                     sorted[s],
