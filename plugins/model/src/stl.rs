@@ -6,7 +6,6 @@
 use std::path::Path;
 
 use lamina_core::{Error, Point3, Result};
-use rayon::prelude::*;
 
 use crate::weld::Soup;
 
@@ -75,30 +74,24 @@ fn looks_ascii(bytes: &[u8]) -> bool {
 }
 
 fn parse_binary(path: &Path, bytes: &[u8], count: usize) -> Result<Soup> {
-    // Records are independent and the file size was checked against `count`, so they
-    // are read in parallel straight into place; the first bad one is looked for after.
-    let records = bytes.get(84..).unwrap_or_default();
     let mut triangles = Vec::with_capacity(count);
-    records
-        .par_chunks_exact(50)
-        .with_min_len(4096)
-        .map(|rec| {
-            let f = |k: usize| {
-                let o = 12 + 4 * k;
-                f64::from(f32::from_le_bytes([rec[o], rec[o + 1], rec[o + 2], rec[o + 3]]))
-            };
-            [0, 1, 2].map(|v| Point3::new(f(3 * v), f(3 * v + 1), f(3 * v + 2)))
-        })
-        .collect_into_vec(&mut triangles);
-    let finite = |t: &[Point3; 3]| {
-        t.iter()
-            .all(|p| p.x.is_finite() && p.y.is_finite() && p.z.is_finite())
-    };
-    if let Some(i) = triangles.par_iter().position_first(|t| !finite(t)) {
-        return Err(model_error(
-            path,
-            format!("triangle {i} (byte {}) has a non-finite coordinate", 84 + 50 * i),
-        ));
+    for (i, rec) in bytes[84..].chunks_exact(50).enumerate() {
+        let f = |k: usize| {
+            let o = 12 + 4 * k;
+            f32::from_le_bytes([rec[o], rec[o + 1], rec[o + 2], rec[o + 3]])
+        };
+        let mut tri = [Point3::origin(); 3];
+        for (v, corner) in tri.iter_mut().enumerate() {
+            let (x, y, z) = (f(3 * v), f(3 * v + 1), f(3 * v + 2));
+            if !(x.is_finite() && y.is_finite() && z.is_finite()) {
+                return Err(model_error(
+                    path,
+                    format!("triangle {i} (byte {}) has a non-finite coordinate", 84 + 50 * i),
+                ));
+            }
+            *corner = Point3::new(f64::from(x), f64::from(y), f64::from(z));
+        }
+        triangles.push(tri);
     }
     Ok(Soup { triangles })
 }
