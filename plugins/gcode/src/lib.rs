@@ -1,0 +1,1 @@
+//! lamina-gcode: G-code for multi-material and mixing printers.

@@ -1,0 +1,313 @@
+//! lamina-plan: toolpath planners. Every sub-region is filled with contour-parallel
+//! closed loops along its iso-material contours (`fill`), the loops are handed to the
+//! tools and ordered nearest-next (`route`), and the tools' routes are timed either one
+//! tool after another (`sequential`, the baseline) or all at once with dynamic
+//! priority (`concurrent`, `sim`).
+//!
+//! Tools: without `mixing`, there is one tool per pipeline material (tool i deposits
+//! material i) and a sub-region goes to the tool of its dominant material, which suits
+//! discrete multi-material parts and coarse gradients on tool changers. With
+//! `mixing = true` a single mixing tool deposits everything and each path carries its
+//! sub-region's composition for the mixing head. Either way the composition is on the
+//! path, so exporters can meter mixtures.
+
+pub mod fill;
+pub mod route;
+pub mod sim;
+
+use std::collections::BTreeMap;
+
+use lamina_core::stage::{AnyStage, OptionSpec, Planner, StageConfig, StageInfo, StageKind};
+use lamina_core::{Error, LayerPlan, Result, RunInfo, StageFactory, Toolpath};
+use serde::Deserialize;
+
+use crate::route::{Move, Parks, Seam, ToolSpec, distribute, pause, route, timed};
+
+/// Side-steps allowed per layer before the concurrent planner falls back to sequential.
+const MAX_SIDE_STEPS: usize = 200;
+
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct ToolOptions {
+    speed: Option<f64>,
+    travel_speed: Option<f64>,
+    envelope: Option<f64>,
+}
+
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct Options {
+    #[serde(default = "d_width")]
+    width: f64,
+    #[serde(default)]
+    seam: Seam,
+    #[serde(default)]
+    mixing: bool,
+    #[serde(default = "d_speed")]
+    speed: f64,
+    #[serde(default = "d_travel")]
+    travel_speed: f64,
+    #[serde(default = "d_envelope")]
+    envelope: f64,
+    #[serde(default = "d_change")]
+    tool_change: f64,
+    step: Option<f64>,
+    #[serde(default)]
+    compare: bool,
+    /// Per-tool settings by material name (or `mixer`).
+    #[serde(default)]
+    tools: BTreeMap<String, ToolOptions>,
+}
+
+fn d_width() -> f64 {
+    0.4
+}
+fn d_speed() -> f64 {
+    30.0
+}
+fn d_travel() -> f64 {
+    120.0
+}
+fn d_envelope() -> f64 {
+    5.0
+}
+fn d_change() -> f64 {
+    5.0
+}
+
+/// Name of the single tool when `mixing = true`.
+pub const MIXER: &str = "mixer";
+
+impl Options {
+    fn check(&self, config: &StageConfig<'_>, concurrent: bool) -> Result<()> {
+        let positive = |k: &str, v: f64| {
+            if v.is_finite() && v > 0.0 {
+                Ok(())
+            } else {
+                Err(config.error(k, "must be a positive number"))
+            }
+        };
+        positive("width", self.width)?;
+        positive("speed", self.speed)?;
+        positive("travel_speed", self.travel_speed)?;
+        positive("envelope", self.envelope)?;
+        if !(self.tool_change.is_finite() && self.tool_change >= 0.0) {
+            return Err(config.error("tool_change", "must be zero or more seconds"));
+        }
+        // `step` and `compare` mean nothing to the sequential planner but are accepted,
+        // so that `--set plan.use=sequential` compares a concurrent pipeline.
+        let _ = concurrent;
+        if let Some(s) = self.step {
+            positive("step", s)?;
+        }
+        for (name, t) in &self.tools {
+            for (k, v) in [("speed", t.speed), ("travel_speed", t.travel_speed), ("envelope", t.envelope)] {
+                if let Some(v) = v
+                    && !(v.is_finite() && v > 0.0)
+                {
+                    return Err(config.error("tools", format!("tools.{name}.{k} must be a positive number")));
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// The tools of a run: one per material, or the mixer.
+    fn tools(&self, info: &RunInfo) -> Result<Vec<ToolSpec>> {
+        let names: Vec<String> = if self.mixing {
+            vec![MIXER.to_string()]
+        } else {
+            info.materials.iter().map(|m| m.name.clone()).collect()
+        };
+        for key in self.tools.keys() {
+            if !names.contains(key) {
+                return Err(Error::stage(
+                    "plan",
+                    format!("tools.{key}: no such tool (the tools are {})", names.join(", ")),
+                ));
+            }
+        }
+        Ok(names
+            .into_iter()
+            .enumerate()
+            .map(|(index, name)| {
+                let t = self.tools.get(&name);
+                ToolSpec {
+                    index,
+                    speed: t.and_then(|t| t.speed).unwrap_or(self.speed),
+                    travel_speed: t.and_then(|t| t.travel_speed).unwrap_or(self.travel_speed),
+                    envelope: t.and_then(|t| t.envelope).unwrap_or(self.envelope),
+                    name,
+                }
+            })
+            .collect())
+    }
+
+    fn step(&self) -> f64 {
+        self.step.unwrap_or(0.01)
+    }
+}
+
+/// The routes of every tool with work in the layer, and the layer's warnings.
+struct Layer {
+    tools: Vec<ToolSpec>,
+    routes: Vec<Vec<Move>>,
+}
+
+fn prepare(o: &Options, info: &RunInfo, plan: &mut LayerPlan, step: f64) -> Result<Layer> {
+    let tools = o.tools(info)?;
+    if tools.is_empty() {
+        return Err(Error::stage("plan", "the pipeline has no materials, so no tools"));
+    }
+    let work = distribute(info, plan, tools.len(), o.width, o.mixing);
+    if !work.thin.is_empty() {
+        let list: Vec<String> = work
+            .thin
+            .iter()
+            .take(5)
+            .map(|(part, r, a)| format!("part `{part}` sub-region {r} ({a:.3} mm²)"))
+            .collect();
+        let more = work.thin.len().saturating_sub(5);
+        plan.warnings.push(format!(
+            "{} sub-region(s) too thin for a {} mm pass are not deposited: {}{}",
+            work.thin.len(),
+            o.width,
+            list.join(", "),
+            if more > 0 { format!(" and {more} more") } else { String::new() }
+        ));
+    }
+    let rmax = tools.iter().map(|t| t.envelope).fold(0.0, f64::max);
+    let vmax = tools.iter().map(ToolSpec::max_speed).fold(0.0, f64::max);
+    let parks = Parks::new(&work.bbox, tools.len(), 2.0 * rmax + 2.0 * vmax * step + 1.0);
+    let routes = tools
+        .iter()
+        .zip(work.jobs)
+        .map(|(t, jobs)| route(t, jobs, &parks, o.seam, o.width))
+        .collect();
+    Ok(Layer { tools, routes })
+}
+
+/// One tool after another in tool order, each out of its park and back, with a tool
+/// change (a pause of the next tool at its park) between two tools.
+fn sequential(layer: &Layer, tool_change: f64) -> (Vec<Toolpath>, f64) {
+    let mut t = 0.0;
+    let mut out = Vec::new();
+    let mut first = true;
+    for (tool, moves) in layer.tools.iter().zip(&layer.routes) {
+        if moves.is_empty() {
+            continue;
+        }
+        if !first && tool_change > 0.0 {
+            out.push(pause(tool.index, moves[0].points[0], t, t + tool_change));
+            t += tool_change;
+        }
+        first = false;
+        let (paths, end) = timed(tool.index, moves, t);
+        out.extend(paths);
+        t = end;
+    }
+    (out, t)
+}
+
+struct Sequential(Options);
+struct Concurrent(Options);
+
+impl Planner for Sequential {
+    fn plan(&self, info: &RunInfo, plan: &mut LayerPlan) -> Result<()> {
+        let layer = prepare(&self.0, info, plan, 0.0)?;
+        let (paths, t) = sequential(&layer, self.0.tool_change);
+        plan.toolpaths.extend(paths);
+        plan.build_time = Some(plan.build_time.unwrap_or(0.0) + t);
+        Ok(())
+    }
+}
+
+impl Planner for Concurrent {
+    fn plan(&self, info: &RunInfo, plan: &mut LayerPlan) -> Result<()> {
+        let o = &self.0;
+        let layer = prepare(o, info, plan, o.step())?;
+        let (seq_paths, seq_time) = sequential(&layer, o.tool_change);
+        let busy: Vec<(&ToolSpec, Vec<Move>)> = layer
+            .tools
+            .iter()
+            .zip(&layer.routes)
+            .filter(|(_, r)| !r.is_empty())
+            .map(|(t, r)| (t, r.clone()))
+            .collect();
+        // The concurrent schedule cannot take longer than every tool's route back to
+        // back plus every hold; a budget of several sequential times catches a layer
+        // whose tools keep giving way to each other.
+        let budget = 4.0 * seq_time + 60.0;
+        let (paths, t) = match sim::concurrent(&busy, o.step(), budget, MAX_SIDE_STEPS) {
+            Ok(r) => r,
+            Err(e) => {
+                plan.warnings.push(format!(
+                    "concurrent planning gave up ({e:?}); this layer is deposited one tool at a time"
+                ));
+                (seq_paths, seq_time)
+            }
+        };
+        if o.compare {
+            plan.warnings.push(format!(
+                "build time {t:.2} s concurrent, {seq_time:.2} s sequential (ratio {:.3})",
+                if seq_time > 0.0 { t / seq_time } else { 1.0 }
+            ));
+        }
+        plan.toolpaths.extend(paths);
+        plan.build_time = Some(plan.build_time.unwrap_or(0.0) + t);
+        Ok(())
+    }
+}
+
+fn build_sequential(config: &StageConfig<'_>) -> Result<AnyStage> {
+    let o: Options = config.parse()?;
+    o.check(config, false)?;
+    Ok(AnyStage::Plan(Box::new(Sequential(o))))
+}
+
+fn build_concurrent(config: &StageConfig<'_>) -> Result<AnyStage> {
+    let o: Options = config.parse()?;
+    o.check(config, true)?;
+    Ok(AnyStage::Plan(Box::new(Concurrent(o))))
+}
+
+macro_rules! common_options {
+    ($($extra:expr),* $(,)?) => {
+        &[
+            OptionSpec::new("width", "float", "0.4", "extrusion width (mm): contour passes at w/2, 3w/2, ... inside each sub-region"),
+            OptionSpec::new("seam", "string", "\"nearest\"", "where loops start: `nearest` (to the tool) or `aligned` (largest x)"),
+            OptionSpec::new("mixing", "bool", "false", "one mixing tool for everything (composition on the path) instead of one tool per material, each depositing the sub-regions its material dominates"),
+            OptionSpec::new("speed", "float", "30.0", "deposition speed (mm/s)"),
+            OptionSpec::new("travel_speed", "float", "120.0", "travel speed (mm/s)"),
+            OptionSpec::new("envelope", "float", "5.0", "tool envelope radius (mm); tools park outside each other's envelopes"),
+            OptionSpec::new("tool_change", "float", "5.0", "seconds to change tools between two tools' turns (sequential)"),
+            OptionSpec::new("tools", "table", "{}", "per-tool `speed`, `travel_speed`, `envelope`, keyed by material name (or `mixer`)"),
+            $($extra),*
+        ]
+    };
+}
+
+lamina_core::register_stage!(StageFactory {
+    info: StageInfo {
+        kind: StageKind::Plan,
+        name: "sequential",
+        doc: "Contour-parallel loops in every sub-region, deposited one tool after another (the baseline).",
+        options: common_options!(),
+        example: "use = \"sequential\"\nwidth = 0.5",
+    },
+    build: build_sequential,
+});
+
+lamina_core::register_stage!(StageFactory {
+    info: StageInfo {
+        kind: StageKind::Plan,
+        name: "concurrent",
+        doc: "Contour-parallel loops deposited by all tools at once; dynamic priority (faster along X) pauses the other tool on a predicted collision.",
+        options: common_options!(
+            OptionSpec::new("step", "float", "0.01", "seconds between collision checks"),
+            OptionSpec::new("compare", "bool", "false", "add a layer warning with the sequential build time"),
+        ),
+        example: "use = \"concurrent\"\nwidth = 0.5\nenvelope = 2.0\nstep = 0.02",
+    },
+    build: build_concurrent,
+});

@@ -1,0 +1,304 @@
+//! What each tool does in a layer, before any timing: its tool settings, its share of
+//! the sub-regions, and its route (park, nearest-next contour loops with their seams,
+//! back to park) as a list of moves at the tool's own speeds.
+
+use lamina_core::{BBox2, Composition, LayerPlan, PathKind, Point2, RunInfo, TimedPoint, Toolpath};
+
+use crate::fill::{Loop, contour_passes};
+
+/// Where each loop starts.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Seam {
+    /// At the loop's vertex nearest to where the tool is: shortest travel.
+    #[default]
+    Nearest,
+    /// At the loop's vertex of largest x: seams line up along one side of the part.
+    Aligned,
+}
+
+/// One tool's settings for a layer.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ToolSpec {
+    pub index: usize,
+    pub name: String,
+    /// Deposition speed (mm/s).
+    pub speed: f64,
+    /// Travel speed (mm/s).
+    pub travel_speed: f64,
+    /// Envelope radius (mm): two tools collide when their centres come closer than the
+    /// sum of their radii.
+    pub envelope: f64,
+}
+
+impl ToolSpec {
+    pub fn max_speed(&self) -> f64 {
+        self.speed.max(self.travel_speed)
+    }
+}
+
+/// One continuous move of a route, untimed.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Move {
+    pub kind: PathKind,
+    pub points: Vec<Point2>,
+    pub speed: f64,
+    pub width: f64,
+    pub composition: Option<Composition>,
+    pub part: Option<usize>,
+    pub region: Option<usize>,
+}
+
+impl Move {
+    pub fn travel(points: Vec<Point2>, speed: f64) -> Self {
+        Move {
+            kind: PathKind::Travel,
+            points,
+            speed,
+            width: 0.0,
+            composition: None,
+            part: None,
+            region: None,
+        }
+    }
+
+    pub fn length(&self) -> f64 {
+        self.points.windows(2).map(|w| (w[1] - w[0]).norm()).sum()
+    }
+
+    pub fn duration(&self) -> f64 {
+        self.length() / self.speed
+    }
+}
+
+/// A loop to deposit, with what it deposits.
+#[derive(Debug, Clone)]
+pub struct Job {
+    pub pass: Loop,
+    pub composition: Option<Composition>,
+    pub part: usize,
+    pub region: usize,
+    /// Lower bound of the distance from a point to the loop, by its bounding box.
+    pub bbox: BBox2,
+}
+
+/// The loops of every tool of a layer, and the sub-regions no pass fits in.
+#[derive(Debug, Default)]
+pub struct Work {
+    /// `jobs[tool]`.
+    pub jobs: Vec<Vec<Job>>,
+    /// (part name, region index, area) of the regions too thin for one pass.
+    pub thin: Vec<(String, usize, f64)>,
+    /// Bounding box of everything deposited in the layer.
+    pub bbox: BBox2,
+}
+
+/// The tool that deposits a region: the mixing tool, or the tool of the region's
+/// dominant material (the part's first material when the region is not graded).
+pub fn tool_of(info: &RunInfo, part: usize, composition: Option<&Composition>, mixing: bool) -> usize {
+    if mixing {
+        return 0;
+    }
+    let Some(p) = info.parts.get(part) else {
+        return 0;
+    };
+    let local = composition
+        .map(|c| {
+            c.fractions
+                .iter()
+                .enumerate()
+                .fold((0, f64::NEG_INFINITY), |a, (i, &f)| if f > a.1 { (i, f) } else { a })
+                .0
+        })
+        .unwrap_or(0);
+    p.materials.get(local).copied().unwrap_or(0)
+}
+
+/// Cuts every sub-region of the layer into passes and hands each to its tool.
+pub fn distribute(info: &RunInfo, plan: &LayerPlan, tools: usize, width: f64, mixing: bool) -> Work {
+    let mut work = Work {
+        jobs: vec![Vec::new(); tools],
+        ..Work::default()
+    };
+    for part in &plan.parts {
+        for (ri, region) in part.regions.iter().enumerate() {
+            let passes = contour_passes(&region.polygon, width);
+            if passes.is_empty() {
+                let name = info.parts.get(part.part).map(|p| p.name.clone()).unwrap_or_default();
+                work.thin.push((name, ri, region.area()));
+                continue;
+            }
+            let tool = tool_of(info, part.part, region.composition.as_ref(), mixing).min(tools - 1);
+            for pass in passes {
+                let bbox = BBox2::from_points(pass.points.iter().copied());
+                work.bbox = work.bbox.union(&bbox);
+                work.jobs[tool].push(Job {
+                    pass,
+                    composition: region.composition.clone(),
+                    part: part.part,
+                    region: ri,
+                    bbox,
+                });
+            }
+        }
+    }
+    work
+}
+
+/// Where tools wait: a row below the layer, `spacing` apart, and the row just below
+/// the layer every tool passes through on its way in and out. Everything a tool does
+/// in the layer stays above `entry_y`, at least `spacing` above every park, so a parked
+/// tool is never in anyone's way.
+#[derive(Debug, Clone, Copy)]
+pub struct Parks {
+    pub x0: f64,
+    pub spacing: f64,
+    pub park_y: f64,
+    pub entry_y: f64,
+}
+
+impl Parks {
+    pub fn new(bbox: &BBox2, tools: usize, spacing: f64) -> Self {
+        let (cx, min_y) = if bbox.is_empty() {
+            (0.0, 0.0)
+        } else {
+            (bbox.center().x, bbox.min.y)
+        };
+        let entry_y = min_y - 1.0;
+        Parks {
+            x0: cx - spacing * (tools.saturating_sub(1)) as f64 / 2.0,
+            spacing,
+            park_y: entry_y - spacing,
+            entry_y,
+        }
+    }
+
+    pub fn park(&self, tool: usize) -> Point2 {
+        Point2::new(self.x0 + self.spacing * tool as f64, self.park_y)
+    }
+
+    pub fn entry(&self, tool: usize) -> Point2 {
+        Point2::new(self.x0 + self.spacing * tool as f64, self.entry_y)
+    }
+}
+
+/// The route of one tool: out of its park, each loop in nearest-next order starting at
+/// its seam, and back. Empty when the tool has nothing to deposit.
+pub fn route(tool: &ToolSpec, jobs: Vec<Job>, parks: &Parks, seam: Seam, width: f64) -> Vec<Move> {
+    let mut moves = Vec::new();
+    if jobs.is_empty() {
+        return moves;
+    }
+    let park = parks.park(tool.index);
+    let entry = parks.entry(tool.index);
+    let mut at = entry;
+    let mut travel = vec![park, entry];
+    let mut left: Vec<Option<Job>> = jobs.into_iter().map(Some).collect();
+    let mut order: Vec<(f64, usize)> = Vec::with_capacity(left.len());
+    for _ in 0..left.len() {
+        // Nearest next loop: exact vertex distances, visited in order of the bounding
+        // box lower bound and stopped once the bound exceeds the best found.
+        order.clear();
+        order.extend(
+            left.iter()
+                .enumerate()
+                .filter_map(|(i, j)| j.as_ref().map(|j| (box_distance(&j.bbox, at), i))),
+        );
+        order.sort_by(|a, b| a.0.total_cmp(&b.0));
+        let mut best: Option<(usize, usize, f64)> = None;
+        for &(bound, i) in &order {
+            if best.is_some_and(|b| bound > b.2) {
+                break;
+            }
+            if let Some(j) = &left[i] {
+                let (v, d) = j.pass.nearest_vertex(at);
+                if best.is_none_or(|b| d < b.2) {
+                    best = Some((i, v, d));
+                }
+            }
+        }
+        let Some((i, v, _)) = best else { break };
+        let Some(job) = left[i].take() else { break };
+        let start = match seam {
+            Seam::Nearest => v,
+            Seam::Aligned => job.pass.max_x_vertex(),
+        };
+        let pass = job.pass.rotated(start);
+        let first = pass.points[0];
+        travel.push(first);
+        push_travel(&mut moves, std::mem::take(&mut travel), tool.travel_speed);
+        at = pass.points[pass.points.len() - 1];
+        moves.push(Move {
+            kind: PathKind::Extrude,
+            points: pass.points,
+            speed: tool.speed,
+            width,
+            composition: job.composition,
+            part: Some(job.part),
+            region: Some(job.region),
+        });
+        travel.push(at);
+    }
+    travel.push(entry);
+    travel.push(park);
+    push_travel(&mut moves, travel, tool.travel_speed);
+    moves
+}
+
+fn push_travel(moves: &mut Vec<Move>, mut points: Vec<Point2>, speed: f64) {
+    points.dedup_by(|a, b| (*a - *b).norm() < 1e-12);
+    if points.len() >= 2 {
+        moves.push(Move::travel(points, speed));
+    }
+}
+
+fn box_distance(b: &BBox2, p: Point2) -> f64 {
+    let dx = (b.min.x - p.x).max(p.x - b.max.x).max(0.0);
+    let dy = (b.min.y - p.y).max(p.y - b.max.y).max(0.0);
+    dx.hypot(dy)
+}
+
+/// The route timed on its own, from `t0`: toolpaths and the time it ends.
+pub fn timed(tool: usize, moves: &[Move], t0: f64) -> (Vec<Toolpath>, f64) {
+    let mut t = t0;
+    let mut out = Vec::with_capacity(moves.len());
+    for m in moves {
+        let mut points = Vec::with_capacity(m.points.len());
+        let mut prev: Option<Point2> = None;
+        for &p in &m.points {
+            if let Some(q) = prev {
+                t += (p - q).norm() / m.speed;
+            }
+            points.push(TimedPoint { p, t });
+            prev = Some(p);
+        }
+        out.push(toolpath(tool, m, points));
+    }
+    (out, t)
+}
+
+/// A toolpath with a move's kind and what it deposits.
+pub fn toolpath(tool: usize, m: &Move, points: Vec<TimedPoint>) -> Toolpath {
+    Toolpath {
+        tool,
+        kind: m.kind,
+        points,
+        width: m.width,
+        composition: m.composition.clone(),
+        part: m.part,
+        region: m.region,
+    }
+}
+
+/// A pause of `tool` at `p` from `t0` to `t1`.
+pub fn pause(tool: usize, p: Point2, t0: f64, t1: f64) -> Toolpath {
+    Toolpath {
+        tool,
+        kind: PathKind::Pause,
+        points: vec![TimedPoint { p, t: t0 }, TimedPoint { p, t: t1 }],
+        width: 0.0,
+        composition: None,
+        part: None,
+        region: None,
+    }
+}

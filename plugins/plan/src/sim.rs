@@ -1,0 +1,324 @@
+//! Concurrent deposition with dynamic priority (Choi and Zhu): every tool follows its
+//! own route at its own speeds; at a fixed rate the positions each tool would reach in
+//! the next step are checked pairwise against the tools' envelopes. On a predicted
+//! collision the tool moving faster along X keeps going and the other pauses where it
+//! is (a safe point: it was clear there one step ago) until the conflict is gone.
+//!
+//! The envelopes are checked with a clearance of half the distance both tools can
+//! cover in one step, so no overlap can hide between two checks. When every unfinished
+//! tool is held (each waits for another), the tool of lowest priority steps aside to
+//! a clear point and comes back once the way is free; if that does not resolve the
+//! layer, the caller falls back to sequential deposition.
+
+use lamina_core::{PathKind, Point2, TimedPoint, Toolpath, Vector2};
+
+use crate::route::{Move, ToolSpec, pause, toolpath};
+
+/// Why the concurrent schedule gave up.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Stuck {
+    /// Tools kept blocking each other after this many side-steps.
+    Deadlock(usize),
+    /// The simulation ran past its time budget (s).
+    Timeout(f64),
+}
+
+/// Where a tool is on its route.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct Cursor {
+    mv: usize,
+    seg: usize,
+    along: f64,
+}
+
+struct Agent<'a> {
+    spec: &'a ToolSpec,
+    route: Vec<Move>,
+    at: Cursor,
+    pos: Point2,
+    done: bool,
+    /// The path being written: the current move's, or a pause.
+    open: Option<Toolpath>,
+    out: Vec<Toolpath>,
+}
+
+impl Agent<'_> {
+    /// The cursor and position after `dt` seconds along the route; with `emit`, the
+    /// route's vertices passed on the way are written with their times from `t`.
+    fn walk(&mut self, dt: f64, t: f64, emit: bool) -> (Cursor, Point2, bool) {
+        let mut c = self.at;
+        let mut left = dt;
+        let mut pos = self.pos;
+        loop {
+            let Some(m) = self.route.get(c.mv) else {
+                return (c, pos, true);
+            };
+            if c.seg + 1 >= m.points.len() {
+                // End of a move: the next one starts where this one ended.
+                if emit {
+                    self.close();
+                }
+                c = Cursor {
+                    mv: c.mv + 1,
+                    seg: 0,
+                    along: 0.0,
+                };
+                if let Some(next) = self.route.get(c.mv)
+                    && emit
+                {
+                    let p = next.points[0];
+                    self.open = Some(toolpath(self.spec.index, next, vec![TimedPoint { p, t: t + dt - left }]));
+                }
+                continue;
+            }
+            let (a, b) = (m.points[c.seg], m.points[c.seg + 1]);
+            let len = (b - a).norm();
+            let need = (len - c.along).max(0.0) / m.speed;
+            if need > left {
+                c.along += left * m.speed;
+                let p = if len > 0.0 { a + (b - a) * (c.along / len) } else { a };
+                return (c, p, false);
+            }
+            left -= need;
+            if emit && let Some(path) = &mut self.open {
+                path.points.push(TimedPoint { p: b, t: t + dt - left });
+            }
+            c = Cursor {
+                mv: c.mv,
+                seg: c.seg + 1,
+                along: 0.0,
+            };
+            pos = b;
+        }
+    }
+
+    fn close(&mut self) {
+        if let Some(path) = self.open.take() {
+            let keep = path.points.len() >= 2
+                && match path.kind {
+                    PathKind::Pause => path.points[path.points.len() - 1].t > path.points[0].t,
+                    _ => path.length() > 0.0,
+                };
+            if keep {
+                self.out.push(path);
+            }
+        }
+    }
+
+    /// Holds the tool at its position for `[t, t + dt]`.
+    fn hold(&mut self, t: f64, dt: f64) {
+        match &mut self.open {
+            Some(p) if p.kind == PathKind::Pause => {
+                if let Some(last) = p.points.last_mut() {
+                    last.t = t + dt;
+                }
+            }
+            _ => {
+                if let Some(path) = &mut self.open
+                    && path.points.last().is_none_or(|q| q.p != self.pos)
+                {
+                    path.points.push(TimedPoint { p: self.pos, t });
+                }
+                self.close();
+                self.open = Some(pause(self.spec.index, self.pos, t, t + dt));
+            }
+        }
+    }
+
+    /// Moves the tool for `dt` from `t`, ending a pause first.
+    fn advance(&mut self, t: f64, dt: f64) {
+        if self.open.as_ref().is_some_and(|p| p.kind == PathKind::Pause) {
+            self.close();
+            if let Some(m) = self.route.get(self.at.mv) {
+                self.open = Some(toolpath(self.spec.index, m, vec![TimedPoint { p: self.pos, t }]));
+            }
+        }
+        let (c, p, done) = self.walk(dt, t, true);
+        self.at = c;
+        self.pos = p;
+        // Between vertices the motion is straight at constant speed: the position is
+        // written only when the tool stops (`hold`) or passes the next vertex.
+        if done {
+            self.close();
+            self.done = true;
+        }
+    }
+
+    /// Leaves the route at the current position for `to` and comes back, then goes on.
+    fn side_step(&mut self, to: Point2) {
+        let c = self.at;
+        let Some(m) = self.route.get(c.mv).cloned() else {
+            return;
+        };
+        let here = self.pos;
+        let mut head: Vec<Point2> = m.points[..=c.seg.min(m.points.len() - 1)].to_vec();
+        head.push(here);
+        let mut tail = vec![here];
+        tail.extend_from_slice(&m.points[(c.seg + 1).min(m.points.len())..]);
+        let speed = self.spec.travel_speed;
+        let seg = head.len() - 2;
+        let along = (head[seg + 1] - head[seg]).norm();
+        self.route[c.mv].points = head;
+        let rest = Move { points: tail, ..m };
+        self.route.splice(
+            c.mv + 1..c.mv + 1,
+            [Move::travel(vec![here, to], speed), Move::travel(vec![to, here], speed), rest],
+        );
+        self.at = Cursor { mv: c.mv, seg, along };
+    }
+}
+
+/// Runs the tools' routes together from time 0 with checks every `step` seconds: the
+/// toolpaths of every tool (with their pauses) and the time the last tool parks.
+pub fn concurrent(
+    tools: &[(&ToolSpec, Vec<Move>)],
+    step: f64,
+    budget: f64,
+    max_side_steps: usize,
+) -> Result<(Vec<Toolpath>, f64), Stuck> {
+    let mut agents: Vec<Agent<'_>> = tools
+        .iter()
+        .map(|(spec, route)| {
+            let pos = route.first().map(|m| m.points[0]).unwrap_or_default();
+            let open = route.first().map(|m| toolpath(spec.index, m, vec![TimedPoint { p: pos, t: 0.0 }]));
+            Agent {
+                spec,
+                done: route.is_empty(),
+                route: route.clone(),
+                at: Cursor {
+                    mv: 0,
+                    seg: 0,
+                    along: 0.0,
+                },
+                pos,
+                open,
+                out: Vec::new(),
+            }
+        })
+        .collect();
+    let n = agents.len();
+    let clear = |a: &Agent<'_>, b: &Agent<'_>| {
+        a.spec.envelope + b.spec.envelope + (a.spec.max_speed() + b.spec.max_speed()) * step / 2.0
+    };
+    let mut t = 0.0;
+    let mut side_steps = 0;
+    let mut proposed: Vec<(Point2, f64)> = vec![(Point2::origin(), 0.0); n];
+    let mut moving = vec![false; n];
+    while agents.iter().any(|a| !a.done) {
+        if t > budget {
+            return Err(Stuck::Timeout(budget));
+        }
+        for (i, a) in agents.iter_mut().enumerate() {
+            moving[i] = !a.done;
+            if a.done {
+                proposed[i] = (a.pos, 0.0);
+            } else {
+                let (_, p, _) = a.walk(step, t, false);
+                proposed[i] = (p, (p.x - a.pos.x).abs() / step);
+            }
+        }
+        // Hold the lower-priority tool of each predicted collision until none is left;
+        // held tools stay where they are, which was clear one step ago.
+        loop {
+            let mut change = false;
+            for i in 0..n {
+                for j in i + 1..n {
+                    if !(moving[i] || moving[j]) {
+                        continue;
+                    }
+                    let pi = if moving[i] { proposed[i].0 } else { agents[i].pos };
+                    let pj = if moving[j] { proposed[j].0 } else { agents[j].pos };
+                    if (pi - pj).norm() >= clear(&agents[i], &agents[j]) {
+                        continue;
+                    }
+                    let loser = match (moving[i], moving[j]) {
+                        (true, true) if proposed[j].1 > proposed[i].1 => i,
+                        (true, true) => j,
+                        (true, false) => i,
+                        _ => j,
+                    };
+                    moving[loser] = false;
+                    change = true;
+                }
+            }
+            if !change {
+                break;
+            }
+        }
+        if !moving.iter().any(|&m| m) {
+            // Every unfinished tool waits for another: the slowest along X steps aside.
+            side_steps += 1;
+            if side_steps > max_side_steps {
+                return Err(Stuck::Deadlock(max_side_steps));
+            }
+            let Some(k) = (0..n)
+                .filter(|&i| !agents[i].done)
+                .min_by(|&a, &b| proposed[a].1.total_cmp(&proposed[b].1).then(b.cmp(&a)))
+            else {
+                break;
+            };
+            let to = aside(&agents, k, &clear);
+            agents[k].side_step(to);
+            continue;
+        }
+        for (i, a) in agents.iter_mut().enumerate() {
+            if moving[i] {
+                a.advance(t, step);
+            } else if !a.done {
+                a.hold(t, step);
+            }
+        }
+        t += step;
+    }
+    let mut out = Vec::new();
+    let mut end = 0.0f64;
+    for a in agents {
+        for p in &a.out {
+            if let Some(q) = p.points.last() {
+                end = end.max(q.t);
+            }
+        }
+        out.extend(a.out);
+    }
+    Ok((out, end))
+}
+
+/// A point clear of every other tool, away from the nearest ones, for tool `k` to wait
+/// at: straight away from the tools around it first, then turning until clear.
+fn aside(agents: &[Agent<'_>], k: usize, clear: &dyn Fn(&Agent<'_>, &Agent<'_>) -> f64) -> Point2 {
+    let here = agents[k].pos;
+    let mut away = Vector2::zeros();
+    let mut reach: f64 = 0.0;
+    for (j, b) in agents.iter().enumerate() {
+        if j == k {
+            continue;
+        }
+        let d = here - b.pos;
+        let c = clear(&agents[k], b);
+        reach = reach.max(c);
+        if d.norm() < 3.0 * c && d.norm() > 0.0 {
+            away += d / d.norm();
+        }
+    }
+    if away.norm() < 1e-9 {
+        away = Vector2::new(0.0, -1.0);
+    }
+    let away = away.normalize();
+    let ok = |p: Point2| {
+        agents
+            .iter()
+            .enumerate()
+            .all(|(j, b)| j == k || (p - b.pos).norm() >= clear(&agents[k], b) * 1.5)
+    };
+    for scale in [2.0, 3.0, 5.0] {
+        for turn in [0.0f64, 45.0, -45.0, 90.0, -90.0, 135.0, -135.0, 180.0] {
+            let (s, c) = turn.to_radians().sin_cos();
+            let dir = Vector2::new(c * away.x - s * away.y, s * away.x + c * away.y);
+            let p = here + dir * reach * scale;
+            if ok(p) {
+                return p;
+            }
+        }
+    }
+    here + away * reach * 2.0
+}
