@@ -1,0 +1,404 @@
+#!/usr/bin/env python3
+"""Lamina against its peers on real meshes, in one command.
+
+Times Lamina and, where they are installed, its peers on the same models and the same
+work, and prints a table of times, ratios and peak memory (also written to a file):
+
+- slicing (load + slice + loops + hierarchy at 0.2 mm): trimesh `section_multiplane`,
+  manifold3d `slice`;
+- offsets (10 inward offsets 0.4 mm apart on every layer of 3DBenchy): pyclipr
+  (Clipper2);
+- signed distance field (512 x 512 grid, 10 iso-levels per layer): scipy
+  `distance_transform_edt` + scikit-image `find_contours`;
+- STL to G-code: `prusa-slicer --export-gcode` (0.2 mm, 3 perimeters, 20 % infill),
+  when Lamina has a `gcode` exporter.
+
+Every figure is the median of several runs after a warm-up, each run a fresh process:
+its whole-process wall time and peak RSS (from wait4), plus the time the work itself
+took inside the process (Lamina's `--timings`, the peers' own clock around the call).
+Both sides run in the same invocation, one after the other.
+
+Usage: python3 benches/benchsuite.py [--quick] [--runs N] [--models DIR]
+       [--lamina PATH] [--python PATH] [--out FILE]
+See benches/README.md for installing the peers.
+"""
+
+import argparse
+import datetime
+import json
+import os
+import shutil
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parent.parent
+
+# (file, scale to mm, label)
+SLICE_MODELS = [
+    ("3DBenchy.stl", 1.0, "3DBenchy"),
+    ("turbine_blade_vtk.stl", 1.0, "turbine blade"),
+    ("stanford_bunny.stl", 1000.0, "bunny x1000"),
+    ("openfoam_buildings_400k.stl", 1.0, "buildings 400k"),
+]
+
+PEER_SLICE_TRIMESH = r"""
+import sys, time, json
+import numpy as np, trimesh
+path, scale, step = sys.argv[1], float(sys.argv[2]), float(sys.argv[3])
+t0 = time.perf_counter()
+m = trimesh.load(path, force="mesh")
+m.apply_scale(scale)
+t1 = time.perf_counter()
+z0, z1 = m.bounds[0][2], m.bounds[1][2]
+heights = np.arange(step / 2, z1 - z0, step)
+sections = m.section_multiplane(plane_origin=[0, 0, z0], plane_normal=[0, 0, 1], heights=heights)
+loops = sum(len(s.polygons_full) for s in sections if s is not None)
+t2 = time.perf_counter()
+print(json.dumps({"work": t2 - t0, "load": t1 - t0, "slice": t2 - t1, "layers": len(heights), "loops": loops}))
+"""
+
+PEER_SLICE_MANIFOLD = r"""
+import sys, time, json
+import numpy as np, trimesh, manifold3d
+path, scale, step = sys.argv[1], float(sys.argv[2]), float(sys.argv[3])
+t0 = time.perf_counter()
+m = trimesh.load(path, force="mesh")
+m.apply_scale(scale)
+t1 = time.perf_counter()
+mesh = manifold3d.Mesh(vert_properties=np.asarray(m.vertices, dtype=np.float32),
+                       tri_verts=np.asarray(m.faces, dtype=np.uint32))
+man = manifold3d.Manifold(mesh)
+z0, z1 = m.bounds[0][2], m.bounds[1][2]
+loops = 0
+layers = 0
+z = z0 + step / 2
+while z < z1:
+    loops += len(man.slice(z).to_polygons())
+    layers += 1
+    z += step
+t2 = time.perf_counter()
+print(json.dumps({"work": t2 - t1, "load": t1 - t0, "layers": layers, "loops": loops,
+                  "status": str(man.status())}))
+"""
+
+PEER_OFFSET_PYCLIPR = r"""
+import sys, time, json
+import numpy as np, pyclipr
+layers = json.load(open(sys.argv[1]))
+count, step = int(sys.argv[2]), float(sys.argv[3])
+paths = [[np.asarray(c, dtype=float) for c in layer] for layer in layers]
+t0 = time.perf_counter()
+total = 0
+for layer in paths:
+    for k in range(1, count + 1):
+        po = pyclipr.ClipperOffset()
+        po.scaleFactor = 1000
+        po.addPaths(layer, pyclipr.JoinType.Round, pyclipr.EndType.Polygon)
+        total += len(po.execute(-step * k))
+t1 = time.perf_counter()
+print(json.dumps({"work": t1 - t0, "layers": len(paths), "paths": total}))
+"""
+
+PEER_SDF_SCIPY = r"""
+import sys, time, json
+import numpy as np
+from scipy import ndimage
+from skimage import draw, measure
+layers = json.load(open(sys.argv[1]))
+n, levels = int(sys.argv[2]), int(sys.argv[3])
+edt = contours = 0.0
+done = 0
+for layer in layers:
+    pts = np.concatenate([np.asarray(c) for c in layer])
+    lo, hi = pts.min(axis=0), pts.max(axis=0)
+    size = (hi - lo).max() * 1.02 + 1e-9
+    mask = np.zeros((n, n), dtype=bool)
+    for c in layer:
+        c = (np.asarray(c) - lo) / size * (n - 1)
+        rr, cc = draw.polygon(c[:, 1], c[:, 0], (n, n))
+        mask[rr, cc] ^= True
+    t0 = time.perf_counter()
+    d = ndimage.distance_transform_edt(mask) - ndimage.distance_transform_edt(~mask)
+    t1 = time.perf_counter()
+    top = d.max()
+    for k in range(levels):
+        measure.find_contours(d, top * k / levels)
+    t2 = time.perf_counter()
+    edt += t1 - t0
+    contours += t2 - t1
+    done += 1
+print(json.dumps({"work": edt + contours, "edt": edt, "contours": contours, "layers": done}))
+"""
+
+
+def run_process(cmd, cwd=None):
+    """Runs a command; returns (wall seconds, stdout, stderr, exit code)."""
+    start = time.perf_counter()
+    proc = subprocess.Popen(cmd, cwd=cwd, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    out, err = proc.communicate()
+    wall = time.perf_counter() - start
+    return wall, out.decode(errors="replace"), err.decode(errors="replace"), proc.returncode
+
+
+# RUSAGE_CHILDREN keeps the maximum over all children a process ever had, so every
+# measurement runs in a fresh measuring process whose only child is the command.
+MEASURE = r"""
+import sys, time, json, subprocess
+start = time.perf_counter()
+proc = subprocess.Popen(sys.argv[1:], stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+out, err = proc.communicate()
+wall = time.perf_counter() - start
+import resource
+# The only child of this process: its peak RSS.
+usage = resource.getrusage(resource.RUSAGE_CHILDREN)
+sys.stdout.write(json.dumps({"wall": wall, "rss_kib": usage.ru_maxrss, "code": proc.returncode,
+                             "out": out.decode(errors="replace"), "err": err.decode(errors="replace")}))
+"""
+
+
+def measure(cmd, cwd=None):
+    """Runs `cmd` in a fresh measuring process: whole-process wall time, peak RSS (MiB),
+    stdout; raises on failure."""
+    wall, out, err, code = run_process([sys.executable, "-c", MEASURE] + [str(c) for c in cmd], cwd=cwd)
+    if code != 0:
+        raise RuntimeError(f"measuring {Path(str(cmd[0])).name} failed: {err.strip()[-300:]}")
+    r = json.loads(out)
+    if r["code"] != 0:
+        lines = [l.strip() for l in r["err"].splitlines() if l.strip()]
+        first = next((l for l in lines if l.startswith("error")), lines[-1] if lines else "no message")
+        raise RuntimeError(f"{Path(str(cmd[0])).name} exited {r['code']}: {first}")
+    return r["wall"], r["rss_kib"] / 1024.0, r["out"]
+
+
+def repeat(cmd, runs, cwd=None):
+    """Median wall, median peak RSS and the stdout of each run, after one warm-up."""
+    measure(cmd, cwd)
+    walls, rss, outs = [], [], []
+    for _ in range(runs):
+        w, m, o = measure(cmd, cwd)
+        walls.append(w)
+        rss.append(m)
+        outs.append(o)
+    return statistics.median(walls), statistics.median(rss), outs
+
+
+def lamina_timings(out):
+    """Per-stage times from `lamina run --timings`."""
+    t = {}
+    for line in out.splitlines():
+        parts = line.split()
+        if len(parts) == 2:
+            try:
+                t[parts[0]] = float(parts[1])
+            except ValueError:
+                pass
+    return t
+
+
+def median_of(outs, key):
+    vals = []
+    for o in outs:
+        try:
+            vals.append(json.loads(o.strip().splitlines()[-1])[key])
+        except (ValueError, IndexError, KeyError):
+            pass
+    return statistics.median(vals) if vals else float("nan")
+
+
+def peer_available(python, modules):
+    code = "import " + ", ".join(modules)
+    return subprocess.run([python, "-c", code], capture_output=True).returncode == 0
+
+
+def write_pipeline(dir_, name, text):
+    path = Path(dir_) / f"{name}.toml"
+    path.write_text(text)
+    return path
+
+
+def model_table(path, scale):
+    return f'[model]\nuse = "stl"\nfile = "{path}"\nscale = {scale}\n[materials.a]\ncolour = [200, 60, 60]\n'
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--quick", action="store_true", help="fewer models and runs (under 2 minutes)")
+    ap.add_argument("--runs", type=int, default=None, help="runs per figure after the warm-up (default 5; quick 1)")
+    ap.add_argument("--models", default=os.environ.get("LAMINA_MODELS", str(ROOT.parent / "shared" / "models")))
+    ap.add_argument("--lamina", default=str(ROOT / "target" / "release" / "lamina"))
+    ap.add_argument("--python", default=sys.executable, help="interpreter that has the Python peers")
+    ap.add_argument("--out", default=None, help="where to write the table (default target/benchsuite/...)")
+    args = ap.parse_args()
+    runs = args.runs or (1 if args.quick else 5)
+    models = Path(args.models)
+    if not models.is_dir():
+        print(f"note: {models} not found; nothing to measure")
+        return 0
+    lamina = Path(args.lamina)
+    if not lamina.exists():
+        print("building lamina (release)...", flush=True)
+        subprocess.run(["cargo", "build", "--release", "--locked", "--bin", "lamina"], cwd=ROOT, check=True)
+    has = {
+        "trimesh": peer_available(args.python, ["trimesh", "numpy", "rtree", "shapely"]),
+        "manifold3d": peer_available(args.python, ["manifold3d", "trimesh"]),
+        "pyclipr": peer_available(args.python, ["pyclipr", "numpy"]),
+        "scipy": peer_available(args.python, ["scipy", "skimage", "numpy"]),
+        "prusa-slicer": shutil.which("prusa-slicer") is not None,
+    }
+    rows = []
+    notes = [f"peers found: {', '.join(k for k, v in has.items() if v) or 'none'}"]
+    tmp = tempfile.TemporaryDirectory(prefix="lamina-benchsuite-")
+    work = Path(tmp.name)
+
+    def row(task, tool, wall, rss, inside, base=None, detail=""):
+        rows.append({"task": task, "tool": tool, "wall": wall, "rss": rss, "inside": inside,
+                     "ratio": (inside / base) if base else None, "detail": detail})
+        ratio = f"{inside / base:.1f}x" if base else ""
+        print(f"  {task:<28} {tool:<14} wall {wall:7.3f} s  work {inside:7.3f} s  {rss:7.1f} MiB  {ratio} {detail}",
+              flush=True)
+
+    # --- slicing -------------------------------------------------------------------
+    slice_models = SLICE_MODELS[:2] if args.quick else SLICE_MODELS
+    extra = []
+    if not args.quick and has["trimesh"]:
+        # A >= 1M-triangle mesh: 3DBenchy subdivided twice (x16).
+        big = work / "benchy_x16.stl"
+        code = ("import sys, trimesh; m = trimesh.load(sys.argv[1], force='mesh'); "
+                "m = m.subdivide().subdivide(); m.export(sys.argv[2])")
+        if subprocess.run([args.python, "-c", code, str(models / "3DBenchy.stl"), str(big)]).returncode == 0:
+            extra.append((str(big), 1.0, "3DBenchy x16 (3.6M)"))
+    print("slicing at 0.2 mm (load + slice + loops + hierarchy)", flush=True)
+    for file, scale, label in [(str(models / f), s, l) for f, s, l in slice_models] + extra:
+        if not Path(file).exists():
+            notes.append(f"{label}: {file} absent, skipped")
+            continue
+        pipe = write_pipeline(work, "slice", model_table(file, scale) + '[slice]\nuse = "uniform"\nthickness = 0.2\n')
+        wall, rss, outs = repeat([lamina, "run", "--quiet", "--timings", "--out", work / "out", pipe], runs)
+        stages = [lamina_timings(o) for o in outs]
+        inside = statistics.median(s.get("model", 0) + s.get("slice", 0) + s.get("sort", 0) for s in stages)
+        base = inside
+        row(f"slice {label}", "lamina", wall, rss, inside,
+            detail="stage sums: " + ", ".join(f"{k} {statistics.median(s.get(k, 0) for s in stages):.3f}"
+                                              for k in ("model", "slice", "sort")))
+        for peer, script, mods in (("trimesh", PEER_SLICE_TRIMESH, "trimesh"),
+                                   ("manifold3d", PEER_SLICE_MANIFOLD, "manifold3d")):
+            if not has[mods]:
+                continue
+            try:
+                w, m, o = repeat([args.python, "-c", script, file, scale, 0.2], runs)
+                row(f"slice {label}", peer, w, m, median_of(o, "work"), base)
+            except RuntimeError as e:
+                notes.append(f"{peer} on {label}: {e}")
+
+    # --- offsets and distance fields on 3DBenchy -------------------------------------
+    benchy = models / "3DBenchy.stl"
+    # Quick runs take every fifth layer's height (1 mm) for offsets and distance fields.
+    thickness = 1.0 if args.quick else 0.2
+    if benchy.exists():
+        layers_json = work / "benchy_layers.json"
+        pipe = write_pipeline(work, "contours", model_table(benchy, 1.0)
+                              + f'[slice]\nuse = "uniform"\nthickness = {thickness}\n'
+                              + '[[output]]\nuse = "json"\npath = "plan.json"\n')
+        subprocess.run([lamina, "run", "--quiet", "--out", work / "contours", pipe], check=True)
+        plan = json.loads((work / "contours" / "plan.json").read_text())
+        layers = []
+        for layer in plan["layers"]:
+            rings = []
+            for part in layer["parts"]:
+                for fam in part["families"]:
+                    rings.append(fam["outer"])
+                    rings.extend(fam["holes"])
+            if rings:
+                layers.append(rings)
+        layers_json.write_text(json.dumps(layers))
+        n_layers = len(layers)
+
+        print(f"offsets: 10 inward offsets 0.4 mm apart on every 3DBenchy layer ({n_layers} layers)", flush=True)
+        pipe = write_pipeline(work, "offset", model_table(benchy, 1.0)
+                              + f'[slice]\nuse = "uniform"\nthickness = {thickness}\n'
+                              + '[discretise]\nuse = "offset"\ncount = 10\nspacing = 0.4\n')
+        wall, rss, outs = repeat([lamina, "run", "--quiet", "--timings", "--out", work / "out", pipe], runs)
+        # The whole job's wall time against the peer's offsets alone.
+        inside = wall
+        stage = statistics.median(lamina_timings(o).get("discretise", float("nan")) for o in outs)
+        row(f"offset 3DBenchy ({n_layers} layers)", "lamina", wall, rss, inside,
+            detail=f"whole job; discretise {stage:.3f} s summed over threads")
+        if has["pyclipr"]:
+            w, m, o = repeat([args.python, "-c", PEER_OFFSET_PYCLIPR, layers_json, 10, 0.4], runs)
+            row(f"offset 3DBenchy ({n_layers} layers)", "pyclipr", w, m, median_of(o, "work"), inside,
+                detail="offsets only")
+
+        print("signed distance field 512 x 512, 10 iso-levels, per layer", flush=True)
+        pipe = write_pipeline(work, "sdf", model_table(benchy, 1.0)
+                              + f'[slice]\nuse = "uniform"\nthickness = {thickness}\n'
+                              + '[discretise]\nuse = "distance-field"\ncells = 512\ncount = 10\n')
+        wall, rss, outs = repeat([lamina, "run", "--quiet", "--timings", "--threads", "1", "--out",
+                                  work / "out", pipe], runs)
+        per_layer = statistics.median(lamina_timings(o).get("discretise", float("nan")) for o in outs) / n_layers
+        row("SDF per layer (1 thread)", "lamina", wall, rss, per_layer, detail=f"{n_layers} layers")
+        if has["scipy"]:
+            w, m, o = repeat([args.python, "-c", PEER_SDF_SCIPY, layers_json, 512, 10], runs)
+            done = median_of(o, "layers")
+            row("SDF per layer (1 thread)", "scipy+skimage", w, m, median_of(o, "work") / done, per_layer,
+                detail=f"edt {median_of(o, 'edt') / done * 1e3:.1f} ms + contours "
+                       f"{median_of(o, 'contours') / done * 1e3:.1f} ms")
+
+        # --- STL to G-code ----------------------------------------------------------------
+        listed = subprocess.run([lamina, "plugins", "export", "--json"], capture_output=True, text=True)
+        has_gcode = '"gcode"' in listed.stdout
+        if has_gcode:
+            print("STL to G-code on 3DBenchy at 0.2 mm", flush=True)
+            pipe = write_pipeline(work, "gcode", model_table(benchy, 1.0)
+                                  + '[slice]\nuse = "uniform"\nthickness = 0.2\n'
+                                  + '[discretise]\nuse = "offset"\ncount = 3\nspacing = 0.45\n'
+                                  + '[plan]\nuse = "sequential"\n'
+                                  + '[[output]]\nuse = "gcode"\npath = "benchy.gcode"\n')
+            try:
+                wall, rss, outs = repeat([lamina, "run", "--quiet", "--timings", "--out", work / "out", pipe], runs)
+                base = wall
+                row("G-code 3DBenchy", "lamina", wall, rss, wall, detail="whole process")
+            except RuntimeError as e:
+                base = None
+                notes.append(f"lamina G-code: {e}")
+        else:
+            base = None
+            notes.append("lamina has no gcode exporter yet: G-code comparison skipped")
+        if has["prusa-slicer"] and base:
+            cmd = ["prusa-slicer", "--export-gcode", "--layer-height", "0.2", "--perimeters", "3",
+                   "--fill-density", "20%", "--output", work / "prusa.gcode", benchy]
+            try:
+                w, m, _ = repeat(cmd, runs)
+                row("G-code 3DBenchy", "prusa-slicer", w, m, w, base, detail="whole process")
+            except RuntimeError as e:
+                notes.append(f"prusa-slicer: {e}")
+    else:
+        notes.append("3DBenchy absent: offsets, distance fields and G-code skipped")
+
+    # --- report -------------------------------------------------------------------------
+    stamp = datetime.datetime.now().strftime("%Y-%m-%d %H:%M")
+    lines = [f"# Lamina benchsuite ({'quick, ' if args.quick else ''}median of {runs} run(s) after a warm-up, {stamp})",
+             "", f"machine: {os.cpu_count()} cores; work = time inside the process for the measured task;",
+             "ratio = peer work / Lamina work (above 1: Lamina is faster).", "",
+             "| task | tool | wall s | work s | peak RSS MiB | ratio | detail |", "|---|---|---|---|---|---|---|"]
+    for r in rows:
+        ratio = f"{r['ratio']:.1f}x" if r["ratio"] else ""
+        lines.append(f"| {r['task']} | {r['tool']} | {r['wall']:.3f} | {r['inside']:.4f} | {r['rss']:.1f} | "
+                     f"{ratio} | {r['detail']} |")
+    lines += [""] + [f"- {n}" for n in notes]
+    text = "\n".join(lines) + "\n"
+    print()
+    print(text)
+    out = Path(args.out) if args.out else ROOT / "target" / "benchsuite" / \
+        f"benchsuite-{datetime.datetime.now().strftime('%Y%m%d-%H%M%S')}.md"
+    out.parent.mkdir(parents=True, exist_ok=True)
+    out.write_text(text)
+    print(f"written to {out}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
