@@ -108,7 +108,13 @@ pub fn contour_passes(polygon: &Polygon, width: f64) -> Vec<Loop> {
         // Offsets of offsets would multiply the arc vertices pass after pass.
         current = inset
             .into_iter()
-            .map(|shape| shape.into_iter().map(|c| simplify(&c, TOLERANCE)).filter(|c| c.len() >= 3).collect())
+            .map(|shape| {
+                shape
+                    .into_iter()
+                    .map(|c| simplify(&c, TOLERANCE))
+                    .filter(|c| c.len() >= 3)
+                    .collect()
+            })
             .filter(|s: &Vec<Vec<[f64; 2]>>| !s.is_empty())
             .collect();
     }
@@ -147,7 +153,11 @@ pub fn simplify(ring: &[[f64; 2]], tol: f64) -> Vec<[f64; 2]> {
 }
 
 fn chord_distance(p: [f64; 2], a: [f64; 2], b: [f64; 2]) -> f64 {
-    lamina_core::geom::segment_distance(Point2::new(p[0], p[1]), Point2::new(a[0], a[1]), Point2::new(b[0], b[1]))
+    lamina_core::geom::segment_distance(
+        Point2::new(p[0], p[1]),
+        Point2::new(a[0], a[1]),
+        Point2::new(b[0], b[1]),
+    )
 }
 
 #[cfg(test)]
@@ -187,7 +197,11 @@ mod tests {
         assert_eq!(loops.len(), 8);
         let deposited: f64 = loops.iter().map(|l| l.length() * 0.4).sum();
         let gap = 8.0 * 4.0 * 0.4;
-        assert!(deposited <= p.area() && deposited + gap >= p.area() - 0.5, "{deposited} vs {}", p.area());
+        assert!(
+            deposited <= p.area() && deposited + gap >= p.area() - 0.5,
+            "{deposited} vs {}",
+            p.area()
+        );
         let thin = Polygon::new(square(0.0, 0.15), vec![]);
         assert!(contour_passes(&thin, 0.4).is_empty());
     }

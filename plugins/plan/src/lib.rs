@@ -101,7 +101,11 @@ impl Options {
             positive("step", s)?;
         }
         for (name, t) in &self.tools {
-            for (k, v) in [("speed", t.speed), ("travel_speed", t.travel_speed), ("envelope", t.envelope)] {
+            for (k, v) in [
+                ("speed", t.speed),
+                ("travel_speed", t.travel_speed),
+                ("envelope", t.envelope),
+            ] {
                 if let Some(v) = v
                     && !(v.is_finite() && v > 0.0)
                 {
@@ -173,7 +177,11 @@ fn prepare(o: &Options, info: &RunInfo, plan: &mut LayerPlan, step: f64) -> Resu
             work.thin.len(),
             o.width,
             list.join(", "),
-            if more > 0 { format!(" and {more} more") } else { String::new() }
+            if more > 0 {
+                format!(" and {more} more")
+            } else {
+                String::new()
+            }
         ));
     }
     let rmax = tools.iter().map(|t| t.envelope).fold(0.0, f64::max);
@@ -305,7 +313,12 @@ lamina_core::register_stage!(StageFactory {
         doc: "Contour-parallel loops deposited by all tools at once; dynamic priority (faster along X) pauses the other tool on a predicted collision.",
         options: common_options!(
             OptionSpec::new("step", "float", "0.01", "seconds between collision checks"),
-            OptionSpec::new("compare", "bool", "false", "add a layer warning with the sequential build time"),
+            OptionSpec::new(
+                "compare",
+                "bool",
+                "false",
+                "add a layer warning with the sequential build time"
+            ),
         ),
         example: "use = \"concurrent\"\nwidth = 0.5\nenvelope = 2.0\nstep = 0.02",
     },

@@ -107,7 +107,10 @@ pub fn tool_of(info: &RunInfo, part: usize, composition: Option<&Composition>, m
             c.fractions
                 .iter()
                 .enumerate()
-                .fold((0, f64::NEG_INFINITY), |a, (i, &f)| if f > a.1 { (i, f) } else { a })
+                .fold(
+                    (0, f64::NEG_INFINITY),
+                    |a, (i, &f)| if f > a.1 { (i, f) } else { a },
+                )
                 .0
         })
         .unwrap_or(0);
@@ -124,7 +127,11 @@ pub fn distribute(info: &RunInfo, plan: &LayerPlan, tools: usize, width: f64, mi
         for (ri, region) in part.regions.iter().enumerate() {
             let passes = contour_passes(&region.polygon, width);
             if passes.is_empty() {
-                let name = info.parts.get(part.part).map(|p| p.name.clone()).unwrap_or_default();
+                let name = info
+                    .parts
+                    .get(part.part)
+                    .map(|p| p.name.clone())
+                    .unwrap_or_default();
                 work.thin.push((name, ri, region.area()));
                 continue;
             }

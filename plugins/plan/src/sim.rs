@@ -67,7 +67,11 @@ impl Agent<'_> {
                     && emit
                 {
                     let p = next.points[0];
-                    self.open = Some(toolpath(self.spec.index, next, vec![TimedPoint { p, t: t + dt - left }]));
+                    self.open = Some(toolpath(
+                        self.spec.index,
+                        next,
+                        vec![TimedPoint { p, t: t + dt - left }],
+                    ));
                 }
                 continue;
             }
@@ -76,12 +80,19 @@ impl Agent<'_> {
             let need = (len - c.along).max(0.0) / m.speed;
             if need > left {
                 c.along += left * m.speed;
-                let p = if len > 0.0 { a + (b - a) * (c.along / len) } else { a };
+                let p = if len > 0.0 {
+                    a + (b - a) * (c.along / len)
+                } else {
+                    a
+                };
                 return (c, p, false);
             }
             left -= need;
             if emit && let Some(path) = &mut self.open {
-                path.points.push(TimedPoint { p: b, t: t + dt - left });
+                path.points.push(TimedPoint {
+                    p: b,
+                    t: t + dt - left,
+                });
             }
             c = Cursor {
                 mv: c.mv,
@@ -162,7 +173,11 @@ impl Agent<'_> {
         let rest = Move { points: tail, ..m };
         self.route.splice(
             c.mv + 1..c.mv + 1,
-            [Move::travel(vec![here, to], speed), Move::travel(vec![to, here], speed), rest],
+            [
+                Move::travel(vec![here, to], speed),
+                Move::travel(vec![to, here], speed),
+                rest,
+            ],
         );
         self.at = Cursor { mv: c.mv, seg, along };
     }
@@ -180,7 +195,9 @@ pub fn concurrent(
         .iter()
         .map(|(spec, route)| {
             let pos = route.first().map(|m| m.points[0]).unwrap_or_default();
-            let open = route.first().map(|m| toolpath(spec.index, m, vec![TimedPoint { p: pos, t: 0.0 }]));
+            let open = route
+                .first()
+                .map(|m| toolpath(spec.index, m, vec![TimedPoint { p: pos, t: 0.0 }]));
             Agent {
                 spec,
                 done: route.is_empty(),
