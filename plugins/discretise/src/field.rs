@@ -26,7 +26,8 @@ impl Field {
     /// samples of margin all round.
     pub fn over(bbox: &BBox2, cells: usize) -> Self {
         let extent = bbox.width().max(bbox.height()).max(f64::MIN_POSITIVE);
-        let cells = cells.max(4);
+        // Seeds are packed with 16 bits a coordinate.
+        let cells = cells.clamp(4, 1 << 15);
         let h = extent / (cells as f64 - 3.0);
         let nx = ((bbox.width() / h).ceil() as usize + 4).max(4);
         let ny = ((bbox.height() / h).ceil() as usize + 4).max(4);
@@ -177,62 +178,76 @@ impl Field {
             }
         }
         // Row pass: over the column results; the argmin names the column, whose
-        // column pass names the row of the nearest seed.
+        // column pass names the row of the nearest seed. Seeds are kept as
+        // (row << 16) | column (grids stay below 2^16 samples a side), so that
+        // comparing them needs no division.
         let mut scratch = Envelope::new(nx.max(ny));
         let mut arg = vec![0u32; nx];
         let mut seed_of = vec![u32::MAX; n];
         for j in 0..ny {
             let row = &g[j * nx..(j + 1) * nx];
             if scratch.transform(row, &mut arg) {
-                for (i, &col) in arg.iter().enumerate() {
-                    let col = col as usize;
-                    seed_of[j * nx + i] = (from_row[j * nx + col] as usize * nx + col) as u32;
+                let from = &from_row[j * nx..(j + 1) * nx];
+                for (s, &col) in seed_of[j * nx..(j + 1) * nx].iter_mut().zip(&arg) {
+                    *s = (from[col as usize] << 16) | col;
                 }
             }
         }
         // Every sample measures its nearest seed's boundary point (seeds their own,
         // exact); squared until the end.
-        let d2 = |k: usize, s: u32| {
+        let d2 = |p: Point2, s: u32| {
             if s == u32::MAX {
                 f64::INFINITY
             } else {
-                let p = Point2::new(ox + (k % nx) as f64 * h, oy + (k / nx) as f64 * h);
-                (p - near[s as usize]).norm_squared()
+                (p - near[(s >> 16) as usize * nx + (s & 0xffff) as usize]).norm_squared()
             }
-        };
-        for k in 0..n {
-            self.values[k] = if seed[k] { seed_d2[k] } else { d2(k, seed_of[k]) };
-        }
-        // Near a medial axis the nearest seed in samples may sit on the farther
-        // boundary. There adjacent samples take seeds on different stretches of the
-        // boundary (seeds more than two samples apart; a missing seed is far from all),
-        // and both samples also try the boundary points of their eight neighbours'
-        // seeds.
-        let refine = |k: usize, values: &mut [f64]| {
-            let (i, j) = (k % nx, k / nx);
-            let mut best = values[k];
-            for nj in j.saturating_sub(1)..(j + 2).min(ny) {
-                for &s in &seed_of[nj * nx + i.saturating_sub(1)..nj * nx + (i + 2).min(nx)] {
-                    best = best.min(d2(k, s));
-                }
-            }
-            values[k] = best;
-        };
-        let apart = |a: u32, b: u32| {
-            let (a, b) = (a as usize, b as usize);
-            a != b && (a % nx).abs_diff(b % nx).max((a / nx).abs_diff(b / nx)) > 2
         };
         for j in 0..ny {
+            let y = oy + j as f64 * h;
             for i in 0..nx {
                 let k = j * nx + i;
-                let s = seed_of[k];
-                if i + 1 < nx && apart(seed_of[k + 1], s) {
-                    refine(k, &mut self.values);
-                    refine(k + 1, &mut self.values);
+                self.values[k] = if seed[k] {
+                    seed_d2[k]
+                } else {
+                    d2(Point2::new(ox + i as f64 * h, y), seed_of[k])
+                };
+            }
+        }
+        // Near a medial axis the nearest seed in samples may sit on the farther
+        // boundary. There neighbouring samples take seeds on different stretches of
+        // the boundary (seeds more than two samples apart; a missing seed is far from
+        // all), and each of the two also tries the other's seed.
+        let apart = |a: u32, b: u32| {
+            a != b
+                && (a == u32::MAX
+                    || b == u32::MAX
+                    || (a & 0xffff).abs_diff(b & 0xffff).max((a >> 16).abs_diff(b >> 16)) > 2)
+        };
+        let at = |i: usize, j: usize| Point2::new(ox + i as f64 * h, oy + j as f64 * h);
+        let values = &mut self.values;
+        let mut cross = |(i, j): (usize, usize), (ni, nj): (usize, usize)| {
+            let (k, m) = (j * nx + i, nj * nx + ni);
+            let (s, t) = (seed_of[k], seed_of[m]);
+            if apart(s, t) {
+                values[k] = values[k].min(d2(at(i, j), t));
+                values[m] = values[m].min(d2(at(ni, nj), s));
+            }
+        };
+        // Each sample with its right, upper, upper-right and upper-left neighbours:
+        // with the samples that look back, all eight.
+        for j in 0..ny {
+            for i in 0..nx {
+                if i + 1 < nx {
+                    cross((i, j), (i + 1, j));
                 }
-                if j + 1 < ny && apart(seed_of[k + nx], s) {
-                    refine(k, &mut self.values);
-                    refine(k + nx, &mut self.values);
+                if j + 1 < ny {
+                    cross((i, j), (i, j + 1));
+                    if i + 1 < nx {
+                        cross((i, j), (i + 1, j + 1));
+                    }
+                    if i > 0 {
+                        cross((i, j), (i - 1, j + 1));
+                    }
                 }
             }
         }
