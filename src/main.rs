@@ -21,6 +21,7 @@ use lamina_export as _;
 use lamina_grade as _;
 use lamina_model as _;
 use lamina_orient as _;
+use lamina_preview as _;
 use lamina_plan as _;
 use lamina_gcode as _;
 use lamina_sequence as _;

@@ -419,6 +419,15 @@ impl LayerSink for Guarded<dyn LayerSink> {
         guard_call(&self.label, || self.inner.layer(info, plan))
     }
 
+    fn layer_with_files(
+        &mut self,
+        info: &RunInfo,
+        plan: &LayerPlan,
+        files: &mut dyn OutputFiles,
+    ) -> Result<()> {
+        guard_call(&self.label, || self.inner.layer_with_files(info, plan, files))
+    }
+
     fn finish(self: Box<Self>, info: &RunInfo) -> Result<()> {
         let Guarded { label, inner } = *self;
         guard_call(&label, || inner.finish(info))

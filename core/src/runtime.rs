@@ -609,7 +609,9 @@ impl Engine {
                     *build_time.get_or_insert(0.0) += t;
                 }
                 for sink in &mut sinks {
-                    timings.time(StageKind::Export, || sink.layer(&info, &plan))?;
+                    timings.time(StageKind::Export, || {
+                        sink.layer_with_files(&info, &plan, &mut outputs)
+                    })?;
                 }
                 observer.layer_done(plan.index);
             }

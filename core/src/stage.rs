@@ -283,6 +283,18 @@ pub trait Exporter: Send + Sync {
 /// Receives the layers of a run in build order, as they are finished.
 pub trait LayerSink: Send {
     fn layer(&mut self, info: &RunInfo, plan: &LayerPlan) -> Result<()>;
+    /// What the runtime calls: [`layer`](Self::layer), with the means to create files
+    /// as layers come (a picture per layer), which appear only when the run succeeds,
+    /// as those made at `open` do.
+    fn layer_with_files(
+        &mut self,
+        info: &RunInfo,
+        plan: &LayerPlan,
+        files: &mut dyn OutputFiles,
+    ) -> Result<()> {
+        let _ = files;
+        self.layer(info, plan)
+    }
     /// Completes the output (trailers, flushing).
     fn finish(self: Box<Self>, info: &RunInfo) -> Result<()>;
 }

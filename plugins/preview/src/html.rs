@@ -1,0 +1,289 @@
+//! `html`: one self-contained HTML file that shows the plan layer by layer: a slider, zoom
+//! and pan, the composition of the region under the pointer, toggles for toolpaths and
+//! tools. The page needs no network: the viewer's script and style are inside, and the
+//! layers are streamed into it as `<script>` blocks as they come, so memory stays flat.
+
+use std::io::Write;
+use std::path::PathBuf;
+
+use lamina_core::stage::{
+    AnyStage, ExportContext, Exporter, LayerSink, OptionSpec, StageConfig, StageInfo, StageKind,
+};
+use lamina_core::{Contour, Error, LayerPlan, PathKind, Result, RunInfo, StageFactory};
+use serde::{Deserialize, Serialize};
+
+use crate::draw::{composition_text, escape, hex, round};
+
+const VIEWER_JS: &str = include_str!("../assets/viewer.js");
+const VIEWER_CSS: &str = include_str!("../assets/viewer.css");
+
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct Options {
+    #[serde(default = "d_path")]
+    path: PathBuf,
+    #[serde(default = "d_every")]
+    every: usize,
+    #[serde(default = "d_digits")]
+    digits: i32,
+    #[serde(default = "d_true")]
+    toolpaths: bool,
+}
+
+fn d_path() -> PathBuf {
+    PathBuf::from("viewer.html")
+}
+fn d_every() -> usize {
+    1
+}
+fn d_digits() -> i32 {
+    3
+}
+fn d_true() -> bool {
+    true
+}
+
+struct Html {
+    options: Options,
+}
+
+struct Sink {
+    out: Box<dyn Write + Send>,
+    path: PathBuf,
+    options: Options,
+}
+
+#[derive(Serialize)]
+struct Header<'a> {
+    name: &'a str,
+    layer_count: usize,
+    materials: Vec<MaterialOut<'a>>,
+    parts: Vec<PartOut<'a>>,
+}
+
+#[derive(Serialize)]
+struct MaterialOut<'a> {
+    name: &'a str,
+    colour: [u8; 3],
+}
+
+#[derive(Serialize)]
+struct PartOut<'a> {
+    name: &'a str,
+    materials: Vec<&'a str>,
+}
+
+#[derive(Serialize)]
+struct LayerOut {
+    i: usize,
+    z: f64,
+    t: f64,
+    parts: Vec<PartLayerOut>,
+    paths: Vec<PathOut>,
+}
+
+#[derive(Serialize)]
+struct PartLayerOut {
+    part: usize,
+    contours: Vec<Vec<f64>>,
+    regions: Vec<RegionOut>,
+}
+
+#[derive(Serialize)]
+struct RegionOut {
+    /// Colour.
+    c: String,
+    /// Composition, as text.
+    m: String,
+    /// Level r.
+    l: f64,
+    /// Index.
+    k: usize,
+    rings: Vec<Vec<f64>>,
+}
+
+#[derive(Serialize)]
+struct PathOut {
+    tool: usize,
+    /// `e`xtrude, `t`ravel or `p`ause.
+    kind: &'static str,
+    pts: Vec<f64>,
+}
+
+fn flat(c: &Contour, digits: i32) -> Vec<f64> {
+    c.points
+        .iter()
+        .flat_map(|p| [round(p.x, digits), round(p.y, digits)])
+        .collect()
+}
+
+/// JSON that may sit inside a `<script>` element: `</` never appears in it.
+fn script_json<T: Serialize>(v: &T) -> std::result::Result<String, serde_json::Error> {
+    Ok(serde_json::to_string(v)?.replace("</", "<\\/"))
+}
+
+fn io(path: &std::path::Path) -> impl Fn(std::io::Error) -> Error + '_ {
+    move |e| Error::io(path, e)
+}
+
+impl Exporter for Html {
+    fn open(&self, ctx: &mut ExportContext<'_>) -> Result<Box<dyn LayerSink>> {
+        let path = self.options.path.clone();
+        let mut out = ctx.files.create(&path)?;
+        let header = Header {
+            name: ctx.pipeline_name,
+            layer_count: ctx.layer_count,
+            materials: ctx
+                .info
+                .materials
+                .iter()
+                .map(|m| MaterialOut {
+                    name: &m.name,
+                    colour: m.colour,
+                })
+                .collect(),
+            parts: ctx
+                .info
+                .parts
+                .iter()
+                .map(|p| PartOut {
+                    name: &p.name,
+                    materials: p
+                        .materials
+                        .iter()
+                        .map(|&m| ctx.info.materials[m].name.as_str())
+                        .collect(),
+                })
+                .collect(),
+        };
+        let header = script_json(&header).map_err(|e| Error::io(&path, std::io::Error::other(e)))?;
+        let legend: String = ctx
+            .info
+            .materials
+            .iter()
+            .map(|m| {
+                let [r, g, b] = m.colour;
+                format!(
+                    "<span><i style=\"display:inline-block;width:10px;height:10px;background:#{r:02x}{g:02x}{b:02x};border:1px solid #555\"></i> {}</span>",
+                    escape(&m.name)
+                )
+            })
+            .collect::<Vec<_>>()
+            .join(" ");
+        write!(
+            out,
+            "<!doctype html>\n<html lang=\"en\">\n<head>\n<meta charset=\"utf-8\">\n<title>{name} - Lamina</title>\n<style>\n{VIEWER_CSS}</style>\n</head>\n<body>\n<div id=\"bar\"><strong>{name}</strong><input id=\"layer\" type=\"range\" min=\"0\" max=\"0\" value=\"0\" aria-label=\"layer\"><span id=\"label\"></span><label><input id=\"paths\" type=\"checkbox\" checked> toolpaths</label><span id=\"tools\"></span>{legend}</div>\n<canvas id=\"view\"></canvas>\n<div id=\"tip\"></div>\n<pre id=\"test-result\" hidden></pre>\n<script>const LAMINA = {header}; const LAYERS = [];</script>\n",
+            name = escape(ctx.pipeline_name),
+        )
+        .map_err(io(&path))?;
+        Ok(Box::new(Sink {
+            out,
+            path,
+            options: self.options.clone(),
+        }))
+    }
+}
+
+impl LayerSink for Sink {
+    fn layer(&mut self, info: &RunInfo, plan: &LayerPlan) -> Result<()> {
+        if !plan.index.is_multiple_of(self.options.every) {
+            return Ok(());
+        }
+        let d = self.options.digits;
+        let parts = plan
+            .parts
+            .iter()
+            .map(|pl| PartLayerOut {
+                part: pl.part,
+                contours: pl
+                    .families
+                    .iter()
+                    .flat_map(|&f| {
+                        let fam = &pl.tree.families[f];
+                        std::iter::once(fam.outer).chain(fam.holes.iter().copied())
+                    })
+                    .map(|c| flat(&pl.contours[c], d))
+                    .collect(),
+                regions: pl
+                    .regions
+                    .iter()
+                    .map(|r| RegionOut {
+                        c: hex(info, pl.part, r),
+                        m: composition_text(info, pl.part, r),
+                        l: round(r.level, 4),
+                        k: r.index,
+                        rings: r.polygon.contours().map(|c| flat(c, d)).collect(),
+                    })
+                    .collect(),
+            })
+            .collect();
+        let paths = if self.options.toolpaths {
+            plan.toolpaths
+                .iter()
+                .map(|t| PathOut {
+                    tool: t.tool,
+                    kind: match t.kind {
+                        PathKind::Extrude => "e",
+                        PathKind::Travel => "t",
+                        PathKind::Pause => "p",
+                    },
+                    pts: t
+                        .points
+                        .iter()
+                        .flat_map(|p| [round(p.p.x, d), round(p.p.y, d)])
+                        .collect(),
+                })
+                .collect()
+        } else {
+            Vec::new()
+        };
+        let layer = LayerOut {
+            i: plan.index,
+            z: round(plan.z, 4),
+            t: round(plan.thickness, 4),
+            parts,
+            paths,
+        };
+        let json = script_json(&layer).map_err(|e| Error::io(&self.path, std::io::Error::other(e)))?;
+        let path = self.path.clone();
+        writeln!(self.out, "<script>LAYERS.push({json});</script>").map_err(io(&path))
+    }
+
+    fn finish(mut self: Box<Self>, _info: &RunInfo) -> Result<()> {
+        let path = self.path.clone();
+        write!(self.out, "<script>\n{VIEWER_JS}</script>\n</body>\n</html>\n").map_err(io(&path))?;
+        self.out.flush().map_err(io(&path))
+    }
+}
+
+fn build(config: &StageConfig<'_>) -> Result<AnyStage> {
+    let options: Options = config.parse()?;
+    if options.every == 0 {
+        return Err(config.error("every", "must be at least 1"));
+    }
+    if !(0..=9).contains(&options.digits) {
+        return Err(config.error("digits", "must be between 0 and 9"));
+    }
+    Ok(AnyStage::Export(Box::new(Html { options })))
+}
+
+lamina_core::register_stage!(StageFactory {
+    info: StageInfo {
+        kind: StageKind::Export,
+        name: "html",
+        doc: "A self-contained HTML layer viewer: slider, zoom and pan, composition on hover, toolpath and tool toggles; no network needed.",
+        options: &[
+            OptionSpec::new(
+                "path",
+                "string",
+                "\"viewer.html\"",
+                "output file, relative to the output folder"
+            ),
+            OptionSpec::new("every", "integer", "1", "keep every n-th layer (large models)"),
+            OptionSpec::new("digits", "integer", "3", "decimals kept of the coordinates (mm)"),
+            OptionSpec::new("toolpaths", "bool", "true", "include the planned toolpaths"),
+        ],
+        example: "use = \"html\"\npath = \"viewer.html\"",
+    },
+    build,
+});

@@ -1,0 +1,10 @@
+//! Previews of a plan, for people rather than machines:
+//!
+//! - `svg`: one SVG picture per layer, sub-regions filled with their property colour,
+//!   contours drawn, toolpaths optionally, each region titled with its composition;
+//! - `html`: one self-contained HTML file (no network access) with a layer slider,
+//!   zoom and pan, a region's composition on hover, and toggles for toolpaths and tools.
+
+mod draw;
+mod html;
+mod svg;

@@ -1,0 +1,237 @@
+//! `svg`: a picture of each layer (or of every n-th): sub-regions filled with their
+//! property colour, each titled with its composition (browsers show it on hover), the
+//! contours drawn over them, and the toolpaths when the plan has them. Files are
+//! written as the layers come and appear when the run succeeds.
+
+use std::fmt::Write as _;
+use std::io::Write;
+use std::path::PathBuf;
+
+use lamina_core::stage::{
+    AnyStage, ExportContext, Exporter, LayerSink, OptionSpec, OutputFiles, StageConfig, StageInfo, StageKind,
+};
+use lamina_core::{Error, LayerPlan, PathKind, Result, RunInfo, StageFactory};
+use serde::Deserialize;
+
+use crate::draw::{composition_text, escape, hex, layer_bounds, path_data, round};
+
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct Options {
+    #[serde(default = "d_path")]
+    path: PathBuf,
+    #[serde(default = "d_every")]
+    every: usize,
+    #[serde(default)]
+    layers: Vec<usize>,
+    #[serde(default = "d_true")]
+    toolpaths: bool,
+    #[serde(default = "d_size")]
+    size: f64,
+}
+
+fn d_path() -> PathBuf {
+    PathBuf::from("svg/layer")
+}
+fn d_every() -> usize {
+    1
+}
+fn d_true() -> bool {
+    true
+}
+fn d_size() -> f64 {
+    800.0
+}
+
+struct Svg {
+    options: Options,
+}
+
+struct Sink {
+    options: Options,
+    digits: usize,
+}
+
+/// The SVG text of one layer.
+pub fn layer_svg(info: &RunInfo, plan: &LayerPlan, toolpaths: bool, size: f64) -> String {
+    let [x0, y0, x1, y1] = layer_bounds(plan).unwrap_or([0.0, 0.0, 1.0, 1.0]);
+    let margin = 0.03 * (x1 - x0).max(y1 - y0).max(1e-3);
+    let (w, h) = (x1 - x0 + 2.0 * margin, y1 - y0 + 2.0 * margin);
+    let scale = size / w.max(h);
+    let stroke = round(1.0 / scale, 5);
+    let mut s = String::new();
+    let _ = writeln!(
+        s,
+        "<svg xmlns=\"http://www.w3.org/2000/svg\" width=\"{}\" height=\"{}\" viewBox=\"{} {} {} {}\">",
+        round(w * scale, 1),
+        round(h * scale, 1),
+        round(x0 - margin, 4),
+        round(-(y1 + margin), 4),
+        round(w, 4),
+        round(h, 4)
+    );
+    let _ = writeln!(
+        s,
+        "<title>layer {} at z = {} mm ({} mm thick)</title>\n<rect x=\"{}\" y=\"{}\" width=\"{}\" height=\"{}\" fill=\"#ffffff\"/>\n<g transform=\"scale(1,-1)\">",
+        plan.index,
+        round(plan.z, 4),
+        round(plan.thickness, 4),
+        round(x0 - margin, 4),
+        round(-(y1 + margin), 4),
+        round(w, 4),
+        round(h, 4)
+    );
+    for pl in &plan.parts {
+        let part = &info.parts[pl.part];
+        for r in &pl.regions {
+            let mut d = String::new();
+            for c in r.polygon.contours() {
+                path_data(&mut d, c, 4);
+            }
+            let _ = writeln!(
+                s,
+                "<path d=\"{d}\" fill=\"{}\" fill-rule=\"evenodd\"><title>{}, region {} (r = {}): {}</title></path>",
+                hex(info, pl.part, r),
+                escape(&part.name),
+                r.index,
+                round(r.level, 4),
+                escape(&composition_text(info, pl.part, r))
+            );
+        }
+        let mut d = String::new();
+        for &f in &pl.families {
+            let fam = &pl.tree.families[f];
+            path_data(&mut d, &pl.contours[fam.outer], 4);
+            for &hole in &fam.holes {
+                path_data(&mut d, &pl.contours[hole], 4);
+            }
+        }
+        let _ = writeln!(
+            s,
+            "<path d=\"{d}\" fill=\"none\" stroke=\"#000000\" stroke-width=\"{stroke}\"/>"
+        );
+    }
+    if toolpaths {
+        for t in &plan.toolpaths {
+            if t.points.len() < 2 || t.kind == PathKind::Pause {
+                continue;
+            }
+            let mut d = String::new();
+            for (i, p) in t.points.iter().enumerate() {
+                let _ = write!(
+                    d,
+                    "{}{} {}",
+                    if i == 0 { "M" } else { " L" },
+                    round(p.p.x, 4),
+                    round(p.p.y, 4)
+                );
+            }
+            let (colour, dash) = match t.kind {
+                PathKind::Travel => (
+                    "#808080",
+                    format!(" stroke-dasharray=\"{}\"", round(4.0 * stroke, 5)),
+                ),
+                _ => ("#202020", String::new()),
+            };
+            let _ = writeln!(
+                s,
+                "<path d=\"{d}\" fill=\"none\" stroke=\"{colour}\" stroke-width=\"{stroke}\"{dash}><title>tool {}</title></path>",
+                t.tool
+            );
+        }
+    }
+    s.push_str("</g>\n</svg>\n");
+    s
+}
+
+impl Exporter for Svg {
+    fn open(&self, ctx: &mut ExportContext<'_>) -> Result<Box<dyn LayerSink>> {
+        Ok(Box::new(Sink {
+            options: self.options.clone(),
+            digits: ctx.layer_count.max(1).to_string().len(),
+        }))
+    }
+}
+
+impl LayerSink for Sink {
+    fn layer(&mut self, _info: &RunInfo, _plan: &LayerPlan) -> Result<()> {
+        Err(Error::stage(
+            "export:svg",
+            "writes a file per layer: call layer_with_files",
+        ))
+    }
+
+    fn layer_with_files(
+        &mut self,
+        info: &RunInfo,
+        plan: &LayerPlan,
+        files: &mut dyn OutputFiles,
+    ) -> Result<()> {
+        let o = &self.options;
+        let wanted = if o.layers.is_empty() {
+            plan.index.is_multiple_of(o.every)
+        } else {
+            o.layers.contains(&plan.index)
+        };
+        if !wanted || layer_bounds(plan).is_none() {
+            return Ok(());
+        }
+        let stem = o
+            .path
+            .file_name()
+            .map(|s| s.to_string_lossy().into_owned())
+            .unwrap_or_default();
+        let name = o
+            .path
+            .with_file_name(format!("{stem}-{:0width$}.svg", plan.index, width = self.digits));
+        let mut out = files.create(&name)?;
+        out.write_all(layer_svg(info, plan, o.toolpaths, o.size).as_bytes())
+            .and_then(|()| out.flush())
+            .map_err(|e| Error::io(&name, e))
+    }
+
+    fn finish(self: Box<Self>, _info: &RunInfo) -> Result<()> {
+        Ok(())
+    }
+}
+
+fn build(config: &StageConfig<'_>) -> Result<AnyStage> {
+    let options: Options = config.parse()?;
+    if options.every == 0 {
+        return Err(config.error("every", "must be at least 1"));
+    }
+    if !(options.size.is_finite() && options.size >= 16.0 && options.size <= 20_000.0) {
+        return Err(config.error("size", "must be between 16 and 20000 pixels"));
+    }
+    if options.path.file_name().is_none() {
+        return Err(config.error("path", "must end in a file name stem, e.g. \"svg/layer\""));
+    }
+    Ok(AnyStage::Export(Box::new(Svg { options })))
+}
+
+lamina_core::register_stage!(StageFactory {
+    info: StageInfo {
+        kind: StageKind::Export,
+        name: "svg",
+        doc: "An SVG picture per layer: sub-regions in their property colours titled with their compositions, contours, toolpaths.",
+        options: &[
+            OptionSpec::new(
+                "path",
+                "string",
+                "\"svg/layer\"",
+                "file stem: layer 7 of 240 is written to `svg/layer-007.svg`"
+            ),
+            OptionSpec::new("every", "integer", "1", "write every n-th layer"),
+            OptionSpec::new(
+                "layers",
+                "array of integer",
+                "[]",
+                "only these layers (indices from 0)"
+            ),
+            OptionSpec::new("toolpaths", "bool", "true", "draw the planned toolpaths"),
+            OptionSpec::new("size", "float", "800", "size of the longer side in pixels"),
+        ],
+        example: "use = \"svg\"\npath = \"svg/layer\"\nevery = 2",
+    },
+    build,
+});

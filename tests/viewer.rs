@@ -1,0 +1,152 @@
+//! The previews end to end: an SVG per layer with the regions' colours, and the HTML
+//! viewer driven in headless Chromium (moving the slider, reading back the shown layer
+//! and a region's composition, taking a screenshot). The Chromium test is skipped with
+//! a printed reason when no Chromium is installed.
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+const PIPELINE: &str = "name = \"viewer-test\"\n[model]\nuse = \"tube\"\nouter_radius = 10.0\ninner_radius = 5.0\nheight = 2.0\n\
+    [materials.green]\ncolour = [0, 255, 0]\n[materials.black]\ncolour = [0, 0, 0]\n\
+    [discretise]\nuse = \"offset\"\ncount = 4\nfrom = \"outer\"\n[grade]\nuse = \"xy\"\n\
+    [slice]\nuse = \"uniform\"\nthickness = 0.5\n\
+    [[output]]\nuse = \"json\"\npath = \"plan.json\"\n\
+    [[output]]\nuse = \"html\"\npath = \"viewer.html\"\n\
+    [[output]]\nuse = \"svg\"\npath = \"svg/layer\"\n";
+
+fn run(dir: &Path) -> serde_json::Value {
+    let path = dir.join("p.toml");
+    std::fs::write(&path, PIPELINE).expect("write");
+    let out = Command::new(env!("CARGO_BIN_EXE_lamina"))
+        .args(["run", "--quiet", "--out"])
+        .arg(dir.join("out"))
+        .arg(&path)
+        .output()
+        .expect("lamina runs");
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    serde_json::from_str(&std::fs::read_to_string(dir.join("out/plan.json")).expect("json")).expect("valid")
+}
+
+fn regions(layer: &serde_json::Value) -> &Vec<serde_json::Value> {
+    layer["parts"][0]["families"][0]["regions"]
+        .as_array()
+        .expect("regions")
+}
+
+#[test]
+fn every_layer_gets_an_svg_in_its_regions_colours() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let plan = run(dir.path());
+    for layer in plan["layers"].as_array().expect("layers") {
+        let i = layer["index"].as_u64().expect("index");
+        let svg = std::fs::read_to_string(dir.path().join(format!("out/svg/layer-{i}.svg"))).expect("svg");
+        assert!(svg.starts_with("<svg xmlns=\"http://www.w3.org/2000/svg\""));
+        assert!(svg.trim_end().ends_with("</svg>"));
+        for r in regions(layer) {
+            let c = &r["colour"];
+            let hex = format!(
+                "fill=\"#{:02x}{:02x}{:02x}\"",
+                c[0].as_u64().expect("r"),
+                c[1].as_u64().expect("g"),
+                c[2].as_u64().expect("b")
+            );
+            assert!(svg.contains(&hex), "layer {i}: {hex} missing");
+        }
+    }
+}
+
+fn chromium() -> Option<PathBuf> {
+    for name in ["chromium", "chromium-browser", "google-chrome"] {
+        if let Ok(out) = Command::new("which").arg(name).output()
+            && out.status.success()
+        {
+            return Some(PathBuf::from(String::from_utf8_lossy(&out.stdout).trim()));
+        }
+    }
+    None
+}
+
+fn headless(browser: &Path, profile: &Path) -> Command {
+    let mut c = Command::new(browser);
+    c.args([
+        "--headless",
+        "--no-sandbox",
+        "--disable-gpu",
+        "--disable-quic",
+        "--no-first-run",
+        "--disable-background-networking",
+        "--disable-component-update",
+        "--disable-sync",
+        "--window-size=900,700",
+    ])
+    .arg(format!("--user-data-dir={}", profile.display()));
+    c
+}
+
+#[test]
+fn the_viewer_shows_the_chosen_layer_and_a_regions_composition_in_chromium() {
+    let Some(browser) = chromium() else {
+        println!("note: no Chromium installed (Debian: apt-get install chromium); viewer test skipped");
+        return;
+    };
+    let dir = tempfile::tempdir().expect("tempdir");
+    let plan = run(dir.path());
+    let page = dir.path().join("out/viewer.html");
+    let html = std::fs::read_to_string(&page).expect("viewer written");
+    assert!(
+        !html.contains("http://") && !html.contains("https://"),
+        "the page fetches nothing"
+    );
+    // Layer 2, the third region from the outside: its reference point and composition.
+    let layer = &plan["layers"][2];
+    let region = &regions(layer)[2];
+    let at = region["reference"].as_array().expect("reference");
+    let (x, y) = (at[0].as_f64().expect("x"), at[1].as_f64().expect("y"));
+    let composition = region["composition"].as_object().expect("composition");
+    let url = format!("file://{}#test:layer=2;at={x},{y}", page.display());
+    let out = headless(&browser, &dir.path().join("profile-dom"))
+        .arg("--dump-dom")
+        .arg(&url)
+        .output()
+        .expect("chromium runs");
+    let dom = String::from_utf8_lossy(&out.stdout);
+    let start = dom
+        .find("<pre id=\"test-result\">")
+        .expect("the page reports what it shows")
+        + 22;
+    let end = start + dom[start..].find("</pre>").expect("end of the report");
+    let shown: serde_json::Value =
+        serde_json::from_str(&dom[start..end].replace("&quot;", "\"")).expect("json");
+    assert_eq!(shown["layer"], 2, "{shown}");
+    assert_eq!(shown["layers"], plan["layers"].as_array().expect("layers").len());
+    assert!(
+        shown["label"]
+            .as_str()
+            .expect("label")
+            .starts_with("layer 2 of 4, z = 1.5 mm"),
+        "{shown}"
+    );
+    let text = shown["region"]["composition"]
+        .as_str()
+        .expect("a region under the point");
+    for (name, f) in composition {
+        let want = format!("{name} {}", (f.as_f64().expect("fraction") * 1e4).round() / 1e4);
+        assert!(text.contains(&want), "{text} lacks {want}");
+    }
+    assert_eq!(shown["region"]["index"], region["index"]);
+
+    let shot = dir.path().join("shot.png");
+    let status = headless(&browser, &dir.path().join("profile-shot"))
+        .arg(format!("--screenshot={}", shot.display()))
+        .arg(format!("file://{}#test:layer=1", page.display()))
+        .output()
+        .expect("chromium runs");
+    assert!(status.status.success() || shot.exists());
+    let png = std::fs::read(&shot).expect("screenshot");
+    assert_eq!(&png[..8], b"\x89PNG\r\n\x1a\n");
+    assert!(
+        png.len() > 10_000,
+        "a drawn layer, not a blank page ({} bytes)",
+        png.len()
+    );
+}
