@@ -222,7 +222,7 @@ struct Concurrent(Options);
 
 impl Planner for Sequential {
     fn plan(&self, info: &RunInfo, plan: &mut LayerPlan) -> Result<()> {
-        let layer = prepare(&self.0, info, plan, 0.0)?;
+        let layer = prepare(&self.0, info, plan, self.0.step())?;
         let (paths, t) = sequential(&layer, self.0.tool_change);
         plan.toolpaths.extend(paths);
         plan.build_time = Some(plan.build_time.unwrap_or(0.0) + t);
@@ -247,6 +247,9 @@ impl Planner for Concurrent {
         // whose tools keep giving way to each other.
         let budget = 4.0 * seq_time + 60.0;
         let (paths, t) = match sim::concurrent(&busy, o.step(), budget, MAX_SIDE_STEPS) {
+            // Tools that mostly wait for each other can end up slower than taking turns;
+            // the sequential schedule is collision-free too, so the faster one is kept.
+            Ok((_, t)) if t > seq_time => (seq_paths, seq_time),
             Ok(r) => r,
             Err(e) => {
                 plan.warnings.push(format!(
