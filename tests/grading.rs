@@ -96,3 +96,34 @@ fn gear_graded_by_the_wave_function() {
         }
     }
 }
+
+/// Fig. 19: the blade graded across each layer and along Z at once; every region's
+/// ceramic fraction is (1 * r_i + 2 * (1 - r_j)) / 3 with r_i = layer / 69 and
+/// r_j = j / (N_R - 1).
+#[test]
+fn blade_graded_along_z_and_across_at_once() {
+    let plan = run("blade-zxy.toml", "blade-zxy.json");
+    let mut checked = 0;
+    for layer in plan["layers"].as_array().expect("layers") {
+        let ri = (layer["index"].as_f64().expect("index") / 69.0).min(1.0);
+        for f in layer["parts"][0]["families"].as_array().expect("families") {
+            for r in f["regions"].as_array().expect("regions") {
+                let count = r["count"].as_f64().expect("count");
+                let rj = if count > 1.0 {
+                    r["index"].as_f64().expect("index") / (count - 1.0)
+                } else {
+                    0.0
+                };
+                let want = (ri + 2.0 * (1.0 - rj)) / 3.0;
+                let got = r["composition"]["ceramic"].as_f64().expect("ceramic");
+                assert!(
+                    (got - want).abs() < 1e-9,
+                    "layer {}: {got} vs {want}",
+                    layer["index"]
+                );
+                checked += 1;
+            }
+        }
+    }
+    assert!(checked > 100, "{checked} regions");
+}

@@ -26,7 +26,7 @@ struct Options {
 
 /// Where the grading starts and ends.
 #[derive(Debug, Clone, Copy, PartialEq)]
-enum Span {
+pub(crate) enum Span {
     /// Layer indices: r = (i - start) / (end - start). Equal to the height ratio for
     /// layers of equal thickness, as in the paper.
     Layers(usize, usize),
@@ -43,7 +43,7 @@ struct AlongZ {
 }
 
 /// r in [0, 1] for a layer; a start equal to its end makes a step there.
-fn level(span: Span, index: usize, z: f64, thickness: f64, part: (f64, f64)) -> f64 {
+pub(crate) fn level(span: Span, index: usize, z: f64, thickness: f64, part: (f64, f64)) -> f64 {
     let ratio = |v: f64, s: f64, e: f64| {
         if e == s {
             if v >= e { 1.0 } else { 0.0 }
@@ -89,9 +89,13 @@ impl Grader for AlongZ {
     }
 }
 
-fn build(config: &StageConfig<'_>) -> Result<AnyStage> {
-    let o: Options = config.parse()?;
-    let span = match (o.from_layer, o.to_layer, o.from_z, o.to_z) {
+/// The span the `from_layer`/`to_layer` or `from_z`/`to_z` options give.
+pub(crate) fn span(
+    config: &StageConfig<'_>,
+    layers: (Option<usize>, Option<usize>),
+    heights: (Option<f64>, Option<f64>),
+) -> Result<Span> {
+    Ok(match (layers.0, layers.1, heights.0, heights.1) {
         (None, None, None, None) => Span::Part,
         (Some(s), Some(e), None, None) => {
             if e < s {
@@ -111,7 +115,12 @@ fn build(config: &StageConfig<'_>) -> Result<AnyStage> {
                 "give both from_layer and to_layer, or both from_z and to_z (or neither: the part's height)",
             ));
         }
-    };
+    })
+}
+
+fn build(config: &StageConfig<'_>) -> Result<AnyStage> {
+    let o: Options = config.parse()?;
+    let span = span(config, (o.from_layer, o.to_layer), (o.from_z, o.to_z))?;
     let control = Control::from_options(
         config,
         &ControlOptions {

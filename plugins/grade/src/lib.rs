@@ -6,9 +6,11 @@
 //! - `constant`: one composition for the whole part (a discrete part of an assembly);
 //! - `z`: a control function of the layer's level between two layers or heights;
 //! - `xy`: a control function of the sub-region's level across the layer;
+//! - `zxy`: a Z grading and an X-Y grading at once, combined by weights (Eq. 8);
 //! - `idw`: inverse-distance weighting of materials carried by a family's contours.
 
 mod along_z;
+mod both;
 mod constant;
 pub mod control;
 mod idw;

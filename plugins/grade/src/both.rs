@@ -1,0 +1,152 @@
+//! `zxy`: grading along Z and across the layer at once (the turbine blade of Fig. 19 of
+//! the topological-hierarchy paper): the Z control function of the layer's level and
+//! the X-Y control function of the sub-region's level each give a composition, and the
+//! two are combined by the weighted operator of the grading-step-width paper (Eq. 8),
+//! (k_z M_z + k_xy M_xy) / (k_z + k_xy).
+
+use lamina_core::script::ScriptArgs;
+use lamina_core::stage::{AnyStage, FamilyContext, Grader, OptionSpec, StageConfig, StageInfo, StageKind};
+use lamina_core::{Composition, Region, Result, StageFactory};
+use serde::Deserialize;
+
+use crate::along_z::{Span, level, span};
+use crate::control::{Control, ControlOptions};
+use crate::in_plane::index_level;
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct Options {
+    z_f: Option<String>,
+    xy_f: Option<String>,
+    from_layer: Option<usize>,
+    to_layer: Option<usize>,
+    from_z: Option<f64>,
+    to_z: Option<f64>,
+    #[serde(default = "d_weights")]
+    weights: [f64; 2],
+    #[serde(default)]
+    xy_level: bool,
+}
+
+fn d_weights() -> [f64; 2] {
+    [1.0, 1.0]
+}
+
+struct Both {
+    z: Control,
+    xy: Control,
+    span: Span,
+    weights: [f64; 2],
+    /// Use the discretiser's level instead of j / (N_R - 1).
+    xy_level: bool,
+}
+
+impl Grader for Both {
+    fn grade(&self, ctx: &FamilyContext<'_>, regions: &mut [Region]) -> Result<()> {
+        let part = &ctx.info.parts[ctx.part];
+        let n = part.materials.len();
+        let rz = level(
+            self.span,
+            ctx.layer.index,
+            ctx.layer.z,
+            ctx.layer.thickness,
+            (part.z_min, part.z_max),
+        );
+        let [kz, kxy] = self.weights;
+        for region in regions.iter_mut() {
+            let rxy = if self.xy_level {
+                region.level
+            } else {
+                index_level(region.index, region.count)
+            };
+            let args = |r: f64| ScriptArgs {
+                r,
+                d: 0.0,
+                x: region.reference.x,
+                y: region.reference.y,
+                z: ctx.layer.z,
+                layer: ctx.layer.index as i64,
+                part: &part.name,
+            };
+            let context = format!(
+                "part `{}`, layer {} (z = {:.4}, r_z = {rz}), region {} (r_xy = {rxy})",
+                part.name, ctx.layer.index, ctx.layer.z, region.index
+            );
+            let mz = self.z.composition(&args(rz), n, &context)?;
+            let mxy = self.xy.composition(&args(rxy), n, &context)?;
+            let mut f: Vec<f64> = mz
+                .fractions
+                .iter()
+                .zip(&mxy.fractions)
+                .map(|(a, b)| ((kz * a + kxy * b) / (kz + kxy)).clamp(0.0, 1.0))
+                .collect();
+            let sum: f64 = f.iter().sum();
+            f.iter_mut().for_each(|v| *v /= sum);
+            region.composition = Some(Composition::new(f)?);
+        }
+        Ok(())
+    }
+}
+
+fn build(config: &StageConfig<'_>) -> Result<AnyStage> {
+    let o: Options = config.parse()?;
+    let span = span(config, (o.from_layer, o.to_layer), (o.from_z, o.to_z))?;
+    if !o.weights.iter().all(|w| w.is_finite() && *w >= 0.0) || o.weights[0] + o.weights[1] <= 0.0 {
+        return Err(config.error("weights", "must be two non-negative numbers, not both 0"));
+    }
+    let control = |f: Option<String>, default: (f64, f64)| {
+        Control::from_options(
+            config,
+            &ControlOptions {
+                f,
+                mu: None,
+                lambda: None,
+                alpha: None,
+                k: None,
+            },
+            default,
+        )
+    };
+    Ok(AnyStage::Grade(Box::new(Both {
+        z: control(o.z_f, (1.0, 0.0))?,
+        xy: control(o.xy_f, (-1.0, 1.0))?,
+        span,
+        weights: o.weights,
+        xy_level: o.xy_level,
+    })))
+}
+
+lamina_core::register_stage!(StageFactory {
+    info: StageInfo {
+        kind: StageKind::Grade,
+        name: "zxy",
+        doc: "Grades along Z and across the layer at once: the Z and X-Y control functions' compositions combined by weights (Eq. 8 of the step-width paper).",
+        options: &[
+            OptionSpec::new(
+                "z_f",
+                "string",
+                "\"linear\"",
+                "control function of the layer's level (a built-in name with its defaults, or Rhai): default f = r"
+            ),
+            OptionSpec::new(
+                "xy_f",
+                "string",
+                "\"linear\"",
+                "control function of the region's level: default f = 1 - r (first material outside)"
+            ),
+            OptionSpec::new("from_layer", "integer", "none", "layer index where r_z = 0"),
+            OptionSpec::new("to_layer", "integer", "none", "layer index where r_z = 1"),
+            OptionSpec::new("from_z", "float", "none", "height (mm) where r_z = 0"),
+            OptionSpec::new("to_z", "float", "none", "height (mm) where r_z = 1"),
+            OptionSpec::new("weights", "array of float", "[1.0, 1.0]", "k_z and k_xy of Eq. 8"),
+            OptionSpec::new(
+                "xy_level",
+                "bool",
+                "false",
+                "use the discretiser's level for r_xy instead of j / (N_R - 1)"
+            ),
+        ],
+        example: "use = \"zxy\"\nz_f = \"r\"\nxy_f = \"1.0 - r\"\nweights = [1.0, 3.0]",
+    },
+    build,
+});
