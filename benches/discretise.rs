@@ -239,6 +239,7 @@ fn field_part(layers: &[(Layer, ContourTree)], runs: usize) {
         levels: Levels::Equal(11),
         cells: 512,
         cell_size: None,
+        around: Default::default(),
     };
     let start = Instant::now();
     let mut loops = 0;

@@ -14,6 +14,7 @@ use i_overlay::core::fill_rule::FillRule;
 use i_overlay::core::overlay::ShapeType;
 
 use crate::bands::{clean, nested_bands};
+use crate::cells::Cells;
 use crate::field::Field;
 use crate::grid::Grid;
 use crate::iso::iso_levels;
@@ -55,6 +56,10 @@ struct Options {
     cells: usize,
     #[serde(default)]
     cell_size: Option<f64>,
+    #[serde(default)]
+    cells_around: Option<usize>,
+    #[serde(default)]
+    cell_length: Option<f64>,
 }
 
 fn default_feature() -> Feature {
@@ -107,6 +112,8 @@ pub struct DistanceField {
     pub levels: Levels,
     pub cells: usize,
     pub cell_size: Option<f64>,
+    /// Circumferential cells of every sub-region.
+    pub around: Cells,
 }
 
 impl DistanceField {
@@ -197,7 +204,9 @@ impl Discretiser for DistanceField {
             }
             Ok(any)
         })?;
-        Ok(from_bands(ctx, &grid, &bands, count, |k| self.levels.level(k)))
+        let mut regions = from_bands(ctx, &grid, &bands, count, |k| self.levels.level(k));
+        self.around.split(&grid, &polygon, &mut regions);
+        Ok(regions)
     }
 }
 
@@ -228,6 +237,7 @@ fn build(config: &StageConfig<'_>) -> Result<AnyStage> {
         levels,
         cells: o.cells,
         cell_size: o.cell_size,
+        around: Cells::checked(o.cells_around, o.cell_length, config)?,
     })))
 }
 
@@ -273,6 +283,8 @@ lamina_core::register_stage!(StageFactory {
                 "none",
                 "sample spacing (mm) instead of `cells`"
             ),
+            crate::cells::AROUND_OPTION,
+            crate::cells::LENGTH_OPTION,
         ],
         example: "use = \"distance-field\"\nfeature = \"outer\"\ncount = 4",
     },

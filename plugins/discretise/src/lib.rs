@@ -7,13 +7,19 @@
 //! - `step-width`: the grading step-width truncation, N_c = 1 / t_g + 1 regions at
 //!   levels 0, t_g, ..., 1 bounded by offsets at the half steps;
 //! - `distance-field`: iso-contours of a normalised distance field to a material
-//!   feature (boundary, outer, holes, centre, point), clipped to the family.
+//!   feature (boundary, outer, holes, centre, point), clipped to the family;
+//! - `radial`: offset contours through the equal divisions of radial lines from the
+//!   outer contour to the inner ones (Method 2, Eq. 17).
+//!
+//! Every discretiser can also split its sub-regions around into circumferential cells
+//! (Fig. 13, [`cells`]).
 //!
 //! All geometry of a family runs on one integer grid ([`grid`]); each region is the
 //! boolean difference of two nested sets read from one overlay graph ([`bands`]), so
 //! regions never overlap and add up to the family.
 
 mod bands;
+pub mod cells;
 pub mod check;
 pub mod distance_field;
 pub mod field;
@@ -22,6 +28,7 @@ mod inset;
 pub mod iso;
 pub mod measure;
 mod offset;
+mod radial;
 mod regions;
 pub mod shapes;
 pub mod step_width;

@@ -9,6 +9,7 @@ use lamina_core::{Polygon, Region, Result, StageFactory};
 use serde::Deserialize;
 
 use crate::bands::{clean, offset_bands};
+use crate::cells::Cells;
 use crate::grid::Grid;
 use crate::inset::{From, Inset, Join};
 use crate::measure::{min_contour_distance, pole};
@@ -34,6 +35,10 @@ struct Options {
     join: Join,
     #[serde(default = "default_tolerance")]
     tolerance: f64,
+    #[serde(default)]
+    cells_around: Option<usize>,
+    #[serde(default)]
+    cell_length: Option<f64>,
 }
 
 fn default_nozzle() -> f64 {
@@ -51,6 +56,7 @@ pub struct Offset {
     pub count: Option<usize>,
     pub spacing: Option<f64>,
     pub inset: Inset,
+    pub cells: Cells,
 }
 
 /// How deep the offsets can go before they meet: L_s from the outer contour to the
@@ -97,7 +103,9 @@ impl Discretiser for Offset {
             return Ok(whole(ctx, polygon));
         }
         let bands = offset_bands(&base, grid.scale(), count, &self.inset, |k| k as f64 * spacing)?;
-        Ok(from_bands(ctx, &grid, &bands, count, |j| uniform_level(j, count)))
+        let mut regions = from_bands(ctx, &grid, &bands, count, |j| uniform_level(j, count));
+        self.cells.split(&grid, &polygon, &mut regions);
+        Ok(regions)
     }
 }
 
@@ -134,6 +142,7 @@ fn checked(o: &Options, config: &StageConfig<'_>) -> Result<Offset> {
             join: o.join,
             tolerance: o.tolerance,
         },
+        cells: Cells::checked(o.cells_around, o.cell_length, config)?,
     })
 }
 
@@ -179,6 +188,8 @@ lamina_core::register_stage!(StageFactory {
                 "0.005",
                 "largest arc-to-chord distance of round corners (mm)"
             ),
+            crate::cells::AROUND_OPTION,
+            crate::cells::LENGTH_OPTION,
         ],
         example: "use = \"offset\"\nnozzle = 0.2",
     },

@@ -10,6 +10,7 @@ use lamina_core::{Polygon, Region, Result, StageFactory};
 use serde::Deserialize;
 
 use crate::bands::{clean, offset_bands};
+use crate::cells::Cells;
 use crate::grid::Grid;
 use crate::inset::{From, Inset, Join};
 use crate::measure::{contour_distance, pole};
@@ -32,6 +33,10 @@ struct Options {
     join: Join,
     #[serde(default = "crate::offset::default_tolerance")]
     tolerance: f64,
+    #[serde(default)]
+    cells_around: Option<usize>,
+    #[serde(default)]
+    cell_length: Option<f64>,
 }
 
 fn default_step() -> f64 {
@@ -92,6 +97,7 @@ struct StepWidth {
     power: f64,
     width: Option<f64>,
     inset: Inset,
+    cells: Cells,
 }
 
 /// The largest distance from the reference inside the family, which normalises d:
@@ -146,9 +152,9 @@ impl Discretiser for StepWidth {
         let count = self.truncation.count;
         let depth = |k: usize| if k == 0 { 0.0 } else { distances[k - 1] };
         let bands = offset_bands(&base, grid.scale(), count, &self.inset, depth)?;
-        Ok(from_bands(ctx, &grid, &bands, count, |k| {
-            self.truncation.level(k)
-        }))
+        let mut regions = from_bands(ctx, &grid, &bands, count, |k| self.truncation.level(k));
+        self.cells.split(&grid, &polygon, &mut regions);
+        Ok(regions)
     }
 }
 
@@ -178,6 +184,7 @@ fn build(config: &StageConfig<'_>) -> Result<AnyStage> {
             join: o.join,
             tolerance: o.tolerance,
         },
+        cells: Cells::checked(o.cells_around, o.cell_length, config)?,
     })))
 }
 
@@ -223,6 +230,8 @@ lamina_core::register_stage!(StageFactory {
                 "0.005",
                 "largest arc-to-chord distance of round corners (mm)"
             ),
+            crate::cells::AROUND_OPTION,
+            crate::cells::LENGTH_OPTION,
         ],
         example: "use = \"step-width\"\nstep = 0.25",
     },

@@ -1,0 +1,163 @@
+//! The `radial` discretiser (Method 2, Eq. 17) and circumferential cells (Fig. 13) on
+//! generated families: concentric and eccentric tubes, several holes, a disc graded
+//! toward its centre, exact tiling, and the cells of every discretiser.
+
+mod common;
+
+use std::f64::consts::PI;
+
+use common::*;
+use lamina_core::{Contour, Point2};
+
+fn moved(c: Contour, dx: f64, dy: f64) -> Contour {
+    Contour::new(c.points.iter().map(|p| Point2::new(p.x + dx, p.y + dy)).collect())
+}
+
+/// Each index 0..n once, as one polygon with `holes` holes.
+fn one_ring_each(regions: &[lamina_core::Region], n: usize, holes: usize) {
+    assert_eq!(indices(regions), (0..n).collect::<Vec<_>>());
+    for j in 0..n {
+        let ring: Vec<_> = regions.iter().filter(|r| r.index == j).collect();
+        assert!(
+            ring.len() == 1 && ring[0].polygon.holes.len() == holes,
+            "ring {j}: {} polygons",
+            ring.len()
+        );
+    }
+}
+
+#[test]
+fn concentric_tube_divides_each_radial_line_equally() {
+    let fam = OneFamily::new(circle(0.0, 0.0, 10.0, 360), vec![circle(0.0, 0.0, 5.0, 360)]);
+    let regions = fam.run(&*stage("use = \"radial\"\ncount = 10"));
+    assert_tiles(&fam.polygon(), &regions);
+    one_ring_each(&regions, 10, 1);
+    for r in &regions {
+        let (a, b) = (10.0 - 0.5 * r.index as f64, 9.5 - 0.5 * r.index as f64);
+        let want = PI * (a * a - b * b);
+        assert!(
+            (r.area() - want).abs() / want < 2e-3,
+            "ring {}: {} vs {want}",
+            r.index,
+            r.area()
+        );
+        assert!((r.level - r.index as f64 / 9.0).abs() < 1e-12);
+    }
+    // Default N_R = int(L_s / D_N) = int(5 / 0.4) = 12.
+    let regions = fam.run(&*stage("use = \"radial\""));
+    assert_tiles(&fam.polygon(), &regions);
+    assert_eq!(regions[0].count, 12);
+}
+
+#[test]
+fn eccentric_hole_gives_rings_thin_on_the_near_side() {
+    let fam = OneFamily::new(circle(0.0, 0.0, 10.0, 360), vec![circle(4.0, 0.0, 3.0, 180)]);
+    let regions = fam.run(&*stage("use = \"radial\"\ncount = 8"));
+    assert_tiles(&fam.polygon(), &regions);
+    one_ring_each(&regions, 8, 1);
+    // Along +x the wall is 3 mm, along -x 11 mm: ring 0 spans 3/8 and 11/8 mm there.
+    let ring0 = &regions[0].polygon;
+    let inner = &ring0.holes[0];
+    let near = inner.points.iter().map(|p| p.x).fold(f64::MIN, f64::max);
+    let far = inner.points.iter().map(|p| p.x).fold(f64::MAX, f64::min);
+    assert!((near - (10.0 - 3.0 / 8.0)).abs() < 0.02, "{near}");
+    assert!((far - (-10.0 + 11.0 / 8.0)).abs() < 0.02, "{far}");
+}
+
+#[test]
+fn several_holes_and_no_holes_tile() {
+    let holes = vec![
+        moved(circle(0.0, 0.0, 3.0, 90), 10.0, 10.0),
+        moved(circle(0.0, 0.0, 3.0, 90), 30.0, 10.0),
+        moved(circle(0.0, 0.0, 4.0, 90), 20.0, 28.0),
+    ];
+    let fam = OneFamily::new(rect(0.0, 0.0, 40.0, 40.0), holes);
+    for text in [
+        "use = \"radial\"\ncount = 10",
+        "use = \"radial\"",
+        "use = \"radial\"\ncount = 3\ncells_around = 6",
+    ] {
+        let regions = fam.run(&*stage(text));
+        assert_tiles(&fam.polygon(), &regions);
+        assert!(regions.len() >= 3, "{text}");
+    }
+    // A disc without holes grades toward its centre: scaled copies of the outline.
+    let disc = OneFamily::new(circle(0.0, 0.0, 10.0, 360), vec![]);
+    let regions = disc.run(&*stage("use = \"radial\"\ncount = 5"));
+    assert_tiles(&disc.polygon(), &regions);
+    for r in &regions {
+        let (a, b) = (10.0 - 2.0 * r.index as f64, 8.0 - 2.0 * r.index as f64);
+        let want = PI * (a * a - b * b);
+        assert!(
+            (r.area() - want).abs() / want < 5e-3,
+            "ring {}: {} vs {want}",
+            r.index,
+            r.area()
+        );
+    }
+    assert!(
+        regions
+            .iter()
+            .find(|r| r.index == 4)
+            .is_some_and(|r| r.polygon.holes.is_empty())
+    );
+    // A dumbbell (not star-shaped about its centre) still tiles.
+    let outer = Contour::new(vec![
+        Point2::new(0.0, 0.0),
+        Point2::new(10.0, 0.0),
+        Point2::new(10.0, 4.5),
+        Point2::new(20.0, 4.5),
+        Point2::new(20.0, 0.0),
+        Point2::new(30.0, 0.0),
+        Point2::new(30.0, 10.0),
+        Point2::new(20.0, 10.0),
+        Point2::new(20.0, 5.5),
+        Point2::new(10.0, 5.5),
+        Point2::new(10.0, 10.0),
+        Point2::new(0.0, 10.0),
+    ]);
+    let bell = OneFamily::new(outer, vec![]);
+    assert_tiles(&bell.polygon(), &bell.run(&*stage("use = \"radial\"\ncount = 6")));
+}
+
+#[test]
+fn cells_split_every_ring_around_and_still_tile() {
+    let fam = OneFamily::new(circle(0.0, 0.0, 10.0, 360), vec![circle(0.0, 0.0, 5.0, 360)]);
+    for text in [
+        "use = \"offset\"\ncount = 4\nfrom = \"outer\"\ncells_around = 8",
+        "use = \"radial\"\ncount = 4\ncells_around = 8",
+        "use = \"step-width\"\nstep = 0.25\nfrom = \"outer\"\ncells_around = 8",
+        "use = \"distance-field\"\nfeature = \"outer\"\ncount = 4\ncells_around = 8",
+    ] {
+        let regions = fam.run(&*stage(text));
+        assert_tiles(&fam.polygon(), &regions);
+        for j in 0..4 {
+            let ring: Vec<_> = regions.iter().filter(|r| r.index == j).collect();
+            let cells: Vec<_> = ring.iter().map(|r| r.cell).collect();
+            assert_eq!(cells, (0..8).map(Some).collect::<Vec<_>>(), "{text}: ring {j}");
+            // Equal sectors of an annulus: equal areas, references in their own cell.
+            let area = ring.iter().map(|r| r.area()).sum::<f64>() / 8.0;
+            for c in &ring {
+                assert!((c.area() - area).abs() / area < 1e-2, "{text}");
+                assert!(c.polygon.holes.is_empty());
+            }
+        }
+    }
+    // About 2 mm long along the middle of each 1.25 mm ring.
+    let regions = fam.run(&*stage(
+        "use = \"offset\"\ncount = 4\nfrom = \"outer\"\ncell_length = 2.0",
+    ));
+    assert_tiles(&fam.polygon(), &regions);
+    let ring0 = regions.iter().filter(|r| r.index == 0).count();
+    let want = (PI * (10.0 + 8.75) / 2.0).round() as usize;
+    assert!(ring0.abs_diff(want) <= 1, "{ring0} cells vs {want}");
+}
+
+#[test]
+fn bad_radial_and_cell_options_are_refused() {
+    assert!(build_error("use = \"radial\"\ncount = 0").contains("count"));
+    assert!(build_error("use = \"radial\"\nnozzle = 0.0").contains("nozzle"));
+    assert!(build_error("use = \"offset\"\ncells_around = 0").contains("cells_around"));
+    assert!(build_error("use = \"offset\"\ncell_length = -1.0").contains("cell_length"));
+    assert!(build_error("use = \"radial\"\ncells_around = 4\ncell_length = 1.0").contains("not both"));
+}
