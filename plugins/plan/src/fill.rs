@@ -76,7 +76,7 @@ fn shapes_of(p: &Polygon) -> Vec<Vec<Vec<[f64; 2]>>> {
 /// when the region is thinner than one width everywhere.
 pub fn contour_passes(polygon: &Polygon, width: f64) -> Vec<Loop> {
     let mut loops = Vec::new();
-    if !(width > 0.0) || polygon.outer.len() < 3 || polygon.area() <= 0.0 {
+    if width.is_nan() || width <= 0.0 || polygon.outer.len() < 3 || polygon.area() <= 0.0 {
         return loops;
     }
     // Each pass is the previous one offset by one width (the first by half a width):
@@ -134,7 +134,7 @@ pub fn simplify(ring: &[[f64; 2]], tol: f64) -> Vec<[f64; 2]> {
     while a < n {
         // Extend the chord from `a` as far as every skipped vertex stays within `tol`.
         let mut b = a + 1;
-        while b + 1 <= n && b - a < 64 {
+        while b < n && b - a < 64 {
             let next = b + 1;
             let end = ring[next % n];
             let ok = (a + 1..next).all(|k| chord_distance(ring[k % n], ring[a % n], end) <= tol);
