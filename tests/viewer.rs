@@ -150,3 +150,77 @@ fn the_viewer_shows_the_chosen_layer_and_a_regions_composition_in_chromium() {
         png.len()
     );
 }
+
+/// Runs of at least `min` equal pixels along the middle row, from the centre rightward.
+fn colour_runs(png: &[u8], min: usize) -> Vec<[u8; 3]> {
+    let pixmap = tiny_skia::Pixmap::decode_png(png).expect("a PNG");
+    let (w, h) = (pixmap.width() as usize, pixmap.height() as usize);
+    let row = h / 2;
+    let mut runs: Vec<([u8; 3], usize)> = Vec::new();
+    for x in w / 2..w {
+        let p = pixmap.pixel(x as u32, row as u32).expect("pixel");
+        let c = [p.red(), p.green(), p.blue()];
+        match runs.last_mut() {
+            Some((last, n)) if *last == c => *n += 1,
+            _ => runs.push((c, 1)),
+        }
+    }
+    let mut out: Vec<[u8; 3]> = runs
+        .into_iter()
+        .filter(|&(_, n)| n >= min)
+        .map(|(c, _)| c)
+        .collect();
+    out.dedup();
+    out
+}
+
+#[test]
+fn pngs_show_the_regions_from_the_bore_outward() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let text = PIPELINE.to_string()
+        + "[[output]]\nuse = \"png\"\nsize = 400\n\
+           [[output]]\nuse = \"contact-sheet\"\ncount = 4\ncolumns = 2\ntile = 128\n\
+           [[output]]\nuse = \"stack\"\nsize = 300\n";
+    let path = dir.path().join("p.toml");
+    std::fs::write(&path, text).expect("write");
+    let out = Command::new(env!("CARGO_BIN_EXE_lamina"))
+        .args(["run", "--quiet", "--out"])
+        .arg(dir.path().join("out"))
+        .arg(&path)
+        .output()
+        .expect("lamina runs");
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let plan: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.path().join("out/plan.json")).expect("json"))
+            .expect("valid");
+    for layer in plan["layers"].as_array().expect("layers") {
+        let i = layer["index"].as_u64().expect("index");
+        let png = std::fs::read(dir.path().join(format!("out/png/layer-{i}.png"))).expect("png");
+        // From the centre: the white bore, the regions from the innermost out, white.
+        let mut want = vec![[255, 255, 255]];
+        for r in regions(layer).iter().rev() {
+            let c = &r["colour"];
+            want.push([0, 1, 2].map(|k| c[k].as_u64().expect("channel") as u8));
+        }
+        want.push([255, 255, 255]);
+        assert_eq!(colour_runs(&png, 5), want, "layer {i}");
+    }
+    for name in ["contact-sheet.png", "stack.png"] {
+        let png = std::fs::read(dir.path().join("out").join(name)).expect(name);
+        let pixmap = tiny_skia::Pixmap::decode_png(&png).expect("a PNG");
+        let coloured = pixmap
+            .pixels()
+            .iter()
+            .filter(|p| p.green() > 100 && p.red() < 50)
+            .count();
+        assert!(
+            coloured > 100,
+            "{name}: the green regions are drawn ({coloured} pixels)"
+        );
+    }
+    let sheet = tiny_skia::Pixmap::decode_png(
+        &std::fs::read(dir.path().join("out/contact-sheet.png")).expect("sheet"),
+    )
+    .expect("png");
+    assert_eq!((sheet.width(), sheet.height()), (256, 256), "2 x 2 tiles of 128");
+}

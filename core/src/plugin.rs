@@ -432,4 +432,9 @@ impl LayerSink for Guarded<dyn LayerSink> {
         let Guarded { label, inner } = *self;
         guard_call(&label, || inner.finish(info))
     }
+
+    fn finish_with_files(self: Box<Self>, info: &RunInfo, files: &mut dyn OutputFiles) -> Result<()> {
+        let Guarded { label, inner } = *self;
+        guard_call(&label, || inner.finish_with_files(info, files))
+    }
 }

@@ -617,7 +617,7 @@ impl Engine {
             }
         }
         for sink in sinks {
-            timings.time(StageKind::Export, || sink.finish(&info))?;
+            timings.time(StageKind::Export, || sink.finish_with_files(&info, &mut outputs))?;
         }
         let files = outputs.commit()?;
         timings

@@ -297,6 +297,12 @@ pub trait LayerSink: Send {
     }
     /// Completes the output (trailers, flushing).
     fn finish(self: Box<Self>, info: &RunInfo) -> Result<()>;
+    /// What the runtime calls: [`finish`](Self::finish), with the means to create files
+    /// (a picture drawn from all layers).
+    fn finish_with_files(self: Box<Self>, info: &RunInfo, files: &mut dyn OutputFiles) -> Result<()> {
+        let _ = files;
+        self.finish(info)
+    }
 }
 
 /// The configuration a stage factory receives: its pipeline table and the services it
