@@ -18,16 +18,16 @@ use lamina_core::{Registry, StageKind};
 // the linker from dropping those registrations.
 use lamina_discretise as _;
 use lamina_export as _;
+use lamina_gcode as _;
 use lamina_grade as _;
 use lamina_model as _;
 use lamina_orient as _;
-use lamina_preview as _;
 use lamina_plan as _;
-use lamina_gcode as _;
+use lamina_preview as _;
 use lamina_sequence as _;
-use lamina_sources as _;
 use lamina_slice as _;
 use lamina_sort as _;
+use lamina_sources as _;
 
 #[derive(Debug, Parser)]
 #[command(name = "lamina", version = lamina_core::VERSION, about = "Plans the layered manufacturing of functionally graded multi-material objects")]
@@ -69,6 +69,18 @@ enum Command {
         /// Prints the time spent in each stage.
         #[arg(long)]
         timings: bool,
+    },
+    /// Runs a pipeline and opens its layers in the HTML viewer (an `html` output is added
+    /// when the pipeline has none).
+    View {
+        #[command(flatten)]
+        args: PipelineArgs,
+        /// Output folder (default: `out` beside the current directory).
+        #[arg(long, value_name = "DIR", default_value = "out")]
+        out: PathBuf,
+        /// Only write the viewer and print its path.
+        #[arg(long)]
+        no_open: bool,
     },
     /// Validates a pipeline (stages, options, scripts, plugins) without running it.
     Check {
@@ -169,6 +181,48 @@ fn execute(cli: Cli) -> Result<(), Failure> {
                 progress::summary(&report, timings);
             } else if timings {
                 progress::timings(&report);
+            }
+            Ok(())
+        }
+        Command::View { args, out, no_open } => {
+            let build = || {
+                let mut pipeline = Pipeline::load(&args.pipeline, &args.set)?;
+                if !pipeline.outputs.iter().any(|o| o.use_name() == Some("html")) {
+                    let mut table = toml::Table::new();
+                    table.insert("use".into(), "html".into());
+                    table.insert("path".into(), format!("{}.html", pipeline.name).into());
+                    pipeline
+                        .outputs
+                        .push(lamina_core::pipeline::TableRef::detached("output", table));
+                }
+                let options = RunOptions {
+                    plugins: args.plugins.clone(),
+                    model: args.model.clone(),
+                    ..RunOptions::default()
+                };
+                Engine::build(pipeline, Registry::linked()?, &options)
+            };
+            let engine = build().map_err(|error| Failure { error, usage: true })?;
+            let observer = progress::Progress::new(false);
+            let report = engine.run(&out, &observer)?;
+            observer.finish();
+            let page = report
+                .files
+                .iter()
+                .find(|f| f.extension().is_some_and(|e| e == "html"))
+                .cloned()
+                .ok_or_else(|| lamina_core::Error::config("the run wrote no HTML viewer"))?;
+            println!("{}", page.display());
+            if !no_open {
+                let opened = std::process::Command::new("xdg-open")
+                    .arg(&page)
+                    .stdout(std::process::Stdio::null())
+                    .stderr(std::process::Stdio::null())
+                    .status()
+                    .is_ok_and(|s| s.success());
+                if !opened {
+                    eprintln!("open {} in a browser (it needs no network)", page.display());
+                }
             }
             Ok(())
         }

@@ -359,3 +359,20 @@ fn family_at_splits_one_mesh_into_parts_followed_through_the_layers() {
         "{err}"
     );
 }
+
+#[test]
+fn view_writes_a_viewer_even_when_the_pipeline_has_none() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let out = lamina(&[
+        "view",
+        "--no-open",
+        "--out",
+        dir.path().to_str().expect("utf-8"),
+        pipelines().join("assembly.toml").to_str().expect("utf-8"),
+    ]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let page = PathBuf::from(text(&out.stdout).trim());
+    let html = std::fs::read_to_string(&page).expect("the printed path is the viewer");
+    assert!(html.contains("LAYERS.push("));
+    assert!(page.starts_with(dir.path()));
+}
