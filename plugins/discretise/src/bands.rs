@@ -92,10 +92,12 @@ pub fn nested_bands(
 }
 
 /// Bands between inward offsets at the cumulative distances `depth(k)` (mm, `depth(0)`
-/// = 0) of the family `base` on a grid of `scale` units per mm. From every boundary,
-/// each set is offset from the previous one by the difference (erosions by discs add
-/// up, and the sets shrink); from the outer contour alone the outer contours of `base`
-/// are offset by the whole depth, as the holes must not move.
+/// = 0) of the family `base` on a grid of `scale` units per mm. Each set is offset from
+/// the previous one by the difference (erosions by discs add up, and the sets shrink,
+/// where offsetting the first set by the whole depth would make ever larger raw loops
+/// with ever more self-crossings). From the outer contour alone, the eroded outer
+/// contours (without the holes, which must not move) are carried along as a set of
+/// their own, and each band's inner set is the family's set clipped by it.
 pub fn offset_bands(
     base: &IntShapes<i32>,
     scale: f64,
@@ -104,17 +106,30 @@ pub fn offset_bands(
     depth: impl Fn(usize) -> f64,
 ) -> Result<Vec<IntShapes<i32>>> {
     let mut scratch = Scratch::default();
-    nested_bands(base, count, FillRule::Positive, |k, current, overlay| {
-        Ok(match inset.from {
-            From::All => inset.add_raw(
-                overlay,
-                current,
-                false,
-                depth(k) - depth(k - 1),
-                scale,
-                &mut scratch,
-            ),
-            From::Outer => inset.add_raw(overlay, base, true, depth(k), scale, &mut scratch),
-        })
+    let holes = base.iter().any(|s| s.len() > 1);
+    if inset.from == From::All || !holes {
+        return nested_bands(base, count, FillRule::Positive, |k, current, overlay| {
+            let step = depth(k) - depth(k - 1);
+            Ok(inset.add_raw(overlay, current, false, step, scale, &mut scratch))
+        });
+    }
+    let mut outer: IntShapes<i32> = base
+        .iter()
+        .filter_map(|s| s.first())
+        .map(|c| vec![c.clone()])
+        .collect();
+    let mut resolve = Overlay::new_custom(0, options(), solver());
+    nested_bands(base, count, FillRule::Positive, |k, _, overlay| {
+        resolve.clear();
+        let step = depth(k) - depth(k - 1);
+        if !inset.add_raw(&mut resolve, &outer, false, step, scale, &mut scratch) {
+            return Ok(false);
+        }
+        outer = resolve.overlay(OverlayRule::Clip, FillRule::Positive);
+        if outer.is_empty() {
+            return Ok(false);
+        }
+        overlay.add_source(&outer, ShapeType::Clip);
+        Ok(true)
     })
 }
