@@ -171,6 +171,15 @@ fn the_expected_built_in_stages_are_registered() {
         (StageKind::Export, "cli"),
         (StageKind::Export, "bitmap"),
         (StageKind::Export, "3mf"),
+        (StageKind::Export, "svg"),
+        (StageKind::Export, "png"),
+        (StageKind::Export, "contact-sheet"),
+        (StageKind::Export, "stack"),
+        (StageKind::Export, "html"),
+        (StageKind::Export, "gcode"),
+        (StageKind::Grade, "zxy"),
+        (StageKind::Plan, "sequential"),
+        (StageKind::Plan, "concurrent"),
     ] {
         assert!(
             registry.get(kind, name).is_some(),
