@@ -141,7 +141,18 @@ fn the_pipes_microstructure_is_written_as_bitmap_layers() {
     let plan = run_pipe(dir.path());
     let header = std::fs::read_to_string(dir.path().join("inner-bitmap.hdr")).expect("header");
     let data = std::fs::read(dir.path().join("inner-bitmap.dat")).expect("data");
-    assert!(dir.path().join("pipe-work-cycles.cli").exists());
+    for file in [
+        "pipe-work-cycles.json",
+        "pipe-work-cycles.cli",
+        "pipe-work-cycles-binary.cli",
+        "pipe-work-cycles-materials.cli",
+        "pipe-work-cycles.3mf",
+        "inner-bitmap.hdr",
+        "inner-bitmap.dat",
+    ] {
+        let len = std::fs::metadata(dir.path().join(file)).map(|m| m.len()).unwrap_or(0);
+        assert!(len > 0, "{file} written");
+    }
     let records: Vec<Vec<f64>> = header
         .lines()
         .filter(|l| !l.starts_with('#'))
