@@ -14,8 +14,8 @@ pub fn iso_loops(field: &Field, values: &[f64], t: f64) -> Vec<Contour> {
 /// The loops of `{v >= t}` for every level `t` of `levels`, in their order, from one
 /// pass over the cells: a cell is looked at for the levels between its lowest and
 /// highest corner only, so the cost is one scan plus the crossed cells. The links
-/// between cell edges are kept per level as sorted pairs rather than as a table over
-/// every edge, which would be cleared and allocated for each level.
+/// between cell edges are gathered per level, then followed through one table over
+/// every edge that each level fills and leaves cleared (every link is followed once).
 pub fn iso_levels(field: &Field, values: &[f64], levels: &[f64]) -> Vec<Vec<Contour>> {
     let (nx, ny) = (field.nx, field.ny);
     let mut order: Vec<usize> = (0..levels.len()).filter(|&l| !levels[l].is_nan()).collect();
@@ -29,9 +29,10 @@ pub fn iso_levels(field: &Field, values: &[f64], levels: &[f64]) -> Vec<Vec<Cont
     // have the sample inside). A cell is crossed by the levels from its lowest corner's
     // band to its highest's, and by none when they agree.
     let band: Vec<u16> = if sorted.len() <= 32 {
+        // Samples below the lowest level (the outside) stop at once.
         values
             .iter()
-            .map(|&v| sorted.iter().map(|&t| u16::from(t <= v)).sum())
+            .map(|&v| sorted.iter().take_while(|&&t| t <= v).count() as u16)
             .collect()
     } else {
         values
@@ -68,10 +69,12 @@ pub fn iso_levels(field: &Field, values: &[f64], levels: &[f64]) -> Vec<Vec<Cont
             }
         }
     }
+    // One table of the next edge over every edge, filled and cleared level by level.
+    let mut next = vec![u32::MAX; horizontal + nx * (ny - 1)];
     links
         .into_iter()
         .enumerate()
-        .map(|(l, mut links)| {
+        .map(|(l, links)| {
             let t = levels[l];
             let point = |edge: usize| -> Point2 {
                 let (k0, k1) = if edge < horizontal {
@@ -91,20 +94,18 @@ pub fn iso_levels(field: &Field, values: &[f64], levels: &[f64]) -> Vec<Vec<Cont
                 let p1 = field.point(k1 % nx, k1 / nx);
                 p0 + (p1 - p0) * s
             };
-            links.sort_unstable_by_key(|l| l.0);
-            let mut used = vec![false; links.len()];
+            for &(from, to) in &links {
+                next[from as usize] = to;
+            }
             let mut loops = Vec::new();
-            for start in 0..links.len() {
-                let mut k = start;
+            for &(start, _) in &links {
+                let mut e = start as usize;
                 let mut points = Vec::new();
-                while !used[k] {
-                    used[k] = true;
-                    let (from, to) = links[k];
-                    points.push(point(from as usize));
-                    match links.binary_search_by_key(&to, |l| l.0) {
-                        Ok(n) => k = n,
-                        Err(_) => break,
-                    }
+                while next[e] != u32::MAX {
+                    points.push(point(e));
+                    let n = next[e] as usize;
+                    next[e] = u32::MAX;
+                    e = n;
                 }
                 if points.len() >= 3 {
                     loops.push(Contour::new(points));
