@@ -131,63 +131,52 @@ impl Field {
                 }
             }
         }
-        // Column pass: squared distance in samples to the nearest seed of the column,
-        // by a sweep up and a sweep down over whole rows (the seeds are all at 0, so
-        // the nearest in a column is the nearest below or above).
-        let seed: Vec<bool> = seed_d2.iter().map(|d| d.is_finite()).collect();
-        let mut g = vec![NONE; n];
+        // Column pass: the row of the nearest seed in each sample's column, by a sweep
+        // up and a sweep down over whole rows (the seeds are all at 0, so the nearest
+        // in a column is the nearest below or above).
         let mut from_row = vec![u32::MAX; n];
         let mut last = vec![u32::MAX; nx];
         for j in 0..ny {
             let row = j * nx..(j + 1) * nx;
-            for (((l, &s), g), r) in last
-                .iter_mut()
-                .zip(&seed[row.clone()])
-                .zip(&mut g[row.clone()])
-                .zip(&mut from_row[row])
-            {
-                if s {
+            for ((l, d), r) in last.iter_mut().zip(&seed_d2[row.clone()]).zip(&mut from_row[row]) {
+                if d.is_finite() {
                     *l = j as u32;
                 }
-                if *l != u32::MAX {
-                    let d = (j - *l as usize) as i64;
-                    *g = d * d;
-                    *r = *l;
-                }
+                *r = *l;
             }
         }
         last.fill(u32::MAX);
         for j in (0..ny).rev() {
             let row = j * nx..(j + 1) * nx;
-            for (((l, &s), g), r) in last
-                .iter_mut()
-                .zip(&seed[row.clone()])
-                .zip(&mut g[row.clone()])
-                .zip(&mut from_row[row])
-            {
-                if s {
+            for ((l, d), r) in last.iter_mut().zip(&seed_d2[row.clone()]).zip(&mut from_row[row]) {
+                if d.is_finite() {
                     *l = j as u32;
                 }
-                if *l != u32::MAX {
-                    let d = (*l as usize - j) as i64;
-                    if d * d < *g {
-                        *g = d * d;
-                        *r = *l;
-                    }
+                // Below is nearer when there is none above or it is closer.
+                if *l != u32::MAX && (*r == u32::MAX || *l as usize - j < j - *r as usize) {
+                    *r = *l;
                 }
             }
         }
-        // Row pass: over the column results; the argmin names the column, whose
-        // column pass names the row of the nearest seed. Seeds are kept as
-        // (row << 16) | column (grids stay below 2^16 samples a side), so that
-        // comparing them needs no division.
+        // Row pass: over the column results (squared distances in samples, made row by
+        // row); the argmin names the column, whose column pass names the row of the
+        // nearest seed. Seeds are kept as (row << 16) | column (grids stay below 2^16
+        // samples a side), so that comparing them needs no division.
         let mut scratch = Envelope::new(nx.max(ny));
         let mut arg = vec![0u32; nx];
+        let mut g = vec![NONE; nx];
         let mut seed_of = vec![u32::MAX; n];
         for j in 0..ny {
-            let row = &g[j * nx..(j + 1) * nx];
-            if scratch.transform(row, &mut arg) {
-                let from = &from_row[j * nx..(j + 1) * nx];
+            let from = &from_row[j * nx..(j + 1) * nx];
+            for (g, &r) in g.iter_mut().zip(from) {
+                *g = if r == u32::MAX {
+                    NONE
+                } else {
+                    let d = j.abs_diff(r as usize) as i64;
+                    d * d
+                };
+            }
+            if scratch.transform(&g, &mut arg) {
                 for (s, &col) in seed_of[j * nx..(j + 1) * nx].iter_mut().zip(&arg) {
                     *s = (from[col as usize] << 16) | col;
                 }
@@ -206,7 +195,7 @@ impl Field {
             let y = oy + j as f64 * h;
             for i in 0..nx {
                 let k = j * nx + i;
-                self.values[k] = if seed[k] {
+                self.values[k] = if seed_d2[k].is_finite() {
                     seed_d2[k]
                 } else {
                     d2(Point2::new(ox + i as f64 * h, y), seed_of[k])
