@@ -150,7 +150,9 @@ fn the_pipes_microstructure_is_written_as_bitmap_layers() {
         "inner-bitmap.hdr",
         "inner-bitmap.dat",
     ] {
-        let len = std::fs::metadata(dir.path().join(file)).map(|m| m.len()).unwrap_or(0);
+        let len = std::fs::metadata(dir.path().join(file))
+            .map(|m| m.len())
+            .unwrap_or(0);
         assert!(len > 0, "{file} written");
     }
     let records: Vec<Vec<f64>> = header

@@ -10,16 +10,16 @@ use lamina_core::{Registry, SourceFile, StageKind};
 fn registry() -> Registry {
     use lamina_discretise as _;
     use lamina_export as _;
+    use lamina_gcode as _;
     use lamina_grade as _;
     use lamina_model as _;
     use lamina_orient as _;
-    use lamina_preview as _;
     use lamina_plan as _;
-    use lamina_gcode as _;
+    use lamina_preview as _;
     use lamina_sequence as _;
-    use lamina_sources as _;
     use lamina_slice as _;
     use lamina_sort as _;
+    use lamina_sources as _;
     Registry::linked().expect("registry")
 }
 
