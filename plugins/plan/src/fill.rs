@@ -64,12 +64,24 @@ impl Loop {
     }
 }
 
+/// The region's contours for the offsetter, simplified first: sub-regions cut on a
+/// fine grid carry hundreds of vertices per millimetre of round or stepped boundary,
+/// and the offsetter's cost grows with every crossing of their offset edges (a thin
+/// ring's inner and outer offsets cross at every wiggle). Dropping what strays less
+/// than the chord tolerance moves no pass by more than that tolerance.
+/// A region whose outer contour simplifies to a sliver has no shape.
 fn shapes_of(p: &Polygon) -> Vec<Vec<Vec<[f64; 2]>>> {
-    vec![
-        p.contours()
-            .map(|c| c.points.iter().map(|q| [q.x, q.y]).collect())
-            .collect(),
-    ]
+    let ring = |c: &lamina_core::Contour| {
+        let ring: Vec<[f64; 2]> = c.points.iter().map(|q| [q.x, q.y]).collect();
+        simplify(&ring, TOLERANCE)
+    };
+    let outer = ring(&p.outer);
+    if outer.len() < 3 {
+        return Vec::new();
+    }
+    let mut shape = vec![outer];
+    shape.extend(p.holes.iter().map(ring).filter(|c| c.len() >= 3));
+    vec![shape]
 }
 
 /// The passes filling `polygon` at extrusion width `width`, outermost first. Empty
@@ -85,6 +97,9 @@ pub fn contour_passes(polygon: &Polygon, width: f64) -> Vec<Loop> {
     let mut current = shapes_of(polygon);
     for k in 0..MAX_PASSES {
         let d = if k == 0 { width / 2.0 } else { width };
+        if current.iter().all(|shape| surely_thin(shape, d)) {
+            break;
+        }
         let step = 2.0 * (1.0 - (TOLERANCE / d).min(1.0)).acos();
         let style = OutlineStyle::new(-d).line_join(LineJoin::Round(step.max(0.01)));
         let inset: Vec<Vec<Vec<[f64; 2]>>> = current.outline(&style);
@@ -121,6 +136,144 @@ pub fn contour_passes(polygon: &Polygon, width: f64) -> Vec<Loop> {
     loops
 }
 
+/// Largest number of sample points the thinness test spends on one shape before it
+/// leaves the answer to the offsetter.
+const MAX_SAMPLES: usize = 200_000;
+
+/// Most cells of the edge table of the thinness test.
+const MAX_CELLS: usize = 4096;
+
+/// Whether no point of `shape` (outer ring, then holes) lies `d` or more from its
+/// boundary, so that offsetting it inward by `d` leaves nothing. Most sub-regions of a
+/// finely graded part are such slivers, and proving it on a sample grid is far cheaper
+/// than offsetting them. Distance to the boundary is 1-Lipschitz: with samples `s`
+/// apart, every point inside is within `s/√2` of an inside sample (or of the boundary),
+/// so when every inside sample is nearer than `d - s/√2` to an edge, no point reaches
+/// `d`. `false` means "not proven", never "thick".
+fn surely_thin(shape: &[Vec<[f64; 2]>], d: f64) -> bool {
+    let s = d / 3.0;
+    let reach = d - s * std::f64::consts::FRAC_1_SQRT_2;
+    let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
+    for q in shape.iter().flatten() {
+        for a in 0..2 {
+            lo[a] = lo[a].min(q[a]);
+            hi[a] = hi[a].max(q[a]);
+        }
+    }
+    if !(lo[0].is_finite() && hi[0].is_finite() && lo[1].is_finite() && hi[1].is_finite() && s > 0.0) {
+        return false;
+    }
+    let cols = ((hi[0] - lo[0]) / s).ceil() as usize + 1;
+    let rows = ((hi[1] - lo[1]) / s).ceil() as usize + 1;
+    if cols.saturating_mul(rows) > MAX_SAMPLES {
+        return false;
+    }
+    // Edges binned on cells of side at least `reach` (coarser on large shapes, to keep
+    // the table small): a sample nearer than `reach` to an edge finds it in its own cell
+    // or the eight around it. Compressed rows: `start[c]..start[c + 1]` in `binned`.
+    let cell = reach.max(((hi[0] - lo[0]) * (hi[1] - lo[1]) / MAX_CELLS as f64).sqrt());
+    let (gw, gh) = (
+        ((hi[0] - lo[0]) / cell) as usize + 1,
+        ((hi[1] - lo[1]) / cell) as usize + 1,
+    );
+    let cell_of = |v: f64, a: usize, n: usize| (((v - lo[a]) / cell).max(0.0) as usize).min(n - 1);
+    let edges: Vec<([f64; 2], [f64; 2])> = shape
+        .iter()
+        .filter(|r| r.len() >= 2)
+        .flat_map(|r| (0..r.len()).map(move |i| (r[i], r[(i + 1) % r.len()])))
+        .collect();
+    let span = |(a, b): &([f64; 2], [f64; 2])| {
+        (
+            cell_of(a[0].min(b[0]), 0, gw)..=cell_of(a[0].max(b[0]), 0, gw),
+            cell_of(a[1].min(b[1]), 1, gh)..=cell_of(a[1].max(b[1]), 1, gh),
+        )
+    };
+    let mut start = vec![0u32; gw * gh + 1];
+    let mut total = 0usize;
+    for e in &edges {
+        let (xs, ys) = span(e);
+        total += xs.clone().count() * ys.clone().count();
+        if total > MAX_SAMPLES {
+            return false;
+        }
+        for y in ys {
+            for x in xs.clone() {
+                start[y * gw + x + 1] += 1;
+            }
+        }
+    }
+    for c in 0..gw * gh {
+        start[c + 1] += start[c];
+    }
+    let mut fill = start.clone();
+    let mut binned = vec![0u32; total];
+    for (i, e) in edges.iter().enumerate() {
+        let (xs, ys) = span(e);
+        for y in ys {
+            for x in xs.clone() {
+                let slot = &mut fill[y * gw + x];
+                binned[*slot as usize] = i as u32;
+                *slot += 1;
+            }
+        }
+    }
+    let bins = |c: usize| &binned[start[c] as usize..start[c + 1] as usize];
+    // Rows of samples at y = lo + (k + ½) s; the inside of a row lies between pairs of
+    // sorted edge crossings (even-odd, which the outer ring and holes share).
+    let mut crossings: Vec<(usize, f64)> = Vec::new();
+    for (a, b) in &edges {
+        let (p, q) = if a[1] <= b[1] { (a, b) } else { (b, a) };
+        if p[1] == q[1] {
+            continue;
+        }
+        let first = ((p[1] - lo[1]) / s - 0.5).ceil().max(0.0) as usize;
+        let mut k = first;
+        loop {
+            let y = lo[1] + (k as f64 + 0.5) * s;
+            if y >= q[1] || k >= rows {
+                break;
+            }
+            if y >= p[1] {
+                crossings.push((k, p[0] + (q[0] - p[0]) * (y - p[1]) / (q[1] - p[1])));
+            }
+            k += 1;
+        }
+    }
+    crossings.sort_by(|a, b| a.0.cmp(&b.0).then(a.1.total_cmp(&b.1)));
+    let near = |x: f64, y: f64| {
+        let (cx, cy) = (cell_of(x, 0, gw), cell_of(y, 1, gh));
+        let p = Point2::new(x, y);
+        (cy.saturating_sub(1)..=(cy + 1).min(gh - 1)).any(|gy| {
+            (cx.saturating_sub(1)..=(cx + 1).min(gw - 1)).any(|gx| {
+                bins(gy * gw + gx).iter().any(|&e| {
+                    let (a, b) = edges[e as usize];
+                    lamina_core::geom::segment_distance(p, Point2::new(a[0], a[1]), Point2::new(b[0], b[1]))
+                        < reach
+                })
+            })
+        })
+    };
+    for row in crossings.chunk_by(|a, b| a.0 == b.0) {
+        let y = lo[1] + (row[0].0 as f64 + 0.5) * s;
+        for pair in row.chunks_exact(2) {
+            let (xa, xb) = (pair[0].1, pair[1].1);
+            // Samples on the column grid x = lo + (j + ½) s inside [xa, xb].
+            let mut j = ((xa - lo[0]) / s - 0.5).ceil().max(0.0) as usize;
+            loop {
+                let x = lo[0] + (j as f64 + 0.5) * s;
+                if x > xb {
+                    break;
+                }
+                if !near(x, y) {
+                    return false;
+                }
+                j += 1;
+            }
+        }
+    }
+    true
+}
+
 /// A closed ring with the vertices dropped that stray less than `tol` from the chord
 /// replacing them (greedy, runs of at most 64 vertices).
 pub fn simplify(ring: &[[f64; 2]], tol: f64) -> Vec<[f64; 2]> {
@@ -137,7 +290,7 @@ pub fn simplify(ring: &[[f64; 2]], tol: f64) -> Vec<[f64; 2]> {
         while b < n && b - a < 64 {
             let next = b + 1;
             let end = ring[next % n];
-            let ok = (a + 1..next).all(|k| chord_distance(ring[k % n], ring[a % n], end) <= tol);
+            let ok = (a + 1..next).all(|k| chord_distance2(ring[k % n], ring[a % n], end) <= tol * tol);
             if !ok {
                 break;
             }
@@ -152,12 +305,19 @@ pub fn simplify(ring: &[[f64; 2]], tol: f64) -> Vec<[f64; 2]> {
     out
 }
 
-fn chord_distance(p: [f64; 2], a: [f64; 2], b: [f64; 2]) -> f64 {
-    lamina_core::geom::segment_distance(
-        Point2::new(p[0], p[1]),
-        Point2::new(a[0], a[1]),
-        Point2::new(b[0], b[1]),
-    )
+/// Squared distance from `p` to segment `ab`: the simplifier compares it with the
+/// squared tolerance for every skipped vertex of every chord it tries, so no root.
+fn chord_distance2(p: [f64; 2], a: [f64; 2], b: [f64; 2]) -> f64 {
+    let (abx, aby) = (b[0] - a[0], b[1] - a[1]);
+    let (apx, apy) = (p[0] - a[0], p[1] - a[1]);
+    let len2 = abx * abx + aby * aby;
+    let t = if len2 > 0.0 {
+        ((apx * abx + apy * aby) / len2).clamp(0.0, 1.0)
+    } else {
+        0.0
+    };
+    let (dx, dy) = (apx - abx * t, apy - aby * t);
+    dx * dx + dy * dy
 }
 
 #[cfg(test)]
