@@ -84,7 +84,9 @@ impl Field {
     pub fn distance_to(&mut self, contours: &[&Contour]) {
         let n = self.nx * self.ny;
         let (nx, ny) = (self.nx, self.ny);
-        let mut near = vec![Point2::origin(); n];
+        // Boundary points of the seeds, as plain arrays so the allocation is zeroed by
+        // the allocator and only the pages of seeds are ever touched.
+        let mut near = vec![[0.0f64; 2]; n];
         let mut seed_d2 = vec![f64::INFINITY; n];
         // Seeds are the samples within a cell of the boundary: a thin band keeps the
         // nearest seed's boundary point close to the true nearest boundary point. Each
@@ -125,7 +127,7 @@ impl Field {
                         let k = j * nx + i;
                         if d2 <= h2 && d2 < seed_d2[k] {
                             seed_d2[k] = d2;
-                            near[k] = on;
+                            near[k] = [on.x, on.y];
                         }
                     }
                 }
@@ -188,7 +190,8 @@ impl Field {
             if s == u32::MAX {
                 f64::INFINITY
             } else {
-                (p - near[(s >> 16) as usize * nx + (s & 0xffff) as usize]).norm_squared()
+                let q = near[(s >> 16) as usize * nx + (s & 0xffff) as usize];
+                (p.x - q[0]).powi(2) + (p.y - q[1]).powi(2)
             }
         };
         for j in 0..ny {
