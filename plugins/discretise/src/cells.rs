@@ -100,8 +100,9 @@ impl Cells {
         .map(|&p| (p - centre).norm())
         .fold(0.0, f64::max);
         // Far enough that the sectors' outer arcs (chords of at most 45 degrees) lie
-        // outside the family.
-        let far = 2.0 * reach + 1.0;
+        // outside the family, and relative to its size, so that the sectors stay in
+        // the grid's range (a few times its half extent) whatever the scale.
+        let far = 2.0 * reach.max(f64::MIN_POSITIVE);
         let mut overlay = Overlay::new_custom(0, options(), solver());
         let mut out = Vec::with_capacity(regions.len());
         for r in regions.drain(..) {

@@ -161,3 +161,29 @@ fn bad_radial_and_cell_options_are_refused() {
     assert!(build_error("use = \"offset\"\ncell_length = -1.0").contains("cell_length"));
     assert!(build_error("use = \"radial\"\ncells_around = 4\ncell_length = 1.0").contains("not both"));
 }
+
+#[test]
+fn tiny_and_degenerate_families_do_not_panic() {
+    for text in [
+        "use = \"radial\"",
+        "use = \"radial\"\ncount = 4\ncells_around = 5",
+        "use = \"offset\"\ncount = 3\ncells_around = 3",
+        "use = \"offset\"\ncount = 3\nfrom = \"outer\"\ncell_length = 0.1",
+    ] {
+        let tiny = OneFamily::new(circle(0.0, 0.0, 1e-6, 64), vec![circle(0.0, 0.0, 5e-7, 64)]);
+        assert!(!tiny.run(&*stage(text)).is_empty(), "{text}");
+        let flat = OneFamily::new(
+            Contour::new(vec![
+                Point2::new(0.0, 0.0),
+                Point2::new(1.0, 0.0),
+                Point2::new(2.0, 0.0),
+            ]),
+            vec![],
+        );
+        assert_eq!(flat.run(&*stage(text)).len(), 1, "{text}");
+        // A hole touching the outer contour at a point.
+        let touching = OneFamily::new(rect(0.0, 0.0, 10.0, 10.0), vec![rect(0.0, 4.0, 2.0, 2.0)]);
+        let regions = touching.run(&*stage(text));
+        assert_tiles(&touching.polygon(), &regions);
+    }
+}
