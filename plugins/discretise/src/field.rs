@@ -270,6 +270,15 @@ impl Envelope {
         }
     }
 
+    /// The first q where parabola m + 1 of the `k` of the envelope is lower than m.
+    fn switch(&self, m: usize, k: usize) -> i64 {
+        if m + 1 >= k {
+            return i64::MAX;
+        }
+        let (dv, dh) = (self.v[m + 1] - self.v[m], self.h[m + 1] - self.h[m]);
+        dh.div_euclid(2 * dv) + 1
+    }
+
     /// `arg[q]` = the p minimising `(q - p)^2 + f[p]` (Felzenszwalb and Huttenlocher).
     /// `NONE` values are skipped; `false` (and `arg` untouched) when all are.
     fn transform(&mut self, f: &[i64], arg: &mut [u32]) -> bool {
@@ -297,12 +306,15 @@ impl Envelope {
         if k == 0 {
             return false;
         }
+        // Parabola m + 1 takes over from m at the first q where it is strictly lower:
+        // q > (h1 - h0) / (2 (v1 - v0)), found once per parabola.
         let mut m = 0usize;
+        let mut next = self.switch(m, k);
         for (q, a) in arg.iter_mut().enumerate() {
             let q = q as i64;
-            // Move on while the next parabola is lower at q: h2 - 2 q v2 < h1 - 2 q v1.
-            while m + 1 < k && self.h[m + 1] - 2 * q * self.v[m + 1] < self.h[m] - 2 * q * self.v[m] {
+            while q >= next {
                 m += 1;
+                next = self.switch(m, k);
             }
             *a = self.v[m] as u32;
         }
