@@ -232,10 +232,10 @@ impl Field {
                 if i + 1 < nx && apart(s, row[i + 1]) {
                     cross((i, j), (i + 1, j), s, row[i + 1]);
                 }
-                if let Some(up) = up {
-                    if apart(s, up[i]) {
-                        cross((i, j), (i, j + 1), s, up[i]);
-                    }
+                if let Some(up) = up
+                    && apart(s, up[i])
+                {
+                    cross((i, j), (i, j + 1), s, up[i]);
                 }
             }
         }
