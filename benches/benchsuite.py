@@ -232,6 +232,8 @@ def main():
     ap.add_argument("--lamina", default=str(ROOT / "target" / "release" / "lamina"))
     ap.add_argument("--python", default=sys.executable, help="interpreter that has the Python peers")
     ap.add_argument("--out", default=None, help="where to write the table (default target/benchsuite/...)")
+    ap.add_argument("--only", action="append", choices=["slice", "offset", "sdf", "gcode"],
+                    help="run only these tasks (repeatable; default all)")
     args = ap.parse_args()
     runs = args.runs or (1 if args.quick else 5)
     models = Path(args.models)
@@ -261,10 +263,12 @@ def main():
         print(f"  {task:<28} {tool:<14} wall {wall:7.3f} s  work {inside:7.3f} s  {rss:7.1f} MiB  {ratio} {detail}",
               flush=True)
 
+    tasks = set(args.only or ["slice", "offset", "sdf", "gcode"])
+
     # --- slicing -------------------------------------------------------------------
-    slice_models = SLICE_MODELS[:2] if args.quick else SLICE_MODELS
+    slice_models = [] if "slice" not in tasks else SLICE_MODELS[:2] if args.quick else SLICE_MODELS
     extra = []
-    if not args.quick and has["trimesh"]:
+    if not args.quick and has["trimesh"] and "slice" in tasks:
         # A >= 1M-triangle mesh: 3DBenchy subdivided twice (x16).
         big = work / "benchy_x16.stl"
         code = ("import sys, trimesh; m = trimesh.load(sys.argv[1], force='mesh'); "
@@ -290,7 +294,16 @@ def main():
                 continue
             try:
                 w, m, o = repeat([args.python, "-c", script, file, scale, 0.2], runs)
-                row(f"slice {label}", peer, w, m, median_of(o, "work"), base)
+                detail = f"{median_of(o, 'loops'):.0f} loops"
+                try:
+                    status = json.loads(o[-1].strip().splitlines()[-1]).get("status")
+                except (ValueError, IndexError):
+                    status = None
+                if status and not status.endswith("NoError"):
+                    # manifold3d refuses meshes that are not closed manifolds and slices
+                    # an empty solid instead: its time is then no comparison.
+                    detail += f", mesh refused: {status}"
+                row(f"slice {label}", peer, w, m, median_of(o, "work"), base, detail=detail)
             except RuntimeError as e:
                 notes.append(f"{peer} on {label}: {e}")
 
@@ -317,64 +330,67 @@ def main():
         layers_json.write_text(json.dumps(layers))
         n_layers = len(layers)
 
-        print(f"offsets: 10 inward offsets 0.4 mm apart on every 3DBenchy layer ({n_layers} layers)", flush=True)
-        pipe = write_pipeline(work, "offset", model_table(benchy, 1.0)
-                              + f'[slice]\nuse = "uniform"\nthickness = {thickness}\n'
-                              + '[discretise]\nuse = "offset"\ncount = 10\nspacing = 0.4\n')
-        wall, rss, outs = repeat([lamina, "run", "--quiet", "--timings", "--out", work / "out", pipe], runs)
-        # The whole job's wall time against the peer's offsets alone.
-        inside = wall
-        stage = statistics.median(lamina_timings(o).get("discretise", float("nan")) for o in outs)
-        row(f"offset 3DBenchy ({n_layers} layers)", "lamina", wall, rss, inside,
-            detail=f"whole job; discretise {stage:.3f} s summed over threads")
-        if has["pyclipr"]:
-            w, m, o = repeat([args.python, "-c", PEER_OFFSET_PYCLIPR, layers_json, 10, 0.4], runs)
-            row(f"offset 3DBenchy ({n_layers} layers)", "pyclipr", w, m, median_of(o, "work"), inside,
-                detail="offsets only")
+        if "offset" in tasks:
+            print(f"offsets: 10 inward offsets 0.4 mm apart on every 3DBenchy layer ({n_layers} layers)", flush=True)
+            pipe = write_pipeline(work, "offset", model_table(benchy, 1.0)
+                                  + f'[slice]\nuse = "uniform"\nthickness = {thickness}\n'
+                                  + '[discretise]\nuse = "offset"\ncount = 10\nspacing = 0.4\n')
+            wall, rss, outs = repeat([lamina, "run", "--quiet", "--timings", "--out", work / "out", pipe], runs)
+            # The whole job's wall time against the peer's offsets alone.
+            inside = wall
+            stage = statistics.median(lamina_timings(o).get("discretise", float("nan")) for o in outs)
+            row(f"offset 3DBenchy ({n_layers} layers)", "lamina", wall, rss, inside,
+                detail=f"whole job; discretise {stage:.3f} s summed over threads")
+            if has["pyclipr"]:
+                w, m, o = repeat([args.python, "-c", PEER_OFFSET_PYCLIPR, layers_json, 10, 0.4], runs)
+                row(f"offset 3DBenchy ({n_layers} layers)", "pyclipr", w, m, median_of(o, "work"), inside,
+                    detail="offsets only")
 
-        print("signed distance field 512 x 512, 10 iso-levels, per layer", flush=True)
-        pipe = write_pipeline(work, "sdf", model_table(benchy, 1.0)
-                              + f'[slice]\nuse = "uniform"\nthickness = {thickness}\n'
-                              + '[discretise]\nuse = "distance-field"\ncells = 512\ncount = 10\n')
-        wall, rss, outs = repeat([lamina, "run", "--quiet", "--timings", "--threads", "1", "--out",
-                                  work / "out", pipe], runs)
-        per_layer = statistics.median(lamina_timings(o).get("discretise", float("nan")) for o in outs) / n_layers
-        row("SDF per layer (1 thread)", "lamina", wall, rss, per_layer, detail=f"{n_layers} layers")
-        if has["scipy"]:
-            w, m, o = repeat([args.python, "-c", PEER_SDF_SCIPY, layers_json, 512, 10], runs)
-            done = median_of(o, "layers")
-            row("SDF per layer (1 thread)", "scipy+skimage", w, m, median_of(o, "work") / done, per_layer,
-                detail=f"edt {median_of(o, 'edt') / done * 1e3:.1f} ms + contours "
-                       f"{median_of(o, 'contours') / done * 1e3:.1f} ms")
+        if "sdf" in tasks:
+            print("signed distance field 512 x 512, 10 iso-levels, per layer", flush=True)
+            pipe = write_pipeline(work, "sdf", model_table(benchy, 1.0)
+                                  + f'[slice]\nuse = "uniform"\nthickness = {thickness}\n'
+                                  + '[discretise]\nuse = "distance-field"\ncells = 512\ncount = 10\n')
+            wall, rss, outs = repeat([lamina, "run", "--quiet", "--timings", "--threads", "1", "--out",
+                                      work / "out", pipe], runs)
+            per_layer = statistics.median(lamina_timings(o).get("discretise", float("nan")) for o in outs) / n_layers
+            row("SDF per layer (1 thread)", "lamina", wall, rss, per_layer, detail=f"{n_layers} layers")
+            if has["scipy"]:
+                w, m, o = repeat([args.python, "-c", PEER_SDF_SCIPY, layers_json, 512, 10], runs)
+                done = median_of(o, "layers")
+                row("SDF per layer (1 thread)", "scipy+skimage", w, m, median_of(o, "work") / done, per_layer,
+                    detail=f"edt {median_of(o, 'edt') / done * 1e3:.1f} ms + contours "
+                           f"{median_of(o, 'contours') / done * 1e3:.1f} ms")
 
         # --- STL to G-code ----------------------------------------------------------------
-        listed = subprocess.run([lamina, "plugins", "export", "--json"], capture_output=True, text=True)
-        has_gcode = '"gcode"' in listed.stdout
-        if has_gcode:
-            print("STL to G-code on 3DBenchy at 0.2 mm", flush=True)
-            pipe = write_pipeline(work, "gcode", model_table(benchy, 1.0)
-                                  + '[slice]\nuse = "uniform"\nthickness = 0.2\n'
-                                  + '[discretise]\nuse = "offset"\ncount = 3\nspacing = 0.45\n'
-                                  + '[plan]\nuse = "sequential"\n'
-                                  + '[[output]]\nuse = "gcode"\npath = "benchy.gcode"\n')
-            try:
-                wall, rss, outs = repeat([lamina, "run", "--quiet", "--timings", "--out", work / "out", pipe], runs)
-                base = wall
-                row("G-code 3DBenchy", "lamina", wall, rss, wall, detail="whole process")
-            except RuntimeError as e:
+        if "gcode" in tasks:
+            listed = subprocess.run([lamina, "plugins", "export", "--json"], capture_output=True, text=True)
+            has_gcode = '"gcode"' in listed.stdout
+            if has_gcode:
+                print("STL to G-code on 3DBenchy at 0.2 mm", flush=True)
+                pipe = write_pipeline(work, "gcode", model_table(benchy, 1.0)
+                                      + '[slice]\nuse = "uniform"\nthickness = 0.2\n'
+                                      + '[discretise]\nuse = "offset"\ncount = 3\nspacing = 0.45\n'
+                                      + '[plan]\nuse = "sequential"\n'
+                                      + '[[output]]\nuse = "gcode"\npath = "benchy.gcode"\n')
+                try:
+                    wall, rss, outs = repeat([lamina, "run", "--quiet", "--timings", "--out", work / "out", pipe], runs)
+                    base = wall
+                    row("G-code 3DBenchy", "lamina", wall, rss, wall, detail="whole process")
+                except RuntimeError as e:
+                    base = None
+                    notes.append(f"lamina G-code: {e}")
+            else:
                 base = None
-                notes.append(f"lamina G-code: {e}")
-        else:
-            base = None
-            notes.append("lamina has no gcode exporter yet: G-code comparison skipped")
-        if has["prusa-slicer"] and base:
-            cmd = ["prusa-slicer", "--export-gcode", "--layer-height", "0.2", "--perimeters", "3",
-                   "--fill-density", "20%", "--output", work / "prusa.gcode", benchy]
-            try:
-                w, m, _ = repeat(cmd, runs)
-                row("G-code 3DBenchy", "prusa-slicer", w, m, w, base, detail="whole process")
-            except RuntimeError as e:
-                notes.append(f"prusa-slicer: {e}")
+                notes.append("lamina has no gcode exporter yet: G-code comparison skipped")
+            if has["prusa-slicer"] and base:
+                cmd = ["prusa-slicer", "--export-gcode", "--layer-height", "0.2", "--perimeters", "3",
+                       "--fill-density", "20%", "--output", work / "prusa.gcode", benchy]
+                try:
+                    w, m, _ = repeat(cmd, runs)
+                    row("G-code 3DBenchy", "prusa-slicer", w, m, w, base, detail="whole process")
+                except RuntimeError as e:
+                    notes.append(f"prusa-slicer: {e}")
     else:
         notes.append("3DBenchy absent: offsets, distance fields and G-code skipped")
 
