@@ -3,12 +3,11 @@
 //! below the start and 1 above the end, and a control function of r gives the
 //! composition of every region of the layer.
 
-use lamina_core::script::ScriptArgs;
 use lamina_core::stage::{AnyStage, FamilyContext, Grader, OptionSpec, StageConfig, StageInfo, StageKind};
 use lamina_core::{Region, Result, StageFactory};
 use serde::Deserialize;
 
-use crate::control::{CONTROL_OPTIONS, Control, ControlOptions};
+use crate::control::{CONTROL_OPTIONS, Control, ControlOptions, region_args};
 
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -70,15 +69,7 @@ impl Grader for AlongZ {
             (part.z_min, part.z_max),
         );
         for region in regions.iter_mut() {
-            let args = ScriptArgs {
-                r,
-                d: 0.0,
-                x: region.reference.x,
-                y: region.reference.y,
-                z: ctx.layer.z,
-                layer: ctx.layer.index as i64,
-                part: &part.name,
-            };
+            let args = region_args(ctx, region, r);
             let context = format!(
                 "part `{}`, layer {} (z = {:.4}, r = {r}), region {}",
                 part.name, ctx.layer.index, ctx.layer.z, region.index

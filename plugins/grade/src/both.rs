@@ -4,13 +4,12 @@
 //! two are combined by the weighted operator of the grading-step-width paper (Eq. 8),
 //! (k_z M_z + k_xy M_xy) / (k_z + k_xy).
 
-use lamina_core::script::ScriptArgs;
 use lamina_core::stage::{AnyStage, FamilyContext, Grader, OptionSpec, StageConfig, StageInfo, StageKind};
 use lamina_core::{Composition, Region, Result, StageFactory};
 use serde::Deserialize;
 
 use crate::along_z::{Span, level, span};
-use crate::control::{Control, ControlOptions};
+use crate::control::{Control, ControlOptions, region_args};
 use crate::in_plane::index_level;
 
 #[derive(Debug, Deserialize)]
@@ -59,15 +58,7 @@ impl Grader for Both {
             } else {
                 index_level(region.index, region.count)
             };
-            let args = |r: f64| ScriptArgs {
-                r,
-                d: 0.0,
-                x: region.reference.x,
-                y: region.reference.y,
-                z: ctx.layer.z,
-                layer: ctx.layer.index as i64,
-                part: &part.name,
-            };
+            let args = |r: f64| region_args(ctx, region, r);
             let context = format!(
                 "part `{}`, layer {} (z = {:.4}, r_z = {rz}), region {} (r_xy = {rxy})",
                 part.name, ctx.layer.index, ctx.layer.z, region.index

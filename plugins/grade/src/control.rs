@@ -4,8 +4,8 @@
 //! one fraction per material instead, for any number of materials.
 
 use lamina_core::script::{ScriptArgs, ScriptFn};
-use lamina_core::stage::StageConfig;
-use lamina_core::{Composition, Error, Result};
+use lamina_core::stage::{FamilyContext, StageConfig};
+use lamina_core::{Composition, Error, Region, Result};
 use serde::Deserialize;
 
 /// The options every control-function grader takes.
@@ -149,5 +149,19 @@ impl Control {
                 ),
             )),
         }
+    }
+}
+
+/// What a control function of `r` sees for `region` of the family in `ctx`: its
+/// reference point, the layer's height and index, and the part's name.
+pub fn region_args<'a>(ctx: &FamilyContext<'a>, region: &Region, r: f64) -> ScriptArgs<'a> {
+    ScriptArgs {
+        r,
+        d: 0.0,
+        x: region.reference.x,
+        y: region.reference.y,
+        z: ctx.layer.z,
+        layer: ctx.layer.index as i64,
+        part: &ctx.info.parts[ctx.part].name,
     }
 }

@@ -5,12 +5,11 @@
 //! f = 1 - r, puts the part's first material at the outer contour and the second at the
 //! far end, as the paper's green-to-black example does.
 
-use lamina_core::script::ScriptArgs;
 use lamina_core::stage::{AnyStage, FamilyContext, Grader, OptionSpec, StageConfig, StageInfo, StageKind};
 use lamina_core::{Region, Result, StageFactory};
 use serde::Deserialize;
 
-use crate::control::{CONTROL_OPTIONS, Control, ControlOptions};
+use crate::control::{CONTROL_OPTIONS, Control, ControlOptions, region_args};
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Deserialize)]
 #[serde(rename_all = "lowercase")]
@@ -57,15 +56,7 @@ impl Grader for InPlane {
                 LevelSource::Index => index_level(region.index, region.count),
                 LevelSource::Level => region.level,
             };
-            let args = ScriptArgs {
-                r,
-                d: 0.0,
-                x: region.reference.x,
-                y: region.reference.y,
-                z: ctx.layer.z,
-                layer: ctx.layer.index as i64,
-                part: &part.name,
-            };
+            let args = region_args(ctx, region, r);
             let context = format!(
                 "part `{}`, layer {} (z = {:.4}), family {}, region {} (r = {r})",
                 part.name, ctx.layer.index, ctx.layer.z, ctx.family, region.index

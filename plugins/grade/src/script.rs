@@ -2,10 +2,12 @@
 //! sub-region (never per point), with the result checked: each fraction in [0, 1] and
 //! their sum 1.
 
-use lamina_core::script::{ScriptArgs, ScriptFn};
+use lamina_core::script::ScriptFn;
 use lamina_core::stage::{AnyStage, FamilyContext, Grader, OptionSpec, StageConfig, StageInfo, StageKind};
 use lamina_core::{Composition, Region, Result, StageFactory};
 use serde::Deserialize;
+
+use crate::control::region_args;
 
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -22,15 +24,7 @@ impl Grader for Script {
         let part = &ctx.info.parts[ctx.part];
         let n = part.materials.len();
         for region in regions.iter_mut() {
-            let args = ScriptArgs {
-                r: region.level,
-                d: 0.0,
-                x: region.reference.x,
-                y: region.reference.y,
-                z: ctx.layer.z,
-                layer: ctx.layer.index as i64,
-                part: &part.name,
-            };
+            let args = region_args(ctx, region, region.level);
             let context = format!(
                 "part `{}`, layer {} (z = {:.4}), family {}, region {} (r = {})",
                 part.name, ctx.layer.index, ctx.layer.z, ctx.family, region.index, region.level

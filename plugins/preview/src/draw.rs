@@ -2,6 +2,7 @@
 //! rounded for output.
 
 use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
 
 use lamina_core::{Contour, LayerPlan, Region, RunInfo};
 
@@ -69,4 +70,25 @@ pub fn escape(s: &str) -> String {
         .replace('<', "&lt;")
         .replace('>', "&gt;")
         .replace('"', "&quot;")
+}
+
+/// The file of a layer for exporters that write one picture per layer: `stem-007.ext`
+/// for layer 7 of up to 999, or `None` when the options leave the layer out (every
+/// n-th layer, or an explicit list).
+pub fn layer_file(
+    path: &Path,
+    every: usize,
+    layers: &[usize],
+    layer_count: usize,
+    index: usize,
+    ext: &str,
+) -> Option<PathBuf> {
+    let wanted = if layers.is_empty() {
+        index.is_multiple_of(every)
+    } else {
+        layers.contains(&index)
+    };
+    let stem = path.file_name()?.to_string_lossy().into_owned();
+    let digits = layer_count.max(1).to_string().len();
+    wanted.then(|| path.with_file_name(format!("{stem}-{index:0digits$}.{ext}")))
 }

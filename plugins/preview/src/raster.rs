@@ -13,7 +13,7 @@ use lamina_core::{Contour, Error, LayerPlan, PathKind, Result, RunInfo, StageFac
 use serde::Deserialize;
 use tiny_skia::{Color, FillRule, Paint, PathBuilder, Pixmap, Stroke, Transform};
 
-use crate::draw::layer_bounds;
+use crate::draw::{layer_bounds, layer_file};
 
 /// Most pixels on a picture's longer side.
 const MAX_SIZE: u32 = 8192;
@@ -181,14 +181,14 @@ struct Png {
 
 struct PngSink {
     options: PngOptions,
-    digits: usize,
+    layer_count: usize,
 }
 
 impl Exporter for Png {
     fn open(&self, ctx: &mut ExportContext<'_>) -> Result<Box<dyn LayerSink>> {
         Ok(Box::new(PngSink {
             options: self.options.clone(),
-            digits: ctx.layer_count.max(1).to_string().len(),
+            layer_count: ctx.layer_count,
         }))
     }
 }
@@ -208,12 +208,10 @@ impl LayerSink for PngSink {
         files: &mut dyn OutputFiles,
     ) -> Result<()> {
         let o = &self.options;
-        let wanted = if o.layers.is_empty() {
-            plan.index.is_multiple_of(o.every)
-        } else {
-            o.layers.contains(&plan.index)
+        let Some(name) = layer_file(&o.path, o.every, &o.layers, self.layer_count, plan.index, "png") else {
+            return Ok(());
         };
-        let Some(b) = layer_bounds(plan).filter(|_| wanted) else {
+        let Some(b) = layer_bounds(plan) else {
             return Ok(());
         };
         let aspect = ((b[3] - b[1]) / (b[2] - b[0]).max(1e-9)).clamp(0.05, 20.0);
@@ -230,14 +228,6 @@ impl LayerSink for PngSink {
             info,
             o.toolpaths,
         );
-        let stem = o
-            .path
-            .file_name()
-            .map(|s| s.to_string_lossy().into_owned())
-            .unwrap_or_default();
-        let name = o
-            .path
-            .with_file_name(format!("{stem}-{:0width$}.png", plan.index, width = self.digits));
         let bytes = encode(&pixmap, &name)?;
         write_file(files, &name, &bytes)
     }

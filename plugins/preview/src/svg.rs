@@ -13,7 +13,7 @@ use lamina_core::stage::{
 use lamina_core::{Error, LayerPlan, PathKind, Result, RunInfo, StageFactory};
 use serde::Deserialize;
 
-use crate::draw::{composition_text, escape, hex, layer_bounds, path_data, round};
+use crate::draw::{composition_text, escape, hex, layer_bounds, layer_file, path_data, round};
 
 #[derive(Debug, Clone, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -49,7 +49,7 @@ struct Svg {
 
 struct Sink {
     options: Options,
-    digits: usize,
+    layer_count: usize,
 }
 
 /// The SVG text of one layer.
@@ -148,7 +148,7 @@ impl Exporter for Svg {
     fn open(&self, ctx: &mut ExportContext<'_>) -> Result<Box<dyn LayerSink>> {
         Ok(Box::new(Sink {
             options: self.options.clone(),
-            digits: ctx.layer_count.max(1).to_string().len(),
+            layer_count: ctx.layer_count,
         }))
     }
 }
@@ -168,22 +168,12 @@ impl LayerSink for Sink {
         files: &mut dyn OutputFiles,
     ) -> Result<()> {
         let o = &self.options;
-        let wanted = if o.layers.is_empty() {
-            plan.index.is_multiple_of(o.every)
-        } else {
-            o.layers.contains(&plan.index)
+        let Some(name) = layer_file(&o.path, o.every, &o.layers, self.layer_count, plan.index, "svg") else {
+            return Ok(());
         };
-        if !wanted || layer_bounds(plan).is_none() {
+        if layer_bounds(plan).is_none() {
             return Ok(());
         }
-        let stem = o
-            .path
-            .file_name()
-            .map(|s| s.to_string_lossy().into_owned())
-            .unwrap_or_default();
-        let name = o
-            .path
-            .with_file_name(format!("{stem}-{:0width$}.svg", plan.index, width = self.digits));
         let mut out = files.create(&name)?;
         out.write_all(layer_svg(info, plan, o.toolpaths, o.size).as_bytes())
             .and_then(|()| out.flush())
