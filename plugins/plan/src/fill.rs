@@ -116,6 +116,12 @@ pub fn contour_passes(polygon: &Polygon, width: f64) -> Vec<Loop> {
                     continue;
                 }
                 let mut points: Vec<Point2> = contour.iter().map(|q| Point2::new(q[0], q[1])).collect();
+                // Every loop runs counter-clockwise, holes' too: two tools working
+                // along the same wall then move the same way round instead of
+                // meeting head-on, where one of them must step aside.
+                if signed_area(&points) < 0.0 {
+                    points.reverse();
+                }
                 points.push(points[0]);
                 loops.push(Loop { points });
             }
@@ -134,6 +140,18 @@ pub fn contour_passes(polygon: &Polygon, width: f64) -> Vec<Loop> {
             .collect();
     }
     loops
+}
+
+/// The shoelace area of an open ring (positive counter-clockwise).
+fn signed_area(ring: &[Point2]) -> f64 {
+    let n = ring.len();
+    (0..n)
+        .map(|i| {
+            let (a, b) = (ring[i], ring[(i + 1) % n]);
+            a.x * b.y - b.x * a.y
+        })
+        .sum::<f64>()
+        / 2.0
 }
 
 /// Largest number of sample points the thinness test spends on one shape before it

@@ -12,15 +12,17 @@
 //! path, so exporters can meter mixtures.
 
 pub mod fill;
+pub mod group;
 pub mod route;
 pub mod sim;
 
 use std::collections::BTreeMap;
 
 use lamina_core::stage::{AnyStage, OptionSpec, Planner, StageConfig, StageInfo, StageKind};
-use lamina_core::{Error, LayerPlan, Result, RunInfo, StageFactory, Toolpath};
+use lamina_core::{BBox2, Error, LayerPlan, Point2, Result, RunInfo, StageFactory, Toolpath};
 use serde::Deserialize;
 
+use crate::group::Thin;
 use crate::route::{Move, Parks, Seam, ToolSpec, distribute, pause, route, timed};
 
 /// Side-steps allowed per layer before the concurrent planner falls back to sequential.
@@ -43,6 +45,8 @@ struct Options {
     seam: Seam,
     #[serde(default)]
     mixing: bool,
+    #[serde(default)]
+    thin: Thin,
     #[serde(default = "d_speed")]
     speed: f64,
     #[serde(default = "d_travel")]
@@ -156,6 +160,9 @@ impl Options {
 struct Layer {
     tools: Vec<ToolSpec>,
     routes: Vec<Vec<Move>>,
+    /// Where a tool may step aside: anywhere above the entry row below the deposits,
+    /// which keeps it clear of every park.
+    arena: BBox2,
 }
 
 fn prepare(o: &Options, info: &RunInfo, plan: &mut LayerPlan, step: f64) -> Result<Layer> {
@@ -163,7 +170,7 @@ fn prepare(o: &Options, info: &RunInfo, plan: &mut LayerPlan, step: f64) -> Resu
     if tools.is_empty() {
         return Err(Error::stage("plan", "the pipeline has no materials, so no tools"));
     }
-    let work = distribute(info, plan, tools.len(), o.width, o.mixing);
+    let work = distribute(info, plan, tools.len(), o.width, o.mixing, o.thin);
     if !work.thin.is_empty() {
         let list: Vec<String> = work
             .thin
@@ -173,15 +180,26 @@ fn prepare(o: &Options, info: &RunInfo, plan: &mut LayerPlan, step: f64) -> Resu
             .collect();
         let more = work.thin.len().saturating_sub(5);
         plan.warnings.push(format!(
-            "{} sub-region(s) too thin for a {} mm pass are not deposited: {}{}",
+            "{} sub-region(s) too thin for a {} mm pass{} are not deposited: {}{}",
             work.thin.len(),
             o.width,
+            match o.thin {
+                Thin::Merge => ", even with their neighbours,",
+                Thin::Skip => "",
+            },
             list.join(", "),
             if more > 0 {
                 format!(" and {more} more")
             } else {
                 String::new()
             }
+        ));
+    }
+    if work.merged > 0 {
+        plan.warnings.push(format!(
+            "{} sub-region(s) narrower than a {} mm pass are deposited together with their neighbours, \
+             with the area-weighted mean composition (`thin = \"skip\"` leaves them out)",
+            work.merged, o.width
         ));
     }
     let rmax = tools.iter().map(|t| t.envelope).fold(0.0, f64::max);
@@ -192,7 +210,15 @@ fn prepare(o: &Options, info: &RunInfo, plan: &mut LayerPlan, step: f64) -> Resu
         .zip(work.jobs)
         .map(|(t, jobs)| route(t, jobs, &parks, o.seam, o.width))
         .collect();
-    Ok(Layer { tools, routes })
+    let arena = if work.bbox.is_empty() {
+        work.bbox
+    } else {
+        BBox2 {
+            min: Point2::new(f64::MIN, work.bbox.min.y - 1.0),
+            max: Point2::new(f64::MAX, f64::MAX),
+        }
+    };
+    Ok(Layer { tools, routes, arena })
 }
 
 /// One tool after another in tool order, each out of its park and back, with a tool
@@ -246,7 +272,7 @@ impl Planner for Concurrent {
         // back plus every hold; a budget of several sequential times catches a layer
         // whose tools keep giving way to each other.
         let budget = 4.0 * seq_time + 60.0;
-        let (paths, t) = match sim::concurrent(&busy, o.step(), budget, MAX_SIDE_STEPS) {
+        let (paths, t) = match sim::concurrent(&busy, o.step(), budget, MAX_SIDE_STEPS, &layer.arena) {
             // Tools that mostly wait for each other can end up slower than taking turns;
             // the sequential schedule is collision-free too, so the faster one is kept.
             Ok((_, t)) if t > seq_time => (seq_paths, seq_time),
@@ -288,6 +314,7 @@ macro_rules! common_options {
             OptionSpec::new("width", "float", "0.4", "extrusion width (mm): contour passes at w/2, 3w/2, ... inside each sub-region"),
             OptionSpec::new("seam", "string", "\"nearest\"", "where loops start: `nearest` (to the tool) or `aligned` (largest x)"),
             OptionSpec::new("mixing", "bool", "false", "one mixing tool for everything (composition on the path) instead of one tool per material, each depositing the sub-regions its material dominates"),
+            OptionSpec::new("thin", "string", "\"merge\"", "sub-regions too thin for one pass: `merge` (deposited with the next levels of their family, mean composition) or `skip` (left out); either way they are reported"),
             OptionSpec::new("speed", "float", "30.0", "deposition speed (mm/s)"),
             OptionSpec::new("travel_speed", "float", "120.0", "travel speed (mm/s)"),
             OptionSpec::new("envelope", "float", "5.0", "tool envelope radius (mm); tools park outside each other's envelopes"),

@@ -4,7 +4,8 @@
 
 use lamina_core::{BBox2, Composition, LayerPlan, PathKind, Point2, RunInfo, TimedPoint, Toolpath};
 
-use crate::fill::{Loop, contour_passes};
+use crate::fill::Loop;
+use crate::group::{Thin, group};
 
 /// Where each loop starts.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Deserialize)]
@@ -87,8 +88,10 @@ pub struct Job {
 pub struct Work {
     /// `jobs[tool]`.
     pub jobs: Vec<Vec<Job>>,
-    /// (part name, region index, area) of the regions too thin for one pass.
+    /// (part name, region index, area) of what is too thin for one pass.
     pub thin: Vec<(String, usize, f64)>,
+    /// Sub-regions deposited together with their neighbours.
+    pub merged: usize,
     /// Bounding box of everything deposited in the layer.
     pub bbox: BBox2,
 }
@@ -117,33 +120,42 @@ pub fn tool_of(info: &RunInfo, part: usize, composition: Option<&Composition>, m
     p.materials.get(local).copied().unwrap_or(0)
 }
 
-/// Cuts every sub-region of the layer into passes and hands each to its tool.
-pub fn distribute(info: &RunInfo, plan: &LayerPlan, tools: usize, width: f64, mixing: bool) -> Work {
+/// Cuts every sub-region of the layer into passes (merging slivers with their
+/// neighbours, [`group`]) and hands each to its tool.
+pub fn distribute(
+    info: &RunInfo,
+    plan: &LayerPlan,
+    tools: usize,
+    width: f64,
+    mixing: bool,
+    thin: Thin,
+) -> Work {
     let mut work = Work {
         jobs: vec![Vec::new(); tools],
         ..Work::default()
     };
     for part in &plan.parts {
-        for (ri, region) in part.regions.iter().enumerate() {
-            let passes = contour_passes(&region.polygon, width);
-            if passes.is_empty() {
-                let name = info
-                    .parts
-                    .get(part.part)
-                    .map(|p| p.name.clone())
-                    .unwrap_or_default();
-                work.thin.push((name, ri, region.area()));
-                continue;
-            }
-            let tool = tool_of(info, part.part, region.composition.as_ref(), mixing).min(tools - 1);
-            for pass in passes {
+        let grouping = group(&part.regions, width, thin);
+        work.merged += grouping.merged();
+        if !grouping.thin.is_empty() {
+            let name = info
+                .parts
+                .get(part.part)
+                .map(|p| p.name.clone())
+                .unwrap_or_default();
+            work.thin
+                .extend(grouping.thin.iter().map(|&(r, a)| (name.clone(), r, a)));
+        }
+        for g in grouping.groups {
+            let tool = tool_of(info, part.part, g.composition.as_ref(), mixing).min(tools - 1);
+            for pass in g.passes {
                 let bbox = BBox2::from_points(pass.points.iter().copied());
                 work.bbox = work.bbox.union(&bbox);
                 work.jobs[tool].push(Job {
                     pass,
-                    composition: region.composition.clone(),
+                    composition: g.composition.clone(),
                     part: part.part,
-                    region: ri,
+                    region: g.members[0],
                     bbox,
                 });
             }

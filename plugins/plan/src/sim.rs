@@ -2,15 +2,19 @@
 //! own route at its own speeds; at a fixed rate the positions each tool would reach in
 //! the next step are checked pairwise against the tools' envelopes. On a predicted
 //! collision the tool moving faster along X keeps going and the other pauses where it
-//! is (a safe point: it was clear there one step ago) until the conflict is gone.
+//! is (a safe point: it was clear there one step ago) until the conflict is gone. When
+//! pausing only one of the two clears the conflict (a tool that follows another along
+//! a wall), that one pauses, whatever the speeds.
 //!
 //! The envelopes are checked with a clearance of half the distance both tools can
 //! cover in one step, so no overlap can hide between two checks. When every unfinished
-//! tool is held (each waits for another), the tool of lowest priority steps aside to
-//! a clear point and comes back once the way is free; if that does not resolve the
-//! layer, the caller falls back to sequential deposition.
+//! tool is held (each waits for another, as tools meeting head-on along neighbouring
+//! walls do), the tool with the least work left steps aside to a clear point (never
+//! toward the parks) and comes back once the way is free: the layer ends when the
+//! busiest tool is done, so that one should not wait. If side-steps do not resolve
+//! the layer, the caller falls back to sequential deposition.
 
-use lamina_core::{PathKind, Point2, TimedPoint, Toolpath, Vector2};
+use lamina_core::{BBox2, PathKind, Point2, TimedPoint, Toolpath, Vector2};
 
 use crate::route::{Move, ToolSpec, pause, toolpath};
 
@@ -155,6 +159,20 @@ impl Agent<'_> {
         }
     }
 
+    /// Seconds of route left from the cursor.
+    fn remaining(&self) -> f64 {
+        let c = self.at;
+        let Some(m) = self.route.get(c.mv) else {
+            return 0.0;
+        };
+        let here: f64 = m.points[c.seg.min(m.points.len() - 1)..]
+            .windows(2)
+            .map(|w| (w[1] - w[0]).norm())
+            .sum::<f64>()
+            - c.along;
+        here.max(0.0) / m.speed + self.route[c.mv + 1..].iter().map(Move::duration).sum::<f64>()
+    }
+
     /// Leaves the route at the current position for `to` and comes back, then goes on.
     fn side_step(&mut self, to: Point2) {
         let c = self.at;
@@ -184,12 +202,14 @@ impl Agent<'_> {
 }
 
 /// Runs the tools' routes together from time 0 with checks every `step` seconds: the
-/// toolpaths of every tool (with their pauses) and the time the last tool parks.
+/// toolpaths of every tool (with their pauses) and the time the last tool parks. Tools
+/// stepping aside stay inside `arena` (an empty box: anywhere).
 pub fn concurrent(
     tools: &[(&ToolSpec, Vec<Move>)],
     step: f64,
     budget: f64,
     max_side_steps: usize,
+    arena: &BBox2,
 ) -> Result<(Vec<Toolpath>, f64), Stuck> {
     let mut agents: Vec<Agent<'_>> = tools
         .iter()
@@ -249,8 +269,20 @@ pub fn concurrent(
                         continue;
                     }
                     let loser = match (moving[i], moving[j]) {
-                        (true, true) if proposed[j].1 > proposed[i].1 => i,
-                        (true, true) => j,
+                        (true, true) => {
+                            // Holding a tool only helps when its staying put clears
+                            // the other's next position: a tool moving away from
+                            // the one behind it goes on whatever its speed along X.
+                            let c = clear(&agents[i], &agents[j]);
+                            let hold_i = (agents[i].pos - proposed[j].0).norm() >= c;
+                            let hold_j = (proposed[i].0 - agents[j].pos).norm() >= c;
+                            match (hold_i, hold_j) {
+                                (true, false) => i,
+                                (false, true) => j,
+                                _ if proposed[j].1 > proposed[i].1 => i,
+                                _ => j,
+                            }
+                        }
                         (true, false) => i,
                         _ => j,
                     };
@@ -263,18 +295,21 @@ pub fn concurrent(
             }
         }
         if !moving.iter().any(|&m| m) {
-            // Every unfinished tool waits for another: the slowest along X steps aside.
+            // Every unfinished tool waits for another: the one with the least work left
+            // steps aside, since the layer ends when the busiest tool is done.
             side_steps += 1;
             if side_steps > max_side_steps {
                 return Err(Stuck::Deadlock(max_side_steps));
             }
             let Some(k) = (0..n)
                 .filter(|&i| !agents[i].done)
-                .min_by(|&a, &b| proposed[a].1.total_cmp(&proposed[b].1).then(b.cmp(&a)))
+                .map(|i| (i, agents[i].remaining()))
+                .min_by(|a, b| a.1.total_cmp(&b.1).then(b.0.cmp(&a.0)))
+                .map(|(i, _)| i)
             else {
                 break;
             };
-            let to = aside(&agents, k, &clear);
+            let to = aside(&agents, k, &clear, arena);
             agents[k].side_step(to);
             continue;
         }
@@ -302,7 +337,12 @@ pub fn concurrent(
 
 /// A point clear of every other tool, away from the nearest ones, for tool `k` to wait
 /// at: straight away from the tools around it first, then turning until clear.
-fn aside(agents: &[Agent<'_>], k: usize, clear: &dyn Fn(&Agent<'_>, &Agent<'_>) -> f64) -> Point2 {
+fn aside(
+    agents: &[Agent<'_>],
+    k: usize,
+    clear: &dyn Fn(&Agent<'_>, &Agent<'_>) -> f64,
+    arena: &BBox2,
+) -> Point2 {
     let here = agents[k].pos;
     let mut away = Vector2::zeros();
     let mut reach: f64 = 0.0;
@@ -321,12 +361,18 @@ fn aside(agents: &[Agent<'_>], k: usize, clear: &dyn Fn(&Agent<'_>, &Agent<'_>) 
         away = Vector2::new(0.0, -1.0);
     }
     let away = away.normalize();
-    let ok = |p: Point2| {
-        agents
-            .iter()
-            .enumerate()
-            .all(|(j, b)| j == k || (p - b.pos).norm() >= clear(&agents[k], b) * 1.5)
+    let inside = |p: Point2| {
+        arena.is_empty()
+            || (p.x >= arena.min.x && p.x <= arena.max.x && p.y >= arena.min.y && p.y <= arena.max.y)
     };
+    let ok = |p: Point2| {
+        inside(p)
+            && agents
+                .iter()
+                .enumerate()
+                .all(|(j, b)| j == k || (p - b.pos).norm() >= clear(&agents[k], b) * 1.5)
+    };
+    // Nearest first: every millimetre out is a millimetre back.
     for scale in [2.0, 3.0, 5.0] {
         for turn in [0.0f64, 45.0, -45.0, 90.0, -90.0, 135.0, -135.0, 180.0] {
             let (s, c) = turn.to_radians().sin_cos();
@@ -337,5 +383,13 @@ fn aside(agents: &[Agent<'_>], k: usize, clear: &dyn Fn(&Agent<'_>, &Agent<'_>) 
             }
         }
     }
-    here + away * reach * 2.0
+    let p = here + away * reach * 2.0;
+    if arena.is_empty() {
+        p
+    } else {
+        Point2::new(
+            p.x.clamp(arena.min.x, arena.max.x),
+            p.y.clamp(arena.min.y, arena.max.y),
+        )
+    }
 }

@@ -1,0 +1,279 @@
+//! Which sub-regions are filled together. A sub-region at least one extrusion width
+//! across is filled on its own, along its own iso-material contours. A discretisation
+//! finer than the bead (ten rings across a 1 mm wall cut rings of 0.1 mm) leaves
+//! sub-regions no pass fits in; dropping them would leave the wall empty, so each such
+//! sliver is merged with the next levels of its family (and cell) until the merged band
+//! takes a pass, and the band is deposited with the area-weighted mean of the merged
+//! compositions: the finest grading the bead can lay down. Only what is thinner than a
+//! pass even with all its neighbours (a fin narrower than the bead) is left out, and
+//! reported.
+
+use std::collections::BTreeMap;
+
+use i_overlay::core::fill_rule::FillRule;
+use i_overlay::float::simplify::SimplifyShape;
+use lamina_core::{Composition, Contour, Point2, Polygon, Region};
+
+use crate::fill::{Loop, contour_passes};
+
+/// What to do with sub-regions too thin for one pass.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Thin {
+    /// Deposit them together with the next levels of their family.
+    #[default]
+    Merge,
+    /// Leave them out (and report them).
+    Skip,
+}
+
+/// Sub-regions of one part filled as one: their passes and mean composition.
+#[derive(Debug, Clone)]
+pub struct Group {
+    /// Indices into the part's regions, in level order.
+    pub members: Vec<usize>,
+    pub passes: Vec<Loop>,
+    pub composition: Option<Composition>,
+}
+
+/// How a part's sub-regions are filled.
+#[derive(Debug, Default)]
+pub struct Grouping {
+    pub groups: Vec<Group>,
+    /// (first region index, area in mm²) of what no pass fits in.
+    pub thin: Vec<(usize, f64)>,
+}
+
+impl Grouping {
+    /// Sub-regions deposited together with others.
+    pub fn merged(&self) -> usize {
+        self.groups
+            .iter()
+            .filter(|g| g.members.len() > 1)
+            .map(|g| g.members.len())
+            .sum()
+    }
+}
+
+/// Groups the sub-regions of one part for filling at extrusion width `width`.
+pub fn group(regions: &[Region], width: f64, thin: Thin) -> Grouping {
+    // Levels of each family and cell, in level order.
+    let mut buckets: BTreeMap<(usize, Option<usize>), BTreeMap<usize, Vec<usize>>> = BTreeMap::new();
+    for (i, r) in regions.iter().enumerate() {
+        buckets
+            .entry((r.family, r.cell))
+            .or_default()
+            .entry(r.index)
+            .or_default()
+            .push(i);
+    }
+    let mut out = Grouping::default();
+    // Unions are always taken of the regions as cut: a union's output is rounded to
+    // its own grid, and a second union against it would find the shared edges a
+    // rounding apart.
+    let fill = |members: &[usize]| -> Vec<Loop> {
+        union(members.iter().map(|&m| &regions[m].polygon))
+            .iter()
+            .flat_map(|q| contour_passes(q, width))
+            .collect()
+    };
+    for levels in buckets.values() {
+        let first = out.groups.len();
+        let mut pending: Vec<usize> = Vec::new();
+        for members in levels.values() {
+            if pending.is_empty() {
+                for &m in members {
+                    let passes = contour_passes(&regions[m].polygon, width);
+                    if !passes.is_empty() {
+                        out.groups.push(Group {
+                            members: vec![m],
+                            passes,
+                            composition: regions[m].composition.clone(),
+                        });
+                    } else if thin == Thin::Skip {
+                        out.thin.push((m, regions[m].area()));
+                    } else {
+                        pending.push(m);
+                    }
+                }
+            } else {
+                pending.extend_from_slice(members);
+                let passes = fill(&pending);
+                if !passes.is_empty() {
+                    out.groups.push(Group {
+                        members: std::mem::take(&mut pending),
+                        passes,
+                        composition: None,
+                    });
+                }
+            }
+        }
+        if !pending.is_empty() {
+            // The innermost levels: with the last group of the family, or left out
+            // when the whole family is thinner than a pass.
+            if out.groups.len() > first {
+                let last = out.groups.last_mut().expect("a group of this family");
+                last.members.append(&mut pending);
+                last.passes = fill(&last.members);
+            } else {
+                let area = pending.iter().map(|&m| regions[m].area()).sum();
+                out.thin.push((pending[0], area));
+            }
+        }
+    }
+    for g in &mut out.groups {
+        if g.members.len() > 1 {
+            g.composition = mean_composition(regions, &g.members);
+        }
+    }
+    out
+}
+
+/// The area-weighted mean composition of `members` (none when they are not graded).
+fn mean_composition(regions: &[Region], members: &[usize]) -> Option<Composition> {
+    let mut sum: Vec<f64> = Vec::new();
+    let mut total = 0.0;
+    for &m in members {
+        let c = regions[m].composition.as_ref()?;
+        let a = regions[m].area();
+        if sum.is_empty() {
+            sum = vec![0.0; c.fractions.len()];
+        }
+        if sum.len() != c.fractions.len() {
+            return regions[members[0]].composition.clone();
+        }
+        for (s, f) in sum.iter_mut().zip(&c.fractions) {
+            *s += a * f;
+        }
+        total += a;
+    }
+    if total <= 0.0 {
+        return regions[members[0]].composition.clone();
+    }
+    let mut fractions: Vec<f64> = sum.iter().map(|s| (s / total).clamp(0.0, 1.0)).collect();
+    // Rounding can leave the sum a few ulps off 1: give the difference to the largest.
+    let err = 1.0 - fractions.iter().sum::<f64>();
+    if let Some(big) = fractions.iter_mut().max_by(|a, b| a.total_cmp(b)) {
+        *big = (*big + err).clamp(0.0, 1.0);
+    }
+    Composition::new(fractions)
+        .ok()
+        .or_else(|| regions[members[0]].composition.clone())
+}
+
+/// The union of sub-regions of one family: they tile it without overlap and their
+/// shared edges come from one integer grid, so the non-zero union closes the seams.
+fn union<'a>(pieces: impl Iterator<Item = &'a Polygon>) -> Vec<Polygon> {
+    let paths: Vec<Vec<[f64; 2]>> = pieces
+        .flat_map(|p| p.contours())
+        .map(|c| c.points.iter().map(|q| [q.x, q.y]).collect())
+        .collect();
+    paths
+        .simplify_shape(FillRule::NonZero)
+        .into_iter()
+        .filter_map(|shape| {
+            let mut rings = shape
+                .into_iter()
+                .filter(|r| r.len() >= 3)
+                .map(|r| Contour::new(r.into_iter().map(|[x, y]| Point2::new(x, y)).collect()));
+            let outer = rings.next()?;
+            Some(Polygon::new(
+                outer.oriented(true),
+                rings.map(|h| h.oriented(false)).collect(),
+            ))
+        })
+        .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn rect(x0: f64, y0: f64, x1: f64, y1: f64) -> Contour {
+        Contour::new(vec![
+            Point2::new(x0, y0),
+            Point2::new(x1, y0),
+            Point2::new(x1, y1),
+            Point2::new(x0, y1),
+        ])
+    }
+
+    /// A 1 mm × 20 mm strip cut into `n` bands across its width, graded from the
+    /// first material to the second.
+    fn strip(n: usize) -> Vec<Region> {
+        (0..n)
+            .map(|j| {
+                let (y0, y1) = (j as f64 / n as f64, (j + 1) as f64 / n as f64);
+                let f = j as f64 / (n - 1) as f64;
+                Region {
+                    family: 0,
+                    index: j,
+                    count: n,
+                    level: f,
+                    polygon: Polygon::new(rect(0.0, y0, 20.0, y1), vec![]),
+                    cell: None,
+                    reference: Point2::new(10.0, (y0 + y1) / 2.0),
+                    composition: Some(Composition::binary(1.0 - f).expect("valid")),
+                }
+            })
+            .collect()
+    }
+
+    #[test]
+    fn wide_regions_are_filled_alone() {
+        let g = group(&strip(2), 0.4, Thin::Merge);
+        assert_eq!(g.groups.len(), 2);
+        assert!(
+            g.groups
+                .iter()
+                .all(|g| g.members.len() == 1 && !g.passes.is_empty())
+        );
+        assert_eq!(g.merged(), 0);
+        assert!(g.thin.is_empty());
+    }
+
+    #[test]
+    fn slivers_merge_with_the_next_levels_until_a_pass_fits() {
+        // Ten bands of 0.1 mm: 0.4 mm of them leave nothing after the half-width
+        // inset, so bands 0..=4 make the first band that takes a 0.4 mm pass and
+        // 5..=9 the second.
+        let regions = strip(10);
+        let g = group(&regions, 0.4, Thin::Merge);
+        let members: Vec<Vec<usize>> = g.groups.iter().map(|g| g.members.clone()).collect();
+        assert_eq!(members, vec![(0..5).collect::<Vec<_>>(), (5..10).collect()]);
+        assert!(g.thin.is_empty());
+        assert_eq!(g.merged(), 10);
+        for grp in &g.groups {
+            assert!(!grp.passes.is_empty());
+            // The mean of a linear grading over equal bands is its middle value.
+            let expect: f64 = grp
+                .members
+                .iter()
+                .map(|&m| regions[m].composition.as_ref().expect("graded").fractions[0])
+                .sum::<f64>()
+                / grp.members.len() as f64;
+            let c = grp.composition.as_ref().expect("graded");
+            assert!((c.fractions[0] - expect).abs() < 1e-9, "{c:?} vs {expect}");
+            assert!((c.fractions.iter().sum::<f64>() - 1.0).abs() < 1e-12);
+        }
+        let skipped = group(&regions, 0.4, Thin::Skip);
+        assert!(skipped.groups.is_empty());
+        assert_eq!(skipped.thin.len(), 10);
+    }
+
+    #[test]
+    fn a_family_thinner_than_a_pass_is_reported_once() {
+        let mut regions = strip(3);
+        for r in &mut regions {
+            for c in [&mut r.polygon.outer] {
+                for p in &mut c.points {
+                    p.y *= 0.3;
+                }
+            }
+        }
+        let g = group(&regions, 0.4, Thin::Merge);
+        assert!(g.groups.is_empty());
+        assert_eq!(g.thin.len(), 1);
+        assert!((g.thin[0].1 - 6.0).abs() < 1e-9, "{:?}", g.thin);
+    }
+}
