@@ -100,8 +100,11 @@ pub struct CutMesh {
     mesh: Arc<Mesh>,
     /// Sign of the mesh's volume: +1 when triangles wind outward, -1 when inside out.
     orientation: f64,
-    /// Triangle z ranges.
+    /// Triangle z ranges, each widened by twice `snap`: a triangle can only cross a plane
+    /// inside its widened range.
     ranges: Vec<(f64, f64)>,
+    /// Vertices closer than this to the plane (mm) are cut as if they lay in it.
+    snap: f64,
     /// Buckets of triangle indices by z: bucket `b` spans `z0 + b * bucket` and holds
     /// `entries[starts[b]..starts[b + 1]]`.
     z0: f64,
@@ -126,21 +129,6 @@ fn edge_key(a: u32, b: u32) -> u64 {
 
 impl CutMesh {
     pub fn new(mesh: Arc<Mesh>, options: CutOptions) -> Self {
-        // One parallel pass over the triangles gives their z ranges and their terms of
-        // the signed volume, summed below in triangle order as `Mesh::signed_volume` does.
-        let (ranges, volumes): (Vec<(f64, f64)>, Vec<f64>) = mesh
-            .triangles
-            .par_iter()
-            .with_min_len(4096)
-            .map(|&[a, b, c]| {
-                let v = &mesh.vertices;
-                let (a, b, c) = (v[a as usize], v[b as usize], v[c as usize]);
-                let range = (a.z.min(b.z).min(c.z), a.z.max(b.z).max(c.z));
-                (range, a.coords.dot(&b.coords.cross(&c.coords)) / 6.0)
-            })
-            .unzip();
-        let volume: f64 = volumes.iter().sum();
-        drop(volumes);
         let bb = mesh.bbox();
         let (z0, z1) = if bb.is_empty() {
             (0.0, 1.0)
@@ -148,6 +136,24 @@ impl CutMesh {
             (bb.min.z, bb.max.z)
         };
         let height = (z1 - z0).max(1e-9);
+        let snap = snap_distance(z0, z1);
+        // One parallel pass over the triangles gives their (widened) z ranges and their
+        // terms of the signed volume, summed below in triangle order as
+        // `Mesh::signed_volume` does.
+        let (ranges, volumes): (Vec<(f64, f64)>, Vec<f64>) = mesh
+            .triangles
+            .par_iter()
+            .with_min_len(4096)
+            .map(|&[a, b, c]| {
+                let v = &mesh.vertices;
+                let (a, b, c) = (v[a as usize], v[b as usize], v[c as usize]);
+                let (lo, hi) = (a.z.min(b.z).min(c.z), a.z.max(b.z).max(c.z));
+                let range = (lo - 2.0 * snap, hi + 2.0 * snap);
+                (range, a.coords.dot(&b.coords.cross(&c.coords)) / 6.0)
+            })
+            .unzip();
+        let volume: f64 = volumes.iter().sum();
+        drop(volumes);
         // Each triangle is listed in every bucket its z range touches, so the entries
         // number about n + sum(extent) * count / height. The count is chosen so that
         // this stays below 4 n (flat caps and tall walls alike), and at most 65536.
@@ -189,6 +195,7 @@ impl CutMesh {
             mesh,
             orientation,
             ranges,
+            snap,
             z0,
             bucket,
             starts,
@@ -208,14 +215,16 @@ impl CutMesh {
 
     /// The segments of the plane `z`.
     fn segments(&self, z: f64) -> Vec<Segment> {
-        let b = ((z - self.z0) / self.bucket).floor();
-        if b < 0.0
-            || b as usize >= self.starts.len() - 1
-                && z > self.z0 + self.bucket * (self.starts.len() - 1) as f64
-        {
+        let count = self.starts.len() - 1;
+        // Every triangle whose widened range holds `z` is listed in `z`'s bucket (the
+        // ranges were bucketed widened), whichever bucket the clamping picks at the ends.
+        if !(z >= self.z0 - 3.0 * self.snap && z <= self.z0 + self.bucket * count as f64 + 3.0 * self.snap) {
             return Vec::new();
         }
-        let b = (b as usize).min(self.starts.len() - 2);
+        let b = ((((z - self.z0) / self.bucket).max(0.0)) as usize).min(count - 1);
+        let snap = self.snap;
+        // In the plane (within `snap`) counts as above, as exactly in the plane does.
+        let on = |p: &lamina_core::Point3| (p.z - z).abs() <= snap;
         let mut out = Vec::new();
         for &t in self.bucket(b) {
             let (lo, hi) = self.ranges[t as usize];
@@ -224,7 +233,10 @@ impl CutMesh {
             }
             let ids = self.mesh.triangles[t as usize];
             let pts = self.mesh.triangle(t as usize);
-            let above = pts.map(|p| p.z >= z);
+            let above = pts.map(|p| p.z >= z || on(&p));
+            if above[0] == above[1] && above[1] == above[2] {
+                continue;
+            }
             // The lone vertex on its side, and the two edges leaving it.
             let lone = match above {
                 [a, b, c] if a != b && a != c => 0,
@@ -232,8 +244,16 @@ impl CutMesh {
                 [_, _, _] => 2,
             };
             let (i1, i2) = ((lone + 1) % 3, (lone + 2) % 3);
+            // An edge from a vertex below to one in the plane is cut at that vertex,
+            // exactly, so all the cuts next to it coincide and merge.
             let cross = |i: usize, j: usize| {
                 let (p, q) = (pts[i], pts[j]);
+                if on(&q) {
+                    return Point2::new(q.x, q.y);
+                }
+                if on(&p) {
+                    return Point2::new(p.x, p.y);
+                }
                 let s = (z - p.z) / (q.z - p.z);
                 Point2::new(p.x + (q.x - p.x) * s, p.y + (q.y - p.y) * s)
             };
@@ -304,6 +324,26 @@ impl CutMesh {
     }
 }
 
+/// How close to the cutting plane a vertex is taken to lie in it: eight times the
+/// rounding of a single-precision height at the mesh's largest height.
+///
+/// STL and most exporters store single-precision coordinates, so a vertex at a design
+/// height that is a whole number of layers (12.1 mm on a 0.2 mm grid cut at mid-layer)
+/// comes back a few ulps off the plane, never in it. Cut exactly, the edges next to it
+/// give points a fraction of a micrometre apart, and the union has to resolve the
+/// layer. Cutting with such vertices moved into the plane is the exact cut of a mesh
+/// moved by a few times its own rounding; the vertex is then the cut of all its edges,
+/// and the loop passes through it once. Which vertices move depends on the vertex
+/// alone, so neighbouring triangles agree and the segments still chain.
+fn snap_distance(z0: f64, z1: f64) -> f64 {
+    let scale = z0.abs().max(z1.abs());
+    if scale.is_finite() {
+        scale * 4.0 * f64::from(f32::EPSILON)
+    } else {
+        0.0
+    }
+}
+
 /// What joining open chains did in one layer.
 #[derive(Default)]
 struct Gaps {
@@ -334,7 +374,7 @@ struct Dropped {
 /// holes clockwise) with a boolean union under the fill rule: overlapping shells merge,
 /// self-touching or slightly self-crossing loops (near-coincident vertices that were not
 /// welded) are cut apart. Coordinates move by at most the integer grid of the overlay
-/// (about 1e-7 of the layer's extent). Loops that are already simple, apart and wound
+/// (about 1e-9 of the layer's extent). Loops that are already simple, apart and wound
 /// as they nest are the union's answer as they stand, and are returned unchanged.
 fn simple_contours(loops: &[Contour], options: CutOptions) -> Vec<Contour> {
     if loops.is_empty() {
@@ -404,11 +444,14 @@ fn union(loops: &[Contour], options: CutOptions) -> Vec<Contour> {
 /// odd), so that both fill rules fill exactly the loops. Most layers of a sound mesh
 /// are like this, and the check costs a fraction of the union.
 ///
-/// Closeness is judged with a margin of 1e-6 of the layer's extent, far above rounding
-/// and above the union's grid: segments (other than neighbours in a loop) must be
-/// farther apart than that, and neighbours must not fold back onto each other. Loops
-/// that cross, touch, or come near (the near-duplicate vertices of a badly welded mesh,
-/// overlapping shells) go to the union.
+/// Closeness is judged with a margin of 1e-8 of the layer's extent: far above rounding,
+/// and five to ten steps of the union's grid (2^-29 of half the extent or finer), so
+/// that no snapping to that grid can make loops kept apart by the margin touch:
+/// segments (other than neighbours in a loop) must be farther apart than that, and
+/// neighbours must not fold back onto each other. Loops that cross, touch, or come near
+/// (the near-duplicate vertices of a badly welded mesh, overlapping shells) go to the
+/// union. A larger margin would send every layer with a short segment (the cut of a
+/// sliver triangle, 1e-5 mm across) to the union, which would keep it unchanged.
 fn already_simple(loops: &[Contour]) -> bool {
     let bbox = loops
         .iter()
@@ -417,7 +460,7 @@ fn already_simple(loops: &[Contour]) -> bool {
     if !(extent.is_finite() && extent > 0.0) {
         return false;
     }
-    let eps = extent * 1e-6;
+    let eps = extent * 1e-8;
     // Every segment with its box grown by eps; neighbours in a loop must not fold back.
     let mut segs = Vec::with_capacity(loops.iter().map(|c| c.points.len()).sum());
     let mut length = 0.0;
@@ -789,6 +832,46 @@ mod tests {
         assert_eq!(top.contours.len(), 1, "{top:?}");
         assert!((top.contours[0].area() - 4.0).abs() < 1e-12);
         assert!(top.warnings.is_empty());
+    }
+
+    /// A barrel: squares of half-size 1 at z = 0 and 2, and one of half-size 2 at
+    /// `ring` between them, the walls two triangles per quad.
+    fn barrel(ring: f64) -> Mesh {
+        let square = |h: f64, z: f64| [(-h, -h), (h, -h), (h, h), (-h, h)].map(|(x, y)| Point3::new(x, y, z));
+        let v: Vec<Point3> = [square(1.0, 0.0), square(2.0, ring), square(1.0, 2.0)].concat();
+        let mut t = vec![[0, 3, 2], [0, 2, 1], [8, 9, 10], [8, 10, 11]];
+        for i in 0..4u32 {
+            let j = (i + 1) % 4;
+            for (lo, hi) in [(0, 4), (4, 8)] {
+                t.push([lo + i, lo + j, hi + j]);
+                t.push([lo + i, hi + j, hi + i]);
+            }
+        }
+        Mesh::new("barrel", v, t)
+    }
+
+    /// A vertex a few single-precision ulps off the plane (12.1 mm stored as a float) is
+    /// cut as if in it: its edges all meet the plane at the vertex, and the loop has no
+    /// sub-micrometre steps around it.
+    #[test]
+    fn vertices_within_rounding_of_the_plane_are_cut_in_it() {
+        for ring in [1.0 + 1e-7, 1.0 - 1e-7, 1.0] {
+            let c = CutMesh::new(Arc::new(barrel(ring)), CutOptions::default());
+            let l = c.cut(&slot(1.0)).expect("cut");
+            assert_eq!(l.contours.len(), 1, "{ring}");
+            let mut points = l.contours[0].points.clone();
+            points.sort_by(|a, b| a.x.total_cmp(&b.x).then(a.y.total_cmp(&b.y)));
+            let expected =
+                [(-2.0, -2.0), (-2.0, 2.0), (2.0, -2.0), (2.0, 2.0)].map(|(x, y)| Point2::new(x, y));
+            assert_eq!(points, expected, "{ring}");
+            assert!(l.contours[0].is_ccw());
+        }
+        // Farther off, the cut is the exact one: a little inside the ring.
+        let c = CutMesh::new(Arc::new(barrel(1.0 + 1e-4)), CutOptions::default());
+        let l = c.cut(&slot(1.0)).expect("cut");
+        assert_eq!(l.contours.len(), 1);
+        let area = l.contours[0].area();
+        assert!(area < 16.0 && area > 16.0 - 2e-3, "{area}");
     }
 
     #[test]
