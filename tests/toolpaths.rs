@@ -1,8 +1,9 @@
-//! The concurrent planner's timed toolpaths, checked from the outside: the JSON plan of
-//! the two-tool gear assembly is re-simulated here, segment by segment, and no two tool
+//! The concurrent planner's timed toolpaths, checked from the outside: the JSON plans
+//! of the two-tool gear assembly and (with `--ignored`, when ../shared/models holds it)
+//! the two-material 3DBenchy are re-simulated here, segment by segment, and no two tool
 //! envelopes may ever overlap; each tool's motion must be continuous in time.
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use std::process::Command;
 
 /// One tool's motion: (t, x, y) breakpoints in time order.
@@ -51,69 +52,133 @@ fn closest(a: &Timeline, b: &Timeline) -> (f64, f64) {
     best
 }
 
+/// Checks one layer of a JSON plan: every tool's motion is continuous, and every two
+/// tools stay `2 * envelope` apart. Returns the tool pairs checked and their closest
+/// approach.
+fn check_layer(layer: &serde_json::Value, envelope: f64) -> (usize, f64) {
+    let mut timelines: std::collections::BTreeMap<u64, Timeline> = Default::default();
+    for path in layer["toolpaths"].as_array().into_iter().flatten() {
+        let tool = path["tool"].as_u64().expect("tool");
+        let tl = timelines.entry(tool).or_default();
+        for p in path["points"].as_array().expect("points") {
+            let t = p["t"].as_f64().expect("t");
+            let xy = p["p"].as_array().expect("p");
+            tl.push((t, xy[0].as_f64().expect("x"), xy[1].as_f64().expect("y")));
+        }
+    }
+    for (tool, tl) in &mut timelines {
+        tl.sort_by(|a, b| a.0.total_cmp(&b.0));
+        // Continuous: a tool is never in two places at one time.
+        for w in tl.windows(2) {
+            if w[1].0 - w[0].0 < 1e-9 {
+                let jump = ((w[1].1 - w[0].1).powi(2) + (w[1].2 - w[0].2).powi(2)).sqrt();
+                assert!(
+                    jump < 1e-6,
+                    "layer {}: tool {tool} jumps {jump} mm at t = {}",
+                    layer["index"],
+                    w[0].0
+                );
+            }
+        }
+    }
+    let tools: Vec<&Timeline> = timelines.values().collect();
+    let (mut checked, mut closest_seen) = (0, f64::INFINITY);
+    for i in 0..tools.len() {
+        for j in i + 1..tools.len() {
+            let (d, t) = closest(tools[i], tools[j]);
+            closest_seen = closest_seen.min(d);
+            assert!(
+                d >= 2.0 * envelope - 1e-6,
+                "layer {}: tools {i} and {j} come {d:.3} mm apart at t = {t:.3} s (envelopes {envelope} mm)",
+                layer["index"]
+            );
+            checked += 1;
+        }
+    }
+    (checked, closest_seen)
+}
+
+/// The pipeline's `plan.envelope` (default 5 mm).
+fn envelope(table: &toml::Table) -> f64 {
+    table["plan"]
+        .get("envelope")
+        .and_then(|v| v.as_float())
+        .unwrap_or(5.0)
+}
+
+fn run(pipeline: &Path, out: &Path) {
+    let run = Command::new(env!("CARGO_BIN_EXE_lamina"))
+        .args(["run", "--quiet", "--out"])
+        .arg(out)
+        .arg(pipeline)
+        .output()
+        .expect("lamina runs");
+    assert!(run.status.success(), "{}", String::from_utf8_lossy(&run.stderr));
+}
+
 #[test]
 fn concurrent_tools_never_collide_on_the_assembly() {
     let pipeline = Path::new(env!("CARGO_MANIFEST_DIR")).join("pipelines/assembly-two-tools.toml");
-    let text = std::fs::read_to_string(&pipeline).expect("pipeline");
-    let table: toml::Table = toml::from_str(&text).expect("toml");
-    let envelope = table["plan"]
-        .get("envelope")
-        .and_then(|v| v.as_float())
-        .unwrap_or(5.0);
+    let table: toml::Table =
+        toml::from_str(&std::fs::read_to_string(&pipeline).expect("pipeline")).expect("toml");
     let dir = tempfile::tempdir().expect("tempdir");
-    let out = Command::new(env!("CARGO_BIN_EXE_lamina"))
-        .args(["run", "--quiet", "--out"])
-        .arg(dir.path())
-        .arg(&pipeline)
-        .output()
-        .expect("lamina runs");
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    run(&pipeline, dir.path());
     let plan: serde_json::Value = serde_json::from_str(
         &std::fs::read_to_string(dir.path().join("assembly-two-tools.json")).expect("json"),
     )
     .expect("valid");
-    let mut checked = 0;
-    let mut closest_seen = f64::INFINITY;
+    let (mut checked, mut closest_seen) = (0, f64::INFINITY);
     for layer in plan["layers"].as_array().expect("layers") {
-        let mut timelines: std::collections::BTreeMap<u64, Timeline> = Default::default();
-        for path in layer["toolpaths"].as_array().into_iter().flatten() {
-            let tool = path["tool"].as_u64().expect("tool");
-            let tl = timelines.entry(tool).or_default();
-            for p in path["points"].as_array().expect("points") {
-                let t = p["t"].as_f64().expect("t");
-                let xy = p["p"].as_array().expect("p");
-                tl.push((t, xy[0].as_f64().expect("x"), xy[1].as_f64().expect("y")));
-            }
-        }
-        for (tool, tl) in &mut timelines {
-            tl.sort_by(|a, b| a.0.total_cmp(&b.0));
-            // Continuous: a tool is never in two places at one time.
-            for w in tl.windows(2) {
-                if w[1].0 - w[0].0 < 1e-9 {
-                    let jump = ((w[1].1 - w[0].1).powi(2) + (w[1].2 - w[0].2).powi(2)).sqrt();
-                    assert!(
-                        jump < 1e-6,
-                        "layer {}: tool {tool} jumps {jump} mm at t = {}",
-                        layer["index"],
-                        w[0].0
-                    );
-                }
-            }
-        }
-        let tools: Vec<&Timeline> = timelines.values().collect();
-        for i in 0..tools.len() {
-            for j in i + 1..tools.len() {
-                let (d, t) = closest(tools[i], tools[j]);
-                closest_seen = closest_seen.min(d);
-                assert!(
-                    d >= 2.0 * envelope - 1e-6,
-                    "layer {}: tools {i} and {j} come {d:.3} mm apart at t = {t:.3} s (envelopes {envelope} mm)",
-                    layer["index"]
-                );
-                checked += 1;
-            }
-        }
+        let (n, d) = check_layer(layer, envelope(&table));
+        checked += n;
+        closest_seen = closest_seen.min(d);
     }
     assert!(checked > 0, "no layer had two tools");
     println!("{checked} tool pairs checked; closest approach {closest_seen:.3} mm");
+}
+
+/// The folder of the real models, when present.
+fn models_dir() -> Option<PathBuf> {
+    let dir = std::env::var_os("LAMINA_MODELS")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../shared/models"));
+    dir.join("3DBenchy.stl").is_file().then_some(dir)
+}
+
+#[test]
+#[ignore = "needs ../shared/models/3DBenchy.stl; run with --ignored"]
+fn concurrent_tools_never_collide_on_the_two_material_benchy() {
+    let Some(models) = models_dir() else {
+        println!("note: 3DBenchy.stl not found; the Benchy collision check is skipped");
+        return;
+    };
+    let source = Path::new(env!("CARGO_MANIFEST_DIR")).join("pipelines/benchy-two-tools.toml");
+    let mut table: toml::Table =
+        toml::from_str(&std::fs::read_to_string(&source).expect("pipeline")).expect("toml");
+    // The shipped pipeline with the model from `models` and a JSON Lines plan instead
+    // of G-code, read one layer at a time.
+    let model = models.join("3DBenchy.stl").canonicalize().expect("model path");
+    table["model"]
+        .as_table_mut()
+        .expect("[model]")
+        .insert("file".into(), model.display().to_string().into());
+    let output: toml::Table =
+        toml::from_str("use = \"json\"\npath = \"plan.jsonl\"\nform = \"lines\"").expect("toml");
+    table.insert("output".into(), toml::Value::Array(vec![output.into()]));
+    let dir = tempfile::tempdir().expect("tempdir");
+    let pipeline = dir.path().join("benchy.toml");
+    std::fs::write(&pipeline, toml::to_string(&table).expect("toml")).expect("write");
+    run(&pipeline, &dir.path().join("out"));
+    let text = std::fs::read_to_string(dir.path().join("out/plan.jsonl")).expect("plan");
+    let (mut checked, mut closest_seen, mut layers) = (0, f64::INFINITY, 0);
+    for line in text.lines().skip(1) {
+        let layer: serde_json::Value = serde_json::from_str(line).expect("a layer");
+        let (n, d) = check_layer(&layer, envelope(&table));
+        checked += n;
+        closest_seen = closest_seen.min(d);
+        layers += 1;
+    }
+    assert_eq!(layers, 240);
+    assert!(checked > 200, "only {checked} layers had two tools at work");
+    println!("{checked} tool pairs checked over {layers} layers; closest approach {closest_seen:.3} mm");
 }

@@ -77,9 +77,20 @@ pub fn group(regions: &[Region], width: f64, thin: Thin) -> Grouping {
             .flat_map(|q| contour_passes(q, width))
             .collect()
     };
+    // Half the perimeter of a level: the length of a band along its family, so that
+    // area / length is the band's mean width.
+    let length = |members: &[usize]| -> f64 {
+        members
+            .iter()
+            .flat_map(|&m| regions[m].polygon.contours())
+            .map(Contour::perimeter)
+            .sum::<f64>()
+            / 2.0
+    };
     for levels in buckets.values() {
         let first = out.groups.len();
         let mut pending: Vec<usize> = Vec::new();
+        let (mut area, mut along) = (0.0, 0.0f64);
         for members in levels.values() {
             if pending.is_empty() {
                 for &m in members {
@@ -94,31 +105,53 @@ pub fn group(regions: &[Region], width: f64, thin: Thin) -> Grouping {
                         out.thin.push((m, regions[m].area()));
                     } else {
                         pending.push(m);
+                        area += regions[m].area();
+                        along = along.max(length(&[m]));
                     }
                 }
-            } else {
-                pending.extend_from_slice(members);
-                let passes = fill(&pending);
-                if !passes.is_empty() {
-                    out.groups.push(Group {
-                        members: std::mem::take(&mut pending),
-                        passes,
-                        composition: None,
-                    });
-                }
+                continue;
+            }
+            pending.extend_from_slice(members);
+            area += members.iter().map(|&m| regions[m].area()).sum::<f64>();
+            along = along.max(length(members));
+            // Nested bands share their sides, so the merged band is about as long as
+            // its longest level and as wide as their areas add up to: no union is
+            // tried before that width nears one pass.
+            if area < 0.9 * width * along {
+                continue;
+            }
+            let passes = fill(&pending);
+            if !passes.is_empty() {
+                out.groups.push(Group {
+                    members: std::mem::take(&mut pending),
+                    passes,
+                    composition: None,
+                });
+                (area, along) = (0.0, 0.0);
             }
         }
-        if !pending.is_empty() {
-            // The innermost levels: with the last group of the family, or left out
-            // when the whole family is thinner than a pass.
-            if out.groups.len() > first {
-                let last = out.groups.last_mut().expect("a group of this family");
-                last.members.append(&mut pending);
-                last.passes = fill(&last.members);
-            } else {
-                let area = pending.iter().map(|&m| regions[m].area()).sum();
-                out.thin.push((pending[0], area));
-            }
+        if pending.is_empty() {
+            continue;
+        }
+        // The innermost levels: with the last group of the family, on their own when
+        // they were never tried together, or left out when the whole family is
+        // thinner than a pass.
+        if out.groups.len() > first {
+            let last = out.groups.last_mut().expect("a group of this family");
+            last.members.append(&mut pending);
+            last.passes = fill(&last.members);
+            continue;
+        }
+        let passes = fill(&pending);
+        if passes.is_empty() {
+            let area = pending.iter().map(|&m| regions[m].area()).sum();
+            out.thin.push((pending[0], area));
+        } else {
+            out.groups.push(Group {
+                members: pending,
+                passes,
+                composition: None,
+            });
         }
     }
     for g in &mut out.groups {

@@ -6,14 +6,15 @@
 //! pausing only one of the two clears the conflict (a tool that follows another along
 //! a wall), that one pauses, whatever the speeds.
 //!
-//! The envelopes are checked with a clearance of half the distance both tools can
-//! cover in one step, so no overlap can hide between two checks. When every unfinished
+//! Each check covers the whole step: the closest approach of the two tools' motions
+//! during it is computed exactly, so no overlap can hide between two checks. When every unfinished
 //! tool is held (each waits for another, as tools meeting head-on along neighbouring
 //! walls do), the tool with the least work left steps aside to a clear point (never
 //! toward the parks) and comes back once the way is free: the layer ends when the
 //! busiest tool is done, so that one should not wait. If side-steps do not resolve
 //! the layer, the caller falls back to sequential deposition.
 
+use lamina_core::geom::segment_distance;
 use lamina_core::{BBox2, PathKind, Point2, TimedPoint, Toolpath, Vector2};
 
 use crate::route::{Move, ToolSpec, pause, toolpath};
@@ -47,14 +48,22 @@ struct Agent<'a> {
 }
 
 impl Agent<'_> {
-    /// The cursor and position after `dt` seconds along the route; with `emit`, the
-    /// route's vertices passed on the way are written with their times from `t`.
-    fn walk(&mut self, dt: f64, t: f64, emit: bool) -> (Cursor, Point2, bool) {
+    /// The cursor and position after `dt` seconds along the route, whether the route
+    /// is done, and the length of route covered; with `emit`, the route's vertices
+    /// passed on the way are written with their times from `t`.
+    fn walk(&mut self, dt: f64, t: f64, emit: bool, mut track: Option<&mut Track>) -> (Cursor, Point2, bool) {
         let mut c = self.at;
         let mut left = dt;
         let mut pos = self.pos;
+        if let Some(tr) = track.as_deref_mut() {
+            tr.clear();
+            tr.push((0.0, pos));
+        }
         loop {
             let Some(m) = self.route.get(c.mv) else {
+                if let Some(tr) = track {
+                    tr.push((dt, pos));
+                }
                 return (c, pos, true);
             };
             if c.seg + 1 >= m.points.len() {
@@ -89,9 +98,15 @@ impl Agent<'_> {
                 } else {
                     a
                 };
+                if let Some(tr) = track {
+                    tr.push((dt, p));
+                }
                 return (c, p, false);
             }
             left -= need;
+            if let Some(tr) = track.as_deref_mut() {
+                tr.push((dt - left, b));
+            }
             if emit && let Some(path) = &mut self.open {
                 path.points.push(TimedPoint {
                     p: b,
@@ -148,7 +163,7 @@ impl Agent<'_> {
                 self.open = Some(toolpath(self.spec.index, m, vec![TimedPoint { p: self.pos, t }]));
             }
         }
-        let (c, p, done) = self.walk(dt, t, true);
+        let (c, p, done) = self.walk(dt, t, true, None);
         self.at = c;
         self.pos = p;
         // Between vertices the motion is straight at constant speed: the position is
@@ -201,6 +216,45 @@ impl Agent<'_> {
     }
 }
 
+/// Timed points of a tool's motion within one step, from 0 to the step length.
+type Track = Vec<(f64, Point2)>;
+
+/// The closest approach of two motions over the same step: between consecutive
+/// breakpoints of either, both move straight at constant speed, so their difference
+/// runs along a segment whose distance to the origin is exact.
+fn closest(a: &[(f64, Point2)], b: &[(f64, Point2)]) -> f64 {
+    let at = |tr: &[(f64, Point2)], t: f64| -> Point2 {
+        let k = tr.partition_point(|q| q.0 <= t);
+        if k == 0 {
+            return tr[0].1;
+        }
+        if k >= tr.len() {
+            return tr[tr.len() - 1].1;
+        }
+        let ((t0, p0), (t1, p1)) = (tr[k - 1], tr[k]);
+        if t1 > t0 {
+            p0 + (p1 - p0) * ((t - t0) / (t1 - t0))
+        } else {
+            p1
+        }
+    };
+    let mut times: Vec<f64> = a.iter().chain(b).map(|q| q.0).collect();
+    times.sort_by(f64::total_cmp);
+    times.dedup();
+    let origin = Point2::origin();
+    let mut best = f64::INFINITY;
+    let mut prev: Option<Point2> = None;
+    for &t in &times {
+        let d = origin + (at(a, t) - at(b, t));
+        best = best.min(match prev {
+            Some(q) => segment_distance(origin, q, d),
+            None => (d - origin).norm(),
+        });
+        prev = Some(d);
+    }
+    best
+}
+
 /// Runs the tools' routes together from time 0 with checks every `step` seconds: the
 /// toolpaths of every tool (with their pauses) and the time the last tool parks. Tools
 /// stepping aside stay inside `arena` (an empty box: anywhere).
@@ -239,7 +293,10 @@ pub fn concurrent(
     };
     let mut t = 0.0;
     let mut side_steps = 0;
+    // Per tool: where it would be after this step and its speed along X, and the
+    // timed points of its motion during the step.
     let mut proposed: Vec<(Point2, f64)> = vec![(Point2::origin(), 0.0); n];
+    let mut tracks: Vec<Track> = vec![Vec::new(); n];
     let mut moving = vec![false; n];
     while agents.iter().any(|a| !a.done) {
         if t > budget {
@@ -250,22 +307,27 @@ pub fn concurrent(
             if a.done {
                 proposed[i] = (a.pos, 0.0);
             } else {
-                let (_, p, _) = a.walk(step, t, false);
+                let (_, p, _) = a.walk(step, t, false, Some(&mut tracks[i]));
                 proposed[i] = (p, (p.x - a.pos.x).abs() / step);
             }
         }
+        // Whether tools i and j, moving or held, keep their envelopes apart for the
+        // whole step: their closest approach along the two timed motions, exactly.
+        let safe = |i: usize, j: usize, mi: bool, mj: bool| {
+            let (a, b) = (&agents[i], &agents[j]);
+            let still = |p: Point2| [(0.0, p), (step, p)];
+            let (si, sj) = (still(a.pos), still(b.pos));
+            let ti: &[(f64, Point2)] = if mi { &tracks[i] } else { &si };
+            let tj: &[(f64, Point2)] = if mj { &tracks[j] } else { &sj };
+            closest(ti, tj) >= a.spec.envelope + b.spec.envelope
+        };
         // Hold the lower-priority tool of each predicted collision until none is left;
         // held tools stay where they are, which was clear one step ago.
         loop {
             let mut change = false;
             for i in 0..n {
                 for j in i + 1..n {
-                    if !(moving[i] || moving[j]) {
-                        continue;
-                    }
-                    let pi = if moving[i] { proposed[i].0 } else { agents[i].pos };
-                    let pj = if moving[j] { proposed[j].0 } else { agents[j].pos };
-                    if (pi - pj).norm() >= clear(&agents[i], &agents[j]) {
+                    if !(moving[i] || moving[j]) || safe(i, j, moving[i], moving[j]) {
                         continue;
                     }
                     let loser = match (moving[i], moving[j]) {
@@ -273,10 +335,7 @@ pub fn concurrent(
                             // Holding a tool only helps when its staying put clears
                             // the other's next position: a tool moving away from
                             // the one behind it goes on whatever its speed along X.
-                            let c = clear(&agents[i], &agents[j]);
-                            let hold_i = (agents[i].pos - proposed[j].0).norm() >= c;
-                            let hold_j = (proposed[i].0 - agents[j].pos).norm() >= c;
-                            match (hold_i, hold_j) {
+                            match (safe(i, j, false, true), safe(i, j, true, false)) {
                                 (true, false) => i,
                                 (false, true) => j,
                                 _ if proposed[j].1 > proposed[i].1 => i,
@@ -391,5 +450,27 @@ fn aside(
             p.x.clamp(arena.min.x, arena.max.x),
             p.y.clamp(arena.min.y, arena.max.y),
         )
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn closest_approach_is_found_between_the_checks() {
+        // Two tools passing each other 1 mm apart: 10 mm apart at both ends of the
+        // step, 1 mm at its middle.
+        let a = [(0.0, Point2::new(0.0, 0.0)), (1.0, Point2::new(10.0, 0.0))];
+        let b = [(0.0, Point2::new(10.0, 1.0)), (1.0, Point2::new(0.0, 1.0))];
+        assert!((closest(&a, &b) - 1.0).abs() < 1e-12);
+        // A breakpoint of one motion inside the step: tool a turns at t = 0.5 toward b.
+        let a = [
+            (0.0, Point2::new(0.0, 0.0)),
+            (0.5, Point2::new(5.0, 0.0)),
+            (1.0, Point2::new(5.0, 5.0)),
+        ];
+        let b = [(0.0, Point2::new(5.0, 8.0)), (1.0, Point2::new(5.0, 8.0))];
+        assert!((closest(&a, &b) - 3.0).abs() < 1e-12);
     }
 }
