@@ -7,23 +7,83 @@ use std::collections::BinaryHeap;
 
 use lamina_core::geom::segment_distance;
 use lamina_core::{Contour, Point2, Polygon};
+use rstar::primitives::Line;
+use rstar::{AABB, PointDistance, RTree};
+
+/// The edges of one or more contours in an R-tree: a sliced wall has thousands of
+/// edges, and the measures below ask for the distance to them thousands of times.
+pub struct Edges {
+    tree: RTree<Line<[f64; 2]>>,
+    max_x: f64,
+}
+
+impl Edges {
+    pub fn new<'a>(contours: impl IntoIterator<Item = &'a Contour>) -> Self {
+        let lines: Vec<Line<[f64; 2]>> = contours
+            .into_iter()
+            .flat_map(|c| c.edges())
+            .map(|(a, b)| Line::new([a.x, a.y], [b.x, b.y]))
+            .collect();
+        let max_x = lines
+            .iter()
+            .map(|l| l.from[0].max(l.to[0]))
+            .fold(f64::NEG_INFINITY, f64::max);
+        Edges {
+            tree: RTree::bulk_load(lines),
+            max_x,
+        }
+    }
+
+    /// Distance from `p` to the nearest edge (infinite without edges).
+    pub fn distance(&self, p: Point2) -> f64 {
+        self.tree
+            .nearest_neighbor([p.x, p.y])
+            .map_or(f64::INFINITY, |l| l.distance_2(&[p.x, p.y]).sqrt())
+    }
+
+    /// Whether `p` is inside under the even-odd rule, which for a polygon's outer
+    /// contour and holes is inside the outer and outside every hole: the edges
+    /// crossed by the ray from `p` toward +x, counted.
+    pub fn contains(&self, p: Point2) -> bool {
+        if p.x > self.max_x {
+            return false;
+        }
+        let ray = AABB::from_corners([p.x, p.y], [self.max_x, p.y]);
+        let mut inside = false;
+        for l in self.tree.locate_in_envelope_intersecting(ray) {
+            let (a, b) = (l.from, l.to);
+            if (a[1] > p.y) != (b[1] > p.y) && p.x < a[0] + (p.y - a[1]) / (b[1] - a[1]) * (b[0] - a[0]) {
+                inside = !inside;
+            }
+        }
+        inside
+    }
+}
 
 /// Shortest distance between two contours that do not cross: attained at a vertex of
 /// one of them, so vertex-to-segment distances both ways are exact.
 pub fn contour_distance(a: &Contour, b: &Contour) -> f64 {
-    let one_way = |a: &Contour, b: &Contour| {
+    edges_distance(a, &Edges::new([a]), b, &Edges::new([b]))
+}
+
+fn edges_distance(a: &Contour, ea: &Edges, b: &Contour, eb: &Edges) -> f64 {
+    let one_way = |a: &Contour, eb: &Edges| {
         a.points
             .iter()
-            .map(|&p| b.distance(p))
+            .map(|&p| eb.distance(p))
             .fold(f64::INFINITY, f64::min)
     };
-    one_way(a, b).min(one_way(b, a))
+    one_way(a, eb).min(one_way(b, ea))
 }
 
 /// L_s: the minimum distance between any two contours of the family; `None` for a
 /// family without holes.
 pub fn min_contour_distance(polygon: &Polygon) -> Option<f64> {
     let contours: Vec<&Contour> = polygon.contours().collect();
+    if contours.len() < 2 {
+        return None;
+    }
+    let edges: Vec<Edges> = contours.iter().map(|c| Edges::new([*c])).collect();
     let boxes: Vec<_> = contours.iter().map(|c| c.bbox()).collect();
     let mut best = f64::INFINITY;
     for i in 0..contours.len() {
@@ -35,7 +95,7 @@ pub fn min_contour_distance(polygon: &Polygon) -> Option<f64> {
             if dx.hypot(dy) >= best {
                 continue;
             }
-            best = best.min(contour_distance(contours[i], contours[j]));
+            best = best.min(edges_distance(contours[i], &edges[i], contours[j], &edges[j]));
         }
     }
     (contours.len() > 1 && best.is_finite()).then_some(best)
@@ -51,9 +111,9 @@ struct Cell {
 }
 
 impl Cell {
-    fn new(polygon: &Polygon, c: Point2, h: f64) -> Self {
-        let d = polygon.boundary_distance(c);
-        let d = if polygon.contains(c) { d } else { -d };
+    fn new(edges: &Edges, c: Point2, h: f64) -> Self {
+        let d = edges.distance(c);
+        let d = if edges.contains(c) { d } else { -d };
         Self {
             c,
             h,
@@ -90,25 +150,26 @@ pub fn pole(polygon: &Polygon, precision: f64) -> Option<(Point2, f64)> {
         return None;
     }
     let precision = precision.max(size * 1e-6);
+    let edges = Edges::new(polygon.contours());
     let h = size / 2.0;
     let mut heap = BinaryHeap::new();
     let mut y = bbox.min.y;
     while y < bbox.max.y {
         let mut x = bbox.min.x;
         while x < bbox.max.x {
-            heap.push(Cell::new(polygon, Point2::new(x + h, y + h), h));
+            heap.push(Cell::new(&edges, Point2::new(x + h, y + h), h));
             x += size;
         }
         y += size;
     }
     let start = interior_point(polygon)?;
-    let mut best = Cell::new(polygon, start, 0.0);
+    let mut best = Cell::new(&edges, start, 0.0);
     // A bound on the work for pathological inputs: the answer stays a valid interior
     // point, only less central.
     let mut budget = 20_000;
     while let Some(cell) = heap.pop() {
         if cell.d > best.d {
-            best = Cell::new(polygon, cell.c, 0.0);
+            best = Cell::new(&edges, cell.c, 0.0);
         }
         if cell.max - best.d <= precision || budget == 0 {
             continue;
@@ -117,7 +178,7 @@ pub fn pole(polygon: &Polygon, precision: f64) -> Option<(Point2, f64)> {
         let h = cell.h / 2.0;
         for (sx, sy) in [(-1.0, -1.0), (1.0, -1.0), (-1.0, 1.0), (1.0, 1.0)] {
             heap.push(Cell::new(
-                polygon,
+                &edges,
                 Point2::new(cell.c.x + sx * h, cell.c.y + sy * h),
                 h,
             ));
