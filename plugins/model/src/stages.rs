@@ -47,16 +47,16 @@ fn read(path: &Path) -> Result<Vec<u8>> {
 impl ModelSource for FileSource {
     fn load(&self, base_dir: &Path) -> Result<Vec<Mesh>> {
         let path = base_dir.join(&self.file);
-        let bytes = read(&path)?;
         let soups: Vec<(String, Soup)> = match self.format {
+            Format::Stl => return crate::stl::read_welded(&path, self.weld),
             Format::ThreeMf => {
-                return Ok(crate::threemf::read(&path, &bytes)?
+                return Ok(crate::threemf::read(&path, &read(&path)?)?
                     .iter()
                     .map(|m| crate::weld::weld_mesh(m, self.weld))
                     .collect());
             }
-            Format::Stl => crate::stl::parse(&path, &bytes)?,
             Format::Obj => {
+                let bytes = read(&path)?;
                 let text = String::from_utf8_lossy(&bytes);
                 crate::obj::parse(&path, &text)?
                     .into_iter()

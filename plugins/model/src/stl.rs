@@ -5,9 +5,9 @@
 
 use std::path::Path;
 
-use lamina_core::{Error, Point3, Result};
+use lamina_core::{Error, Mesh, Point3, Result};
 
-use crate::weld::Soup;
+use crate::weld::{MeshWelder, Soup};
 
 /// Parses STL bytes into a triangle soup. `path` names the file in errors.
 pub fn parse(path: &Path, bytes: &[u8]) -> Result<Vec<(String, Soup)>> {
@@ -76,24 +76,81 @@ fn looks_ascii(bytes: &[u8]) -> bool {
 fn parse_binary(path: &Path, bytes: &[u8], count: usize) -> Result<Soup> {
     let mut triangles = Vec::with_capacity(count);
     for (i, rec) in bytes[84..].chunks_exact(50).enumerate() {
-        let f = |k: usize| {
-            let o = 12 + 4 * k;
-            f32::from_le_bytes([rec[o], rec[o + 1], rec[o + 2], rec[o + 3]])
-        };
-        let mut tri = [Point3::origin(); 3];
-        for (v, corner) in tri.iter_mut().enumerate() {
-            let (x, y, z) = (f(3 * v), f(3 * v + 1), f(3 * v + 2));
-            if !(x.is_finite() && y.is_finite() && z.is_finite()) {
-                return Err(model_error(
-                    path,
-                    format!("triangle {i} (byte {}) has a non-finite coordinate", 84 + 50 * i),
-                ));
-            }
-            *corner = Point3::new(f64::from(x), f64::from(y), f64::from(z));
-        }
-        triangles.push(tri);
+        triangles.push(record(path, i, rec)?);
     }
     Ok(Soup { triangles })
+}
+
+/// The corners of binary record `i`, refused when a coordinate is not finite.
+fn record(path: &Path, i: usize, rec: &[u8]) -> Result<[Point3; 3]> {
+    let f = |k: usize| {
+        let o = 12 + 4 * k;
+        f32::from_le_bytes([rec[o], rec[o + 1], rec[o + 2], rec[o + 3]])
+    };
+    let mut tri = [Point3::origin(); 3];
+    for (v, corner) in tri.iter_mut().enumerate() {
+        let (x, y, z) = (f(3 * v), f(3 * v + 1), f(3 * v + 2));
+        if !(x.is_finite() && y.is_finite() && z.is_finite()) {
+            return Err(model_error(
+                path,
+                format!("triangle {i} (byte {}) has a non-finite coordinate", 84 + 50 * i),
+            ));
+        }
+        *corner = Point3::new(f64::from(x), f64::from(y), f64::from(z));
+    }
+    Ok(tri)
+}
+
+/// Reads an STL file into welded meshes (see [`crate::weld::weld`]): the same meshes
+/// as [`parse`] and welding, but a binary file is welded while it is read, a block of
+/// records at a time, so neither the file nor its soup of corners is ever held whole.
+/// On large meshes those two buffers cost more than the welding (fresh memory is
+/// faulted in page by page).
+pub fn read_welded(path: &Path, tolerance: f64) -> Result<Vec<Mesh>> {
+    use std::io::Read;
+    let io = |e| Error::io(path, e);
+    let mut file = std::fs::File::open(path).map_err(io)?;
+    let len = file.metadata().map_err(io)?.len();
+    let mut header = [0u8; 84];
+    if len >= 84 {
+        file.read_exact(&mut header).map_err(io)?;
+        let count = binary_count(&header).unwrap_or(0);
+        if 84 + 50 * u64::from(count) == len {
+            return Ok(vec![weld_binary(path, &mut file, count as usize, tolerance)?]);
+        }
+    }
+    let mut bytes = Vec::with_capacity(len as usize);
+    if len >= 84 {
+        bytes.extend_from_slice(&header);
+    }
+    file.read_to_end(&mut bytes).map_err(io)?;
+    Ok(parse(path, &bytes)?
+        .into_iter()
+        .map(|(name, soup)| crate::weld::weld(&name, &soup, tolerance).0)
+        .collect())
+}
+
+/// Welds the `count` records that follow the header in `file`.
+fn weld_binary(path: &Path, file: &mut impl std::io::Read, count: usize, tolerance: f64) -> Result<Mesh> {
+    const BLOCK: usize = 4096;
+    let mut welder = MeshWelder::new(tolerance, count);
+    let mut buf = vec![0u8; 50 * BLOCK.min(count)];
+    let mut triangles = Vec::with_capacity(MeshWelder::BLOCK);
+    let mut done = 0;
+    while done < count {
+        let n = BLOCK.min(count - done);
+        let block = &mut buf[..50 * n];
+        file.read_exact(block).map_err(|e| Error::io(path, e))?;
+        for (k, recs) in block.chunks(50 * MeshWelder::BLOCK).enumerate() {
+            triangles.clear();
+            for (j, rec) in recs.chunks_exact(50).enumerate() {
+                triangles.push(record(path, done + k * MeshWelder::BLOCK + j, rec)?);
+            }
+            welder.push(&triangles);
+        }
+        done += n;
+    }
+    Ok(welder.finish(&name_of(path)).0)
 }
 
 fn parse_ascii(path: &Path, bytes: &[u8]) -> Result<Vec<(String, Soup)>> {
@@ -255,5 +312,63 @@ mod tests {
         let e = parse(Path::new("t.stl"), text.as_bytes()).expect_err("truncated ascii");
         assert!(e.to_string().contains("truncated"), "{e}");
         assert!(parse(Path::new("t.stl"), b"").is_err());
+    }
+
+    /// Welding while reading gives the meshes of parsing and welding, for binary files
+    /// of several blocks (a partial last one) and for the files that are read whole.
+    #[test]
+    fn read_welded_is_parse_then_weld() {
+        let dir = tempfile::tempdir().expect("temporary directory");
+        // A strip of triangles sharing corners, one of them degenerate.
+        let count = 4096 + 100;
+        let mut b = vec![0u8; 80];
+        b.extend_from_slice(&(count as u32).to_le_bytes());
+        for i in 0..count {
+            let x = (i / 2) as f32;
+            let corners = if i == 7 {
+                [[x, 0.0, 0.0], [x, 0.0, 0.0], [x, 1.0, 0.0]]
+            } else if i % 2 == 0 {
+                [[x, 0.0, 0.0], [x + 1.0, 0.0, 0.0], [x, 1.0, 0.5]]
+            } else {
+                [[x + 1.0, 0.0, 0.0], [x + 1.0, 1.0, 0.5], [x, 1.0, 0.5]]
+            };
+            b.extend_from_slice(&[0u8; 12]);
+            for c in corners.as_flattened() {
+                b.extend_from_slice(&c.to_le_bytes());
+            }
+            b.extend_from_slice(&[0u8; 2]);
+        }
+        let mut nan = binary(1, 1, b"x");
+        nan[84 + 12..84 + 16].copy_from_slice(&f32::NAN.to_le_bytes());
+        for (name, bytes) in [
+            ("strip.stl", b.clone()),
+            ("solid.stl", binary(2, 2, b"solid but binary")),
+            ("t.stl", ASCII.as_bytes().to_vec()),
+            ("truncated.stl", b[..b.len() - 10].to_vec()),
+            ("nan.stl", nan),
+            ("empty.stl", Vec::new()),
+        ] {
+            let path = dir.path().join(name);
+            std::fs::write(&path, &bytes).expect("write");
+            let expected = parse(&path, &bytes).map(|soups| {
+                soups
+                    .into_iter()
+                    .map(|(n, soup)| crate::weld::weld(&n, &soup, 1e-5).0)
+                    .collect::<Vec<_>>()
+            });
+            match (read_welded(&path, 1e-5), expected) {
+                (Ok(got), Ok(expected)) => {
+                    assert_eq!(got.len(), expected.len(), "{name}");
+                    for (g, e) in got.iter().zip(&expected) {
+                        assert_eq!(g.name, e.name, "{name}");
+                        assert_eq!(g.vertices, e.vertices, "{name}");
+                        assert_eq!(g.triangles, e.triangles, "{name}");
+                        assert_eq!(g.warnings, e.warnings, "{name}");
+                    }
+                }
+                (Err(got), Err(expected)) => assert_eq!(got.to_string(), expected.to_string(), "{name}"),
+                (got, expected) => panic!("{name}: {:?} vs {:?}", got.is_ok(), expected.is_ok()),
+            }
+        }
     }
 }

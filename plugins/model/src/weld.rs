@@ -3,7 +3,6 @@
 //! Slicing relies on shared vertex indices to chain the cut segments into loops.
 
 use lamina_core::{Mesh, Point3};
-use rustc_hash::FxHashMap;
 
 /// Triangles as three corners each, before welding.
 #[derive(Debug, Default, Clone)]
@@ -24,85 +23,207 @@ pub struct WeldReport {
 /// duplicates STL files are made of and the tiny rounding differences some exporters
 /// leave. Triangles with two equal corners after welding are dropped.
 pub fn weld(name: &str, soup: &Soup, tolerance: f64) -> (Mesh, WeldReport) {
-    let (mesh, report, _) = weld_kept(name, soup, tolerance);
+    let mut welder = MeshWelder::new(tolerance, soup.triangles.len());
+    welder.push(&soup.triangles);
+    let (mesh, report, _) = welder.finish(name);
     (mesh, report)
 }
 
 /// Welds a mesh, keeping its per-triangle materials in step with the triangles kept.
 pub fn weld_mesh(mesh: &Mesh, tolerance: f64) -> Mesh {
-    let soup = Soup {
-        triangles: (0..mesh.triangles.len()).map(|i| mesh.triangle(i)).collect(),
-    };
-    let (mut out, _, kept) = weld_kept(&mesh.name, &soup, tolerance);
+    let (mut out, _, dropped) = weld_with(&mesh.name, mesh.triangles.len(), |t| mesh.triangle(t), tolerance);
     if mesh.triangle_materials.len() == mesh.triangles.len() {
-        out.triangle_materials = kept.iter().map(|&i| mesh.triangle_materials[i]).collect();
+        let mut dropped = dropped.iter().peekable();
+        out.triangle_materials = (0..mesh.triangles.len())
+            .filter(|&t| dropped.next_if_eq(&&t).is_none())
+            .map(|t| mesh.triangle_materials[t])
+            .collect();
         out.material_names = mesh.material_names.clone();
     }
     out
 }
 
-/// [`weld`], also returning the indices of the soup triangles kept.
-fn weld_kept(name: &str, soup: &Soup, tolerance: f64) -> (Mesh, WeldReport, Vec<usize>) {
-    let corners = soup.triangles.as_flattened();
-    let grid = Grid::new(tolerance);
-    let mut vertices = Vec::with_capacity(soup.triangles.len() / 2 + 3);
-    let ids = vertex_ids(corners, grid, &mut vertices);
-    let mut triangles = Vec::with_capacity(soup.triangles.len());
-    let mut kept = Vec::with_capacity(soup.triangles.len());
-    let mut degenerate = 0;
-    for (t, tri) in ids.chunks_exact(3).enumerate() {
-        let tri = [tri[0], tri[1], tri[2]];
-        if tri[0] == tri[1] || tri[1] == tri[2] || tri[0] == tri[2] {
-            degenerate += 1;
-            continue;
-        }
-        triangles.push(tri);
-        kept.push(t);
+/// [`weld`] of the `count` triangles `triangle(0..count)`, also returning the indices of
+/// the triangles dropped, in increasing order.
+fn weld_with(
+    name: &str,
+    count: usize,
+    triangle: impl Fn(usize) -> [Point3; 3],
+    tolerance: f64,
+) -> (Mesh, WeldReport, Vec<usize>) {
+    let mut welder = MeshWelder::new(tolerance, count);
+    let mut block = Vec::with_capacity(MeshWelder::BLOCK);
+    for start in (0..count).step_by(MeshWelder::BLOCK) {
+        block.clear();
+        block.extend((start..count.min(start + MeshWelder::BLOCK)).map(&triangle));
+        welder.push(&block);
     }
-    let report = WeldReport {
-        corners: corners.len(),
-        vertices: vertices.len(),
-        degenerate,
-    };
-    let mut mesh = Mesh::new(name, vertices, triangles);
-    if degenerate > 0 {
-        mesh.warnings.push(format!(
-            "{name}: dropped {degenerate} degenerate triangle(s) (corners closer than {tolerance} mm)"
-        ));
-    }
-    (mesh, report, kept)
+    welder.finish(name)
 }
 
-/// The vertex index of every corner: corners with the same key share the vertex made
-/// from the first of them, numbered in order of first appearance.
-///
-/// A corner is nearly always a bit-for-bit copy of one met a few triangles earlier (STL
-/// repeats every shared corner), so a small cache from exact coordinates to vertex,
-/// which stays in the processor's cache, answers most corners before the map from key
-/// to vertex, which outgrows it on large meshes, is asked. Equal coordinates have equal
-/// keys, so the cache never changes an answer.
-fn vertex_ids(corners: &[Point3], grid: Grid, vertices: &mut Vec<Point3>) -> Vec<u32> {
-    const CACHE_BITS: u32 = 13;
-    const EMPTY: u32 = u32::MAX;
-    let mut cache = vec![([0u64; 3], EMPTY); 1 << CACHE_BITS];
-    let mut seen: FxHashMap<[i64; 3], u32> =
-        FxHashMap::with_capacity_and_hasher(corners.len() / 4 + 1, Default::default());
-    corners
-        .iter()
-        .map(|p| {
-            let b = bits(p);
-            let slot = &mut cache[(mix(b) >> (64 - CACHE_BITS)) as usize];
-            if slot.1 != EMPTY && slot.0 == b {
-                return slot.1;
+/// Welds triangles as they come, so that a reader can weld while it reads without
+/// building a [`Soup`] first (a soup of a large file is several times the file).
+pub(crate) struct MeshWelder {
+    welder: Welder,
+    tolerance: f64,
+    triangles: Vec<[u32; 3]>,
+    dropped: Vec<usize>,
+    count: usize,
+    ids: Vec<u32>,
+}
+
+impl MeshWelder {
+    /// Triangles welded together at best: a block's table lookups overlap in memory.
+    pub(crate) const BLOCK: usize = 256;
+
+    /// A welder for about `triangles` triangles (the storage is sized for them).
+    pub(crate) fn new(tolerance: f64, triangles: usize) -> Self {
+        Self {
+            welder: Welder::new(Grid::new(tolerance), 3 * triangles),
+            tolerance,
+            triangles: Vec::with_capacity(triangles),
+            dropped: Vec::new(),
+            count: 0,
+            ids: Vec::new(),
+        }
+    }
+
+    /// Welds the next triangles (best in blocks of [`Self::BLOCK`]).
+    pub(crate) fn push(&mut self, triangles: &[[Point3; 3]]) {
+        for block in triangles.chunks(Self::BLOCK) {
+            self.welder.ids(block.as_flattened(), &mut self.ids);
+            for tri in self.ids.chunks_exact(3) {
+                let tri = [tri[0], tri[1], tri[2]];
+                if tri[0] == tri[1] || tri[1] == tri[2] || tri[0] == tri[2] {
+                    self.dropped.push(self.count);
+                } else {
+                    self.triangles.push(tri);
+                }
+                self.count += 1;
             }
-            let id = *seen.entry(grid.key(p)).or_insert_with(|| {
-                vertices.push(*p);
-                (vertices.len() - 1) as u32
+        }
+    }
+
+    /// The mesh, what welding changed, and the indices of the triangles dropped, in
+    /// increasing order.
+    pub(crate) fn finish(self, name: &str) -> (Mesh, WeldReport, Vec<usize>) {
+        let degenerate = self.dropped.len();
+        let vertices = self.welder.into_vertices();
+        let report = WeldReport {
+            corners: 3 * self.count,
+            vertices: vertices.len(),
+            degenerate,
+        };
+        let mut mesh = Mesh::new(name, vertices, self.triangles);
+        if degenerate > 0 {
+            mesh.warnings.push(format!(
+                "{name}: dropped {degenerate} degenerate triangle(s) (corners closer than {} mm)",
+                self.tolerance
+            ));
+        }
+        (mesh, report, self.dropped)
+    }
+}
+
+/// Gives every corner its vertex: corners with the same key share the vertex made from
+/// the first of them, numbered in order of first appearance.
+///
+/// The table is open addressing over one word per slot (a tag from the key's hash and
+/// the vertex index; the keys themselves are kept once, by vertex), sized from the
+/// corner count for the usual six corners per vertex: a table eight times smaller than
+/// a general map of keys stays in the processor's caches longer. Even so, a new vertex
+/// is nearly always a miss there, so corners come in blocks whose keys are hashed and
+/// whose slots are read first, all in one tight loop: the misses overlap instead of
+/// following each other. (A cache of exact coordinates in front of the table, which
+/// answers repeated corners, costs more than it saves once the table lookups overlap.)
+struct Welder {
+    grid: Grid,
+    /// `0` for empty, else the key hash's low half above `vertex + 1`.
+    slots: Vec<u64>,
+    /// The key of each vertex.
+    keys: Vec<[i64; 3]>,
+    vertices: Vec<Point3>,
+}
+
+impl Welder {
+    fn new(grid: Grid, corners: usize) -> Self {
+        let expected = corners / 6 + 1;
+        Self {
+            grid,
+            slots: vec![0; (2 * expected).next_power_of_two().max(16)],
+            keys: Vec::with_capacity(expected),
+            vertices: Vec::with_capacity(expected),
+        }
+    }
+
+    /// The vertices of `corners`, in `ids`.
+    fn ids(&mut self, corners: &[Point3], ids: &mut Vec<u32>) {
+        ids.clear();
+        for chunk in corners.chunks(3 * MeshWelder::BLOCK) {
+            let mask = self.slots.len() - 1;
+            let mut keys = [([0i64; 3], 0u64); 3 * MeshWelder::BLOCK];
+            let keys = &mut keys[..chunk.len()];
+            for (p, k) in chunk.iter().zip(keys.iter_mut()) {
+                let key = self.grid.key(p);
+                *k = (key, mix(key.map(|k| k as u64)));
+            }
+            let touched = keys.iter().fold(0u64, |t, &(_, h)| {
+                t.wrapping_add(self.slots[(h >> 32) as usize & mask])
             });
-            *slot = (b, id);
-            id
-        })
-        .collect()
+            std::hint::black_box(touched);
+            for (p, &(key, h)) in chunk.iter().zip(keys.iter()) {
+                let id = self.lookup(key, h, p);
+                ids.push(id);
+            }
+        }
+    }
+
+    /// The vertex of `key` (whose hash is `h`), made from `p` if the key is new.
+    fn lookup(&mut self, key: [i64; 3], h: u64, p: &Point3) -> u32 {
+        let tag = h << 32;
+        let mask = self.slots.len() - 1;
+        let mut i = (h >> 32) as usize & mask;
+        loop {
+            let s = self.slots[i];
+            if s == 0 {
+                break;
+            }
+            if s & !0xFFFF_FFFF == tag {
+                let v = (s as u32 - 1) as usize;
+                if self.keys[v] == key {
+                    return v as u32;
+                }
+            }
+            i = (i + 1) & mask;
+        }
+        let v = self.vertices.len();
+        self.slots[i] = tag | (v as u64 + 1);
+        self.keys.push(key);
+        self.vertices.push(*p);
+        if 2 * self.vertices.len() > self.slots.len() {
+            self.grow();
+        }
+        v as u32
+    }
+
+    /// Doubles the table (more vertices than the corner count suggested).
+    fn grow(&mut self) {
+        let mut slots = vec![0u64; 2 * self.slots.len()];
+        let mask = slots.len() - 1;
+        for (v, key) in self.keys.iter().enumerate() {
+            let h = mix(key.map(|k| k as u64));
+            let mut i = (h >> 32) as usize & mask;
+            while slots[i] != 0 {
+                i = (i + 1) & mask;
+            }
+            slots[i] = (h << 32) | (v as u64 + 1);
+        }
+        self.slots = slots;
+    }
+
+    fn into_vertices(self) -> Vec<Point3> {
+        self.vertices
+    }
 }
 
 /// The welding grid: a corner's key is its cell, or its exact coordinates when the
@@ -152,11 +273,7 @@ fn round(x: f64) -> i64 {
     }
 }
 
-fn bits(p: &Point3) -> [u64; 3] {
-    [p.x.to_bits(), p.y.to_bits(), p.z.to_bits()]
-}
-
-/// Mixes three words into 64 well-spread bits (the cache takes the top bits).
+/// Mixes three words into 64 well-spread bits (the table takes both halves).
 fn mix(words: [u64; 3]) -> u64 {
     let mut h = 0x9E37_79B9_7F4A_7C15u64;
     for v in words {
@@ -225,9 +342,9 @@ mod tests {
         }
     }
 
-    /// The cached lookup equals one exact map, vertex order included.
+    /// The blocked table lookup equals one exact map, vertex order included.
     #[test]
-    fn cached_ids_are_the_exact_ones() {
+    fn table_ids_are_the_exact_ones() {
         let mut x = 7u64;
         let mut next = move || {
             x ^= x << 13;
@@ -256,9 +373,16 @@ mod tests {
             .collect();
         for tolerance in [1e-5, 0.0, 0.25] {
             let grid = Grid::new(tolerance);
-            let mut vertices = Vec::new();
-            let ids = vertex_ids(&corners, grid, &mut vertices);
-            let mut reference: FxHashMap<[i64; 3], u32> = FxHashMap::default();
+            // Sized for far fewer vertices than there are, so that the table grows.
+            let mut welder = Welder::new(grid, 600);
+            let mut ids = Vec::new();
+            for block in corners.chunks(3 * MeshWelder::BLOCK - 2) {
+                let mut some = Vec::new();
+                welder.ids(block, &mut some);
+                ids.extend(some);
+            }
+            let vertices = welder.into_vertices();
+            let mut reference: std::collections::HashMap<[i64; 3], u32> = Default::default();
             let mut expected_vertices = Vec::new();
             let expected: Vec<u32> = corners
                 .iter()
