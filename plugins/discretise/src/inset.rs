@@ -83,9 +83,11 @@ impl Inset {
         if delta.is_nan() || delta <= 0.0 || delta.is_infinite() {
             return false;
         }
-        // Vertices closer than this to their neighbours' chord change nothing the
-        // tolerance would notice; dropping them removes the nearly straight corners.
-        let eps = (self.tolerance * 0.02 * scale).max(2.0);
+        // Vertices closer than a fifth of the tolerance to the chord replacing them change
+        // nothing the tolerance would notice; dropping them removes the nearly
+        // straight corners and most of the chord points a sliced curve carries, which
+        // the overlay would otherwise cross-check against every offset edge.
+        let eps = (self.tolerance * 0.2 * scale).max(2.0);
         let step = arc_step(self.tolerance / distance);
         let mut any = false;
         for shape in shapes {
@@ -230,11 +232,17 @@ fn simplify(contour: &[IntPoint<i32>], eps: f64, out: &mut Vec<[f64; 2]>) {
         .max_by(|&a, &b| turn(p(a + n - 1), p(a), p(a + 1)).total_cmp(&turn(p(b + n - 1), p(b), p(b + 1))))
         .unwrap_or(0);
     out.push(p(start));
+    // Greedy chords: a vertex is dropped only while every vertex skipped since the
+    // last one kept stays within `eps` of the chord replacing them, so the error never
+    // adds up along a gentle curve (runs are capped to bound the work).
+    let mut anchor = 0;
     for k in 1..n {
-        let (v, next) = (p(start + k), p(start + k + 1));
-        let anchor = out[out.len() - 1];
-        if segment_distance(v, anchor, next) >= eps {
-            out.push(v);
+        let next = p(start + k + 1);
+        let a = out[out.len() - 1];
+        let fits = k - anchor < 64 && (anchor + 1..=k).all(|j| segment_distance(p(start + j), a, next) < eps);
+        if !fits {
+            out.push(p(start + k));
+            anchor = k;
         }
     }
     // The last kept vertex against the chord back to the start.
