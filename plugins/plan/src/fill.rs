@@ -2,7 +2,10 @@
 //! contours (the region's boundary offset inward by w/2, 3w/2, ...). Each loop's bead
 //! covers the band within w/2 of it, so consecutive loops w apart neither leave a gap
 //! nor deposit twice; what stays uncovered is the part of the medial band narrower
-//! than one width.
+//! than one width. A last pass that is a ring narrower than one width keeps only its
+//! outer side, where loops along both would deposit their overlap twice; a last pass
+//! that is a hole-free sliver keeps its loop (a centre line would need the medial
+//! axis).
 
 use i_overlay::mesh::float::outline::offset::OutlineOffset;
 use i_overlay::mesh::float::style::{LineJoin, OutlineStyle};
@@ -107,7 +110,15 @@ pub fn contour_passes(polygon: &Polygon, width: f64) -> Vec<Loop> {
             break;
         }
         for shape in &inset {
-            for contour in shape {
+            // A band narrower than one width everywhere (the last pass of a ring):
+            // beads along both its sides would overlap by the difference, so only its
+            // outer side is deposited, leaving less than one width open.
+            let sides = if shape.len() > 1 && surely_thin(shape, width / 2.0) {
+                1
+            } else {
+                shape.len()
+            };
+            for contour in &shape[..sides] {
                 if contour.len() < 3 {
                     continue;
                 }
@@ -382,6 +393,18 @@ mod tests {
         );
         let thin = Polygon::new(square(0.0, 0.15), vec![]);
         assert!(contour_passes(&thin, 0.4).is_empty());
+    }
+
+    #[test]
+    fn a_ring_narrower_than_two_widths_gets_one_loop_not_two_overlapping() {
+        // A 0.6 mm band: the pass at 0.2 mm is a 0.2 mm ring; beads along both its
+        // sides would overlap by 0.2 mm, so only the outer one is laid.
+        let p = Polygon::new(square(0.0, 5.0), vec![square(0.0, 4.4).oriented(false)]);
+        let loops = contour_passes(&p, 0.4);
+        assert_eq!(loops.len(), 1);
+        let deposited = loops[0].length() * 0.4;
+        assert!(deposited <= p.area() + 1e-6, "{deposited} vs {}", p.area());
+        assert!(deposited >= p.area() * 0.6, "{deposited} vs {}", p.area());
     }
 
     #[test]

@@ -48,6 +48,9 @@ pub struct Move {
     pub composition: Option<Composition>,
     pub part: Option<usize>,
     pub region: Option<usize>,
+    /// Gives way to every tool it meets (the way back from a side-step): it returns
+    /// once the way is free instead of pushing in by its speed along X.
+    pub yields: bool,
 }
 
 impl Move {
@@ -60,6 +63,7 @@ impl Move {
             composition: None,
             part: None,
             region: None,
+            yields: false,
         }
     }
 
@@ -255,6 +259,7 @@ pub fn route(tool: &ToolSpec, jobs: Vec<Job>, parks: &Parks, seam: Seam, width: 
             composition: job.composition,
             part: Some(job.part),
             region: Some(job.region),
+            yields: false,
         });
         travel.push(at);
     }

@@ -4,7 +4,8 @@
 //! collision the tool moving faster along X keeps going and the other pauses where it
 //! is (a safe point: it was clear there one step ago) until the conflict is gone. When
 //! pausing only one of the two clears the conflict (a tool that follows another along
-//! a wall), that one pauses, whatever the speeds.
+//! a wall), that one pauses, whatever the speeds; a tool on its way back from a
+//! side-step gives way to every other.
 //!
 //! Each check covers the whole step: the closest approach of the two tools' motions
 //! during it is computed exactly, so no overlap can hide between two checks. When every unfinished
@@ -174,6 +175,11 @@ impl Agent<'_> {
         }
     }
 
+    /// Whether the tool is on its way back from a side-step.
+    fn yields(&self) -> bool {
+        self.route.get(self.at.mv).is_some_and(|m| m.yields)
+    }
+
     /// Seconds of route left from the cursor.
     fn remaining(&self) -> f64 {
         let c = self.at;
@@ -208,7 +214,10 @@ impl Agent<'_> {
             c.mv + 1..c.mv + 1,
             [
                 Move::travel(vec![here, to], speed),
-                Move::travel(vec![to, here], speed),
+                Move {
+                    yields: true,
+                    ..Move::travel(vec![to, here], speed)
+                },
                 rest,
             ],
         );
@@ -338,6 +347,13 @@ pub fn concurrent(
                             match (safe(i, j, false, true), safe(i, j, true, false)) {
                                 (true, false) => i,
                                 (false, true) => j,
+                                _ if agents[i].yields() != agents[j].yields() => {
+                                    if agents[i].yields() {
+                                        i
+                                    } else {
+                                        j
+                                    }
+                                }
                                 _ if proposed[j].1 > proposed[i].1 => i,
                                 _ => j,
                             }
