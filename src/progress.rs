@@ -69,8 +69,15 @@ pub fn summary(report: &RunReport, timings: bool) {
         report.warnings,
         report.timings.wall().as_secs_f64()
     );
-    if let Some(t) = report.build_time {
-        eprintln!("planned build time: {t:.1} s");
+    match (report.build_time, report.sequential_time) {
+        (Some(t), Some(s)) if s > 0.0 => {
+            eprintln!(
+                "planned build time: {t:.1} s ({s:.1} s one tool at a time: ratio {:.3})",
+                t / s
+            )
+        }
+        (Some(t), _) => eprintln!("planned build time: {t:.1} s"),
+        _ => {}
     }
     if let Some(o) = &report.orientation {
         let [x, y, z] = o.direction;

@@ -440,6 +440,10 @@ pub struct LayerPlan {
     /// Build time of the layer in seconds, when planned.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub build_time: Option<f64>,
+    /// Build time of the layer with one tool at a time (s), when a planner that works
+    /// tools concurrently also timed that baseline.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub sequential_time: Option<f64>,
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub warnings: Vec<String>,
 }

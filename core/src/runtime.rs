@@ -108,6 +108,9 @@ pub struct RunReport {
     pub timings: Timings,
     /// Sum of the planned layer build times (s), when a planner ran.
     pub build_time: Option<f64>,
+    /// Sum of the layers' one-tool-at-a-time build times (s), when the planner timed
+    /// that baseline (a concurrent planner).
+    pub sequential_time: Option<f64>,
     /// The build direction chosen by an `[orient]` stage and the alternatives weighed.
     pub orientation: Option<Orientation>,
 }
@@ -583,6 +586,7 @@ impl Engine {
         let window = pool.current_num_threads().max(1) * 4;
         let mut regions = 0;
         let mut build_time: Option<f64> = None;
+        let mut sequential_time: Option<f64> = None;
         for chunk in slots.chunks(window) {
             let plans: Vec<Result<LayerPlan>> = pool.install(|| {
                 chunk
@@ -608,6 +612,9 @@ impl Engine {
                 if let Some(t) = plan.build_time {
                     *build_time.get_or_insert(0.0) += t;
                 }
+                if let Some(t) = plan.sequential_time {
+                    *sequential_time.get_or_insert(0.0) += t;
+                }
                 for sink in &mut sinks {
                     timings.time(StageKind::Export, || {
                         sink.layer_with_files(&info, &plan, &mut outputs)
@@ -630,6 +637,7 @@ impl Engine {
             warnings,
             timings,
             build_time,
+            sequential_time,
             orientation,
         })
     }
@@ -701,6 +709,7 @@ impl Engine {
             parts,
             toolpaths: Vec::new(),
             build_time: None,
+            sequential_time: None,
             warnings,
         };
         if let Some(planner) = &self.planner {

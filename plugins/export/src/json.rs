@@ -80,6 +80,8 @@ struct LayerOut<'a> {
     toolpaths: Option<&'a [Toolpath]>,
     #[serde(skip_serializing_if = "Option::is_none")]
     build_time: Option<f64>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    sequential_time: Option<f64>,
     #[serde(skip_serializing_if = "<[String]>::is_empty")]
     warnings: &'a [String],
 }
@@ -178,6 +180,7 @@ fn layer_out<'a>(info: &'a RunInfo, plan: &'a LayerPlan, toolpaths: bool) -> Lay
         parts,
         toolpaths: (toolpaths && !plan.toolpaths.is_empty()).then_some(plan.toolpaths.as_slice()),
         build_time: plan.build_time,
+        sequential_time: plan.sequential_time,
         warnings: &plan.warnings,
     }
 }

@@ -122,6 +122,7 @@ fn layers(seed: u64) -> Vec<LayerPlan> {
                 parts: Vec::new(),
                 toolpaths,
                 build_time: Some(t),
+                sequential_time: None,
                 warnings: Vec::new(),
             }
         })

@@ -292,6 +292,7 @@ impl Planner for Concurrent {
         }
         plan.toolpaths.extend(paths);
         plan.build_time = Some(plan.build_time.unwrap_or(0.0) + t);
+        plan.sequential_time = Some(plan.sequential_time.unwrap_or(0.0) + seq_time);
         Ok(())
     }
 }

@@ -125,6 +125,7 @@ fn layout(rng: &mut Rng, tools: usize) -> (RunInfo, LayerPlan) {
         parts: layers,
         toolpaths: Vec::new(),
         build_time: None,
+        sequential_time: None,
         warnings: Vec::new(),
     };
     (info, plan)
@@ -320,5 +321,25 @@ fn sequential_time_is_path_length_over_speed_plus_tool_changes() {
     // Closed loops: each extrusion ends where it starts.
     for p in plan.toolpaths.iter().filter(|p| p.kind == PathKind::Extrude) {
         assert!((p.points[0].p - p.points[p.points.len() - 1].p).norm() < 1e-9);
+    }
+}
+
+#[test]
+fn concurrent_plans_report_the_sequential_baseline() {
+    for seed in 1..6 {
+        let mut rng = Rng(seed);
+        let (info, plan) = layout(&mut rng, 3);
+        let mut conc = plan.clone();
+        planner("use = \"concurrent\"\nenvelope = 2.0")
+            .plan(&info, &mut conc)
+            .expect("plans");
+        let mut seq = plan;
+        planner("use = \"sequential\"\nenvelope = 2.0")
+            .plan(&info, &mut seq)
+            .expect("plans");
+        let (t, s) = (conc.build_time.expect("timed"), seq.build_time.expect("timed"));
+        assert_eq!(conc.sequential_time, Some(s), "seed {seed}");
+        assert!(seq.sequential_time.is_none());
+        assert!(t <= s + 1e-9, "seed {seed}: concurrent {t} > sequential {s}");
     }
 }
