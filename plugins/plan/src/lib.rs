@@ -1,8 +1,9 @@
 //! lamina-plan: toolpath planners. Every sub-region is filled with contour-parallel
 //! closed loops along its iso-material contours (`fill`), the loops are handed to the
 //! tools and ordered nearest-next (`route`), and the tools' routes are timed either one
-//! tool after another (`sequential`, the baseline) or all at once with dynamic
-//! priority (`concurrent`, `sim`).
+//! tool after another (`sequential`, the baseline, also registered as `contour` for the
+//! single-tool and mixing-head case) or all at once with dynamic priority
+//! (`concurrent`, `sim`).
 //!
 //! Tools: without `mixing`, there is one tool per pipeline material (tool i deposits
 //! material i) and a sub-region goes to the tool of its dominant material, which suits
@@ -333,6 +334,17 @@ lamina_core::register_stage!(StageFactory {
         doc: "Contour-parallel loops in every sub-region, deposited one tool after another (the baseline).",
         options: common_options!(),
         example: "use = \"sequential\"\nwidth = 0.5",
+    },
+    build: build_sequential,
+});
+
+lamina_core::register_stage!(StageFactory {
+    info: StageInfo {
+        kind: StageKind::Plan,
+        name: "contour",
+        doc: "Toolpaths along the iso-material contours: closed contour-parallel loops filling every sub-region, deposited tool by tool (with `mixing = true`, by one mixing head). The fill of `sequential` and `concurrent`, under the name of the method.",
+        options: common_options!(),
+        example: "use = \"contour\"\nwidth = 0.4\nmixing = true\nseam = \"aligned\"",
     },
     build: build_sequential,
 });

@@ -340,6 +340,16 @@ fn concurrent_plans_report_the_sequential_baseline() {
         let (t, s) = (conc.build_time.expect("timed"), seq.build_time.expect("timed"));
         assert_eq!(conc.sequential_time, Some(s), "seed {seed}");
         assert!(seq.sequential_time.is_none());
+        let mut contour = conc.clone();
+        contour.toolpaths.clear();
+        contour.build_time = None;
+        planner("use = \"contour\"\nenvelope = 2.0")
+            .plan(&info, &mut contour)
+            .expect("plans");
+        assert_eq!(
+            contour.toolpaths, seq.toolpaths,
+            "`contour` is the sequential fill"
+        );
         assert!(t <= s + 1e-9, "seed {seed}: concurrent {t} > sequential {s}");
     }
 }
