@@ -214,7 +214,7 @@ fn build(config: &StageConfig<'_>) -> Result<AnyStage> {
     let o: Options = config.parse()?;
     let levels = match o.step {
         Some(step) => Levels::Steps(Truncation::new(step).map_err(|e| config.error("step", e))?),
-        None if (1..=crate::offset::MAX_COUNT).contains(&o.count) => Levels::Equal(o.count),
+        None if (1..=crate::options::MAX_COUNT).contains(&o.count) => Levels::Equal(o.count),
         None => return Err(config.error("count", format!("`count` must be at least 1, not {}", o.count))),
     };
     if !(8..=8192).contains(&o.cells) {

@@ -28,6 +28,7 @@ mod inset;
 pub mod iso;
 pub mod measure;
 mod offset;
+mod options;
 mod radial;
 mod regions;
 pub mod shapes;

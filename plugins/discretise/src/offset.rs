@@ -13,12 +13,10 @@ use crate::cells::Cells;
 use crate::grid::Grid;
 use crate::inset::{From, Inset, Join};
 use crate::measure::{min_contour_distance, pole};
+use crate::options::{self, MAX_COUNT, positive_mm};
 use crate::regions::{from_bands, uniform_level, whole};
 
 const STAGE: &str = "discretise:offset";
-
-/// More rings than any nozzle could deposit in a layer: a guard against typos.
-pub const MAX_COUNT: usize = 10_000;
 
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -114,25 +112,13 @@ fn build(config: &StageConfig<'_>) -> Result<AnyStage> {
     Ok(AnyStage::Discretise(Box::new(checked(&o, config)?)))
 }
 
-fn positive(config: &StageConfig<'_>, key: &str, v: f64) -> Result<f64> {
-    if v > 0.0 && v.is_finite() {
-        Ok(v)
-    } else {
-        Err(config.error(key, format!("`{key}` must be a positive number of mm, not {v}")))
-    }
-}
-
 fn checked(o: &Options, config: &StageConfig<'_>) -> Result<Offset> {
-    positive(config, "nozzle", o.nozzle)?;
-    positive(config, "tolerance", o.tolerance)?;
+    positive_mm(config, "nozzle", o.nozzle)?;
+    positive_mm(config, "tolerance", o.tolerance)?;
     if let Some(s) = o.spacing {
-        positive(config, "spacing", s)?;
+        positive_mm(config, "spacing", s)?;
     }
-    if let Some(n) = o.count
-        && !(1..=MAX_COUNT).contains(&n)
-    {
-        return Err(config.error("count", format!("`count` must be in 1..={MAX_COUNT}, not {n}")));
-    }
+    options::count(config, o.count)?;
     Ok(Offset {
         nozzle: o.nozzle,
         count: o.count,
@@ -152,18 +138,8 @@ lamina_core::register_stage!(StageFactory {
         name: "offset",
         doc: "Method 1: rings between equally spaced inward offsets of the family (outer and holes), N_R = int(reach / nozzle).",
         options: &[
-            OptionSpec::new(
-                "nozzle",
-                "float",
-                "0.4",
-                "nozzle diameter D_N (mm) for N_R = int(L_s / D_N)"
-            ),
-            OptionSpec::new(
-                "count",
-                "integer",
-                "none",
-                "number of sub-regions N_R instead of the nozzle rule"
-            ),
+            options::NOZZLE,
+            options::COUNT,
             OptionSpec::new(
                 "spacing",
                 "float",
@@ -176,18 +152,8 @@ lamina_core::register_stage!(StageFactory {
                 "\"all\"",
                 "grading reference: `all` (outer and holes move in together, reach L_s / 2) or `outer` (toward the holes, reach L_s)"
             ),
-            OptionSpec::new(
-                "join",
-                "string",
-                "\"round\"",
-                "offset corners: `round` (exact distance), `miter` or `bevel`"
-            ),
-            OptionSpec::new(
-                "tolerance",
-                "float",
-                "0.005",
-                "largest arc-to-chord distance of round corners (mm)"
-            ),
+            options::JOIN,
+            options::TOLERANCE,
             crate::cells::AROUND_OPTION,
             crate::cells::LENGTH_OPTION,
         ],

@@ -9,9 +9,7 @@
 
 use i_overlay::core::fill_rule::FillRule;
 use i_overlay::core::overlay::ShapeType;
-use lamina_core::stage::{
-    AnyStage, Discretiser, FamilyContext, OptionSpec, StageConfig, StageInfo, StageKind,
-};
+use lamina_core::stage::{AnyStage, Discretiser, FamilyContext, StageConfig, StageInfo, StageKind};
 use lamina_core::{Contour, Point2, Polygon, Region, Result, StageFactory};
 use serde::Deserialize;
 
@@ -20,7 +18,8 @@ use crate::cells::Cells;
 use crate::grid::Grid;
 use crate::inset::From;
 use crate::measure::pole;
-use crate::offset::{MAX_COUNT, reach};
+use crate::offset::reach;
+use crate::options::{self, MAX_COUNT, positive_mm};
 use crate::regions::{from_bands, uniform_level, whole};
 
 const STAGE: &str = "discretise:radial";
@@ -272,17 +271,8 @@ impl Discretiser for Radial {
 
 fn build(config: &StageConfig<'_>) -> Result<AnyStage> {
     let o: Options = config.parse()?;
-    if !(o.nozzle > 0.0 && o.nozzle.is_finite()) {
-        return Err(config.error(
-            "nozzle",
-            format!("`nozzle` must be a positive number of mm, not {}", o.nozzle),
-        ));
-    }
-    if let Some(n) = o.count
-        && !(1..=MAX_COUNT).contains(&n)
-    {
-        return Err(config.error("count", format!("`count` must be in 1..={MAX_COUNT}, not {n}")));
-    }
+    positive_mm(config, "nozzle", o.nozzle)?;
+    options::count(config, o.count)?;
     let cells = Cells::checked(o.cells_around, o.cell_length, config)?;
     Ok(AnyStage::Discretise(Box::new(Radial {
         nozzle: o.nozzle,
@@ -297,18 +287,8 @@ lamina_core::register_stage!(StageFactory {
         name: "radial",
         doc: "Method 2: radial lines from the outer contour to the inner contours (or the centre), divided into N_R equal parts; offset contours through the dividing points (Eq. 17).",
         options: &[
-            OptionSpec::new(
-                "nozzle",
-                "float",
-                "0.4",
-                "nozzle diameter D_N (mm) for N_R = int(L_s / D_N)"
-            ),
-            OptionSpec::new(
-                "count",
-                "integer",
-                "none",
-                "number of sub-regions N_R instead of the nozzle rule"
-            ),
+            options::NOZZLE,
+            options::COUNT,
             crate::cells::AROUND_OPTION,
             crate::cells::LENGTH_OPTION,
         ],

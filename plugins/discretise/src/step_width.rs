@@ -14,6 +14,7 @@ use crate::cells::Cells;
 use crate::grid::Grid;
 use crate::inset::{From, Inset, Join};
 use crate::measure::{contour_distance, pole};
+use crate::options::positive_mm;
 use crate::regions::{from_bands, whole};
 
 const STAGE: &str = "discretise:step-width";
@@ -164,17 +165,10 @@ fn build(config: &StageConfig<'_>) -> Result<AnyStage> {
     if o.power.is_nan() || o.power <= 0.0 || o.power.is_infinite() {
         return Err(config.error("power", format!("`power` must be positive, not {}", o.power)));
     }
-    if let Some(w) = o.width
-        && (w.is_nan() || w <= 0.0 || w.is_infinite())
-    {
-        return Err(config.error(
-            "width",
-            format!("`width` must be a positive number of mm, not {w}"),
-        ));
+    if let Some(w) = o.width {
+        positive_mm(config, "width", w)?;
     }
-    if o.tolerance.is_nan() || o.tolerance <= 0.0 {
-        return Err(config.error("tolerance", "`tolerance` must be positive"));
-    }
+    positive_mm(config, "tolerance", o.tolerance)?;
     Ok(AnyStage::Discretise(Box::new(StepWidth {
         truncation,
         power: o.power,
@@ -218,18 +212,8 @@ lamina_core::register_stage!(StageFactory {
                 "\"all\"",
                 "distance reference: `all` boundaries or the `outer` contour"
             ),
-            OptionSpec::new(
-                "join",
-                "string",
-                "\"round\"",
-                "offset corners: `round` (exact distance), `miter` or `bevel`"
-            ),
-            OptionSpec::new(
-                "tolerance",
-                "float",
-                "0.005",
-                "largest arc-to-chord distance of round corners (mm)"
-            ),
+            crate::options::JOIN,
+            crate::options::TOLERANCE,
             crate::cells::AROUND_OPTION,
             crate::cells::LENGTH_OPTION,
         ],
