@@ -5,43 +5,25 @@
 //!
 //! Run: `cargo bench --bench discretise` (the median of 5 runs; `--quick` runs once).
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use lamina_core::Contour;
 use lamina_core::stage::{Discretiser, FamilyContext, MeshSlicer};
-use lamina_core::{AnyStage, ContourTree, Layer, Registry, RunInfo, StageKind};
+use lamina_core::{AnyStage, ContourTree, Layer, RunInfo, StageKind};
 use lamina_discretise::distance_field::{DistanceField, Feature, Levels};
 use lamina_discretise::field::Field;
 use lamina_discretise::iso::iso_levels;
 use rayon::prelude::*;
 
-fn stage(kind: StageKind, text: &str, dir: &Path) -> AnyStage {
-    use lamina_discretise as _;
-    use lamina_model as _;
-    use lamina_slice as _;
-    use lamina_sort as _;
-    let table = lamina_core::pipeline::TableRef::parse_snippet(kind.name(), text).expect("snippet");
-    let scripts = lamina_core::script::ScriptHost::new(dir, Default::default());
-    Registry::linked()
-        .expect("registry")
-        .build(kind, &table, &scripts, dir)
-        .expect("stage builds")
-}
+#[path = "common/mod.rs"]
+mod common;
+use common::{load, median, stage};
 
 /// Every layer of the model at 0.2 mm with its contour tree.
 fn layers(dir: &Path, file: &str) -> (RunInfo, Vec<(Layer, ContourTree)>) {
-    let AnyStage::Model(source) = stage(
-        StageKind::Model,
-        &format!("use = \"stl\"\nfile = \"{file}\""),
-        dir,
-    ) else {
-        unreachable!()
-    };
-    let mut meshes = source.load(dir).expect("loads");
-    lamina_core::runtime::place(&mut meshes, 1.0, lamina_core::pipeline::Placement::Bed);
-    let mesh = Arc::new(meshes.remove(0));
+    let mesh = Arc::new(load(dir, file));
     let AnyStage::Slice(slicer) = stage(StageKind::Slice, "use = \"uniform\"\nthickness = 0.2", dir) else {
         unreachable!()
     };
@@ -94,16 +76,9 @@ fn process_cpu() -> Option<Duration> {
     Some(Duration::from_millis(ticks * 10))
 }
 
-fn median(mut v: Vec<Duration>) -> Duration {
-    v.sort();
-    v[v.len() / 2]
-}
-
 fn main() {
     let quick = std::env::args().any(|a| a == "--quick");
-    let dir = std::env::var_os("LAMINA_MODELS")
-        .map(PathBuf::from)
-        .unwrap_or_else(|| PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../shared/models"));
+    let dir = common::models_dir();
     if !dir.join("3DBenchy.stl").exists() {
         println!(
             "note: 3DBenchy.stl not found in {}; benchmark skipped",

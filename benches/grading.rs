@@ -7,29 +7,16 @@
 //!
 //! Run: `cargo bench --bench grading` (median of 5 after a warm-up; `--quick`: one run).
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::time::Duration;
 
 use lamina_core::pipeline::Pipeline;
 use lamina_core::runtime::{Engine, RunOptions, RunReport, Silent};
-use lamina_core::{Registry, SourceFile, StageKind};
+use lamina_core::{SourceFile, StageKind};
 
-fn models_dir() -> Option<PathBuf> {
-    let dir = std::env::var_os("LAMINA_MODELS")
-        .map(PathBuf::from)
-        .unwrap_or_else(|| PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../shared/models"));
-    dir.join("3DBenchy.stl").exists().then_some(dir)
-}
-
-fn registry() -> Registry {
-    use lamina_discretise as _;
-    use lamina_export as _;
-    use lamina_grade as _;
-    use lamina_model as _;
-    use lamina_slice as _;
-    use lamina_sort as _;
-    Registry::linked().expect("registry")
-}
+#[path = "common/mod.rs"]
+mod common;
+use common::{median, registry};
 
 fn pipeline(models: &Path, grade: &str) -> String {
     format!(
@@ -50,14 +37,9 @@ fn run(text: &str, out: &Path) -> RunReport {
     engine.run(&out.join("out"), &Silent).expect("runs")
 }
 
-fn median(mut v: Vec<Duration>) -> Duration {
-    v.sort();
-    v[v.len() / 2]
-}
-
 fn main() {
     let quick = std::env::args().any(|a| a == "--quick");
-    let Some(models) = models_dir() else {
+    let Some(models) = common::benchy_dir() else {
         println!(
             "note: ../shared/models/3DBenchy.stl not found (set LAMINA_MODELS); grading benchmark skipped"
         );

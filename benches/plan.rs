@@ -12,33 +12,16 @@
 use std::path::{Path, PathBuf};
 use std::time::Duration;
 
+use lamina_core::StageKind;
 use lamina_core::pipeline::{Override, Pipeline};
 use lamina_core::runtime::{Engine, RunOptions, RunReport, Silent};
-use lamina_core::{Registry, StageKind};
+
+#[path = "common/mod.rs"]
+mod common;
+use common::{median, registry};
 
 fn root() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-}
-
-/// The folder holding 3DBenchy.stl, when there is one.
-fn benchy() -> Option<PathBuf> {
-    let dir = std::env::var_os("LAMINA_MODELS")
-        .map(PathBuf::from)
-        .unwrap_or_else(|| root().join("../shared/models"));
-    let file = dir.join("3DBenchy.stl");
-    file.exists().then_some(file)
-}
-
-fn registry() -> Registry {
-    use lamina_discretise as _;
-    use lamina_export as _;
-    use lamina_gcode as _;
-    use lamina_grade as _;
-    use lamina_model as _;
-    use lamina_plan as _;
-    use lamina_slice as _;
-    use lamina_sort as _;
-    Registry::linked().expect("registry")
 }
 
 fn set(s: &str) -> Override {
@@ -50,11 +33,6 @@ fn run(name: &str, overrides: &[Override], out: &Path) -> RunReport {
     let pipeline = Pipeline::load(&root().join("pipelines").join(name), overrides).expect("pipeline");
     let engine = Engine::build(pipeline, registry(), &RunOptions::default()).expect("engine");
     engine.run(out, &Silent).expect("runs")
-}
-
-fn median(mut v: Vec<Duration>) -> Duration {
-    v.sort();
-    v[v.len() / 2]
 }
 
 /// Concurrent and sequential planned build times (s) of one pipeline.
@@ -76,7 +54,7 @@ fn main() {
     let runs = if quick { 1 } else { 5 };
     let dir = tempfile::tempdir().expect("tempdir");
     let out = dir.path().join("out");
-    let model = benchy();
+    let model = common::benchy_dir().map(|d| d.join("3DBenchy.stl"));
     let benchy_overrides: Vec<Override> = model
         .iter()
         .map(|f| set(&format!("model.file={:?}", f.display().to_string())))

@@ -12,33 +12,12 @@ use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use lamina_core::stage::{MeshSlicer, Slicer, Sorter};
-use lamina_core::{AnyStage, Mesh, Point3, Registry, RunInfo, StageKind};
+use lamina_core::{AnyStage, Mesh, Point3, RunInfo, StageKind};
 use rayon::prelude::*;
 
-fn stage(kind: StageKind, text: &str, dir: &Path) -> AnyStage {
-    use lamina_model as _;
-    use lamina_slice as _;
-    use lamina_sort as _;
-    let table = lamina_core::pipeline::TableRef::parse_snippet(kind.name(), text).expect("snippet");
-    let scripts = lamina_core::script::ScriptHost::new(dir, Default::default());
-    Registry::linked()
-        .expect("registry")
-        .build(kind, &table, &scripts, dir)
-        .expect("stage builds")
-}
-
-fn load(dir: &Path, file: &str) -> Mesh {
-    let AnyStage::Model(source) = stage(
-        StageKind::Model,
-        &format!("use = \"stl\"\nfile = \"{file}\""),
-        dir,
-    ) else {
-        unreachable!()
-    };
-    let mut meshes = source.load(dir).expect("loads");
-    lamina_core::runtime::place(&mut meshes, 1.0, lamina_core::pipeline::Placement::Bed);
-    meshes.remove(0)
-}
+#[path = "common/mod.rs"]
+mod common;
+use common::{load, median, stage};
 
 /// Splits every triangle into four (midpoints shared through an edge map).
 fn subdivide(mesh: &Mesh) -> Mesh {
@@ -119,11 +98,6 @@ fn run(dir: &Path, file: &str, thickness: f64) -> Times {
     }
 }
 
-fn median(mut v: Vec<Duration>) -> Duration {
-    v.sort();
-    v[v.len() / 2]
-}
-
 fn ms(d: Duration) -> f64 {
     d.as_secs_f64() * 1e3
 }
@@ -153,9 +127,7 @@ fn main() {
     let quick = args.iter().any(|a| a == "--quick");
     // Words that are not options select models by a part of their name.
     let filters: Vec<&String> = args.iter().filter(|a| !a.starts_with('-')).collect();
-    let dir = std::env::var_os("LAMINA_MODELS")
-        .map(PathBuf::from)
-        .unwrap_or_else(|| PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../shared/models"));
+    let dir = common::models_dir();
     if !dir.is_dir() {
         println!("note: {} not found; slicing benchmark skipped", dir.display());
         return;
