@@ -396,8 +396,14 @@ pub struct Toolpath {
     pub tool: usize,
     pub kind: PathKind,
     pub points: Vec<TimedPoint>,
-    /// Extrusion width (mm); 0 for travel.
+    /// Extrusion width (mm); 0 for travel. The width of every segment unless
+    /// `widths` says otherwise.
     pub width: f64,
+    /// Width of each segment (`points[i]` to `points[i + 1]`) of a variable-width bead,
+    /// whose width follows the local width of what it fills; empty when every segment
+    /// has `width`.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub widths: Vec<f64>,
     /// Composition deposited along the path (over the part's materials), if extruding.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub composition: Option<Composition>,
@@ -411,6 +417,23 @@ pub struct Toolpath {
 impl Toolpath {
     pub fn length(&self) -> f64 {
         self.points.windows(2).map(|w| (w[1].p - w[0].p).norm()).sum()
+    }
+
+    /// The width of segment `i` (from `points[i]` to `points[i + 1]`).
+    pub fn segment_width(&self, i: usize) -> f64 {
+        self.widths.get(i).copied().unwrap_or(self.width)
+    }
+
+    /// The area the path's bead covers (mm²): each segment's length times its width.
+    pub fn bead_area(&self) -> f64 {
+        if self.kind != PathKind::Extrude {
+            return 0.0;
+        }
+        self.points
+            .windows(2)
+            .enumerate()
+            .map(|(i, w)| (w[1].p - w[0].p).norm() * self.segment_width(i))
+            .sum()
     }
 }
 

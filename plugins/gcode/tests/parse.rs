@@ -96,6 +96,7 @@ fn layers(seed: u64) -> Vec<LayerPlan> {
                     } else {
                         0.0
                     },
+                    widths: Vec::new(),
                     composition: (kind == PathKind::Extrude)
                         .then(|| Composition::binary(f.min(1.0)).expect("valid")),
                     part: Some(0),
@@ -108,6 +109,7 @@ fn layers(seed: u64) -> Vec<LayerPlan> {
                         kind: PathKind::Pause,
                         points: vec![TimedPoint { p, t }, TimedPoint { p, t: t + 1.0 }],
                         width: 0.0,
+                        widths: Vec::new(),
                         composition: None,
                         part: None,
                         region: None,
