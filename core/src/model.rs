@@ -467,8 +467,24 @@ pub struct LayerPlan {
     /// tools concurrently also timed that baseline.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub sequential_time: Option<f64>,
+    /// How much of the layer's sub-regions the planned beads fill, when planned.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub fill: Option<Fill>,
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub warnings: Vec<String>,
+}
+
+/// The area a planner was given to fill in a layer and the area its beads cover
+/// (length x width of every extrusion), with the least share the run must reach over
+/// all its layers: an under-filled part fails the run rather than leaving quietly.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct Fill {
+    /// Sub-regions' area (mm²).
+    pub area: f64,
+    /// Beads' area (mm²).
+    pub deposited: f64,
+    /// Least deposited / area over the whole run (volumes, layer thickness weighted).
+    pub min_ratio: f64,
 }
 
 #[cfg(test)]

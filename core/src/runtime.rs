@@ -111,6 +111,9 @@ pub struct RunReport {
     /// Sum of the layers' one-tool-at-a-time build times (s), when the planner timed
     /// that baseline (a concurrent planner).
     pub sequential_time: Option<f64>,
+    /// Volume the planned beads deposit and volume of the sub-regions they fill (mm³),
+    /// when a planner reported its fill.
+    pub fill: Option<(f64, f64)>,
     /// The build direction chosen by an `[orient]` stage and the alternatives weighed.
     pub orientation: Option<Orientation>,
 }
@@ -587,6 +590,8 @@ impl Engine {
         let mut regions = 0;
         let mut build_time: Option<f64> = None;
         let mut sequential_time: Option<f64> = None;
+        let mut fill: Option<(f64, f64)> = None;
+        let mut min_fill = 0.0f64;
         for chunk in slots.chunks(window) {
             let plans: Vec<Result<LayerPlan>> = pool.install(|| {
                 chunk
@@ -615,6 +620,12 @@ impl Engine {
                 if let Some(t) = plan.sequential_time {
                     *sequential_time.get_or_insert(0.0) += t;
                 }
+                if let Some(f) = plan.fill {
+                    let sum = fill.get_or_insert((0.0, 0.0));
+                    sum.0 += f.deposited * plan.thickness;
+                    sum.1 += f.area * plan.thickness;
+                    min_fill = min_fill.max(f.min_ratio);
+                }
                 for sink in &mut sinks {
                     timings.time(StageKind::Export, || {
                         sink.layer_with_files(&info, &plan, &mut outputs)
@@ -622,6 +633,20 @@ impl Engine {
                 }
                 observer.layer_done(plan.index);
             }
+        }
+        if let Some((deposited, volume)) = fill
+            && volume > 0.0
+            && deposited < min_fill * volume
+        {
+            return Err(Error::stage(
+                "plan",
+                format!(
+                    "the toolpaths deposit {deposited:.1} mm³ of the {volume:.1} mm³ to fill ({:.1} %, \
+                     below the {:.1} % asked by `min_fill`); see the layers' warnings for what is left out",
+                    100.0 * deposited / volume,
+                    100.0 * min_fill
+                ),
+            ));
         }
         for sink in sinks {
             timings.time(StageKind::Export, || sink.finish_with_files(&info, &mut outputs))?;
@@ -638,6 +663,7 @@ impl Engine {
             timings,
             build_time,
             sequential_time,
+            fill,
             orientation,
         })
     }
@@ -710,6 +736,7 @@ impl Engine {
             toolpaths: Vec::new(),
             build_time: None,
             sequential_time: None,
+            fill: None,
             warnings,
         };
         if let Some(planner) = &self.planner {

@@ -306,12 +306,17 @@ impl LayerSink for Sink {
                     } else {
                         Some(self.mix_of(info, path))
                     };
-                    for w in path.points.windows(2) {
+                    for (i, w) in path.points.windows(2).enumerate() {
                         let d = (w[1].p - w[0].p).norm();
                         if d <= 0.0 {
                             continue;
                         }
-                        let de = filament_length(d, path.width, plan.thickness, self.o.filament_diameter);
+                        let de = filament_length(
+                            d,
+                            path.segment_width(i),
+                            plan.thickness,
+                            self.o.filament_diameter,
+                        );
                         let e = self.e_word(de);
                         match &mix {
                             None => {

@@ -125,6 +125,7 @@ fn layers(seed: u64) -> Vec<LayerPlan> {
                 toolpaths,
                 build_time: Some(t),
                 sequential_time: None,
+                fill: None,
                 warnings: Vec::new(),
             }
         })

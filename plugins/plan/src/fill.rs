@@ -1,69 +1,81 @@
-//! Contour-parallel fill of one sub-region: closed loops along the iso-material
-//! contours (the region's boundary offset inward by w/2, 3w/2, ...). Each loop's bead
-//! covers the band within w/2 of it, so consecutive loops w apart neither leave a gap
-//! nor deposit twice; what stays uncovered is the part of the medial band narrower
-//! than one width. A last pass that is a ring narrower than one width keeps only its
-//! outer side, where loops along both would deposit their overlap twice; a last pass
-//! that is a hole-free sliver keeps its loop (a centre line would need the medial
-//! axis).
+//! The fill of one sub-region, to its boundary. Bead width is first fitted to the
+//! region: a band of the discretiser (a ring between two iso-material contours) of
+//! width W takes n = W / w' beads exactly when w' = W / n lies in the nozzle's width
+//! range, so the nominal width is bent within that range to the nearest whole count
+//! (the region's mean width, twice its area over its perimeter, stands for W).
+//!
+//! Then, level by level from the boundary inward (E_0 is the region, E_k+1 = E_k
+//! eroded by w'), a closed loop of width w' runs at depth (k + ½) w' wherever the
+//! region reaches depth (k + 1) w' (up to a slack of a tenth of w'): the boundary of
+//! the erosion to that depth dilated back by w'/2. Its bead covers depths k w' to
+//! (k + 1) w' and nothing of the next level, so loops never overlap beyond that slack.
+//! What no loop covers (the medial band where the region is too thin for another
+//! loop, and the corners between two loops) is the residue of each level, E_k minus
+//! the loop's band; it is filled by variable-width beads along its centre line
+//! ([`crate::axis`]), whose widths follow the residue's local width and whose areas
+//! add up to the residue's. Loops and centre beads together fill the region's area.
 
+use i_overlay::core::fill_rule::FillRule;
+use i_overlay::core::overlay_rule::OverlayRule;
+use i_overlay::float::single::SingleFloatOverlay;
 use i_overlay::mesh::float::outline::offset::OutlineOffset;
 use i_overlay::mesh::float::style::{LineJoin, OutlineStyle};
 use lamina_core::{Point2, Polygon};
 
+use crate::axis::centre_beads;
+use crate::bead::Bead;
+
 /// Largest distance (mm) between a round offset corner and its chords.
 const TOLERANCE: f64 = 0.005;
 
-/// Upper bound on passes per region, so a huge region with a tiny width cannot run
+/// Upper bound on levels per region, so a huge region with a tiny width cannot run
 /// away with memory.
 const MAX_PASSES: usize = 100_000;
 
-/// One closed pass: `points.first() == points.last()`.
-#[derive(Debug, Clone, PartialEq)]
-pub struct Loop {
-    pub points: Vec<Point2>,
+/// Residue pieces smaller than this (mm²) are rounding noise of the offsets, not
+/// something a nozzle can lay.
+const MIN_RESIDUE: f64 = 1e-5;
+
+/// The widths a nozzle lays: the nominal one and the range a bead may be bent to.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Widths {
+    pub nominal: f64,
+    pub min: f64,
+    pub max: f64,
 }
 
-impl Loop {
-    pub fn length(&self) -> f64 {
-        self.points.windows(2).map(|w| (w[1] - w[0]).norm()).sum()
-    }
-
-    /// Restarts the closed loop at vertex `i` (the seam), keeping start = end.
-    pub fn rotated(&self, i: usize) -> Loop {
-        let n = self.points.len().saturating_sub(1);
-        if n == 0 || i == 0 || i >= n {
-            return self.clone();
+impl Widths {
+    /// The width of the loops of a region whose mean width is `mean`: the nominal width
+    /// bent, within the range, to fill the mean width with a whole number of beads.
+    pub fn fitted(&self, mean: f64) -> f64 {
+        if !(mean.is_finite() && mean > 0.0) {
+            return self.nominal;
         }
-        let mut points: Vec<Point2> = self.points[i..n].to_vec();
-        points.extend_from_slice(&self.points[..=i]);
-        Loop { points }
-    }
-
-    /// Index and distance of the vertex nearest to `p`.
-    pub fn nearest_vertex(&self, p: Point2) -> (usize, f64) {
-        let n = self.points.len().saturating_sub(1).max(1).min(self.points.len());
-        let mut best = (0, f64::INFINITY);
-        for (i, q) in self.points[..n].iter().enumerate() {
-            let d2 = (q - p).norm_squared();
-            if d2 < best.1 {
-                best = (i, d2);
+        let n = (mean / self.nominal).round().max(1.0);
+        let mut best: Option<f64> = None;
+        for k in [n, n - 1.0, n + 1.0] {
+            if k < 1.0 {
+                continue;
+            }
+            let w = mean / k;
+            if w >= self.min
+                && w <= self.max
+                && best.is_none_or(|b| (w - self.nominal).abs() < (b - self.nominal).abs())
+            {
+                best = Some(w);
             }
         }
-        (best.0, best.1.sqrt())
+        best.unwrap_or(self.nominal)
     }
+}
 
-    /// Index of the vertex with the largest x (then largest y): an aligned seam.
-    pub fn max_x_vertex(&self) -> usize {
-        let n = self.points.len().saturating_sub(1).max(1);
-        let mut best = 0;
-        for (i, q) in self.points[..n.min(self.points.len())].iter().enumerate() {
-            let b = self.points[best];
-            if q.x > b.x || (q.x == b.x && q.y > b.y) {
-                best = i;
-            }
-        }
-        best
+/// Twice the area over the perimeter: the width of a band, the radius of a disc.
+pub fn mean_width(p: &Polygon) -> f64 {
+    let perimeter: f64 = p.contours().map(lamina_core::Contour::perimeter).sum();
+    if perimeter > 0.0 {
+        2.0 * p.area() / perimeter
+    } else {
+        0.0
     }
 }
 
@@ -87,70 +99,98 @@ fn shapes_of(p: &Polygon) -> Vec<Vec<Vec<[f64; 2]>>> {
     vec![shape]
 }
 
-/// The passes filling `polygon` at extrusion width `width`, outermost first. Empty
-/// when the region is thinner than one width everywhere.
-pub fn contour_passes(polygon: &Polygon, width: f64) -> Vec<Loop> {
-    let mut loops = Vec::new();
-    if width.is_nan() || width <= 0.0 || polygon.outer.len() < 3 || polygon.area() <= 0.0 {
-        return loops;
+type Shapes = Vec<Vec<Vec<[f64; 2]>>>;
+
+/// `shapes` offset by `d` (negative: inward) with round joins, simplified.
+fn offset(shapes: &Shapes, d: f64) -> Shapes {
+    if shapes.is_empty() || d == 0.0 {
+        return shapes.clone();
     }
-    // Each pass is the previous one offset by one width (the first by half a width):
-    // erosions by discs compose, and small offsets need far fewer arc segments for the
-    // same chord tolerance than one large offset of the region.
-    let mut current = shapes_of(polygon);
-    for k in 0..MAX_PASSES {
-        let d = if k == 0 { width / 2.0 } else { width };
-        if current.iter().all(|shape| surely_thin(shape, d)) {
+    let step = 2.0 * (1.0 - (TOLERANCE / d.abs()).min(1.0)).acos();
+    let style = OutlineStyle::new(d).line_join(LineJoin::Round(step.max(0.01)));
+    let out: Shapes = shapes.outline(&style);
+    tidy(out)
+}
+
+/// Offsets of offsets would multiply the arc vertices pass after pass.
+fn tidy(shapes: Shapes) -> Shapes {
+    shapes
+        .into_iter()
+        .map(|shape| {
+            shape
+                .into_iter()
+                .map(|c| simplify(&c, TOLERANCE))
+                .filter(|c| c.len() >= 3)
+                .collect::<Vec<_>>()
+        })
+        .filter(|s: &Vec<Vec<[f64; 2]>>| !s.is_empty())
+        .collect()
+}
+
+/// The area of a shape: its outer ring less its holes (the offsetter writes holes
+/// the other way round, so the signed areas add up to it).
+fn shape_area(shape: &[Vec<[f64; 2]>]) -> f64 {
+    shape
+        .iter()
+        .map(|r| {
+            let n = r.len();
+            (0..n)
+                .map(|i| r[i][0] * r[(i + 1) % n][1] - r[(i + 1) % n][0] * r[i][1])
+                .sum::<f64>()
+                / 2.0
+        })
+        .sum::<f64>()
+        .abs()
+}
+
+/// The beads filling `polygon`: loops outermost first, then the centre beads of what
+/// they leave. Empty only for a region with no area.
+pub fn fill(polygon: &Polygon, widths: &Widths) -> Vec<Bead> {
+    let mut beads = Vec::new();
+    if widths.nominal.is_nan() || widths.nominal <= 0.0 || polygon.outer.len() < 3 || polygon.area() <= 0.0 {
+        return beads;
+    }
+    let w = widths.fitted(mean_width(polygon));
+    let slack = 0.1 * w;
+    let mut level = shapes_of(polygon);
+    let mut residue: Shapes = Vec::new();
+    for _ in 0..MAX_PASSES {
+        if level.is_empty() {
             break;
         }
-        let step = 2.0 * (1.0 - (TOLERANCE / d).min(1.0)).acos();
-        let style = OutlineStyle::new(-d).line_join(LineJoin::Round(step.max(0.01)));
-        let inset: Vec<Vec<Vec<[f64; 2]>>> = current.outline(&style);
-        if inset.is_empty() {
+        // Where the level reaches one more width (less the slack), a loop at half a
+        // width; its band reaches from the level's boundary to the next level's.
+        let deep = if level.iter().all(|shape| surely_thin(shape, w - slack)) {
+            Vec::new()
+        } else {
+            offset(&level, -(w - slack))
+        };
+        if deep.is_empty() {
+            residue.extend(level);
             break;
         }
-        for shape in &inset {
-            // A band narrower than one width everywhere (the last pass of a ring):
-            // beads along both its sides would overlap by the difference, so only its
-            // outer side is deposited, leaving less than one width open.
-            let sides = if shape.len() > 1 && surely_thin(shape, width / 2.0) {
-                1
-            } else {
-                shape.len()
-            };
-            for contour in &shape[..sides] {
-                if contour.len() < 3 {
-                    continue;
-                }
-                let contour = simplify(contour, TOLERANCE);
-                if contour.len() < 3 {
-                    continue;
-                }
-                let mut points: Vec<Point2> = contour.iter().map(|q| Point2::new(q[0], q[1])).collect();
-                // Every loop runs counter-clockwise, holes' too: two tools working
-                // along the same wall then move the same way round instead of
-                // meeting head-on, where one of them must step aside.
-                if signed_area(&points) < 0.0 {
-                    points.reverse();
-                }
-                points.push(points[0]);
-                loops.push(Loop { points });
+        let loops = offset(&deep, w / 2.0 - slack);
+        for contour in loops.iter().flatten() {
+            let mut points: Vec<Point2> = contour.iter().map(|q| Point2::new(q[0], q[1])).collect();
+            // Every loop runs counter-clockwise, holes' too: two tools working along
+            // the same wall then move the same way round instead of meeting head-on,
+            // where one of them must step aside.
+            if signed_area(&points) < 0.0 {
+                points.reverse();
             }
+            beads.push(Bead::closed(points, w));
         }
-        // Offsets of offsets would multiply the arc vertices pass after pass.
-        current = inset
-            .into_iter()
-            .map(|shape| {
-                shape
-                    .into_iter()
-                    .map(|c| simplify(&c, TOLERANCE))
-                    .filter(|c| c.len() >= 3)
-                    .collect()
-            })
-            .filter(|s: &Vec<Vec<[f64; 2]>>| !s.is_empty())
-            .collect();
+        let band = offset(&loops, w / 2.0);
+        let rest: Shapes = tidy(level.overlay(&band, OverlayRule::Difference, FillRule::EvenOdd));
+        residue.extend(rest.into_iter().filter(|s| shape_area(s) > MIN_RESIDUE));
+        level = offset(&level, -w);
     }
-    loops
+    residue.retain(|s| shape_area(s) > MIN_RESIDUE);
+    // Edges split to three widths at most: enough for the chords to run across a
+    // residue (at most two widths wide), and a third of the vertices of a split to
+    // one width; the triangulation is the larger part of the fill's time.
+    beads.extend(centre_beads(&residue, 3.0 * w, TOLERANCE));
+    beads
 }
 
 /// The shoelace area of an open ring (positive counter-clockwise).
@@ -363,66 +403,70 @@ mod tests {
         ])
     }
 
+    const NOZZLE: Widths = Widths {
+        nominal: 0.4,
+        min: 0.24,
+        max: 0.6,
+    };
+
+    fn filled(beads: &[Bead]) -> f64 {
+        beads.iter().map(Bead::area).sum()
+    }
+
     #[test]
-    fn a_square_gets_concentric_closed_loops() {
+    fn widths_are_bent_to_a_whole_count() {
+        // A 1.1 mm ring: three beads of 0.367, not two of 0.4 and a gap.
+        assert!((NOZZLE.fitted(1.1) - 1.1 / 3.0).abs() < 1e-12);
+        assert!((NOZZLE.fitted(0.5) - 0.5).abs() < 1e-12);
+        assert!((NOZZLE.fitted(0.7) - 0.35).abs() < 1e-12);
+        assert_eq!(NOZZLE.fitted(0.1), 0.4, "nothing in range");
+    }
+
+    #[test]
+    fn a_square_is_filled_to_its_area() {
         let p = Polygon::new(square(0.0, 5.0), vec![]);
-        let loops = contour_passes(&p, 0.4);
-        // Offsets at 0.2, 0.6, ..., 4.6 (12 passes; 5.0 is the inradius).
-        assert_eq!(loops.len(), 12, "{}", loops.len());
-        for l in &loops {
-            assert_eq!(l.points.first(), l.points.last());
-        }
-        let deposited: f64 = loops.iter().map(|l| l.length() * 0.4).sum();
-        assert!((deposited - p.area()).abs() / p.area() < 0.02, "{deposited}");
-    }
-
-    #[test]
-    fn a_ring_gets_loops_around_the_hole_and_a_thin_region_none() {
-        let p = Polygon::new(square(0.0, 5.0), vec![square(0.0, 3.0).oriented(false)]);
-        let loops = contour_passes(&p, 0.4);
-        // A 2 mm band: passes at 0.2 and 0.6 mm from each side, and small loops in the
-        // four thicker corners; along the sides the medial band 0.8..1.2 mm (one width)
-        // stays open rather than being deposited twice.
-        assert_eq!(loops.len(), 8);
-        let deposited: f64 = loops.iter().map(|l| l.length() * 0.4).sum();
-        let gap = 8.0 * 4.0 * 0.4;
+        let beads = fill(&p, &NOZZLE);
         assert!(
-            deposited <= p.area() && deposited + gap >= p.area() - 0.5,
-            "{deposited} vs {}",
-            p.area()
+            beads
+                .iter()
+                .all(|b| b.points.len() >= 2 && b.widths.len() + 1 == b.points.len())
         );
+        let loops = beads.iter().filter(|b| b.closed).count();
+        // Mean width 5 mm: beads of 5 / 12 mm, twelve loops deep... less the centre.
+        assert!(loops >= 10, "{loops}");
+        let a = filled(&beads);
+        assert!((a - p.area()).abs() / p.area() < 0.01, "{a} vs {}", p.area());
+        for b in &beads {
+            for w in &b.widths {
+                assert!(*w > 0.0 && *w < 1.0, "{w}");
+            }
+        }
+    }
+
+    #[test]
+    fn rings_are_filled_without_gaps_or_overlaps() {
+        for band in [0.3, 0.5, 0.6, 0.8, 1.1, 1.3, 2.0, 2.75] {
+            let p = Polygon::new(square(0.0, 5.0), vec![square(0.0, 5.0 - band).oriented(false)]);
+            let beads = fill(&p, &NOZZLE);
+            let a = filled(&beads);
+            assert!(
+                (a - p.area()).abs() / p.area() < 0.01,
+                "band {band}: {a} vs {}",
+                p.area()
+            );
+            for b in &beads {
+                for w in &b.widths {
+                    assert!(*w < 2.0 * NOZZLE.max, "band {band}: width {w}");
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn a_thin_region_gets_a_centre_bead() {
         let thin = Polygon::new(square(0.0, 0.15), vec![]);
-        assert!(contour_passes(&thin, 0.4).is_empty());
-    }
-
-    #[test]
-    fn a_ring_narrower_than_two_widths_gets_one_loop_not_two_overlapping() {
-        // A 0.6 mm band: the pass at 0.2 mm is a 0.2 mm ring; beads along both its
-        // sides would overlap by 0.2 mm, so only the outer one is laid.
-        let p = Polygon::new(square(0.0, 5.0), vec![square(0.0, 4.4).oriented(false)]);
-        let loops = contour_passes(&p, 0.4);
-        assert_eq!(loops.len(), 1);
-        let deposited = loops[0].length() * 0.4;
-        assert!(deposited <= p.area() + 1e-6, "{deposited} vs {}", p.area());
-        assert!(deposited >= p.area() * 0.6, "{deposited} vs {}", p.area());
-    }
-
-    #[test]
-    fn seams_rotate_and_keep_the_loop_closed() {
-        let l = Loop {
-            points: vec![
-                Point2::new(0.0, 0.0),
-                Point2::new(1.0, 0.0),
-                Point2::new(1.0, 1.0),
-                Point2::new(0.0, 1.0),
-                Point2::new(0.0, 0.0),
-            ],
-        };
-        assert_eq!(l.max_x_vertex(), 2);
-        let r = l.rotated(2);
-        assert_eq!(r.points.first(), Some(&Point2::new(1.0, 1.0)));
-        assert_eq!(r.points.first(), r.points.last());
-        assert!((r.length() - 4.0).abs() < 1e-12);
-        assert_eq!(l.nearest_vertex(Point2::new(0.1, 0.9)).0, 3);
+        let beads = fill(&thin, &NOZZLE);
+        assert!(!beads.is_empty());
+        assert!((filled(&beads) - 0.09).abs() < 1e-6);
     }
 }

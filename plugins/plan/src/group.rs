@@ -14,7 +14,8 @@ use i_overlay::core::fill_rule::FillRule;
 use i_overlay::float::simplify::SimplifyShape;
 use lamina_core::{Composition, Contour, Point2, Polygon, Region};
 
-use crate::fill::{Loop, contour_passes};
+use crate::bead::Bead;
+use crate::fill::{Widths, fill, mean_width};
 
 /// What to do with sub-regions too thin for one pass.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Deserialize)]
@@ -32,7 +33,7 @@ pub enum Thin {
 pub struct Group {
     /// Indices into the part's regions, in level order.
     pub members: Vec<usize>,
-    pub passes: Vec<Loop>,
+    pub passes: Vec<Bead>,
     pub composition: Option<Composition>,
 }
 
@@ -55,8 +56,10 @@ impl Grouping {
     }
 }
 
-/// Groups the sub-regions of one part for filling at extrusion width `width`.
-pub fn group(regions: &[Region], width: f64, thin: Thin) -> Grouping {
+/// Groups the sub-regions of one part for filling with beads of `widths`.
+pub fn group(regions: &[Region], widths: &Widths, thin: Thin) -> Grouping {
+    // A region whose mean width is below the narrowest bead cannot be laid alone.
+    let width = widths.min;
     // Levels of each family and cell, in level order.
     let mut buckets: BTreeMap<(usize, Option<usize>), BTreeMap<usize, Vec<usize>>> = BTreeMap::new();
     for (i, r) in regions.iter().enumerate() {
@@ -71,10 +74,10 @@ pub fn group(regions: &[Region], width: f64, thin: Thin) -> Grouping {
     // Unions are always taken of the regions as cut: a union's output is rounded to
     // its own grid, and a second union against it would find the shared edges a
     // rounding apart.
-    let fill = |members: &[usize]| -> Vec<Loop> {
+    let fill_union = |members: &[usize]| -> Vec<Bead> {
         union(members.iter().map(|&m| &regions[m].polygon))
             .iter()
-            .flat_map(|q| contour_passes(q, width))
+            .flat_map(|q| fill(q, widths))
             .collect()
     };
     // Half the perimeter of a level: the length of a band along its family, so that
@@ -94,7 +97,11 @@ pub fn group(regions: &[Region], width: f64, thin: Thin) -> Grouping {
         for members in levels.values() {
             if pending.is_empty() {
                 for &m in members {
-                    let passes = contour_passes(&regions[m].polygon, width);
+                    let passes = if mean_width(&regions[m].polygon) >= width {
+                        fill(&regions[m].polygon, widths)
+                    } else {
+                        Vec::new()
+                    };
                     if !passes.is_empty() {
                         out.groups.push(Group {
                             members: vec![m],
@@ -117,10 +124,10 @@ pub fn group(regions: &[Region], width: f64, thin: Thin) -> Grouping {
             // Nested bands share their sides, so the merged band is about as long as
             // its longest level and as wide as their areas add up to: no union is
             // tried before that width nears one pass.
-            if area < 0.9 * width * along {
+            if area < width * along {
                 continue;
             }
-            let passes = fill(&pending);
+            let passes = fill_union(&pending);
             if !passes.is_empty() {
                 out.groups.push(Group {
                     members: std::mem::take(&mut pending),
@@ -139,10 +146,14 @@ pub fn group(regions: &[Region], width: f64, thin: Thin) -> Grouping {
         if out.groups.len() > first {
             let last = out.groups.last_mut().expect("a group of this family");
             last.members.append(&mut pending);
-            last.passes = fill(&last.members);
+            last.passes = fill_union(&last.members);
             continue;
         }
-        let passes = fill(&pending);
+        let passes = if area >= width * along {
+            fill_union(&pending)
+        } else {
+            Vec::new()
+        };
         if passes.is_empty() {
             let area = pending.iter().map(|&m| regions[m].area()).sum();
             out.thin.push((pending[0], area));
@@ -222,6 +233,13 @@ fn union<'a>(pieces: impl Iterator<Item = &'a Polygon>) -> Vec<Polygon> {
 mod tests {
     use super::*;
 
+    /// Beads of 0.4 mm, none narrower.
+    const W: Widths = Widths {
+        nominal: 0.4,
+        min: 0.4,
+        max: 0.6,
+    };
+
     fn rect(x0: f64, y0: f64, x1: f64, y1: f64) -> Contour {
         Contour::new(vec![
             Point2::new(x0, y0),
@@ -254,7 +272,7 @@ mod tests {
 
     #[test]
     fn wide_regions_are_filled_alone() {
-        let g = group(&strip(2), 0.4, Thin::Merge);
+        let g = group(&strip(2), &W, Thin::Merge);
         assert_eq!(g.groups.len(), 2);
         assert!(
             g.groups
@@ -271,7 +289,7 @@ mod tests {
         // inset, so bands 0..=4 make the first band that takes a 0.4 mm pass and
         // 5..=9 the second.
         let regions = strip(10);
-        let g = group(&regions, 0.4, Thin::Merge);
+        let g = group(&regions, &W, Thin::Merge);
         let members: Vec<Vec<usize>> = g.groups.iter().map(|g| g.members.clone()).collect();
         assert_eq!(members, vec![(0..5).collect::<Vec<_>>(), (5..10).collect()]);
         assert!(g.thin.is_empty());
@@ -289,7 +307,7 @@ mod tests {
             assert!((c.fractions[0] - expect).abs() < 1e-9, "{c:?} vs {expect}");
             assert!((c.fractions.iter().sum::<f64>() - 1.0).abs() < 1e-12);
         }
-        let skipped = group(&regions, 0.4, Thin::Skip);
+        let skipped = group(&regions, &W, Thin::Skip);
         assert!(skipped.groups.is_empty());
         assert_eq!(skipped.thin.len(), 10);
     }
@@ -304,7 +322,7 @@ mod tests {
                 }
             }
         }
-        let g = group(&regions, 0.4, Thin::Merge);
+        let g = group(&regions, &W, Thin::Merge);
         assert!(g.groups.is_empty());
         assert_eq!(g.thin.len(), 1);
         assert!((g.thin[0].1 - 6.0).abs() < 1e-9, "{:?}", g.thin);

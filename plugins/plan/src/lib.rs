@@ -12,6 +12,8 @@
 //! sub-region's composition for the mixing head. Either way the composition is on the
 //! path, so exporters can meter mixtures.
 
+pub mod axis;
+pub mod bead;
 pub mod fill;
 pub mod group;
 pub mod route;
@@ -23,6 +25,7 @@ use lamina_core::stage::{AnyStage, OptionSpec, Planner, StageConfig, StageInfo, 
 use lamina_core::{BBox2, Error, LayerPlan, Point2, Result, RunInfo, StageFactory, Toolpath};
 use serde::Deserialize;
 
+use crate::fill::Widths;
 use crate::group::Thin;
 use crate::route::{Move, Parks, Seam, ToolSpec, distribute, pause, route, timed};
 
@@ -42,6 +45,10 @@ struct ToolOptions {
 struct Options {
     #[serde(default = "d_width")]
     width: f64,
+    #[serde(default = "d_width_range")]
+    width_range: [f64; 2],
+    #[serde(default = "d_min_fill")]
+    min_fill: f64,
     #[serde(default)]
     seam: Seam,
     #[serde(default)]
@@ -66,6 +73,12 @@ struct Options {
 
 fn d_width() -> f64 {
     0.4
+}
+fn d_width_range() -> [f64; 2] {
+    [0.6, 1.5]
+}
+fn d_min_fill() -> f64 {
+    0.98
 }
 fn d_speed() -> f64 {
     30.0
@@ -93,6 +106,16 @@ impl Options {
             }
         };
         positive("width", self.width)?;
+        let [lo, hi] = self.width_range;
+        if !(lo.is_finite() && hi.is_finite() && lo > 0.0 && lo <= 1.0 && hi >= 1.0) {
+            return Err(config.error(
+                "width_range",
+                "must be [min, max] fractions of `width` with 0 < min <= 1 <= max",
+            ));
+        }
+        if !(self.min_fill.is_finite() && (0.0..=1.0).contains(&self.min_fill)) {
+            return Err(config.error("min_fill", "must be a share between 0 and 1"));
+        }
         positive("speed", self.speed)?;
         positive("travel_speed", self.travel_speed)?;
         positive("envelope", self.envelope)?;
@@ -155,6 +178,14 @@ impl Options {
     fn step(&self) -> f64 {
         self.step.unwrap_or(0.01)
     }
+
+    fn widths(&self) -> Widths {
+        Widths {
+            nominal: self.width,
+            min: self.width * self.width_range[0],
+            max: self.width * self.width_range[1],
+        }
+    }
 }
 
 /// The routes of every tool with work in the layer, and the layer's warnings.
@@ -171,7 +202,8 @@ fn prepare(o: &Options, info: &RunInfo, plan: &mut LayerPlan, step: f64) -> Resu
     if tools.is_empty() {
         return Err(Error::stage("plan", "the pipeline has no materials, so no tools"));
     }
-    let work = distribute(info, plan, tools.len(), o.width, o.mixing, o.thin);
+    let widths = o.widths();
+    let work = distribute(info, plan, tools.len(), &widths, o.mixing, o.thin);
     if !work.thin.is_empty() {
         let list: Vec<String> = work
             .thin
@@ -181,9 +213,9 @@ fn prepare(o: &Options, info: &RunInfo, plan: &mut LayerPlan, step: f64) -> Resu
             .collect();
         let more = work.thin.len().saturating_sub(5);
         plan.warnings.push(format!(
-            "{} sub-region(s) too thin for a {} mm pass{} are not deposited: {}{}",
+            "{} sub-region(s) narrower than the narrowest bead ({:.3} mm){} are not deposited: {}{}",
             work.thin.len(),
-            o.width,
+            widths.min,
             match o.thin {
                 Thin::Merge => ", even with their neighbours,",
                 Thin::Skip => "",
@@ -198,9 +230,9 @@ fn prepare(o: &Options, info: &RunInfo, plan: &mut LayerPlan, step: f64) -> Resu
     }
     if work.merged > 0 {
         plan.warnings.push(format!(
-            "{} sub-region(s) narrower than a {} mm pass are deposited together with their neighbours, \
+            "{} sub-region(s) narrower than the narrowest bead ({:.3} mm) are deposited together with their neighbours, \
              with the area-weighted mean composition (`thin = \"skip\"` leaves them out)",
-            work.merged, o.width
+            work.merged, widths.min
         ));
     }
     let rmax = tools.iter().map(|t| t.envelope).fold(0.0, f64::max);
@@ -209,7 +241,7 @@ fn prepare(o: &Options, info: &RunInfo, plan: &mut LayerPlan, step: f64) -> Resu
     let routes = tools
         .iter()
         .zip(work.jobs)
-        .map(|(t, jobs)| route(t, jobs, &parks, o.seam, o.width))
+        .map(|(t, jobs)| route(t, jobs, &parks, o.seam))
         .collect();
     let arena = if work.bbox.is_empty() {
         work.bbox
@@ -244,6 +276,17 @@ fn sequential(layer: &Layer, tool_change: f64) -> (Vec<Toolpath>, f64) {
     (out, t)
 }
 
+/// Records how much of the layer's sub-regions the toolpaths fill.
+fn report_fill(o: &Options, plan: &mut LayerPlan) {
+    let area: f64 = plan.parts.iter().flat_map(|p| &p.regions).map(|r| r.area()).sum();
+    let deposited: f64 = plan.toolpaths.iter().map(Toolpath::bead_area).sum();
+    plan.fill = Some(lamina_core::Fill {
+        area,
+        deposited,
+        min_ratio: o.min_fill,
+    });
+}
+
 struct Sequential(Options);
 struct Concurrent(Options);
 
@@ -253,6 +296,7 @@ impl Planner for Sequential {
         let (paths, t) = sequential(&layer, self.0.tool_change);
         plan.toolpaths.extend(paths);
         plan.build_time = Some(plan.build_time.unwrap_or(0.0) + t);
+        report_fill(&self.0, plan);
         Ok(())
     }
 }
@@ -294,6 +338,7 @@ impl Planner for Concurrent {
         plan.toolpaths.extend(paths);
         plan.build_time = Some(plan.build_time.unwrap_or(0.0) + t);
         plan.sequential_time = Some(plan.sequential_time.unwrap_or(0.0) + seq_time);
+        report_fill(o, plan);
         Ok(())
     }
 }
@@ -313,10 +358,12 @@ fn build_concurrent(config: &StageConfig<'_>) -> Result<AnyStage> {
 macro_rules! common_options {
     ($($extra:expr),* $(,)?) => {
         &[
-            OptionSpec::new("width", "float", "0.4", "extrusion width (mm): contour passes at w/2, 3w/2, ... inside each sub-region"),
+            OptionSpec::new("width", "float", "0.4", "nominal bead width (mm): loops at w/2, 3w/2, ... inside each sub-region, the width bent within `width_range` to fill a band with a whole number of beads; what loops leave is filled by variable-width beads along its centre line"),
+            OptionSpec::new("width_range", "array of float", "[0.6, 1.5]", "narrowest and widest bead as fractions of `width`; sub-regions narrower than the narrowest merge with their neighbours (`thin`)"),
+            OptionSpec::new("min_fill", "float", "0.98", "least share of the sub-regions' volume the beads must deposit over the run; below it the run fails"),
             OptionSpec::new("seam", "string", "\"nearest\"", "where loops start: `nearest` (to the tool) or `aligned` (largest x)"),
             OptionSpec::new("mixing", "bool", "false", "one mixing tool for everything (composition on the path) instead of one tool per material, each depositing the sub-regions its material dominates"),
-            OptionSpec::new("thin", "string", "\"merge\"", "sub-regions too thin for one pass: `merge` (deposited with the next levels of their family, mean composition) or `skip` (left out); either way they are reported"),
+            OptionSpec::new("thin", "string", "\"merge\"", "sub-regions narrower than the narrowest bead: `merge` (deposited with the next levels of their family, mean composition) or `skip` (left out); either way they are reported"),
             OptionSpec::new("speed", "float", "30.0", "deposition speed (mm/s)"),
             OptionSpec::new("travel_speed", "float", "120.0", "travel speed (mm/s)"),
             OptionSpec::new("envelope", "float", "5.0", "tool envelope radius (mm); tools park outside each other's envelopes"),

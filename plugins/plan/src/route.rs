@@ -4,7 +4,8 @@
 
 use lamina_core::{BBox2, Composition, LayerPlan, PathKind, Point2, RunInfo, TimedPoint, Toolpath};
 
-use crate::fill::Loop;
+use crate::bead::Bead;
+use crate::fill::Widths;
 use crate::group::{Thin, group};
 
 /// Where each loop starts.
@@ -45,6 +46,8 @@ pub struct Move {
     pub points: Vec<Point2>,
     pub speed: f64,
     pub width: f64,
+    /// Width of each segment of a variable-width bead; empty when all are `width`.
+    pub widths: Vec<f64>,
     pub composition: Option<Composition>,
     pub part: Option<usize>,
     pub region: Option<usize>,
@@ -60,6 +63,7 @@ impl Move {
             points,
             speed,
             width: 0.0,
+            widths: Vec::new(),
             composition: None,
             part: None,
             region: None,
@@ -74,12 +78,17 @@ impl Move {
     pub fn duration(&self) -> f64 {
         self.length() / self.speed
     }
+
+    /// The width of segment `i`.
+    pub fn segment_width(&self, i: usize) -> f64 {
+        self.widths.get(i).copied().unwrap_or(self.width)
+    }
 }
 
-/// A loop to deposit, with what it deposits.
+/// A bead to deposit, with what it deposits.
 #[derive(Debug, Clone)]
 pub struct Job {
-    pub pass: Loop,
+    pub pass: Bead,
     pub composition: Option<Composition>,
     pub part: usize,
     pub region: usize,
@@ -130,7 +139,7 @@ pub fn distribute(
     info: &RunInfo,
     plan: &LayerPlan,
     tools: usize,
-    width: f64,
+    widths: &Widths,
     mixing: bool,
     thin: Thin,
 ) -> Work {
@@ -139,7 +148,7 @@ pub fn distribute(
         ..Work::default()
     };
     for part in &plan.parts {
-        let grouping = group(&part.regions, width, thin);
+        let grouping = group(&part.regions, widths, thin);
         work.merged += grouping.merged();
         if !grouping.thin.is_empty() {
             let name = info
@@ -207,7 +216,7 @@ impl Parks {
 
 /// The route of one tool: out of its park, each loop in nearest-next order starting at
 /// its seam, and back. Empty when the tool has nothing to deposit.
-pub fn route(tool: &ToolSpec, jobs: Vec<Job>, parks: &Parks, seam: Seam, width: f64) -> Vec<Move> {
+pub fn route(tool: &ToolSpec, jobs: Vec<Job>, parks: &Parks, seam: Seam) -> Vec<Move> {
     let mut moves = Vec::new();
     if jobs.is_empty() {
         return moves;
@@ -234,7 +243,7 @@ pub fn route(tool: &ToolSpec, jobs: Vec<Job>, parks: &Parks, seam: Seam, width: 
                 break;
             }
             if let Some(j) = &left[i] {
-                let (v, d) = j.pass.nearest_vertex(at);
+                let (v, d) = j.pass.nearest_start(at);
                 if best.is_none_or(|b| d < b.2) {
                     best = Some((i, v, d));
                 }
@@ -246,16 +255,21 @@ pub fn route(tool: &ToolSpec, jobs: Vec<Job>, parks: &Parks, seam: Seam, width: 
             Seam::Nearest => v,
             Seam::Aligned => job.pass.max_x_vertex(),
         };
-        let pass = job.pass.rotated(start);
+        let pass = job.pass.started_at(start);
         let first = pass.points[0];
         travel.push(first);
         push_travel(&mut moves, std::mem::take(&mut travel), tool.travel_speed);
         at = pass.points[pass.points.len() - 1];
         moves.push(Move {
             kind: PathKind::Extrude,
+            width: pass.uniform_width().unwrap_or(0.0),
+            widths: if pass.uniform_width().is_some() {
+                Vec::new()
+            } else {
+                pass.widths
+            },
             points: pass.points,
             speed: tool.speed,
-            width,
             composition: job.composition,
             part: Some(job.part),
             region: Some(job.region),
@@ -306,9 +320,13 @@ pub fn toolpath(tool: usize, m: &Move, points: Vec<TimedPoint>) -> Toolpath {
     Toolpath {
         tool,
         kind: m.kind,
+        widths: if m.widths.is_empty() {
+            Vec::new()
+        } else {
+            m.widths[..points.len().saturating_sub(1).min(m.widths.len())].to_vec()
+        },
         points,
         width: m.width,
-        widths: Vec::new(),
         composition: m.composition.clone(),
         part: m.part,
         region: m.region,

@@ -20,6 +20,15 @@ use lamina_core::{BBox2, PathKind, Point2, TimedPoint, Toolpath, Vector2};
 
 use crate::route::{Move, ToolSpec, pause, toolpath};
 
+/// Appends the end of a stretch of segment `seg` of move `m` to `path`, with that
+/// segment's width when the move's bead varies in width.
+fn push_point(path: &mut Toolpath, m: &Move, seg: usize, p: TimedPoint) {
+    if !m.widths.is_empty() {
+        path.widths.push(m.segment_width(seg));
+    }
+    path.points.push(p);
+}
+
 /// Why the concurrent schedule gave up.
 #[derive(Debug, Clone, PartialEq)]
 pub enum Stuck {
@@ -109,10 +118,15 @@ impl Agent<'_> {
                 tr.push((dt - left, b));
             }
             if emit && let Some(path) = &mut self.open {
-                path.points.push(TimedPoint {
-                    p: b,
-                    t: t + dt - left,
-                });
+                push_point(
+                    path,
+                    m,
+                    c.seg,
+                    TimedPoint {
+                        p: b,
+                        t: t + dt - left,
+                    },
+                );
             }
             c = Cursor {
                 mv: c.mv,
@@ -148,7 +162,12 @@ impl Agent<'_> {
                 if let Some(path) = &mut self.open
                     && path.points.last().is_none_or(|q| q.p != self.pos)
                 {
-                    path.points.push(TimedPoint { p: self.pos, t });
+                    let seg = self.at.seg;
+                    if let Some(m) = self.route.get(self.at.mv) {
+                        push_point(path, m, seg, TimedPoint { p: self.pos, t });
+                    } else {
+                        path.points.push(TimedPoint { p: self.pos, t });
+                    }
                 }
                 self.close();
                 self.open = Some(pause(self.spec.index, self.pos, t, t + dt));

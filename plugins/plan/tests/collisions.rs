@@ -126,6 +126,7 @@ fn layout(rng: &mut Rng, tools: usize) -> (RunInfo, LayerPlan) {
         toolpaths: Vec::new(),
         build_time: None,
         sequential_time: None,
+        fill: None,
         warnings: Vec::new(),
     };
     (info, plan)
@@ -278,24 +279,35 @@ fn tools_crossing_head_on_give_way_by_speed_along_x() {
     let b = timeline(&plan.toolpaths, 1);
     assert!(closest(&a, &b).0 >= 4.0 - 1e-6);
     assert!(plan.toolpaths.iter().any(|p| p.kind == PathKind::Pause));
-    // Every extrusion is closed or continues the loop it was split from.
+    // Split extrusions keep their beads' widths: loops of 2 mm / 5 = 0.4 mm... bent
+    // to the bars' mean width, centre beads narrower.
     for p in plan.toolpaths.iter().filter(|p| p.kind == PathKind::Extrude) {
-        assert!(p.points.len() >= 2 && p.width == 0.4);
+        assert!(p.points.len() >= 2);
+        assert!(p.widths.is_empty() || p.widths.len() + 1 == p.points.len());
+        for i in 0..p.points.len() - 1 {
+            let w = p.segment_width(i);
+            assert!(w > 0.0 && w <= 1.2, "{w}");
+        }
     }
+    let fill = plan.fill.expect("fill reported");
+    assert!((fill.deposited - fill.area).abs() <= 0.02 * fill.area, "{fill:?}");
 }
 
 #[test]
 fn thin_regions_are_reported() {
     let mut rng = Rng(3);
     let (info, mut plan) = layout(&mut rng, 2);
-    plan.parts[0].regions[0].polygon = Polygon::new(rect(0.0, 0.0, 10.0, 0.3), vec![]);
+    // 0.15 mm wide: under the narrowest bead (0.6 x 0.4 mm), and alone in its part.
+    plan.parts[0].regions.truncate(1);
+    plan.parts[0].regions[0].polygon = Polygon::new(rect(0.0, 0.0, 10.0, 0.15), vec![]);
     planner("use = \"sequential\"")
         .plan(&info, &mut plan)
         .expect("plans");
     assert!(
         plan.warnings
             .iter()
-            .any(|w| w.contains("too thin") && w.contains("even with their neighbours")),
+            .any(|w| w.contains("narrower than the narrowest bead")
+                && w.contains("even with their neighbours")),
         "{:?}",
         plan.warnings
     );
@@ -318,10 +330,12 @@ fn sequential_time_is_path_length_over_speed_plus_tool_changes() {
     }
     let t = plan.build_time.expect("timed");
     assert!((t - expected).abs() < 1e-6, "{t} vs {expected}");
-    // Closed loops: each extrusion ends where it starts.
-    for p in plan.toolpaths.iter().filter(|p| p.kind == PathKind::Extrude) {
-        assert!((p.points[0].p - p.points[p.points.len() - 1].p).norm() < 1e-9);
-    }
+    // The beads fill the sub-regions: loops, and centre beads where loops leave off.
+    let fill = plan.fill.expect("fill reported");
+    assert!((fill.deposited - fill.area).abs() <= 0.02 * fill.area, "{fill:?}");
+    assert!(plan.toolpaths.iter().any(
+        |p| p.kind == PathKind::Extrude && (p.points[0].p - p.points[p.points.len() - 1].p).norm() < 1e-9
+    ));
 }
 
 #[test]

@@ -1,0 +1,573 @@
+//! Variable-width beads along the centre line of thin regions: what contour-parallel
+//! loops of one width leave open (the medial band of a region, the corners between two
+//! loops). The centre line is the chordal axis of a constrained Delaunay triangulation
+//! of the region (Prasad's chordal axis transform): every interior edge of the
+//! triangulation is a chord across the region, the axis joins the chords' midpoints,
+//! and the chord's length is the region's local width.
+//!
+//! Each triangle gives its own area to the axis segment that crosses it (a sleeve: the
+//! segment between its two chords' midpoints; a junction: a third to each of the three
+//! segments to its centroid; an end: the segment from its chord to its apex), so the
+//! beads fill exactly the region's area: a segment's width is its area over its
+//! length. This is the role of Arachne's variable-width extrusions in PrusaSlicer and
+//! Cura, computed from a triangulation rather than a Voronoi diagram.
+
+use std::collections::HashMap;
+
+use lamina_core::Point2;
+use spade::handles::FixedFaceHandle;
+use spade::{ConstrainedDelaunayTriangulation, Triangulation};
+
+use crate::bead::Bead;
+
+/// Most axis segments merged into one straight run (the merge test is quadratic in
+/// the run's length).
+const MAX_RUN: usize = 32;
+
+type Cdt = ConstrainedDelaunayTriangulation<spade::Point2<f64>>;
+
+/// Largest number of boundary vertices triangulated for one shape; a residue larger
+/// than this is left unfilled (and so counted as under-fill) rather than stalling a
+/// layer.
+const MAX_VERTICES: usize = 400_000;
+
+/// The beads along the centre lines of `shapes` (each an outer ring then its holes,
+/// rings open, any orientation). Boundary edges are split to at most `max_edge` so
+/// that chords run across the region rather than along it; axis vertices that stray
+/// less than `tol` from a straight run are merged.
+pub fn centre_beads(shapes: &[Vec<Vec<[f64; 2]>>], max_edge: f64, tol: f64) -> Vec<Bead> {
+    let mut out = Vec::new();
+    for shape in shapes {
+        centre_beads_of(shape, max_edge, tol, &mut out);
+    }
+    out
+}
+
+fn centre_beads_of(shape: &[Vec<[f64; 2]>], max_edge: f64, tol: f64, out: &mut Vec<Bead>) {
+    let shape: Vec<Vec<[f64; 2]>> = shape.iter().map(|r| clean(r)).filter(|r| r.len() >= 3).collect();
+    let shape = &shape[..];
+    let mut vertices: Vec<spade::Point2<f64>> = Vec::new();
+    let mut edges: Vec<[usize; 2]> = Vec::new();
+    for ring in shape.iter().filter(|r| r.len() >= 3) {
+        let start = vertices.len();
+        for i in 0..ring.len() {
+            let (a, b) = (ring[i], ring[(i + 1) % ring.len()]);
+            let len = (b[0] - a[0]).hypot(b[1] - a[1]);
+            let pieces = if max_edge > 0.0 && len.is_finite() {
+                ((len / max_edge).ceil() as usize).clamp(1, 1 << 16)
+            } else {
+                1
+            };
+            for k in 0..pieces {
+                let t = k as f64 / pieces as f64;
+                vertices.push(spade::Point2::new(
+                    a[0] + (b[0] - a[0]) * t,
+                    a[1] + (b[1] - a[1]) * t,
+                ));
+            }
+            if vertices.len() > MAX_VERTICES {
+                return;
+            }
+        }
+        let n = vertices.len() - start;
+        edges.extend((0..n).map(|i| [start + i, start + (i + 1) % n]));
+    }
+    if vertices.len() < 3 || vertices.iter().any(|p| !(p.x.is_finite() && p.y.is_finite())) {
+        return;
+    }
+    let count = vertices.len();
+    let mut conflicts = 0usize;
+    let Ok(cdt) = Cdt::try_bulk_load_cdt(vertices, edges, |_| conflicts += 1) else {
+        return;
+    };
+    // Parity needs every constraint to be a boundary edge crossed once: when rings
+    // touched (a constraint was refused, or shared vertices merged) or the inside
+    // found does not add up to the shape's area, every face is tested on its own.
+    let mut inside = classify(&cdt, shape, conflicts > 0 || cdt.num_vertices() < count);
+    let area: f64 = shape.iter().map(|r| ring_area(r)).sum::<f64>().abs();
+    if conflicts == 0 && (inside_area(&cdt, &inside) - area).abs() > 1e-6 * area.max(1e-3) {
+        inside = classify(&cdt, shape, true);
+    }
+    let mut graph = axis_graph(&cdt, &inside);
+    graph.prune();
+    for (points, areas) in graph.chains() {
+        if let Some(b) = bead(points, areas, tol) {
+            out.push(b);
+        }
+    }
+}
+
+/// Which faces lie inside the shape: parity of the constraint edges crossed on the way
+/// from the outside, or (when some boundary edges could not be inserted because rings
+/// touch) each face's centroid tested against the rings.
+fn classify(cdt: &Cdt, shape: &[Vec<[f64; 2]>], fallback: bool) -> Vec<bool> {
+    let n = cdt.num_all_faces();
+    let mut inside = vec![false; n];
+    if fallback {
+        for f in cdt.inner_faces() {
+            let [a, b, c] = f.positions();
+            let p = [(a.x + b.x + c.x) / 3.0, (a.y + b.y + c.y) / 3.0];
+            inside[f.fix().index()] = even_odd(shape, p);
+        }
+        return inside;
+    }
+    let mut seen = vec![false; n];
+    let mut queue: Vec<FixedFaceHandle<spade::handles::InnerTag>> = Vec::new();
+    for e in cdt.convex_hull() {
+        // Hull edges run with the outer face on their left; the inner face is across.
+        if let Some(f) = e.rev().face().as_inner() {
+            let i = f.fix().index();
+            if !seen[i] {
+                seen[i] = true;
+                inside[i] = e.is_constraint_edge();
+                queue.push(f.fix());
+            }
+        }
+    }
+    while let Some(f) = queue.pop() {
+        let face = cdt.face(f);
+        let here = inside[f.index()];
+        for e in face.adjacent_edges() {
+            if let Some(g) = e.rev().face().as_inner() {
+                let j = g.fix().index();
+                if !seen[j] {
+                    seen[j] = true;
+                    inside[j] = here ^ e.is_constraint_edge();
+                    queue.push(g.fix());
+                }
+            }
+        }
+    }
+    inside
+}
+
+/// The ring without repeated points and without spikes (a vertex where the ring
+/// turns straight back: the trace of a boolean operation's collinear edges), which
+/// would be constraints with the region on both sides.
+fn clean(ring: &[[f64; 2]]) -> Vec<[f64; 2]> {
+    let mut out: Vec<[f64; 2]> = Vec::with_capacity(ring.len());
+    let same = |a: [f64; 2], b: [f64; 2]| (a[0] - b[0]).abs() < 1e-9 && (a[1] - b[1]).abs() < 1e-9;
+    // Whether `b` is the tip of a spike a -> b -> c.
+    let spike = |a: [f64; 2], b: [f64; 2], c: [f64; 2]| {
+        let (u, v) = ([b[0] - a[0], b[1] - a[1]], [c[0] - b[0], c[1] - b[1]]);
+        let cross = u[0] * v[1] - u[1] * v[0];
+        let dot = u[0] * v[0] + u[1] * v[1];
+        let scale = (u[0].hypot(u[1]) * v[0].hypot(v[1])).max(1e-300);
+        dot < 0.0 && cross.abs() <= 1e-9 * scale
+    };
+    for &p in ring {
+        if out.last().is_some_and(|&q| same(p, q)) {
+            continue;
+        }
+        out.push(p);
+        while out.len() >= 3 {
+            let n = out.len();
+            if spike(out[n - 3], out[n - 2], out[n - 1]) || same(out[n - 3], out[n - 1]) {
+                let last = out.pop().unwrap_or(p);
+                out.pop();
+                if !out.last().is_some_and(|&q| same(q, last)) {
+                    out.push(last);
+                }
+            } else {
+                break;
+            }
+        }
+    }
+    // The same across the ring's seam.
+    loop {
+        let n = out.len();
+        if n < 3 {
+            break;
+        }
+        if same(out[0], out[n - 1]) || spike(out[n - 2], out[n - 1], out[0]) {
+            out.pop();
+        } else if spike(out[n - 1], out[0], out[1]) {
+            out.remove(0);
+        } else {
+            break;
+        }
+    }
+    if out.len() < 3 || ring_area(&out).abs() < 1e-12 {
+        return Vec::new();
+    }
+    out
+}
+
+fn ring_area(r: &[[f64; 2]]) -> f64 {
+    let n = r.len();
+    (0..n)
+        .map(|i| r[i][0] * r[(i + 1) % n][1] - r[(i + 1) % n][0] * r[i][1])
+        .sum::<f64>()
+        / 2.0
+}
+
+fn inside_area(cdt: &Cdt, inside: &[bool]) -> f64 {
+    cdt.inner_faces()
+        .filter(|f| inside[f.fix().index()])
+        .map(|f| {
+            let [a, b, c] = f.positions();
+            ((b.x - a.x) * (c.y - a.y) - (c.x - a.x) * (b.y - a.y)).abs() / 2.0
+        })
+        .sum()
+}
+
+/// Even-odd containment of `p` in the rings of `shape`.
+fn even_odd(shape: &[Vec<[f64; 2]>], p: [f64; 2]) -> bool {
+    let mut odd = false;
+    for ring in shape {
+        let n = ring.len();
+        for i in 0..n {
+            let (a, b) = (ring[i], ring[(i + 1) % n]);
+            if (a[1] > p[1]) != (b[1] > p[1]) {
+                let x = a[0] + (b[0] - a[0]) * (p[1] - a[1]) / (b[1] - a[1]);
+                if x > p[0] {
+                    odd = !odd;
+                }
+            }
+        }
+    }
+    odd
+}
+
+/// The chordal axis as a graph: nodes at chord midpoints, junction centroids and end
+/// apexes; each edge carries the area of the triangle (or third) it crosses.
+#[derive(Default)]
+struct Graph {
+    nodes: Vec<Point2>,
+    /// The region's width at each node: its chord's length (at a junction the longest
+    /// side of its triangle, at an end none).
+    widths: Vec<f64>,
+    /// (node, node, area)
+    edges: Vec<(usize, usize, f64)>,
+}
+
+fn axis_graph(cdt: &Cdt, inside: &[bool]) -> Graph {
+    let mut g = Graph::default();
+    let mut chord_node: HashMap<usize, usize> = HashMap::new();
+    let p2 = |p: spade::Point2<f64>| Point2::new(p.x, p.y);
+    let is_in = |f: spade::handles::FaceHandle<'_, spade::handles::PossiblyOuterTag, _, _, _, _>| {
+        f.as_inner().is_some_and(|f| inside[f.fix().index()])
+    };
+    for f in cdt.inner_faces() {
+        if !inside[f.fix().index()] {
+            continue;
+        }
+        let [a, b, c] = f.positions();
+        let area = ((b.x - a.x) * (c.y - a.y) - (c.x - a.x) * (b.y - a.y)).abs() / 2.0;
+        // A chord is an edge shared with another inside face (a boundary edge is a
+        // constraint, or borders the outside).
+        let mut chords: Vec<usize> = Vec::with_capacity(3);
+        let mut walls: Vec<usize> = Vec::with_capacity(3);
+        let edges = f.adjacent_edges();
+        for (k, e) in edges.iter().enumerate() {
+            if !e.is_constraint_edge() && is_in(e.rev().face()) {
+                chords.push(k);
+            } else {
+                walls.push(k);
+            }
+        }
+        let mut node_of = |k: usize, g: &mut Graph| -> usize {
+            let e = edges[k];
+            let key = e.as_undirected().fix().index();
+            *chord_node.entry(key).or_insert_with(|| {
+                let [p, q] = e.positions();
+                g.nodes.push(Point2::new((p.x + q.x) / 2.0, (p.y + q.y) / 2.0));
+                g.widths.push(e.length_2().sqrt());
+                g.nodes.len() - 1
+            })
+        };
+        match chords.len() {
+            2 => {
+                let (m0, m1) = (node_of(chords[0], &mut g), node_of(chords[1], &mut g));
+                g.edges.push((m0, m1, area));
+            }
+            1 => {
+                // An end: from the chord to the vertex across it.
+                let m = node_of(chords[0], &mut g);
+                let e = edges[chords[0]];
+                let apex = e.next().to().position();
+                g.nodes.push(p2(apex));
+                g.widths.push(0.0);
+                let n = g.nodes.len() - 1;
+                g.edges.push((m, n, area));
+            }
+            3 => {
+                g.nodes
+                    .push(Point2::new((a.x + b.x + c.x) / 3.0, (a.y + b.y + c.y) / 3.0));
+                g.widths
+                    .push(edges.iter().map(|e| e.length_2().sqrt()).fold(0.0, f64::max));
+                let centre = g.nodes.len() - 1;
+                for &k in &chords {
+                    let m = node_of(k, &mut g);
+                    g.edges.push((m, centre, area / 3.0));
+                }
+            }
+            _ => {
+                // A lone triangle: across it from its longest side.
+                let k = walls
+                    .iter()
+                    .copied()
+                    .max_by(|&i, &j| edges[i].length_2().total_cmp(&edges[j].length_2()))
+                    .unwrap_or(0);
+                let e = edges[k];
+                let [p, q] = e.positions();
+                g.nodes.push(Point2::new((p.x + q.x) / 2.0, (p.y + q.y) / 2.0));
+                g.nodes.push(p2(e.next().to().position()));
+                g.widths.extend([0.0, 0.0]);
+                let n = g.nodes.len();
+                g.edges.push((n - 2, n - 1, area));
+            }
+        }
+    }
+    g
+}
+
+impl Graph {
+    /// Removes the spurs of the axis: a branch from an end to a junction that is
+    /// shorter than the region is wide there is the trace of a corner (a chordal axis branches toward
+    /// every corner of its region), not a place a bead must go. Its area is handed to
+    /// the junction's other branches, so the total stays the region's area, and the
+    /// main line runs on through the junction as one bead.
+    fn prune(&mut self) {
+        let n = self.nodes.len();
+        let mut alive = vec![true; self.edges.len()];
+        let mut adj: Vec<Vec<usize>> = vec![Vec::new(); n];
+        for (i, &(a, b, _)) in self.edges.iter().enumerate() {
+            adj[a].push(i);
+            adj[b].push(i);
+        }
+        let degree =
+            |v: usize, alive: &[bool], adj: &[Vec<usize>]| adj[v].iter().filter(|&&e| alive[e]).count();
+        for _ in 0..4 {
+            let mut changed = false;
+            for leaf in 0..n {
+                if degree(leaf, &alive, &adj) != 1 {
+                    continue;
+                }
+                // Walk to the first node that is not a plain link.
+                let (mut v, mut prev) = (leaf, usize::MAX);
+                let (mut len, mut area) = (0.0, 0.0);
+                let mut path = Vec::new();
+                while let Some(&e) = adj[v].iter().find(|&&e| alive[e] && e != prev) {
+                    let (a, b, ar) = self.edges[e];
+                    let w = if a == v { b } else { a };
+                    len += (self.nodes[w] - self.nodes[v]).norm();
+                    area += ar;
+                    path.push(e);
+                    prev = e;
+                    v = w;
+                    if degree(v, &alive, &adj) != 2 || path.len() > 64 {
+                        break;
+                    }
+                }
+                if degree(v, &alive, &adj) < 3 || len <= 0.0 {
+                    continue;
+                }
+                // The width of the region at the junction: its chords'.
+                let wide = self.widths[v];
+                if len > wide {
+                    continue;
+                }
+                for &e in &path {
+                    alive[e] = false;
+                }
+                let rest: Vec<usize> = adj[v].iter().copied().filter(|&e| alive[e]).collect();
+                for &e in &rest {
+                    self.edges[e].2 += area / rest.len() as f64;
+                }
+                changed = true;
+            }
+            if !changed {
+                break;
+            }
+        }
+        let mut k = 0;
+        self.edges.retain(|_| {
+            k += 1;
+            alive[k - 1]
+        });
+    }
+
+    /// The axis cut into chains between nodes where it branches or ends (a closed
+    /// chain starts and ends at the same node): points and the area of each segment.
+    fn chains(&self) -> Vec<(Vec<Point2>, Vec<f64>)> {
+        let n = self.nodes.len();
+        let mut adj: Vec<Vec<usize>> = vec![Vec::new(); n];
+        for (i, &(a, b, _)) in self.edges.iter().enumerate() {
+            adj[a].push(i);
+            adj[b].push(i);
+        }
+        let mut used = vec![false; self.edges.len()];
+        let mut out = Vec::new();
+        let other = |e: usize, v: usize| {
+            let (a, b, _) = self.edges[e];
+            if a == v { b } else { a }
+        };
+        let walk = |start: usize, first: usize, used: &mut Vec<bool>| {
+            let mut points = vec![self.nodes[start]];
+            let mut areas = Vec::new();
+            let (mut v, mut e) = (start, first);
+            loop {
+                used[e] = true;
+                let w = other(e, v);
+                points.push(self.nodes[w]);
+                areas.push(self.edges[e].2);
+                if adj[w].len() != 2 || w == start {
+                    break;
+                }
+                match adj[w].iter().copied().find(|&f| !used[f]) {
+                    Some(f) => {
+                        v = w;
+                        e = f;
+                    }
+                    None => break,
+                }
+            }
+            (points, areas)
+        };
+        // Open chains from every node that is not a plain link, then the cycles.
+        for (v, links) in adj.iter().enumerate() {
+            if links.len() == 2 {
+                continue;
+            }
+            for &e in links {
+                if !used[e] {
+                    out.push(walk(v, e, &mut used));
+                }
+            }
+        }
+        for e in 0..self.edges.len() {
+            if !used[e] {
+                let start = self.edges[e].0;
+                out.push(walk(start, e, &mut used));
+            }
+        }
+        out
+    }
+}
+
+/// A bead from a chain of axis points with the area of each segment: straight runs
+/// merged (their areas summed) and each segment's width its area over its length.
+fn bead(points: Vec<Point2>, areas: Vec<f64>, tol: f64) -> Option<Bead> {
+    let total: f64 = areas.iter().sum();
+    if points.len() < 2 || total.is_nan() || total <= 0.0 {
+        return None;
+    }
+    let closed = points.len() > 2 && (points[0] - points[points.len() - 1]).norm() < 1e-12;
+    let mut out_p = vec![points[0]];
+    let mut out_w = Vec::new();
+    let mut a = 0;
+    let mut carry = 0.0;
+    while a + 1 < points.len() {
+        // Extend the run from `a` while every vertex it skips stays within `tol` of
+        // the chord and the run's segments have about the same width.
+        let mut b = a + 1;
+        let mut area = areas[a];
+        loop {
+            let next = b + 1;
+            if next >= points.len() || next - a > MAX_RUN {
+                break;
+            }
+            let chord = points[next] - points[a];
+            let len = chord.norm();
+            if len <= 0.0 {
+                break;
+            }
+            let straight = (a + 1..next)
+                .all(|k| lamina_core::geom::segment_distance(points[k], points[a], points[next]) <= tol);
+            let w_run = (area + areas[b]) / len;
+            let seg_w = |k: usize| areas[k] / (points[k + 1] - points[k]).norm().max(1e-12);
+            let even = (a..next).all(|k| (seg_w(k) - w_run).abs() <= 0.15 * w_run + 0.01);
+            if !(straight && even) {
+                break;
+            }
+            area += areas[b];
+            b = next;
+        }
+        let len = (points[b] - points[a]).norm();
+        area += carry;
+        carry = 0.0;
+        if len < 1e-6 {
+            // A point-like step: its area goes to the next segment (or the last one).
+            carry = area;
+        } else {
+            out_p.push(points[b]);
+            out_w.push(area / len);
+        }
+        a = b;
+    }
+    if carry > 0.0
+        && let Some(last) = out_w.last_mut()
+    {
+        let n = out_p.len();
+        *last += carry / (out_p[n - 1] - out_p[n - 2]).norm();
+    }
+    if out_w.is_empty() {
+        return None;
+    }
+    Some(Bead {
+        points: out_p,
+        widths: out_w,
+        closed,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn rect(x0: f64, y0: f64, x1: f64, y1: f64) -> Vec<[f64; 2]> {
+        vec![[x0, y0], [x1, y0], [x1, y1], [x0, y1]]
+    }
+
+    #[test]
+    fn a_strip_gets_one_bead_along_its_middle_of_its_width() {
+        let beads = centre_beads(&[vec![rect(0.0, 0.0, 10.0, 0.3)]], 0.15, 0.005);
+        let area: f64 = beads.iter().map(Bead::area).sum();
+        assert!((area - 3.0).abs() < 1e-9, "{area}");
+        let longest = beads
+            .iter()
+            .max_by(|a, b| a.length().total_cmp(&b.length()))
+            .expect("a bead");
+        assert!(longest.length() > 9.0, "{}", longest.length());
+        // Along the middle of the strip, as wide as the strip.
+        for (w, p) in longest.widths.iter().zip(&longest.points[1..]) {
+            if p.x > 0.5 && p.x < 9.5 {
+                assert!((p.y - 0.15).abs() < 1e-6, "{p:?}");
+                assert!((w - 0.3).abs() < 0.02, "{w}");
+            }
+        }
+    }
+
+    #[test]
+    fn a_ring_gets_a_closed_bead_and_a_wedge_a_tapering_one() {
+        let mut hole = rect(0.3, 0.3, 9.7, 9.7);
+        hole.reverse();
+        let beads = centre_beads(&[vec![rect(0.0, 0.0, 10.0, 10.0), hole]], 0.15, 0.005);
+        let area: f64 = beads.iter().map(Bead::area).sum();
+        let expect = 100.0 - 9.4 * 9.4;
+        assert!((area - expect).abs() < 1e-9, "{area} vs {expect}");
+        let summary: Vec<(bool, f64, usize)> = beads
+            .iter()
+            .map(|b| (b.closed, b.length(), b.points.len()))
+            .collect();
+        assert!(beads.iter().any(|b| b.closed && b.length() > 35.0), "{summary:?}");
+        // A wedge 2 mm long narrowing from 0.4 mm to a point.
+        let wedge = vec![[0.0, 0.0], [2.0, 0.2], [0.0, 0.4]];
+        let beads = centre_beads(&[vec![wedge]], 0.1, 0.005);
+        let area: f64 = beads.iter().map(Bead::area).sum();
+        assert!((area - 0.4).abs() < 1e-9, "{area}");
+        let b = beads
+            .iter()
+            .max_by(|a, b| a.length().total_cmp(&b.length()))
+            .expect("a bead");
+        // Wide (0.4 mm) at the blunt end, nothing at the tip.
+        let widest = b.widths.iter().copied().fold(0.0, f64::max);
+        let tip = if b.points[0].x > 1.0 {
+            b.widths[0]
+        } else {
+            b.widths[b.widths.len() - 1]
+        };
+        assert!(widest > 0.3 && tip < 0.05, "{:?}", b.widths);
+    }
+}
