@@ -227,8 +227,21 @@ impl Agent<'_> {
         let speed = self.spec.travel_speed;
         let seg = head.len() - 2;
         let along = (head[seg + 1] - head[seg]).norm();
+        // A variable-width bead keeps each segment's width on both sides of the cut:
+        // the cut segment's on its two pieces.
+        let (head_w, tail_w) = if m.widths.is_empty() {
+            (Vec::new(), Vec::new())
+        } else {
+            let cut = c.seg.min(m.widths.len().saturating_sub(1));
+            (m.widths[..=cut].to_vec(), m.widths[cut..].to_vec())
+        };
         self.route[c.mv].points = head;
-        let rest = Move { points: tail, ..m };
+        self.route[c.mv].widths = head_w;
+        let rest = Move {
+            points: tail,
+            widths: tail_w,
+            ..m
+        };
         self.route.splice(
             c.mv + 1..c.mv + 1,
             [

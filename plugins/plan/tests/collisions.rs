@@ -193,11 +193,13 @@ fn closest(a: &[(f64, Point2)], b: &[(f64, Point2)]) -> (f64, f64) {
     best
 }
 
+/// The area the extrusions cover (their widths lined up with their segments).
 fn extruded(paths: &[Toolpath]) -> f64 {
     paths
         .iter()
         .filter(|p| p.kind == PathKind::Extrude)
-        .map(Toolpath::length)
+        .inspect(|p| assert!(p.widths.is_empty() || p.widths.len() + 1 == p.points.len()))
+        .map(Toolpath::bead_area)
         .sum()
 }
 
@@ -235,7 +237,7 @@ fn random_layouts_of_two_to_four_tools_never_collide() {
                 );
             }
         }
-        // The same loops are deposited either way.
+        // The same beads are deposited either way.
         let (a, b) = (extruded(&conc.toolpaths), extruded(&seq.toolpaths));
         assert!((a - b).abs() <= 1e-6 * b.max(1.0), "case {case}: {a} vs {b}");
         let (tc, ts) = (conc.build_time.unwrap_or(0.0), seq.build_time.unwrap_or(0.0));
@@ -338,6 +340,22 @@ fn sequential_time_is_path_length_over_speed_plus_tool_changes() {
     ));
 }
 
+/// Area each tool's beads cover, after checking every extrusion's widths line up with
+/// its segments.
+fn bead_area_by_tool(plan: &LayerPlan, tools: usize) -> Vec<f64> {
+    let mut area = vec![0.0; tools];
+    for p in plan.toolpaths.iter().filter(|p| p.kind == PathKind::Extrude) {
+        assert!(
+            p.widths.is_empty() || p.widths.len() + 1 == p.points.len(),
+            "{} widths for {} points",
+            p.widths.len(),
+            p.points.len()
+        );
+        area[p.tool] += p.bead_area();
+    }
+    area
+}
+
 #[test]
 fn concurrent_plans_report_the_sequential_baseline() {
     for seed in 1..6 {
@@ -353,6 +371,11 @@ fn concurrent_plans_report_the_sequential_baseline() {
             .expect("plans");
         let (t, s) = (conc.build_time.expect("timed"), seq.build_time.expect("timed"));
         assert_eq!(conc.sequential_time, Some(s), "seed {seed}");
+        // Holds and side-steps split beads but deposit every one of them whole.
+        let (a, b) = (bead_area_by_tool(&conc, 3), bead_area_by_tool(&seq, 3));
+        for (x, y) in a.iter().zip(&b) {
+            assert!((x - y).abs() <= 1e-9 * y.max(1.0), "seed {seed}: {a:?} vs {b:?}");
+        }
         assert!(seq.sequential_time.is_none());
         let mut contour = conc.clone();
         contour.toolpaths.clear();
