@@ -299,6 +299,7 @@ class Options:
     coverage_min: float = 0.99
     overlap_max: float = 0.05
     coverage_every: int = 5
+    bead_ends: str = "flat"  # "flat" rectangles (the contract) or "round"
     time_tol: float = 0.05
     flavor: str | None = None  # None: from the header, else marlin
     accel: tuple[float, float, float] = (DEFAULT_ACCEL, DEFAULT_ACCEL, DEFAULT_ACCEL)
@@ -1418,9 +1419,13 @@ class MeshSlicer:
         return reduce(lambda acc, g: acc.symmetric_difference(g), rings[1:], rings[0])
 
 
-def bead_geometry(segs: list[tuple], height: float, area: float):
-    """Rectangles of PART beads, their summed area, the union and the overlap
-    of consecutive segments of one run."""
+def bead_geometry(segs: list[tuple], height: float, area: float, ends: str = "flat"):
+    """Beads of PART segments: their union, summed area, the overlap of
+    consecutive segments of one run, and the widths.
+
+    ``ends="flat"`` (the contract) makes each bead a flat-ended rectangle;
+    ``"round"`` the segment swept by a disc of the bead's width (a stadium),
+    closer to what a round nozzle lays at corners."""
     import shapely
 
     arr = np.asarray([s[:5] for s in segs], dtype=float)
@@ -1441,8 +1446,13 @@ def bead_geometry(segs: list[tuple], height: float, area: float):
         np.stack([x0 - nx, y0 - ny], axis=1),
         np.stack([x0 + nx, y0 + ny], axis=1),
     ], axis=1)
-    rects = shapely.polygons(ring)
-    bead_area = float((width * ln).sum())
+    if ends == "round":
+        lines = shapely.linestrings(np.stack([np.stack([x0, y0], axis=1), np.stack([x1, y1], axis=1)], axis=1))
+        rects = shapely.buffer(lines, width / 2.0, quad_segs=8)
+        bead_area = float(shapely.area(rects).sum())
+    else:
+        rects = shapely.polygons(ring)
+        bead_area = float((width * ln).sum())
     union = shapely.union_all(rects)
     same = runs[1:] == runs[:-1]
     consecutive = 0.0
@@ -1517,7 +1527,7 @@ def build_report(r: Replay, o: Options, name: str) -> dict:
     checks["volume"].details.update({"part_mm3": part_volume, "mesh_mm3": volume["mesh_mm3"], "ratio": volume["ratio"]})
 
     # Coverage
-    coverage = {"every": o.coverage_every, "layers": [], "worst_coverage": None, "worst_overlap": None,
+    coverage = {"every": o.coverage_every, "bead_ends": o.bead_ends, "layers": [], "worst_coverage": None, "worst_overlap": None,
                 "min": o.coverage_min, "overlap_max": o.overlap_max, "placement": None}
     if mesh_data is not None:
         coverage_check(r, o, mesh_data, coverage)
@@ -1592,7 +1602,7 @@ def build_report(r: Replay, o: Options, name: str) -> dict:
             "mesh": o.mesh, "place": o.place, "bed": o.bed_rect, "bed_circle": o.bed_circle,
             "filament": o.filament, "min_extrude_temp": o.min_extrude_temp,
             "volume_tol": o.volume_tol, "coverage_min": o.coverage_min, "overlap_max": o.overlap_max,
-            "coverage_every": o.coverage_every, "time_tol": o.time_tol,
+            "coverage_every": o.coverage_every, "bead_ends": o.bead_ends, "time_tol": o.time_tol,
             "accel": list(o.accel), "junction_deviation": o.junction_deviation,
         },
     }
@@ -1644,7 +1654,8 @@ def coverage_check(r: Replay, o: Options, mesh_data, coverage: dict) -> None:
         ref_area = float(ref.area)
         row["reference_mm2"] = ref_area
         if lay.segs:
-            union, bead_area, consecutive, _ = bead_geometry(lay.segs, lay.height, r.area if not r.volumetric else 1.0)
+            union, bead_area, consecutive, _ = bead_geometry(lay.segs, lay.height, r.area if not r.volumetric else 1.0,
+                                                             o.bead_ends)
             uarea = float(union.area)
             row["bead_mm2"] = bead_area
             row["union_mm2"] = uarea
@@ -1757,6 +1768,8 @@ def parse_args(argv: list[str]) -> tuple[str, Options, str | None]:
     ap.add_argument("--coverage-min", type=float, default=0.99, help="minimum coverage per sampled layer, default 0.99")
     ap.add_argument("--overlap-max", type=float, default=0.05, help="maximum bead overlap per sampled layer, default 0.05")
     ap.add_argument("--coverage-every", type=int, default=5, help="sample every N-th layer for coverage, default 5")
+    ap.add_argument("--bead-ends", choices=("flat", "round"), default="flat",
+                    help="beads as flat-ended rectangles (default) or with round ends (swept disc)")
     ap.add_argument("--time-tol", type=float, default=0.05, help="relative time tolerance, default 0.05")
     ap.add_argument("--flavor", choices=("marlin", "rrf"), help="firmware (default: the '; flavor:' header, else marlin)")
     ap.add_argument("--accel", default=None,
@@ -1800,6 +1813,7 @@ def parse_args(argv: list[str]) -> tuple[str, Options, str | None]:
     if a.coverage_every < 1:
         raise UsageError("--coverage-every must be at least 1")
     o.coverage_every = a.coverage_every
+    o.bead_ends = a.bead_ends
     o.time_tol = a.time_tol
     o.flavor = a.flavor
     if a.accel:

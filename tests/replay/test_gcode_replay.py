@@ -17,6 +17,7 @@ import unittest
 from contextlib import redirect_stderr, redirect_stdout
 
 import numpy as np
+import shapely
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 
@@ -435,6 +436,18 @@ class Mesh(unittest.TestCase):
         np.testing.assert_allclose(width, 0.4)
         self.assertGreater(consecutive, 0.0)
         self.assertLess(abs(bead - union.area - consecutive), 1e-9)
+
+
+    def test_round_bead_ends_fill_outer_corners(self):
+        # an L-shaped run: flat ends leave the outer corner square empty
+        segs = [(0, 0, 5, 0, 0, 1), (5, 0, 5, 5, 0, 1)]
+        segs = [(a, b, c, d, 0.4 * 0.2 * math.hypot(c - a, d - b) / FIL_AREA, r) for a, b, c, d, _, r in segs]
+        flat, _, _, _ = gr.bead_geometry(segs, 0.2, FIL_AREA)
+        rnd, bead, cons, _ = gr.bead_geometry(segs, 0.2, FIL_AREA, ends="round")
+        corner = shapely.box(5.0, -0.2, 5.2, 0.0)
+        self.assertAlmostEqual(flat.intersection(corner).area, 0.0)
+        self.assertGreater(rnd.intersection(corner).area, 0.02)
+        self.assertLess(abs(bead - rnd.area - cons), 1e-9)
 
 
 class Time(unittest.TestCase):
