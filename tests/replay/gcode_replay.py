@@ -1196,7 +1196,8 @@ _HANDLERS = {
 # Time replay
 # ---------------------------------------------------------------------------
 
-def replay_time(moves: list[tuple], jd: float, jerk: list[float] | None) -> float:
+def replay_time(moves: list[tuple], jd: float, jerk: list[float] | None,
+                breakdown: dict[str, float] | None = None) -> float:
     """Total time of the moves with trapezoidal profiles and a look-ahead.
 
     Junction speed limits follow Marlin's junction deviation: with theta the
@@ -1211,7 +1212,9 @@ def replay_time(moves: list[tuple], jd: float, jerk: list[float] | None) -> floa
     per-axis components are within the jerk limits) with jerk. A backward pass
     then caps each entry speed by what the move can still brake from, a
     forward pass by what it can reach, and each move takes the time of its
-    trapezoid (or triangle).
+    trapezoid (or triangle). ``breakdown``, when given, receives the time of
+    printing moves (XYZ with E), travel (XYZ without E) and E-only moves
+    (retractions and recoveries).
     """
     n = len(moves)
     if n == 0:
@@ -1286,11 +1289,18 @@ def replay_time(moves: list[tuple], jd: float, jerk: list[float] | None) -> floa
         if vout[i] > vo:
             vout[i] = vo
     total = 0.0
+    kinds = {"print": 0.0, "travel": 0.0, "e_only": 0.0}
     for i in range(n):
         vo = vout[i]
         if i + 1 < n and shared[i + 1] and vin[i + 1] < vo:
             vo = vin[i + 1]
-        total += trapezoid_time(L[i], vin[i], vo, V[i], A[i])
+        t = trapezoid_time(L[i], vin[i], vo, V[i], A[i])
+        total += t
+        if breakdown is not None:
+            m = moves[i]
+            kinds["e_only" if m[6] != 0.0 else ("print" if m[10] != 0.0 else "travel")] += t
+    if breakdown is not None:
+        breakdown.update(kinds)
     return total
 
 
@@ -1535,7 +1545,8 @@ def build_report(r: Replay, o: Options, name: str) -> dict:
         checks["coverage"].skip("no --mesh given")
 
     # Time
-    replayed = replay_time(r.moves, r.jd, r.jerk) + r.dwell
+    by_kind: dict[str, float] = {}
+    replayed = replay_time(r.moves, r.jd, r.jerk, by_kind) + r.dwell
     time = {
         "replayed_s": replayed,
         "estimated_s": r.estimated_time,
@@ -1544,6 +1555,7 @@ def build_report(r: Replay, o: Options, name: str) -> dict:
         "tolerance": o.time_tol,
         "moves": len(r.moves),
         "dwell_s": r.dwell,
+        "by_kind_s": by_kind,
         "junction": ("jerk" if r.jerk is not None else f"junction deviation {r.jd:g} mm"),
         "accel_print": r.accel_print, "accel_travel": r.accel_travel, "accel_retract": r.accel_retract,
         "firmware_retractions_untimed": r.fw_retract_count,
@@ -1712,7 +1724,9 @@ def summary(rep: dict) -> str:
         out.append(f"mix channels: {ch}; {rep['mix']['commands']} mix commands, {rep['mix']['changes']} changes")
     t = rep["time"]
     est = f"{t['estimated_s']:.1f} s" if t["estimated_s"] is not None else "none"
-    out.append(f"time: replayed {t['replayed_s']:.1f} s, file estimate {est}")
+    k = t.get("by_kind_s") or {}
+    out.append(f"time: replayed {t['replayed_s']:.1f} s (print {k.get('print', 0):.0f}, travel {k.get('travel', 0):.0f}, "
+               f"E-only {k.get('e_only', 0):.0f}, dwell {t['dwell_s']:.0f}), file estimate {est}")
     cov = rep["coverage"]
     if cov["layers"]:
         wc = cov["worst_coverage"]

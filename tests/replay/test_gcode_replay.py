@@ -484,6 +484,16 @@ class Time(unittest.TestCase):
         expect = 2 * gr.trapezoid_time(L, 10.0, 10.0, v, a)
         self.assertAlmostEqual(gr.replay_time(moves, 0.013, jerk), expect)
 
+    def test_breakdown_by_kind(self):
+        moves = [gr.make_move(10.0, 0, 0, 0, 50.0, 1000.0, True), gr.make_move(10.0, 0, 0, 0.5, 50.0, 1000.0, True),
+                 gr.make_move(0, 0, 0, -1.0, 35.0, 1000.0, True)]
+        kinds = {}
+        total = gr.replay_time(moves, 0.013, None, kinds)
+        self.assertAlmostEqual(kinds["travel"], gr.trapezoid_time(10.0, 0, 0, 50.0, 1000.0))
+        self.assertAlmostEqual(kinds["print"], kinds["travel"])
+        self.assertAlmostEqual(kinds["e_only"], gr.trapezoid_time(1.0, 0, 0, 35.0, 1000.0))
+        self.assertAlmostEqual(sum(kinds.values()), total)
+
     def test_file_accelerations_feeds_and_dwell(self):
         text = "; flavor: marlin\nG90\nM204 T500\nG0 X0 Y0 F6000\nG0 X100 F6000\nG4 P1500\nG4 S2\n"
         rep = run_checks(text)
