@@ -1435,7 +1435,8 @@ def bead_geometry(segs: list[tuple], height: float, area: float, ends: str = "fl
 
     ``ends="flat"`` (the contract) makes each bead a flat-ended rectangle;
     ``"round"`` the segment swept by a disc of the bead's width (a stadium),
-    closer to what a round nozzle lays at corners."""
+    closer to what a round nozzle lays at corners. With round ends a continuous
+    run is one bead: the area its own segments share is not overlap."""
     import shapely
 
     arr = np.asarray([s[:5] for s in segs], dtype=float)
@@ -1464,6 +1465,18 @@ def bead_geometry(segs: list[tuple], height: float, area: float, ends: str = "fl
         rects = shapely.polygons(ring)
         bead_area = float((width * ln).sum())
     union = shapely.union_all(rects)
+    if ends == "round":
+        # A continuous extrusion is one bead: where its own segments meet (joints,
+        # and the tight turns of a densely sampled centre line) the nozzle lays no
+        # second layer of material. Each run's footprint is the union of its
+        # segments; what the footprints of different runs share is overlap.
+        order = np.argsort(runs, kind="stable")
+        bounds = np.flatnonzero(np.diff(runs[order])) + 1
+        groups = np.split(order, bounds)
+        footprints = [shapely.union_all(rects[g]) for g in groups]
+        run_area = float(sum(f.area for f in footprints))
+        consecutive = bead_area - run_area
+        return union, bead_area, consecutive, width
     same = runs[1:] == runs[:-1]
     consecutive = 0.0
     if same.any():
