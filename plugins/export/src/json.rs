@@ -82,6 +82,8 @@ struct LayerOut<'a> {
     build_time: Option<f64>,
     #[serde(skip_serializing_if = "Option::is_none")]
     sequential_time: Option<f64>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    fill: Option<lamina_core::Fill>,
     #[serde(skip_serializing_if = "<[String]>::is_empty")]
     warnings: &'a [String],
 }
@@ -181,6 +183,7 @@ fn layer_out<'a>(info: &'a RunInfo, plan: &'a LayerPlan, toolpaths: bool) -> Lay
         toolpaths: (toolpaths && !plan.toolpaths.is_empty()).then_some(plan.toolpaths.as_slice()),
         build_time: plan.build_time,
         sequential_time: plan.sequential_time,
+        fill: plan.fill,
         warnings: &plan.warnings,
     }
 }
