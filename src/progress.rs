@@ -79,6 +79,14 @@ pub fn summary(report: &RunReport, timings: bool) {
         (Some(t), _) => eprintln!("planned build time: {t:.1} s"),
         _ => {}
     }
+    if let Some((deposited, volume)) = report.fill
+        && volume > 0.0
+    {
+        eprintln!(
+            "beads deposit {deposited:.1} mm³ of the sub-regions' {volume:.1} mm³ ({:.1} %)",
+            100.0 * deposited / volume
+        );
+    }
     if let Some(o) = &report.orientation {
         let [x, y, z] = o.direction;
         eprintln!(
