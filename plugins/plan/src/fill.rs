@@ -186,10 +186,12 @@ pub fn fill(polygon: &Polygon, widths: &Widths) -> Vec<Bead> {
         level = offset(&level, -w);
     }
     residue.retain(|s| shape_area(s) > MIN_RESIDUE);
-    // Edges split to three widths at most: enough for the chords to run across a
-    // residue (at most two widths wide), and a third of the vertices of a split to
-    // one width; the triangulation is the larger part of the fill's time.
-    beads.extend(centre_beads(&residue, 3.0 * w, TOLERANCE));
+    // Edges split to one width at most: a segment's bead stands for the triangle it
+    // crosses, and the longer the triangles the less a bead of their mean width
+    // covers them where the residue widens or bends (splitting to three widths saves
+    // a fifth of the plan's time and leaves 0.7 % of a layer uncovered on 3DBenchy's
+    // cabin, against 0.2 %).
+    beads.extend(centre_beads(&residue, w, TOLERANCE));
     beads
 }
 
