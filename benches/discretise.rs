@@ -37,6 +37,8 @@ fn layers(dir: &Path, file: &str) -> (RunInfo, Vec<(Layer, ContourTree)>) {
         parts: Vec::new(),
         z_min: bb.min.z,
         z_max: bb.max.z,
+        xy_bounds: lamina_core::BBox2::EMPTY,
+        machine: None,
     };
     let slots = slicer
         .layers(std::slice::from_ref(&mesh), &info, None)

@@ -72,6 +72,8 @@ fn run(dir: &Path, file: &str, thickness: f64) -> Times {
         parts: Vec::new(),
         z_min: bb.min.z,
         z_max: bb.max.z,
+        xy_bounds: lamina_core::BBox2::EMPTY,
+        machine: None,
     };
     let slots = slicer
         .layers(std::slice::from_ref(&mesh), &info, None)

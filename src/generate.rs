@@ -164,7 +164,7 @@ pub fn meshes(registry: &Registry, req: &Request) -> Result<Vec<Mesh>> {
     if meshes.iter().all(|m| m.triangles.is_empty()) {
         return Err(Error::stage(&req.model, "the model has no triangles"));
     }
-    lamina_core::runtime::place(&mut meshes, spec.scale, spec.place);
+    lamina_core::runtime::place(&mut meshes, spec.factor(), spec.place);
     Ok(meshes)
 }
 

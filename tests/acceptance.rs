@@ -220,6 +220,8 @@ fn real_models_slice_into_closed_simple_nested_contours() {
             parts: Vec::new(),
             z_min: bb.min.z,
             z_max: bb.max.z,
+            xy_bounds: lamina_core::BBox2::EMPTY,
+            machine: None,
         };
         let slots = slicer
             .layers(std::slice::from_ref(&mesh), &info, None)
@@ -334,6 +336,8 @@ fn real_models_discretise_into_tiling_sub_regions() {
             parts: Vec::new(),
             z_min: bb.min.z,
             z_max: bb.max.z,
+            xy_bounds: lamina_core::BBox2::EMPTY,
+            machine: None,
         };
         let slots = slicer
             .layers(std::slice::from_ref(&mesh), &info, None)

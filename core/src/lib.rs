@@ -1,12 +1,13 @@
 //! lamina-core: the model that flows between Lamina's stages, one trait per stage kind,
 //! the registry of named stage factories, pipeline files, Rhai scripting, dynamic plugin
-//! loading and the runtime that drives layers through the stages.
+//! loading, machine profiles and the runtime that drives layers through the stages.
 //!
 //! This crate knows no concrete algorithm: slicers, sorters, discretisers, graders,
 //! sequencers, planners and exporters live in plugin crates that depend on this one.
 
 pub mod error;
 pub mod geom;
+pub mod machine;
 pub mod mesh;
 pub mod model;
 pub mod output;
@@ -20,6 +21,7 @@ pub mod stage;
 
 pub use error::{Error, Result};
 pub use geom::{BBox2, Contour, Point2, Polygon, Vector2};
+pub use machine::Machine;
 pub use mesh::{BBox3, Mesh, Point3};
 pub use model::*;
 pub use registry::{Registry, StageFactory};

@@ -11,6 +11,8 @@ use toml::Spanned;
 use toml::de::{DeTable, DeValue};
 
 use crate::error::{Error, Result};
+use crate::machine::Machine;
+use crate::machine::load::MachineSpec;
 use crate::model::Material;
 use crate::source::{Location, SourceFile, Span};
 use crate::stage::StageKind;
@@ -78,6 +80,16 @@ impl TableRef {
 
     pub fn file(&self) -> &Arc<SourceFile> {
         &self.file
+    }
+
+    /// Where this table is in its file, from the document root.
+    pub fn path(&self) -> &[PathElem] {
+        &self.path
+    }
+
+    /// True when a `--set` override changed this table, so its spans are stale.
+    pub fn is_overridden(&self) -> bool {
+        self.overridden
     }
 
     /// The dotted path of this table in its file (`slice`, `parts.0.grade`).
@@ -175,7 +187,7 @@ impl TableRef {
     }
 }
 
-fn navigate_de<'i>(doc: Spanned<DeTable<'i>>, path: &[PathElem]) -> Option<Spanned<DeValue<'i>>> {
+pub(crate) fn navigate_de<'i>(doc: Spanned<DeTable<'i>>, path: &[PathElem]) -> Option<Spanned<DeValue<'i>>> {
     let span = doc.span();
     let mut cur = Spanned::new(span, DeValue::Table(doc.into_inner()));
     for elem in path {
@@ -306,6 +318,7 @@ struct RawPipeline {
     #[serde(default)]
     plugins: Vec<String>,
     model: Option<toml::Table>,
+    machine: Option<toml::Value>,
     #[serde(default)]
     materials: toml::Table,
     #[serde(default)]
@@ -352,21 +365,30 @@ pub enum Placement {
     Centre,
 }
 
+/// The unit a model file's coordinates are in; Lamina works in millimetres.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Units {
+    Mm,
+    Cm,
+    M,
+    In,
+}
+
+impl Units {
+    /// Millimetres in one unit.
+    pub fn millimetres(self) -> f64 {
+        match self {
+            Units::Mm => 1.0,
+            Units::Cm => 10.0,
+            Units::M => 1000.0,
+            Units::In => 25.4,
+        }
+    }
+}
+
 /// Keys of a `[model]` table that the host reads itself.
-pub const MODEL_HOST_KEYS: &[&str] = &["use", "scale", "place"];
-
-#[derive(Debug, Clone, Deserialize)]
-#[serde(deny_unknown_fields)]
-struct RawModelHost {
-    #[serde(default = "one")]
-    scale: f64,
-    #[serde(default)]
-    place: Placement,
-}
-
-fn one() -> f64 {
-    1.0
-}
+pub const MODEL_HOST_KEYS: &[&str] = &["use", "scale", "units", "place"];
 
 /// A part as the pipeline describes it.
 #[derive(Debug, Clone)]
@@ -390,8 +412,24 @@ pub struct PartSpec {
 #[derive(Debug, Clone)]
 pub struct ModelSpec {
     pub table: TableRef,
-    pub scale: f64,
+    /// `scale` as written: a factor on top of `units`.
+    pub scale: Option<f64>,
+    /// The unit of the file's coordinates as written.
+    pub units: Option<Units>,
     pub place: Placement,
+}
+
+impl ModelSpec {
+    /// What the model's coordinates are multiplied by to be millimetres.
+    pub fn factor(&self) -> f64 {
+        self.units.map_or(1.0, Units::millimetres) * self.scale.unwrap_or(1.0)
+    }
+
+    /// True when the pipeline says what size the model is (`scale` or `units`), which
+    /// turns off the check for models that look like metres or micrometres.
+    pub fn size_given(&self) -> bool {
+        self.scale.is_some() || self.units.is_some()
+    }
 }
 
 /// A parsed pipeline: what to make, from what, and with which stages.
@@ -410,6 +448,8 @@ pub struct Pipeline {
     pub stages: BTreeMap<StageKind, TableRef>,
     /// `[[output]]` tables, one exporter each.
     pub outputs: Vec<TableRef>,
+    /// The machine the `machine` key names, resolved and validated.
+    pub machine: Option<Machine>,
 }
 
 impl Pipeline {
@@ -450,6 +490,31 @@ impl Pipeline {
                 Some(model_spec(tr)?)
             }
             None => None,
+        };
+
+        let machine = match raw.machine {
+            None => None,
+            Some(value) => {
+                let machine_path = vec![key("machine")];
+                let spec = match value {
+                    toml::Value::String(reference) => MachineSpec::Named {
+                        reference,
+                        at: root_ref.location_of(Some("machine")),
+                    },
+                    toml::Value::Table(t) => {
+                        MachineSpec::Inline(table_ref(machine_path, t).with_host_keys(&[]))
+                    }
+                    _ => {
+                        return Err(root_ref
+                            .error_at(
+                                "machine",
+                                "must name a built-in profile, a `.toml` profile file, or be a table",
+                            )
+                            .with_help(format!("built-in profiles: {}", crate::machine::builtin::names())));
+                    }
+                };
+                Some(crate::machine::resolve(&spec, &base_dir)?)
+            }
         };
 
         let mut materials = Vec::new();
@@ -584,40 +649,41 @@ impl Pipeline {
             parts,
             stages,
             outputs,
+            machine,
         })
     }
 }
 
-/// Reads the host's placement keys of a model table.
+/// Reads the host's placement keys of a model table (`scale`, `units`, `place`), each
+/// on its own so that an error points at the key that is wrong.
 pub fn model_spec(table: TableRef) -> Result<ModelSpec> {
-    let host_only = TableRef {
-        table: table
-            .table
-            .iter()
-            .filter(|(k, _)| ["scale", "place"].contains(&k.as_str()))
-            .map(|(k, v)| (k.clone(), v.clone()))
-            .collect(),
-        ..table.clone()
+    let scale = match table.get("scale") {
+        None => None,
+        Some(v) => match v.as_float().or_else(|| v.as_integer().map(|i| i as f64)) {
+            Some(s) if s.is_finite() && s > 0.0 => Some(s),
+            _ => return Err(table.error_at("scale", "must be a positive number")),
+        },
     };
-    // Parse from the owned subset: spans of these two keys are found by error_at.
-    let host: RawModelHost =
-        toml::Value::Table(host_only.table.clone())
-            .try_into()
-            .map_err(|e: toml::de::Error| {
-                let k = if e.message().contains("place") {
-                    "place"
-                } else {
-                    "scale"
-                };
-                table.error_at(k, e.message().trim())
-            })?;
-    if !(host.scale.is_finite() && host.scale > 0.0) {
-        return Err(table.error_at("scale", "must be a positive number"));
-    }
+    let units = match table.get("units") {
+        None => None,
+        Some(v) => Some(v.clone().try_into::<Units>().map_err(|_| {
+            table
+                .error_at("units", format!("{v} is not a unit"))
+                .with_help("units = \"mm\", \"cm\", \"m\" or \"in\"")
+        })?),
+    };
+    let place = match table.get("place") {
+        None => Placement::default(),
+        Some(v) => v
+            .clone()
+            .try_into::<Placement>()
+            .map_err(|e: toml::de::Error| table.error_at("place", e.message().trim()))?,
+    };
     Ok(ModelSpec {
         table,
-        scale: host.scale,
-        place: host.place,
+        scale,
+        units,
+        place,
     })
 }
 

@@ -259,6 +259,7 @@ fn replace_model_file(spec: &ModelSpec, path: &Path) -> Result<ModelSpec> {
     Ok(ModelSpec {
         table: TableRef::detached("--model", table).with_host_keys(crate::pipeline::MODEL_HOST_KEYS),
         scale: spec.scale,
+        units: spec.units,
         place: spec.place,
     })
 }
@@ -472,7 +473,10 @@ impl Engine {
             if meshes.is_empty() || meshes.iter().all(|m| m.triangles.is_empty()) {
                 return Err(Error::config(format!("model {} holds no triangles", m.label)));
             }
-            place(&mut meshes, m.spec.scale, m.spec.place);
+            if !m.spec.size_given() {
+                check_units(&meshes, &m.spec, &m.label)?;
+            }
+            place(&mut meshes, m.spec.factor(), m.spec.place);
             out.push(meshes);
         }
         Ok(out)
@@ -539,12 +543,27 @@ impl Engine {
             });
         }
         let bbox = meshes.iter().fold(BBox3::EMPTY, |b, m| b.union(&m.bbox()));
+        let xy_bounds = if bbox.is_empty() {
+            crate::geom::BBox2::EMPTY
+        } else {
+            crate::geom::BBox2::from_points([
+                Point2::new(bbox.min.x, bbox.min.y),
+                Point2::new(bbox.max.x, bbox.max.y),
+            ])
+        };
+        if let Some(machine) = &self.pipeline.machine {
+            for (p, &mi) in self.parts.iter().zip(&part_mesh) {
+                check_on_bed(machine, &p.name, &meshes[mi], &xy_bounds)?;
+            }
+        }
         let info = RunInfo {
             base_dir: self.pipeline.base_dir.clone(),
             materials: self.pipeline.materials.clone(),
             parts: parts_info,
             z_min: bbox.min.z,
             z_max: bbox.max.z,
+            xy_bounds,
+            machine: self.pipeline.machine.clone(),
         };
 
         let sequence = match &self.sequencer {
@@ -1103,6 +1122,123 @@ pub fn place(meshes: &mut [Mesh], scale: f64, placement: Placement) {
     for m in meshes.iter_mut() {
         m.transform(1.0, offset);
     }
+}
+
+/// A model whose extents are all under this (mm) is most likely in metres.
+const SMALLEST_PLAUSIBLE_MM: f64 = 1.0;
+/// A model with an extent over this (mm) is most likely in micrometres (or tenths).
+const LARGEST_PLAUSIBLE_MM: f64 = 2000.0;
+
+/// Refuses a model whose size says its file is not in millimetres (a mesh in metres
+/// slices to a single layer and an empty file), unless the pipeline gives `scale` or
+/// `units`.
+fn check_units(meshes: &[Mesh], spec: &ModelSpec, label: &str) -> Result<()> {
+    let bbox = meshes.iter().fold(BBox3::EMPTY, |b, m| b.union(&m.bbox()));
+    if bbox.is_empty() {
+        return Ok(());
+    }
+    let size = bbox.size();
+    let extents = [("wide", size.x), ("deep", size.y), ("tall", size.z)];
+    let (word, largest) = extents
+        .into_iter()
+        .max_by(|a, b| a.1.total_cmp(&b.1))
+        .unwrap_or(("tall", size.z));
+    let (guess, fix) = if largest < SMALLEST_PLAUSIBLE_MM {
+        ("is it in metres?", "scale = 1000 or units = \"m\"")
+    } else if largest > LARGEST_PLAUSIBLE_MM {
+        ("is it in micrometres?", "scale = 0.001")
+    } else {
+        return Ok(());
+    };
+    let table = spec.table.path_string();
+    let table = if table.is_empty() {
+        "model".to_string()
+    } else {
+        table
+    };
+    let message = format!(
+        "the model `{label}` is {} mm {word} ({} x {} x {} mm): {guess} set [{table}] {fix}",
+        short(largest),
+        short(size.x),
+        short(size.y),
+        short(size.z)
+    );
+    let help = format!(
+        "Lamina works in millimetres; `scale` or `units` (\"mm\", \"cm\", \"m\", \"in\") in [{table}] says what the file's numbers mean, and turns this check off"
+    );
+    Err(match spec
+        .table
+        .location_of(Some("file"))
+        .filter(|_| !spec.table.is_overridden())
+    {
+        Some(loc) => Error::config_at(loc, message),
+        None => Error::config(message),
+    }
+    .with_help(help))
+}
+
+/// A length for messages: three significant digits, no trailing zeros.
+fn short(v: f64) -> String {
+    let digits = if v == 0.0 {
+        0
+    } else {
+        (2 - v.abs().log10().floor() as i32).max(0) as usize
+    };
+    let s = format!("{v:.digits$}");
+    if s.contains('.') {
+        s.trim_end_matches('0').trim_end_matches('.').to_string()
+    } else {
+        s
+    }
+}
+
+/// Refuses a part that does not fit the machine: placed as the machine says, every
+/// vertex must lie on the bed and below the machine's build height.
+fn check_on_bed(
+    machine: &crate::machine::Machine,
+    part: &str,
+    mesh: &Mesh,
+    all: &crate::geom::BBox2,
+) -> Result<()> {
+    let offset = machine.placement_offset(all);
+    let bbox = mesh.bbox();
+    if bbox.is_empty() {
+        return Ok(());
+    }
+    let bed = &machine.bed;
+    let on_bed = match bed.shape {
+        crate::machine::BedShape::Rectangle { .. } => bed.contains_box(
+            &crate::geom::BBox2::from_points([
+                Point2::new(bbox.min.x, bbox.min.y) + offset,
+                Point2::new(bbox.max.x, bbox.max.y) + offset,
+            ]),
+            0.0,
+        ),
+        crate::machine::BedShape::Circle { .. } => mesh
+            .vertices
+            .iter()
+            .all(|v| bed.contains(Point2::new(v.x, v.y) + offset, 0.0)),
+    };
+    if !on_bed {
+        return Err(machine.error(format!(
+            "part `{part}` ({} x {} mm, placed at X {:.1}..{:.1}, Y {:.1}..{:.1}) does not fit the {} bed",
+            short(bbox.max.x - bbox.min.x),
+            short(bbox.max.y - bbox.min.y),
+            bbox.min.x + offset.x,
+            bbox.max.x + offset.x,
+            bbox.min.y + offset.y,
+            bbox.max.y + offset.y,
+            bed.describe()
+        )));
+    }
+    if bbox.max.z > bed.max_height {
+        return Err(machine.error(format!(
+            "part `{part}` is {} mm tall, the machine builds up to {} mm",
+            short(bbox.max.z),
+            bed.max_height
+        )));
+    }
+    Ok(())
 }
 
 fn describe_model(spec: &ModelSpec) -> String {

@@ -10,6 +10,8 @@ use std::sync::Arc;
 use serde::{Deserialize, Serialize};
 
 use crate::error::Result;
+use crate::geom::BBox2;
+use crate::machine::Machine;
 use crate::mesh::Mesh;
 use crate::model::*;
 use crate::script::ScriptHost;
@@ -162,6 +164,11 @@ pub struct RunInfo {
     /// Height range of all parts (mm).
     pub z_min: f64,
     pub z_max: f64,
+    /// XY bounding box of all the meshes as placed by their model tables (mm): what a
+    /// machine's placement moves onto its bed.
+    pub xy_bounds: BBox2,
+    /// The machine the pipeline names, if any.
+    pub machine: Option<Machine>,
 }
 
 impl RunInfo {

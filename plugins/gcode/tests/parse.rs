@@ -51,6 +51,8 @@ fn info() -> RunInfo {
         }],
         z_min: 0.0,
         z_max: 1.0,
+        xy_bounds: lamina_core::BBox2::EMPTY,
+        machine: None,
     }
 }
 

@@ -129,6 +129,8 @@ mod tests {
             }],
             z_min: 0.0,
             z_max: 1.0,
+            xy_bounds: lamina_core::BBox2::EMPTY,
+            machine: None,
         }
     }
 

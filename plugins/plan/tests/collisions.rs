@@ -116,6 +116,8 @@ fn layout(rng: &mut Rng, tools: usize) -> (RunInfo, LayerPlan) {
         parts,
         z_min: 0.0,
         z_max: 1.0,
+        xy_bounds: lamina_core::BBox2::EMPTY,
+        machine: None,
     };
     let plan = LayerPlan {
         index: 0,

@@ -69,6 +69,8 @@ impl OneFamily {
                 parts: vec![],
                 z_min: 0.0,
                 z_max: 1.0,
+                xy_bounds: lamina_core::BBox2::EMPTY,
+                machine: None,
             },
             layer: Layer {
                 index: 0,
