@@ -5,6 +5,7 @@
 use std::path::{Path, PathBuf};
 
 use crate::error::{Error, Result};
+use crate::machine::Machine;
 use crate::pipeline::TableRef;
 use crate::script::ScriptHost;
 use crate::stage::{AnyStage, StageConfig, StageInfo, StageKind};
@@ -162,6 +163,19 @@ impl Registry {
         scripts: &ScriptHost,
         base_dir: &Path,
     ) -> Result<AnyStage> {
+        self.build_for(kind, table, scripts, base_dir, None)
+    }
+
+    /// Builds the stage a table names for a pipeline that names `machine`, which the
+    /// stage may consult (and check its options against).
+    pub fn build_for(
+        &self,
+        kind: StageKind,
+        table: &TableRef,
+        scripts: &ScriptHost,
+        base_dir: &Path,
+        machine: Option<&Machine>,
+    ) -> Result<AnyStage> {
         let name = match table.get("use") {
             Some(toml::Value::String(s)) => s.as_str(),
             Some(_) => return Err(table.error_at("use", "must be a string naming the stage")),
@@ -176,7 +190,7 @@ impl Registry {
                 .error_at("use", format!("no {kind} stage named `{name}`"))
                 .with_help(format!("available: {}", self.names(kind)))
         })?;
-        self.build_entry(entry, table, scripts, base_dir)
+        self.build_entry_for(entry, table, scripts, base_dir, machine)
     }
 
     /// Builds a stage from a given registry entry.
@@ -187,10 +201,23 @@ impl Registry {
         scripts: &ScriptHost,
         base_dir: &Path,
     ) -> Result<AnyStage> {
+        self.build_entry_for(entry, table, scripts, base_dir, None)
+    }
+
+    /// Builds a stage from a given registry entry for a pipeline that names `machine`.
+    pub fn build_entry_for(
+        &self,
+        entry: &Registered,
+        table: &TableRef,
+        scripts: &ScriptHost,
+        base_dir: &Path,
+        machine: Option<&Machine>,
+    ) -> Result<AnyStage> {
         let config = StageConfig {
             table,
             scripts,
             base_dir,
+            machine,
         };
         let stage = match (&entry.origin, entry.guarded_build) {
             (Origin::Dynamic { plugin, .. }, Some(build)) => {

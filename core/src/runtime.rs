@@ -174,7 +174,7 @@ fn build_default(
     default: &str,
 ) -> Result<AnyStage> {
     match pipeline.stages.get(&kind) {
-        Some(t) => registry.build(kind, t, scripts, &pipeline.base_dir),
+        Some(t) => registry.build_for(kind, t, scripts, &pipeline.base_dir, pipeline.machine.as_ref()),
         None => {
             let mut table = toml::Table::new();
             table.insert("use".into(), toml::Value::String(default.into()));
@@ -196,10 +196,10 @@ fn build_optional(
     kind: StageKind,
     table: Option<&TableRef>,
     scripts: &ScriptHost,
-    base_dir: &Path,
+    pipeline: &Pipeline,
 ) -> Result<Option<AnyStage>> {
     table
-        .map(|t| registry.build(kind, t, scripts, base_dir))
+        .map(|t| registry.build_for(kind, t, scripts, &pipeline.base_dir, pipeline.machine.as_ref()))
         .transpose()
 }
 
@@ -325,12 +325,12 @@ impl Engine {
                     .as_ref()
                     .or(pipeline.stages.get(&StageKind::Discretise)),
                 &scripts,
-                &base,
+                &pipeline,
             )?
             .map(|s| -> Result<_> { Ok(expect_kind!(s, Discretise)) })
             .transpose()?;
             let grade_table = part.grade.as_ref().or(pipeline.stages.get(&StageKind::Grade));
-            let grader = build_optional(&registry, StageKind::Grade, grade_table, &scripts, &base)?
+            let grader = build_optional(&registry, StageKind::Grade, grade_table, &scripts, &pipeline)?
                 .map(|s| -> Result<_> { Ok(expect_kind!(s, Grade)) })
                 .transpose()?;
             let discretiser_grades = discretiser.as_ref().is_some_and(|d| d.grades());
@@ -385,7 +385,7 @@ impl Engine {
             StageKind::Orient,
             pipeline.stages.get(&StageKind::Orient),
             &scripts,
-            &base,
+            &pipeline,
         )?
         .map(|s| -> Result<_> { Ok(expect_kind!(s, Orient)) })
         .transpose()?;
@@ -394,7 +394,7 @@ impl Engine {
             StageKind::Sequence,
             pipeline.stages.get(&StageKind::Sequence),
             &scripts,
-            &base,
+            &pipeline,
         )?
         .map(|s| -> Result<_> { Ok(expect_kind!(s, Sequence)) })
         .transpose()?;
@@ -403,14 +403,14 @@ impl Engine {
             StageKind::Plan,
             pipeline.stages.get(&StageKind::Plan),
             &scripts,
-            &base,
+            &pipeline,
         )?
         .map(|s| -> Result<_> { Ok(expect_kind!(s, Plan)) })
         .transpose()?;
         let mut exporters = Vec::new();
         for t in &pipeline.outputs {
             exporters.push(expect_kind!(
-                registry.build(StageKind::Export, t, &scripts, &base)?,
+                registry.build_for(StageKind::Export, t, &scripts, &base, pipeline.machine.as_ref())?,
                 Export
             ));
         }

@@ -318,6 +318,9 @@ pub struct StageConfig<'a> {
     pub table: &'a crate::pipeline::TableRef,
     pub scripts: &'a ScriptHost,
     pub base_dir: &'a Path,
+    /// The machine the pipeline names, so a stage can check its options against it
+    /// when the pipeline is checked rather than when it runs.
+    pub machine: Option<&'a Machine>,
 }
 
 impl StageConfig<'_> {

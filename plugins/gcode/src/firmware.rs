@@ -1,0 +1,489 @@
+//! What the firmware makes of the lines the exporter writes: positions and modes, the
+//! selected tool, heater targets and what has been waited for, and the motion settings
+//! with the time every move takes ([`crate::motion`]).
+//!
+//! The exporter runs everything it writes through this model, templates included, so
+//! that it heats and selects a tool before extruding with it whatever a template did,
+//! and so that the time estimate is that of the file itself.
+
+use lamina_core::machine::{Firmware as Dialect, Flavor};
+
+use crate::motion::{Corner, Limits, Planner};
+
+/// Marlin's EXTRUDE_MINTEMP: the firmware refuses to move the extruder below this (°C).
+pub const EXTRUDE_MIN_TEMPERATURE: f64 = 170.0;
+/// Within this of a target, a heater counts as at temperature (°C), as M109 does.
+const TEMPERATURE_WINDOW: f64 = 1.0;
+
+/// One heater: its target and how hot it is known to be (the last target waited for,
+/// lowered when the target drops, since the heater cools).
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+struct Heater {
+    target: f64,
+    reached: f64,
+}
+
+impl Heater {
+    fn set(&mut self, t: f64) {
+        self.target = t;
+        self.reached = self.reached.min(t);
+    }
+
+    fn wait(&mut self) {
+        self.reached = self.target;
+    }
+}
+
+/// A RepRapFirmware tool's active and standby temperatures (`G10 P.. S.. R..`).
+#[derive(Debug, Clone, Copy, Default)]
+struct RrfTemperatures {
+    active: f64,
+    standby: f64,
+    /// Selected once: it waits at standby when deselected (a tool never used is off).
+    used: bool,
+}
+
+/// The firmware's state, fed line by line.
+#[derive(Debug, Clone)]
+pub struct Firmware {
+    dialect: Dialect,
+    mixing: bool,
+    /// X, Y, Z, E as the firmware counts them.
+    position: [f64; 4],
+    absolute: bool,
+    absolute_e: bool,
+    /// Modal feed (mm/min).
+    feed: f64,
+    tool: Option<usize>,
+    heaters: Vec<Heater>,
+    rrf: Vec<RrfTemperatures>,
+    bed: Heater,
+    /// Part-cooling fan, 0 to 1.
+    fan: f64,
+    homed: bool,
+    planner: Planner,
+    /// The first line that moves the extruder of a cold or unselected tool.
+    cold: Option<String>,
+}
+
+impl Firmware {
+    pub fn new(dialect: Dialect, flavor: Flavor, tools: usize, limits: Limits) -> Self {
+        let heaters = if flavor.is_mixing() { 1 } else { tools.max(1) };
+        Self {
+            dialect,
+            mixing: flavor.is_mixing(),
+            position: [0.0; 4],
+            absolute: true,
+            absolute_e: true,
+            feed: 3000.0,
+            tool: None,
+            heaters: vec![Heater::default(); heaters],
+            rrf: vec![RrfTemperatures::default(); heaters],
+            bed: Heater::default(),
+            fan: 0.0,
+            homed: false,
+            planner: Planner::new(limits),
+            cold: None,
+        }
+    }
+
+    /// Feeds every line of `text`.
+    pub fn feed_text(&mut self, text: &str) {
+        for line in text.lines() {
+            self.feed_line(line);
+        }
+    }
+
+    /// Feeds one line of G-code.
+    pub fn feed_line(&mut self, line: &str) {
+        let code = line.split(';').next().unwrap_or("").trim();
+        if code.is_empty() {
+            return;
+        }
+        let mut words = code.split_whitespace();
+        let Some(command) = words.next() else { return };
+        let params: Vec<(char, f64)> = words
+            .filter_map(|w| {
+                let mut c = w.chars();
+                let letter = c.next()?.to_ascii_uppercase();
+                Some((letter, c.as_str().parse::<f64>().ok()?))
+            })
+            .collect();
+        let get = |l: char| params.iter().find(|(k, _)| *k == l).map(|(_, v)| *v);
+        let command = command.to_ascii_uppercase();
+        match command.as_str() {
+            "G0" | "G1" => self.linear(&get, line),
+            "G4" => {
+                let seconds = get('S').unwrap_or(0.0) + get('P').unwrap_or(0.0) / 1000.0;
+                self.planner.dwell(seconds);
+            }
+            "G10" if self.dialect == Dialect::RepRapFirmware => {
+                if let Some(p) = get('P').map(|p| p as usize)
+                    && p < self.rrf.len()
+                {
+                    if let Some(s) = get('S') {
+                        self.rrf[p].active = s;
+                    }
+                    if let Some(r) = get('R') {
+                        self.rrf[p].standby = r;
+                    }
+                    self.rrf_heater_follows(p);
+                }
+            }
+            "G28" => {
+                self.planner.stop();
+                self.homed = true;
+                for (a, letter) in ['X', 'Y', 'Z'].into_iter().enumerate() {
+                    let all = !params.iter().any(|(k, _)| "XYZ".contains(*k));
+                    if all || params.iter().any(|(k, _)| *k == letter) {
+                        self.position[a] = 0.0;
+                    }
+                }
+            }
+            "G29" | "M400" => self.planner.stop(),
+            "G90" => {
+                self.absolute = true;
+                if self.dialect == Dialect::Marlin {
+                    self.absolute_e = true;
+                }
+            }
+            "G91" => {
+                self.absolute = false;
+                if self.dialect == Dialect::Marlin {
+                    self.absolute_e = false;
+                }
+            }
+            "M82" => self.absolute_e = true,
+            "M83" => self.absolute_e = false,
+            "G92" => {
+                for (a, letter) in ['X', 'Y', 'Z', 'E'].into_iter().enumerate() {
+                    if let Some(v) = get(letter) {
+                        self.position[a] = v;
+                    }
+                }
+            }
+            "M104" | "M109" => {
+                let heater = self.heater_of(get('T'));
+                if let (Some(h), Some(t)) = (heater, get('S').or(get('R'))) {
+                    if self.dialect == Dialect::RepRapFirmware {
+                        self.rrf[h].active = t;
+                    }
+                    self.heaters[h].set(t);
+                    if command == "M109" {
+                        self.planner.stop();
+                        self.heaters[h].wait();
+                    }
+                }
+            }
+            "M116" => {
+                self.planner.stop();
+                match get('P').map(|p| p as usize) {
+                    Some(p) if p < self.heaters.len() => self.heaters[p].wait(),
+                    Some(_) => {}
+                    None => {
+                        for h in &mut self.heaters {
+                            h.wait();
+                        }
+                        self.bed.wait();
+                    }
+                }
+            }
+            "M140" | "M190" => {
+                if let Some(t) = get('S').or(get('R')) {
+                    self.bed.set(t);
+                }
+                if command == "M190" {
+                    self.planner.stop();
+                    self.bed.wait();
+                }
+            }
+            "M106" => {
+                let s = get('S').unwrap_or(255.0);
+                // Marlin counts to 255; RepRapFirmware takes either a fraction or 0..255.
+                self.fan = if self.dialect == Dialect::RepRapFirmware && s <= 1.0 {
+                    s
+                } else {
+                    s / 255.0
+                };
+            }
+            "M107" => self.fan = 0.0,
+            "M201" | "M203" | "M204" | "M205" | "M566" => self.motion_setting(&command, &get),
+            _ if command.starts_with('T') => self.select(command[1..].parse::<i64>().ok()),
+            _ => {}
+        }
+    }
+
+    fn linear(&mut self, get: &dyn Fn(char) -> Option<f64>, line: &str) {
+        if let Some(f) = get('F')
+            && f > 0.0
+        {
+            self.feed = f;
+        }
+        let mut target = self.position;
+        for (a, letter) in ['X', 'Y', 'Z', 'E'].into_iter().enumerate() {
+            if let Some(v) = get(letter) {
+                let absolute = if a == 3 { self.absolute_e } else { self.absolute };
+                target[a] = if absolute { v } else { self.position[a] + v };
+            }
+        }
+        let delta = [0, 1, 2, 3].map(|a| target[a] - self.position[a]);
+        if delta[3] != 0.0 && self.cold.is_none() && !self.can_extrude() {
+            self.cold = Some(line.trim().to_string());
+        }
+        self.planner.push(delta, self.feed / 60.0);
+        self.position = target;
+    }
+
+    /// Whether the extruder may move: a tool is selected (any, on a mixing head) and its
+    /// heater has been waited for above the firmware's minimum.
+    fn can_extrude(&self) -> bool {
+        let heater = if self.mixing { Some(0) } else { self.tool };
+        heater.is_some_and(|h| {
+            let h = self.heaters[h];
+            h.target >= EXTRUDE_MIN_TEMPERATURE && h.reached >= EXTRUDE_MIN_TEMPERATURE - TEMPERATURE_WINDOW
+        }) && ((self.mixing && self.dialect == Dialect::Marlin) || self.tool.is_some())
+    }
+
+    fn heater_of(&self, t: Option<f64>) -> Option<usize> {
+        let h = if self.mixing {
+            0
+        } else {
+            match t {
+                Some(t) if t >= 0.0 => t as usize,
+                Some(_) => return None,
+                None => self.tool.unwrap_or(0),
+            }
+        };
+        (h < self.heaters.len()).then_some(h)
+    }
+
+    fn select(&mut self, tool: Option<i64>) {
+        self.planner.stop();
+        let previous = self.tool;
+        self.tool = match tool {
+            Some(t) if t >= 0 && (self.mixing || (t as usize) < self.heaters.len()) => Some(t as usize),
+            _ => None,
+        };
+        if self.dialect == Dialect::RepRapFirmware {
+            if self.mixing {
+                self.rrf_heater_follows(0);
+                return;
+            }
+            if let Some(t) = self.tool {
+                self.rrf[t].used = true;
+                self.rrf_heater_follows(t);
+            }
+            if let Some(p) = previous.filter(|p| Some(*p) != self.tool) {
+                self.rrf_heater_follows(p);
+            }
+        }
+    }
+
+    /// A RepRapFirmware tool's heater is at its active temperature while selected, at
+    /// standby once used and deselected, and off before its first use.
+    fn rrf_heater_follows(&mut self, t: usize) {
+        if self.mixing {
+            if self.tool.is_some() {
+                let active = self.rrf[0].active;
+                self.heaters[0].set(active);
+            }
+            return;
+        }
+        let r = self.rrf[t];
+        let target = if self.tool == Some(t) {
+            r.active
+        } else if r.used {
+            r.standby
+        } else {
+            0.0
+        };
+        self.heaters[t].set(target);
+    }
+
+    fn motion_setting(&mut self, command: &str, get: &dyn Fn(char) -> Option<f64>) {
+        let mut l = *self.planner.limits();
+        // RepRapFirmware gives speeds and jerk in mm/min.
+        let per_minute = if self.dialect == Dialect::RepRapFirmware {
+            60.0
+        } else {
+            1.0
+        };
+        let axes = |current: [f64; 4], scale: f64| {
+            let mut v = current;
+            for (a, letter) in ['X', 'Y', 'Z', 'E'].into_iter().enumerate() {
+                if let Some(x) = get(letter).filter(|x| *x > 0.0) {
+                    v[a] = x / scale;
+                }
+            }
+            v
+        };
+        match command {
+            "M201" => l.max_acceleration = axes(l.max_acceleration, 1.0),
+            "M203" => l.max_speed = axes(l.max_speed, per_minute),
+            "M204" => {
+                if let Some(p) = get('P').or(get('S')).filter(|v| *v > 0.0) {
+                    l.print = p;
+                    if self.dialect == Dialect::RepRapFirmware {
+                        l.retract = p;
+                    }
+                }
+                if let Some(r) = get('R').filter(|v| *v > 0.0) {
+                    l.retract = r;
+                }
+                if let Some(t) = get('T').filter(|v| *v > 0.0) {
+                    l.travel = t;
+                }
+            }
+            "M205" => {
+                if let Some(j) = get('J').filter(|v| *v > 0.0) {
+                    l.corner = Corner::JunctionDeviation(j);
+                } else if ['X', 'Y', 'Z', 'E'].iter().any(|c| get(*c).is_some()) {
+                    let current = match l.corner {
+                        Corner::Jerk(j) => j,
+                        Corner::JunctionDeviation(_) => [10.0, 10.0, 0.4, 5.0],
+                    };
+                    l.corner = Corner::Jerk(axes(current, 1.0));
+                }
+            }
+            "M566" => {
+                let current = match l.corner {
+                    Corner::Jerk(j) => j,
+                    Corner::JunctionDeviation(_) => [15.0, 15.0, 0.2, 2.0],
+                };
+                l.corner = Corner::Jerk(axes(current, 60.0));
+            }
+            _ => {}
+        }
+        self.planner.set_limits(l);
+    }
+
+    /// The selected tool (the virtual tool of a mixing head).
+    pub fn tool(&self) -> Option<usize> {
+        self.tool
+    }
+
+    /// Whether tool `t`'s heater targets `temperature` and has been waited for.
+    pub fn is_hot(&self, t: usize, temperature: f64) -> bool {
+        let h = if self.mixing { 0 } else { t };
+        self.heaters.get(h).is_some_and(|h| {
+            h.target >= temperature - TEMPERATURE_WINDOW && h.reached >= temperature - TEMPERATURE_WINDOW
+        })
+    }
+
+    /// The target of tool `t`'s heater.
+    pub fn target(&self, t: usize) -> f64 {
+        let h = if self.mixing { 0 } else { t };
+        self.heaters.get(h).map_or(0.0, |h| h.target)
+    }
+
+    /// Targets of every heater, the bed's last.
+    pub fn targets(&self) -> Vec<f64> {
+        self.heaters
+            .iter()
+            .map(|h| h.target)
+            .chain([self.bed.target])
+            .collect()
+    }
+
+    pub fn bed_is_hot(&self, temperature: f64) -> bool {
+        self.bed.target >= temperature - TEMPERATURE_WINDOW
+            && self.bed.reached >= temperature - TEMPERATURE_WINDOW
+    }
+
+    pub fn bed_target(&self) -> f64 {
+        self.bed.target
+    }
+
+    /// Part-cooling fan, 0 to 1.
+    pub fn fan(&self) -> f64 {
+        self.fan
+    }
+
+    pub fn homed(&self) -> bool {
+        self.homed
+    }
+
+    pub fn position(&self) -> [f64; 4] {
+        self.position
+    }
+
+    pub fn absolute_e(&self) -> bool {
+        self.absolute_e
+    }
+
+    /// Modal feed (mm/min).
+    pub fn feed(&self) -> f64 {
+        self.feed
+    }
+
+    pub fn limits(&self) -> &Limits {
+        self.planner.limits()
+    }
+
+    /// The first line that would extrude with a cold or unselected tool, if any.
+    pub fn cold_extrusion(&self) -> Option<&str> {
+        self.cold.as_deref()
+    }
+
+    /// Seconds the file takes so far, as if the machine stopped now.
+    pub fn time(&mut self) -> f64 {
+        self.planner.total()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn marlin_heats_per_tool_and_cools_on_standby() {
+        let mut f = Firmware::new(Dialect::Marlin, Flavor::ToolChange, 2, Limits::default());
+        f.feed_text("M104 T1 S215\nT1\n");
+        assert!(!f.is_hot(1, 215.0), "set but not waited for");
+        f.feed_line("M109 T1 S215");
+        assert!(f.is_hot(1, 215.0));
+        f.feed_line("M104 T1 S170 ; standby");
+        f.feed_line("M104 T1 S215");
+        assert!(!f.is_hot(1, 215.0), "it cooled toward standby in between");
+        f.feed_line("G1 X10 E1 F600");
+        assert!(f.cold_extrusion().is_none(), "170 °C is warm enough for Marlin");
+        f.feed_text("T0\nG1 X20 E2 F600\n");
+        assert_eq!(
+            f.cold_extrusion(),
+            Some("G1 X20 E2 F600"),
+            "tool 0 was never heated"
+        );
+    }
+
+    #[test]
+    fn reprapfirmware_tools_go_to_standby_when_deselected() {
+        let mut f = Firmware::new(Dialect::RepRapFirmware, Flavor::ToolChange, 2, Limits::default());
+        f.feed_text("G10 P0 S210 R160\nG10 P1 S215 R160\nT0\nM116 P0\n");
+        assert!(f.is_hot(0, 210.0));
+        assert_eq!(f.target(1), 0.0, "never used: off");
+        f.feed_text("T1\n");
+        assert_eq!(f.target(0), 160.0);
+        assert_eq!(f.target(1), 215.0);
+        assert!(!f.is_hot(1, 215.0));
+        f.feed_text("M116 P1\nG1 X5 E0.5 F1200\n");
+        assert!(f.cold_extrusion().is_none());
+    }
+
+    #[test]
+    fn modes_positions_and_motion_settings() {
+        let mut f = Firmware::new(
+            Dialect::RepRapFirmware,
+            Flavor::ReprapMixing,
+            2,
+            Limits::default(),
+        );
+        f.feed_text(
+            "G90\nM83\nG1 X10 Y10 F6000\nG91\nG1 X5\nG90\nG92 E0\nM566 X600 Y600 Z24 E300\nM204 P800 T2000\n",
+        );
+        assert_eq!(f.position(), [15.0, 10.0, 0.0, 0.0]);
+        assert!(!f.absolute_e(), "G90 leaves RepRapFirmware's E mode alone");
+        assert_eq!(f.limits().corner, Corner::Jerk([10.0, 10.0, 0.4, 5.0]));
+        assert_eq!((f.limits().print, f.limits().travel), (800.0, 2000.0));
+        assert!(f.time() > 0.0);
+    }
+}

@@ -1,0 +1,64 @@
+//! Text that reaches the G-code: names made safe for comment lines, and numbers
+//! written as firmwares read them.
+
+/// The longest name written into a comment.
+const MAX_NAME: usize = 80;
+
+/// A name (pipeline, part, material, head) made safe for a `;` comment: control
+/// characters and Unicode line breaks become spaces, so that a name with a newline can
+/// never start an executable line, and very long names are cut.
+pub fn clean(name: &str) -> String {
+    let mut out: String = name
+        .chars()
+        .map(|c| {
+            if c.is_control() || matches!(c, '\u{2028}' | '\u{2029}' | '\u{85}') {
+                ' '
+            } else {
+                c
+            }
+        })
+        .take(MAX_NAME)
+        .collect();
+    if name.chars().count() > MAX_NAME {
+        out.push_str("...");
+    }
+    let trimmed = out.trim();
+    if trimmed.is_empty() {
+        "?".to_string()
+    } else {
+        trimmed.to_string()
+    }
+}
+
+/// A coordinate or temperature with at most `digits` decimals and no trailing zeros
+/// (`210`, `0.2`, `12.345`), and never `-0`.
+pub fn num(v: f64, digits: usize) -> String {
+    let s = format!("{v:.digits$}");
+    let s = if s.contains('.') {
+        s.trim_end_matches('0').trim_end_matches('.').to_string()
+    } else {
+        s
+    };
+    if s == "-0" { "0".to_string() } else { s }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn names_cannot_break_lines() {
+        assert_eq!(clean("red\nG28 X0"), "red G28 X0");
+        assert_eq!(clean("a\r\u{2028}b\u{0}"), "a  b");
+        assert_eq!(clean("\n"), "?");
+        assert!(clean(&"x".repeat(200)).len() <= MAX_NAME + 3);
+    }
+
+    #[test]
+    fn numbers_are_short() {
+        assert_eq!(num(210.0, 1), "210");
+        assert_eq!(num(0.2, 4), "0.2");
+        assert_eq!(num(-0.00001, 3), "0");
+        assert_eq!(num(12.34567, 3), "12.346");
+    }
+}

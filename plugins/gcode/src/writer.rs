@@ -1,0 +1,1146 @@
+//! The G-code file: start (modes, motion settings, the start template, homing and
+//! heating), prime lines, then each layer (skirt, the parts' paths tool by tool or mix
+//! by mix, the wipe tower's purges after each change), and the end (template, heaters
+//! off, the time estimate).
+//!
+//! Every line goes through the firmware model ([`Firmware`]) as it is written, so the
+//! writer knows at each point which tool is selected and which heaters were waited
+//! for: a tool is selected and at temperature before it moves its extruder, whatever
+//! the templates did, and the time estimate is that of the file itself.
+
+use std::fmt::Write as _;
+use std::io::Write;
+use std::path::PathBuf;
+
+use lamina_core::machine::{Firmware as Dialect, FirstLayerSpeed, Flavor, Machine};
+use lamina_core::{Error, LayerPlan, PathKind, Point2, Result, RunInfo, Toolpath};
+
+use crate::firmware::{EXTRUDE_MIN_TEMPERATURE, Firmware};
+use crate::layout::Layout;
+use crate::setup::Setup;
+use crate::text::{clean, num};
+use crate::tower::{Feature, Stroke, Tower};
+
+/// Travel shorter than this (mm) keeps the filament where it is.
+const RETRACT_MIN_TRAVEL: f64 = 1.0;
+/// Speeds of what the exporter adds (mm/s), before the first layer's slow-down.
+const SKIRT_SPEED: f64 = 30.0;
+const PRIME_SPEED: f64 = 25.0;
+const TOWER_SPEED: f64 = 40.0;
+/// A planned path without timing is extruded at this speed (mm/s).
+const DEFAULT_PRINT_SPEED: f64 = 30.0;
+/// Z speed when the machine sets no Z limit (mm/s).
+const DEFAULT_Z_SPEED: f64 = 10.0;
+/// Clearance above the print when parking (mm).
+const PARK_CLEARANCE: f64 = 10.0;
+
+/// The axis letters of `M165`, one per mixing channel, in Marlin's order.
+pub const M165_AXES: [char; 6] = ['A', 'B', 'C', 'D', 'H', 'I'];
+
+/// The width of segment `i` of a path (from point `i` to `i + 1`).
+fn segment_width(path: &Toolpath, i: usize) -> f64 {
+    let _ = i;
+    path.width
+}
+
+/// Fractions as whole percentages summing to 100 (largest remainders), so that
+/// firmwares that normalise or reject sums other than 1 agree on the mix.
+pub fn percentages(f: &[f64]) -> Vec<u32> {
+    let sum: f64 = f.iter().sum();
+    if f.is_empty() || sum <= 0.0 {
+        let mut p = vec![0; f.len()];
+        if let Some(x) = p.first_mut() {
+            *x = 100;
+        }
+        return p;
+    }
+    let raw: Vec<f64> = f.iter().map(|x| x / sum * 100.0).collect();
+    let mut p: Vec<u32> = raw.iter().map(|x| x.floor() as u32).collect();
+    let mut left = 100u32.saturating_sub(p.iter().sum());
+    let mut order: Vec<usize> = (0..f.len()).collect();
+    order.sort_by(|&a, &b| (raw[b] - raw[b].floor()).total_cmp(&(raw[a] - raw[a].floor())));
+    for i in order.into_iter().cycle().take(f.len() * 2) {
+        if left == 0 {
+            break;
+        }
+        p[i] += 1;
+        left -= 1;
+    }
+    p
+}
+
+/// One planned path to extrude, with the head and mix it needs.
+struct Job<'a> {
+    head: usize,
+    mix: Option<Vec<u32>>,
+    path: &'a Toolpath,
+}
+
+/// The G-code being written.
+pub struct Writer {
+    s: Setup,
+    layout: Layout,
+    out: Box<dyn Write + Send>,
+    path: PathBuf,
+    fw: Firmware,
+    buf: String,
+    /// Position in `s.heads` of the head in use.
+    head: Option<usize>,
+    /// Filament pulled back, per head (mm).
+    retracted: Vec<f64>,
+    /// Whether each head has extruded: a head fresh from loading has nothing to pull
+    /// back.
+    extruded: Vec<bool>,
+    /// Height of the layer being written.
+    z: f64,
+    feature: Option<Feature>,
+    mix: Option<Vec<u32>>,
+    tower: Option<Tower>,
+    /// Every layer up to this height has a tower level.
+    tower_end: f64,
+    /// The last layer had a tower level, so the tower can take one more change.
+    tower_alive: bool,
+    layers: usize,
+    started: bool,
+    /// Filament fed per head (tool changers) or channel (mixing heads), mm.
+    fed: Vec<f64>,
+    /// Per-tool temperatures for the templates' `_<n>` variables.
+    tool_temperatures: Vec<(f64, f64, f64)>,
+    z_max: f64,
+    /// Planned layer build times (s), summed.
+    planned: f64,
+    /// The lowest head the parts use: the templates' `{first_tool}`.
+    first_head: usize,
+}
+
+fn io(path: &std::path::Path, e: std::io::Error) -> Error {
+    Error::io(path, e)
+}
+
+impl Writer {
+    /// Opens the file: header, modes, motion settings, the start template, homing and
+    /// heating.
+    pub fn open(
+        s: Setup,
+        info: &RunInfo,
+        layout: Layout,
+        out: Box<dyn Write + Send>,
+        path: PathBuf,
+        header: &Header<'_>,
+    ) -> Result<Writer> {
+        let fw = Firmware::new(s.dialect, s.flavor, s.heads.len(), s.limits);
+        let used_heads = s.used_heads(info);
+        let needs_tower = layout.tower.is_some();
+        let tower = layout.tower.map(|r| Tower::new(r, s.line_width()));
+        let fed = vec![
+            0.0;
+            if s.flavor.is_mixing() {
+                s.channel_names.len()
+            } else {
+                s.heads.len()
+            }
+        ];
+        let tool_temperatures = match info.machine.as_ref() {
+            Some(m) => m
+                .tools
+                .iter()
+                .map(|t| {
+                    (
+                        t.nozzle_temperature,
+                        t.first_layer_temperature,
+                        t.standby_temperature.unwrap_or(t.nozzle_temperature),
+                    )
+                })
+                .collect(),
+            None => s
+                .heads
+                .iter()
+                .map(|h| {
+                    (
+                        h.nozzle_temperature,
+                        h.first_layer_temperature,
+                        h.nozzle_temperature,
+                    )
+                })
+                .collect(),
+        };
+        let mut w = Writer {
+            retracted: vec![0.0; s.heads.len()],
+            extruded: vec![false; s.heads.len()],
+            tower_end: if needs_tower {
+                tower_end(info)
+            } else {
+                f64::NEG_INFINITY
+            },
+            s,
+            layout,
+            out,
+            path,
+            fw,
+            buf: String::new(),
+            head: None,
+            z: 0.0,
+            feature: None,
+            mix: None,
+            tower,
+            tower_alive: false,
+            layers: 0,
+            started: false,
+            fed,
+            tool_temperatures,
+            z_max: info.z_max,
+            planned: 0.0,
+            first_head: used_heads.first().copied().unwrap_or(0),
+        };
+        w.header(info, header, &used_heads);
+        w.start(&used_heads)?;
+        w.flush()?;
+        Ok(w)
+    }
+
+    // ------------------------------------------------------------------ lines
+
+    /// Writes one line and lets the firmware model read it.
+    fn line(&mut self, text: impl AsRef<str>) {
+        let text = text.as_ref();
+        self.fw.feed_line(text);
+        self.buf.push_str(text);
+        self.buf.push('\n');
+    }
+
+    /// Writes a comment (never read as a command: names are cleaned).
+    fn comment(&mut self, text: impl AsRef<str>) {
+        let text = text.as_ref().replace(['\n', '\r'], " ");
+        self.buf.push_str("; ");
+        self.buf.push_str(&text);
+        self.buf.push('\n');
+    }
+
+    /// Writes a rendered template line by line.
+    fn template(&mut self, text: &str) {
+        for l in text.lines() {
+            let l = l.trim_end();
+            if !l.trim().is_empty() {
+                self.line(l);
+            }
+        }
+    }
+
+    fn flush(&mut self) -> Result<()> {
+        self.out
+            .write_all(self.buf.as_bytes())
+            .map_err(|e| io(&self.path, e))?;
+        self.buf.clear();
+        Ok(())
+    }
+
+    fn set_feature(&mut self, f: Feature) {
+        if self.feature != Some(f) {
+            self.buf.push_str(";TYPE:");
+            self.buf.push_str(f.name());
+            self.buf.push('\n');
+            self.feature = Some(f);
+        }
+    }
+
+    // ------------------------------------------------------------------ start
+
+    fn header(&mut self, info: &RunInfo, h: &Header<'_>, used_heads: &[usize]) {
+        let s = &self.s;
+        let mut t = String::new();
+        let _ = writeln!(
+            t,
+            "; generated by Lamina {} from pipeline `{}`",
+            lamina_core::VERSION,
+            clean(h.pipeline)
+        );
+        let _ = writeln!(
+            t,
+            "; flavor: {}, firmware: {}, {} layers",
+            s.flavor.name(),
+            s.dialect.name(),
+            h.layers
+        );
+        match (&s.machine, s.bed) {
+            (Some(name), Some(bed)) => {
+                let _ = writeln!(
+                    t,
+                    "; machine: {}, bed {}, origin {}, build height {} mm",
+                    clean(name),
+                    bed.describe(),
+                    s.origin_name(),
+                    num(bed.max_height, 1)
+                );
+            }
+            _ => {
+                let _ = writeln!(t, "; machine: none (the exporter's own options)");
+            }
+        }
+        let _ = writeln!(t, "; coordinates: {}", self.layout.note);
+        let _ = writeln!(
+            t,
+            "; filament diameter {} mm, {} E, retraction {} mm at {} mm/s{}",
+            num(s.filament_diameter, 3),
+            if s.relative_e { "relative" } else { "absolute" },
+            num(s.retraction.length, 2),
+            num(s.retraction.speed, 1),
+            if s.retraction.z_hop > 0.0 {
+                format!(", z-hop {} mm", num(s.retraction.z_hop, 2))
+            } else {
+                String::new()
+            }
+        );
+        if s.flavor.is_mixing() {
+            for (i, name) in s.channel_names.iter().enumerate() {
+                let _ = writeln!(t, "; channel {i}: {}", clean(name));
+            }
+        }
+        for (i, head) in s.heads.iter().enumerate() {
+            let used = if used_heads.contains(&i) { "" } else { ", unused" };
+            let standby = head
+                .standby_temperature
+                .map(|x| format!(", standby {}", num(x, 0)))
+                .unwrap_or_default();
+            let _ = writeln!(
+                t,
+                "; tool T{}: {}, {} °C (first layer {}{standby}){used}",
+                head.index,
+                clean(&head.label),
+                num(head.nozzle_temperature, 0),
+                num(head.first_layer_temperature, 0)
+            );
+        }
+        for p in &info.parts {
+            let mats: Vec<String> = p
+                .materials
+                .iter()
+                .filter_map(|&m| info.materials.get(m).map(|m| clean(&m.name)))
+                .collect();
+            let _ = writeln!(
+                t,
+                "; part {}: {} (z {:.3}..{:.3} mm)",
+                clean(&p.name),
+                mats.join(", "),
+                p.z_min,
+                p.z_max
+            );
+        }
+        if let Some(r) = self.layout.tower {
+            let purge = if s.flavor.is_mixing() {
+                format!("{} mm³ after each change of mix", num(s.transition_volume, 1))
+            } else {
+                format!(
+                    "{} mm³ after each tool change",
+                    num(s.wipe_tower.map_or(0.0, |w| w.purge_volume), 1)
+                )
+            };
+            let _ = writeln!(
+                t,
+                "; wipe tower: X {:.1}..{:.1}, Y {:.1}..{:.1}, up to z {:.3} mm, purging {purge}",
+                r.min.x, r.max.x, r.min.y, r.max.y, self.tower_end
+            );
+        }
+        self.buf.push_str(&t);
+    }
+
+    fn start(&mut self, used_heads: &[usize]) -> Result<()> {
+        self.line("G21 ; millimetres");
+        self.line("G90 ; absolute coordinates");
+        self.line(if self.s.relative_e {
+            "M83 ; relative extrusion"
+        } else {
+            "M82 ; absolute extrusion"
+        });
+        for l in crate::commands::motion(&self.s) {
+            self.line(l);
+        }
+        if self.s.flavor == Flavor::ReprapMixing {
+            let drives: Vec<String> = (0..self.s.channel_names.len()).map(|d| d.to_string()).collect();
+            self.line(format!(
+                "M563 P0 D{} H1 S\"mixer\" ; the mixing tool over every drive",
+                drives.join(":")
+            ));
+        }
+        if self.s.machine.is_some() {
+            let start = self.render(&self.s.templates.start.clone(), None, 0.0)?;
+            // Home first unless the template does: nothing may move before.
+            let mut probe = self.fw.clone();
+            probe.feed_text(&start);
+            if !probe.homed() {
+                self.line("G28 ; home all axes (the start template does not)");
+            }
+            self.template(&start);
+            let bed = self.s.first_layer_bed_temperature;
+            if bed > 0.0 && !self.fw.bed_is_hot(bed) {
+                if self.fw.bed_target() < bed - 0.5 {
+                    self.line(format!("M140 S{}", num(bed, 0)));
+                }
+                self.line(format!("M190 S{} ; wait for the bed", num(bed, 0)));
+            }
+            // Every head the parts use warms up together; each is waited for before it
+            // moves its extruder.
+            for &h in used_heads {
+                let head = self.s.heads[h].clone();
+                match self.s.dialect {
+                    Dialect::Marlin => {
+                        if self.fw.target(head.index) < head.first_layer_temperature - 0.5 {
+                            self.line(crate::commands::set_temperature(
+                                &self.s,
+                                head.index,
+                                head.first_layer_temperature,
+                            ));
+                        }
+                    }
+                    Dialect::RepRapFirmware => {
+                        self.line(crate::commands::rrf_tool_temperatures(
+                            head.index,
+                            head.first_layer_temperature,
+                            head.standby_temperature,
+                        ));
+                    }
+                }
+            }
+        } else if self.s.dialect == Dialect::RepRapFirmware {
+            let head = self.s.heads[0].clone();
+            self.line(crate::commands::rrf_tool_temperatures(
+                head.index,
+                head.first_layer_temperature,
+                head.standby_temperature,
+            ));
+        }
+        if self.s.flavor == Flavor::MarlinMixing {
+            self.line(format!(
+                "T{} ; the virtual tool that holds the mix",
+                self.s.virtual_tool
+            ));
+        }
+        if !self.s.relative_e {
+            self.line("G92 E0");
+        }
+        Ok(())
+    }
+
+    /// Values of template variables.
+    fn variable(&self, name: &str, change: Option<(Option<usize>, usize)>, layer_z: f64) -> Option<String> {
+        let s = &self.s;
+        let head = &s.heads[self.first_head];
+        let printed = self.layout.printed();
+        let park = (self.z_max + PARK_CLEARANCE).min(s.bed.map_or(f64::INFINITY, |b| b.max_height));
+        let v = match name {
+            "bed_temperature" => num(s.bed_temperature, 0),
+            "first_layer_bed_temperature" => num(s.first_layer_bed_temperature, 0),
+            "first_tool" => head.index.to_string(),
+            "nozzle_temperature" => num(head.nozzle_temperature, 0),
+            "first_layer_temperature" => num(head.first_layer_temperature, 0),
+            "standby_temperature" => num(head.standby_temperature.unwrap_or(head.nozzle_temperature), 0),
+            "filament_diameter" => num(s.filament_diameter, 3),
+            "nozzle_diameter" => num(s.nozzle_diameter, 3),
+            "print_min_x" => num(printed.min.x, 3),
+            "print_min_y" => num(printed.min.y, 3),
+            "print_max_x" => num(printed.max.x, 3),
+            "print_max_y" => num(printed.max.y, 3),
+            "max_z" => num(self.z_max, 3),
+            "park_z" => num(park, 3),
+            "layer_z" => num(layer_z, 3),
+            "previous_tool" => match change {
+                Some((Some(p), _)) => s.heads[p].index.to_string(),
+                _ => "-1".into(),
+            },
+            "next_tool" => s.heads[change?.1].index.to_string(),
+            "next_temperature" => num(s.heads[change?.1].temperature(self.layers), 0),
+            _ => {
+                let (base, n) = name.rsplit_once('_')?;
+                let (nozzle, first, standby) = *self.tool_temperatures.get(n.parse::<usize>().ok()?)?;
+                match base {
+                    "nozzle_temperature" => num(nozzle, 0),
+                    "first_layer_temperature" => num(first, 0),
+                    "standby_temperature" => num(standby, 0),
+                    _ => return None,
+                }
+            }
+        };
+        Some(v)
+    }
+
+    fn render(
+        &self,
+        t: &lamina_core::machine::Template,
+        change: Option<(Option<usize>, usize)>,
+        layer_z: f64,
+    ) -> Result<String> {
+        t.render(|n| self.variable(n, change, layer_z)).map_err(|e| {
+            Error::stage(
+                crate::STAGE,
+                format!("machine `{}`: {e}", self.s.machine.as_deref().unwrap_or("?")),
+            )
+        })
+    }
+
+    // ------------------------------------------------------------------ tools and heat
+
+    /// Selects head `h` (changing tools if need be) and waits until it is at the
+    /// temperature of the current layer.
+    fn ready(&mut self, h: usize) -> Result<()> {
+        if self.head != Some(h) {
+            self.change_to(h)?;
+        }
+        let head = self.s.heads[h].clone();
+        let temperature = head.temperature(self.layers);
+        if !self.fw.is_hot(head.index, temperature) {
+            match self.s.dialect {
+                Dialect::Marlin => {
+                    let t = if self.s.flavor.is_mixing() {
+                        String::new()
+                    } else {
+                        format!(" T{}", head.index)
+                    };
+                    self.line(format!("M109{t} S{} ; wait for the nozzle", num(temperature, 0)));
+                }
+                Dialect::RepRapFirmware => {
+                    if (self.fw.target(head.index) - temperature).abs() > 0.5 {
+                        self.line(crate::commands::rrf_tool_temperatures(
+                            head.index,
+                            temperature,
+                            head.standby_temperature,
+                        ));
+                    }
+                    self.line(format!("M116 P{} ; wait for the tool's heaters", head.index));
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// Parks the head in use (retracted, at standby) and selects head `h`.
+    fn change_to(&mut self, h: usize) -> Result<()> {
+        let to = self.s.heads[h].clone();
+        let from = self.head;
+        if self.s.flavor.is_mixing() {
+            if self.fw.tool() != Some(to.index) {
+                self.line(format!("T{} ; select the mixing tool", to.index));
+            }
+            self.head = Some(h);
+            return Ok(());
+        }
+        if let Some(f) = from {
+            let length = self.s.retraction.tool_change_length;
+            self.retract(length);
+            self.lift();
+            let prev = self.s.heads[f].clone();
+            if let (Some(standby), Dialect::Marlin) = (prev.standby_temperature, self.s.dialect) {
+                self.line(format!("M104 T{} S{} ; standby", prev.index, num(standby, 0)));
+            }
+        }
+        self.comment(format!("tool change to T{} ({})", to.index, clean(&to.label)));
+        let text = if self.s.machine.is_some() {
+            self.render(&self.s.templates.tool_change.clone(), Some((from, h)), self.z)?
+        } else {
+            String::new()
+        };
+        self.template(&text);
+        if self.fw.tool() != Some(to.index) {
+            self.line(format!("T{}", to.index));
+        }
+        if !self.s.relative_e {
+            // Each tool's E axis starts over: keep this file's E continuous.
+            let e = self.fw.position()[3];
+            self.line(format!("G92 E{e:.5}"));
+        }
+        self.head = Some(h);
+        Ok(())
+    }
+
+    fn can_move_filament(&self) -> bool {
+        self.head.is_some_and(|h| {
+            let i = self.s.heads[h].index;
+            self.fw.tool() == Some(i) && self.fw.is_hot(i, EXTRUDE_MIN_TEMPERATURE)
+        })
+    }
+
+    /// Pulls the filament of the head in use back to `length` mm (if it is hot).
+    fn retract(&mut self, length: f64) {
+        let Some(h) = self.head else { return };
+        let more = length - self.retracted[h];
+        if more > 1e-9 && self.extruded[h] && self.can_move_filament() {
+            let e = self.e_word(-more);
+            let f = self.s.retraction.speed * 60.0;
+            self.line(format!("G1 {e} F{}", num(f, 0)));
+            self.retracted[h] = length;
+        }
+    }
+
+    /// Pushes the filament of the head in use back to the nozzle.
+    fn unretract(&mut self) {
+        let Some(h) = self.head else { return };
+        let back = self.retracted[h];
+        if back > 1e-9 && self.can_move_filament() {
+            let e = self.e_word(back);
+            let f = self.s.retraction.speed * 60.0;
+            self.line(format!("G1 {e} F{}", num(f, 0)));
+            self.retracted[h] = 0.0;
+        }
+    }
+
+    /// The E word for `de` mm of filament, absolute or relative.
+    fn e_word(&self, de: f64) -> String {
+        if self.s.relative_e {
+            format!("E{de:.5}")
+        } else {
+            format!("E{:.5}", self.fw.position()[3] + de)
+        }
+    }
+
+    fn z_feed(&self) -> f64 {
+        let max = self.s.limits.max_speed[2];
+        let cap = if max.is_finite() { max } else { DEFAULT_Z_SPEED };
+        self.s.travel_speed.min(cap) * 60.0
+    }
+
+    /// Lifts the nozzle by the z-hop, when there is one.
+    fn lift(&mut self) {
+        let hop = self.s.retraction.z_hop;
+        if hop > 0.0 && self.fw.position()[2] < self.z + hop - 1e-9 {
+            let f = self.z_feed();
+            self.line(format!("G1 Z{} F{}", num(self.z + hop, 4), num(f, 0)));
+        }
+    }
+
+    /// Moves to `to` at the layer's height, retracted (and lifted) when far.
+    fn travel(&mut self, to: Point2) {
+        let [x, y, z, _] = self.fw.position();
+        let d = (to - Point2::new(x, y)).norm();
+        if d < 1e-6 && (z - self.z).abs() < 1e-9 {
+            return;
+        }
+        if d > RETRACT_MIN_TRAVEL {
+            self.retract(self.s.retraction.length);
+            self.lift();
+        }
+        let f = self.s.travel_speed * 60.0;
+        self.line(format!("G0 X{} Y{} F{}", num(to.x, 4), num(to.y, 4), num(f, 0)));
+        if (self.fw.position()[2] - self.z).abs() > 1e-9 {
+            let f = self.z_feed();
+            self.line(format!("G1 Z{} F{}", num(self.z, 4), num(f, 0)));
+        }
+    }
+
+    /// The feed of an extrusion on the current layer (mm/min).
+    fn print_feed(&self, speed: f64) -> f64 {
+        let v = match (self.layers, self.s.first_layer_speed) {
+            (0, Some(FirstLayerSpeed::Factor(f))) => speed * f,
+            (0, Some(FirstLayerSpeed::Speed(s))) => speed.min(s),
+            _ => speed,
+        };
+        v * 60.0
+    }
+
+    /// Extrudes along `points` (machine coordinates) with head `h`: segment `i` is
+    /// `width(i)` wide and `height` high.
+    fn extrude(
+        &mut self,
+        h: usize,
+        points: &[Point2],
+        width: &dyn Fn(usize) -> f64,
+        height: f64,
+        speed: f64,
+        feature: Feature,
+    ) -> Result<()> {
+        let Some(&first) = points.first() else {
+            return Ok(());
+        };
+        self.ready(h)?;
+        self.travel(first);
+        self.set_feature(feature);
+        self.unretract();
+        let feed = self.print_feed(speed);
+        let area = self.s.filament_area();
+        let mut with_feed = (self.fw.feed() - feed).abs() > 0.5;
+        for (i, w) in points.windows(2).enumerate() {
+            let d = (w[1] - w[0]).norm();
+            if d <= 1e-9 {
+                continue;
+            }
+            let de = d * width(i) * height / area;
+            self.account(h, de);
+            self.extruded[h] = true;
+            let e = self.e_word(de);
+            let f = if with_feed {
+                with_feed = false;
+                format!(" F{}", num(feed, 0))
+            } else {
+                String::new()
+            };
+            self.line(format!("G1 X{} Y{} {e}{f}", num(w[1].x, 4), num(w[1].y, 4)));
+        }
+        Ok(())
+    }
+
+    /// Counts filament toward the head's or the mix's channels.
+    fn account(&mut self, h: usize, de: f64) {
+        match &self.mix {
+            Some(m) if self.s.flavor.is_mixing() => {
+                for (x, p) in self.fed.iter_mut().zip(m) {
+                    *x += de * f64::from(*p) / 100.0;
+                }
+            }
+            _ => {
+                if let Some(x) = self.fed.get_mut(h) {
+                    *x += de;
+                }
+            }
+        }
+    }
+
+    fn strokes(&mut self, h: usize, strokes: Vec<Stroke>, height: f64) -> Result<()> {
+        let w = self.s.line_width();
+        for s in strokes {
+            self.extrude(h, &s.points, &|_| w, height, TOWER_SPEED, s.feature)?;
+        }
+        Ok(())
+    }
+
+    // ------------------------------------------------------------------ mixing
+
+    /// The mix of a path over the head's channels, in percent summing to 100.
+    fn mix_of(&self, info: &RunInfo, path: &Toolpath) -> Vec<u32> {
+        let channels = self.s.channel_names.len();
+        let mut f = vec![0.0; channels];
+        match (&path.composition, path.part.and_then(|p| info.parts.get(p))) {
+            (Some(c), Some(part)) => {
+                for (x, m) in c.fractions.iter().zip(&part.materials) {
+                    if let Some(Some(ch)) = self.s.slot_of.get(*m) {
+                        f[*ch] += x;
+                    }
+                }
+            }
+            (_, Some(part)) => {
+                if let Some(Some(ch)) = part.materials.first().and_then(|m| self.s.slot_of.get(*m)) {
+                    f[*ch] = 1.0;
+                }
+            }
+            _ => {}
+        }
+        percentages(&f)
+    }
+
+    fn set_mix(&mut self, mix: Vec<u32>) {
+        if self.mix.as_ref() == Some(&mix) {
+            return;
+        }
+        for l in crate::commands::mix(&self.s, &mix) {
+            self.line(l);
+        }
+        self.mix = Some(mix);
+    }
+
+    // ------------------------------------------------------------------ layers
+
+    /// The layer's paths in the order they are written: tool changers tool by tool
+    /// (starting with the tool in use, to save a change), each tool's paths in planned
+    /// order; mixing heads mix by mix.
+    fn jobs<'a>(&self, info: &RunInfo, plan: &'a LayerPlan) -> Vec<Job<'a>> {
+        let mut paths: Vec<&Toolpath> = plan
+            .toolpaths
+            .iter()
+            .filter(|p| p.kind == PathKind::Extrude && p.points.len() >= 2)
+            .collect();
+        let start = |p: &&Toolpath| p.points.first().map_or(0.0, |q| q.t);
+        if self.s.flavor.is_mixing() {
+            paths.sort_by(|a, b| start(a).total_cmp(&start(b)));
+            return self.by_mix(
+                paths
+                    .into_iter()
+                    .map(|path| Job {
+                        head: 0,
+                        mix: Some(self.mix_of(info, path)),
+                        path,
+                    })
+                    .collect(),
+            );
+        }
+        let mut jobs: Vec<Job<'a>> = paths
+            .into_iter()
+            .map(|path| Job {
+                head: self.head_of(info, path),
+                mix: None,
+                path,
+            })
+            .collect();
+        let current = self.head;
+        jobs.sort_by(|a, b| {
+            let rank = |h: usize| (Some(h) != current, h);
+            rank(a.head)
+                .cmp(&rank(b.head))
+                .then(start(&a.path).total_cmp(&start(&b.path)))
+        });
+        jobs
+    }
+
+    /// A mixing head's paths grouped by mix, each group in planned order: every change
+    /// of mix costs a purge, so the layer changes once per mix it uses. The group of
+    /// the mix in the nozzle goes first, then each next is the mix nearest the last.
+    fn by_mix<'a>(&self, jobs: Vec<Job<'a>>) -> Vec<Job<'a>> {
+        let mut groups: Vec<(Vec<u32>, Vec<Job<'a>>)> = Vec::new();
+        for j in jobs {
+            let mix = j.mix.clone().unwrap_or_default();
+            match groups.iter_mut().find(|(m, _)| *m == mix) {
+                Some((_, g)) => g.push(j),
+                None => groups.push((mix, vec![j])),
+            }
+        }
+        let distance = |a: &[u32], b: &[u32]| -> u32 { a.iter().zip(b).map(|(x, y)| x.abs_diff(*y)).sum() };
+        let mut out = Vec::new();
+        let mut last = self.mix.clone();
+        while !groups.is_empty() {
+            let next = match &last {
+                Some(l) => (0..groups.len())
+                    .min_by_key(|&i| (distance(l, &groups[i].0), i))
+                    .unwrap_or(0),
+                None => 0,
+            };
+            let (mix, g) = groups.remove(next);
+            out.extend(g);
+            last = Some(mix);
+        }
+        out
+    }
+
+    /// The head of a path on a tool changer: the one carrying its dominant material
+    /// (the planner's tool when it plans one tool per material).
+    fn head_of(&self, info: &RunInfo, path: &Toolpath) -> usize {
+        let material = match (&path.composition, path.part.and_then(|p| info.parts.get(p))) {
+            (Some(c), Some(part)) if c.fractions.len() == part.materials.len() => c
+                .fractions
+                .iter()
+                .enumerate()
+                .max_by(|a, b| a.1.total_cmp(b.1).then(b.0.cmp(&a.0)))
+                .map_or(path.tool, |(i, _)| part.materials[i]),
+            _ => path.tool,
+        };
+        self.s.slot_of.get(material).copied().flatten().unwrap_or(0)
+    }
+
+    /// Before the first layer: each head the parts use is heated, selected and primes
+    /// its line (the first layer's first head last, so the layer starts with it).
+    fn prime(&mut self, info: &RunInfo, plan: &LayerPlan) -> Result<()> {
+        self.z = plan.z;
+        let jobs = self.jobs(info, plan);
+        let first = jobs.first().map(|j| j.head);
+        let lines = self.layout.prime_lines.clone();
+        if lines.is_empty() {
+            return Ok(());
+        }
+        let mut order: Vec<usize> = if self.s.flavor.is_mixing() {
+            vec![0]
+        } else {
+            self.s.used_heads(info)
+        };
+        if let Some(f) = first {
+            order.retain(|h| *h != f);
+            order.push(f);
+        }
+        if self.s.flavor.is_mixing() {
+            let channels = self.s.used_channels(info);
+            let mut even = vec![0.0; self.s.channel_names.len()];
+            for c in &channels {
+                even[*c] = 1.0;
+            }
+            self.set_mix(percentages(&even));
+        }
+        let width = self.s.prime_line.map_or(self.s.line_width(), |p| p.width);
+        // Clear of anything left on the bed, then down to the first layer.
+        let above = self.fw.position()[2].max(self.z + 1.0);
+        if self.fw.position()[2] < above - 1e-9 {
+            let f = self.z_feed();
+            self.line(format!("G1 Z{} F{}", num(above, 3), num(f, 0)));
+        }
+        for (h, (a, b)) in order.into_iter().zip(lines) {
+            self.comment(format!("prime line of T{}", self.s.heads[h].index));
+            self.extrude(
+                h,
+                &[a, b],
+                &|_| width,
+                plan.thickness,
+                PRIME_SPEED,
+                Feature::Prime,
+            )?;
+            self.retract(self.s.retraction.length);
+        }
+        Ok(())
+    }
+
+    /// Switches the bed and nozzles from their first-layer temperatures.
+    fn after_first_layer(&mut self) {
+        let s = self.s.clone();
+        if s.machine.is_some() && (s.bed_temperature - s.first_layer_bed_temperature).abs() > 0.5 {
+            self.line(format!("M140 S{}", num(s.bed_temperature, 0)));
+        }
+        for (h, head) in s.heads.iter().enumerate() {
+            if (head.nozzle_temperature - head.first_layer_temperature).abs() <= 0.5 {
+                continue;
+            }
+            match s.dialect {
+                Dialect::Marlin => {
+                    if self.head == Some(h) {
+                        self.line(crate::commands::set_temperature(
+                            &s,
+                            head.index,
+                            head.nozzle_temperature,
+                        ));
+                    }
+                }
+                Dialect::RepRapFirmware => {
+                    if self.fw.target(head.index) > 0.0 || self.head == Some(h) {
+                        self.line(crate::commands::rrf_tool_temperatures(
+                            head.index,
+                            head.nozzle_temperature,
+                            head.standby_temperature,
+                        ));
+                    }
+                }
+            }
+        }
+    }
+
+    fn set_fan(&mut self) {
+        let Some(fan) = self.s.fan else { return };
+        let n = self.layers;
+        let full = fan.speed / 100.0;
+        let start = usize::from(!fan.first_layer);
+        let f = if n < start {
+            0.0
+        } else if n >= fan.full_speed_layer || fan.full_speed_layer <= start {
+            full
+        } else {
+            full * (n - start + 1) as f64 / (fan.full_speed_layer - start + 1) as f64
+        };
+        if (f - self.fw.fan()).abs() > 0.005 {
+            self.line(crate::commands::fan(&self.s, f));
+        }
+    }
+
+    /// Writes one layer.
+    pub fn write_layer(&mut self, info: &RunInfo, plan: &LayerPlan) -> Result<()> {
+        if !self.started {
+            self.prime(info, plan)?;
+            self.started = true;
+        }
+        self.feature = None;
+        let _ = writeln!(
+            self.buf,
+            ";LAYER:{} Z{:.4} height {:.4}",
+            plan.index, plan.z, plan.thickness
+        );
+        if self.layers == 1 {
+            self.after_first_layer();
+        }
+        self.set_fan();
+        let jobs = self.jobs(info, plan);
+        // Up to the layer's height.
+        if (plan.z - self.z).abs() > 1e-9 || self.layers == 0 {
+            self.retract(self.s.retraction.length);
+            self.z = plan.z;
+            if (self.fw.position()[2] - plan.z).abs() > 1e-9 {
+                let f = self.z_feed();
+                self.line(format!("G1 Z{} F{}", num(plan.z, 4), num(f, 0)));
+            }
+        }
+        // Where the head or mix changes.
+        let mut state = (self.head, self.mix.clone());
+        let mut changes = 0;
+        for j in &jobs {
+            let next = (Some(j.head), j.mix.clone().or(state.1.clone()));
+            if state.0.is_some() && next != state {
+                changes += 1;
+            }
+            state = next;
+        }
+        let tower_here =
+            self.tower.is_some() && (plan.z <= self.tower_end + 1e-6 || (changes > 0 && self.tower_alive));
+        if tower_here && let Some(t) = &mut self.tower {
+            t.begin(plan.z);
+        }
+        // Skirt, with the head in use (or the layer's first).
+        if let (Some(skirt), Some(h)) = (self.s.skirt, self.head.or(jobs.first().map(|j| j.head)))
+            && self.layers < skirt.layers
+        {
+            let loops = self.layout.skirt.clone();
+            let w = self.s.line_width();
+            for l in loops {
+                self.extrude(h, &l, &|_| w, plan.thickness, SKIRT_SPEED, Feature::Skirt)?;
+            }
+        }
+        let offset = self.layout.offset;
+        let purge = if self.s.flavor.is_mixing() {
+            self.s.transition_volume
+        } else {
+            self.s.wipe_tower.map_or(0.0, |w| w.purge_volume)
+        };
+        let mut left = changes;
+        for j in &jobs {
+            let changed_head = self.head.is_some() && self.head != Some(j.head);
+            let changed_mix = j.mix.is_some() && self.mix.is_some() && self.mix != j.mix;
+            if let Some(m) = &j.mix {
+                self.set_mix(m.clone());
+            }
+            self.ready(j.head)?;
+            if changed_head || changed_mix {
+                left -= 1;
+                if tower_here && !self.tower.as_ref().is_some_and(Tower::open) {
+                    self.comment("the tower's level at this height is complete: the change is not purged");
+                } else if tower_here {
+                    let strokes = match &mut self.tower {
+                        Some(t) => t.purge(purge).map_err(|e| e.in_layer(plan.index, plan.z))?,
+                        None => Vec::new(),
+                    };
+                    self.strokes(j.head, strokes, self.tower_height())?;
+                    if left == 0 {
+                        let strokes = self.tower.as_mut().map(Tower::finish).unwrap_or_default();
+                        self.strokes(j.head, strokes, self.tower_height())?;
+                    }
+                } else {
+                    self.comment("no wipe tower at this height: the change is not purged");
+                }
+            }
+            let points: Vec<Point2> = j.path.points.iter().map(|p| p.p + offset).collect();
+            let speed = match (j.path.points.first(), j.path.points.last()) {
+                (Some(a), Some(b)) if b.t > a.t && j.path.length() > 0.0 => j.path.length() / (b.t - a.t),
+                _ => DEFAULT_PRINT_SPEED,
+            };
+            let path = j.path;
+            self.extrude(
+                j.head,
+                &points,
+                &|i| segment_width(path, i),
+                plan.thickness,
+                speed,
+                Feature::Part,
+            )?;
+        }
+        if tower_here && self.tower.as_ref().is_some_and(Tower::open) {
+            let h = self.head.or(jobs.first().map(|j| j.head));
+            if let Some(h) = h {
+                let strokes = self.tower.as_mut().map(Tower::finish).unwrap_or_default();
+                self.strokes(h, strokes, self.tower_height())?;
+            }
+        }
+        self.tower_alive = tower_here;
+        self.planned += plan.build_time.unwrap_or(0.0);
+        self.layers += 1;
+        self.flush()
+    }
+
+    fn tower_height(&self) -> f64 {
+        self.tower.as_ref().map_or(0.0, Tower::height)
+    }
+
+    /// The end: retraction, the end template, every heater off, and the summary with
+    /// the time the file takes.
+    pub fn finish_file(mut self: Box<Self>, info: &RunInfo) -> Result<()> {
+        self.retract(self.s.retraction.length);
+        self.feature = None;
+        if self.s.machine.is_some() {
+            let end = self.render(&self.s.templates.end.clone(), None, self.z)?;
+            self.template(&end);
+        }
+        let targets = self.fw.targets();
+        let (heaters, bed) = targets.split_at(targets.len() - 1);
+        for (h, t) in heaters.iter().enumerate() {
+            if *t > 0.0 {
+                let index = if self.s.flavor.is_mixing() {
+                    self.s.heads[0].index
+                } else {
+                    h
+                };
+                self.line(crate::commands::heater_off(&self.s, index));
+            }
+        }
+        if bed.first().is_some_and(|b| *b > 0.0) {
+            self.line("M140 S0 ; bed off");
+        }
+        if self.fw.fan() > 0.0 {
+            self.line("M107 ; fan off");
+        }
+        if self.s.machine.is_none() {
+            self.line("M84 ; motors off");
+        }
+        if let Some(line) = self.fw.cold_extrusion() {
+            return Err(Error::stage(
+                crate::STAGE,
+                format!(
+                    "the file would move the extruder of a cold or unselected tool at `{line}`: \
+                     check the machine's start and tool-change templates"
+                ),
+            ));
+        }
+        let time = self.fw.time();
+        let names: Vec<String> = if self.s.flavor.is_mixing() {
+            self.s
+                .channel_names
+                .iter()
+                .map(|n| format!("channel {}", clean(n)))
+                .collect()
+        } else {
+            self.s
+                .heads
+                .iter()
+                .map(|h| format!("T{} {}", h.index, clean(&h.label)))
+                .collect()
+        };
+        let area = self.s.filament_area();
+        let mut t = String::new();
+        let _ = writeln!(t, "; end: {} layers", self.layers);
+        for (name, fed) in names.iter().zip(&self.fed) {
+            let _ = writeln!(t, "; filament {name}: {fed:.3} mm ({:.1} mm³)", fed * area);
+        }
+        let _ = writeln!(
+            t,
+            "; planned build time not stated: the {} flavor runs one tool at a time, so the file takes what it says below (the plan's {:.1} s times tools working together)",
+            self.s.flavor.name(),
+            self.planned
+        );
+        let _ = writeln!(t, "; estimated printing time: {time:.1} s");
+        let _ = info;
+        self.buf.push_str(&t);
+        self.flush()?;
+        self.out.flush().map_err(|e| io(&self.path, e))
+    }
+}
+
+/// What the header says about the run.
+pub struct Header<'a> {
+    pub pipeline: &'a str,
+    pub layers: usize,
+}
+
+/// The highest layer top up to which two materials are deposited (tools or mixes still
+/// change there), from the parts' materials and heights: the tower reaches it.
+pub fn tower_end(info: &RunInfo) -> f64 {
+    let mut cuts: Vec<f64> = info.parts.iter().flat_map(|p| [p.z_min, p.z_max]).collect();
+    cuts.sort_by(f64::total_cmp);
+    cuts.dedup();
+    let mut end = f64::NEG_INFINITY;
+    for w in cuts.windows(2) {
+        let mid = (w[0] + w[1]) / 2.0;
+        let mut materials: Vec<usize> = info
+            .parts
+            .iter()
+            .filter(|p| p.z_min <= mid && mid <= p.z_max)
+            .flat_map(|p| p.materials.iter().copied())
+            .collect();
+        materials.sort_unstable();
+        materials.dedup();
+        if materials.len() >= 2 {
+            end = end.max(w[1]);
+        }
+    }
+    end
+}
+
+/// The machine of a run, for errors.
+pub fn machine_error(machine: Option<&Machine>) -> impl Fn(String) -> Error + '_ {
+    move |m| match machine {
+        Some(machine) => machine.error(m),
+        None => Error::stage(crate::STAGE, m),
+    }
+}
