@@ -35,7 +35,30 @@ pub fn text(registry: &Registry, kind: Option<StageKind>) -> String {
             let _ = writeln!(out, "      {} : {}{default}  {}", o.name, o.ty, o.doc);
         }
     }
+    if kind.is_none() {
+        out.push_str("\nmachine profiles (machine = \"name\"):\n");
+        for (name, description) in machine_profiles() {
+            let _ = writeln!(out, "  {name:<22} {description}");
+        }
+    }
     out
+}
+
+/// The built-in machine profiles with their descriptions.
+fn machine_profiles() -> Vec<(&'static str, String)> {
+    lamina_core::machine::builtin::PROFILES
+        .iter()
+        .map(|p| {
+            let spec = lamina_core::machine::load::MachineSpec::Named {
+                reference: p.name.to_string(),
+                at: None,
+            };
+            let description = lamina_core::machine::resolve(&spec, std::path::Path::new("."))
+                .map(|m| m.description)
+                .unwrap_or_else(|e| format!("(invalid: {e})"));
+            (p.name, description)
+        })
+        .collect()
 }
 
 pub fn json(registry: &Registry, kind: Option<StageKind>) -> String {
@@ -66,8 +89,15 @@ pub fn markdown(registry: &Registry, kind: Option<StageKind>) -> String {
          A pipeline names one stage per table with `use = \"name\"` and sets its options \
          beside it. Tables: `[model]` (or a model per `[[parts]]`), `[slice]`, `[sort]`, \
          `[discretise]`, `[grade]`, `[sequence]`, `[plan]`, and one `[[output]]` per file \
-         to write.\n",
+         to write. A top-level `machine` names the printer ([machines.md](machines.md)).\n",
     );
+    if kind.is_none() {
+        out.push_str("\n## machine\n\nBuilt-in machine profiles, for `machine = \"name\"`:\n\n");
+        out.push_str("| name | machine |\n|---|---|\n");
+        for (name, description) in machine_profiles() {
+            let _ = writeln!(out, "| `{name}` | {} |", description.replace('|', "\\|"));
+        }
+    }
     let mut last = None;
     for r in registry.list(kind) {
         let info = r.info();

@@ -296,7 +296,7 @@ fn prime_band(bed: &Bed, length: f64, width: f64, count: usize, back: bool) -> O
             };
             // Alternate directions so that each line starts where the last ended.
             (x1 - x0 >= 10.0).then(|| {
-                if k % 2 == 0 {
+                if k.is_multiple_of(2) {
                     (Point2::new(x0, y), Point2::new(x1, y))
                 } else {
                     (Point2::new(x1, y), Point2::new(x0, y))

@@ -141,8 +141,8 @@ impl Planner {
         } else {
             l.print
         };
-        for a in 0..4 {
-            let d = direction[a].abs();
+        for (a, d) in direction.iter().enumerate() {
+            let d = d.abs();
             if d > 0.0 {
                 nominal = nominal.min(l.max_speed[a] / d);
                 acceleration = acceleration.min(l.max_acceleration[a] / d);

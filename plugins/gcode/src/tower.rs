@@ -11,7 +11,7 @@
 use lamina_core::{BBox2, Error, Point2, Result};
 
 /// Every how many rows a sparse tower layer lays a line.
-const SPARSE_STEP: usize = 3;
+const SPARSE_STEP: usize = 6;
 
 /// What a stroke is, for the `;TYPE:` comment before it.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -100,14 +100,13 @@ impl Tower {
         }
         let height = z - self.top;
         let along_x = self.levels.is_multiple_of(2);
-        let (length, across) = if along_x {
-            (self.rect.width(), self.rect.height())
+        let across = if along_x {
+            self.rect.height()
         } else {
-            (self.rect.height(), self.rect.width())
+            self.rect.width()
         };
         let w = self.width;
         let rows = ((across - 2.0 * w) / w).floor().max(0.0) as usize;
-        let _ = length;
         self.level = Some(Level {
             z,
             height,
@@ -149,7 +148,11 @@ impl Tower {
     fn point(&self, l: &Level, r: usize, along: f64) -> Point2 {
         let w = self.width;
         let (start, end, _) = self.row_geometry(l);
-        let t = if r % 2 == 0 { start + along } else { end - along };
+        let t = if r.is_multiple_of(2) {
+            start + along
+        } else {
+            end - along
+        };
         let across = if l.along_x {
             self.rect.min.y + w + (r as f64 + 0.5) * w
         } else {
@@ -263,15 +266,16 @@ impl Tower {
                 let mut points = Vec::new();
                 for (i, &r) in rows.iter().enumerate() {
                     // Serpentine over the chosen rows: every other one runs backward.
-                    let (a, b) = if i % 2 == 0 {
+                    // `point` measures along a row from its own start, which is at the
+                    // far end on odd rows.
+                    let from_start = |at: f64| if r.is_multiple_of(2) { at } else { row_length - at };
+                    let (a, b) = if i.is_multiple_of(2) {
                         (0.0, row_length)
                     } else {
                         (row_length, 0.0)
                     };
-                    let pa = self.point(&l, r, if r % 2 == 0 { a } else { row_length - a });
-                    let pb = self.point(&l, r, if r % 2 == 0 { b } else { row_length - b });
-                    points.push(pa);
-                    points.push(pb);
+                    points.push(self.point(&l, r, from_start(a)));
+                    points.push(self.point(&l, r, from_start(b)));
                 }
                 out.push(Stroke {
                     points,

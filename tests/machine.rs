@@ -1,0 +1,230 @@
+//! Machine profiles and model units end to end, through the `lamina` command line: a
+//! profile's errors name the file, line and field; a part the bed cannot hold is
+//! refused with its name and the bed's size; a model in metres is refused with the fix;
+//! an inline machine extends a built-in one.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+fn lamina(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_lamina"))
+        .args(args)
+        .output()
+        .expect("lamina runs")
+}
+
+fn text(out: &[u8]) -> String {
+    String::from_utf8_lossy(out).into_owned()
+}
+
+fn write(dir: &Path, name: &str, text: &str) -> PathBuf {
+    let p = dir.join(name);
+    std::fs::write(&p, text).expect("write");
+    p
+}
+
+/// A graded box printed by a machine; `model` and `machine` are TOML lines.
+fn pipeline(model: &str, machine: &str) -> String {
+    format!(
+        r#"name = "box"
+{machine}
+
+[model]
+use = "box"
+{model}
+
+[materials.red]
+colour = [255, 0, 0]
+[materials.green]
+colour = [0, 255, 0]
+
+[grade]
+use = "z"
+f = "linear"
+
+[slice]
+use = "uniform"
+thickness = 0.5
+
+[plan]
+use = "sequential"
+mixing = true
+
+[[output]]
+use = "gcode"
+path = "box.gcode"
+"#
+    )
+}
+
+#[test]
+fn a_part_too_big_for_the_bed_is_refused_with_its_name_and_the_bed_size() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let p = write(
+        dir.path(),
+        "big.toml",
+        &pipeline("size = [250.0, 40.0, 2.0]", "machine = \"marlin-mixing-2in1\""),
+    );
+    let out = lamina(&[
+        "run",
+        "--quiet",
+        "--out",
+        &dir.path().join("out").to_string_lossy(),
+        &p.to_string_lossy(),
+    ]);
+    assert_eq!(out.status.code(), Some(2), "{}", text(&out.stderr));
+    let err = text(&out.stderr);
+    assert!(err.contains("part `part`"), "{err}");
+    assert!(err.contains("220 x 220 mm"), "{err}");
+    assert!(!dir.path().join("out/box.gcode").exists(), "nothing written");
+
+    let tall = write(
+        dir.path(),
+        "tall.toml",
+        &pipeline("size = [20.0, 20.0, 260.0]", "machine = \"marlin-mixing-2in1\""),
+    );
+    let out = lamina(&[
+        "run",
+        "--quiet",
+        "--out",
+        &dir.path().join("out").to_string_lossy(),
+        &tall.to_string_lossy(),
+    ]);
+    assert_eq!(out.status.code(), Some(2));
+    assert!(
+        text(&out.stderr).contains("builds up to 250 mm"),
+        "{}",
+        text(&out.stderr)
+    );
+}
+
+#[test]
+fn profile_errors_name_the_file_line_and_field() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    write(
+        dir.path(),
+        "printer.toml",
+        "base = \"marlin-toolchanger-2\"\nname = \"mine\"\n\n[retraction]\nspeed = -35.0\n",
+    );
+    let p = write(dir.path(), "p.toml", &pipeline("", "machine = \"printer.toml\""));
+    let out = lamina(&["check", &p.to_string_lossy()]);
+    assert_eq!(out.status.code(), Some(2));
+    let err = text(&out.stderr);
+    assert!(err.contains("printer.toml:5:1"), "{err}");
+    assert!(err.contains("retraction.speed"), "{err}");
+
+    // Inline: the line in the pipeline.
+    let p = write(
+        dir.path(),
+        "inline.toml",
+        &pipeline("", "[machine]\nbase = \"rrf-idex-2\"\nplacement = [900.0, 10.0]"),
+    );
+    let out = lamina(&["check", &p.to_string_lossy()]);
+    assert_eq!(out.status.code(), Some(2));
+    let err = text(&out.stderr);
+    assert!(err.contains("inline.toml:4:1"), "{err}");
+    assert!(err.contains("placement"), "{err}");
+
+    let p = write(dir.path(), "unknown.toml", &pipeline("", "machine = \"prusa\""));
+    let out = lamina(&["check", &p.to_string_lossy()]);
+    assert_eq!(out.status.code(), Some(2));
+    assert!(
+        text(&out.stderr).contains("rrf-idex-2"),
+        "lists the built-in profiles"
+    );
+}
+
+#[test]
+fn an_inline_machine_extends_a_builtin_one() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let p = write(
+        dir.path(),
+        "p.toml",
+        &pipeline(
+            "size = [20.0, 20.0, 1.0]",
+            "[machine]\nbase = \"marlin-mixing-2in1\"\nplacement = [60.0, 150.0]\nbed_temperature = 55.0\n\
+             [machine.bed]\nmax_height = 100.0",
+        ),
+    );
+    let out_dir = dir.path().join("out");
+    let out = lamina(&[
+        "run",
+        "--quiet",
+        "--out",
+        &out_dir.to_string_lossy(),
+        &p.to_string_lossy(),
+    ]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let gcode = std::fs::read_to_string(out_dir.join("box.gcode")).expect("gcode");
+    assert!(gcode.contains("marlin-mixing-2in1"));
+    assert!(gcode.contains("build height 100 mm"));
+    assert!(gcode.contains("M140 S55"), "the second layer's bed temperature");
+    // The box's corner (0, 0) lands 10 mm left and below the placement point.
+    assert!(
+        gcode.contains("by X+50.000 Y+140.000"),
+        "{}",
+        &gcode[..gcode.len().min(800)]
+    );
+}
+
+#[test]
+fn a_model_in_metres_is_refused_with_the_fix_unless_its_units_are_given() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let p = write(dir.path(), "m.toml", &pipeline("size = [0.04, 0.03, 0.0156]", ""));
+    let out = lamina(&[
+        "run",
+        "--quiet",
+        "--out",
+        &dir.path().join("out").to_string_lossy(),
+        &p.to_string_lossy(),
+    ]);
+    assert_eq!(out.status.code(), Some(2), "{}", text(&out.stderr));
+    let err = text(&out.stderr);
+    assert!(err.contains("is 0.04 mm wide"), "{err}");
+    assert!(
+        err.contains("is it in metres? set [model] scale = 1000 or units = \"m\""),
+        "{err}"
+    );
+
+    for fix in ["units = \"m\"", "scale = 1000"] {
+        let p = write(
+            dir.path(),
+            "fixed.toml",
+            &pipeline(&format!("size = [0.04, 0.03, 0.002]\n{fix}"), ""),
+        );
+        let out = lamina(&[
+            "run",
+            "--quiet",
+            "--out",
+            &dir.path().join("out2").to_string_lossy(),
+            &p.to_string_lossy(),
+        ]);
+        assert!(out.status.success(), "{fix}: {}", text(&out.stderr));
+    }
+
+    let p = write(
+        dir.path(),
+        "km.toml",
+        &pipeline("size = [40000.0, 30.0, 2.0]", ""),
+    );
+    let out = lamina(&["check", &p.to_string_lossy()]);
+    assert!(out.status.success(), "the check needs the mesh: `check` passes");
+    let out = lamina(&[
+        "run",
+        "--quiet",
+        "--out",
+        &dir.path().join("out3").to_string_lossy(),
+        &p.to_string_lossy(),
+    ]);
+    assert_eq!(out.status.code(), Some(2));
+    assert!(
+        text(&out.stderr).contains("scale = 0.001"),
+        "{}",
+        text(&out.stderr)
+    );
+
+    let p = write(dir.path(), "bad.toml", &pipeline("units = \"furlong\"", ""));
+    let out = lamina(&["check", &p.to_string_lossy()]);
+    assert_eq!(out.status.code(), Some(2));
+    assert!(text(&out.stderr).contains("units"), "{}", text(&out.stderr));
+}
