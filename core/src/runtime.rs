@@ -461,6 +461,16 @@ impl Engine {
                 },
             ));
         }
+        if let Some(m) = &self.pipeline.machine {
+            lines.push(format!(
+                "machine: {} ({}, {}, {} bed, {} tool(s))",
+                m.name,
+                m.flavor.name(),
+                m.firmware.name(),
+                m.bed.describe(),
+                m.tools.len()
+            ));
+        }
         lines.push(format!("outputs: {}", self.exporters.len()));
         lines
     }

@@ -378,17 +378,19 @@ impl Writer {
                 self.line(format!("M190 S{} ; wait for the bed", num(bed, 0)));
             }
             // Every head the parts use warms up together; each is waited for before it
-            // moves its extruder.
+            // moves its extruder. Without prime lines a head that does not print first
+            // waits at its standby temperature until it is needed.
             for &h in used_heads {
                 let head = self.s.heads[h].clone();
+                let warm = if self.s.prime_line.is_some() || h == self.first_head {
+                    head.first_layer_temperature
+                } else {
+                    head.standby_temperature.unwrap_or(head.first_layer_temperature)
+                };
                 match self.s.dialect {
                     Dialect::Marlin => {
-                        if self.fw.target(head.index) < head.first_layer_temperature - 0.5 {
-                            self.line(crate::commands::set_temperature(
-                                &self.s,
-                                head.index,
-                                head.first_layer_temperature,
-                            ));
+                        if self.fw.target(head.index) < warm - 0.5 {
+                            self.line(crate::commands::set_temperature(&self.s, head.index, warm));
                         }
                     }
                     Dialect::RepRapFirmware => {
