@@ -27,7 +27,7 @@ use crate::stage::*;
 /// `b"LAMINAPL"` as a little-endian integer: marks a Lamina plugin descriptor.
 pub const PLUGIN_MAGIC: u64 = u64::from_le_bytes(*b"LAMINAPL");
 /// Incremented when the meaning of the descriptor or of the stage traits changes.
-pub const ABI_MAJOR: u32 = 4;
+pub const ABI_MAJOR: u32 = 5;
 /// Incremented for additions a host of the same major can ignore.
 pub const ABI_MINOR: u32 = 0;
 /// The entry symbol; `v1` is the version of the descriptor's frozen prefix.

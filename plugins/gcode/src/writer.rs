@@ -21,8 +21,9 @@ use crate::setup::Setup;
 use crate::text::{clean, num};
 use crate::tower::{Feature, Stroke, Tower};
 
-/// Travel shorter than this (mm) keeps the filament where it is.
-const RETRACT_MIN_TRAVEL: f64 = 1.0;
+/// Travel shorter than this (mm) keeps the filament where it is (PrusaSlicer's
+/// `retract_before_travel` default): short hops stay over the part.
+const RETRACT_MIN_TRAVEL: f64 = 2.0;
 /// Speeds of what the exporter adds (mm/s), before the first layer's slow-down.
 const SKIRT_SPEED: f64 = 30.0;
 const PRIME_SPEED: f64 = 25.0;
@@ -36,12 +37,6 @@ const PARK_CLEARANCE: f64 = 10.0;
 
 /// The axis letters of `M165`, one per mixing channel, in Marlin's order.
 pub const M165_AXES: [char; 6] = ['A', 'B', 'C', 'D', 'H', 'I'];
-
-/// The width of segment `i` of a path (from point `i` to `i + 1`).
-fn segment_width(path: &Toolpath, i: usize) -> f64 {
-    let _ = i;
-    path.width
-}
 
 /// Fractions as whole percentages summing to 100 (largest remainders), so that
 /// firmwares that normalise or reject sums other than 1 agree on the mix.
@@ -254,9 +249,11 @@ impl Writer {
             lamina_core::VERSION,
             clean(h.pipeline)
         );
+        // The flavour and the firmware in one word, which is what a reader of the file
+        // needs to know how to take its commands.
         let _ = writeln!(
             t,
-            "; flavor: {}, firmware: {}, {} layers",
+            "; flavor: {}/{}, {} layers",
             s.flavor.name(),
             s.dialect.name(),
             h.layers
@@ -1013,7 +1010,7 @@ impl Writer {
             self.extrude(
                 j.head,
                 &points,
-                &|i| segment_width(path, i),
+                &|i| path.segment_width(i),
                 plan.thickness,
                 speed,
                 Feature::Part,

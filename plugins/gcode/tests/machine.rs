@@ -116,6 +116,7 @@ fn layers(seed: u64) -> Vec<LayerPlan> {
                         kind: PathKind::Extrude,
                         points,
                         width: 0.45,
+                        widths: Vec::new(),
                         composition: Some(Composition::binary(f).expect("valid")),
                         part: Some(0),
                         region: Some(k),
@@ -131,6 +132,7 @@ fn layers(seed: u64) -> Vec<LayerPlan> {
                 toolpaths,
                 build_time: Some(t),
                 sequential_time: None,
+                fill: None,
                 warnings: Vec::new(),
             }
         })
