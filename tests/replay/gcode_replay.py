@@ -57,6 +57,11 @@ Checks (each reported with the line numbers of its violations):
 It also reports per-tool and per-mix-channel filament, tool changes, mix
 changes, XY extents and layer count.
 
+A file that selects motion systems (RepRapFirmware 3.5 ``M596``) is split into
+one stream per motion system and replayed by ``multi_motion.py`` (same checks
+per stream, plus barriers, build time, axis/tool ownership and collisions of
+the tool heads); see README.md.
+
 Run ``python3 gcode_replay.py --help`` for the command line; exit status is 0
 when every check passes, 1 when one fails and 2 on a usage or parse error.
 """
@@ -74,6 +79,11 @@ from functools import reduce
 from typing import Iterable
 
 import numpy as np
+
+if __name__ == "__main__":
+    # multi_motion imports this module by name: let it share this copy (and its
+    # exception classes) when the checker runs as a script.
+    sys.modules.setdefault("gcode_replay", sys.modules["__main__"])
 
 # ---------------------------------------------------------------------------
 # Defaults taken from the firmware documentation / stock configuration.
@@ -300,10 +310,28 @@ class Options:
     overlap_max: float = 0.05
     coverage_every: int = 5
     bead_ends: str = "flat"  # "flat" rectangles (the contract) or "round"
-    time_tol: float = 0.05
+    time_tol: float | None = None  # None: 0.05, or 0.02 with multiple motion systems
     flavor: str | None = None  # None: from the header, else marlin
     accel: tuple[float, float, float] = (DEFAULT_ACCEL, DEFAULT_ACCEL, DEFAULT_ACCEL)
     junction_deviation: float = DEFAULT_JUNCTION_DEVIATION
+    # Multiple motion systems (multi_motion.py); the file's header fills what is None/empty.
+    head_radius: float | None = None  # envelope radius of every head (mm)
+    envelopes: dict[int, float] = field(default_factory=dict)  # system -> envelope radius (mm)
+    axis_maps: dict[int, dict[str, str]] = field(default_factory=dict)  # system -> {"X": "U", ...}
+    homes: dict[int, tuple[float, float]] = field(default_factory=dict)  # system -> head X, Y after homing
+    shared_gantry: bool | None = None  # heads on one gantry: check X order instead of discs
+    extrusion_tol: float = 0.01  # planned extrusion per tool
+
+
+#: Time tolerance when --time-tol is not given: one motion system / several.
+DEFAULT_TIME_TOL = 0.05
+DEFAULT_TIME_TOL_MULTI = 0.02
+
+
+def time_tolerance(o: "Options", multi: bool = False) -> float:
+    if o.time_tol is not None:
+        return o.time_tol
+    return DEFAULT_TIME_TOL_MULTI if multi else DEFAULT_TIME_TOL
 
 
 @dataclass
@@ -1198,7 +1226,30 @@ _HANDLERS = {
 
 def replay_time(moves: list[tuple], jd: float, jerk: list[float] | None,
                 breakdown: dict[str, float] | None = None) -> float:
-    """Total time of the moves with trapezoidal profiles and a look-ahead.
+    """Total time of the moves with trapezoidal profiles and a look-ahead
+    (the speeds of ``plan_speeds``, each move timed by ``trapezoid_time``).
+    ``breakdown``, when given, receives the time of printing moves (XYZ with
+    E), travel (XYZ without E) and E-only moves (retractions and recoveries).
+    """
+    n = len(moves)
+    if n == 0:
+        return 0.0
+    vin, vout = plan_speeds(moves, jd, jerk)
+    total = 0.0
+    kinds = {"print": 0.0, "travel": 0.0, "e_only": 0.0}
+    for i in range(n):
+        m = moves[i]
+        t = trapezoid_time(m[0], vin[i], vout[i], m[1], m[2])
+        total += t
+        if breakdown is not None:
+            kinds["e_only" if m[6] != 0.0 else ("print" if m[10] != 0.0 else "travel")] += t
+    if breakdown is not None:
+        breakdown.update(kinds)
+    return total
+
+
+def plan_speeds(moves: list[tuple], jd: float, jerk: list[float] | None) -> tuple[list[float], list[float]]:
+    """Entry and exit speed of every move under the look-ahead.
 
     Junction speed limits follow Marlin's junction deviation: with theta the
     angle between the two paths (cos theta = -u_in . u_out), the junction is
@@ -1212,13 +1263,12 @@ def replay_time(moves: list[tuple], jd: float, jerk: list[float] | None,
     per-axis components are within the jerk limits) with jerk. A backward pass
     then caps each entry speed by what the move can still brake from, a
     forward pass by what it can reach, and each move takes the time of its
-    trapezoid (or triangle). ``breakdown``, when given, receives the time of
-    printing moves (XYZ with E), travel (XYZ without E) and E-only moves
-    (retractions and recoveries).
+    trapezoid (or triangle): the exit speed returned is the one the move
+    really ends at (never above the next move's entry speed).
     """
     n = len(moves)
     if n == 0:
-        return 0.0
+        return [], []
     L = [m[0] for m in moves]
     V = [m[1] for m in moves]
     A = [m[2] for m in moves]
@@ -1288,20 +1338,10 @@ def replay_time(moves: list[tuple], jd: float, jerk: list[float] | None,
         vo = sqrt(vin[i] * vin[i] + 2.0 * A[i] * L[i])
         if vout[i] > vo:
             vout[i] = vo
-    total = 0.0
-    kinds = {"print": 0.0, "travel": 0.0, "e_only": 0.0}
-    for i in range(n):
-        vo = vout[i]
-        if i + 1 < n and shared[i + 1] and vin[i + 1] < vo:
-            vo = vin[i + 1]
-        t = trapezoid_time(L[i], vin[i], vo, V[i], A[i])
-        total += t
-        if breakdown is not None:
-            m = moves[i]
-            kinds["e_only" if m[6] != 0.0 else ("print" if m[10] != 0.0 else "travel")] += t
-    if breakdown is not None:
-        breakdown.update(kinds)
-    return total
+    for i in range(n - 1):
+        if shared[i + 1] and vin[i + 1] < vout[i]:
+            vout[i] = vin[i + 1]
+    return vin, vout
 
 
 def trapezoid_time(length: float, v0: float, v1: float, vmax: float, accel: float) -> float:
@@ -1320,6 +1360,28 @@ def trapezoid_time(length: float, v0: float, v1: float, vmax: float, accel: floa
     vp2 = accel * length + 0.5 * (v0 * v0 + v1 * v1)
     vp = math.sqrt(max(vp2, max(v0, v1) ** 2))
     return max(0.0, (vp - v0) / accel) + max(0.0, (vp - v1) / accel)
+
+
+def trapezoid_phases(length: float, v0: float, v1: float, vmax: float,
+                     accel: float) -> tuple[float, float, float, float, float, float]:
+    """The profile ``trapezoid_time`` times, as its phases: (v0, peak speed,
+    v1, accelerating time, cruising time, braking time). Distance along the
+    move at time t of a phase is a quadratic in t (constant acceleration
+    +accel, 0, -accel). An infinite or non-positive acceleration gives one
+    cruise at vmax."""
+    if length <= 0:
+        return (0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+    if accel <= 0 or not math.isfinite(accel):
+        return (vmax, vmax, vmax, 0.0, length / vmax, 0.0)
+    v0 = min(v0, vmax)
+    v1 = min(v1, vmax)
+    d_acc = (vmax * vmax - v0 * v0) / (2.0 * accel)
+    d_dec = (vmax * vmax - v1 * v1) / (2.0 * accel)
+    if d_acc + d_dec <= length:
+        return (v0, vmax, v1, (vmax - v0) / accel, (length - d_acc - d_dec) / vmax, (vmax - v1) / accel)
+    vp2 = accel * length + 0.5 * (v0 * v0 + v1 * v1)
+    vp = math.sqrt(max(vp2, max(v0, v1) ** 2))
+    return (v0, vp, v1, max(0.0, (vp - v0) / accel), 0.0, max(0.0, (vp - v1) / accel))
 
 
 # ---------------------------------------------------------------------------
@@ -1489,8 +1551,22 @@ def bead_geometry(segs: list[tuple], height: float, area: float, ends: str = "fl
 # Driver
 # ---------------------------------------------------------------------------
 
+_M596_RE = re.compile(r"^\s*(?:N\d+\s*)?M596\b", re.MULTILINE | re.IGNORECASE)
+
+
+def uses_motion_systems(text: str) -> bool:
+    """A file that selects motion systems (RepRapFirmware 3.5 ``M596``)."""
+    return _M596_RE.search(text) is not None
+
+
 def analyse(text: str, opts: Options, name: str = "<string>") -> dict:
-    """Replays ``text`` and returns the report dictionary (raises ParseError)."""
+    """Replays ``text`` and returns the report dictionary (raises ParseError).
+    A file with ``M596`` (multiple motion systems) is replayed stream by
+    stream by ``multi_motion``."""
+    if uses_motion_systems(text):
+        import multi_motion
+
+        return multi_motion.analyse_multi(text, opts, name)
     r = Replay(opts)
     r.run(text)
     return build_report(r, opts, name)
@@ -1560,12 +1636,13 @@ def build_report(r: Replay, o: Options, name: str) -> dict:
     # Time
     by_kind: dict[str, float] = {}
     replayed = replay_time(r.moves, r.jd, r.jerk, by_kind) + r.dwell
+    time_tol = time_tolerance(o)
     time = {
         "replayed_s": replayed,
         "estimated_s": r.estimated_time,
         "estimate_line": r.estimated_time_line,
         "rel_error": None,
-        "tolerance": o.time_tol,
+        "tolerance": time_tol,
         "moves": len(r.moves),
         "dwell_s": r.dwell,
         "by_kind_s": by_kind,
@@ -1578,7 +1655,7 @@ def build_report(r: Replay, o: Options, name: str) -> dict:
     else:
         rel = (r.estimated_time - replayed) / replayed if replayed > 0 else (0.0 if r.estimated_time == 0 else math.inf)
         time["rel_error"] = rel
-        if abs(rel) > o.time_tol:
+        if abs(rel) > time_tol:
             checks["time"].fail(r.estimated_time_line, f"file estimates {r.estimated_time:.1f} s, replay gives {replayed:.1f} s ({rel * 100:+.1f} %)")
     checks["time"].details.update({"replayed_s": replayed, "estimated_s": r.estimated_time, "rel_error": time["rel_error"]})
 
@@ -1602,6 +1679,7 @@ def build_report(r: Replay, o: Options, name: str) -> dict:
     zs = [lay.z for lay in r.layers if lay.z is not None]
     report = {
         "file": name,
+        "mode": "single",
         "ok": all(c.status != "fail" for c in checks.values()),
         "flavor": r.flavor,
         "flavor_from": r.flavor_from,
@@ -1627,7 +1705,7 @@ def build_report(r: Replay, o: Options, name: str) -> dict:
             "mesh": o.mesh, "place": o.place, "bed": o.bed_rect, "bed_circle": o.bed_circle,
             "filament": o.filament, "min_extrude_temp": o.min_extrude_temp,
             "volume_tol": o.volume_tol, "coverage_min": o.coverage_min, "overlap_max": o.overlap_max,
-            "coverage_every": o.coverage_every, "bead_ends": o.bead_ends, "time_tol": o.time_tol,
+            "coverage_every": o.coverage_every, "bead_ends": o.bead_ends, "time_tol": time_tol,
             "accel": list(o.accel), "junction_deviation": o.junction_deviation,
         },
     }
@@ -1716,6 +1794,10 @@ def coverage_check(r: Replay, o: Options, mesh_data, coverage: dict) -> None:
 # ---------------------------------------------------------------------------
 
 def summary(rep: dict) -> str:
+    if rep.get("mode") == "multi-motion":
+        import multi_motion
+
+        return multi_motion.summary_multi(rep)
     out = []
     out.append(f"{rep['file']}: {rep['lines']} lines, flavour {rep['flavor']} ({rep['flavor_from']})"
                + (", mixing" if rep["mixing"] else ""))
@@ -1797,12 +1879,25 @@ def parse_args(argv: list[str]) -> tuple[str, Options, str | None]:
     ap.add_argument("--coverage-every", type=int, default=5, help="sample every N-th layer for coverage, default 5")
     ap.add_argument("--bead-ends", choices=("flat", "round"), default="flat",
                     help="beads as flat-ended rectangles (default) or with round ends (swept disc)")
-    ap.add_argument("--time-tol", type=float, default=0.05, help="relative time tolerance, default 0.05")
+    ap.add_argument("--time-tol", type=float, default=None,
+                    help="relative time tolerance, default 0.05 (0.02 with multiple motion systems)")
     ap.add_argument("--flavor", choices=("marlin", "rrf"), help="firmware (default: the '; flavor:' header, else marlin)")
     ap.add_argument("--accel", default=None,
                     help="default accelerations P[,T[,R]] in mm/s^2 before any M204 (default 3000, Marlin's stock value)")
     ap.add_argument("--junction-deviation", type=float, default=DEFAULT_JUNCTION_DEVIATION,
                     help="junction deviation (mm) before any M205 J, default 0.013")
+    mm = ap.add_argument_group("multiple motion systems (RepRapFirmware 3.5 M596; override the file's header)")
+    mm.add_argument("--head-radius", type=float, help="envelope radius of every tool head (mm)")
+    mm.add_argument("--envelope", action="append", default=[], metavar="N:R",
+                    help="envelope radius R (mm) of motion system N's head (repeatable)")
+    mm.add_argument("--axis-map", action="append", default=[], metavar="N:X=U,Y=V[,Z=Z]",
+                    help="axis letters motion system N drives as its head's X, Y (and Z) (repeatable)")
+    mm.add_argument("--home", action="append", default=[], metavar="N:X,Y",
+                    help="where motion system N's head is at the start and after homing (repeatable)")
+    mm.add_argument("--shared-gantry", action="store_true", default=None,
+                    help="the heads share one gantry: check their X order (system 0 leftmost) instead of discs")
+    mm.add_argument("--extrusion-tol", type=float, default=0.01,
+                    help="relative tolerance of the planned extrusion per tool, default 0.01")
     ap.add_argument("--json", help="JSON report path (default FILE.replay.json; '-' prints it instead of the summary)")
     # Let coordinate lists start with a minus sign: "--bed -100,-100,100,100".
     fixed: list[str] = []
@@ -1852,7 +1947,41 @@ def parse_args(argv: list[str]) -> tuple[str, Options, str | None]:
         rr = vals[2] if len(vals) > 2 else p
         o.accel = (p, t, rr)
     o.junction_deviation = a.junction_deviation
+    if a.head_radius is not None:
+        if a.head_radius < 0:
+            raise UsageError("--head-radius must not be negative")
+        o.head_radius = a.head_radius
+    for item in a.envelope:
+        n, val = _system_item(item, "--envelope")
+        r_env = _floats(val, 1, "--envelope")[0]
+        if r_env < 0:
+            raise UsageError("--envelope: radius must not be negative")
+        o.envelopes[n] = r_env
+    for item in a.axis_map:
+        n, val = _system_item(item, "--axis-map")
+        amap: dict[str, str] = {}
+        for part in val.split(","):
+            m = re.match(r"^\s*([XYZ])\s*=\s*([A-Za-z])\s*$", part)
+            if not m:
+                raise UsageError(f"--axis-map: expected N:X=<letter>,Y=<letter>[,Z=<letter>], got {item!r}")
+            amap[m.group(1).upper()] = m.group(2).upper()
+        o.axis_maps[n] = amap
+    for item in a.home:
+        n, val = _system_item(item, "--home")
+        o.homes[n] = _floats(val, 2, "--home")  # type: ignore[assignment]
+    o.shared_gantry = a.shared_gantry
+    if a.extrusion_tol <= 0:
+        raise UsageError("--extrusion-tol must be positive")
+    o.extrusion_tol = a.extrusion_tol
     return a.file, o, a.json
+
+
+def _system_item(item: str, what: str) -> tuple[int, str]:
+    """``N:rest`` of a per-motion-system option."""
+    m = re.match(r"^\s*(\d+)\s*:(.*)$", item)
+    if not m:
+        raise UsageError(f"{what}: expected N:..., got {item!r}")
+    return int(m.group(1)), m.group(2)
 
 
 def main(argv: Iterable[str] | None = None) -> int:
