@@ -228,3 +228,47 @@ fn a_model_in_metres_is_refused_with_the_fix_unless_its_units_are_given() {
     assert_eq!(out.status.code(), Some(2));
     assert!(text(&out.stderr).contains("units"), "{}", text(&out.stderr));
 }
+
+#[test]
+fn beads_take_the_machine_nozzle_width_unless_the_plan_names_one() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    // A 20 mm box graded along Z: loops bent from the nominal width to fill its
+    // 10 mm half width with a whole number of beads.
+    let run = |plan_width: &str| -> f64 {
+        let source = pipeline(
+            "size = [20.0, 20.0, 1.0]",
+            "[machine]\nbase = \"marlin-mixing-2in1\"\nnozzle_diameter = 0.6",
+        )
+        .replace(
+            "[[output]]\nuse = \"gcode\"\npath = \"box.gcode\"",
+            "[[output]]\nuse = \"json\"\npath = \"box.json\"",
+        )
+        .replace("mixing = true", &format!("mixing = true\n{plan_width}"));
+        let p = write(dir.path(), "w.toml", &source);
+        let out_dir = dir.path().join(format!("out{}", plan_width.len()));
+        let out = lamina(&[
+            "run",
+            "--quiet",
+            "--out",
+            &out_dir.to_string_lossy(),
+            &p.to_string_lossy(),
+        ]);
+        assert!(out.status.success(), "{}", text(&out.stderr));
+        let plan: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(out_dir.join("box.json")).expect("json"))
+                .expect("JSON");
+        // The width of the outermost loop of the first layer.
+        plan["layers"][0]["toolpaths"]
+            .as_array()
+            .expect("toolpaths")
+            .iter()
+            .find(|t| t["kind"] == "extrude" && t.get("widths").is_none())
+            .and_then(|t| t["width"].as_f64())
+            .expect("a loop")
+    };
+    let from_machine = run("");
+    let named = run("width = 0.4");
+    // 10 / 0.6 = 16.7 beads: 17 of 0.588; 10 / 0.4 = 25 beads of 0.4.
+    assert!((from_machine - 10.0 / 17.0).abs() < 1e-3, "{from_machine}");
+    assert!((named - 0.4).abs() < 1e-3, "{named}");
+}

@@ -43,8 +43,9 @@ struct ToolOptions {
 #[derive(Debug, Clone, Deserialize)]
 #[serde(deny_unknown_fields)]
 struct Options {
-    #[serde(default = "d_width")]
-    width: f64,
+    /// Nominal bead width; by default the machine's nozzle diameter (0.4 mm without a
+    /// machine).
+    width: Option<f64>,
     #[serde(default = "d_width_range")]
     width_range: [f64; 2],
     #[serde(default = "d_min_fill")]
@@ -71,9 +72,8 @@ struct Options {
     tools: BTreeMap<String, ToolOptions>,
 }
 
-fn d_width() -> f64 {
-    0.4
-}
+/// Bead width when neither the stage nor a machine gives one (mm).
+const DEFAULT_WIDTH: f64 = 0.4;
 fn d_width_range() -> [f64; 2] {
     [0.6, 1.5]
 }
@@ -105,7 +105,7 @@ impl Options {
                 Err(config.error(k, "must be a positive number"))
             }
         };
-        positive("width", self.width)?;
+        positive("width", self.width())?;
         let [lo, hi] = self.width_range;
         if !(lo.is_finite() && hi.is_finite() && lo > 0.0 && lo <= 1.0 && hi >= 1.0) {
             return Err(config.error(
@@ -179,11 +179,25 @@ impl Options {
         self.step.unwrap_or(0.01)
     }
 
+    fn width(&self) -> f64 {
+        self.width.unwrap_or(DEFAULT_WIDTH)
+    }
+
+    /// Options as written, with the width the machine's nozzle gives when the stage
+    /// names none.
+    fn parse(config: &StageConfig<'_>) -> Result<Self> {
+        let mut o: Options = config.parse()?;
+        if o.width.is_none() {
+            o.width = config.machine.map(|m| m.nozzle_diameter);
+        }
+        Ok(o)
+    }
+
     fn widths(&self) -> Widths {
         Widths {
-            nominal: self.width,
-            min: self.width * self.width_range[0],
-            max: self.width * self.width_range[1],
+            nominal: self.width(),
+            min: self.width() * self.width_range[0],
+            max: self.width() * self.width_range[1],
         }
     }
 }
@@ -344,13 +358,13 @@ impl Planner for Concurrent {
 }
 
 fn build_sequential(config: &StageConfig<'_>) -> Result<AnyStage> {
-    let o: Options = config.parse()?;
+    let o = Options::parse(config)?;
     o.check(config, false)?;
     Ok(AnyStage::Plan(Box::new(Sequential(o))))
 }
 
 fn build_concurrent(config: &StageConfig<'_>) -> Result<AnyStage> {
-    let o: Options = config.parse()?;
+    let o = Options::parse(config)?;
     o.check(config, true)?;
     Ok(AnyStage::Plan(Box::new(Concurrent(o))))
 }
@@ -358,7 +372,7 @@ fn build_concurrent(config: &StageConfig<'_>) -> Result<AnyStage> {
 macro_rules! common_options {
     ($($extra:expr),* $(,)?) => {
         &[
-            OptionSpec::new("width", "float", "0.4", "nominal bead width (mm): loops at w/2, 3w/2, ... inside each sub-region, the width bent within `width_range` to fill a band with a whole number of beads; what loops leave is filled by variable-width beads along its centre line"),
+            OptionSpec::new("width", "float", "0.4", "nominal bead width (mm), by default the machine's nozzle diameter: loops at w/2, 3w/2, ... inside each sub-region, the width bent within `width_range` to fill a band with a whole number of beads; what loops leave is filled by variable-width beads along its centre line"),
             OptionSpec::new("width_range", "array of float", "[0.6, 1.5]", "narrowest and widest bead as fractions of `width`; sub-regions narrower than the narrowest merge with their neighbours (`thin`)"),
             OptionSpec::new("min_fill", "float", "0.98", "least share of the sub-regions' volume the beads must deposit over the run; below it the run fails"),
             OptionSpec::new("seam", "string", "\"nearest\"", "where loops start: `nearest` (to the tool) or `aligned` (largest x)"),
