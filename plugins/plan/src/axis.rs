@@ -193,7 +193,8 @@ fn clean(ring: &[[f64; 2]]) -> Vec<[f64; 2]> {
     out
 }
 
-fn ring_area(r: &[[f64; 2]]) -> f64 {
+/// The shoelace area of an open ring (positive counter-clockwise).
+pub(crate) fn ring_area(r: &[[f64; 2]]) -> f64 {
     let n = r.len();
     (0..n)
         .map(|i| r[i][0] * r[(i + 1) % n][1] - r[(i + 1) % n][0] * r[i][1])

@@ -22,7 +22,7 @@ use i_overlay::mesh::float::outline::offset::OutlineOffset;
 use i_overlay::mesh::float::style::{LineJoin, OutlineStyle};
 use lamina_core::{Point2, Polygon};
 
-use crate::axis::centre_beads;
+use crate::axis::{centre_beads, ring_area};
 use crate::bead::Bead;
 
 /// Largest distance (mm) between a round offset corner and its chords.
@@ -130,17 +130,7 @@ fn tidy(shapes: Shapes) -> Shapes {
 /// The area of a shape: its outer ring less its holes (the offsetter writes holes
 /// the other way round, so the signed areas add up to it).
 fn shape_area(shape: &[Vec<[f64; 2]>]) -> f64 {
-    shape
-        .iter()
-        .map(|r| {
-            let n = r.len();
-            (0..n)
-                .map(|i| r[i][0] * r[(i + 1) % n][1] - r[(i + 1) % n][0] * r[i][1])
-                .sum::<f64>()
-                / 2.0
-        })
-        .sum::<f64>()
-        .abs()
+    shape.iter().map(|r| ring_area(r)).sum::<f64>().abs()
 }
 
 /// The beads filling `polygon`: loops outermost first, then the centre beads of what
@@ -175,7 +165,7 @@ pub fn fill(polygon: &Polygon, widths: &Widths) -> Vec<Bead> {
             // Every loop runs counter-clockwise, holes' too: two tools working along
             // the same wall then move the same way round instead of meeting head-on,
             // where one of them must step aside.
-            if signed_area(&points) < 0.0 {
+            if ring_area(contour) < 0.0 {
                 points.reverse();
             }
             beads.push(Bead::closed(points, w));
@@ -193,18 +183,6 @@ pub fn fill(polygon: &Polygon, widths: &Widths) -> Vec<Bead> {
     // cabin, against 0.2 %).
     beads.extend(centre_beads(&residue, w, TOLERANCE));
     beads
-}
-
-/// The shoelace area of an open ring (positive counter-clockwise).
-fn signed_area(ring: &[Point2]) -> f64 {
-    let n = ring.len();
-    (0..n)
-        .map(|i| {
-            let (a, b) = (ring[i], ring[(i + 1) % n]);
-            a.x * b.y - b.x * a.y
-        })
-        .sum::<f64>()
-        / 2.0
 }
 
 /// Largest number of sample points the thinness test spends on one shape before it
