@@ -178,8 +178,18 @@ fn replay_file(
         args.push(o);
     }
     lamina(&args);
-    let table: toml::Table =
+    let mut table: toml::Table =
         toml::from_str(&std::fs::read_to_string(pipeline).expect("pipeline")).expect("TOML");
+    // The mesh the run read: an overridden model file replaces the pipeline's.
+    for o in overrides {
+        if let Some(value) = o.strip_prefix("model.file=") {
+            let file: toml::Value =
+                toml::from_str::<toml::Table>(&format!("v = {value}")).expect("a TOML value")["v"].clone();
+            if let Some(model) = table.get_mut("model").and_then(toml::Value::as_table_mut) {
+                model.insert("file".into(), file);
+            }
+        }
+    }
     let mesh = model_stl(pipeline, &table, dir.path());
     let named = machine.map(|m| toml::Value::String(m.to_string()));
     let machine = named.as_ref().or(table.get("machine")).expect("a machine");
@@ -275,6 +285,7 @@ fn benchy_replays_on_every_machine() {
     let models = std::env::var("LAMINA_MODELS")
         .map(PathBuf::from)
         .unwrap_or_else(|_| root().join("../shared/models"));
+    let models = std::fs::canonicalize(&models).unwrap_or(models);
     if !models.join("3DBenchy.stl").exists() {
         assert!(
             !required(),
