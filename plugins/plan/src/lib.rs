@@ -28,6 +28,7 @@ use serde::Deserialize;
 use crate::fill::Widths;
 use crate::group::Thin;
 use crate::route::{Move, Parks, Seam, ToolSpec, distribute, pause, route, timed};
+use crate::sim::Priority;
 
 /// Side-steps allowed per layer before the concurrent planner falls back to sequential.
 const MAX_SIDE_STEPS: usize = 200;
@@ -67,6 +68,11 @@ struct Options {
     step: Option<f64>,
     #[serde(default)]
     compare: bool,
+    #[serde(default)]
+    priority: Priority,
+    /// Plan a layer one tool at a time when that is faster than the concurrent schedule.
+    #[serde(default)]
+    keep_faster: bool,
     /// Per-tool settings by material name (or `mixer`).
     #[serde(default)]
     tools: BTreeMap<String, ToolOptions>,
@@ -122,8 +128,9 @@ impl Options {
         if !(self.tool_change.is_finite() && self.tool_change >= 0.0) {
             return Err(config.error("tool_change", "must be zero or more seconds"));
         }
-        // `step` and `compare` mean nothing to the sequential planner but are accepted,
-        // so that `--set plan.use=sequential` compares a concurrent pipeline.
+        // `step`, `compare`, `priority` and `keep_faster` mean nothing to the sequential
+        // planner but are accepted, so that `--set plan.use=sequential` compares a
+        // concurrent pipeline.
         let _ = concurrent;
         if let Some(s) = self.step {
             positive("step", s)?;
@@ -331,10 +338,31 @@ impl Planner for Concurrent {
         // back plus every hold; a budget of several sequential times catches a layer
         // whose tools keep giving way to each other.
         let budget = 4.0 * seq_time + 60.0;
-        let (paths, t) = match sim::concurrent(&busy, o.step(), budget, MAX_SIDE_STEPS, &layer.arena) {
-            // Tools that mostly wait for each other can end up slower than taking turns;
-            // the sequential schedule is collision-free too, so the faster one is kept.
-            Ok((_, t)) if t > seq_time => (seq_paths, seq_time),
+        let settings = sim::Settings {
+            step: o.step(),
+            budget,
+            max_side_steps: MAX_SIDE_STEPS,
+            priority: o.priority,
+        };
+        let (paths, t) = match sim::concurrent(&busy, &settings, &layer.arena) {
+            // Tools that mostly wait for each other can end up slower than taking turns:
+            // said, and the concurrent schedule kept unless asked for the faster one
+            // (the sequential schedule is collision-free too).
+            Ok((paths, t)) if t > seq_time => {
+                plan.warnings.push(format!(
+                    "the concurrent schedule ({t:.2} s) is slower than one tool at a time ({seq_time:.2} s); {}",
+                    if o.keep_faster {
+                        "this layer is deposited one tool at a time (`keep_faster`)"
+                    } else {
+                        "it is kept (`keep_faster = true` plans the faster)"
+                    }
+                ));
+                if o.keep_faster {
+                    (seq_paths, seq_time)
+                } else {
+                    (paths, t)
+                }
+            }
             Ok(r) => r,
             Err(e) => {
                 plan.warnings.push(format!(
@@ -414,7 +442,7 @@ lamina_core::register_stage!(StageFactory {
     info: StageInfo {
         kind: StageKind::Plan,
         name: "concurrent",
-        doc: "Contour-parallel loops deposited by all tools at once; dynamic priority (faster along X) pauses the other tool on a predicted collision.",
+        doc: "Contour-parallel loops deposited by all tools at once; on a predicted collision dynamic priority pauses one tool (by default the paper's rule: the tool slower along X pauses, the faster goes on). The concurrent schedule is planned even when one tool at a time would be faster (with a warning) unless `keep_faster` is set.",
         options: common_options!(
             OptionSpec::new("step", "float", "0.01", "seconds between collision checks"),
             OptionSpec::new(
@@ -422,6 +450,18 @@ lamina_core::register_stage!(StageFactory {
                 "bool",
                 "false",
                 "add a layer warning with the sequential build time"
+            ),
+            OptionSpec::new(
+                "priority",
+                "string",
+                "\"x-speed\"",
+                "who keeps going when two tools are about to collide: `x-speed` (the paper's rule: the tool faster along X at the check, the X component of its velocity, goes on and the other pauses; on a tie the first tool goes on), `clearing` (a tool whose pausing alone clears the conflict pauses, else one returning from a side-step, else `x-speed`) or `returning` (a tool returning from a side-step gives way, else `x-speed`)"
+            ),
+            OptionSpec::new(
+                "keep_faster",
+                "bool",
+                "false",
+                "deposit a layer one tool at a time when that is faster than the concurrent schedule (either way a warning says so); a layer whose tools stay blocked falls back to one tool at a time regardless"
             ),
         ),
         example: "use = \"concurrent\"\nwidth = 0.5\nenvelope = 2.0\nstep = 0.02",

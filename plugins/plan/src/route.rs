@@ -51,8 +51,9 @@ pub struct Move {
     pub composition: Option<Composition>,
     pub part: Option<usize>,
     pub region: Option<usize>,
-    /// Gives way to every tool it meets (the way back from a side-step): it returns
-    /// once the way is free instead of pushing in by its speed along X.
+    /// The way back from a side-step: under the `clearing` and `returning` priorities
+    /// it gives way to every tool it meets, returning once the way is free instead of
+    /// pushing in by its speed along X.
     pub yields: bool,
 }
 

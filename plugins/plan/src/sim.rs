@@ -1,19 +1,21 @@
 //! Concurrent deposition with dynamic priority (Choi and Zhu): every tool follows its
 //! own route at its own speeds; at a fixed rate the positions each tool would reach in
 //! the next step are checked pairwise against the tools' envelopes. On a predicted
-//! collision the tool moving faster along X keeps going and the other pauses where it
-//! is (a safe point: it was clear there one step ago) until the conflict is gone. When
-//! pausing only one of the two clears the conflict (a tool that follows another along
-//! a wall), that one pauses, whatever the speeds; a tool on its way back from a
-//! side-step gives way to every other.
+//! collision one tool keeps going along its path and the other pauses where it is (a
+//! safe point: it was clear there one step ago) until the conflict is gone. Which one
+//! pauses is the [`Priority`] rule; the paper's, and the default, is
+//! [`Priority::XSpeed`]: the tools' traverse speeds along the x-axis are compared and
+//! the faster one has priority.
 //!
 //! Each check covers the whole step: the closest approach of the two tools' motions
-//! during it is computed exactly, so no overlap can hide between two checks. When every unfinished
-//! tool is held (each waits for another, as tools meeting head-on along neighbouring
-//! walls do), the tool with the least work left steps aside to a clear point (never
-//! toward the parks) and comes back once the way is free: the layer ends when the
-//! busiest tool is done, so that one should not wait. If side-steps do not resolve
-//! the layer, the caller falls back to sequential deposition.
+//! during it is computed exactly, so no overlap can hide between two checks. When
+//! pausing the lower-priority tool does not clear the conflict (it is ahead of the
+//! other), the other is held too. When every unfinished tool is held (each waits for
+//! another, as tools meeting head-on along neighbouring walls do), the tool with the
+//! least work left steps aside to a clear point (never toward the parks) and comes back
+//! once the way is free: the layer ends when the busiest tool is done, so that one
+//! should not wait. If side-steps do not resolve the layer, the caller falls back to
+//! sequential deposition.
 
 use lamina_core::geom::segment_distance;
 use lamina_core::{BBox2, PathKind, Point2, TimedPoint, Toolpath, Vector2};
@@ -27,6 +29,31 @@ fn push_point(path: &mut Toolpath, m: &Move, seg: usize, p: TimedPoint) {
         path.widths.push(m.segment_width(seg));
     }
     path.points.push(p);
+}
+
+/// Which of two tools about to collide keeps going; the other pauses.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Priority {
+    /// The paper's rule (Choi and Zhu, abstract): the traverse speeds of the tools
+    /// along the x-axis are compared and the tool traversing faster has priority; it
+    /// goes on depositing along its path while the other pauses until the collision is
+    /// no longer in prospect. The speed compared is each tool's speed along X at the
+    /// check, the X component of its velocity on the segment it is on (zero along a
+    /// wall parallel to Y), not its set deposition or travel speed: the paper compares
+    /// speeds *along the x-axis* and assigns priority afresh at every collision it
+    /// detects, which a tool's fixed speed would not. On a tie the tool listed first
+    /// keeps going.
+    #[default]
+    XSpeed,
+    /// Lamina's rules first, then the paper's: when pausing only one of the two tools
+    /// clears the conflict (a tool following another along a wall), that one pauses
+    /// whatever the speeds; else a tool on its way back from a side-step gives way;
+    /// else [`Priority::XSpeed`].
+    Clearing,
+    /// A tool on its way back from a side-step gives way to every other; else
+    /// [`Priority::XSpeed`].
+    Returning,
 }
 
 /// Why the concurrent schedule gave up.
@@ -296,16 +323,44 @@ fn closest(a: &[(f64, Point2)], b: &[(f64, Point2)]) -> f64 {
     best
 }
 
-/// Runs the tools' routes together from time 0 with checks every `step` seconds: the
-/// toolpaths of every tool (with their pauses) and the time the last tool parks. Tools
-/// stepping aside stay inside `arena` (an empty box: anywhere).
+/// The speed along X (mm/s) at the start of a tool's motion over a step: the X
+/// component of its velocity on its first stretch that takes time (a stretch of less
+/// than a nanosecond is what rounding leaves of a segment the tool has just finished:
+/// the tool is at a vertex and moves on along the next one).
+fn speed_along_x(track: &[(f64, Point2)]) -> f64 {
+    track
+        .windows(2)
+        .find(|w| w[1].0 - w[0].0 > 1e-9)
+        .map_or(0.0, |w| (w[1].1.x - w[0].1.x).abs() / (w[1].0 - w[0].0))
+}
+
+/// How the concurrent schedule is run.
+#[derive(Debug, Clone, Copy)]
+pub struct Settings {
+    /// Seconds between two collision checks.
+    pub step: f64,
+    /// Simulated seconds after which the schedule gives up.
+    pub budget: f64,
+    /// Side-steps after which the schedule gives up.
+    pub max_side_steps: usize,
+    /// Who keeps going when two tools are about to collide.
+    pub priority: Priority,
+}
+
+/// Runs the tools' routes together from time 0 with checks every `settings.step`
+/// seconds: the toolpaths of every tool (with their pauses) and the time the last tool
+/// parks. Tools stepping aside stay inside `arena` (an empty box: anywhere).
 pub fn concurrent(
     tools: &[(&ToolSpec, Vec<Move>)],
-    step: f64,
-    budget: f64,
-    max_side_steps: usize,
+    settings: &Settings,
     arena: &BBox2,
 ) -> Result<(Vec<Toolpath>, f64), Stuck> {
+    let Settings {
+        step,
+        budget,
+        max_side_steps,
+        priority,
+    } = *settings;
     let mut agents: Vec<Agent<'_>> = tools
         .iter()
         .map(|(spec, route)| {
@@ -334,9 +389,9 @@ pub fn concurrent(
     };
     let mut t = 0.0;
     let mut side_steps = 0;
-    // Per tool: where it would be after this step and its speed along X, and the
-    // timed points of its motion during the step.
-    let mut proposed: Vec<(Point2, f64)> = vec![(Point2::origin(), 0.0); n];
+    // Per tool: its speed along X at the check, and the timed points of its motion
+    // during the step.
+    let mut along_x: Vec<f64> = vec![0.0; n];
     let mut tracks: Vec<Track> = vec![Vec::new(); n];
     let mut moving = vec![false; n];
     while agents.iter().any(|a| !a.done) {
@@ -345,12 +400,12 @@ pub fn concurrent(
         }
         for (i, a) in agents.iter_mut().enumerate() {
             moving[i] = !a.done;
-            if a.done {
-                proposed[i] = (a.pos, 0.0);
+            along_x[i] = if a.done {
+                0.0
             } else {
-                let (_, p, _) = a.walk(step, t, false, Some(&mut tracks[i]));
-                proposed[i] = (p, (p.x - a.pos.x).abs() / step);
-            }
+                a.walk(step, t, false, Some(&mut tracks[i]));
+                speed_along_x(&tracks[i])
+            };
         }
         // Whether tools i and j, moving or held, keep their envelopes apart for the
         // whole step: their closest approach along the two timed motions, exactly.
@@ -373,21 +428,25 @@ pub fn concurrent(
                     }
                     let loser = match (moving[i], moving[j]) {
                         (true, true) => {
-                            // Holding a tool only helps when its staying put clears
-                            // the other's next position: a tool moving away from
-                            // the one behind it goes on whatever its speed along X.
-                            match (safe(i, j, false, true), safe(i, j, true, false)) {
-                                (true, false) => i,
-                                (false, true) => j,
-                                _ if agents[i].yields() != agents[j].yields() => {
-                                    if agents[i].yields() {
-                                        i
-                                    } else {
-                                        j
+                            // The paper's rule: the tool slower along X pauses (on a
+                            // tie, the later one).
+                            let by_speed = if along_x[j] > along_x[i] { i } else { j };
+                            let (yi, yj) = (agents[i].yields(), agents[j].yields());
+                            let by_return = (yi != yj).then_some(if yi { i } else { j });
+                            match priority {
+                                Priority::XSpeed => by_speed,
+                                Priority::Returning => by_return.unwrap_or(by_speed),
+                                // Holding a tool only helps when its staying put
+                                // clears the other's next position: a tool moving
+                                // away from the one behind it goes on whatever its
+                                // speed along X.
+                                Priority::Clearing => {
+                                    match (safe(i, j, false, true), safe(i, j, true, false)) {
+                                        (true, false) => i,
+                                        (false, true) => j,
+                                        _ => by_return.unwrap_or(by_speed),
                                     }
                                 }
-                                _ if proposed[j].1 > proposed[i].1 => i,
-                                _ => j,
                             }
                         }
                         (true, false) => i,

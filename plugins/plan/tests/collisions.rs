@@ -8,9 +8,11 @@ use std::path::PathBuf;
 
 use lamina_core::stage::{AnyStage, Planner};
 use lamina_core::{
-    Composition, Contour, ContourTree, LayerPlan, Material, PartInfo, PartLayer, PathKind, Point2, Polygon,
-    Region, Registry, RunInfo, StageKind, Toolpath,
+    BBox2, Composition, Contour, ContourTree, LayerPlan, Material, PartInfo, PartLayer, PathKind, Point2,
+    Polygon, Region, Registry, RunInfo, StageKind, Toolpath,
 };
+use lamina_plan::route::{Move, ToolSpec};
+use lamina_plan::sim::{self, Priority, Settings};
 
 struct Rng(u64);
 impl Rng {
@@ -25,16 +27,17 @@ impl Rng {
     }
 }
 
-fn planner(table: &str) -> Box<dyn Planner> {
+fn build(table: &str) -> lamina_core::Result<AnyStage> {
     use lamina_plan as _;
     let registry = Registry::linked().expect("registry");
     let dir = std::env::temp_dir();
     let scripts = lamina_core::script::ScriptHost::new(&dir, Default::default());
     let table = lamina_core::pipeline::TableRef::parse_snippet("plan", table).expect("table");
-    match registry
-        .build(StageKind::Plan, &table, &scripts, &dir)
-        .expect("builds")
-    {
+    registry.build(StageKind::Plan, &table, &scripts, &dir)
+}
+
+fn planner(table: &str) -> Box<dyn Planner> {
+    match build(table).expect("builds") {
         AnyStage::Plan(p) => p,
         _ => panic!("not a planner"),
     }
@@ -205,11 +208,109 @@ fn extruded(paths: &[Toolpath]) -> f64 {
         .sum()
 }
 
+/// A tool's velocity along X (its absolute X component, mm/s) on the first stretch of
+/// its timeline that starts at or after `t` and takes time.
+fn speed_along_x_from(line: &[(f64, Point2)], t: f64) -> f64 {
+    line.windows(2)
+        .find(|w| w[0].0 >= t - 1e-9 && w[1].0 - w[0].0 > 1e-9)
+        .map_or(0.0, |w| (w[1].1.x - w[0].1.x).abs() / (w[1].0 - w[0].0))
+}
+
+/// A tool's velocity along X on the stretch of its timeline that ends at `t`, if any.
+fn speed_along_x_before(line: &[(f64, Point2)], t: f64) -> Option<f64> {
+    line.windows(2)
+        .filter(|w| (w[1].0 - t).abs() <= 1e-9 && w[1].0 - w[0].0 > 1e-9)
+        .map(|w| (w[1].1.x - w[0].1.x).abs() / (w[1].0 - w[0].0))
+        .next()
+}
+
+/// A tool's velocity along X on the stretch of its timeline under way at `t` (zero
+/// once it is done).
+fn speed_along_x_at(line: &[(f64, Point2)], t: f64) -> f64 {
+    line.windows(2)
+        .find(|w| w[0].0 <= t + 1e-9 && w[1].0 - w[0].0 > 1e-9 && w[1].0 > t + 1e-9)
+        .map_or(0.0, |w| (w[1].1.x - w[0].1.x).abs() / (w[1].0 - w[0].0))
+}
+
+/// One pause of a tool: when it starts and ends, and where.
+#[derive(Debug, Clone, Copy)]
+struct Hold {
+    tool: usize,
+    from: f64,
+    to: f64,
+    at: Point2,
+}
+
+fn holds(paths: &[Toolpath]) -> Vec<Hold> {
+    let mut out: Vec<Hold> = paths
+        .iter()
+        .filter(|p| p.kind == PathKind::Pause)
+        .map(|p| Hold {
+            tool: p.tool,
+            from: p.points[0].t,
+            to: p.points[p.points.len() - 1].t,
+            at: p.points[0].p,
+        })
+        .collect();
+    out.sort_by(|a, b| a.from.total_cmp(&b.from));
+    out
+}
+
+/// Checks the paper's rule on a two-tool schedule: whenever one tool starts a pause
+/// while the other goes on (an encounter decided by priority, not a tool held behind
+/// a held one or both held for a side-step), the one going on was at least as fast
+/// along X as the paused one was about to move. Returns the encounters checked.
+fn check_priority_by_speed_along_x(paths: &[Toolpath], step: f64) -> usize {
+    let lines = [timeline(paths, 0), timeline(paths, 1)];
+    let mut decided = 0;
+    for h in holds(paths) {
+        let other = 1 - h.tool;
+        let line = &lines[other];
+        if line.is_empty() {
+            continue;
+        }
+        // The other tool moves over the step where this one starts to wait.
+        let moved = (position(line, h.from + step) - position(line, h.from)).norm();
+        if moved < 1e-9 {
+            continue;
+        }
+        // The paused tool's speed along X is that of the stretch it was on when held
+        // (after the pause it may step aside instead of going on), or at the start of
+        // the layer the stretch it starts with.
+        let mine = speed_along_x_before(&lines[h.tool], h.from)
+            .unwrap_or_else(|| speed_along_x_from(&lines[h.tool], h.to));
+        let theirs = speed_along_x_at(line, h.from);
+        assert!(
+            mine <= theirs + 1e-6 * theirs.max(1.0),
+            "tool {} paused at t = {:.3} s at {:?} for tool {other}, which is slower along X ({theirs:.3} mm/s against {mine:.3} mm/s)",
+            h.tool,
+            h.from,
+            h.at
+        );
+        decided += 1;
+    }
+    decided
+}
+
+/// The seconds a tool of a plan spends moving (its paths other than pauses).
+fn busy_time(plan: &LayerPlan, tool: usize) -> f64 {
+    plan.toolpaths
+        .iter()
+        .filter(|p| p.tool == tool && p.kind != PathKind::Pause)
+        .map(|p| p.points[p.points.len() - 1].t - p.points[0].t)
+        .sum()
+}
+
+fn says_slower(plan: &LayerPlan) -> bool {
+    plan.warnings
+        .iter()
+        .any(|w| w.contains("is slower than one tool at a time"))
+}
+
 #[test]
 fn random_layouts_of_two_to_four_tools_never_collide() {
     let mut rng = Rng(0x5eed_1234_abcd_0001);
-    let mut pauses = 0;
-    let mut faster = 0;
+    let (mut pauses, mut faster, mut slower, mut decided) = (0, 0, 0, 0);
     for case in 0..40 {
         let tools = 2 + case % 3;
         let envelope = rng.range(1.5, 6.0);
@@ -243,14 +344,44 @@ fn random_layouts_of_two_to_four_tools_never_collide() {
         let (a, b) = (extruded(&conc.toolpaths), extruded(&seq.toolpaths));
         assert!((a - b).abs() <= 1e-6 * b.max(1.0), "case {case}: {a} vs {b}");
         let (tc, ts) = (conc.build_time.unwrap_or(0.0), seq.build_time.unwrap_or(0.0));
-        if !conc.warnings.iter().any(|w| w.contains("gave up")) {
+        // No tool finishes before its own work is done.
+        for tool in 0..tools {
+            let own = busy_time(&seq, tool);
             assert!(
-                tc <= ts + 1e-6,
-                "case {case}: concurrent {tc} s slower than sequential {ts} s"
+                tc >= own - 1e-6,
+                "case {case}: {tc} s for tool {tool}'s {own} s of work"
+            );
+        }
+        if !conc.warnings.iter().any(|w| w.contains("gave up")) {
+            // The concurrent schedule is what is planned, faster or not; a slower one
+            // is said.
+            assert_eq!(
+                says_slower(&conc),
+                tc > ts,
+                "case {case}: {tc} s against {ts} s, {:?}",
+                conc.warnings
             );
             if tc < ts {
                 faster += 1;
             }
+            if tools == 2 {
+                decided += check_priority_by_speed_along_x(&conc.toolpaths, 0.02);
+            }
+        }
+        // Asked for, the faster of the two is kept.
+        let mut keep = plan.clone();
+        planner(&table.replace("[tools.m0]", "keep_faster = true\n[tools.m0]"))
+            .plan(&info, &mut keep)
+            .expect("plans");
+        let tk = keep.build_time.unwrap_or(0.0);
+        assert!(
+            (tk - tc.min(ts)).abs() <= 1e-9,
+            "case {case}: kept {tk} s of {tc} s and {ts} s"
+        );
+        if tc > ts {
+            slower += 1;
+            assert_eq!(keep.toolpaths, seq.toolpaths, "case {case}");
+            assert!(says_slower(&keep), "case {case}");
         }
         pauses += conc
             .toolpaths
@@ -265,6 +396,10 @@ fn random_layouts_of_two_to_four_tools_never_collide() {
         "concurrent was faster in only {faster} of 40 layouts"
     );
     assert!(pauses > 0, "no layout made a tool give way");
+    assert!(decided > 0, "no two-tool encounter was decided by priority");
+    println!(
+        "{faster} of 40 layouts faster concurrently, {slower} slower; {decided} two-tool encounters by speed along X"
+    );
 }
 
 #[test]
@@ -283,6 +418,12 @@ fn tools_crossing_head_on_give_way_by_speed_along_x() {
     let b = timeline(&plan.toolpaths, 1);
     assert!(closest(&a, &b).0 >= 4.0 - 1e-6);
     assert!(plan.toolpaths.iter().any(|p| p.kind == PathKind::Pause));
+    // Every pause while the other tool goes on is the slower tool's along X (tool 1
+    // deposits at 10 mm/s, tool 0 at 30 mm/s).
+    assert!(
+        check_priority_by_speed_along_x(&plan.toolpaths, 0.01) > 0,
+        "no pause was decided by priority"
+    );
     // Split extrusions keep their beads' widths: loops of 2 mm / 5 = 0.4 mm... bent
     // to the bars' mean width, centre beads narrower.
     for p in plan.toolpaths.iter().filter(|p| p.kind == PathKind::Extrude) {
@@ -389,6 +530,185 @@ fn concurrent_plans_report_the_sequential_baseline() {
             contour.toolpaths, seq.toolpaths,
             "`contour` is the sequential fill"
         );
-        assert!(t <= s + 1e-9, "seed {seed}: concurrent {t} > sequential {s}");
+        // Slower or not, the concurrent schedule is planned; slower, it is said.
+        assert_eq!(
+            says_slower(&conc),
+            t > s,
+            "seed {seed}: concurrent {t} s, sequential {s} s"
+        );
+    }
+}
+
+fn tool(index: usize, speed: f64, envelope: f64) -> ToolSpec {
+    ToolSpec {
+        index,
+        name: format!("m{index}"),
+        speed,
+        travel_speed: speed,
+        envelope,
+    }
+}
+
+/// A straight bead from `a` to `b`.
+fn bead(a: Point2, b: Point2, speed: f64) -> Move {
+    Move {
+        kind: PathKind::Extrude,
+        width: 0.5,
+        ..Move::travel(vec![a, b], speed)
+    }
+}
+
+const STEP: f64 = 0.01;
+
+fn simulate(tools: &[(&ToolSpec, Vec<Move>)], priority: Priority) -> Vec<Toolpath> {
+    let settings = Settings {
+        step: STEP,
+        budget: 100.0,
+        max_side_steps: 20,
+        priority,
+    };
+    let (paths, _) = sim::concurrent(tools, &settings, &BBox2::EMPTY).expect("no deadlock");
+    let lines = [timeline(&paths, 0), timeline(&paths, 1)];
+    let (d, t) = closest(&lines[0], &lines[1]);
+    assert!(
+        d >= 2.0 * tools[0].0.envelope - 1e-6,
+        "{priority:?}: {d} mm apart at t = {t}"
+    );
+    paths
+}
+
+/// Two tools whose paths cross at right angles at the origin: tool 0 runs up along Y at
+/// 40 mm/s (0 mm/s along X), tool 1 along X at 20 mm/s. Tool 0 is the faster tool and
+/// the first one, tool 1 the faster along X. Tool 0 comes within 4 mm of tool 1's path
+/// (y = -4, the two envelopes) at t = 1.45 s, when tool 1 is 1 mm short of the
+/// crossing.
+fn crossing() -> (ToolSpec, ToolSpec, Vec<Move>, Vec<Move>) {
+    let (up, across) = (tool(0, 40.0, 2.0), tool(1, 20.0, 2.0));
+    let r0 = vec![bead(Point2::new(0.0, -62.1), Point2::new(0.0, 57.9), 40.0)];
+    let r1 = vec![bead(Point2::new(-30.0, 0.0), Point2::new(30.0, 0.0), 20.0)];
+    (up, across, r0, r1)
+}
+
+#[test]
+fn at_a_crossing_the_tool_faster_along_x_goes_on_and_the_other_pauses_before_it() {
+    let (up, across, r0, r1) = crossing();
+    let paths = simulate(&[(&up, r0), (&across, r1)], Priority::XSpeed);
+    let h = holds(&paths);
+    // Tool 1, faster along X though slower and listed second, never pauses; tool 0
+    // pauses where it reaches tool 1's path, until tool 1 has gone by, then edges on
+    // behind it (it is faster along Y than tool 1 moves off).
+    assert!(!h.is_empty(), "nobody gave way");
+    assert!(h.iter().all(|h| h.tool == 0), "{h:?}");
+    let first = h[0];
+    assert!((first.from - 1.45).abs() < 1e-6, "{first:?}");
+    assert!(
+        (first.at - Point2::new(0.0, -4.1)).norm() < 1e-6,
+        "tool 0 waits at {:?}",
+        first.at
+    );
+    let across_line = timeline(&paths, 1);
+    let passed = position(&across_line, first.to);
+    assert!(passed.x > 1.0, "tool 0 goes on with tool 1 at {passed:?}");
+    assert!(h[h.len() - 1].to < 1.8, "tool 0 waits until {:?}", h[h.len() - 1]);
+    // Tool 1 keeps its pace: 60 mm at 20 mm/s.
+    let end = across_line[across_line.len() - 1].0;
+    assert!((end - 3.0).abs() < 1e-9, "tool 1 ends at {end} s");
+    assert_eq!(check_priority_by_speed_along_x(&paths, STEP), h.len());
+}
+
+/// Tool 0 crosses tool 1's path at 10 mm/s along Y (0 along X) and is 2 mm past the
+/// crossing when tool 1 comes along X at 20 mm/s, 4 mm short of it at t = 3.2 s:
+/// holding tool 1 alone clears the way (tool 0 moves off), holding tool 0 does not.
+/// Tool 1 has more work left: when both are held, tool 0 steps aside. With `returning`,
+/// tool 1's move is the way back from a side-step.
+fn on_the_crossing(returning: bool) -> (ToolSpec, ToolSpec, Vec<Move>, Vec<Move>) {
+    let (up, across) = (tool(0, 10.0, 2.0), tool(1, 20.0, 2.0));
+    let r0 = vec![bead(Point2::new(0.0, -30.0), Point2::new(0.0, 30.0), 10.0)];
+    let r1 = vec![Move {
+        yields: returning,
+        ..bead(Point2::new(-68.0, 0.0), Point2::new(80.0, 0.0), 20.0)
+    }];
+    (up, across, r0, r1)
+}
+
+/// What happens on the crossing: which tools gave way (paused, or stepped off their
+/// one bead) and which did first, and where tool 1 first paused.
+struct Outcome {
+    gave_way: [bool; 2],
+    first: Option<usize>,
+    paused_at: Option<Point2>,
+}
+
+fn on_the_crossing_with(returning: bool, priority: Priority) -> Outcome {
+    let (up, across, r0, r1) = on_the_crossing(returning);
+    let paths = simulate(&[(&up, r0), (&across, r1)], priority);
+    let h = holds(&paths);
+    let since = [0, 1].map(|tool| {
+        let held = h.iter().find(|h| h.tool == tool).map(|h| h.from);
+        let off = paths
+            .iter()
+            .filter(|p| p.tool == tool && p.kind != PathKind::Extrude)
+            .map(|p| p.points[0].t)
+            .reduce(f64::min);
+        let line = timeline(&paths, tool);
+        // Each bead alone: 60 mm at 10 mm/s, 148 mm at 20 mm/s.
+        let late = line[line.len() - 1].0 > [6.0, 7.4][tool] + 1e-9;
+        let since = [held, off].into_iter().flatten().reduce(f64::min);
+        assert_eq!(since.is_some(), late, "{priority:?}, tool {tool}");
+        since
+    });
+    Outcome {
+        gave_way: since.map(|s| s.is_some()),
+        first: match since {
+            [Some(a), Some(b)] => Some(if a <= b { 0 } else { 1 }),
+            [Some(_), None] => Some(0),
+            [None, Some(_)] => Some(1),
+            [None, None] => None,
+        },
+        paused_at: h.iter().find(|h| h.tool == 1).map(|h| h.at),
+    }
+}
+
+#[test]
+fn priority_by_clearing_pauses_the_tool_whose_pausing_clears_the_way() {
+    // The paper's rule: tool 1, faster along X, has priority; tool 0 gives way first
+    // (it is held on tool 1's path, so it steps aside).
+    assert_eq!(on_the_crossing_with(false, Priority::XSpeed).first, Some(0));
+    // `clearing`: tool 1 waits, where it comes within 4 mm of tool 0 (2 mm off its
+    // path), for tool 0 to move off; tool 0 never waits.
+    let o = on_the_crossing_with(false, Priority::Clearing);
+    assert_eq!(o.gave_way, [false, true]);
+    let at = o.paused_at.expect("tool 1 paused");
+    assert!(at.x < -3.2 && at.x > -3.7 && at.y.abs() < 1e-9, "{at:?}");
+}
+
+#[test]
+fn priority_by_returning_pauses_the_tool_back_from_a_side_step() {
+    // Without a side-step, `returning` is the paper's rule.
+    assert_eq!(on_the_crossing_with(false, Priority::Returning).first, Some(0));
+    // Tool 1 on its way back from a side-step gives way with `returning` (and
+    // `clearing`): it waits and tool 0 never does; not with `x-speed`.
+    for priority in [Priority::Returning, Priority::Clearing] {
+        let o = on_the_crossing_with(true, priority);
+        assert_eq!(o.gave_way, [false, true], "{priority:?}");
+        assert!(o.paused_at.is_some(), "{priority:?}: tool 1 paused");
+    }
+    assert_eq!(on_the_crossing_with(true, Priority::XSpeed).first, Some(0));
+}
+
+#[test]
+fn priority_and_keep_faster_are_options_of_the_concurrent_planner() {
+    for ok in [
+        "priority = \"x-speed\"",
+        "priority = \"clearing\"",
+        "priority = \"returning\"",
+        "keep_faster = true",
+    ] {
+        assert!(build(&format!("use = \"concurrent\"\n{ok}")).is_ok(), "{ok}");
+        // Accepted by the sequential planner too, which ignores them.
+        assert!(build(&format!("use = \"sequential\"\n{ok}")).is_ok(), "{ok}");
+    }
+    for bad in ["priority = \"fastest\"", "priority = 1", "keep_faster = \"yes\""] {
+        assert!(build(&format!("use = \"concurrent\"\n{bad}")).is_err(), "{bad}");
     }
 }
