@@ -33,6 +33,33 @@ pub fn clean(name: &str) -> String {
 /// A coordinate or temperature with at most `digits` decimals and no trailing zeros
 /// (`210`, `0.2`, `12.345`), and never `-0`.
 pub fn num(v: f64, digits: usize) -> String {
+    // Fixed point through an integer: `format!` with a precision takes the exact
+    // (slow) path for many values, and a G-code file formats millions of them.
+    let scale = 10f64.powi(digits.min(15) as i32);
+    let scaled = (v * scale).round();
+    if digits <= 9 && scaled.is_finite() && scaled.abs() < 9.0e15 {
+        let n = scaled as i64;
+        if n == 0 {
+            return "0".to_string();
+        }
+        let unit = 10i64.pow(digits as u32);
+        let (int, mut frac) = (n.abs() / unit, n.abs() % unit);
+        let mut out = String::with_capacity(24);
+        if n < 0 {
+            out.push('-');
+        }
+        out.push_str(&int.to_string());
+        if frac != 0 {
+            let mut width = digits;
+            while frac % 10 == 0 {
+                frac /= 10;
+                width -= 1;
+            }
+            out.push('.');
+            out.push_str(&format!("{frac:0width$}"));
+        }
+        return out;
+    }
     let s = format!("{v:.digits$}");
     let s = if s.contains('.') {
         s.trim_end_matches('0').trim_end_matches('.').to_string()
@@ -60,5 +87,16 @@ mod tests {
         assert_eq!(num(0.2, 4), "0.2");
         assert_eq!(num(-0.00001, 3), "0");
         assert_eq!(num(12.34567, 3), "12.346");
+        assert_eq!(num(-12.34567, 4), "-12.3457");
+        assert_eq!(num(0.05, 4), "0.05");
+        assert_eq!(num(-0.5, 1), "-0.5");
+        assert_eq!(num(1.0e20, 3), "100000000000000000000");
+        // Within half a unit of the last digit of the value (the product with the
+        // scale may round a near tie the other way than the exact formatter).
+        for i in 0..2000 {
+            let v = (i as f64 - 1000.0) * 0.123_456_7;
+            let back: f64 = num(v, 4).parse().expect("a number");
+            assert!((back - v).abs() <= 0.5e-4 + 1e-12, "{v} -> {back}");
+        }
     }
 }
