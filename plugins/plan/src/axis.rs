@@ -46,6 +46,16 @@ pub fn centre_beads(shapes: &[Vec<Vec<[f64; 2]>>], max_edge: f64, tol: f64) -> V
 fn centre_beads_of(shape: &[Vec<[f64; 2]>], max_edge: f64, tol: f64, out: &mut Vec<Bead>) {
     let shape: Vec<Vec<[f64; 2]>> = shape.iter().map(|r| clean(r)).filter(|r| r.len() >= 3).collect();
     let shape = &shape[..];
+    if let [ring] = shape
+        && ring.len() <= SMALL_RING
+        && (0..ring.len()).all(|i| {
+            let (a, b) = (ring[i], ring[(i + 1) % ring.len()]);
+            (b[0] - a[0]).powi(2) + (b[1] - a[1]).powi(2) <= 4.0 * max_edge * max_edge
+        })
+    {
+        out.extend(small_bead(ring));
+        return;
+    }
     let mut vertices: Vec<spade::Point2<f64>> = Vec::new();
     let mut edges: Vec<[usize; 2]> = Vec::new();
     for ring in shape.iter().filter(|r| r.len() >= 3) {
@@ -139,6 +149,45 @@ fn classify(cdt: &Cdt, shape: &[Vec<[f64; 2]>], fallback: bool) -> Vec<bool> {
         }
     }
     inside
+}
+
+/// Rings of at most this many vertices, none of their sides longer than two split
+/// lengths (the corners and slivers loops leave), get one straight bead instead of a
+/// triangulation.
+const SMALL_RING: usize = 6;
+
+/// One straight bead through a small ring holding its area: for a triangle from the
+/// middle of its shortest side to the corner across (into a corner loops leave
+/// open), for a sliver between its two farthest vertices.
+fn small_bead(ring: &[[f64; 2]]) -> Option<Bead> {
+    let area = ring_area(ring).abs();
+    let p = |v: [f64; 2]| Point2::new(v[0], v[1]);
+    let (a, b) = if ring.len() == 3 {
+        let side = |i: usize| (p(ring[(i + 1) % 3]) - p(ring[i])).norm_squared();
+        let i = (0..3).min_by(|&i, &j| side(i).total_cmp(&side(j)))?;
+        let mid = (p(ring[i]) + p(ring[(i + 1) % 3]).coords) / 2.0;
+        (mid, p(ring[(i + 2) % 3]))
+    } else {
+        let mut best = (0, 0, -1.0);
+        for i in 0..ring.len() {
+            for j in i + 1..ring.len() {
+                let d = (p(ring[j]) - p(ring[i])).norm_squared();
+                if d > best.2 {
+                    best = (i, j, d);
+                }
+            }
+        }
+        (p(ring[best.0]), p(ring[best.1]))
+    };
+    let len = (b - a).norm();
+    if len <= 1e-9 || area <= 0.0 {
+        return None;
+    }
+    Some(Bead {
+        points: vec![a, b],
+        widths: vec![area / len],
+        closed: false,
+    })
 }
 
 /// The ring without repeated points and without spikes (a vertex where the ring
