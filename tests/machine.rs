@@ -13,6 +13,17 @@ fn lamina(args: &[&str]) -> Output {
         .expect("lamina runs")
 }
 
+/// `lamina run --quiet` of `pipeline` into `out`.
+fn run(pipeline: &Path, out: &Path) -> Output {
+    lamina(&[
+        "run",
+        "--quiet",
+        "--out",
+        &out.to_string_lossy(),
+        &pipeline.to_string_lossy(),
+    ])
+}
+
 fn text(out: &[u8]) -> String {
     String::from_utf8_lossy(out).into_owned()
 }
@@ -65,13 +76,7 @@ fn a_part_too_big_for_the_bed_is_refused_with_its_name_and_the_bed_size() {
         "big.toml",
         &pipeline("size = [250.0, 40.0, 2.0]", "machine = \"marlin-mixing-2in1\""),
     );
-    let out = lamina(&[
-        "run",
-        "--quiet",
-        "--out",
-        &dir.path().join("out").to_string_lossy(),
-        &p.to_string_lossy(),
-    ]);
+    let out = run(&p, &dir.path().join("out"));
     assert_eq!(out.status.code(), Some(2), "{}", text(&out.stderr));
     let err = text(&out.stderr);
     assert!(err.contains("part `part`"), "{err}");
@@ -83,13 +88,7 @@ fn a_part_too_big_for_the_bed_is_refused_with_its_name_and_the_bed_size() {
         "tall.toml",
         &pipeline("size = [20.0, 20.0, 260.0]", "machine = \"marlin-mixing-2in1\""),
     );
-    let out = lamina(&[
-        "run",
-        "--quiet",
-        "--out",
-        &dir.path().join("out").to_string_lossy(),
-        &tall.to_string_lossy(),
-    ]);
+    let out = run(&tall, &dir.path().join("out"));
     assert_eq!(out.status.code(), Some(2));
     assert!(
         text(&out.stderr).contains("builds up to 250 mm"),
@@ -147,13 +146,7 @@ fn an_inline_machine_extends_a_builtin_one() {
         ),
     );
     let out_dir = dir.path().join("out");
-    let out = lamina(&[
-        "run",
-        "--quiet",
-        "--out",
-        &out_dir.to_string_lossy(),
-        &p.to_string_lossy(),
-    ]);
+    let out = run(&p, &out_dir);
     assert!(out.status.success(), "{}", text(&out.stderr));
     let gcode = std::fs::read_to_string(out_dir.join("box.gcode")).expect("gcode");
     assert!(gcode.contains("marlin-mixing-2in1"));
@@ -171,13 +164,7 @@ fn an_inline_machine_extends_a_builtin_one() {
 fn a_model_in_metres_is_refused_with_the_fix_unless_its_units_are_given() {
     let dir = tempfile::tempdir().expect("tempdir");
     let p = write(dir.path(), "m.toml", &pipeline("size = [0.04, 0.03, 0.0156]", ""));
-    let out = lamina(&[
-        "run",
-        "--quiet",
-        "--out",
-        &dir.path().join("out").to_string_lossy(),
-        &p.to_string_lossy(),
-    ]);
+    let out = run(&p, &dir.path().join("out"));
     assert_eq!(out.status.code(), Some(2), "{}", text(&out.stderr));
     let err = text(&out.stderr);
     assert!(err.contains("is 0.04 mm wide"), "{err}");
@@ -192,13 +179,7 @@ fn a_model_in_metres_is_refused_with_the_fix_unless_its_units_are_given() {
             "fixed.toml",
             &pipeline(&format!("size = [0.04, 0.03, 0.002]\n{fix}"), ""),
         );
-        let out = lamina(&[
-            "run",
-            "--quiet",
-            "--out",
-            &dir.path().join("out2").to_string_lossy(),
-            &p.to_string_lossy(),
-        ]);
+        let out = run(&p, &dir.path().join("out2"));
         assert!(out.status.success(), "{fix}: {}", text(&out.stderr));
     }
 
@@ -209,13 +190,7 @@ fn a_model_in_metres_is_refused_with_the_fix_unless_its_units_are_given() {
     );
     let out = lamina(&["check", &p.to_string_lossy()]);
     assert!(out.status.success(), "the check needs the mesh: `check` passes");
-    let out = lamina(&[
-        "run",
-        "--quiet",
-        "--out",
-        &dir.path().join("out3").to_string_lossy(),
-        &p.to_string_lossy(),
-    ]);
+    let out = run(&p, &dir.path().join("out3"));
     assert_eq!(out.status.code(), Some(2));
     assert!(
         text(&out.stderr).contains("scale = 0.001"),
@@ -246,13 +221,7 @@ fn beads_take_the_machine_nozzle_width_unless_the_plan_names_one() {
         .replace("mixing = true", &format!("mixing = true\n{plan_width}"));
         let p = write(dir.path(), "w.toml", &source);
         let out_dir = dir.path().join(format!("out{}", plan_width.len()));
-        let out = lamina(&[
-            "run",
-            "--quiet",
-            "--out",
-            &out_dir.to_string_lossy(),
-            &p.to_string_lossy(),
-        ]);
+        let out = run(&p, &out_dir);
         assert!(out.status.success(), "{}", text(&out.stderr));
         let plan: serde_json::Value =
             serde_json::from_str(&std::fs::read_to_string(out_dir.join("box.json")).expect("json"))

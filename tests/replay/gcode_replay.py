@@ -1831,9 +1831,16 @@ def summary(rep: dict) -> str:
                    f"{'%.4f (layer %s)' % (wo['overlap'], wo['layer']) if wo else 'n/a'}")
     if rep["unknown_commands"]:
         out.append("unknown commands: " + ", ".join(f"{k} x{v}" for k, v in rep["unknown_commands"].items()))
-    out.append("checks:")
+    out.extend(checks_summary(rep, 9))
+    return "\n".join(out)
+
+
+def checks_summary(rep: dict, name_width: int) -> list[str]:
+    """The checks' lines of a summary (status, violations, the first examples) and
+    the result line; shared by the single- and multi-stream summaries."""
+    out = ["checks:"]
     for name, c in rep["checks"].items():
-        line = f"  {name:9s} {c['status'].upper():7s}"
+        line = f"  {name:{name_width}s} {c['status'].upper():7s}"
         if c["violations"]:
             line += f" {c['violations']} violation(s)"
         if c.get("skipped"):
@@ -1845,7 +1852,7 @@ def summary(rep: dict) -> str:
         if c["violations"] > 5:
             out.append(f"      ... {c['violations'] - 5} more")
     out.append("RESULT: " + ("PASS" if rep["ok"] else "FAIL"))
-    return "\n".join(out)
+    return out
 
 
 def _floats(text: str, n: int, what: str) -> tuple[float, ...]:

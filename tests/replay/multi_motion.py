@@ -1299,18 +1299,5 @@ def summary_multi(rep: dict) -> str:
         out.append(f"PART {vol['part_mm3']:.1f} mm^3 vs mesh {vol['mesh_mm3']:.1f} mm^3: ratio {vol['ratio']:.4f}")
     if rep["unknown_commands"]:
         out.append("unknown commands: " + ", ".join(f"{k} x{v}" for k, v in rep["unknown_commands"].items()))
-    out.append("checks:")
-    for name, ch in rep["checks"].items():
-        row = f"  {name:10s} {ch['status'].upper():7s}"
-        if ch["violations"]:
-            row += f" {ch['violations']} violation(s)"
-        if ch.get("skipped"):
-            row += f" ({ch['skipped']})"
-        out.append(row)
-        for e in ch["examples"][:5]:
-            where = f"line {e['line']}" if e["line"] is not None else "file"
-            out.append(f"      {where}: {e['message']}")
-        if ch["violations"] > 5:
-            out.append(f"      ... {ch['violations'] - 5} more")
-    out.append("RESULT: " + ("PASS" if rep["ok"] else "FAIL"))
+    out.extend(gr.checks_summary(rep, 10))
     return "\n".join(out)

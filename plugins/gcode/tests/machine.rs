@@ -6,38 +6,18 @@
 //! of the moves.
 
 use std::collections::BTreeMap;
-use std::io::Write;
 use std::path::{Path, PathBuf};
-use std::sync::{Arc, Mutex};
+
+mod support;
+
+use support::export;
 
 use lamina_core::machine::load::MachineSpec;
 use lamina_core::machine::{BedPlacement, Machine};
-use lamina_core::stage::{AnyStage, ExportContext, OutputFiles};
 use lamina_core::{
     BBox2, Composition, LayerPlan, Material, PartInfo, PathKind, Point2, Registry, RunInfo, StageKind,
     TimedPoint, Toolpath,
 };
-
-#[derive(Clone, Default)]
-struct Buffer(Arc<Mutex<Vec<u8>>>);
-
-impl Write for Buffer {
-    fn write(&mut self, b: &[u8]) -> std::io::Result<usize> {
-        self.0.lock().expect("lock").extend_from_slice(b);
-        Ok(b.len())
-    }
-    fn flush(&mut self) -> std::io::Result<()> {
-        Ok(())
-    }
-}
-
-struct Files(Buffer);
-
-impl OutputFiles for Files {
-    fn create(&mut self, _name: &Path) -> lamina_core::Result<Box<dyn Write + Send>> {
-        Ok(Box::new(self.0.clone()))
-    }
-}
 
 fn machine(name: &str) -> Machine {
     lamina_core::machine::resolve(
@@ -137,36 +117,6 @@ fn layers(seed: u64) -> Vec<LayerPlan> {
             }
         })
         .collect()
-}
-
-fn export(table: &str, info: &RunInfo, plans: &[LayerPlan], pipeline: &str) -> lamina_core::Result<String> {
-    use lamina_gcode as _;
-    let registry = Registry::linked().expect("registry");
-    let dir = std::env::temp_dir();
-    let scripts = lamina_core::script::ScriptHost::new(&dir, Default::default());
-    let table = lamina_core::pipeline::TableRef::parse_snippet("gcode", table).expect("table");
-    let AnyStage::Export(exporter) =
-        registry.build_for(StageKind::Export, &table, &scripts, &dir, info.machine.as_ref())?
-    else {
-        panic!("not an exporter")
-    };
-    let buffer = Buffer::default();
-    let mut files = Files(buffer.clone());
-    let mut ctx = ExportContext {
-        info,
-        sequence: None,
-        orientation: None,
-        layer_count: plans.len(),
-        pipeline_name: pipeline,
-        files: &mut files,
-    };
-    let mut sink = exporter.open(&mut ctx)?;
-    for p in plans {
-        sink.layer(info, p)?;
-    }
-    sink.finish(info)?;
-    let bytes = buffer.0.lock().expect("lock").clone();
-    Ok(String::from_utf8(bytes).expect("utf-8"))
 }
 
 fn export_for(name: &str) -> (Machine, String) {

@@ -2,36 +2,14 @@
 //! the extrusion it commands adds up to the planned bead volumes within 1 %, and each
 //! flavour's mixing or tool commands are where they belong.
 
-use std::io::Write;
-use std::path::{Path, PathBuf};
-use std::sync::{Arc, Mutex};
+mod support;
 
-use lamina_core::stage::{AnyStage, ExportContext, OutputFiles};
+use std::path::PathBuf;
+
 use lamina_core::{
     Composition, LayerPlan, Material, PartInfo, PathKind, Point2, Registry, RunInfo, StageKind, TimedPoint,
     Toolpath,
 };
-
-#[derive(Clone, Default)]
-struct Buffer(Arc<Mutex<Vec<u8>>>);
-
-impl Write for Buffer {
-    fn write(&mut self, b: &[u8]) -> std::io::Result<usize> {
-        self.0.lock().expect("lock").extend_from_slice(b);
-        Ok(b.len())
-    }
-    fn flush(&mut self) -> std::io::Result<()> {
-        Ok(())
-    }
-}
-
-struct Files(Buffer);
-
-impl OutputFiles for Files {
-    fn create(&mut self, _name: &Path) -> lamina_core::Result<Box<dyn Write + Send>> {
-        Ok(Box::new(self.0.clone()))
-    }
-}
 
 fn info() -> RunInfo {
     let mat = |name: &str, colour| Material {
@@ -135,35 +113,7 @@ fn layers(seed: u64) -> Vec<LayerPlan> {
 }
 
 fn export(table: &str, plans: &[LayerPlan]) -> String {
-    use lamina_gcode as _;
-    let registry = Registry::linked().expect("registry");
-    let dir = std::env::temp_dir();
-    let scripts = lamina_core::script::ScriptHost::new(&dir, Default::default());
-    let table = lamina_core::pipeline::TableRef::parse_snippet("gcode", table).expect("table");
-    let AnyStage::Export(exporter) = registry
-        .build(StageKind::Export, &table, &scripts, &dir)
-        .expect("builds")
-    else {
-        panic!("not an exporter")
-    };
-    let info = info();
-    let buffer = Buffer::default();
-    let mut files = Files(buffer.clone());
-    let mut ctx = ExportContext {
-        info: &info,
-        sequence: None,
-        orientation: None,
-        layer_count: plans.len(),
-        pipeline_name: "test",
-        files: &mut files,
-    };
-    let mut sink = exporter.open(&mut ctx).expect("opens");
-    for p in plans {
-        sink.layer(&info, p).expect("layer");
-    }
-    sink.finish(&info).expect("finishes");
-    let bytes = buffer.0.lock().expect("lock").clone();
-    String::from_utf8(bytes).expect("utf-8")
+    support::export(table, &info(), plans, "test").expect("exports")
 }
 
 /// The parsed program. gcode 0.6 reports some commands twice, first without their

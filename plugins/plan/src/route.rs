@@ -257,14 +257,15 @@ pub fn route(tool: &ToolSpec, jobs: Vec<Job>, parks: &Parks, seam: Seam) -> Vec<
             Seam::Aligned => job.pass.max_x_vertex(),
         };
         let pass = job.pass.started_at(start);
+        let uniform = pass.uniform_width();
         let first = pass.points[0];
         travel.push(first);
         push_travel(&mut moves, std::mem::take(&mut travel), tool.travel_speed);
         at = pass.points[pass.points.len() - 1];
         moves.push(Move {
             kind: PathKind::Extrude,
-            width: pass.uniform_width().unwrap_or(0.0),
-            widths: if pass.uniform_width().is_some() {
+            width: uniform.unwrap_or(0.0),
+            widths: if uniform.is_some() {
                 Vec::new()
             } else {
                 pass.widths

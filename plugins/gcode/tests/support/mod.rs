@@ -1,0 +1,67 @@
+//! What the G-code tests share: the exporter run in memory on given layer plans.
+
+use std::io::Write;
+use std::path::Path;
+use std::sync::{Arc, Mutex};
+
+use lamina_core::stage::{AnyStage, ExportContext, OutputFiles};
+use lamina_core::{LayerPlan, Registry, RunInfo, StageKind};
+
+/// One in-memory file every output of the exporter writes into.
+#[derive(Clone, Default)]
+struct Buffer(Arc<Mutex<Vec<u8>>>);
+
+impl Write for Buffer {
+    fn write(&mut self, b: &[u8]) -> std::io::Result<usize> {
+        self.0.lock().expect("lock").extend_from_slice(b);
+        Ok(b.len())
+    }
+    fn flush(&mut self) -> std::io::Result<()> {
+        Ok(())
+    }
+}
+
+struct Files(Buffer);
+
+impl OutputFiles for Files {
+    fn create(&mut self, _name: &Path) -> lamina_core::Result<Box<dyn Write + Send>> {
+        Ok(Box::new(self.0.clone()))
+    }
+}
+
+/// The G-code the exporter configured by `table` writes for `plans`, built against the
+/// run's machine (if any) as a pipeline would.
+pub fn export(
+    table: &str,
+    info: &RunInfo,
+    plans: &[LayerPlan],
+    pipeline: &str,
+) -> lamina_core::Result<String> {
+    use lamina_gcode as _;
+    let registry = Registry::linked().expect("registry");
+    let dir = std::env::temp_dir();
+    let scripts = lamina_core::script::ScriptHost::new(&dir, Default::default());
+    let table = lamina_core::pipeline::TableRef::parse_snippet("gcode", table).expect("table");
+    let AnyStage::Export(exporter) =
+        registry.build_for(StageKind::Export, &table, &scripts, &dir, info.machine.as_ref())?
+    else {
+        panic!("not an exporter")
+    };
+    let buffer = Buffer::default();
+    let mut files = Files(buffer.clone());
+    let mut ctx = ExportContext {
+        info,
+        sequence: None,
+        orientation: None,
+        layer_count: plans.len(),
+        pipeline_name: pipeline,
+        files: &mut files,
+    };
+    let mut sink = exporter.open(&mut ctx)?;
+    for p in plans {
+        sink.layer(info, p)?;
+    }
+    sink.finish(info)?;
+    let bytes = buffer.0.lock().expect("lock").clone();
+    Ok(String::from_utf8(bytes).expect("utf-8"))
+}
