@@ -751,7 +751,11 @@ fn validate(raw: RawMachine, c: &Check<'_>) -> Result<Machine> {
                     "the transition is purged on the wipe tower: add a [wipe_tower] with its size",
                 ));
             }
-            Some(Mixer { transition_volume })
+            let blend_below = c.within(m.blend_below.unwrap_or(0.0), 0.0, 1.0, "mixer.blend_below", "")?;
+            Some(Mixer {
+                transition_volume,
+                blend_below,
+            })
         }
         (true, None) => {
             return Err(c.err(

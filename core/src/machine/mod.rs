@@ -338,6 +338,12 @@ pub struct Mixer {
     /// Volume that leaves the nozzle after a mix change before the new mix is pure
     /// (mm³): it is purged before the next sub-region.
     pub transition_volume: f64,
+    /// Share of the mix (half the sum of the channels' differences, 0..1) below which
+    /// a change between beads is blended in place rather than purged: a graded part
+    /// changes its mix by a few percent from one bead to the next, and the chamber's
+    /// blending of such a step is the gradient itself.
+    #[serde(default)]
+    pub blend_below: f64,
 }
 
 /// G-code templates with `{variable}` placeholders (see [`template::START_VARIABLES`]

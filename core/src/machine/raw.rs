@@ -137,6 +137,7 @@ pub(crate) struct RawWipeTower {
 #[serde(deny_unknown_fields)]
 pub(crate) struct RawMixer {
     pub transition_volume: Option<f64>,
+    pub blend_below: Option<f64>,
 }
 
 #[derive(Debug, Default, Deserialize)]

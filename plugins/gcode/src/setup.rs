@@ -85,6 +85,8 @@ pub struct Setup {
     pub wipe_tower: Option<WipeTower>,
     /// Volume a mixing head purges after a change of mix (mm³).
     pub transition_volume: f64,
+    /// Changes of mix smaller than this share are blended in place, not purged.
+    pub blend_below: f64,
     pub templates: Templates,
     /// Whether the parts are placed by the machine (else moved only off negative
     /// coordinates).
@@ -218,6 +220,7 @@ impl Setup {
             prime_line: m.prime_line,
             wipe_tower: m.wipe_tower,
             transition_volume: m.mixer.map_or(0.0, |x| x.transition_volume),
+            blend_below: m.mixer.map_or(0.0, |x| x.blend_below),
             templates: m.gcode.clone(),
             placed: true,
         })
@@ -323,6 +326,7 @@ impl Setup {
             prime_line: None,
             wipe_tower: None,
             transition_volume: 0.0,
+            blend_below: 0.0,
             templates: Templates::default(),
             placed: false,
         })

@@ -69,6 +69,9 @@ struct Job<'a> {
     head: usize,
     mix: Option<Vec<u32>>,
     path: &'a Toolpath,
+    /// The path goes on from where the previous one ended, in the same part: one
+    /// extrusion whose mix changes in place, neither purged nor reordered.
+    continues: bool,
 }
 
 /// The G-code being written.
@@ -324,7 +327,11 @@ impl Writer {
         }
         if let Some(r) = self.layout.tower {
             let purge = if s.flavor.is_mixing() {
-                format!("{} mm³ after each change of mix", num(s.transition_volume, 1))
+                format!(
+                    "{} mm³ after each change of mix between beads of {}% or more (smaller changes, and a mix that changes along a bead, are set in place and blend over about that volume)",
+                    num(s.transition_volume, 1),
+                    num(s.blend_below * 100.0, 1)
+                )
             } else {
                 format!(
                     "{} mm³ after each tool change",
@@ -608,7 +615,8 @@ impl Writer {
     fn travel(&mut self, to: Point2) {
         let [x, y, z, _] = self.fw.position();
         let d = (to - Point2::new(x, y)).norm();
-        if d < 1e-6 && (z - self.z).abs() < 1e-9 {
+        // The position is read back from the file, rounded to its 4 decimals.
+        if d < 2e-4 && (z - self.z).abs() < 1e-9 {
             return;
         }
         if d > RETRACT_MIN_TRAVEL {
@@ -722,6 +730,19 @@ impl Writer {
         percentages(&f)
     }
 
+    /// Whether a change of mix from `a` to `b` between two beads is purged: it is a
+    /// change, and not one small enough to blend in place (`mixer.blend_below`).
+    fn purged_change(&self, a: Option<&[u32]>, b: Option<&[u32]>) -> bool {
+        let (Some(a), Some(b)) = (a, b) else {
+            return false;
+        };
+        if a == b {
+            return false;
+        }
+        let moved: u32 = a.iter().zip(b).map(|(x, y)| x.abs_diff(*y)).sum();
+        f64::from(moved) / 200.0 >= self.s.blend_below
+    }
+
     fn set_mix(&mut self, mix: Vec<u32>) {
         if self.mix.as_ref() == Some(&mix) {
             return;
@@ -736,7 +757,8 @@ impl Writer {
 
     /// The layer's paths in the order they are written: tool changers tool by tool
     /// (starting with the tool in use, to save a change), each tool's paths in planned
-    /// order; mixing heads mix by mix.
+    /// order; mixing heads mix by mix, a bead cut into pieces of several mixes kept
+    /// whole.
     fn jobs<'a>(&self, info: &RunInfo, plan: &'a LayerPlan) -> Vec<Job<'a>> {
         let mut paths: Vec<&Toolpath> = plan
             .toolpaths
@@ -746,16 +768,23 @@ impl Writer {
         let start = |p: &&Toolpath| p.points.first().map_or(0.0, |q| q.t);
         if self.s.flavor.is_mixing() {
             paths.sort_by(|a, b| start(a).total_cmp(&start(b)));
-            return self.by_mix(
-                paths
-                    .into_iter()
-                    .map(|path| Job {
-                        head: 0,
-                        mix: Some(self.mix_of(info, path)),
-                        path,
-                    })
-                    .collect(),
-            );
+            let mut jobs: Vec<Job<'a>> = Vec::with_capacity(paths.len());
+            for path in paths {
+                let continues = jobs.last().is_some_and(|prev: &Job<'a>| {
+                    prev.path.part == path.part
+                        && match (prev.path.points.last(), path.points.first()) {
+                            (Some(a), Some(b)) => (a.p - b.p).norm() < 1e-9,
+                            _ => false,
+                        }
+                });
+                jobs.push(Job {
+                    head: 0,
+                    mix: Some(self.mix_of(info, path)),
+                    path,
+                    continues,
+                });
+            }
+            return self.by_mix(jobs);
         }
         let mut jobs: Vec<Job<'a>> = paths
             .into_iter()
@@ -763,6 +792,7 @@ impl Writer {
                 head: self.head_of(info, path),
                 mix: None,
                 path,
+                continues: false,
             })
             .collect();
         let current = self.head;
@@ -775,31 +805,52 @@ impl Writer {
         jobs
     }
 
-    /// A mixing head's paths grouped by mix, each group in planned order: every change
-    /// of mix costs a purge, so the layer changes once per mix it uses. The group of
-    /// the mix in the nozzle goes first, then each next is the mix nearest the last.
+    /// A mixing head's paths ordered by mix: every change of mix between beads may cost
+    /// a purge, so each next chain of paths (a bead cut into pieces of several mixes
+    /// stays whole) starts with the mix in the nozzle when one does, in planned order,
+    /// else with the nearest mix. A layer of a few mixes changes once per mix.
     fn by_mix<'a>(&self, jobs: Vec<Job<'a>>) -> Vec<Job<'a>> {
-        let mut groups: Vec<(Vec<u32>, Vec<Job<'a>>)> = Vec::new();
+        // Paths that go on from the previous one stay with it, under its mix.
+        let mut chains: Vec<Vec<Job<'a>>> = Vec::new();
         for j in jobs {
-            let mix = j.mix.clone().unwrap_or_default();
-            match groups.iter_mut().find(|(m, _)| *m == mix) {
-                Some((_, g)) => g.push(j),
-                None => groups.push((mix, vec![j])),
+            match chains.last_mut() {
+                Some(chain) if j.continues => chain.push(j),
+                _ => chains.push(vec![j]),
             }
         }
+        // Each next chain starts with the mix the last one ended with when one does (in
+        // planned order), else with the nearest mix.
+        let first_mix = |c: &[Job<'a>]| c[0].mix.clone().unwrap_or_default();
+        let mut by_first: std::collections::HashMap<Vec<u32>, std::collections::VecDeque<usize>> =
+            std::collections::HashMap::new();
+        for (i, c) in chains.iter().enumerate() {
+            by_first.entry(first_mix(c)).or_default().push_back(i);
+        }
         let distance = |a: &[u32], b: &[u32]| -> u32 { a.iter().zip(b).map(|(x, y)| x.abs_diff(*y)).sum() };
+        let mut left: Vec<Option<Vec<Job<'a>>>> = chains.into_iter().map(Some).collect();
         let mut out = Vec::new();
         let mut last = self.mix.clone();
-        while !groups.is_empty() {
-            let next = match &last {
-                Some(l) => (0..groups.len())
-                    .min_by_key(|&i| (distance(l, &groups[i].0), i))
-                    .unwrap_or(0),
-                None => 0,
+        for _ in 0..left.len() {
+            let same = last.as_ref().and_then(|l| {
+                let queue = by_first.get_mut(l)?;
+                while let Some(i) = queue.pop_front() {
+                    if left[i].is_some() {
+                        return Some(i);
+                    }
+                }
+                None
+            });
+            let next = same.or_else(|| {
+                (0..left.len()).filter(|&i| left[i].is_some()).min_by_key(|&i| {
+                    let c = left[i].as_deref().expect("left");
+                    (last.as_ref().map_or(0, |l| distance(l, &first_mix(c))), i)
+                })
+            });
+            let Some(chain) = next.and_then(|i| left[i].take()) else {
+                break;
             };
-            let (mix, g) = groups.remove(next);
-            out.extend(g);
-            last = Some(mix);
+            last = chain.last().and_then(|j| j.mix.clone()).or(last);
+            out.extend(chain);
         }
         out
     }
@@ -946,10 +997,11 @@ impl Writer {
         }
         // Where the head or mix changes.
         let mut state = (self.head, self.mix.clone());
-        let mut changes = 0;
+        let mut changes = 0usize;
         for j in &jobs {
             let next = (Some(j.head), j.mix.clone().or(state.1.clone()));
-            if state.0.is_some() && next != state {
+            let purged_mix = !j.continues && self.purged_change(state.1.as_deref(), next.1.as_deref());
+            if state.0.is_some() && (next.0 != state.0 || purged_mix) {
                 changes += 1;
             }
             state = next;
@@ -978,13 +1030,13 @@ impl Writer {
         let mut left = changes;
         for j in &jobs {
             let changed_head = self.head.is_some() && self.head != Some(j.head);
-            let changed_mix = j.mix.is_some() && self.mix.is_some() && self.mix != j.mix;
+            let changed_mix = !j.continues && self.purged_change(self.mix.as_deref(), j.mix.as_deref());
             if let Some(m) = &j.mix {
                 self.set_mix(m.clone());
             }
             self.ready(j.head)?;
             if changed_head || changed_mix {
-                left -= 1;
+                left = left.saturating_sub(1);
                 if tower_here && !self.tower.as_ref().is_some_and(Tower::open) {
                     self.comment("the tower's level at this height is complete: the change is not purged");
                 } else if tower_here {

@@ -480,32 +480,67 @@ fn every_change_is_purged_on_the_tower() {
         (purged - expected).abs() <= 0.01 * expected,
         "{purged} mm³ purged for {changes} selections"
     );
-    // Mixing head: after each change of mix, the transition volume before the part.
-    let (m, text) = export_for("marlin-mixing-2in1");
-    let transition = m.mixer.expect("mixer").transition_volume;
-    let lines: Vec<&str> = text.lines().collect();
-    let mut mixes = 0;
-    for (i, l) in lines.iter().enumerate() {
-        if l.starts_with("M164") && lines[..i].iter().any(|l| l.starts_with(";LAYER:")) {
-            mixes += 1;
-            let next_part = lines[i..]
+    // Mixing head: after each change of mix of `blend_below` or more, the transition
+    // volume before the part; smaller steps are set in place, unpurged.
+    for blend in [0.0, 0.1, 0.3] {
+        let mut m = machine("marlin-mixing-2in1");
+        m.mixer.as_mut().expect("mixer").blend_below = blend;
+        let transition = m.mixer.expect("mixer").transition_volume;
+        let info = info(Some(m), ["red", "green"]);
+        let text = export("use = \"gcode\"", &info, &layers(11), "test").expect("exports");
+        let lines: Vec<&str> = text.lines().collect();
+        let (mut purged_mixes, mut blended) = (0, 0);
+        let mut mix: Vec<f64> = Vec::new();
+        let mut last: Option<Vec<f64>> = None;
+        for (i, l) in lines.iter().enumerate() {
+            if let Some(rest) = l.strip_prefix("M163 ") {
+                let words: Vec<&str> = rest.split_whitespace().collect();
+                let ch: usize = words[0][1..].parse().expect("channel");
+                let f: f64 = words[1][1..].parse().expect("factor");
+                if mix.len() <= ch {
+                    mix.resize(ch + 1, 0.0);
+                }
+                mix[ch] = f;
+            }
+            if !l.starts_with("M164") {
+                continue;
+            }
+            let before = last.replace(mix.clone());
+            if !lines[..i].iter().any(|l| l.starts_with(";LAYER:")) {
+                continue;
+            }
+            let Some(before) = before else { continue };
+            let moved: f64 = before.iter().zip(&mix).map(|(a, b)| (a - b).abs()).sum::<f64>() / 2.0;
+            // Up to the next change of mix or layer: a purge there follows this change.
+            let end = lines[i + 1..]
                 .iter()
-                .position(|l| *l == ";TYPE:PART")
-                .expect("part after the mix");
-            assert!(
-                lines[i..i + next_part].contains(&";TYPE:PURGE"),
-                "no purge between the mix at line {} and the part",
-                i + 1
-            );
+                .position(|l| l.starts_with("M164") || l.starts_with(";LAYER:"))
+                .map_or(lines.len(), |k| i + 1 + k);
+            let purge = lines[i..end].contains(&";TYPE:PURGE");
+            if moved >= blend - 1e-9 {
+                purged_mixes += 1;
+                assert!(
+                    purge,
+                    "blend {blend}: no purge between the mix at line {} and the part",
+                    i + 1
+                );
+            } else {
+                blended += 1;
+                assert!(!purge, "blend {blend}: a {moved} step purged at line {}", i + 1);
+            }
         }
+        let r = replay(&text, false);
+        let purged = r.fed["PURGE"] * area;
+        if blend == 0.0 {
+            assert!(purged_mixes > 5 && blended == 0);
+        } else if blend > 0.2 {
+            assert!(blended > 0, "blend {blend}: every step was purged");
+        }
+        assert!(
+            (purged - purged_mixes as f64 * transition).abs() <= 0.01 * purged.max(1.0),
+            "blend {blend}: {purged} mm³ for {purged_mixes} mixes"
+        );
     }
-    let r = replay(&text, false);
-    let purged = r.fed["PURGE"] * area;
-    assert!(mixes > 5);
-    assert!(
-        (purged - mixes as f64 * transition).abs() <= 0.01 * purged,
-        "{purged} mm³ for {mixes} mixes"
-    );
 }
 
 #[test]

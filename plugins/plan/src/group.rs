@@ -16,6 +16,7 @@ use lamina_core::{Composition, Contour, Point2, Polygon, Region};
 
 use crate::bead::Bead;
 use crate::fill::{Widths, fill, mean_width};
+use crate::pieces;
 
 /// What to do with sub-regions too thin for one pass.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Deserialize)]
@@ -51,8 +52,9 @@ impl Grouping {
         self.groups
             .iter()
             .filter(|g| g.members.len() > 1)
-            .map(|g| g.members.len())
-            .sum()
+            .flat_map(|g| &g.members)
+            .collect::<std::collections::BTreeSet<_>>()
+            .len()
     }
 }
 
@@ -62,7 +64,14 @@ pub fn group(regions: &[Region], widths: &Widths, thin: Thin) -> Grouping {
     let width = widths.min;
     // Levels of each family and cell, in level order.
     let mut buckets: BTreeMap<(usize, Option<usize>), BTreeMap<usize, Vec<usize>>> = BTreeMap::new();
+    // Thin circumferential cells of each family: their levels' cells need not line up,
+    // so they are filled as one wall and the material read back along the beads.
+    let mut walls: BTreeMap<usize, Vec<usize>> = BTreeMap::new();
     for (i, r) in regions.iter().enumerate() {
+        if r.cell.is_some() && thin == Thin::Merge && mean_width(&r.polygon) < width {
+            walls.entry(r.family).or_default().push(i);
+            continue;
+        }
         buckets
             .entry((r.family, r.cell))
             .or_default()
@@ -210,13 +219,62 @@ pub fn group(regions: &[Region], widths: &Widths, thin: Thin) -> Grouping {
             }
         }
     }
+    for members in walls.into_values() {
+        wall(regions, &members, widths, &mut out);
+    }
     for g in &mut out.groups {
-        if g.members.len() > 1 {
+        if g.members.len() > 1 && g.composition.is_none() {
             g.composition = mean_composition(regions, &g.members);
         }
     }
     out
 }
+
+/// Fills the union of the thin cells `members` of one family as one wall, each bead
+/// cut into pieces by the composition of the cells under it ([`pieces`]).
+fn wall(regions: &[Region], members: &[usize], widths: &Widths, out: &mut Grouping) {
+    for piece in union(members.iter().map(|&m| &regions[m].polygon)) {
+        let box_ = piece.bbox();
+        let inside: Vec<usize> = members
+            .iter()
+            .copied()
+            .filter(|&m| {
+                regions[m].polygon.bbox().overlaps(&box_)
+                    && regions[m]
+                        .polygon
+                        .outer
+                        .interior_point()
+                        .is_some_and(|p| piece.contains(p))
+            })
+            .collect();
+        let Some(&first) = inside.first() else {
+            continue;
+        };
+        if mean_width(&piece) < widths.min {
+            out.thin.push((first, piece.area()));
+            continue;
+        }
+        for bead in fill(&piece, widths) {
+            for p in pieces::split(bead, &inside, regions, widths.nominal, PIECE_TOLERANCE) {
+                let members = if p.regions.is_empty() {
+                    vec![first]
+                } else {
+                    p.regions
+                };
+                let composition = p.composition.or_else(|| mean_composition(regions, &inside));
+                out.groups.push(Group {
+                    members,
+                    passes: vec![p.bead],
+                    composition,
+                });
+            }
+        }
+    }
+}
+
+/// Largest difference of a material's fraction along one piece of a wall's bead: the
+/// percent resolution of a mixing head's mix.
+const PIECE_TOLERANCE: f64 = 0.01;
 
 /// The area-weighted mean composition of `members` (none when they are not graded).
 fn mean_composition(regions: &[Region], members: &[usize]) -> Option<Composition> {
@@ -386,8 +444,7 @@ mod tests {
         };
         let g = group(&regions, &w, Thin::Merge);
         assert!(g.thin.is_empty(), "{:?}", g.thin);
-        let members: usize = g.groups.iter().map(|g| g.members.len()).sum();
-        assert_eq!(members, 6);
+        assert_eq!(g.merged(), 6);
         let filled: f64 = g.groups.iter().flat_map(|g| &g.passes).map(Bead::area).sum();
         assert!((filled - 6.0).abs() < 0.06, "{filled}");
         // No bead narrower than the narrowest one the nozzle lays, bar the ends.
@@ -398,6 +455,73 @@ mod tests {
             .max_by(|a, b| a.length().total_cmp(&b.length()))
             .expect("a bead");
         assert!(longest.length() > 15.0 && longest.area() / longest.length() > 0.25);
+    }
+
+    #[test]
+    fn thin_cells_that_do_not_line_up_are_filled_as_one_wall_graded_along_it() {
+        // Ten 0.1 mm levels of a 1 mm × 20 mm wall, each cut into cells of its own
+        // length (4 to 6 per level), graded by the cell's position along the wall.
+        let mut regions = Vec::new();
+        for j in 0..10 {
+            let (y0, y1) = (j as f64 * 0.1, (j + 1) as f64 * 0.1);
+            let n = 4 + j % 3;
+            for c in 0..n {
+                let (x0, x1) = (20.0 * c as f64 / n as f64, 20.0 * (c + 1) as f64 / n as f64);
+                let f = (x0 + x1) / 40.0;
+                regions.push(Region {
+                    family: 0,
+                    index: j,
+                    count: 10,
+                    level: j as f64 / 9.0,
+                    polygon: Polygon::new(rect(x0, y0, x1, y1), vec![]),
+                    cell: Some(c),
+                    reference: Point2::new((x0 + x1) / 2.0, (y0 + y1) / 2.0),
+                    composition: Some(Composition::binary(f).expect("valid")),
+                });
+            }
+        }
+        let w = Widths {
+            nominal: 0.4,
+            min: 0.25,
+            max: 0.6,
+        };
+        let g = group(&regions, &w, Thin::Merge);
+        assert!(g.thin.is_empty(), "{:?}", g.thin);
+        assert_eq!(g.merged(), regions.len());
+        let filled: f64 = g.groups.iter().flat_map(|g| &g.passes).map(Bead::area).sum();
+        assert!((filled - 20.0).abs() < 0.2, "{filled}");
+        // Long beads along the wall, cut into pieces end to start.
+        let ends: Vec<(Point2, Point2)> = g
+            .groups
+            .iter()
+            .flat_map(|g| &g.passes)
+            .map(|b| (b.points[0], b.points[b.points.len() - 1]))
+            .collect();
+        let chained = ends
+            .iter()
+            .filter(|(a, _)| ends.iter().any(|(_, b)| (*a - *b).norm() < 1e-9))
+            .count();
+        assert!(
+            chained * 2 > ends.len(),
+            "{chained} of {} pieces go on from another",
+            ends.len()
+        );
+        // Each piece takes the grading of the cells under it: the first material's
+        // share follows the position along the wall within a cell's length.
+        for grp in &g.groups {
+            let c = grp.composition.as_ref().expect("graded");
+            assert!((c.fractions.iter().sum::<f64>() - 1.0).abs() < 1e-12);
+            let bead = &grp.passes[0];
+            let xs: Vec<f64> = bead.points.iter().map(|p| p.x).collect();
+            let mid = (xs.iter().copied().fold(f64::INFINITY, f64::min)
+                + xs.iter().copied().fold(f64::NEG_INFINITY, f64::max))
+                / 2.0;
+            assert!(
+                (c.fractions[0] - mid / 20.0).abs() <= 0.2,
+                "piece about x = {mid} has {:?}",
+                c.fractions
+            );
+        }
     }
 
     #[test]

@@ -16,6 +16,7 @@ pub mod axis;
 pub mod bead;
 pub mod fill;
 pub mod group;
+pub mod pieces;
 pub mod route;
 pub mod sim;
 
