@@ -55,7 +55,7 @@ f = "linear"
 
 [slice]
 use = "uniform"
-thickness = 0.5
+thickness = 0.25
 
 [plan]
 use = "sequential"
@@ -240,4 +240,54 @@ fn beads_take_the_machine_nozzle_width_unless_the_plan_names_one() {
     // 10 / 0.6 = 16.7 beads: 17 of 0.588; 10 / 0.4 = 25 beads of 0.4.
     assert!((from_machine - 10.0 / 17.0).abs() < 1e-3, "{from_machine}");
     assert!((named - 0.4).abs() < 1e-3, "{named}");
+}
+
+#[test]
+fn the_first_layer_takes_the_machine_height_and_layers_stay_within_the_nozzle() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    // The machine's first layer (0.3 mm), then the pipeline's 0.25 mm layers.
+    let source = pipeline(
+        "size = [20.0, 20.0, 1.05]",
+        "[machine]\nbase = \"marlin-mixing-2in1\"\nfirst_layer = { height = 0.3 }",
+    )
+    .replace(
+        "[[output]]\nuse = \"gcode\"\npath = \"box.gcode\"",
+        "[[output]]\nuse = \"json\"\npath = \"box.json\"",
+    );
+    let p = write(dir.path(), "first.toml", &source);
+    let out_dir = dir.path().join("out");
+    let out = run(&p, &out_dir);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let plan: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out_dir.join("box.json")).expect("json"))
+            .expect("JSON");
+    let thickness: Vec<f64> = plan["layers"]
+        .as_array()
+        .expect("layers")
+        .iter()
+        .map(|l| l["thickness"].as_f64().expect("thickness"))
+        .collect();
+    assert_eq!(thickness.len(), 4, "{thickness:?}");
+    assert!((thickness[0] - 0.3).abs() < 1e-9, "{thickness:?}");
+    assert!(
+        thickness[1..].iter().all(|t| (t - 0.25).abs() < 1e-9),
+        "{thickness:?}"
+    );
+
+    // A layer thicker than the nozzle presses is refused at its key, nothing written.
+    let thick = write(
+        dir.path(),
+        "thick.toml",
+        &pipeline("size = [20.0, 20.0, 1.0]", "machine = \"marlin-mixing-2in1\"")
+            .replace("thickness = 0.25", "thickness = 0.5"),
+    );
+    let out_dir = dir.path().join("thick-out");
+    let out = run(&thick, &out_dir);
+    assert!(!out.status.success());
+    let err = text(&out.stderr);
+    assert!(
+        err.contains("thickness") && err.contains("max_layer_height"),
+        "{err}"
+    );
+    assert!(!out_dir.join("box.gcode").exists());
 }

@@ -537,7 +537,26 @@ fn validate(raw: RawMachine, c: &Check<'_>) -> Result<Machine> {
         full_speed_layer: raw_fan.full_speed_layer.unwrap_or(1),
     };
     let raw_first = raw.first_layer.unwrap_or_default();
+    let max_layer_height = c.within(
+        raw.max_layer_height.unwrap_or(0.75 * nozzle_diameter),
+        0.01,
+        nozzle_diameter,
+        "max_layer_height",
+        "mm (at most the nozzle's bore)",
+    )?;
     let first_layer = FirstLayer {
+        height: raw_first
+            .height
+            .map(|h| {
+                c.within(
+                    h,
+                    0.01,
+                    max_layer_height,
+                    "first_layer.height",
+                    "mm (at most max_layer_height)",
+                )
+            })
+            .transpose()?,
         speed: match (raw_first.speed, raw_first.speed_factor) {
             (Some(_), Some(_)) => {
                 return Err(c.err("first_layer", "give `speed` (mm/s) or `speed_factor`, not both"));
@@ -788,6 +807,7 @@ fn validate(raw: RawMachine, c: &Check<'_>) -> Result<Machine> {
         bed,
         placement,
         nozzle_diameter,
+        max_layer_height,
         filament_diameter,
         tools,
         bed_temperature,
@@ -913,5 +933,26 @@ mod tests {
         assert_eq!(m.bed.shape, BedShape::Circle { diameter: 180.0 });
         assert!(matches!(m.motion.cornering, Cornering::Jerk(_)));
         assert_eq!(m.first_layer.speed, FirstLayerSpeed::Speed(15.0));
+    }
+
+    #[test]
+    fn layer_heights_stay_within_what_the_nozzle_presses() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let m = named("marlin-toolchanger-2", dir.path()).expect("valid");
+        assert_eq!((m.max_layer_height, m.first_layer.height), (0.3, Some(0.2)));
+        for (text, field) in [
+            ("max_layer_height = 0.5\n", "max_layer_height"),
+            ("[first_layer]\nheight = 0.35\n", "first_layer.height"),
+        ] {
+            let path = dir.path().join("thick.toml");
+            std::fs::write(&path, format!("base = \"marlin-toolchanger-2\"\n{text}")).expect("write");
+            let e = named("thick.toml", dir.path()).expect_err("too thick");
+            assert!(e.to_string().contains(field), "{e}");
+        }
+        // A finer nozzle takes limits of its own.
+        let path = dir.path().join("fine.toml");
+        std::fs::write(&path, "base = \"marlin-toolchanger-2\"\nnozzle_diameter = 0.25\nmax_layer_height = 0.18\n[first_layer]\nheight = 0.15\n").expect("write");
+        let m = named("fine.toml", dir.path()).expect("valid");
+        assert_eq!((m.max_layer_height, m.first_layer.height), (0.18, Some(0.15)));
     }
 }

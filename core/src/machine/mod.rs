@@ -39,6 +39,9 @@ pub struct Machine {
     pub placement: BedPlacement,
     /// Nozzle bore (mm); the natural extrusion width is near it.
     pub nozzle_diameter: f64,
+    /// Thickest layer the nozzle lays and presses down (mm): about three quarters of
+    /// its bore.
+    pub max_layer_height: f64,
     pub filament_diameter: f64,
     /// Tools of a tool changer or IDEX, or channels of a mixing head, in firmware order.
     pub tools: Vec<ToolSlot>,
@@ -236,6 +239,10 @@ pub struct Fan {
 /// How the first layer is slowed down.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct FirstLayer {
+    /// Thickness of the first layer (mm), when the machine wants its own: slicers
+    /// that cut uniform layers start with it.
+    #[serde(default)]
+    pub height: Option<f64>,
     pub speed: FirstLayerSpeed,
 }
 

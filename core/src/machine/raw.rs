@@ -20,6 +20,7 @@ pub(crate) struct RawMachine {
     pub firmware: Option<Firmware>,
     pub placement: Option<RawPlacement>,
     pub nozzle_diameter: Option<f64>,
+    pub max_layer_height: Option<f64>,
     pub filament_diameter: Option<f64>,
     pub bed_temperature: Option<f64>,
     pub first_layer_bed_temperature: Option<f64>,
@@ -76,6 +77,7 @@ pub(crate) struct RawFan {
 #[derive(Debug, Default, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub(crate) struct RawFirstLayer {
+    pub height: Option<f64>,
     pub speed: Option<f64>,
     pub speed_factor: Option<f64>,
 }

@@ -971,6 +971,17 @@ impl Writer {
 
     /// Writes one layer.
     pub fn write_layer(&mut self, info: &RunInfo, plan: &LayerPlan) -> Result<()> {
+        if let Some(max) = self.s.max_layer_height
+            && plan.thickness > max + 1e-9
+        {
+            return Err(Error::stage(
+                "gcode",
+                format!(
+                    "layer {} is {} mm thick; the machine's {} mm nozzle presses layers of at most {} mm (`max_layer_height`): slice thinner layers",
+                    plan.index, plan.thickness, self.s.nozzle_diameter, max
+                ),
+            ));
+        }
         if !self.started {
             self.prime(info, plan)?;
             self.started = true;

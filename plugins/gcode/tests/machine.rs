@@ -673,3 +673,22 @@ fn a_material_no_tool_carries_is_refused() {
         "{err}"
     );
 }
+
+#[test]
+fn a_layer_thicker_than_the_nozzle_presses_is_refused() {
+    let m = machine("marlin-toolchanger-2");
+    let mut plans = layers(3);
+    plans[2].thickness = 0.45;
+    let e = export(
+        "use = \"gcode\"",
+        &info(Some(m), ["red", "green"]),
+        &plans,
+        "test",
+    )
+    .expect_err("too thick")
+    .to_string();
+    assert!(
+        e.contains("layer 2 is 0.45 mm thick") && e.contains("max_layer_height"),
+        "{e}"
+    );
+}

@@ -42,6 +42,9 @@ struct Options {
     max_thickness: f64,
     #[serde(default = "d_cusp")]
     cusp: f64,
+    /// Thickness of the first layer; the machine's `first_layer.height` when unset.
+    #[serde(default)]
+    first_layer: Option<f64>,
     #[serde(default = "crate::cut::default_close_gaps")]
     close_gaps: f64,
     #[serde(default)]
@@ -62,9 +65,7 @@ fn d_cusp() -> f64 {
 
 struct Adaptive {
     mode: Mode,
-    min: f64,
-    max: f64,
-    cusp: f64,
+    heights: Heights,
     options: CutOptions,
     max_layers: usize,
 }
@@ -82,16 +83,30 @@ struct Facet {
 /// thinning around them.
 const FLAT: f64 = 1.0 - 1e-9;
 
+/// The bounds of the surface mode's layer heights (mm).
+#[derive(Debug, Clone, Copy)]
+struct Heights {
+    min: f64,
+    max: f64,
+    cusp: f64,
+    /// The first layer's thickness, whatever the surface.
+    first: Option<f64>,
+}
+
 /// Layer slots over `z_min..z_max` for the given facets.
 fn plan_heights(
     facets: &mut [Facet],
     z_min: f64,
     z_max: f64,
-    min: f64,
-    max: f64,
-    cusp: f64,
+    heights: &Heights,
     max_layers: usize,
 ) -> Result<Vec<LayerSlot>> {
+    let Heights {
+        min,
+        max,
+        cusp,
+        first,
+    } = *heights;
     facets.sort_by(|a, b| a.lo.total_cmp(&b.lo));
     let mut flats: Vec<f64> = facets.iter().filter(|f| f.nz >= FLAT).map(|f| f.lo).collect();
     flats.sort_by(f64::total_cmp);
@@ -114,6 +129,13 @@ fn plan_heights(
             }
         }
         t = t.clamp(min, max);
+        if let (Some(f), true) = (first, slots.is_empty()) {
+            // The machine's first layer, whatever the surface.
+            let t = f.min(z_max - z);
+            slots.push(LayerSlot::new(0, z + t, t, z + t / 2.0));
+            z += t;
+            continue;
+        }
         // End on a flat face inside the layer when that keeps the thickness legal.
         let first_flat = flats.partition_point(|&h| h <= z + 1e-9);
         if let Some(&h) = flats.get(first_flat)
@@ -196,9 +218,7 @@ impl Slicer for Adaptive {
             &mut facets,
             info.z_min,
             info.z_max,
-            self.min,
-            self.max,
-            self.cusp,
+            &self.heights,
             self.max_layers,
         )
     }
@@ -222,11 +242,43 @@ fn build(config: &StageConfig<'_>) -> Result<AnyStage> {
     if o.min_thickness > o.max_thickness {
         return Err(config.error("min_thickness", "must not exceed max_thickness"));
     }
+    if let Some(f) = o.first_layer
+        && !(f.is_finite() && f > 0.0)
+    {
+        return Err(config.error("first_layer", "must be a positive number of mm"));
+    }
+    if o.first_layer.is_some() && o.mode == Mode::Material {
+        return Err(config.error(
+            "first_layer",
+            "with mode = \"material\" the work cycles set every layer's thickness",
+        ));
+    }
+    let first = o
+        .first_layer
+        .or_else(|| config.machine.and_then(|m| m.first_layer.height));
+    if let Some(m) = config.machine {
+        for (key, t) in [("max_thickness", Some(o.max_thickness)), ("first_layer", first)] {
+            if let Some(t) = t
+                && t > m.max_layer_height + 1e-9
+            {
+                return Err(config.error(
+                    key,
+                    format!(
+                        "{t} mm is thicker than machine `{}` lays: its {} mm nozzle presses layers of at most {} mm (`max_layer_height`)",
+                        m.name, m.nozzle_diameter, m.max_layer_height
+                    ),
+                ));
+            }
+        }
+    }
     Ok(AnyStage::Slice(Box::new(Adaptive {
         mode: o.mode,
-        min: o.min_thickness,
-        max: o.max_thickness,
-        cusp: o.cusp,
+        heights: Heights {
+            min: o.min_thickness,
+            max: o.max_thickness,
+            cusp: o.cusp,
+            first,
+        },
         options: CutOptions::from_table(config, o.close_gaps, o.fill_rule)?,
         max_layers: o.max_layers,
     })))
@@ -257,6 +309,12 @@ lamina_core::register_stage!(StageFactory {
                 "thickest layer (mm, surface mode)"
             ),
             OptionSpec::new(
+                "first_layer",
+                "float",
+                "none",
+                "thickness of the first layer (mm, surface mode); unset: the machine's `first_layer.height`, else from the surface"
+            ),
+            OptionSpec::new(
                 "cusp",
                 "float",
                 "0.05",
@@ -282,7 +340,19 @@ mod tests {
     #[test]
     fn vertical_walls_get_the_thickest_layers() {
         let mut f = vec![facet(0.0, 3.0, 0.0), facet(0.0, 0.0, 1.0), facet(3.0, 3.0, 1.0)];
-        let s = plan_heights(&mut f, 0.0, 3.0, 0.05, 0.3, 0.05, 1000).expect("plans");
+        let s = plan_heights(
+            &mut f,
+            0.0,
+            3.0,
+            &Heights {
+                min: 0.05,
+                max: 0.3,
+                cusp: 0.05,
+                first: None,
+            },
+            1000,
+        )
+        .expect("plans");
         assert_eq!(s.len(), 10, "{s:?}");
         assert!(s.iter().all(|l| (l.thickness - 0.3).abs() < 1e-9));
         assert!((s[9].z - 3.0).abs() < 1e-9);
@@ -293,7 +363,19 @@ mod tests {
         // A 45° slope from z = 1 to 2 between vertical walls.
         let c = std::f64::consts::FRAC_1_SQRT_2;
         let mut f = vec![facet(0.0, 3.0, 0.0), facet(1.0, 2.0, c)];
-        let s = plan_heights(&mut f, 0.0, 3.0, 0.05, 0.3, 0.1, 1000).expect("plans");
+        let s = plan_heights(
+            &mut f,
+            0.0,
+            3.0,
+            &Heights {
+                min: 0.05,
+                max: 0.3,
+                cusp: 0.1,
+                first: None,
+            },
+            1000,
+        )
+        .expect("plans");
         let on_slope: Vec<_> = s
             .iter()
             .filter(|l| l.z - l.thickness >= 1.0 && l.z <= 2.0)
@@ -310,7 +392,42 @@ mod tests {
     #[test]
     fn layers_end_on_flat_faces() {
         let mut f = vec![facet(0.0, 2.0, 0.0), facet(1.05, 1.05, 1.0)];
-        let s = plan_heights(&mut f, 0.0, 2.0, 0.05, 0.3, 0.05, 1000).expect("plans");
+        let s = plan_heights(
+            &mut f,
+            0.0,
+            2.0,
+            &Heights {
+                min: 0.05,
+                max: 0.3,
+                cusp: 0.05,
+                first: None,
+            },
+            1000,
+        )
+        .expect("plans");
         assert!(s.iter().any(|l| (l.z - 1.05).abs() < 1e-9), "{s:?}");
+    }
+
+    #[test]
+    fn the_first_layer_has_the_thickness_asked_for() {
+        // Vertical walls: every layer is max_thickness but the first.
+        let mut f = vec![facet(0.0, 2.0, 0.0)];
+        let s = plan_heights(
+            &mut f,
+            0.0,
+            2.0,
+            &Heights {
+                min: 0.05,
+                max: 0.3,
+                cusp: 0.05,
+                first: Some(0.2),
+            },
+            1000,
+        )
+        .expect("plans");
+        assert!((s[0].thickness - 0.2).abs() < 1e-12 && (s[0].cut_z - 0.1).abs() < 1e-12);
+        assert!((s[1].thickness - 0.3).abs() < 1e-12, "{s:?}");
+        let total: f64 = s.iter().map(|l| l.thickness).sum();
+        assert!((total - 2.0).abs() < 1e-9);
     }
 }

@@ -41,6 +41,9 @@ impl CutAt {
 struct Options {
     #[serde(default = "d_thickness")]
     thickness: f64,
+    /// Thickness of the first layer; the machine's `first_layer.height` when unset.
+    #[serde(default)]
+    first_layer: Option<f64>,
     #[serde(default = "d_cut")]
     cut: CutAt,
     #[serde(default = "crate::cut::default_close_gaps")]
@@ -61,32 +64,48 @@ fn d_cut() -> CutAt {
 
 pub(crate) struct Uniform {
     thickness: f64,
+    first: f64,
     cut: f64,
     options: CutOptions,
     max_layers: usize,
 }
 
-/// Slots of equal thickness `t` covering `z_min..z_max`; the last layer's top is at
-/// or above `z_max`.
-pub fn uniform_slots(z_min: f64, z_max: f64, t: f64, cut: f64, max_layers: usize) -> Result<Vec<LayerSlot>> {
+/// Slots covering `z_min..z_max`: the first `first` thick, the others `t`; the last
+/// layer's top is at or above `z_max`.
+pub fn uniform_slots(
+    z_min: f64,
+    z_max: f64,
+    first: f64,
+    t: f64,
+    cut: f64,
+    max_layers: usize,
+) -> Result<Vec<LayerSlot>> {
     let height = z_max - z_min;
     if height.is_nan() || height <= 0.0 {
         return Ok(Vec::new());
     }
     // Tolerate a height that is a whole number of layers up to rounding.
-    let n = ((height / t) - 1e-9).ceil().max(1.0);
-    if n > max_layers as f64 {
+    let rest = ((height - first) / t - 1e-9).ceil().max(0.0);
+    if rest + 1.0 > max_layers as f64 {
         return Err(Error::stage(
             "slice:uniform",
-            format!("{n} layers of {t} mm exceed max_layers = {max_layers}"),
+            format!("{} layers of {t} mm exceed max_layers = {max_layers}", rest + 1.0),
         ));
     }
-    let n = n as usize;
+    let n = rest as usize + 1;
     Ok((0..n)
         .map(|i| {
-            let top = z_min + t * (i + 1) as f64;
-            let bottom = z_min + t * i as f64;
-            LayerSlot::new(i, top, t, (bottom + t * cut).min(z_max))
+            let (bottom, thickness) = if i == 0 {
+                (z_min, first)
+            } else {
+                (z_min + first + t * (i - 1) as f64, t)
+            };
+            LayerSlot::new(
+                i,
+                bottom + thickness,
+                thickness,
+                (bottom + thickness * cut).min(z_max),
+            )
         })
         .collect())
 }
@@ -98,7 +117,14 @@ impl Slicer for Uniform {
         info: &RunInfo,
         _sequence: Option<&Sequence>,
     ) -> Result<Vec<LayerSlot>> {
-        uniform_slots(info.z_min, info.z_max, self.thickness, self.cut, self.max_layers)
+        uniform_slots(
+            info.z_min,
+            info.z_max,
+            self.first,
+            self.thickness,
+            self.cut,
+            self.max_layers,
+        )
     }
 
     fn prepare(&self, mesh: Arc<Mesh>) -> Result<Box<dyn MeshSlicer>> {
@@ -119,6 +145,29 @@ fn build(config: &StageConfig<'_>) -> Result<AnyStage> {
     if !(o.thickness.is_finite() && o.thickness > 0.0) {
         return Err(config.error("thickness", "must be a positive number of mm"));
     }
+    let first = match o.first_layer {
+        Some(f) if !(f.is_finite() && f > 0.0) => {
+            return Err(config.error("first_layer", "must be a positive number of mm"));
+        }
+        Some(f) => f,
+        None => config
+            .machine
+            .and_then(|m| m.first_layer.height)
+            .unwrap_or(o.thickness),
+    };
+    if let Some(m) = config.machine {
+        for (key, t) in [("thickness", o.thickness), ("first_layer", first)] {
+            if t > m.max_layer_height + 1e-9 {
+                return Err(config.error(
+                    key,
+                    format!(
+                        "{t} mm is thicker than machine `{}` lays: its {} mm nozzle presses layers of at most {} mm (`max_layer_height`)",
+                        m.name, m.nozzle_diameter, m.max_layer_height
+                    ),
+                ));
+            }
+        }
+    }
     let cut = o.cut.fraction();
     if !(0.0..=1.0).contains(&cut) {
         return Err(config.error(
@@ -128,6 +177,7 @@ fn build(config: &StageConfig<'_>) -> Result<AnyStage> {
     }
     Ok(AnyStage::Slice(Box::new(Uniform {
         thickness: o.thickness,
+        first,
         cut,
         options: CutOptions::from_table(config, o.close_gaps, o.fill_rule)?,
         max_layers: o.max_layers,
@@ -141,6 +191,12 @@ lamina_core::register_stage!(StageFactory {
         doc: "Layers of one thickness from the bottom of the model to its top, each cut at a chosen height within it.",
         options: &[
             OptionSpec::new("thickness", "float", "0.2", "layer thickness (mm)"),
+            OptionSpec::new(
+                "first_layer",
+                "float",
+                "none",
+                "thickness of the first layer (mm); unset: the machine's `first_layer.height`, else `thickness`"
+            ),
             OptionSpec::new(
                 "cut",
                 "string or float",
@@ -162,13 +218,33 @@ mod tests {
 
     #[test]
     fn slots_cover_the_height() {
-        let s = uniform_slots(0.0, 1.0, 0.2, 0.5, 100).expect("slots");
+        let s = uniform_slots(0.0, 1.0, 0.2, 0.2, 0.5, 100).expect("slots");
         assert_eq!(s.len(), 5);
         assert!((s[4].z - 1.0).abs() < 1e-12);
         assert!((s[0].cut_z - 0.1).abs() < 1e-12);
-        let s = uniform_slots(0.0, 1.05, 0.2, 1.0, 100).expect("slots");
+        let s = uniform_slots(0.0, 1.05, 0.2, 0.2, 1.0, 100).expect("slots");
         assert_eq!(s.len(), 6);
         assert!((s[5].cut_z - 1.05).abs() < 1e-12);
-        assert!(uniform_slots(0.0, 1.0, 1e-9, 0.5, 100).is_err());
+        assert!(uniform_slots(0.0, 1.0, 1e-9, 1e-9, 0.5, 100).is_err());
+    }
+
+    #[test]
+    fn a_first_layer_of_its_own_thickness_then_the_others() {
+        // 0.3 mm, then 0.2 mm layers up to 1.1 mm: 0.3, 0.5, 0.7, 0.9, 1.1.
+        let s = uniform_slots(0.0, 1.1, 0.3, 0.2, 0.5, 100).expect("slots");
+        let tops: Vec<f64> = s.iter().map(|l| l.z).collect();
+        let thick: Vec<f64> = s.iter().map(|l| l.thickness).collect();
+        assert_eq!(s.len(), 5, "{tops:?}");
+        assert!((thick[0] - 0.3).abs() < 1e-12 && thick[1..].iter().all(|t| (t - 0.2).abs() < 1e-12));
+        assert!(
+            (tops[0] - 0.3).abs() < 1e-12 && (tops[4] - 1.1).abs() < 1e-12,
+            "{tops:?}"
+        );
+        assert!((s[0].cut_z - 0.15).abs() < 1e-12 && (s[1].cut_z - 0.4).abs() < 1e-12);
+        // A part thinner than the first layer is that one layer.
+        assert_eq!(
+            uniform_slots(0.0, 0.25, 0.3, 0.2, 0.5, 100).expect("slots").len(),
+            1
+        );
     }
 }
