@@ -306,6 +306,113 @@ fn benchy_replays_on_every_machine() {
     );
 }
 
+/// The volume section of a replayed file's JSON report (by feature, the mesh's).
+fn replayed_volumes(gcode: &Path, extra: &[&str]) -> serde_json::Value {
+    let report = gcode.with_extension("replay.json");
+    let o = Command::new("python3")
+        .arg(root().join("tests/replay/gcode_replay.py"))
+        .arg(gcode)
+        .args(extra)
+        .arg("--json")
+        .arg(&report)
+        .output()
+        .expect("python3 runs");
+    assert!(
+        report.exists(),
+        "no report for {}:\n{}{}",
+        gcode.display(),
+        String::from_utf8_lossy(&o.stdout),
+        String::from_utf8_lossy(&o.stderr)
+    );
+    let json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&report).expect("report")).expect("JSON");
+    json["volume"].clone()
+}
+
+/// PrusaSlicer 2.5 (the Debian package), a slicer the printing world trusts, fills the
+/// gear solid (100 % rectilinear infill, 0.4 mm nozzle, 0.2 mm layers) and deposits
+/// within 2 % of the mesh volume; Lamina's file for the same gear must agree with it
+/// and with the mesh. Both files go through the same replay checker.
+#[test]
+fn prusa_slicer_and_lamina_deposit_the_same_volume_for_the_gear() {
+    if !checker_ready() {
+        return;
+    }
+    let prusa = Command::new("prusa-slicer").arg("--help").output();
+    if prusa.is_err() {
+        assert!(
+            !required(),
+            "LAMINA_REQUIRE is set but prusa-slicer is not installed (Debian package prusa-slicer)"
+        );
+        eprintln!("note: prusa-slicer not found; the reference volume check skipped");
+        return;
+    }
+    let dir = tempfile::tempdir().expect("temp dir");
+    let pipeline = root().join("pipelines/gear-mixing-gcode.toml");
+    let table: toml::Table =
+        toml::from_str(&std::fs::read_to_string(&pipeline).expect("pipeline")).expect("TOML");
+    let mesh = model_stl(&pipeline, &table, dir.path());
+    let reference = dir.path().join("prusa.gcode");
+    let o = Command::new("prusa-slicer")
+        .args([
+            "--export-gcode",
+            "--fill-density",
+            "100%",
+            "--fill-pattern",
+            "rectilinear",
+            "--layer-height",
+            "0.2",
+            "--first-layer-height",
+            "0.2",
+            "--nozzle-diameter",
+            "0.4",
+            "--filament-diameter",
+            "1.75",
+            "--center",
+            "110,110",
+            "--output",
+        ])
+        .arg(&reference)
+        .arg(&mesh)
+        .output()
+        .expect("prusa-slicer runs");
+    assert!(
+        o.status.success(),
+        "prusa-slicer failed:\n{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    let theirs: f64 = replayed_volumes(&reference, &["--flavor", "marlin"])["by_type_mm3"]
+        .as_object()
+        .expect("volumes by feature")
+        .iter()
+        .filter(|(k, _)| !k.contains("SKIRT") && !k.contains("WIPE"))
+        .map(|(_, v)| v.as_f64().expect("mm³"))
+        .sum();
+    let out = dir.path().join("out");
+    lamina(&[
+        "run",
+        pipeline.to_str().expect("utf-8"),
+        "--out",
+        out.to_str().expect("utf-8"),
+        "-q",
+    ]);
+    let mesh_arg = format!("--mesh={}", mesh.display());
+    let volumes = replayed_volumes(&out.join("gear-mixing.gcode"), &[&mesh_arg]);
+    let ours = volumes["by_type_mm3"]["PART"].as_f64().expect("mm³");
+    let mesh_volume = volumes["mesh_mm3"].as_f64().expect("mesh mm³");
+    eprintln!(
+        "gear: mesh {mesh_volume:.1} mm³, PrusaSlicer {theirs:.1} mm³ ({:.4}), Lamina {ours:.1} mm³ ({:.4})",
+        theirs / mesh_volume,
+        ours / mesh_volume
+    );
+    assert!((theirs / mesh_volume - 1.0).abs() < 0.02, "PrusaSlicer {theirs}");
+    assert!((ours / mesh_volume - 1.0).abs() < 0.02, "Lamina {ours}");
+    assert!(
+        (ours / theirs - 1.0).abs() < 0.02,
+        "Lamina {ours} vs PrusaSlicer {theirs}"
+    );
+}
+
 #[test]
 fn an_under_filled_plan_fails_and_writes_nothing() {
     // Sixty rings across the gear's rim are each far narrower than the narrowest bead;
