@@ -129,14 +129,19 @@ fn bed(machine: &toml::Value, pipeline: &Path) -> [f64; 4] {
 
 /// Runs `pipeline` (with `overrides`, and on another built-in `machine` if given) and
 /// replays every G-code file it writes.
-fn replay(pipeline: &str, machine: Option<&str>, overrides: &[&str], coverage_every: usize) {
+fn replay(
+    pipeline: &str,
+    machine: Option<&str>,
+    overrides: &[&str],
+    coverage_every: usize,
+) -> Vec<serde_json::Value> {
     replay_file(
         &root().join(pipeline),
         machine,
         overrides,
         coverage_every,
         TARGETS,
-    );
+    )
 }
 
 /// Least coverage of a layer by the beads and most overlap between beads.
@@ -159,9 +164,9 @@ fn replay_file(
     overrides: &[&str],
     coverage_every: usize,
     targets: Targets,
-) {
+) -> Vec<serde_json::Value> {
     if !checker_ready() {
-        return;
+        return Vec::new();
     }
     let dir = tempfile::tempdir().expect("temp dir");
     let out = dir.path().join("out");
@@ -200,6 +205,7 @@ fn replay_file(
         .filter(|p| p.extension().is_some_and(|e| e == "gcode"))
         .collect();
     assert!(!files.is_empty(), "{} wrote no G-code", pipeline.display());
+    let mut reports = Vec::new();
     for gcode in files {
         let report = gcode.with_extension("replay.json");
         let o = Command::new("python3")
@@ -224,7 +230,11 @@ fn replay_file(
             gcode.display(),
             String::from_utf8_lossy(&o.stderr)
         );
+        reports.push(
+            serde_json::from_str(&std::fs::read_to_string(&report).expect("report")).expect("JSON report"),
+        );
     }
+    reports
 }
 
 #[test]
@@ -245,6 +255,42 @@ fn gear_and_shaft_on_a_tool_changer_replay() {
         &[],
         2,
     );
+}
+
+/// The gear and shaft on a machine with two motion systems: the concurrent plan's
+/// file runs both heads at once (RepRapFirmware 3.5's M596/M598, replayed stream by
+/// stream by `multi_motion.py`) with no collision, the time it states, and each tool's
+/// planned volume; and it is done sooner than the same machine's file for the plan
+/// that takes the tools one at a time.
+#[test]
+fn gear_and_shaft_on_two_motion_systems_replay_without_collision() {
+    let concurrent = replay(
+        "pipelines/assembly-two-tools.toml",
+        Some("rrf-two-systems-2"),
+        &[],
+        2,
+    );
+    let sequential = replay(
+        "pipelines/assembly-two-tools.toml",
+        Some("rrf-two-systems-2"),
+        &["plan.use=\"sequential\""],
+        4,
+    );
+    let (Some(c), Some(s)) = (concurrent.first(), sequential.first()) else {
+        return;
+    };
+    assert_eq!(c["mode"], "multi-motion");
+    assert_eq!(c["collisions"]["count"], 0);
+    let time = |r: &serde_json::Value| r["time"]["replayed_s"].as_f64().expect("replayed time");
+    let ratio = time(c) / time(s);
+    eprintln!(
+        "gear and shaft: concurrent {:.1} s, one tool at a time {:.1} s (ratio {ratio:.3}); paused {:.1} % and {:.1} %",
+        time(c),
+        time(s),
+        100.0 * c["streams"][0]["paused_share"].as_f64().unwrap_or(f64::NAN),
+        100.0 * c["streams"][1]["paused_share"].as_f64().unwrap_or(f64::NAN),
+    );
+    assert!(ratio < 0.95, "the concurrent file is not faster: {ratio}");
 }
 
 /// The two-cavity blade in three materials mixed by inverse distance weighting, on a
@@ -304,6 +350,31 @@ fn benchy_replays_on_every_machine() {
         &[&file, "plan.mixing=true"],
         10,
     );
+    // Both heads at once, on two motion systems, against the same machine taking
+    // the tools one at a time.
+    let concurrent = replay(
+        "pipelines/benchy-two-tools.toml",
+        Some("rrf-two-systems-2"),
+        &[&file],
+        10,
+    );
+    let sequential = replay(
+        "pipelines/benchy-two-tools.toml",
+        Some("rrf-two-systems-2"),
+        &[&file, "plan.use=\"sequential\""],
+        20,
+    );
+    if let (Some(c), Some(s)) = (concurrent.first(), sequential.first()) {
+        let time = |r: &serde_json::Value| r["time"]["replayed_s"].as_f64().expect("replayed time");
+        eprintln!(
+            "3DBenchy on two motion systems: concurrent {:.1} s, one tool at a time {:.1} s (ratio {:.3})",
+            time(c),
+            time(s),
+            time(c) / time(s)
+        );
+        assert_eq!(c["collisions"]["count"], 0);
+        assert!(time(c) < time(s), "the concurrent file is not faster");
+    }
 }
 
 /// The volume section of a replayed file's JSON report (by feature, the mesh's).

@@ -27,6 +27,11 @@ pub const PROFILES: &[BuiltinProfile] = &[
         path: "profiles/rrf-idex-2.toml",
         text: include_str!("../../../profiles/rrf-idex-2.toml"),
     },
+    BuiltinProfile {
+        name: "rrf-two-systems-2",
+        path: "profiles/rrf-two-systems-2.toml",
+        text: include_str!("../../../profiles/rrf-two-systems-2.toml"),
+    },
 ];
 
 /// The built-in profile called `name`.

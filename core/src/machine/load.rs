@@ -520,6 +520,20 @@ fn validate(raw: RawMachine, c: &Check<'_>) -> Result<Machine> {
         {
             return Err(c.err(&p("axis"), format!("`{axis}` is not an axis letter (X, U, ...)")));
         }
+        if let Some(axis) = &t.y_axis
+            && !(axis.len() == 1 && axis.chars().all(|ch| ch.is_ascii_uppercase()))
+        {
+            return Err(c.err(
+                &p("y_axis"),
+                format!("`{axis}` is not an axis letter (Y, V, ...)"),
+            ));
+        }
+        let envelope = t.envelope.map(|e| c.positive(e, &p("envelope"))).transpose()?;
+        let home = match t.home {
+            Some([x, y]) if x.is_finite() && y.is_finite() => Some([x, y]),
+            Some(_) => return Err(c.err(&p("home"), "must be two finite numbers [x, y] (mm)")),
+            None => None,
+        };
         tools.push(ToolSlot {
             material: t.material,
             nozzle_temperature: nozzle,
@@ -527,6 +541,9 @@ fn validate(raw: RawMachine, c: &Check<'_>) -> Result<Machine> {
             standby_temperature: standby,
             name: t.name,
             axis: t.axis,
+            y_axis: t.y_axis,
+            home,
+            envelope,
         });
     }
 
@@ -799,8 +816,11 @@ fn validate(raw: RawMachine, c: &Check<'_>) -> Result<Machine> {
         )?,
     };
 
+    let motion_systems = raw.motion_systems.unwrap_or(1);
+    check_motion_systems(c, motion_systems, firmware, flavor, &tools)?;
     Ok(Machine {
         name,
+        motion_systems,
         description: raw.description.unwrap_or_default(),
         flavor,
         firmware,
@@ -824,6 +844,69 @@ fn validate(raw: RawMachine, c: &Check<'_>) -> Result<Machine> {
         gcode,
         origin: MachineOrigin::default(),
     })
+}
+
+/// Two motion systems: a RepRapFirmware tool changer whose two tools each have their
+/// own X and Y axis letters and envelope.
+fn check_motion_systems(
+    c: &Check<'_>,
+    n: usize,
+    firmware: Firmware,
+    flavor: Flavor,
+    tools: &[ToolSlot],
+) -> Result<()> {
+    match n {
+        1 => return Ok(()),
+        2 => {}
+        _ => {
+            return Err(c.err(
+                "motion_systems",
+                format!("must be 1 or 2 (RepRapFirmware 3.5 runs two), not {n}"),
+            ));
+        }
+    }
+    if firmware != Firmware::RepRapFirmware {
+        return Err(c.err(
+            "motion_systems",
+            "several motion systems in one job are a RepRapFirmware 3.5 feature (M596): set firmware = \"reprapfirmware\"",
+        ));
+    }
+    if flavor != Flavor::ToolChange || tools.len() != 2 {
+        return Err(c.err(
+            "motion_systems",
+            format!(
+                "two motion systems drive two tools of a tool-change machine, one each; this profile is {} with {} tools",
+                flavor.name(),
+                tools.len()
+            ),
+        ));
+    }
+    let mut letters: Vec<&str> = Vec::new();
+    for (i, t) in tools.iter().enumerate() {
+        let p = |k: &str| format!("tools.{i}.{k}");
+        for (key, v) in [("axis", &t.axis), ("y_axis", &t.y_axis)] {
+            let Some(v) = v else {
+                return Err(c.err(
+                    &p(key),
+                    "missing: each motion system's head names its axis letters",
+                ));
+            };
+            if ["Z", "E"].contains(&v.as_str()) || letters.contains(&v.as_str()) {
+                return Err(c.err(
+                    &p(key),
+                    format!("`{v}` is not free: each head moves on axes of its own, Z is shared"),
+                ));
+            }
+            letters.push(v);
+        }
+        if t.envelope.is_none() {
+            return Err(c.err(
+                &p("envelope"),
+                "missing: the radius (mm) around the nozzle that the other head must keep out of",
+            ));
+        }
+    }
+    Ok(())
 }
 
 #[cfg(test)]
@@ -954,5 +1037,38 @@ mod tests {
         std::fs::write(&path, "base = \"marlin-toolchanger-2\"\nnozzle_diameter = 0.25\nmax_layer_height = 0.18\n[first_layer]\nheight = 0.15\n").expect("write");
         let m = named("fine.toml", dir.path()).expect("valid");
         assert_eq!((m.max_layer_height, m.first_layer.height), (0.18, Some(0.15)));
+    }
+
+    #[test]
+    fn two_motion_systems_need_reprapfirmware_and_a_head_each_with_its_axes() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let m = named("rrf-two-systems-2", dir.path()).expect("valid");
+        assert_eq!(m.motion_systems, 2);
+        assert_eq!(m.tools[1].axis.as_deref(), Some("U"));
+        assert_eq!(m.tools[1].y_axis.as_deref(), Some("V"));
+        assert_eq!(m.tools[1].envelope, Some(4.0));
+        for (text, field) in [
+            (
+                "base = \"rrf-two-systems-2\"\nfirmware = \"marlin\"\n",
+                "motion_systems",
+            ),
+            (
+                "base = \"rrf-two-systems-2\"\nmotion_systems = 3\n",
+                "motion_systems",
+            ),
+            (
+                "base = \"rrf-two-systems-2\"\n[[tools]]\n[[tools]]\ny_axis = \"Y\"\n",
+                "tools.1.y_axis",
+            ),
+            (
+                "base = \"rrf-two-systems-2\"\n[[tools]]\n[[tools]]\naxis = \"Z\"\n",
+                "tools.1.axis",
+            ),
+            ("base = \"rrf-idex-2\"\nmotion_systems = 2\n", "tools.0.y_axis"),
+        ] {
+            std::fs::write(dir.path().join("mms.toml"), text).expect("write");
+            let e = named("mms.toml", dir.path()).expect_err(text);
+            assert!(e.to_string().contains(field), "{text}: {e}");
+        }
     }
 }

@@ -34,6 +34,11 @@ pub struct Machine {
     pub description: String,
     pub flavor: Flavor,
     pub firmware: Firmware,
+    /// Motion systems that move heads independently (RepRapFirmware 3.5 runs two from
+    /// one job): with two, tool `n` is the head of motion system `n` and the tools work
+    /// at the same time.
+    #[serde(default = "one")]
+    pub motion_systems: usize,
     pub bed: Bed,
     /// Where the parts go on the bed.
     pub placement: BedPlacement,
@@ -63,6 +68,10 @@ pub struct Machine {
     /// Where the profile came from, for messages.
     #[serde(skip)]
     pub origin: MachineOrigin,
+}
+
+fn one() -> usize {
+    1
 }
 
 /// How the firmware is asked to change material.
@@ -223,6 +232,16 @@ pub struct ToolSlot {
     pub name: Option<String>,
     /// The firmware axis that moves this head along X (`X`, `U`) on an IDEX.
     pub axis: Option<String>,
+    /// The firmware axis that moves this head along Y (`Y`, `V`), when the head has a
+    /// motion system of its own.
+    #[serde(default)]
+    pub y_axis: Option<String>,
+    /// Where homing leaves the head (bed coordinates, mm).
+    #[serde(default)]
+    pub home: Option<[f64; 2]>,
+    /// Radius of the disc around the nozzle that no other head may enter (mm).
+    #[serde(default)]
+    pub envelope: Option<f64>,
 }
 
 /// The part-cooling fan.

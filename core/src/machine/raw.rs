@@ -19,6 +19,7 @@ pub(crate) struct RawMachine {
     pub flavor: Option<Flavor>,
     pub firmware: Option<Firmware>,
     pub placement: Option<RawPlacement>,
+    pub motion_systems: Option<usize>,
     pub nozzle_diameter: Option<f64>,
     pub max_layer_height: Option<f64>,
     pub filament_diameter: Option<f64>,
@@ -64,6 +65,9 @@ pub(crate) struct RawTool {
     pub standby_temperature: Option<f64>,
     pub name: Option<String>,
     pub axis: Option<String>,
+    pub y_axis: Option<String>,
+    pub home: Option<[f64; 2]>,
+    pub envelope: Option<f64>,
 }
 
 #[derive(Debug, Default, Deserialize)]

@@ -429,6 +429,18 @@ impl Firmware {
     pub fn time(&mut self) -> f64 {
         self.planner.total()
     }
+
+    /// Z as another motion system left it: a shared axis this stream did not move.
+    pub fn assume_z(&mut self, z: f64) {
+        self.position[2] = z;
+    }
+
+    /// Stands still until `t` seconds into the file (a synchronisation with another
+    /// motion system).
+    pub fn wait_until(&mut self, t: f64) {
+        let now = self.planner.total();
+        self.planner.dwell(t - now);
+    }
 }
 
 #[cfg(test)]

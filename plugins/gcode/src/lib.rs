@@ -132,7 +132,10 @@ impl Exporter for Gcode {
                 ),
             ));
         }
-        let needs_tower = setup.wipe_tower.is_some()
+        // Two motion systems never change tools: no tower, each head primes alone.
+        let multi = setup.systems.is_some();
+        let needs_tower = !multi
+            && setup.wipe_tower.is_some()
             && if setup.flavor.is_mixing() {
                 setup.transition_volume > 0.0 && setup.used_channels(info).len() >= 2
             } else {
@@ -141,6 +144,7 @@ impl Exporter for Gcode {
         let primed = match (setup.prime_line, setup.flavor.is_mixing()) {
             (None, _) => 0,
             (Some(_), true) => 1,
+            (Some(_), false) if multi => 1,
             (Some(_), false) => setup.used_heads(info).len(),
         };
         let layout = layout::plan(

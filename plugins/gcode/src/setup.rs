@@ -39,6 +39,17 @@ impl Head {
     }
 }
 
+/// A motion system of a machine that runs several (RepRapFirmware 3.5): the axis
+/// letters of its head, the disc the other head keeps out of, and where homing leaves
+/// it. System `n` drives head `n`.
+#[derive(Debug, Clone)]
+pub struct System {
+    pub x: String,
+    pub y: String,
+    pub envelope: f64,
+    pub home: Option<[f64; 2]>,
+}
+
 /// The exporter's own options, for a pipeline without a machine.
 #[derive(Debug, Clone)]
 pub struct OwnOptions {
@@ -89,6 +100,8 @@ pub struct Setup {
     pub transition_volume: f64,
     /// Changes of mix smaller than this share are blended in place, not purged.
     pub blend_below: f64,
+    /// The motion systems when the machine runs two at once; `None`: one head at a time.
+    pub systems: Option<Vec<System>>,
     pub templates: Templates,
     /// Whether the parts are placed by the machine (else moved only off negative
     /// coordinates).
@@ -215,15 +228,36 @@ impl Setup {
             first_layer_bed_temperature: m.first_layer_bed_temperature,
             fan: Some(m.fan),
             first_layer_speed: Some(m.first_layer.speed),
-            retraction: m.retraction,
+            // Z is one axis both motion systems share: no system may hop it while
+            // the other prints.
+            retraction: if m.motion_systems > 1 {
+                lamina_core::machine::Retraction {
+                    z_hop: 0.0,
+                    ..m.retraction
+                }
+            } else {
+                m.retraction
+            },
             travel_speed: m.travel_speed,
             limits,
             axis_limits: mo.max_speed.is_some() || mo.max_acceleration.is_some(),
-            skirt: m.skirt,
+            // Two heads at work: no skirt, which would run between them.
+            skirt: m.skirt.filter(|_| m.motion_systems < 2),
             prime_line: m.prime_line,
             wipe_tower: m.wipe_tower,
             transition_volume: m.mixer.map_or(0.0, |x| x.transition_volume),
             blend_below: m.mixer.map_or(0.0, |x| x.blend_below),
+            systems: (m.motion_systems > 1).then(|| {
+                m.tools
+                    .iter()
+                    .map(|t| System {
+                        x: t.axis.clone().unwrap_or_else(|| "X".into()),
+                        y: t.y_axis.clone().unwrap_or_else(|| "Y".into()),
+                        envelope: t.envelope.unwrap_or(0.0),
+                        home: t.home,
+                    })
+                    .collect()
+            }),
             templates: m.gcode.clone(),
             placed: true,
         })
@@ -331,6 +365,7 @@ impl Setup {
             wipe_tower: None,
             transition_volume: 0.0,
             blend_below: 0.0,
+            systems: None,
             templates: Templates::default(),
             placed: false,
         })

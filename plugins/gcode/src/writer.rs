@@ -21,6 +21,8 @@ use crate::setup::Setup;
 use crate::text::{clean, num};
 use crate::tower::{Feature, Stroke, Tower};
 
+mod multi;
+
 /// Travel shorter than this (mm) keeps the filament where it is (PrusaSlicer's
 /// `retract_before_travel` default): short hops stay over the part.
 const RETRACT_MIN_TRAVEL: f64 = 2.0;
@@ -109,6 +111,8 @@ pub struct Writer {
     planned: f64,
     /// The lowest head the parts use: the templates' `{first_tool}`.
     first_head: usize,
+    /// The streams of a machine with two motion systems working at once.
+    multi: Option<multi::Multi>,
 }
 
 fn io(path: &std::path::Path, e: std::io::Error) -> Error {
@@ -127,6 +131,7 @@ impl Writer {
         header: &Header<'_>,
     ) -> Result<Writer> {
         let fw = Firmware::new(s.dialect, s.flavor, s.heads.len(), s.limits);
+        let multi = s.systems.clone().map(multi::Multi::new);
         let used_heads = s.used_heads(info);
         let needs_tower = layout.tower.is_some();
         let tower = layout.tower.map(|r| Tower::new(r, s.line_width()));
@@ -189,6 +194,7 @@ impl Writer {
             z_max: info.z_max,
             planned: 0.0,
             first_head: used_heads.first().copied().unwrap_or(0),
+            multi,
         };
         w.header(info, header, &used_heads);
         w.start(&used_heads)?;
@@ -201,6 +207,10 @@ impl Writer {
     /// Writes one line and lets the firmware model read it.
     fn line(&mut self, text: impl AsRef<str>) {
         let text = text.as_ref();
+        if self.multi.is_some() {
+            self.stream_line(text);
+            return;
+        }
         self.fw.feed_line(text);
         self.buf.push_str(text);
         self.buf.push('\n');
@@ -277,6 +287,9 @@ impl Writer {
             }
         }
         let _ = writeln!(t, "; coordinates: {}", self.layout.note);
+        if let Some(m) = &self.multi {
+            t.push_str(&m.describe());
+        }
         let _ = writeln!(
             t,
             "; filament diameter {} mm, {} E, retraction {} mm at {} mm/s{}",
@@ -613,6 +626,11 @@ impl Writer {
 
     /// Moves to `to` at the layer's height, retracted (and lifted) when far.
     fn travel(&mut self, to: Point2) {
+        self.travel_at(to, self.s.travel_speed);
+    }
+
+    /// [`Self::travel`] at `speed` (mm/s).
+    fn travel_at(&mut self, to: Point2, speed: f64) {
         let [x, y, z, _] = self.fw.position();
         let d = (to - Point2::new(x, y)).norm();
         // The position is read back from the file, rounded to its 4 decimals.
@@ -623,7 +641,7 @@ impl Writer {
             self.retract(self.s.retraction.length);
             self.lift();
         }
-        let f = self.s.travel_speed * 60.0;
+        let f = speed * 60.0;
         self.line(format!("G0 X{} Y{} F{}", num(to.x, 4), num(to.y, 4), num(f, 0)));
         if (self.fw.position()[2] - self.z).abs() > 1e-9 {
             let f = self.z_feed();
@@ -982,6 +1000,12 @@ impl Writer {
                 ),
             ));
         }
+        if self.multi.is_some() {
+            self.write_layer_multi(plan)?;
+            self.planned += plan.build_time.unwrap_or(0.0);
+            self.layers += 1;
+            return self.flush();
+        }
         if !self.started {
             self.prime(info, plan)?;
             self.started = true;
@@ -1099,6 +1123,7 @@ impl Writer {
     /// The end: retraction, the end template, every heater off, and the summary with
     /// the time the file takes.
     pub fn finish_file(mut self: Box<Self>, info: &RunInfo) -> Result<()> {
+        self.end_streams();
         self.retract(self.s.retraction.length);
         self.feature = None;
         if self.s.machine.is_some() {
@@ -1155,12 +1180,16 @@ impl Writer {
         for (name, fed) in names.iter().zip(&self.fed) {
             let _ = writeln!(t, "; filament {name}: {fed:.3} mm ({:.1} mm³)", fed * area);
         }
-        let _ = writeln!(
-            t,
-            "; planned build time not stated: the {} flavor runs one tool at a time, so the file takes what it says below (the plan's {:.1} s times tools working together)",
-            self.s.flavor.name(),
-            self.planned
-        );
+        if self.multi.is_some() {
+            t.push_str(&self.multi_footer());
+        } else {
+            let _ = writeln!(
+                t,
+                "; planned build time not stated: the {} flavor runs one tool at a time, so the file takes what it says below (the plan's {:.1} s times tools working together)",
+                self.s.flavor.name(),
+                self.planned
+            );
+        }
         let _ = writeln!(t, "; estimated printing time: {time:.1} s");
         let _ = info;
         self.buf.push_str(&t);

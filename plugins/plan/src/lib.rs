@@ -198,6 +198,24 @@ impl Options {
         if o.width.is_none() {
             o.width = config.machine.map(|m| m.nozzle_diameter);
         }
+        // Heads that must keep out of each other: the machine's envelopes are the least
+        // the plan may keep.
+        let machine = config
+            .machine
+            .and_then(|m| m.tools.iter().filter_map(|t| t.envelope).reduce(f64::max));
+        if let Some(e) = machine {
+            if config.table.get("envelope").is_none() {
+                o.envelope = e + ENVELOPE_MARGIN;
+            } else if o.envelope < e {
+                return Err(config.error(
+                    "envelope",
+                    format!(
+                        "{} mm is less than the {e} mm the machine's heads keep out of each other",
+                        o.envelope
+                    ),
+                ));
+            }
+        }
         Ok(o)
     }
 
@@ -309,6 +327,11 @@ fn report_fill(o: &Options, plan: &mut LayerPlan) {
     });
 }
 
+/// What the plan keeps beyond the machine's head envelopes (mm, per head): the
+/// firmware's accelerations move heads off the plan's timing between two
+/// synchronisations, and this is the room that leaves.
+const ENVELOPE_MARGIN: f64 = 1.0;
+
 struct Sequential(Options);
 struct Concurrent(Options);
 
@@ -409,7 +432,7 @@ macro_rules! common_options {
             OptionSpec::new("thin", "string", "\"merge\"", "sub-regions narrower than the narrowest bead: `merge` (deposited with the next levels of their family, mean composition) or `skip` (left out); either way they are reported"),
             OptionSpec::new("speed", "float", "30.0", "deposition speed (mm/s)"),
             OptionSpec::new("travel_speed", "float", "120.0", "travel speed (mm/s)"),
-            OptionSpec::new("envelope", "float", "5.0", "tool envelope radius (mm); tools park outside each other's envelopes"),
+            OptionSpec::new("envelope", "float", "5.0", "tool envelope radius (mm); tools park outside each other's envelopes; the machine's head envelope plus 1 mm when it gives one (and at least the envelope)"),
             OptionSpec::new("tool_change", "float", "5.0", "seconds to change tools between two tools' turns (sequential)"),
             OptionSpec::new("tools", "table", "{}", "per-tool `speed`, `travel_speed`, `envelope`, keyed by material name (or `mixer`)"),
             $($extra),*
