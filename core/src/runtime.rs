@@ -27,6 +27,9 @@ use crate::script::{ScriptHost, ScriptLimits};
 use crate::stage::*;
 
 /// How a run is carried out (as opposed to what it makes, which the pipeline says).
+/// Stack of each worker thread (bytes).
+const WORKER_STACK: usize = 64 << 20;
+
 #[derive(Debug, Clone, Default)]
 pub struct RunOptions {
     /// Worker threads; `None` uses every core.
@@ -499,6 +502,9 @@ impl Engine {
         let timings = Timings::default();
         let pool = rayon::ThreadPoolBuilder::new()
             .num_threads(self.threads.unwrap_or(0))
+            // Scripts recurse within their depth limits on these threads: room for
+            // the deepest the limits allow, reserved, not touched.
+            .stack_size(WORKER_STACK)
             .build()
             .map_err(|e| Error::config(format!("cannot start worker threads: {e}")))?;
 

@@ -46,6 +46,10 @@ impl Default for ScriptLimits {
 thread_local! {
     /// Deadline of the script call running on this thread.
     static DEADLINE: Cell<Option<Instant>> = const { Cell::new(None) };
+    /// Whether the call running on this thread was stopped at least once. Some of
+    /// Rhai's functions swallow their callbacks' errors (a sort comparator that is
+    /// stopped only makes the sort go on): once stopped, the whole call fails.
+    static STOPPED: Cell<bool> = const { Cell::new(false) };
 }
 
 /// The names a script may read; anything else is refused when the script is compiled.
@@ -119,12 +123,27 @@ impl ScriptHost {
             .disable_symbol("eval")
             .on_print(|_| {})
             .on_debug(|_, _, _| {});
-        engine.on_progress(|ops| {
-            if ops % 1024 != 0 {
+        let max_operations = limits.max_operations;
+        engine.on_progress(move |ops| {
+            let over = ops >= max_operations;
+            if ops % 1024 != 0 && !over {
                 return None;
             }
-            let late = DEADLINE.with(|d| d.get().is_some_and(|t| Instant::now() > t));
+            let late = over || DEADLINE.with(|d| d.get().is_some_and(|t| Instant::now() > t));
+            if late {
+                STOPPED.with(|s| s.set(true));
+            }
             late.then(|| Dynamic::from("time limit exceeded".to_string()))
+        });
+        // A grading function has no business waiting.
+        engine.register_fn(
+            "sleep",
+            |_: FLOAT| -> std::result::Result<(), Box<EvalAltResult>> {
+                Err("`sleep` is not available to grading scripts".into())
+            },
+        );
+        engine.register_fn("sleep", |_: INT| -> std::result::Result<(), Box<EvalAltResult>> {
+            Err("`sleep` is not available to grading scripts".into())
         });
         // Constants usable everywhere, including inside script functions, which cannot
         // see the caller's scope.
@@ -370,6 +389,7 @@ struct DeadlineGuard;
 impl Drop for DeadlineGuard {
     fn drop(&mut self) {
         DEADLINE.with(|d| d.set(None));
+        STOPPED.with(|s| s.set(false));
     }
 }
 
@@ -377,6 +397,7 @@ impl ScriptFn {
     /// Runs the script with `args`, within the host's limits.
     pub fn call(&self, args: &ScriptArgs<'_>, context: &str) -> Result<Dynamic> {
         DEADLINE.with(|d| d.set(Some(Instant::now() + self.time_limit)));
+        STOPPED.with(|s| s.set(false));
         let _guard = DeadlineGuard;
         let result = match &self.function {
             None => {
@@ -391,8 +412,31 @@ impl ScriptFn {
                     .call_fn_with_options::<Dynamic>(options, &mut scope, &self.ast, name, values)
             }
         };
+        // Stopped inside a function that swallowed the error: the call still fails.
+        let result = match result {
+            Ok(_) if STOPPED.with(Cell::get) => Err(Box::new(EvalAltResult::ErrorTerminated(
+                Dynamic::from("time limit exceeded".to_string()),
+                Position::NONE,
+            ))),
+            other => other,
+        };
         result.map_err(|e| {
             let pos = e.position();
+            if pos.is_none() {
+                // No position (a limit hit deep inside): the function, not the file's top.
+                return self.value_error(
+                    match *e {
+                        EvalAltResult::ErrorTerminated(..) => {
+                            "stopped: time or operation limit exceeded".to_string()
+                        }
+                        EvalAltResult::ErrorStackOverflow(..) => {
+                            "stopped: too many nested function calls (endless recursion?)".to_string()
+                        }
+                        other => format!("failed: {other}"),
+                    },
+                    context,
+                );
+            }
             let message = match *e {
                 EvalAltResult::ErrorTerminated(..) => "stopped: time limit exceeded".to_string(),
                 EvalAltResult::ErrorTooManyOperations(..) => {
@@ -575,5 +619,38 @@ mod tests {
         let path = dir.path().join("g.rhai");
         std::fs::write(&path, "fn f(q) { q }\n").expect("write");
         assert!(host().function(&path, "f", None).is_err());
+    }
+
+    #[test]
+    fn limits_hold_inside_callbacks_sleep_and_recursion() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let path = dir.path().join("g.rhai");
+        std::fs::write(
+            &path,
+            "fn sorter(r) {\n  let a = [3, 1, 2, 5, 4];\n  a.sort(|x, y| { loop { } });\n  0.5\n}\n\n\
+             fn deep(r) {\n  deep(((((r + 1.0)))))\n}\n\nfn nap(r) {\n  sleep(1);\n  0.5\n}\n",
+        )
+        .expect("write");
+        // A sort swallows its comparator's stop; the call fails all the same.
+        let f = host().function(&path, "sorter", None).expect("compiles");
+        let t = Instant::now();
+        let e = f.number(&ScriptArgs::default(), "t").expect_err("stopped");
+        assert!(t.elapsed() < Duration::from_secs(2), "took {:?}", t.elapsed());
+        assert!(e.to_string().contains("stopped"), "{e}");
+        assert_eq!(e.location().expect("located").line_col(), (1, 1));
+        // Endless recursion: stopped at the depth limit, pointed at the function.
+        let f = host().function(&path, "deep", None).expect("compiles");
+        let e = f.number(&ScriptArgs::default(), "t").expect_err("stopped");
+        assert!(e.to_string().contains("recursion"), "{e}");
+        assert_eq!(e.location().expect("located").line_col(), (7, 1));
+        // No sleeping.
+        let f = host().function(&path, "nap", None).expect("compiles");
+        let t = Instant::now();
+        let e = f.number(&ScriptArgs::default(), "t").expect_err("refused");
+        assert!(t.elapsed() < Duration::from_millis(500), "took {:?}", t.elapsed());
+        assert!(e.to_string().contains("sleep"), "{e}");
+        // A later call on the same thread starts afresh.
+        let ok = host().expression("r + 0.25", None).expect("compiles");
+        assert_eq!(ok.number(&ScriptArgs::default(), "t").expect("runs"), 0.25);
     }
 }
