@@ -57,13 +57,13 @@ enum Command {
     Run {
         #[command(flatten)]
         args: PipelineArgs,
-        /// Output folder (default: `out` beside the current directory).
+        /// Output folder (default: `out` in the current directory).
         #[arg(long, value_name = "DIR", default_value = "out")]
         out: PathBuf,
         /// Worker threads (default: all cores).
         #[arg(long, value_name = "N")]
         threads: Option<usize>,
-        /// No progress bar and no summary.
+        /// No progress bar and no summary; warnings and errors are still printed.
         #[arg(long, short)]
         quiet: bool,
         /// Prints the time spent in each stage.
@@ -75,7 +75,7 @@ enum Command {
     View {
         #[command(flatten)]
         args: PipelineArgs,
-        /// Output folder (default: `out` beside the current directory).
+        /// Output folder (default: `out` in the current directory).
         #[arg(long, value_name = "DIR", default_value = "out")]
         out: PathBuf,
         /// Only write the viewer and print its path.

@@ -50,10 +50,9 @@ impl Observer for Progress {
         }
     }
 
+    /// Warnings are printed even when quiet: `-q` silences the chatter, not what a
+    /// user must know about the output.
     fn warning(&self, message: &str) {
-        if self.quiet {
-            return;
-        }
         match &self.bar {
             Some(bar) => bar.suspend(|| eprintln!("warning: {message}")),
             None => eprintln!("warning: {message}"),

@@ -376,3 +376,62 @@ fn view_writes_a_viewer_even_when_the_pipeline_has_none() {
     assert!(html.contains("LAYERS.push("));
     assert!(page.starts_with(dir.path()));
 }
+
+#[test]
+fn quiet_runs_still_print_warnings() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let out = dir.path().join("out");
+    let pipeline = pipelines().join("blade-idw.toml");
+    let o = lamina(&[
+        "run",
+        pipeline.to_str().expect("utf-8"),
+        "--out",
+        out.to_str().expect("utf-8"),
+        "-q",
+        "--set",
+        "plan.use=\"sequential\"",
+        "--set",
+        "slice.thickness=10",
+    ]);
+    assert!(o.status.success(), "{}", text(&o.stderr));
+    let err = text(&o.stderr);
+    assert!(
+        err.contains("warning:") && err.contains("narrower than the narrowest bead"),
+        "{err}"
+    );
+    assert!(!err.contains("layers,"), "no summary when quiet: {err}");
+}
+
+#[test]
+fn overridden_values_are_reported_at_their_key_in_plain_words() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let o = lamina(&[
+        "generate",
+        "gear",
+        "--teeth",
+        "7.5",
+        "-o",
+        &dir.path().join("g.stl").to_string_lossy(),
+    ]);
+    assert_eq!(o.status.code(), Some(2), "{}", text(&o.stderr));
+    let err = text(&o.stderr);
+    assert!(
+        err.contains("teeth") && err.contains("expected a whole number"),
+        "{err}"
+    );
+    assert!(!err.contains("usize") && !err.contains("after --set"), "{err}");
+    let pipeline = pipelines().join("gear-z-gradient.toml");
+    let o = lamina(&[
+        "check",
+        pipeline.to_str().expect("utf-8"),
+        "--set",
+        "slice.thickness=\"thin\"",
+    ]);
+    let err = text(&o.stderr);
+    assert!(!o.status.success());
+    assert!(
+        err.contains("[slice] thickness") && err.contains("expected a number"),
+        "{err}"
+    );
+    assert!(!err.contains("f64"), "{err}");
+}

@@ -142,13 +142,33 @@ impl TableRef {
         for k in self.host_keys {
             table.remove(*k);
         }
-        T::deserialize(toml::Value::Table(table)).map_err(|e| {
-            Error::config(format!(
-                "[{}] (after --set overrides): {}",
-                self.path_string(),
-                e.message()
-            ))
-        })
+        // The table as the overrides left it has no file: write it out and read it
+        // back, so that an error still finds the key it is about.
+        let text = toml::to_string(&table).unwrap_or_default();
+        if let Ok(doc) = DeTable::parse(&text) {
+            let span = doc.span();
+            let keys: Vec<(String, std::ops::Range<usize>)> = doc
+                .get_ref()
+                .iter()
+                .map(|(k, v)| (k.get_ref().to_string(), k.span().start..v.span().end))
+                .collect();
+            let de = toml::de::ValueDeserializer::from(Spanned::new(span, DeValue::Table(doc.into_inner())));
+            return T::deserialize(de).map_err(|e| {
+                let key = e.span().and_then(|at| {
+                    keys.iter()
+                        .filter(|(_, r)| r.start <= at.start && at.end <= r.end.max(r.start + 1))
+                        .min_by_key(|(_, r)| r.end - r.start)
+                        .map(|(k, _)| k.clone())
+                });
+                let message = plain(e.message().trim());
+                match key {
+                    Some(k) => self.error_at(&k, message),
+                    None => Error::config(format!("[{}] {message}", self.path_string())),
+                }
+            });
+        }
+        T::deserialize(toml::Value::Table(table))
+            .map_err(|e| Error::config(format!("[{}] {}", self.path_string(), plain(e.message().trim()))))
     }
 
     fn de_error(&self, e: &toml::de::Error) -> Error {
@@ -158,7 +178,7 @@ impl TableRef {
             .or_else(|| self.location_of(None));
         Error::Config {
             location,
-            message: format!("[{}] {}", self.path_string(), e.message().trim()),
+            message: format!("[{}] {}", self.path_string(), plain(e.message().trim())),
             help: None,
         }
     }
@@ -185,6 +205,36 @@ impl TableRef {
             _ => Error::config(message),
         }
     }
+}
+
+/// A deserialiser's message in the words of a pipeline's reader, not of Rust: `usize`
+/// is "a whole number", `f64` "a number", and so on.
+pub fn plain(message: &str) -> String {
+    const WORDS: &[(&str, &str)] = &[
+        ("expected usize", "expected a whole number (0 or more)"),
+        ("expected u64", "expected a whole number (0 or more)"),
+        ("expected u32", "expected a whole number (0 or more)"),
+        ("expected u16", "expected a whole number (0 or more)"),
+        ("expected u8", "expected a whole number (0 or more)"),
+        ("expected i64", "expected a whole number"),
+        ("expected i32", "expected a whole number"),
+        ("expected isize", "expected a whole number"),
+        ("expected f64", "expected a number"),
+        ("expected f32", "expected a number"),
+        ("expected a boolean", "expected true or false"),
+        ("invalid type: floating point", "got the decimal number"),
+        ("invalid type: integer", "got the whole number"),
+        ("invalid type: string", "got the string"),
+        ("invalid type: boolean", "got"),
+        ("invalid type: sequence", "got an array"),
+        ("invalid type: map", "got a table"),
+        ("invalid type: unit variant", "got a value of the wrong kind"),
+    ];
+    let mut out = message.to_string();
+    for (from, to) in WORDS {
+        out = out.replace(from, to);
+    }
+    out
 }
 
 pub(crate) fn navigate_de<'i>(doc: Spanned<DeTable<'i>>, path: &[PathElem]) -> Option<Spanned<DeValue<'i>>> {
