@@ -11,6 +11,44 @@ use tempfile::TempPath;
 use crate::error::{Error, Result};
 use crate::stage::OutputFiles;
 
+/// Temporary outputs are named `.lamina-<pid>-<random>.partial`: the process id tells
+/// a later run which are left over from a run that was killed.
+const PARTIAL_PREFIX: &str = ".lamina-";
+
+/// Removes the temporary files in `dir` of runs that are no longer running (a killed
+/// run leaves its partial outputs behind; a run still writing keeps its own).
+fn remove_stale(dir: &Path) {
+    let Ok(entries) = std::fs::read_dir(dir) else {
+        return;
+    };
+    for entry in entries.flatten() {
+        let name = entry.file_name();
+        let Some(name) = name.to_str() else { continue };
+        let Some(rest) = name.strip_prefix(PARTIAL_PREFIX) else {
+            continue;
+        };
+        if !name.ends_with(".partial") {
+            continue;
+        }
+        let Some(pid) = rest.split('-').next().and_then(|p| p.parse::<u32>().ok()) else {
+            continue;
+        };
+        if pid != std::process::id() && !process_alive(pid) {
+            let _ = std::fs::remove_file(entry.path());
+        }
+    }
+}
+
+/// Whether process `pid` runs (Linux: its `/proc` entry; elsewhere assumed alive, so
+/// nothing is removed).
+fn process_alive(pid: u32) -> bool {
+    if cfg!(target_os = "linux") {
+        Path::new("/proc").join(pid.to_string()).exists()
+    } else {
+        true
+    }
+}
+
 /// The outputs of one run, in one folder.
 #[derive(Debug)]
 pub struct AtomicOutputs {
@@ -38,6 +76,16 @@ impl AtomicOutputs {
     /// Renames every temporary file to its final name. Call after all writers were
     /// flushed and dropped.
     pub fn commit(self) -> Result<Vec<PathBuf>> {
+        // Whatever can be known to fail is checked before the first rename, so that a
+        // run does not end with some of its outputs committed and others not.
+        for (_, dest) in &self.pending {
+            if dest.is_dir() {
+                return Err(Error::config(format!(
+                    "output `{}` is a folder: name a file",
+                    dest.display()
+                )));
+            }
+        }
         let mut done = Vec::new();
         for (temp, dest) in self.pending {
             temp.persist(&dest).map_err(|e| Error::io(&dest, e.error))?;
@@ -55,14 +103,32 @@ impl OutputFiles for AtomicOutputs {
                 name.display()
             )));
         }
+        if name.file_name().is_none() || name.components().all(|c| matches!(c, Component::CurDir)) {
+            return Err(Error::config(format!(
+                "output path `{}` must name a file inside the output folder",
+                name.display()
+            )));
+        }
         let dest = self.dir.join(name);
         if self.pending.iter().any(|(_, d)| d == &dest) {
             return Err(Error::config(format!("two outputs write `{}`", dest.display())));
         }
         let parent = dest.parent().unwrap_or(&self.dir).to_path_buf();
         std::fs::create_dir_all(&parent).map_err(|e| Error::io(&parent, e))?;
+        // A link inside the output folder must not lead the file out of it.
+        if let (Ok(root), Ok(real)) = (self.dir.canonicalize(), parent.canonicalize())
+            && !real.starts_with(&root)
+        {
+            return Err(Error::config(format!(
+                "output path `{}` leads out of the output folder (through a link to `{}`)",
+                name.display(),
+                real.display()
+            )));
+        }
+        remove_stale(&parent);
         let mut builder = tempfile::Builder::new();
-        builder.prefix(".lamina-").suffix(".partial");
+        let prefix = format!("{PARTIAL_PREFIX}{}-", std::process::id());
+        builder.prefix(&prefix).suffix(".partial");
         // Temporary files are private by default; outputs are ordinary files.
         #[cfg(unix)]
         builder.permissions(std::os::unix::fs::PermissionsExt::from_mode(0o644));
@@ -105,5 +171,51 @@ mod tests {
         let dir = tempfile::tempdir().expect("tempdir");
         let mut out = AtomicOutputs::new(dir.path());
         assert!(out.create(Path::new("../x")).is_err());
+    }
+
+    #[test]
+    fn paths_that_name_no_file_or_lead_out_are_refused() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let mut out = AtomicOutputs::new(dir.path());
+        for bad in ["", ".", "./", "../x.json", "/tmp/x.json"] {
+            assert!(out.create(Path::new(bad)).is_err(), "{bad:?}");
+        }
+        #[cfg(unix)]
+        {
+            let outside = tempfile::tempdir().expect("tempdir");
+            std::os::unix::fs::symlink(outside.path(), dir.path().join("link")).expect("symlink");
+            let e = out.create(Path::new("link/x.json")).err().expect("refused");
+            assert!(e.to_string().contains("leads out"), "{e}");
+            assert_eq!(std::fs::read_dir(outside.path()).expect("list").count(), 0);
+        }
+    }
+
+    #[test]
+    fn nothing_is_committed_when_an_output_is_a_folder() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        std::fs::create_dir(dir.path().join("b.json")).expect("mkdir");
+        let mut out = AtomicOutputs::new(dir.path());
+        drop(out.create(Path::new("a.json")).expect("create"));
+        drop(out.create(Path::new("b.json")).expect("create"));
+        assert!(out.commit().is_err());
+        assert!(!dir.path().join("a.json").exists());
+    }
+
+    #[test]
+    fn partial_files_of_dead_runs_are_removed_by_the_next() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        // No process has this id (beyond Linux's pid_max).
+        let stale = dir.path().join(".lamina-4194399-abc.partial");
+        std::fs::write(&stale, b"left over").expect("write");
+        let mine = dir
+            .path()
+            .join(format!(".lamina-{}-keep.partial", std::process::id()));
+        std::fs::write(&mine, b"in progress").expect("write");
+        let mut out = AtomicOutputs::new(dir.path());
+        drop(out.create(Path::new("a.json")).expect("create"));
+        if cfg!(target_os = "linux") {
+            assert!(!stale.exists());
+        }
+        assert!(mine.exists());
     }
 }
