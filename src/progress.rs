@@ -9,11 +9,43 @@ use lamina_core::runtime::{Observer, RunReport};
 pub struct Progress {
     bar: Option<ProgressBar>,
     quiet: bool,
+    /// Warnings by their shape (numbers left out): how many of each, and the first
+    /// one's text. A layer-by-layer warning is printed once, with its count at the end.
+    seen: std::sync::Mutex<Vec<Seen>>,
+}
+
+/// One shape of warning: the shape, the first one's text and how many came.
+#[derive(Clone)]
+struct Seen {
+    shape: String,
+    first: String,
+    count: usize,
+}
+
+/// A warning with its numbers left out: the same warning on another layer.
+fn shape(message: &str) -> String {
+    let mut out = String::with_capacity(message.len());
+    let mut digits = false;
+    for c in message.chars() {
+        let d = c.is_ascii_digit() || (digits && c == '.');
+        if d && !digits {
+            out.push('#');
+        } else if !d {
+            out.push(c);
+        }
+        digits = d;
+    }
+    out
 }
 
 impl Progress {
     pub fn new(quiet: bool) -> Self {
-        Self { bar: None, quiet }.with_bar()
+        Self {
+            bar: None,
+            quiet,
+            seen: std::sync::Mutex::new(Vec::new()),
+        }
+        .with_bar()
     }
 
     fn with_bar(mut self) -> Self {
@@ -32,6 +64,10 @@ impl Progress {
     pub fn finish(&self) {
         if let Some(bar) = &self.bar {
             bar.finish_and_clear();
+        }
+        let seen = self.seen.lock().map(|s| s.clone()).unwrap_or_default();
+        for w in seen.iter().filter(|w| w.count > 1) {
+            eprintln!("warning: {} more like \"{}\"", w.count - 1, w.first);
         }
     }
 }
@@ -53,6 +89,20 @@ impl Observer for Progress {
     /// Warnings are printed even when quiet: `-q` silences the chatter, not what a
     /// user must know about the output.
     fn warning(&self, message: &str) {
+        if let Ok(mut seen) = self.seen.lock() {
+            let key = shape(message);
+            match seen.iter_mut().find(|w| w.shape == key) {
+                Some(w) => {
+                    w.count += 1;
+                    return;
+                }
+                None => seen.push(Seen {
+                    shape: key,
+                    first: message.to_string(),
+                    count: 1,
+                }),
+            }
+        }
         match &self.bar {
             Some(bar) => bar.suspend(|| eprintln!("warning: {message}")),
             None => eprintln!("warning: {message}"),

@@ -400,6 +400,13 @@ fn quiet_runs_still_print_warnings() {
         "{err}"
     );
     assert!(!err.contains("layers,"), "no summary when quiet: {err}");
+    // The same warning on every layer is printed once, then counted.
+    assert_eq!(
+        err.matches("narrower than the narrowest bead").count(),
+        2,
+        "{err}"
+    );
+    assert!(err.contains("more like"), "{err}");
 }
 
 #[test]
