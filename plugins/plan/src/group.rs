@@ -194,17 +194,7 @@ pub fn group(regions: &[Region], widths: &Widths, thin: Thin) -> Grouping {
     // filled, with the mean composition of the slivers it holds.
     for members in leftover.into_values() {
         for piece in union(members.iter().map(|&m| &regions[m].polygon)) {
-            let inside: Vec<usize> = members
-                .iter()
-                .copied()
-                .filter(|&m| {
-                    regions[m]
-                        .polygon
-                        .outer
-                        .interior_point()
-                        .is_some_and(|p| piece.contains(p))
-                })
-                .collect();
+            let inside = inside(regions, &members, &piece);
             let Some(&first) = inside.first() else {
                 continue;
             };
@@ -230,23 +220,25 @@ pub fn group(regions: &[Region], widths: &Widths, thin: Thin) -> Grouping {
     out
 }
 
+/// The sub-regions among `members` that lie in `piece` of their union.
+fn inside(regions: &[Region], members: &[usize], piece: &Polygon) -> Vec<usize> {
+    let bbox = piece.bbox();
+    members
+        .iter()
+        .copied()
+        .filter(|&m| {
+            let polygon = &regions[m].polygon;
+            polygon.bbox().overlaps(&bbox)
+                && polygon.outer.interior_point().is_some_and(|p| piece.contains(p))
+        })
+        .collect()
+}
+
 /// Fills the union of the thin cells `members` of one family as one wall, each bead
 /// cut into pieces by the composition of the cells under it ([`pieces`]).
 fn wall(regions: &[Region], members: &[usize], widths: &Widths, out: &mut Grouping) {
     for piece in union(members.iter().map(|&m| &regions[m].polygon)) {
-        let box_ = piece.bbox();
-        let inside: Vec<usize> = members
-            .iter()
-            .copied()
-            .filter(|&m| {
-                regions[m].polygon.bbox().overlaps(&box_)
-                    && regions[m]
-                        .polygon
-                        .outer
-                        .interior_point()
-                        .is_some_and(|p| piece.contains(p))
-            })
-            .collect();
+        let inside = inside(regions, members, &piece);
         let Some(&first) = inside.first() else {
             continue;
         };

@@ -572,14 +572,21 @@ impl Writer {
         // accelerations let one fall behind the plan more than the other: barriers
         // also go where the heads' paths come close ([`safe_times`]).
         times.retain(|&t| t > SAME_TIME && t < end - SAME_TIME);
-        if let Some(m) = self.multi.as_ref()
-            && n == 2
-        {
-            let keep_out = m.systems.iter().map(|s| s.envelope).sum::<f64>();
-            let (ta, tb) = (track(&paths[0]), track(&paths[1]));
+        let tracks: Vec<Vec<(f64, Point2)>> = paths.iter().map(|l| track(l)).collect();
+        let keep_out = self
+            .multi
+            .as_ref()
+            .map_or(0.0, |m| m.systems.iter().map(|s| s.envelope).sum());
+        if n == 2 {
             let (ba, bb) = (beads(&paths[0]), beads(&paths[1]));
             let course = |track, beads| Course { track, beads };
-            times = safe_times(course(&ta, &ba), course(&tb, &bb), &times, keep_out, end);
+            times = safe_times(
+                course(&tracks[0], &ba),
+                course(&tracks[1], &bb),
+                &times,
+                keep_out,
+                end,
+            );
         }
         times.push(end);
         times.sort_by(f64::total_cmp);
@@ -591,15 +598,9 @@ impl Writer {
         self.barrier();
         let offset = self.layout.offset;
         if n == 2 {
-            let starts: Vec<Option<Point2>> = paths
-                .iter()
-                .map(|l| track(l).first().map(|q| q.1 + offset))
-                .collect();
+            let starts: Vec<Option<Point2>> =
+                tracks.iter().map(|t| t.first().map(|q| q.1 + offset)).collect();
             let now = [self.stream_position(0), self.stream_position(1)];
-            let keep_out = self
-                .multi
-                .as_ref()
-                .map_or(0.0, |m| m.systems.iter().map(|s| s.envelope).sum());
             let clear = |p: usize, q: usize| {
                 let (p0, p1) = (now[p], starts[p].unwrap_or(now[p]));
                 let q1 = starts[q].unwrap_or(now[q]);
@@ -790,6 +791,12 @@ mod tests {
         assert!(clip(&path, 2.0, 3.0).is_none());
     }
 
+    /// Barriers for two heads without beads.
+    fn barriers(a: &[(f64, Point2)], b: &[(f64, Point2)], fixed: &[f64]) -> Vec<f64> {
+        let course = |track| Course { track, beads: &[] };
+        safe_times(course(a), course(b), fixed, 10.0, 10.0)
+    }
+
     fn line_track(from: (f64, f64), to: (f64, f64), t0: f64, t1: f64) -> Vec<(f64, Point2)> {
         vec![(t0, Point2::new(from.0, from.1)), (t1, Point2::new(to.0, to.1))]
     }
@@ -799,39 +806,12 @@ mod tests {
         // Parallel, 50 mm apart: nothing to synchronise.
         let a = line_track((0.0, 0.0), (100.0, 0.0), 0.0, 10.0);
         let b = line_track((0.0, 50.0), (100.0, 50.0), 0.0, 10.0);
-        assert!(
-            safe_times(
-                Course {
-                    track: &a,
-                    beads: &[]
-                },
-                Course {
-                    track: &b,
-                    beads: &[]
-                },
-                &[],
-                10.0,
-                10.0
-            )
-            .is_empty()
-        );
+        assert!(barriers(&a, &b, &[]).is_empty());
         // Head b crosses where head a has been: at no instant are they closer than
         // the keep-out in the plan, but b must not start across before a has left.
         let a = line_track((0.0, 0.0), (100.0, 0.0), 0.0, 10.0);
         let b = line_track((20.0, -50.0), (20.0, 50.0), 0.0, 10.0);
-        let times = safe_times(
-            Course {
-                track: &a,
-                beads: &[],
-            },
-            Course {
-                track: &b,
-                beads: &[],
-            },
-            &[],
-            10.0,
-            10.0,
-        );
+        let times = barriers(&a, &b, &[]);
         assert!(!times.is_empty());
         // Between consecutive barriers the swept stretches keep 10 mm apart.
         let mut bounds = vec![0.0];
@@ -858,19 +838,7 @@ mod tests {
             );
         }
         // The fixed barriers stay.
-        let times = safe_times(
-            Course {
-                track: &a,
-                beads: &[],
-            },
-            Course {
-                track: &b,
-                beads: &[],
-            },
-            &[3.0],
-            10.0,
-            10.0,
-        );
+        let times = barriers(&a, &b, &[3.0]);
         assert!(times.iter().any(|t| (t - 3.0).abs() < 1e-9));
     }
 }
