@@ -256,20 +256,9 @@ fn build(config: &StageConfig<'_>) -> Result<AnyStage> {
     let first = o
         .first_layer
         .or_else(|| config.machine.and_then(|m| m.first_layer.height));
-    if let Some(m) = config.machine {
-        for (key, t) in [("max_thickness", Some(o.max_thickness)), ("first_layer", first)] {
-            if let Some(t) = t
-                && t > m.max_layer_height + 1e-9
-            {
-                return Err(config.error(
-                    key,
-                    format!(
-                        "{t} mm is thicker than machine `{}` lays: its {} mm nozzle presses layers of at most {} mm (`max_layer_height`)",
-                        m.name, m.nozzle_diameter, m.max_layer_height
-                    ),
-                ));
-            }
-        }
+    crate::cut::check_layer_height(config, "max_thickness", o.max_thickness)?;
+    if let Some(f) = first {
+        crate::cut::check_layer_height(config, "first_layer", f)?;
     }
     Ok(AnyStage::Slice(Box::new(Adaptive {
         mode: o.mode,

@@ -775,6 +775,24 @@ fn close_open(mut open: Vec<Vec<Point2>>, tolerance: f64, gaps: &mut Gaps) -> Ve
     out
 }
 
+/// Refuses a layer thickness (option `key`) the pipeline's machine cannot press down.
+pub(crate) fn check_layer_height(
+    config: &lamina_core::stage::StageConfig<'_>,
+    key: &str,
+    t: f64,
+) -> lamina_core::Result<()> {
+    match config.machine {
+        Some(m) if t > m.max_layer_height + 1e-9 => Err(config.error(
+            key,
+            format!(
+                "{t} mm is thicker than machine `{}` lays: its {} mm nozzle presses layers of at most {} mm (`max_layer_height`)",
+                m.name, m.nozzle_diameter, m.max_layer_height
+            ),
+        )),
+        _ => Ok(()),
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -155,19 +155,8 @@ fn build(config: &StageConfig<'_>) -> Result<AnyStage> {
             .and_then(|m| m.first_layer.height)
             .unwrap_or(o.thickness),
     };
-    if let Some(m) = config.machine {
-        for (key, t) in [("thickness", o.thickness), ("first_layer", first)] {
-            if t > m.max_layer_height + 1e-9 {
-                return Err(config.error(
-                    key,
-                    format!(
-                        "{t} mm is thicker than machine `{}` lays: its {} mm nozzle presses layers of at most {} mm (`max_layer_height`)",
-                        m.name, m.nozzle_diameter, m.max_layer_height
-                    ),
-                ));
-            }
-        }
-    }
+    crate::cut::check_layer_height(config, "thickness", o.thickness)?;
+    crate::cut::check_layer_height(config, "first_layer", first)?;
     let cut = o.cut.fraction();
     if !(0.0..=1.0).contains(&cut) {
         return Err(config.error(
