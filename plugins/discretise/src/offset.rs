@@ -1,6 +1,11 @@
-//! `offset` (Method 1, Eq. 14-16): inward offsets of the whole family at equal spacing;
+//! `offset` (Method 1, Eq. 14-16): inward offsets of the family at equal spacing;
 //! sub-region j is the ring between the j-th and (j+1)-th offsets, the last one the
-//! remaining core. N_R = int(reach / nozzle) unless `count` or `spacing` is given.
+//! remaining core. As the paper states it (the default): the outer contour moves toward
+//! the holes (C_3 -> C_2 of Fig. 5), N_R = int(L_s / D_N) and the offset distance d is
+//! D_N, so every ring is one nozzle wide and the last one takes the remainder. With
+//! `from = "all"` the holes move out as well, the reach is L_s / 2 and each index has a
+//! band on the outer side and one about each hole. `count` and `spacing` override N_R
+//! and d; a `count` alone spreads the rings over the whole reach.
 
 use lamina_core::stage::{
     AnyStage, Discretiser, FamilyContext, OptionSpec, StageConfig, StageInfo, StageKind,
@@ -27,7 +32,7 @@ struct Options {
     count: Option<usize>,
     #[serde(default)]
     spacing: Option<f64>,
-    #[serde(default)]
+    #[serde(default = "default_from")]
     from: From,
     #[serde(default)]
     join: Join,
@@ -41,6 +46,11 @@ struct Options {
 
 fn default_nozzle() -> f64 {
     0.4
+}
+
+/// The paper's reference: the family's outer contour.
+fn default_from() -> From {
+    From::Outer
 }
 
 pub fn default_tolerance() -> f64 {
@@ -68,7 +78,8 @@ pub fn reach(polygon: &Polygon, from: From, precision: f64) -> Option<f64> {
 }
 
 impl Offset {
-    /// N_R and the spacing (mm) for a family.
+    /// N_R and the spacing d (mm) for a family: Eq. 14 with d = D_N unless `count`
+    /// or `spacing` says otherwise.
     pub fn plan(&self, polygon: &Polygon) -> Option<(usize, f64)> {
         match (self.count, self.spacing) {
             (Some(n), Some(s)) => Some((n, s)),
@@ -76,10 +87,8 @@ impl Offset {
             (None, Some(s)) => {
                 reach(polygon, self.inset.from, s * 0.05).map(|r| (((r / s) as usize).clamp(1, MAX_COUNT), s))
             }
-            (None, None) => reach(polygon, self.inset.from, self.nozzle * 0.05).map(|r| {
-                let n = ((r / self.nozzle) as usize).clamp(1, MAX_COUNT);
-                (n, r / n as f64)
-            }),
+            (None, None) => reach(polygon, self.inset.from, self.nozzle * 0.05)
+                .map(|r| (((r / self.nozzle) as usize).clamp(1, MAX_COUNT), self.nozzle)),
         }
     }
 }
@@ -136,7 +145,7 @@ lamina_core::register_stage!(StageFactory {
     info: StageInfo {
         kind: StageKind::Discretise,
         name: "offset",
-        doc: "Method 1: rings between equally spaced inward offsets of the family (outer and holes), N_R = int(reach / nozzle).",
+        doc: "Method 1: rings between inward offsets of the outer contour toward the holes, one nozzle apart, N_R = int(L_s / D_N); the last ring takes the remainder.",
         options: &[
             options::NOZZLE,
             options::COUNT,
@@ -144,13 +153,13 @@ lamina_core::register_stage!(StageFactory {
                 "spacing",
                 "float",
                 "none",
-                "distance between offsets (mm); default reach / N_R so the rings meet at the thinnest wall"
+                "offset distance d (mm); default D_N (the nozzle), or reach / count when only `count` is given"
             ),
             OptionSpec::new(
                 "from",
                 "string",
-                "\"all\"",
-                "grading reference: `all` (outer and holes move in together, reach L_s / 2) or `outer` (toward the holes, reach L_s)"
+                "\"outer\"",
+                "grading reference: `outer` (the paper's: the outer contour moves toward the holes, reach L_s) or `all` (outer and holes move together and meet halfway, reach L_s / 2, a band on each side per index)"
             ),
             options::JOIN,
             options::TOLERANCE,

@@ -10,38 +10,62 @@ fn tube(r_out: f64, r_in: f64) -> OneFamily {
     OneFamily::new(circle(0.0, 0.0, r_out, 512), vec![circle(0.0, 0.0, r_in, 512)])
 }
 
+/// The paper's Method 1 by default (Eq. 14-16, Fig. 5): the outer contour moves toward
+/// the hole one nozzle at a time, N_R = int(L_s / D_N), and the last ring keeps what
+/// is left, with the levels of Eq. 21.
 #[test]
-fn tube_from_outer_has_int_ls_over_dn_rings_with_eq21_levels() {
+fn default_offsets_the_outer_contour_by_the_nozzle_with_int_ls_over_dn_rings() {
     let fam = tube(10.0, 5.0);
-    let regions = fam.run(&*stage("use = \"offset\"\nnozzle = 0.4\nfrom = \"outer\""));
+    let regions = fam.run(&*stage("use = \"offset\"\nnozzle = 0.4"));
     assert_tiles(&fam.polygon(), &regions);
-    // L_s = 5 (inscribed 512-gons: 4.9998), int(5 / 0.4) = 12 rings of 5 / 12 mm.
+    // L_s = 5 (inscribed 512-gons: 4.9998), N_R = int(4.9998 / 0.4) = 12; offsets at
+    // 0.4, 0.8, ..., 4.4 mm, the last ring from 5.6 mm down to the bore.
     assert_eq!(regions.len(), 12);
     assert_eq!(indices(&regions), (0..12).collect::<Vec<_>>());
-    let s = fam.polygon().holes[0].distance(Point2::new(10.0, 0.0)).min(5.0) / 12.0;
+    let bore = fam.polygon().holes[0].area().abs();
     for (j, r) in regions.iter().enumerate() {
         assert_eq!(r.count, 12);
         assert!((r.level - j as f64 / 11.0).abs() < 1e-12);
-        let (a, b) = (10.0 - j as f64 * s, 10.0 - (j + 1) as f64 * s);
-        let ring = std::f64::consts::PI * (a * a - b * b);
+        assert!(r.polygon.holes.len() == 1, "ring {j} is an annulus");
+        let a = 10.0 - 0.4 * j as f64;
+        let ring = if j < 11 {
+            let b = a - 0.4;
+            std::f64::consts::PI * (a * a - b * b)
+        } else {
+            std::f64::consts::PI * a * a - bore
+        };
         assert!(
             (r.area() - ring).abs() / ring < 2e-3,
             "ring {j}: {} vs {ring}",
             r.area()
         );
-        assert!(r.polygon.holes.len() == 1, "ring {j} is an annulus");
+    }
+    // The same as the explicit form.
+    let outer = fam.run(&*stage(
+        "use = \"offset\"\nnozzle = 0.4\nfrom = \"outer\"\nspacing = 0.4",
+    ));
+    assert_eq!(outer.len(), regions.len());
+    for (a, b) in outer.iter().zip(&regions) {
+        assert!((a.area() - b.area()).abs() < 1e-9);
     }
 }
 
+/// `from = "all"`: the bore moves out as the rim moves in, one nozzle at a time, and
+/// they meet halfway: N_R = int(L_s / 2 / D_N).
 #[test]
-fn tube_from_all_meets_halfway() {
+fn from_all_moves_the_holes_too_and_meets_halfway() {
     let fam = tube(10.0, 5.0);
-    let regions = fam.run(&*stage("use = \"offset\"\nnozzle = 0.4"));
+    let regions = fam.run(&*stage("use = \"offset\"\nnozzle = 0.4\nfrom = \"all\""));
     assert_tiles(&fam.polygon(), &regions);
-    // Reach L_s / 2 = 2.5: int(2.5 / 0.4) = 6.
+    // Reach L_s / 2 = 2.4999: int(2.4999 / 0.4) = 6.
     assert_eq!(indices(&regions), (0..6).collect::<Vec<_>>());
-    // Ring 0 touches both boundaries: two annuli (outer band and hole band).
-    assert_eq!(regions.iter().filter(|r| r.index == 0).count(), 2);
+    // Ring 0 touches both boundaries: two annuli (outer band and hole band), each
+    // 0.4 mm wide.
+    let ring0: Vec<_> = regions.iter().filter(|r| r.index == 0).collect();
+    assert_eq!(ring0.len(), 2);
+    let want = std::f64::consts::PI * ((10.0f64.powi(2) - 9.6f64.powi(2)) + (5.4f64.powi(2) - 25.0));
+    let got: f64 = ring0.iter().map(|r| r.area()).sum();
+    assert!((got - want).abs() / want < 2e-3, "{got} vs {want}");
 }
 
 #[test]
@@ -91,10 +115,16 @@ fn thin_wall_vanishes_into_one_region() {
     assert_tiles(&fam.polygon(), &ten);
     assert_eq!(indices(&ten), vec![0]);
     assert_eq!(ten[0].level, 0.0);
-    // With a small step the wall holds a few rings before the offsets meet.
+    // With a small step the wall holds a few rings before the offsets reach the bore
+    // (0.305 / 0.05: six rings and the remainder), or meet halfway from both sides.
     let fine = fam.run(&*stage("use = \"offset\"\ncount = 10\nspacing = 0.05"));
     assert_tiles(&fam.polygon(), &fine);
-    assert_eq!(indices(&fine), vec![0, 1, 2, 3]);
+    assert_eq!(indices(&fine), (0..7).collect::<Vec<_>>());
+    let both = fam.run(&*stage(
+        "use = \"offset\"\ncount = 10\nspacing = 0.05\nfrom = \"all\"",
+    ));
+    assert_tiles(&fam.polygon(), &both);
+    assert_eq!(indices(&both), vec![0, 1, 2, 3]);
 }
 
 #[test]
@@ -187,9 +217,10 @@ fn tube_ring_split_into_pieces() {
     for n in [128, 240, 256, 1000] {
         let fam = OneFamily::new(sliced_circle(10.0, n), vec![sliced_circle(5.0, n)]);
         for (text, rings) in [
-            ("use = \"offset\"\ncount = 10\nfrom = \"outer\"", 10),
             ("use = \"offset\"\ncount = 10", 10),
-            ("use = \"offset\"\nnozzle = 0.4", 6),
+            ("use = \"offset\"\ncount = 10\nfrom = \"all\"", 10),
+            ("use = \"offset\"\nnozzle = 0.4\nfrom = \"all\"", 6),
+            ("use = \"offset\"\nnozzle = 0.4", 12),
             ("use = \"step-width\"\nstep = 0.125", 9),
         ] {
             let regions = fam.run(&*stage(text));
@@ -199,11 +230,8 @@ fn tube_ring_split_into_pieces() {
                 let ring: Vec<_> = regions.iter().filter(|r| r.index == j).collect();
                 // From every boundary, the rings are pairs of annuli (one along the outer
                 // contour, one along the bore) until they meet in the last one.
-                let want = if text.contains("outer") || j + 1 == rings {
-                    1
-                } else {
-                    2
-                };
+                let pairs = text.contains("all") || text.contains("step-width");
+                let want = if !pairs || j + 1 == rings { 1 } else { 2 };
                 assert!(
                     ring.len() == want && ring.iter().all(|r| r.polygon.holes.len() == 1),
                     "{n}-gon, {text}: ring {j} is {} polygons with {:?} holes",
