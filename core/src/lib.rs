@@ -18,6 +18,7 @@ pub mod runtime;
 pub mod script;
 pub mod source;
 pub mod stage;
+pub mod steps;
 
 pub use error::{Error, Result};
 pub use geom::{BBox2, Contour, Point2, Polygon, Vector2};

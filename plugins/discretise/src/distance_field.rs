@@ -7,6 +7,7 @@
 use lamina_core::stage::{
     AnyStage, Discretiser, FamilyContext, OptionSpec, StageConfig, StageInfo, StageKind,
 };
+use lamina_core::steps::Truncation;
 use lamina_core::{Contour, Point2, Polygon, Region, Result, StageFactory};
 use serde::Deserialize;
 
@@ -20,7 +21,6 @@ use crate::grid::Grid;
 use crate::iso::iso_levels;
 use crate::measure::pole;
 use crate::regions::{from_bands, uniform_level, whole};
-use crate::step_width::Truncation;
 
 const STAGE: &str = "discretise:distance-field";
 

@@ -6,6 +6,7 @@
 use lamina_core::stage::{
     AnyStage, Discretiser, FamilyContext, OptionSpec, StageConfig, StageInfo, StageKind,
 };
+use lamina_core::steps::Truncation;
 use lamina_core::{Polygon, Region, Result, StageFactory};
 use serde::Deserialize;
 
@@ -46,51 +47,6 @@ fn default_step() -> f64 {
 
 fn default_power() -> f64 {
     1.0
-}
-
-/// The truncation: N_c levels, and the normalised distances where the level changes.
-#[derive(Debug, Clone, PartialEq)]
-pub struct Truncation {
-    /// t_g.
-    pub step: f64,
-    /// N_c = 1 / t_g + 1.
-    pub count: usize,
-}
-
-impl Truncation {
-    /// Refuses a step outside (0, 1] or one that does not divide 1.
-    pub fn new(step: f64) -> std::result::Result<Self, String> {
-        if step.is_nan() || step <= 0.0 || step > 1.0 {
-            return Err(format!("the step t_g must lie in (0, 1], not {step}"));
-        }
-        let steps = (1.0 / step).round();
-        if (steps * step - 1.0).abs() > 1e-9 || steps > 10_000.0 {
-            return Err(format!(
-                "the step t_g = {step} must divide 1 (1 / t_g a whole number)"
-            ));
-        }
-        Ok(Self {
-            step,
-            count: steps as usize + 1,
-        })
-    }
-
-    /// Level of band k: k t_g.
-    pub fn level(&self, k: usize) -> f64 {
-        (k as f64 * self.step).min(1.0)
-    }
-
-    /// The values of f where band k - 1 ends and band k starts, k in 1..N_c:
-    /// (k - 1/2) t_g.
-    pub fn thresholds(&self) -> Vec<f64> {
-        (1..self.count).map(|k| (k as f64 - 0.5) * self.step).collect()
-    }
-
-    /// The truncated value of f (the level of the band f falls in).
-    pub fn truncate(&self, f: f64) -> f64 {
-        let k = self.thresholds().iter().filter(|&&t| f >= t).count();
-        self.level(k)
-    }
 }
 
 struct StepWidth {
@@ -186,13 +142,13 @@ lamina_core::register_stage!(StageFactory {
     info: StageInfo {
         kind: StageKind::Discretise,
         name: "step-width",
-        doc: "Grading step-width truncation: N_c = 1 / t_g + 1 regions at levels 0, t_g, ..., 1, split at the half steps of f(d).",
+        doc: "Grading step-width truncation: N_c = 1 / t_g + 1 regions at levels 0, t_g, ..., 1, split at the half steps (u + 1/2) t_g of f(d).",
         options: &[
             OptionSpec::new(
                 "step",
                 "float",
                 "0.25",
-                "grading step-width t_g in (0, 1]; 1 / t_g must be whole"
+                "grading step-width t_g in (0, 1]; N_c = int(1 / t_g) + 1 levels, the last one 1"
             ),
             OptionSpec::new(
                 "power",
@@ -221,25 +177,3 @@ lamina_core::register_stage!(StageFactory {
     },
     build,
 });
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn quarter_steps_give_five_levels_with_half_step_thresholds() {
-        let t = Truncation::new(0.25).expect("valid");
-        assert_eq!(t.count, 5);
-        let levels: Vec<f64> = (0..t.count).map(|k| t.level(k)).collect();
-        assert_eq!(levels, vec![0.0, 0.25, 0.5, 0.75, 1.0]);
-        assert_eq!(t.thresholds(), vec![0.125, 0.375, 0.625, 0.875]);
-        assert_eq!(t.truncate(0.1), 0.0);
-        assert_eq!(t.truncate(0.125), 0.25);
-        assert_eq!(t.truncate(0.6), 0.5);
-        assert_eq!(t.truncate(0.9), 1.0);
-        assert_eq!(Truncation::new(1.0).expect("valid").count, 2);
-        assert!(Truncation::new(0.3).is_err());
-        assert!(Truncation::new(0.0).is_err());
-        assert!(Truncation::new(f64::NAN).is_err());
-    }
-}

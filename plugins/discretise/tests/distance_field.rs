@@ -62,5 +62,5 @@ fn every_feature_tiles() {
 fn bad_field_options_are_refused() {
     assert!(build_error("use = \"distance-field\"\nfeature = \"point\"").contains("point"));
     assert!(build_error("use = \"distance-field\"\ncells = 2").contains("cells"));
-    assert!(build_error("use = \"distance-field\"\nstep = 0.4").contains("step"));
+    assert!(build_error("use = \"distance-field\"\nstep = 1.5").contains("step"));
 }

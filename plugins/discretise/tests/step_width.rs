@@ -74,8 +74,31 @@ fn step_width_tiles_awkward_families() {
     }
 }
 
+/// A step that does not divide 1 follows the paper's rule as the `sources` stage does:
+/// t_g = 0.3 gives the levels 0, 0.3, 0.6 and 1 split at f = 0.15, 0.45 and 0.75.
 #[test]
-fn steps_that_do_not_divide_one_are_refused() {
-    assert!(build_error("use = \"step-width\"\nstep = 0.3").contains("step"));
-    assert!(build_error("use = \"step-width\"\npower = 0.0").contains("power"));
+fn step_that_does_not_divide_one_ends_at_one() {
+    let fam = OneFamily::new(rect(0.0, 0.0, 40.0, 40.0), vec![]);
+    let regions = fam.run(&*stage("use = \"step-width\"\nstep = 0.3\nwidth = 10.0"));
+    assert_tiles(&fam.polygon(), &regions);
+    assert_eq!(indices(&regions), vec![0, 1, 2, 3]);
+    let levels: Vec<f64> = regions.iter().map(|r| r.level).collect();
+    assert_eq!(levels, vec![0.0, 0.3, 0.6, 1.0]);
+    // f = d / 10: the last boundary at d = 7.5 mm, leaving a 25 mm square core.
+    assert!(
+        (regions[3].area() - 625.0).abs() / 625.0 < 1e-6,
+        "{}",
+        regions[3].area()
+    );
+}
+
+#[test]
+fn bad_steps_are_refused() {
+    for bad in ["step = 0.0", "step = 1.5", "step = 1e-9", "power = 0.0"] {
+        let key = bad.split(' ').next().unwrap_or_default();
+        assert!(
+            build_error(&format!("use = \"step-width\"\n{bad}")).contains(key),
+            "{bad}"
+        );
+    }
 }

@@ -3,6 +3,7 @@
 //! thresholds where the steps change.
 
 use lamina_core::Point2;
+use lamina_core::steps::Truncation;
 
 /// Where distances are measured from.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -29,8 +30,8 @@ pub struct Source {
     /// Composition where f <= 0 (Ms) and where f >= 1 (Me), over the part's materials.
     pub start: Vec<f64>,
     pub end: Vec<f64>,
-    /// Grading step-width t_g in (0, 1].
-    pub step: f64,
+    /// Grading step-width t_g and its levels.
+    pub steps: Truncation,
     /// Weight k_i of Eq. 8.
     pub weight: f64,
 }
@@ -50,32 +51,23 @@ impl Source {
         value.powf(1.0 / self.k) / self.alpha
     }
 
-    /// N_c = 1/t_g + 1 step levels 0, t_g, ..., 1 (the last step may be shorter when
-    /// 1/t_g is not whole).
+    /// N_c = 1/t_g + 1 step levels 0, t_g, ..., 1.
     pub fn levels(&self) -> Vec<f64> {
-        let n = (1.0 / self.step - 1e-9).ceil() as usize;
-        (0..=n).map(|u| (u as f64 * self.step).min(1.0)).collect()
+        self.steps.levels()
     }
 
     /// The truncated value of f (grading-step-width 3.1): 0 below t_g/2, t_g (u + 1)
     /// from (u + 1/2) t_g, and 1 from the last half step.
     pub fn truncate(&self, f: f64) -> f64 {
-        let levels = self.levels();
-        let mut out = levels[0];
-        for w in levels.windows(2) {
-            if f >= (w[0] + w[1]) / 2.0 {
-                out = w[1];
-            }
-        }
-        out
+        self.steps.truncate(f)
     }
 
-    /// The distances where the truncated value steps up: f(d) = the midpoints between
-    /// successive levels.
+    /// The distances where the truncated value steps up: f(d) = (u + 1/2) t_g.
     pub fn thresholds(&self) -> Vec<f64> {
-        self.levels()
-            .windows(2)
-            .map(|w| self.d_at((w[0] + w[1]) / 2.0))
+        self.steps
+            .thresholds()
+            .into_iter()
+            .map(|t| self.d_at(t))
             .collect()
     }
 
@@ -128,7 +120,7 @@ mod tests {
             k: 1.0,
             start: vec![1.0, 0.0],
             end: vec![0.0, 1.0],
-            step,
+            steps: Truncation::new(step).unwrap(),
             weight: 1.0,
         }
     }
@@ -161,6 +153,10 @@ mod tests {
         }
         assert_eq!(source(1.0).levels(), [0.0, 1.0]);
         assert_eq!(source(0.1).levels().len(), 11);
+        // A step that does not divide 1: the paper's half-step thresholds, 1 at the top
+        // (the same rule as the `step-width` discretiser).
+        assert_eq!(source(0.3).levels(), [0.0, 0.3, 0.6, 1.0]);
+        assert_eq!(source(0.3).truncate(0.8), 1.0);
     }
 
     #[test]

@@ -4,6 +4,7 @@
 use lamina_core::stage::{
     AnyStage, Discretiser, FamilyContext, OptionSpec, StageConfig, StageInfo, StageKind,
 };
+use lamina_core::steps::Truncation;
 use lamina_core::{Composition, Error, Region, Result, StageFactory};
 use serde::Deserialize;
 
@@ -250,9 +251,7 @@ fn build(config: &StageConfig<'_>) -> Result<AnyStage> {
         if !(s.k.is_finite() && s.k > 0.0) {
             return Err(bad("`k` must be a positive number"));
         }
-        if !(s.step > 0.0 && s.step <= 1.0) {
-            return Err(bad("`step` (t_g) must lie in (0, 1]"));
-        }
+        let steps = Truncation::new(s.step).map_err(|e| bad(&e))?;
         if !(s.weight.is_finite() && s.weight > 0.0) {
             return Err(bad("`weight` must be a positive number"));
         }
@@ -268,7 +267,7 @@ fn build(config: &StageConfig<'_>) -> Result<AnyStage> {
                 k: s.k,
                 start: Vec::new(),
                 end: Vec::new(),
-                step: s.step,
+                steps,
                 weight: s.weight,
             },
             start: s.start,
