@@ -223,8 +223,8 @@ fn field_part(layers: &[(Layer, ContourTree)], runs: usize) {
     for (layer, tree) in layers {
         for f in 0..tree.families.len() {
             let polygon = tree.family_polygon(&layer.contours, f);
-            if let Some((_, sets)) = df.iso_sets(&polygon) {
-                loops += sets.iter().map(Vec::len).sum::<usize>();
+            if let Some(iso) = df.iso_sets(&polygon) {
+                loops += iso.sets.iter().map(Vec::len).sum::<usize>();
             }
         }
     }

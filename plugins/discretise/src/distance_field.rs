@@ -52,6 +52,8 @@ struct Options {
     count: usize,
     #[serde(default)]
     step: Option<f64>,
+    #[serde(default)]
+    spacing: Option<f64>,
     #[serde(default = "default_cells")]
     cells: usize,
     #[serde(default)]
@@ -78,30 +80,58 @@ pub enum Levels {
     /// `n` equal parts of r, levels j / (n - 1) (Eq. 21).
     Equal(usize),
     Steps(Truncation),
+    /// Iso-contours every `s` mm of distance from the feature (Fig. 7: 0, 1.5, ...,
+    /// 10.5 over a maximum of 11.76); the region from the contour at d = j s on has the
+    /// level j s / max(d) of Eq. 2, and the last one runs to the maximum.
+    Spacing(f64),
+}
+
+/// The cut of one family's field: where each band starts (values of r) and each
+/// band's level.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Cut {
+    /// Values of r where band k starts, k in 1..count.
+    pub thresholds: Vec<f64>,
+    /// The level of every band, outermost first.
+    pub levels: Vec<f64>,
 }
 
 impl Levels {
-    pub fn count(&self) -> usize {
+    /// The cut for a field whose largest distance inside the family is `max` mm.
+    pub fn cut(&self, max: f64) -> Cut {
         match self {
-            Levels::Equal(n) => *n,
-            Levels::Steps(t) => t.count,
+            Levels::Equal(n) => Cut {
+                thresholds: (1..*n).map(|k| k as f64 / *n as f64).collect(),
+                levels: (0..*n).map(|k| uniform_level(k, *n)).collect(),
+            },
+            Levels::Steps(t) => Cut {
+                thresholds: t.thresholds(),
+                levels: t.levels(),
+            },
+            Levels::Spacing(s) => {
+                // Contours strictly below the maximum: one at the maximum itself would
+                // bound nothing. The guard keeps a tiny spacing on a huge part finite.
+                let n = ((max / s).ceil() as usize).clamp(1, crate::options::MAX_COUNT);
+                let levels: Vec<f64> = (0..n).map(|k| (k as f64 * s / max).min(1.0)).collect();
+                Cut {
+                    thresholds: levels[1..].to_vec(),
+                    levels,
+                }
+            }
         }
     }
+}
 
-    /// Values of r where band k starts, k in 1..count.
-    pub fn thresholds(&self) -> Vec<f64> {
-        match self {
-            Levels::Equal(n) => (1..*n).map(|k| k as f64 / *n as f64).collect(),
-            Levels::Steps(t) => t.thresholds(),
-        }
-    }
-
-    pub fn level(&self, k: usize) -> f64 {
-        match self {
-            Levels::Equal(n) => uniform_level(k, *n),
-            Levels::Steps(t) => t.level(k),
-        }
-    }
+/// One family's field and its iso-loops.
+#[derive(Debug, Clone)]
+pub struct IsoSets {
+    /// Normalised distances r.
+    pub field: Field,
+    /// max(d_ij) (mm).
+    pub max: f64,
+    pub cut: Cut,
+    /// The loops of every threshold of `cut`.
+    pub sets: Vec<Vec<Contour>>,
 }
 
 /// The distance-field discretiser.
@@ -117,10 +147,11 @@ pub struct DistanceField {
 }
 
 impl DistanceField {
-    /// The field of normalised distances r (border samples at `FLOOR`) and the iso-loops
-    /// of every threshold, without clipping. `None` when the family has no inside at the
-    /// grid's resolution.
-    pub fn iso_sets(&self, polygon: &Polygon) -> Option<(Field, Vec<Vec<Contour>>)> {
+    /// The field of normalised distances r (border samples at `FLOOR`), the largest
+    /// distance inside the family (mm, Eq. 2's max(d_ij)), the cut into levels and the
+    /// iso-loops of every threshold, without clipping. `None` when the family has no
+    /// inside at the grid's resolution.
+    pub fn iso_sets(&self, polygon: &Polygon) -> Option<IsoSets> {
         let bbox = polygon.bbox();
         let cells = match self.cell_size {
             Some(s) => ((bbox.width().max(bbox.height()) / s).ceil() as usize + 3).clamp(4, 8192),
@@ -175,8 +206,14 @@ impl DistanceField {
                 };
             }
         }
-        let sets = iso_levels(&field, &field.values, &self.levels.thresholds());
-        Some((field, sets))
+        let cut = self.levels.cut(max);
+        let sets = iso_levels(&field, &field.values, &cut.thresholds);
+        Some(IsoSets {
+            field,
+            max,
+            cut,
+            sets,
+        })
     }
 }
 
@@ -187,10 +224,10 @@ impl Discretiser for DistanceField {
             return Ok(whole(ctx, polygon));
         };
         let base = clean(&vec![grid.shape(&polygon)]);
-        let Some((_, sets)) = self.iso_sets(&polygon).filter(|_| !base.is_empty()) else {
+        let Some(IsoSets { cut, sets, .. }) = self.iso_sets(&polygon).filter(|_| !base.is_empty()) else {
             return Ok(whole(ctx, polygon));
         };
-        let count = self.levels.count();
+        let count = cut.levels.len();
         // Loops keep the set on their left: the non-zero rule in the band overlay reads
         // them as outers and holes.
         let bands = nested_bands(&base, count, FillRule::NonZero, |k, _, overlay| {
@@ -204,7 +241,7 @@ impl Discretiser for DistanceField {
             }
             Ok(any)
         })?;
-        let mut regions = from_bands(ctx, &grid, &bands, count, |k| self.levels.level(k));
+        let mut regions = from_bands(ctx, &grid, &bands, count, |k| cut.levels[k]);
         self.around.split(&grid, &polygon, &mut regions);
         Ok(regions)
     }
@@ -212,10 +249,21 @@ impl Discretiser for DistanceField {
 
 fn build(config: &StageConfig<'_>) -> Result<AnyStage> {
     let o: Options = config.parse()?;
-    let levels = match o.step {
-        Some(step) => Levels::Steps(Truncation::new(step).map_err(|e| config.error("step", e))?),
-        None if (1..=crate::options::MAX_COUNT).contains(&o.count) => Levels::Equal(o.count),
-        None => return Err(config.error("count", format!("`count` must be at least 1, not {}", o.count))),
+    let levels = match (o.step, o.spacing) {
+        (Some(_), Some(_)) => return Err(config.error("spacing", "give `step` or `spacing`, not both")),
+        (Some(step), None) => Levels::Steps(Truncation::new(step).map_err(|e| config.error("step", e))?),
+        (None, Some(s)) => Levels::Spacing(crate::options::positive_mm(config, "spacing", s)?),
+        (None, None) if (1..=crate::options::MAX_COUNT).contains(&o.count) => Levels::Equal(o.count),
+        (None, None) => {
+            return Err(config.error(
+                "count",
+                format!(
+                    "`count` must be in 1..={}, not {}",
+                    crate::options::MAX_COUNT,
+                    o.count
+                ),
+            ));
+        }
     };
     if !(8..=8192).contains(&o.cells) {
         return Err(config.error("cells", format!("`cells` must be in 8..=8192, not {}", o.cells)));
@@ -270,6 +318,12 @@ lamina_core::register_stage!(StageFactory {
                 "float",
                 "none",
                 "grading step-width t_g: levels 0, t_g, ..., 1 at half steps"
+            ),
+            OptionSpec::new(
+                "spacing",
+                "float",
+                "none",
+                "iso-contours every `spacing` mm of distance (Fig. 7) instead of `count` parts of r; levels d / max(d) (Eq. 2)"
             ),
             OptionSpec::new(
                 "cells",

@@ -63,4 +63,57 @@ fn bad_field_options_are_refused() {
     assert!(build_error("use = \"distance-field\"\nfeature = \"point\"").contains("point"));
     assert!(build_error("use = \"distance-field\"\ncells = 2").contains("cells"));
     assert!(build_error("use = \"distance-field\"\nstep = 1.5").contains("step"));
+    assert!(build_error("use = \"distance-field\"\nspacing = -1.0").contains("spacing"));
+    assert!(build_error("use = \"distance-field\"\nspacing = 1.0\nstep = 0.5").contains("spacing"));
+}
+
+/// Fig. 7 of the distance-field paper: a section whose largest distance from its
+/// boundary is 11.76 (at the centre), iso-contours C1-C8 at the distances 0, 1.5, ...,
+/// 10.5, the sub-regions R1-R7 between them (and the centre beyond C8), each with
+/// Eq. 2's composition f1 = d / max(d).
+#[test]
+fn fig_7_iso_contours_every_one_and_a_half_over_a_maximum_of_11_76() {
+    use lamina_discretise::distance_field::{DistanceField, Feature, Levels};
+    let a = 11.76;
+    let fam = OneFamily::new(rect(-a, -a, 2.0 * a, 2.0 * a), vec![]);
+    let df = DistanceField {
+        feature: Feature::Boundary,
+        point: None,
+        levels: Levels::Spacing(1.5),
+        cells: 256,
+        cell_size: None,
+        around: Default::default(),
+    };
+    let iso = df.iso_sets(&fam.polygon()).expect("a field");
+    assert!((iso.max - 11.76).abs() < 0.05, "max(d) = {}", iso.max);
+    // C2-C8 (C1 is the boundary, d = 0).
+    assert_eq!(iso.cut.thresholds.len(), 7);
+    for (k, t) in iso.cut.thresholds.iter().enumerate() {
+        assert!((t * iso.max - 1.5 * (k + 1) as f64).abs() < 1e-9);
+    }
+    let regions = fam.run(&*stage("use = \"distance-field\"\nspacing = 1.5\ncells = 256"));
+    assert_tiles(&fam.polygon(), &regions);
+    assert_eq!(indices(&regions), (0..8).collect::<Vec<_>>());
+    for r in &regions {
+        let j = r.index as f64;
+        // Eq. 2 at the contour the region starts from.
+        assert!(
+            (r.level - 1.5 * j / iso.max).abs() < 1e-9,
+            "R{}: {}",
+            r.index + 1,
+            r.level
+        );
+        // The iso-contours of a square's distance field are squares.
+        let (outer, inner) = (2.0 * (a - 1.5 * j), 2.0 * (a - 1.5 * (j + 1.0)).max(0.0));
+        let want = outer * outer - inner * inner;
+        assert!(
+            (r.area() - want).abs() / want < 1e-2,
+            "R{}: {} vs {want}",
+            r.index + 1,
+            r.area()
+        );
+    }
+    // Fractions of the maximum stay available: eight equal parts of r.
+    let parts = fam.run(&*stage("use = \"distance-field\"\ncount = 8"));
+    assert_eq!(indices(&parts), (0..8).collect::<Vec<_>>());
 }
