@@ -8,11 +8,11 @@
 //! layer with a 32-bit float z; 130: polyline with 32-bit integers and float points),
 //! little-endian, right after `$$HEADEREND`.
 //!
-//! The modified CLI (ASCII) writes the sub-regions instead: each region's boundary
-//! polylines carry the paper's contour identifying number (1 for the family's outer
-//! contour, 0 for its innermost contours, 2..N for the offset contours from the outside
-//! in), and each polyline is preceded by `$$MATERIAL/R,G,B,f1,...,fn`: the property
-//! colour and the volume fractions of the region it bounds.
+//! The modified CLI (ASCII) writes the sub-regions' contours instead, each once and from
+//! the outside in, with the paper's contour identifying number (1 for the family's
+//! outer contour, 2..N for the offset contours, 0 for its innermost contours; see
+//! [`crate::contour_ids`]), each polyline preceded by `$$MATERIAL/R,G,B,f1,...,fn`: the
+//! property colour and the volume fractions of the region that starts at it.
 
 use std::io::Write;
 use std::path::PathBuf;
@@ -206,8 +206,10 @@ impl LayerSink for Sink {
                 continue;
             }
             let materials = info.part_materials(pl.part);
-            for r in &pl.regions {
-                let Some(c) = &r.composition else { continue };
+            for entry in crate::contour_ids::entries(pl) {
+                let Some(c) = &pl.regions[entry.region].composition else {
+                    continue;
+                };
                 let rgb = c.colour(&materials);
                 let mut material = format!("$$MATERIAL/{},{},{}", rgb[0], rgb[1], rgb[2]);
                 for f in &c.fractions {
@@ -215,16 +217,10 @@ impl LayerSink for Sink {
                     push_number(&mut material, *f);
                 }
                 material.push('\n');
-                // The paper's contour ids: 1 the family's outer contour, 2.. the
-                // offsets inward, 0 the innermost contours.
-                let outer_id = if r.index == 0 { 1 } else { r.index + 1 };
-                let inner_id = if r.index + 1 >= r.count { 0 } else { r.index + 2 };
                 self.out.write_all(material.as_bytes()).map_err(io(&path))?;
-                self.contour(outer_id, COUNTER_CLOCKWISE, &r.polygon.outer)?;
-                for h in &r.polygon.holes {
-                    self.out.write_all(material.as_bytes()).map_err(io(&path))?;
-                    self.contour(inner_id, CLOCKWISE, h)?;
-                }
+                let dir = if entry.ccw { COUNTER_CLOCKWISE } else { CLOCKWISE };
+                let contour = entry.contour.clone().oriented(entry.ccw);
+                self.contour(entry.id, dir, &contour)?;
             }
         }
         Ok(())

@@ -3,5 +3,6 @@
 
 pub mod bitmap;
 pub mod cli;
+pub mod contour_ids;
 pub mod json;
 pub mod threemf;
