@@ -79,10 +79,13 @@ fn truncated(d: f64, width: f64, step: f64) -> f64 {
     out
 }
 
-#[test]
-fn three_sources_combine_by_eq_8_at_every_region() {
-    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("pipelines/grading-sources.toml");
-    let plan = run(&std::fs::read_to_string(path).expect("pipeline"));
+/// The three sources of `grading-sources.toml` at every region: Eq. 2 per source and
+/// Eq. 8 over the sources whose effective region (0 <= f <= 1) holds the region (over
+/// all of them, with their complementary compositions, where none does), or over all
+/// of them everywhere.
+/// Returns the number of regions of a pure material.
+fn check_three_sources(plan: &serde_json::Value, everywhere: bool) -> usize {
+    let mut pure = 0;
     for layer in plan["layers"].as_array().expect("layers") {
         let z = layer["z"].as_f64().expect("z") - layer["thickness"].as_f64().expect("t") / 2.0;
         let family: f64 = layer["parts"][0]["families"][0]["area"].as_f64().expect("area");
@@ -97,21 +100,35 @@ fn three_sources_combine_by_eq_8_at_every_region() {
             let p = r["reference"].as_array().expect("reference");
             let (x, y) = (p[0].as_f64().expect("x"), p[1].as_f64().expect("y"));
             // Axis (weight 2): core -> skin over 16 mm from the centre line.
-            let fa = truncated(x.hypot(y), 16.0, 0.25);
+            let da = x.hypot(y) / 16.0;
             // Point (weight 1): skin -> core over 20 mm from (20, 20, 3).
-            let fp = truncated(
-                ((x - 20.0).powi(2) + (y - 20.0).powi(2) + (z - 3.0).powi(2)).sqrt(),
-                20.0,
-                0.25,
-            );
+            let dp = ((x - 20.0).powi(2) + (y - 20.0).powi(2) + (z - 3.0).powi(2)).sqrt() / 20.0;
             // Plane (weight 1): skin -> core over 10 mm from x = -20.
-            let fl = truncated(x + 20.0, 10.0, 0.25);
-            let skin = (2.0 * fa + (1.0 - fp) + (1.0 - fl)) / 4.0;
+            let dl = (x + 20.0) / 10.0;
+            let (fa, fp, fl) = (
+                truncated(da, 1.0, 0.25),
+                truncated(dp, 1.0, 0.25),
+                truncated(dl, 1.0, 0.25),
+            );
+            let terms = [
+                (2.0, fa, (0.0..=1.0).contains(&da)),
+                (1.0, 1.0 - fp, (0.0..=1.0).contains(&dp)),
+                (1.0, 1.0 - fl, (0.0..=1.0).contains(&dl)),
+            ];
+            let any = !everywhere && terms.iter().any(|t| t.2);
+            let (sum, weight) = terms
+                .iter()
+                .filter(|t| !any || t.2)
+                .fold((0.0, 0.0), |(s, w), t| (s + t.0 * t.1, w + t.0));
+            let skin = sum / weight;
             let c = &r["composition"];
             let got = c["skin"].as_f64().expect("skin");
             assert!((got - skin).abs() < 1e-9, "region at ({x}, {y}): {got} vs {skin}");
             assert!((got + c["core"].as_f64().expect("core") - 1.0).abs() < 1e-12);
             seen.insert((fa.to_bits(), fp.to_bits(), fl.to_bits()));
+            if got == 0.0 || got == 1.0 {
+                pure += 1;
+            }
         }
         assert!(
             seen.len() > 10,
@@ -119,4 +136,21 @@ fn three_sources_combine_by_eq_8_at_every_region() {
             seen.len()
         );
     }
+    pure
+}
+
+#[test]
+fn three_sources_combine_by_eq_8_where_their_regions_intersect() {
+    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("pipelines/grading-sources.toml");
+    let text = std::fs::read_to_string(path).expect("pipeline");
+    let paper = check_three_sources(&run(&text), false);
+    let everywhere = text.replace("use = \"sources\"", "use = \"sources\"\ncombine = \"everywhere\"");
+    assert_ne!(everywhere, text);
+    let blended = check_three_sources(&run(&everywhere), true);
+    // R1' = R1 minus R12 keeps a source's own composition (the axis source alone is
+    // pure skin along its centre line), where blending everywhere mixes it.
+    assert!(
+        paper > blended,
+        "pure regions: {paper} with the paper's booleans, {blended} blended everywhere"
+    );
 }

@@ -36,6 +36,16 @@ pub fn difference(a: &Shapes, b: &Shapes) -> Shapes {
     a.overlay(b, OverlayRule::Difference, FillRule::EvenOdd)
 }
 
+pub fn union(a: &Shapes, b: &Shapes) -> Shapes {
+    if a.is_empty() {
+        return b.clone();
+    }
+    if b.is_empty() {
+        return a.clone();
+    }
+    a.overlay(b, OverlayRule::Union, FillRule::EvenOdd)
+}
+
 impl Set {
     pub fn intersect(&self, a: &Shapes) -> Shapes {
         match self {

@@ -8,7 +8,7 @@ use lamina_core::steps::Truncation;
 use lamina_core::{Composition, Error, Region, Result, StageFactory};
 use serde::Deserialize;
 
-use crate::shapes::{Shapes, closer_than, inside_point, polygon_shapes, to_polygons};
+use crate::shapes::{Set, Shapes, closer_than, inside_point, polygon_shapes, to_polygons, union};
 use crate::source::{Datum, Source, combine};
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize)]
@@ -56,12 +56,29 @@ fn d_tolerance() -> f64 {
     0.001
 }
 
+/// Where the sources' compositions are combined by Eq. 8.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Deserialize)]
+#[serde(rename_all = "lowercase")]
+enum Combine {
+    /// The paper's regularised booleans: a source counts where a point lies in its
+    /// effective grading region (0 <= f <= 1). R12 = R1 ∩* R2 blends the sources, R1' =
+    /// R1 /* R12 keeps source 1's composition alone, and where no source grades the
+    /// complementary compositions (Ms, Me) of every source are blended.
+    #[default]
+    Intersection,
+    /// Every source blends everywhere, with its complementary composition outside its
+    /// effective region.
+    Everywhere,
+}
+
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
 struct Options {
     sources: Vec<SourceSpec>,
     #[serde(default = "d_tolerance")]
     tolerance: f64,
+    #[serde(default)]
+    combine: Combine,
 }
 
 /// A source whose compositions are still named (materials are resolved per part).
@@ -74,6 +91,31 @@ struct Pending {
 struct Sources {
     sources: Vec<Pending>,
     tolerance: f64,
+    combine: Combine,
+}
+
+/// A piece of the family with, per source, its step and whether it lies in that
+/// source's effective grading region.
+struct Cell {
+    shapes: Shapes,
+    steps: Vec<usize>,
+    effective: Vec<bool>,
+}
+
+/// `cells` cut by `set`: the pieces inside it (tagged `true`) and outside.
+fn split(shapes: Shapes, set: &Set) -> Vec<(Shapes, bool)> {
+    match set {
+        Set::Whole => vec![(shapes, true)],
+        Set::Empty => vec![(shapes, false)],
+        Set::Shapes(_) => {
+            let inside = set.intersect(&shapes);
+            let outside = set.subtract_from(&shapes);
+            [(inside, true), (outside, false)]
+                .into_iter()
+                .filter(|(s, _)| !s.is_empty())
+                .collect()
+        }
+    }
 }
 
 impl Sources {
@@ -122,22 +164,37 @@ impl Discretiser for Sources {
             s.end = self.resolve(ctx, &p.end, i)?;
             sources.push(s);
         }
-        // Cells of the overlay: a piece of the family and the step of each source.
+        // Cells of the overlay: a piece of the family, the step of each source and
+        // whether it is in that source's effective grading region.
         let family_shapes = polygon_shapes(&family);
-        let mut cells: Vec<(Shapes, Vec<usize>)> = vec![(family_shapes.clone(), Vec::new())];
+        let mut cells = vec![Cell {
+            shapes: family_shapes.clone(),
+            steps: Vec::new(),
+            effective: Vec::new(),
+        }];
+        let closer = |s: &Source, d: f64| closer_than(&s.datum, d, z, &bbox, self.tolerance, &family_shapes);
         for s in &sources {
-            let sets: Vec<_> = s
-                .thresholds()
-                .iter()
-                .map(|&d| closer_than(&s.datum, d, z, &bbox, self.tolerance, &family_shapes))
-                .collect();
+            let sets: Vec<_> = s.thresholds().iter().map(|&d| closer(s, d)).collect();
+            // The effective region 0 <= f <= 1: within the grading width, and in front
+            // of a plane.
+            let (within, behind) = match self.combine {
+                Combine::Everywhere => (Set::Whole, Set::Empty),
+                Combine::Intersection => (
+                    closer(s, s.d_at(1.0)),
+                    match s.datum {
+                        Datum::Plane { .. } => closer(s, 0.0),
+                        _ => Set::Empty,
+                    },
+                ),
+            };
             let mut next = Vec::new();
-            for (cell, steps) in cells {
-                let mut rest = cell;
+            for cell in cells {
+                let mut stepped = Vec::new();
+                let mut rest = cell.shapes;
                 for (u, set) in sets.iter().enumerate() {
                     let inside = set.intersect(&rest);
                     if !inside.is_empty() {
-                        next.push((inside, [steps.as_slice(), &[u]].concat()));
+                        stepped.push((inside, u));
                     }
                     rest = set.subtract_from(&rest);
                     if rest.is_empty() {
@@ -145,31 +202,38 @@ impl Discretiser for Sources {
                     }
                 }
                 if !rest.is_empty() {
-                    next.push((rest, [steps.as_slice(), &[sets.len()]].concat()));
+                    stepped.push((rest, sets.len()));
+                }
+                for (shapes, u) in stepped {
+                    for (shapes, w) in split(shapes, &within) {
+                        for (shapes, b) in split(shapes, &behind) {
+                            next.push(Cell {
+                                shapes,
+                                steps: [cell.steps.as_slice(), &[u]].concat(),
+                                effective: [cell.effective.as_slice(), &[w && !b]].concat(),
+                            });
+                        }
+                    }
                 }
             }
             cells = next;
         }
-        let sliver = family_area.abs() * 1e-12;
-        let mut pieces = Vec::new();
-        for (shapes, steps) in &cells {
-            let polygons: Vec<_> = to_polygons(shapes)
-                .into_iter()
-                .filter(|p| p.area() > sliver)
-                .collect();
-            if !polygons.is_empty() {
-                pieces.push((polygons, steps));
-            }
-        }
-        let count = pieces.len();
-        let total_weight: f64 = sources.iter().map(|s| s.weight).sum();
-        let mut regions = Vec::new();
-        for (index, (polygons, steps)) in pieces.into_iter().enumerate() {
-            let levels: Vec<f64> = sources.iter().zip(steps).map(|(s, &u)| s.levels()[u]).collect();
-            let parts: Vec<(f64, Vec<f64>)> = sources
+        // Each cell's composition (Eq. 2 per source, Eq. 8 over the sources that grade
+        // it); cells of equal steps and composition are one homogeneous region.
+        let mut pieces: Vec<(Shapes, Vec<usize>, Vec<f64>, f64)> = Vec::new();
+        for cell in cells {
+            let levels: Vec<f64> = sources
                 .iter()
-                .zip(&levels)
-                .map(|(s, &l)| (s.weight, s.composition(l)))
+                .zip(&cell.steps)
+                .map(|(s, &u)| s.levels()[u])
+                .collect();
+            let any = cell.effective.iter().any(|&e| e);
+            let counted: Vec<usize> = (0..sources.len())
+                .filter(|&i| !any || cell.effective[i])
+                .collect();
+            let parts: Vec<(f64, Vec<f64>)> = counted
+                .iter()
+                .map(|&i| (sources[i].weight, sources[i].composition(levels[i])))
                 .collect();
             let mut fractions = combine(&parts);
             // Clear the rounding of the blend so the sum check sees exactly 1.
@@ -178,13 +242,32 @@ impl Discretiser for Sources {
             }
             let sum: f64 = fractions.iter().sum();
             fractions.iter_mut().for_each(|f| *f /= sum);
-            let composition = Composition::new(fractions)?;
-            let level = sources
+            let weight: f64 = counted.iter().map(|&i| sources[i].weight).sum();
+            let level = counted
                 .iter()
-                .zip(&levels)
-                .map(|(s, l)| s.weight * l)
+                .map(|&i| sources[i].weight * levels[i])
                 .sum::<f64>()
-                / total_weight;
+                / weight;
+            match pieces.iter_mut().find(|p| p.1 == cell.steps && p.2 == fractions) {
+                Some(p) => p.0 = union(&p.0, &cell.shapes),
+                None => pieces.push((cell.shapes, cell.steps, fractions, level)),
+            }
+        }
+        let sliver = family_area.abs() * 1e-12;
+        let pieces: Vec<_> = pieces
+            .into_iter()
+            .filter_map(|(shapes, _, fractions, level)| {
+                let polygons: Vec<_> = to_polygons(&shapes)
+                    .into_iter()
+                    .filter(|p| p.area() > sliver)
+                    .collect();
+                (!polygons.is_empty()).then_some((polygons, fractions, level))
+            })
+            .collect();
+        let count = pieces.len();
+        let mut regions = Vec::new();
+        for (index, (polygons, fractions, level)) in pieces.into_iter().enumerate() {
+            let composition = Composition::new(fractions)?;
             for polygon in polygons {
                 regions.push(Region {
                     family: ctx.family,
@@ -277,6 +360,7 @@ fn build(config: &StageConfig<'_>) -> Result<AnyStage> {
     Ok(AnyStage::Discretise(Box::new(Sources {
         sources,
         tolerance: o.tolerance,
+        combine: o.combine,
     })))
 }
 
@@ -296,6 +380,12 @@ lamina_core::register_stage!(StageFactory {
                 "float",
                 "0.001",
                 "largest chord error of curved step boundaries (mm)"
+            ),
+            OptionSpec::new(
+                "combine",
+                "string",
+                "\"intersection\"",
+                "where Eq. 8 blends: `intersection` (the paper's regularised booleans: only where effective grading regions 0 <= f <= 1 overlap; a source alone keeps its own composition) or `everywhere` (every source at every point)"
             ),
         ],
         example: "use = \"sources\"\nsources = [{ kind = \"axis\", at = [0.0, 0.0, 0.0], width = 10.0, start = \"red\", end = \"green\" }]",
