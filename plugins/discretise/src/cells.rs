@@ -1,19 +1,17 @@
-//! Circumferential cells (Fig. 13): each sub-region split along its length into cells
-//! by angular sectors about the family's centre (the centre of its largest hole, or the
-//! pole of a family without holes), so that a grader can vary the material around the
-//! contours too. The sectors are built on the family's grid and share their edges, so
-//! the cells of a region tile it exactly.
+//! Circumferential cells (Fig. 13): each sub-region split along its own offset contour
+//! into cells of equal arc length, so that a grader can vary the material around the
+//! contours too. The cuts run across the ring toward its largest hole (toward its most
+//! inland point in a core); they are sliced on the family's grid, so the cells of a
+//! region tile it exactly.
 
 use i_overlay::core::fill_rule::FillRule;
-use i_overlay::core::overlay::{Overlay, ShapeType};
-use i_overlay::core::overlay_rule::OverlayRule;
-use i_overlay::i_float::int::point::IntPoint;
+use i_overlay::string::line::IntLine;
+use i_overlay::string::slice::IntSlice;
 use lamina_core::stage::{OptionSpec, StageConfig};
-use lamina_core::{Point2, Polygon, Region, Result};
+use lamina_core::{Contour, Point2, Polygon, Region, Result, Vector2};
 
-use crate::bands::{options, solver};
 use crate::grid::Grid;
-use crate::measure::pole;
+use crate::measure::{interior_point, pole};
 use crate::regions::region;
 
 /// More cells around one region than anyone could deposit: a guard against typos.
@@ -23,14 +21,14 @@ pub const AROUND_OPTION: OptionSpec = OptionSpec::new(
     "cells_around",
     "integer",
     "none",
-    "split every sub-region into this many circumferential cells (equal angles about the family's centre)",
+    "split every sub-region into this many circumferential cells of equal arc length along its outer contour",
 );
 
 pub const LENGTH_OPTION: OptionSpec = OptionSpec::new(
     "cell_length",
     "float",
     "none",
-    "split every sub-region into circumferential cells about this long (mm, along its middle)",
+    "split every sub-region into circumferential cells of equal arc length about this long (mm, along its middle)",
 );
 
 /// How sub-regions are split around.
@@ -38,9 +36,9 @@ pub const LENGTH_OPTION: OptionSpec = OptionSpec::new(
 pub enum Cells {
     #[default]
     None,
-    /// This many equal sectors.
+    /// This many cells of equal arc length.
     Around(usize),
-    /// Sectors about this long (mm) along the region's middle.
+    /// Cells about this long (mm) along the region's middle.
     Length(f64),
 }
 
@@ -66,7 +64,7 @@ impl Cells {
         }
     }
 
-    /// Number of sectors for one region.
+    /// Number of cells for one region.
     fn count(&self, polygon: &Polygon) -> usize {
         match *self {
             Cells::None => 1,
@@ -82,89 +80,158 @@ impl Cells {
     }
 
     /// Splits every region of `regions` (one family on `grid`) into its cells, each
-    /// with `cell = Some(i)` (numbered counter-clockwise from the +x direction) and a
-    /// reference point inside it.
-    pub fn split(&self, grid: &Grid, family: &Polygon, regions: &mut Vec<Region>) {
+    /// with `cell = Some(i)` and a reference point inside it. The cells of a region
+    /// have equal arc lengths along its own outer contour (the offset contour it starts
+    /// at): the cuts start at equal steps of arc length, counter-clockwise from the
+    /// contour's point farthest along +x, and run toward the contour's pole across the
+    /// region (see [`cuts`]).
+    pub fn split(&self, grid: &Grid, regions: &mut Vec<Region>) {
         if *self == Cells::None || regions.is_empty() {
             return;
         }
-        let centre = centre(family);
-        let bbox = family.bbox();
-        let reach = [
-            bbox.min,
-            bbox.max,
-            Point2::new(bbox.min.x, bbox.max.y),
-            Point2::new(bbox.max.x, bbox.min.y),
-        ]
-        .iter()
-        .map(|&p| (p - centre).norm())
-        .fold(0.0, f64::max);
-        // Far enough that the sectors' outer arcs (chords of at most 45 degrees) lie
-        // outside the family, and relative to its size, so that the sectors stay in
-        // the grid's range (a few times its half extent) whatever the scale.
-        let far = 2.0 * reach.max(f64::MIN_POSITIVE);
-        let mut overlay = Overlay::new_custom(0, options(), solver());
         let mut out = Vec::with_capacity(regions.len());
         for r in regions.drain(..) {
             let n = self.count(&r.polygon);
-            if n <= 1 {
+            let cuts = if n > 1 { cuts(grid, &r.polygon, n) } else { Vec::new() };
+            if cuts.is_empty() {
                 out.push(Region { cell: Some(0), ..r });
                 continue;
             }
-            let shape = grid.shape(&r.polygon);
-            let mut cell = 0;
-            for m in 0..n {
-                let sector = sector(grid, centre, far, m, n);
-                overlay.clear();
-                overlay.add_contour(&sector, ShapeType::Clip);
-                for c in &shape {
-                    overlay.add_contour(c, ShapeType::Subject);
-                }
-                let pieces = overlay.overlay(OverlayRule::Intersect, FillRule::NonZero);
-                for polygon in grid.polygons(&pieces) {
-                    if polygon.outer.len() < 3 {
-                        continue;
-                    }
-                    let mut c = region(r.family, r.index, r.count, r.level, polygon);
-                    c.cell = Some(cell);
-                    out.push(c);
-                    cell += 1;
-                }
+            let shape = vec![grid.shape(&r.polygon)];
+            let pieces = shape.slice_by_lines(&cuts, FillRule::NonZero);
+            let mut cells: Vec<(f64, Polygon)> = grid
+                .polygons(&pieces)
+                .into_iter()
+                .filter(|p| p.outer.len() >= 3)
+                .map(|p| (arc_position(&r.polygon.outer, interior_point(&p).unwrap_or_else(|| p.bbox().center())), p))
+                .collect();
+            // Numbered along the contour from the first cut.
+            cells.sort_by(|a, b| a.0.total_cmp(&b.0));
+            for (i, (_, polygon)) in cells.into_iter().enumerate() {
+                let mut c = region(r.family, r.index, r.count, r.level, polygon);
+                c.cell = Some(i);
+                out.push(c);
             }
         }
         *regions = out;
     }
 }
 
-/// The point the sectors fan out from: the centre of the largest hole's bounding box,
-/// or the pole of a family without holes (its bounding-box centre if none is found).
-fn centre(family: &Polygon) -> Point2 {
-    match family.holes.iter().max_by(|a, b| a.area().total_cmp(&b.area())) {
-        Some(h) => h.bbox().center(),
-        None => pole(family, family.bbox().diagonal() * 1e-3)
-            .map(|(c, _)| c)
-            .unwrap_or_else(|| family.bbox().center()),
+/// Where a point projects onto a closed contour, as a fraction of its length from the
+/// contour's start point of [`start`].
+fn arc_position(outer: &Contour, p: Point2) -> f64 {
+    let pts = start(outer);
+    let total: f64 = perimeter(&pts);
+    let (mut best, mut at, mut run) = (f64::INFINITY, 0.0, 0.0);
+    for k in 0..pts.len() {
+        let (a, b) = (pts[k], pts[(k + 1) % pts.len()]);
+        let d = b - a;
+        let len = d.norm();
+        let t = if len > 0.0 { ((p - a).dot(&d) / (len * len)).clamp(0.0, 1.0) } else { 0.0 };
+        let dist = (a + d * t - p).norm();
+        if dist < best {
+            best = dist;
+            at = run + t * len;
+        }
+        run += len;
     }
+    if total > 0.0 { at / total } else { 0.0 }
 }
 
-/// Sector `m` of `n` about `centre` as a counter-clockwise grid contour reaching `far`
-/// mm out. Its two straight edges are computed from the angle alone, so neighbouring
-/// sectors share them exactly.
-fn sector(grid: &Grid, centre: Point2, far: f64, m: usize, n: usize) -> Vec<IntPoint<i32>> {
-    let at = |a: f64| grid.point(centre + lamina_core::Vector2::new(a.cos(), a.sin()) * far);
-    let (a0, a1) = (
-        std::f64::consts::TAU * m as f64 / n as f64,
-        std::f64::consts::TAU * (m + 1) as f64 / n as f64,
-    );
-    let steps = ((a1 - a0) / std::f64::consts::FRAC_PI_4).ceil().max(1.0) as usize;
-    let mut points = vec![grid.point(centre)];
-    for s in 0..=steps {
-        let a = if s == steps {
-            a1
-        } else {
-            a0 + (a1 - a0) * s as f64 / steps as f64
-        };
-        points.push(at(a));
+fn perimeter(pts: &[Point2]) -> f64 {
+    (0..pts.len()).map(|k| (pts[(k + 1) % pts.len()] - pts[k]).norm()).sum()
+}
+
+/// The contour's points counter-clockwise from its point farthest along +x (the lowest
+/// of those), so that cells start at the same side of every ring.
+fn start(outer: &Contour) -> Vec<Point2> {
+    let c = outer.clone().oriented(true);
+    let k = (0..c.points.len())
+        .max_by(|&i, &j| {
+            let (p, q) = (c.points[i], c.points[j]);
+            p.x.total_cmp(&q.x).then(q.y.total_cmp(&p.y))
+        })
+        .unwrap_or(0);
+    c.points[k..].iter().chain(&c.points[..k]).copied().collect()
+}
+
+/// The cut lines of a region into `n` cells of equal arc length along its outer
+/// contour, on the grid. Each cut runs from its point on the outer contour toward one
+/// centre up to where it first leaves the region: the pole (most inland point) of the
+/// region's largest hole, so that a ring is cut across to its inner side, or the pole
+/// of a core without holes, where the cuts meet. Cuts aimed at one point never cross
+/// each other, however thick the region.
+fn cuts(grid: &Grid, polygon: &Polygon, n: usize) -> Vec<IntLine<i32>> {
+    let pts = start(&polygon.outer);
+    if pts.len() < 3 {
+        return Vec::new();
     }
-    points
+    let total = perimeter(&pts);
+    let extent = polygon.bbox().diagonal();
+    if !(total > 0.0 && extent > 0.0) {
+        return Vec::new();
+    }
+    let target = match polygon.holes.iter().max_by(|a, b| a.area().total_cmp(&b.area())) {
+        Some(h) => Polygon::new(h.clone().oriented(true), Vec::new()),
+        None => polygon.clone(),
+    };
+    let Some((centre, _)) = pole(&target, extent * 1e-3) else {
+        return Vec::new();
+    };
+    // Beyond the boundary by a little, so that the cut crosses it cleanly.
+    let overshoot = 1e-3 * extent;
+    let mut lines = Vec::with_capacity(n);
+    for i in 0..n {
+        let p = at_length(&pts, total * i as f64 / n as f64);
+        let to_centre = centre - p;
+        let len = to_centre.norm();
+        if len.is_nan() || len <= overshoot {
+            continue;
+        }
+        let dir = to_centre / len;
+        let to = match first_exit(polygon, p, dir) {
+            Some(t) if t < len => p + dir * (t + overshoot),
+            _ => centre,
+        };
+        lines.push([grid.point(p - dir * overshoot), grid.point(to)]);
+    }
+    lines
+}
+
+/// The point at arc length `s` (taken around, any sign) along the closed contour `pts`.
+fn at_length(pts: &[Point2], s: f64) -> Point2 {
+    let total = perimeter(pts);
+    let mut s = s.rem_euclid(total);
+    for k in 0..pts.len() {
+        let (a, b) = (pts[k], pts[(k + 1) % pts.len()]);
+        let len = (b - a).norm();
+        if s <= len {
+            return if len > 0.0 { a + (b - a) * (s / len) } else { a };
+        }
+        s -= len;
+    }
+    pts[0]
+}
+
+/// How far the ray from `p` (on the outer contour) along `dir` runs inside the
+/// polygon before it meets a boundary again.
+fn first_exit(polygon: &Polygon, p: Point2, dir: Vector2) -> Option<f64> {
+    let eps = 1e-9 * polygon.bbox().diagonal();
+    let mut best: Option<f64> = None;
+    for c in polygon.contours() {
+        for (a, b) in c.edges() {
+            let e = b - a;
+            let den = dir.x * e.y - dir.y * e.x;
+            if den.abs() < 1e-300 {
+                continue;
+            }
+            let w = a - p;
+            let t = (w.x * e.y - w.y * e.x) / den;
+            let u = (w.x * dir.y - w.y * dir.x) / den;
+            if t > eps && (0.0..=1.0).contains(&u) && best.is_none_or(|b| t < b) {
+                best = Some(t);
+            }
+        }
+    }
+    best
 }

@@ -110,7 +110,7 @@ impl Discretiser for StepWidth {
         let depth = |k: usize| if k == 0 { 0.0 } else { distances[k - 1] };
         let bands = offset_bands(&base, grid.scale(), count, &self.inset, depth)?;
         let mut regions = from_bands(ctx, &grid, &bands, count, |k| self.truncation.level(k));
-        self.cells.split(&grid, &polygon, &mut regions);
+        self.cells.split(&grid, &mut regions);
         Ok(regions)
     }
 }

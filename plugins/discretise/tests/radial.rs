@@ -153,6 +153,37 @@ fn cells_split_every_ring_around_and_still_tile() {
     assert!(ring0.abs_diff(want) <= 1, "{ring0} cells vs {want}");
 }
 
+/// Fig. 13's cells divide each sub-region along its own offset contour into equal arc
+/// lengths, also where the hole is off centre (equal angles about the hole would give
+/// the cells of the outer rings very unequal lengths).
+#[test]
+fn cells_have_equal_arc_lengths_along_their_own_contour() {
+    let fam = OneFamily::new(circle(0.0, 0.0, 10.0, 720), vec![circle(4.0, 0.0, 3.0, 360)]);
+    // L_s = 3: rings 10..9 and 9..8 are annuli about the origin, the last reaches the hole.
+    let regions = fam.run(&*stage("use = \"offset\"\nnozzle = 1.0\ncells_around = 8"));
+    assert_tiles(&fam.polygon(), &regions);
+    for (j, radius) in [(0, 10.0), (1, 9.0)] {
+        let ring: Vec<_> = regions.iter().filter(|r| r.index == j).collect();
+        assert_eq!(ring.len(), 8, "ring {j}");
+        for c in &ring {
+            // The cell's share of the ring's outer circle.
+            let on = |p: Point2| (p.coords.norm() - radius).abs() < 2e-3;
+            let arc: f64 = c
+                .polygon
+                .outer
+                .edges()
+                .filter(|(a, b)| on(*a) && on(*b))
+                .map(|(a, b)| (b - a).norm())
+                .sum();
+            let want = 2.0 * PI * radius / 8.0;
+            assert!((arc - want).abs() / want < 0.02, "ring {j} cell {:?}: {arc} vs {want}", c.cell);
+        }
+    }
+    // With a cell length instead of a count, the cells still tile.
+    let regions = fam.run(&*stage("use = \"offset\"\nnozzle = 1.0\ncell_length = 3.0"));
+    assert_tiles(&fam.polygon(), &regions);
+}
+
 #[test]
 fn bad_radial_and_cell_options_are_refused() {
     assert!(build_error("use = \"radial\"\ncount = 0").contains("count"));
