@@ -389,8 +389,8 @@ fn real_models_discretise_into_tiling_sub_regions() {
 /// (the nozzle rule makes dozens of rings on the large models), radial lines,
 /// step-width with circumferential cells, and a distance field.
 const DISCRETISERS: &[&str] = &[
-    "use = \"offset\"\ncount = 10\nspacing = 0.4",
-    "use = \"offset\"\nnozzle = 0.4\nfrom = \"outer\"",
+    "use = \"offset\"\ncount = 10\nspacing = 0.4\nfrom = \"all\"",
+    "use = \"offset\"\nnozzle = 0.4",
     "use = \"radial\"\ncount = 10",
     "use = \"step-width\"\nstep = 0.25\ncells_around = 6",
     "use = \"distance-field\"\ncount = 5",

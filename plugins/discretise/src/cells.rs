@@ -92,7 +92,11 @@ impl Cells {
         let mut out = Vec::with_capacity(regions.len());
         for r in regions.drain(..) {
             let n = self.count(&r.polygon);
-            let cuts = if n > 1 { cuts(grid, &r.polygon, n) } else { Vec::new() };
+            let cuts = if n > 1 {
+                cuts(grid, &r.polygon, n)
+            } else {
+                Vec::new()
+            };
             if cuts.is_empty() {
                 out.push(Region { cell: Some(0), ..r });
                 continue;
@@ -103,7 +107,15 @@ impl Cells {
                 .polygons(&pieces)
                 .into_iter()
                 .filter(|p| p.outer.len() >= 3)
-                .map(|p| (arc_position(&r.polygon.outer, interior_point(&p).unwrap_or_else(|| p.bbox().center())), p))
+                .map(|p| {
+                    (
+                        arc_position(
+                            &r.polygon.outer,
+                            interior_point(&p).unwrap_or_else(|| p.bbox().center()),
+                        ),
+                        p,
+                    )
+                })
                 .collect();
             // Numbered along the contour from the first cut.
             cells.sort_by(|a, b| a.0.total_cmp(&b.0));
@@ -127,7 +139,11 @@ fn arc_position(outer: &Contour, p: Point2) -> f64 {
         let (a, b) = (pts[k], pts[(k + 1) % pts.len()]);
         let d = b - a;
         let len = d.norm();
-        let t = if len > 0.0 { ((p - a).dot(&d) / (len * len)).clamp(0.0, 1.0) } else { 0.0 };
+        let t = if len > 0.0 {
+            ((p - a).dot(&d) / (len * len)).clamp(0.0, 1.0)
+        } else {
+            0.0
+        };
         let dist = (a + d * t - p).norm();
         if dist < best {
             best = dist;
@@ -139,7 +155,9 @@ fn arc_position(outer: &Contour, p: Point2) -> f64 {
 }
 
 fn perimeter(pts: &[Point2]) -> f64 {
-    (0..pts.len()).map(|k| (pts[(k + 1) % pts.len()] - pts[k]).norm()).sum()
+    (0..pts.len())
+        .map(|k| (pts[(k + 1) % pts.len()] - pts[k]).norm())
+        .sum()
 }
 
 /// The contour's points counter-clockwise from its point farthest along +x (the lowest

@@ -3,8 +3,9 @@
 //! offset contour j runs through the points v_i + (j / N_R) (v'_i - v_i) of every line.
 //! With several inner contours (Fig. 12) each line goes to the nearest one; the closed
 //! loops this leaves are dropped by the positive winding rule and sharp turns by a
-//! spike filter. A family without holes grades toward its centre (the pole of
-//! inaccessibility). Sub-region j is the band between offset contours j and j + 1,
+//! spike filter. In a family without holes each line ends on the family's medial axis
+//! (the centre of the largest inscribed disc touching the outline at v_i), so the
+//! offset contours are insets of the outline. Sub-region j is the band between offset contours j and j + 1,
 //! clipped on the family's grid as for `offset`, so the tiling stays exact.
 
 use i_overlay::core::fill_rule::FillRule;
@@ -171,11 +172,11 @@ fn rays(outer: &Contour) -> Vec<Point2> {
 }
 
 /// The end v'_i of each radial line: on the nearest inner contour (by the distance to
-/// its enclosing circle about its centre), or the family's centre without holes.
+/// its enclosing circle about its centre), or on the family's medial axis without
+/// holes.
 fn ends(polygon: &Polygon, starts: &[Point2], precision: f64) -> Option<Vec<Point2>> {
     if polygon.holes.is_empty() {
-        let (c, _) = pole(polygon, precision)?;
-        return Some(vec![c; starts.len()]);
+        return medial_ends(polygon, starts, precision);
     }
     let targets: Vec<Target<'_>> = polygon
         .holes
@@ -198,6 +199,215 @@ fn ends(polygon: &Polygon, starts: &[Point2], precision: f64) -> Option<Vec<Poin
             })
             .collect(),
     )
+}
+
+/// Where the radial line from each start ends on the medial axis of a family without
+/// holes: the centre of the largest disc inside the family that touches the outer
+/// contour at the start, found along the inward normal there (the bisector at a
+/// corner). The discs tangent at v grow with their radius t, so t is the smallest
+/// radius at which the disc meets another edge, in closed form per edge. A convex
+/// family's lines thus end on its skeleton (a rectangle's on its mid-line and the
+/// bisectors of its corners), and the offset contours of Eq. 17 are insets of the
+/// outline, not copies scaled toward one pole.
+fn medial_ends(polygon: &Polygon, starts: &[Point2], precision: f64) -> Option<Vec<Point2>> {
+    if starts.len() < 3 {
+        return None;
+    }
+    let outer = polygon.outer.clone().oriented(true);
+    let edges: Vec<(Point2, Point2)> = outer.edges().collect();
+    let eps = precision.max(1e-12);
+    let grid = EdgeGrid::new(&edges);
+    let mut seen = vec![usize::MAX; edges.len()];
+    let mut out = Vec::with_capacity(starts.len());
+    let unit = |a: Point2, b: Point2| {
+        let e = b - a;
+        let el = e.norm();
+        (el > 0.0).then(|| (e / el, el))
+    };
+    let inward = |u: lamina_core::Vector2| lamina_core::Vector2::new(-u.y, u.x);
+    for (index, &v) in starts.iter().enumerate() {
+        // The edges through v (one inside an edge, two at a vertex), and the inward
+        // normal there: the edge's, or the corner's bisector.
+        let mut incident: Vec<usize> = Vec::with_capacity(2);
+        for r in 0..2 {
+            grid.ring(v, r, |e| {
+                let (a, b) = edges[e];
+                if !incident.contains(&e)
+                    && unit(a, b).is_some_and(|(u, el)| {
+                        (v - a).perp(&u).abs() <= eps && (-eps..=el + eps).contains(&(v - a).dot(&u))
+                    })
+                {
+                    incident.push(e);
+                }
+            });
+        }
+        let sum = incident
+            .iter()
+            .filter_map(|&k| unit(edges[k].0, edges[k].1))
+            .fold(lamina_core::Vector2::zeros(), |s, (u, _)| s + inward(u));
+        let norm = sum.norm();
+        if incident.is_empty() || norm <= 1e-12 {
+            out.push(v);
+            continue;
+        }
+        let nrm = sum / norm;
+        // The disc centred at v + n t touches the edges through v at radius k t: at a
+        // convex corner the sine of its half angle, elsewhere 1 (at v itself).
+        let k = incident
+            .iter()
+            .filter_map(|&e| unit(edges[e].0, edges[e].1).map(|(u, el)| (e, u, el)))
+            .map(|(e, u, el)| {
+                let along = (v - edges[e].0).dot(&u) + nrm.dot(&u) * 1e-6;
+                if (0.0..=el).contains(&along) {
+                    inward(u).dot(&nrm)
+                } else {
+                    1.0
+                }
+            })
+            .fold(1.0f64, f64::min)
+            .max(1e-6);
+        let mut t_min = f64::INFINITY;
+        // Edges in rings of grid cells about v, nearest first: an edge at distance
+        // delta from v meets the disc only once its diameter, at most 2 t, reaches it.
+        for r in 0..=grid.rings() {
+            if (r as f64 - 1.0) * grid.cell > 2.0 * t_min {
+                break;
+            }
+            grid.ring(v, r, |e| {
+                if seen[e] == index || incident.contains(&e) {
+                    return;
+                }
+                seen[e] = index;
+                let (a, b) = edges[e];
+                let Some((u, el)) = unit(a, b) else { return };
+                // Touching the edge's line: m . (v + n t - a) = k t, m its inward normal.
+                let m = inward(u);
+                let den = k - m.dot(&nrm);
+                if den > 1e-12 {
+                    let t = m.dot(&(v - a)) / den;
+                    if t > eps {
+                        let s = (v + nrm * t - a).dot(&u);
+                        if (0.0..=el).contains(&s) {
+                            t_min = t_min.min(t);
+                            return;
+                        }
+                    }
+                }
+                // Touching an end point p: |v + n t - p| = k t.
+                for p in [a, b] {
+                    let w = v - p;
+                    if w.norm() <= eps {
+                        continue;
+                    }
+                    let (qa, qb, qc) = (1.0 - k * k, 2.0 * nrm.dot(&w), w.norm_squared());
+                    let t = if qa.abs() < 1e-12 {
+                        if qb < 0.0 { -qc / qb } else { f64::INFINITY }
+                    } else {
+                        let disc = qb * qb - 4.0 * qa * qc;
+                        if disc < 0.0 {
+                            f64::INFINITY
+                        } else {
+                            let root = disc.sqrt();
+                            [(-qb - root) / (2.0 * qa), (-qb + root) / (2.0 * qa)]
+                                .into_iter()
+                                .filter(|t| *t > eps)
+                                .fold(f64::INFINITY, f64::min)
+                        }
+                    };
+                    t_min = t_min.min(t);
+                }
+            });
+        }
+        out.push(if t_min.is_finite() { v + nrm * t_min } else { v });
+    }
+    Some(out)
+}
+
+/// The edges of a contour bucketed on a uniform grid of square cells, so that the
+/// edges near a point are found ring by ring of cells.
+struct EdgeGrid {
+    min: Point2,
+    cell: f64,
+    nx: usize,
+    ny: usize,
+    cells: Vec<Vec<usize>>,
+}
+
+impl EdgeGrid {
+    fn new(edges: &[(Point2, Point2)]) -> Self {
+        let bbox = lamina_core::BBox2::from_points(edges.iter().map(|e| e.0));
+        let side = ((edges.len() as f64).sqrt().ceil() as usize).clamp(1, 512);
+        let extent = bbox.width().max(bbox.height());
+        let cell = if extent > 0.0 && extent.is_finite() {
+            extent / side as f64
+        } else {
+            1.0
+        };
+        let nx = ((bbox.width() / cell) as usize + 1).min(side + 1);
+        let ny = ((bbox.height() / cell) as usize + 1).min(side + 1);
+        let mut grid = EdgeGrid {
+            min: bbox.min,
+            cell,
+            nx,
+            ny,
+            cells: vec![Vec::new(); nx * ny],
+        };
+        for (e, &(a, b)) in edges.iter().enumerate() {
+            let (i0, j0) = grid.index(Point2::new(a.x.min(b.x), a.y.min(b.y)));
+            let (i1, j1) = grid.index(Point2::new(a.x.max(b.x), a.y.max(b.y)));
+            for j in j0..=j1 {
+                for i in i0..=i1 {
+                    grid.cells[j * nx + i].push(e);
+                }
+            }
+        }
+        grid
+    }
+
+    fn index(&self, p: Point2) -> (usize, usize) {
+        let f = |v: f64, n: usize| {
+            if v.is_nan() || v <= 0.0 {
+                0
+            } else {
+                (v as usize).min(n - 1)
+            }
+        };
+        (
+            f((p.x - self.min.x) / self.cell, self.nx),
+            f((p.y - self.min.y) / self.cell, self.ny),
+        )
+    }
+
+    /// The largest ring that holds any cell.
+    fn rings(&self) -> usize {
+        self.nx.max(self.ny)
+    }
+
+    /// Calls `f` with every edge of the cells r rings (Chebyshev distance) from the
+    /// cell of `p`; an edge in several cells comes several times.
+    fn ring(&self, p: Point2, r: usize, mut f: impl FnMut(usize)) {
+        let (ci, cj) = self.index(p);
+        let (ci, cj, r) = (ci as isize, cj as isize, r as isize);
+        let mut visit = |i: isize, j: isize| {
+            if i >= 0 && j >= 0 && (i as usize) < self.nx && (j as usize) < self.ny {
+                for &e in &self.cells[j as usize * self.nx + i as usize] {
+                    f(e);
+                }
+            }
+        };
+        if r == 0 {
+            visit(ci, cj);
+            return;
+        }
+        for i in ci - r..=ci + r {
+            visit(i, cj - r);
+            visit(i, cj + r);
+        }
+        for j in cj - r + 1..=cj + r - 1 {
+            visit(ci - r, j);
+            visit(ci + r, j);
+        }
+    }
 }
 
 /// Drops the vertices where the contour turns back sharply (more than about 170

@@ -120,6 +120,25 @@ fn several_holes_and_no_holes_tile() {
     assert_tiles(&bell.polygon(), &bell.run(&*stage("use = \"radial\"\ncount = 6")));
 }
 
+/// Without holes the radial lines end on the medial axis, not on one pole. In a
+/// 40 x 10 rectangle the lines from the long sides end on the mid-line 5 mm in, and
+/// those near a corner on the corner's bisector, as long as their distance from the
+/// corner. Eq. 17 then moves the boundary by r = j / 5 of each line: the strip cut off
+/// along each long side is 175 r mm² and along each short side 25 r, 400 r in all, so
+/// every ring has 80 mm². Lines converging on the centre would make scaled copies
+/// (rings of 144, 112, 80, 48 and 16 mm²).
+#[test]
+fn without_holes_lines_end_on_the_medial_axis() {
+    let fam = OneFamily::new(rect(0.0, 0.0, 40.0, 10.0), vec![]);
+    let regions = fam.run(&*stage("use = \"radial\"\ncount = 5"));
+    assert_tiles(&fam.polygon(), &regions);
+    assert_eq!(indices(&regions), vec![0, 1, 2, 3, 4]);
+    for j in 0..5 {
+        let got: f64 = regions.iter().filter(|r| r.index == j).map(|r| r.area()).sum();
+        assert!((got - 80.0).abs() / 80.0 < 0.03, "ring {j}: {got} vs 80");
+    }
+}
+
 #[test]
 fn cells_split_every_ring_around_and_still_tile() {
     let fam = OneFamily::new(circle(0.0, 0.0, 10.0, 360), vec![circle(0.0, 0.0, 5.0, 360)]);
@@ -176,7 +195,11 @@ fn cells_have_equal_arc_lengths_along_their_own_contour() {
                 .map(|(a, b)| (b - a).norm())
                 .sum();
             let want = 2.0 * PI * radius / 8.0;
-            assert!((arc - want).abs() / want < 0.02, "ring {j} cell {:?}: {arc} vs {want}", c.cell);
+            assert!(
+                (arc - want).abs() / want < 0.02,
+                "ring {j} cell {:?}: {arc} vs {want}",
+                c.cell
+            );
         }
     }
     // With a cell length instead of a count, the cells still tile.
