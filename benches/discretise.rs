@@ -136,6 +136,7 @@ fn offset_part(info: &RunInfo, layers: &[(Layer, ContourTree)], dir: &Path, runs
                             info,
                             layer,
                             tree,
+                            mesh: None,
                             part: 0,
                             family,
                         };
@@ -213,6 +214,10 @@ fn field_part(layers: &[(Layer, ContourTree)], runs: usize) {
     let df = DistanceField {
         feature: Feature::Boundary,
         point: None,
+        points: Vec::new(),
+        faces: Default::default(),
+        surfaces: Default::default(),
+        width: None,
         levels: Levels::Equal(11),
         cells: 512,
         cell_size: None,
@@ -223,7 +228,7 @@ fn field_part(layers: &[(Layer, ContourTree)], runs: usize) {
     for (layer, tree) in layers {
         for f in 0..tree.families.len() {
             let polygon = tree.family_polygon(&layer.contours, f);
-            if let Some(iso) = df.iso_sets(&polygon) {
+            if let Some(iso) = df.iso_sets(&polygon, None) {
                 loops += iso.sets.iter().map(Vec::len).sum::<usize>();
             }
         }

@@ -354,6 +354,7 @@ fn real_models_discretise_into_tiling_sub_regions() {
                     info: &info,
                     layer: &layer,
                     tree: &tree,
+                    mesh: None,
                     part: 0,
                     family: f,
                 };

@@ -97,12 +97,33 @@ fn gear_graded_by_the_wave_function() {
     }
 }
 
-/// Fig. 19: the blade graded across each layer and along Z at once; every region's
-/// ceramic fraction is (1 * r_i + 2 * (1 - r_j)) / 3 with r_i = layer / 69 and
-/// r_j = j / (N_R - 1).
+/// Fig. 19: the blade graded across each layer and along Z at once, with two pairs of
+/// materials: red (ductile) on the first layer to green (hard) on the last along Z
+/// (Eq. 9: r_i = i / 69), ceramic (yellow) at the skin to metal (blue) inside across
+/// (Eq. 25: f_ceramic = 1 - r_j, r_j = j / (N_R - 1)), combined with equal weights.
 #[test]
 fn blade_graded_along_z_and_across_at_once() {
     let plan = run("blade-zxy.toml", "blade-zxy.json");
+    let materials: Vec<(&str, [u64; 3])> = plan["materials"]
+        .as_array()
+        .expect("materials")
+        .iter()
+        .map(|m| {
+            let c = m["colour"].as_array().expect("colour");
+            (
+                m["name"].as_str().expect("name"),
+                [0, 1, 2].map(|k| c[k].as_u64().expect("rgb")),
+            )
+        })
+        .collect();
+    for (name, rgb) in [
+        ("red", [255, 0, 0]),
+        ("green", [0, 255, 0]),
+        ("ceramic", [255, 255, 0]),
+        ("metal", [0, 0, 255]),
+    ] {
+        assert!(materials.contains(&(name, rgb)), "Fig. 19's {name} {rgb:?}");
+    }
     let mut checked = 0;
     for layer in plan["layers"].as_array().expect("layers") {
         let ri = (layer["index"].as_f64().expect("index") / 69.0).min(1.0);
@@ -114,13 +135,22 @@ fn blade_graded_along_z_and_across_at_once() {
                 } else {
                     0.0
                 };
-                let want = (ri + 2.0 * (1.0 - rj)) / 3.0;
-                let got = r["composition"]["ceramic"].as_f64().expect("ceramic");
-                assert!(
-                    (got - want).abs() < 1e-9,
-                    "layer {}: {got} vs {want}",
-                    layer["index"]
-                );
+                let c = &r["composition"];
+                let got = |m: &str| c[m].as_f64().unwrap_or(0.0);
+                for (m, want) in [
+                    ("red", (1.0 - ri) / 2.0),
+                    ("green", ri / 2.0),
+                    ("ceramic", (1.0 - rj) / 2.0),
+                    ("metal", rj / 2.0),
+                ] {
+                    assert!(
+                        (got(m) - want).abs() < 1e-9,
+                        "layer {} region {}: {m} {} vs {want}",
+                        layer["index"],
+                        r["index"],
+                        got(m)
+                    );
+                }
                 checked += 1;
             }
         }

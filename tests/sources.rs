@@ -154,3 +154,30 @@ fn three_sources_combine_by_eq_8_where_their_regions_intersect() {
         "pure regions: {paper} with the paper's booleans, {blended} blended everywhere"
     );
 }
+
+/// A distance field from chosen faces of the part's mesh, measured in space: the top
+/// face of a 4 mm box grades its layers along Z (layer mid-heights 3.5, 2.5, 1.5 and
+/// 0.5 mm below it, r = d / 4 in four parts).
+#[test]
+fn a_surface_feature_measures_from_the_mesh_in_space() {
+    let text = "[model]\nuse = \"box\"\nsize = [40.0, 20.0, 4.0]\n\
+        [materials.a]\ncolour = [255, 0, 0]\n[materials.b]\ncolour = [0, 0, 255]\n\
+        [slice]\nuse = \"uniform\"\nthickness = 1.0\n\
+        [discretise]\nuse = \"distance-field\"\nfeature = \"surface\"\n\
+        faces = { normal = [0.0, 0.0, 1.0], within = 5.0 }\ncount = 4\nwidth = 4.0\n\
+        [grade]\nuse = \"xy\"\n\
+        [[output]]\nuse = \"json\"\npath = \"plan.json\"\n";
+    let plan = run(text);
+    let got: Vec<Vec<u64>> = plan["layers"]
+        .as_array()
+        .expect("layers")
+        .iter()
+        .map(|l| {
+            regions(l)
+                .iter()
+                .map(|r| r["index"].as_u64().expect("index"))
+                .collect()
+        })
+        .collect();
+    assert_eq!(got, [[3], [2], [1], [0]]);
+}

@@ -19,6 +19,7 @@ pub mod script;
 pub mod source;
 pub mod stage;
 pub mod steps;
+pub mod surface;
 
 pub use error::{Error, Result};
 pub use geom::{BBox2, Contour, Point2, Polygon, Vector2};

@@ -614,6 +614,7 @@ impl Engine {
 
         let shared = LayerShared {
             info: &info,
+            meshes: &meshes,
             sequence: sequence.as_ref(),
             prepared: &prepared,
             part_mesh: &part_mesh,
@@ -712,6 +713,7 @@ impl Engine {
             part_mesh,
             selections,
             timings,
+            meshes: _,
         } = *shared;
         // Each distinct mesh is cut and sorted once per layer.
         let mut cut: Vec<Option<(Layer, crate::model::ContourTree)>> =
@@ -758,7 +760,7 @@ impl Engine {
             let Some((layer, tree)) = &cut[mi] else { continue };
             let families = selections.families(pi, slot.index, layer, tree, part_mesh);
             let part_layer = self
-                .process_part(pi, layer, tree, families, info, timings)
+                .process_part(pi, layer, tree, families, shared)
                 .map_err(|e| e.in_part(&p.name))?;
             parts.push(part_layer);
         }
@@ -786,9 +788,10 @@ impl Engine {
         layer: &Layer,
         tree: &crate::model::ContourTree,
         families: Vec<usize>,
-        info: &RunInfo,
-        timings: &Timings,
+        shared: &LayerShared<'_>,
     ) -> Result<PartLayer> {
+        let (info, timings) = (shared.info, shared.timings);
+        let mesh = shared.meshes.get(shared.part_mesh[pi]).map(|m| &**m);
         let p = &self.parts[pi];
         let n_materials = p.materials.len();
         let mut regions = Vec::new();
@@ -797,6 +800,7 @@ impl Engine {
                 info,
                 layer,
                 tree,
+                mesh,
                 part: pi,
                 family: f,
             };
@@ -850,6 +854,8 @@ impl Engine {
 #[derive(Clone, Copy)]
 struct LayerShared<'a> {
     info: &'a RunInfo,
+    /// The meshes as sliced (placed and oriented), for stages that measure in space.
+    meshes: &'a [Arc<Mesh>],
     sequence: Option<&'a Sequence>,
     prepared: &'a [Box<dyn MeshSlicer>],
     part_mesh: &'a [usize],

@@ -230,6 +230,10 @@ pub struct FamilyContext<'a> {
     pub info: &'a RunInfo,
     pub layer: &'a Layer,
     pub tree: &'a ContourTree,
+    /// The part's mesh as it was sliced (placed and oriented), for stages that measure
+    /// in space (distances to chosen faces); `None` where no mesh exists (tests of a
+    /// stage on a drawn family).
+    pub mesh: Option<&'a crate::mesh::Mesh>,
     pub part: usize,
     pub family: usize,
 }

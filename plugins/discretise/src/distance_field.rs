@@ -4,12 +4,15 @@
 //! family, bound the sub-regions. With `step`, the levels follow the grading step-width
 //! truncation instead of equal parts.
 
+use lamina_core::mesh::Point3;
 use lamina_core::stage::{
     AnyStage, Discretiser, FamilyContext, OptionSpec, StageConfig, StageInfo, StageKind,
 };
 use lamina_core::steps::Truncation;
-use lamina_core::{Contour, Point2, Polygon, Region, Result, StageFactory};
+use lamina_core::surface::{FaceSelection, Surface};
+use lamina_core::{Contour, Error, Mesh, Point2, Polygon, Region, Result, StageFactory};
 use serde::Deserialize;
+use std::sync::{Arc, Mutex};
 
 use i_overlay::core::fill_rule::FillRule;
 use i_overlay::core::overlay::ShapeType;
@@ -39,6 +42,13 @@ pub enum Feature {
     Centre,
     /// The point `point = [x, y]`.
     Point,
+    /// The straight line through the two `points` (extended across the family).
+    Line,
+    /// The open polyline through `points` (a curve given by its points).
+    Polyline,
+    /// Chosen faces of the part's mesh (`faces`): the distance in space from the
+    /// layer's mid-plane to them.
+    Surface,
 }
 
 #[derive(Debug, Deserialize)]
@@ -48,12 +58,18 @@ struct Options {
     feature: Feature,
     #[serde(default)]
     point: Option<[f64; 2]>,
+    #[serde(default)]
+    points: Option<Vec<[f64; 2]>>,
+    #[serde(default)]
+    faces: Option<FaceSelection>,
     #[serde(default = "default_count")]
     count: usize,
     #[serde(default)]
     step: Option<f64>,
     #[serde(default)]
     spacing: Option<f64>,
+    #[serde(default)]
+    width: Option<f64>,
     #[serde(default = "default_cells")]
     cells: usize,
     #[serde(default)]
@@ -122,6 +138,36 @@ impl Levels {
     }
 }
 
+/// The chosen faces of each mesh a stage has met, keyed by the mesh's address: built
+/// once per run, shared by the layers' threads.
+#[derive(Debug, Default)]
+pub struct Surfaces(Mutex<Vec<(usize, Option<Arc<Surface>>)>>);
+
+impl Clone for Surfaces {
+    fn clone(&self) -> Self {
+        Surfaces::default()
+    }
+}
+
+impl Surfaces {
+    /// The surface of `faces` on `mesh`, built on first use.
+    pub fn of(
+        &self,
+        mesh: &Mesh,
+        faces: &FaceSelection,
+    ) -> std::result::Result<Option<Arc<Surface>>, String> {
+        let key = mesh as *const Mesh as usize;
+        let mut known = self.0.lock().unwrap_or_else(|e| e.into_inner());
+        if let Some((_, s)) = known.iter().find(|(k, _)| *k == key) {
+            return Ok(s.clone());
+        }
+        let chosen = faces.select(mesh)?;
+        let surface = Surface::new(mesh, &chosen).map(Arc::new);
+        known.push((key, surface.clone()));
+        Ok(surface)
+    }
+}
+
 /// One family's field and its iso-loops.
 #[derive(Debug, Clone)]
 pub struct IsoSets {
@@ -139,19 +185,51 @@ pub struct IsoSets {
 pub struct DistanceField {
     pub feature: Feature,
     pub point: Option<Point2>,
+    /// The points of a `line` (two) or a `polyline`.
+    pub points: Vec<Point2>,
+    /// The faces of a `surface` feature.
+    pub faces: FaceSelection,
+    /// The chosen faces of each mesh met so far (by address), built once per run.
+    pub surfaces: Surfaces,
     pub levels: Levels,
     pub cells: usize,
     pub cell_size: Option<f64>,
     /// Circumferential cells of every sub-region.
     pub around: Cells,
+    /// The distance (mm) that r = 1 stands for, instead of each family's largest
+    /// distance: one scale for every layer (a surface feature's distance varies along
+    /// Z, not only in the layer).
+    pub width: Option<f64>,
 }
 
 impl DistanceField {
+    /// The line or polyline as a closed contour that runs there and back, so that its
+    /// edges are the path's segments (a line extended across the family).
+    fn path(&self, polygon: &Polygon) -> Contour {
+        let mut pts = self.points.clone();
+        if self.feature == Feature::Line && pts.len() == 2 {
+            let (a, b) = (pts[0], pts[1]);
+            let u = (b - a).normalize();
+            let bbox = polygon.bbox();
+            let reach = (bbox.center() - a).norm() + bbox.diagonal();
+            pts = vec![a - u * reach, b + u * reach];
+        }
+        let back: Vec<Point2> = pts
+            .iter()
+            .rev()
+            .skip(1)
+            .take(pts.len().saturating_sub(2))
+            .copied()
+            .collect();
+        pts.extend(back);
+        Contour::new(pts)
+    }
+
     /// The field of normalised distances r (border samples at `FLOOR`), the largest
     /// distance inside the family (mm, Eq. 2's max(d_ij)), the cut into levels and the
     /// iso-loops of every threshold, without clipping. `None` when the family has no
     /// inside at the grid's resolution.
-    pub fn iso_sets(&self, polygon: &Polygon) -> Option<IsoSets> {
+    pub fn iso_sets(&self, polygon: &Polygon, space: Option<(&Surface, f64)>) -> Option<IsoSets> {
         let bbox = polygon.bbox();
         let cells = match self.cell_size {
             Some(s) => ((bbox.width().max(bbox.height()) / s).ceil() as usize + 3).clamp(4, 8192),
@@ -169,6 +247,19 @@ impl DistanceField {
                 }
                 let holes: Vec<&Contour> = polygon.holes.iter().collect();
                 field.distance_to(&holes);
+            }
+            Feature::Line | Feature::Polyline => {
+                let path = self.path(polygon);
+                field.distance_to(&[&path]);
+            }
+            Feature::Surface => {
+                let (surface, z) = space?;
+                for j in 0..field.ny {
+                    for i in 0..field.nx {
+                        let p = field.point(i, j);
+                        field.values[j * field.nx + i] = surface.distance(Point3::new(p.x, p.y, z));
+                    }
+                }
             }
             Feature::Centre | Feature::Point => {
                 let c = match (self.feature, self.point) {
@@ -189,6 +280,7 @@ impl DistanceField {
             .filter(|(_, i)| **i)
             .map(|(v, _)| *v)
             .fold(0.0f64, f64::max);
+        let max = self.width.unwrap_or(max);
         if max.is_nan() || max <= 0.0 || max.is_infinite() {
             return None;
         }
@@ -224,7 +316,26 @@ impl Discretiser for DistanceField {
             return Ok(whole(ctx, polygon));
         };
         let base = clean(&vec![grid.shape(&polygon)]);
-        let Some(IsoSets { cut, sets, .. }) = self.iso_sets(&polygon).filter(|_| !base.is_empty()) else {
+        let surface = match (self.feature, ctx.mesh) {
+            (Feature::Surface, Some(mesh)) => self
+                .surfaces
+                .of(mesh, &self.faces)
+                .map_err(|e| Error::stage(STAGE, e))?,
+            (Feature::Surface, None) => {
+                return Err(Error::stage(
+                    STAGE,
+                    "`feature = \"surface\"` needs the part's mesh",
+                ));
+            }
+            _ => None,
+        };
+        if self.feature == Feature::Surface && surface.is_none() {
+            return Err(Error::stage(STAGE, "`faces` selects no face of the part's mesh"));
+        }
+        let z = ctx.layer.z - ctx.layer.thickness / 2.0;
+        let space = surface.as_deref().map(|s| (s, z));
+        let Some(IsoSets { cut, sets, .. }) = self.iso_sets(&polygon, space).filter(|_| !base.is_empty())
+        else {
             return Ok(whole(ctx, polygon));
         };
         let count = cut.levels.len();
@@ -279,9 +390,39 @@ fn build(config: &StageConfig<'_>) -> Result<AnyStage> {
         }
         (_, p) => p.map(|[x, y]| Point2::new(x, y)),
     };
+    let points: Vec<Point2> = o
+        .points
+        .unwrap_or_default()
+        .into_iter()
+        .map(|[x, y]| Point2::new(x, y))
+        .collect();
+    if points.iter().any(|p| !(p.x.is_finite() && p.y.is_finite())) {
+        return Err(config.error("points", "`points` must be finite coordinates (mm)"));
+    }
+    match o.feature {
+        Feature::Line if points.len() != 2 || (points[1] - points[0]).norm() == 0.0 => {
+            return Err(config.error(
+                "points",
+                "`feature = \"line\"` needs two distinct `points = [[x, y], [x, y]]`",
+            ));
+        }
+        Feature::Polyline if points.len() < 2 => {
+            return Err(config.error("points", "`feature = \"polyline\"` needs at least two `points`"));
+        }
+        _ => {}
+    }
+    let faces = o.faces.unwrap_or_default();
+    faces.check().map_err(|e| config.error("faces", e))?;
     Ok(AnyStage::Discretise(Box::new(DistanceField {
         feature: o.feature,
         point,
+        points,
+        faces,
+        surfaces: Surfaces::default(),
+        width: match o.width {
+            Some(w) => Some(crate::options::positive_mm(config, "width", w)?),
+            None => None,
+        },
         levels,
         cells: o.cells,
         cell_size: o.cell_size,
@@ -299,13 +440,25 @@ lamina_core::register_stage!(StageFactory {
                 "feature",
                 "string",
                 "\"boundary\"",
-                "where r = 0: `boundary` (signed), `outer`, `holes`, `centre` or `point`"
+                "where r = 0: `boundary` (signed), `outer`, `holes`, `centre`, `point`, `line`, `polyline` or `surface` (chosen faces of the part's mesh, measured in space)"
             ),
             OptionSpec::new(
                 "point",
                 "array of float",
                 "none",
                 "[x, y] (mm) of the feature `point`"
+            ),
+            OptionSpec::new(
+                "points",
+                "array of array of float",
+                "none",
+                "[[x, y], ...] (mm): two points of the feature `line`, or the points of the `polyline`"
+            ),
+            OptionSpec::new(
+                "faces",
+                "table",
+                "all faces",
+                "the faces of the feature `surface`: `{ normal = [x, y, z], within = 30.0 }` (outward normal within that many degrees) and/or `{ groups = [\"name\"] }` (named face groups of a 3MF)"
             ),
             OptionSpec::new(
                 "count",
@@ -324,6 +477,12 @@ lamina_core::register_stage!(StageFactory {
                 "float",
                 "none",
                 "iso-contours every `spacing` mm of distance (Fig. 7) instead of `count` parts of r; levels d / max(d) (Eq. 2)"
+            ),
+            OptionSpec::new(
+                "width",
+                "float",
+                "none",
+                "distance (mm) that r = 1 stands for (farther is r = 1); default each family's largest distance (Eq. 2's max(d_ij))"
             ),
             OptionSpec::new(
                 "cells",

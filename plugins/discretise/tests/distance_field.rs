@@ -79,12 +79,16 @@ fn fig_7_iso_contours_every_one_and_a_half_over_a_maximum_of_11_76() {
     let df = DistanceField {
         feature: Feature::Boundary,
         point: None,
+        points: Vec::new(),
+        faces: Default::default(),
+        surfaces: Default::default(),
+        width: None,
         levels: Levels::Spacing(1.5),
         cells: 256,
         cell_size: None,
         around: Default::default(),
     };
-    let iso = df.iso_sets(&fam.polygon()).expect("a field");
+    let iso = df.iso_sets(&fam.polygon(), None).expect("a field");
     assert!((iso.max - 11.76).abs() < 0.05, "max(d) = {}", iso.max);
     // C2-C8 (C1 is the boundary, d = 0).
     assert_eq!(iso.cut.thresholds.len(), 7);
@@ -116,4 +120,89 @@ fn fig_7_iso_contours_every_one_and_a_half_over_a_maximum_of_11_76() {
     // Fractions of the maximum stay available: eight equal parts of r.
     let parts = fam.run(&*stage("use = \"distance-field\"\ncount = 8"));
     assert_eq!(indices(&parts), (0..8).collect::<Vec<_>>());
+}
+
+/// Material features beyond the boundary, centre and point: a straight line (the
+/// bottom edge's line: d = y), a polyline (the mid-line: d = |y - 10|), and chosen
+/// faces of the part's mesh (its x = 0 side: d = x in space).
+#[test]
+fn line_polyline_and_surface_features() {
+    let fam = OneFamily::new(rect(0.0, 0.0, 40.0, 20.0), vec![]);
+    let strips = |regions: &[lamina_core::Region], want: &[f64]| {
+        assert_tiles(&fam.polygon(), regions);
+        assert_eq!(indices(regions), (0..want.len()).collect::<Vec<_>>());
+        for (j, w) in want.iter().enumerate() {
+            let got: f64 = regions.iter().filter(|r| r.index == j).map(|r| r.area()).sum();
+            assert!((got - w).abs() / w < 1e-2, "band {j}: {got} vs {w}");
+        }
+    };
+    // d = y, every 5 mm: four strips of 40 x 5.
+    let line = fam.run(&*stage(
+        "use = \"distance-field\"\nfeature = \"line\"\npoints = [[10.0, 0.0], [11.0, 0.0]]\nspacing = 5.0",
+    ));
+    strips(&line, &[200.0; 4]);
+    // d = |y - 10|, two equal parts of r: the middle band |y - 10| < 5, then the rest.
+    let mid = fam.run(&*stage(
+        "use = \"distance-field\"\nfeature = \"polyline\"\npoints = [[0.0, 10.0], [20.0, 10.0], [40.0, 10.0]]\ncount = 2",
+    ));
+    strips(&mid, &[400.0, 400.0]);
+    // The box's x = 0 face (outward normal -x): d = x, four equal parts.
+    let mut solid = OneFamily::new(rect(0.0, 0.0, 40.0, 20.0), vec![]);
+    solid.mesh = Some(box_mesh(40.0, 20.0, 10.0));
+    let side = solid.run(&*stage(
+        "use = \"distance-field\"\nfeature = \"surface\"\nfaces = { normal = [-1.0, 0.0, 0.0], within = 10.0 }\ncount = 4",
+    ));
+    strips(&side, &[200.0; 4]);
+    assert!(side[0].reference.x < 10.0 && side[3].reference.x > 30.0);
+    // Without a mesh, or with faces that select nothing, the stage says so.
+    let d = stage("use = \"distance-field\"\nfeature = \"surface\"");
+    let ctx_error = |fam: &OneFamily| fam.try_run(&*d).expect_err("refused").to_string();
+    assert!(ctx_error(&fam).contains("mesh"));
+    let none = stage(
+        "use = \"distance-field\"\nfeature = \"surface\"\nfaces = { normal = [1.0, 1.0, 1.0], within = 1.0 }",
+    );
+    assert!(
+        solid
+            .try_run(&*none)
+            .expect_err("refused")
+            .to_string()
+            .contains("no face")
+    );
+    assert!(
+        build_error("use = \"distance-field\"\nfeature = \"line\"\npoints = [[0.0, 0.0]]").contains("points")
+    );
+    assert!(
+        build_error("use = \"distance-field\"\nfeature = \"surface\"\nfaces = { normal = [0.0, 0.0, 0.0] }")
+            .contains("faces")
+    );
+}
+
+/// An axis-aligned box from the origin, outward winding.
+fn box_mesh(x: f64, y: f64, z: f64) -> lamina_core::Mesh {
+    use lamina_core::Point3;
+    let vertices = vec![
+        Point3::new(0.0, 0.0, 0.0),
+        Point3::new(x, 0.0, 0.0),
+        Point3::new(x, y, 0.0),
+        Point3::new(0.0, y, 0.0),
+        Point3::new(0.0, 0.0, z),
+        Point3::new(x, 0.0, z),
+        Point3::new(x, y, z),
+        Point3::new(0.0, y, z),
+    ];
+    let triangles = vec![
+        [0, 2, 1],
+        [0, 3, 2],
+        [4, 5, 6],
+        [4, 6, 7],
+        [0, 1, 5],
+        [0, 5, 4],
+        [2, 3, 7],
+        [2, 7, 6],
+        [1, 2, 6],
+        [1, 6, 5],
+        [0, 4, 7],
+        [0, 7, 3],
+    ];
+    lamina_core::Mesh::new("box", vertices, triangles)
 }

@@ -5,7 +5,7 @@
 //! (k_z M_z + k_xy M_xy) / (k_z + k_xy).
 
 use lamina_core::stage::{AnyStage, FamilyContext, Grader, OptionSpec, StageConfig, StageInfo, StageKind};
-use lamina_core::{Composition, Region, Result, StageFactory};
+use lamina_core::{Composition, Error, Region, Result, StageFactory};
 use serde::Deserialize;
 
 use crate::along_z::{Span, level, span};
@@ -25,6 +25,10 @@ struct Options {
     weights: [f64; 2],
     #[serde(default)]
     xy_level: bool,
+    #[serde(default)]
+    z_materials: Option<Vec<String>>,
+    #[serde(default)]
+    xy_materials: Option<Vec<String>>,
 }
 
 fn d_weights() -> [f64; 2] {
@@ -38,6 +42,35 @@ struct Both {
     weights: [f64; 2],
     /// Use the discretiser's level instead of j / (N_R - 1).
     xy_level: bool,
+    /// The materials each grading runs over (Fig. 19: red to green along Z, ceramic to
+    /// metal across); `None` for all of the part's materials.
+    z_materials: Option<Vec<String>>,
+    xy_materials: Option<Vec<String>>,
+}
+
+impl Both {
+    /// Indices into the part's materials of the names a grading runs over; all of them
+    /// when none are named.
+    fn indices(&self, ctx: &FamilyContext<'_>, names: &Option<Vec<String>>, key: &str) -> Result<Vec<usize>> {
+        let part = &ctx.info.parts[ctx.part];
+        match names {
+            None => Ok((0..part.materials.len()).collect()),
+            Some(names) => names
+                .iter()
+                .map(|name| {
+                    part.materials
+                        .iter()
+                        .position(|&m| ctx.info.materials[m].name == *name)
+                        .ok_or_else(|| {
+                            Error::stage(
+                                "grade:zxy",
+                                format!("`{key}`: part `{}` has no material `{name}`", part.name),
+                            )
+                        })
+                })
+                .collect(),
+        }
+    }
 }
 
 impl Grader for Both {
@@ -52,6 +85,16 @@ impl Grader for Both {
             (part.z_min, part.z_max),
         );
         let [kz, kxy] = self.weights;
+        let zi = self.indices(ctx, &self.z_materials, "z_materials")?;
+        let xyi = self.indices(ctx, &self.xy_materials, "xy_materials")?;
+        // A grading's composition over its own materials, placed among the part's.
+        let spread = |c: Composition, at: &[usize]| {
+            let mut f = vec![0.0; n];
+            for (&i, v) in at.iter().zip(c.fractions) {
+                f[i] += v;
+            }
+            f
+        };
         for region in regions.iter_mut() {
             let rxy = if self.xy_level {
                 region.level
@@ -63,12 +106,11 @@ impl Grader for Both {
                 "part `{}`, layer {} (z = {:.4}, r_z = {rz}), region {} (r_xy = {rxy})",
                 part.name, ctx.layer.index, ctx.layer.z, region.index
             );
-            let mz = self.z.composition(&args(rz), n, &context)?;
-            let mxy = self.xy.composition(&args(rxy), n, &context)?;
+            let mz = spread(self.z.composition(&args(rz), zi.len(), &context)?, &zi);
+            let mxy = spread(self.xy.composition(&args(rxy), xyi.len(), &context)?, &xyi);
             let mut f: Vec<f64> = mz
-                .fractions
                 .iter()
-                .zip(&mxy.fractions)
+                .zip(&mxy)
                 .map(|(a, b)| ((kz * a + kxy * b) / (kz + kxy)).clamp(0.0, 1.0))
                 .collect();
             let sum: f64 = f.iter().sum();
@@ -104,7 +146,22 @@ fn build(config: &StageConfig<'_>) -> Result<AnyStage> {
         span,
         weights: o.weights,
         xy_level: o.xy_level,
+        z_materials: pair(config, o.z_materials, "z_materials")?,
+        xy_materials: pair(config, o.xy_materials, "xy_materials")?,
     })))
+}
+
+/// A list of material names given for one grading: not empty, no name twice.
+fn pair(config: &StageConfig<'_>, names: Option<Vec<String>>, key: &str) -> Result<Option<Vec<String>>> {
+    if let Some(n) = &names {
+        if n.is_empty() {
+            return Err(config.error(key, "name at least one material"));
+        }
+        if n.iter().enumerate().any(|(i, a)| n[..i].contains(a)) {
+            return Err(config.error(key, "a material is named twice"));
+        }
+    }
+    Ok(names)
 }
 
 lamina_core::register_stage!(StageFactory {
@@ -130,6 +187,18 @@ lamina_core::register_stage!(StageFactory {
             OptionSpec::new("from_z", "float", "none", "height (mm) where r_z = 0"),
             OptionSpec::new("to_z", "float", "none", "height (mm) where r_z = 1"),
             OptionSpec::new("weights", "array of float", "[1.0, 1.0]", "k_z and k_xy of Eq. 8"),
+            OptionSpec::new(
+                "z_materials",
+                "array of string",
+                "all",
+                "the part's materials the Z grading runs over (Fig. 19: [\"red\", \"green\"])"
+            ),
+            OptionSpec::new(
+                "xy_materials",
+                "array of string",
+                "all",
+                "the part's materials the X-Y grading runs over (Fig. 19: [\"ceramic\", \"metal\"])"
+            ),
             OptionSpec::new(
                 "xy_level",
                 "bool",

@@ -166,6 +166,7 @@ mod tests {
             info: &info,
             layer: &layer,
             tree: &tree,
+            mesh: None,
             part: 0,
             family: 0,
         };
@@ -213,6 +214,7 @@ mod tests {
             info: &info,
             layer: &layer,
             tree: &tree,
+            mesh: None,
             part: 0,
             family: 0,
         };

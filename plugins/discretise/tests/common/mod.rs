@@ -43,6 +43,8 @@ pub struct OneFamily {
     pub info: RunInfo,
     pub layer: Layer,
     pub tree: ContourTree,
+    /// The part's mesh, for stages that measure in space.
+    pub mesh: Option<lamina_core::Mesh>,
 }
 
 impl OneFamily {
@@ -86,6 +88,7 @@ impl OneFamily {
                     holes: (1..=n).collect(),
                 }],
             },
+            mesh: None,
         }
     }
 
@@ -94,14 +97,20 @@ impl OneFamily {
     }
 
     pub fn run(&self, d: &dyn Discretiser) -> Vec<Region> {
+        self.try_run(d).expect("discretises")
+    }
+
+    #[allow(dead_code)]
+    pub fn try_run(&self, d: &dyn Discretiser) -> lamina_core::Result<Vec<Region>> {
         let ctx = FamilyContext {
             info: &self.info,
             layer: &self.layer,
             tree: &self.tree,
+            mesh: self.mesh.as_ref(),
             part: 0,
             family: 0,
         };
-        d.discretise(&ctx).expect("discretises")
+        d.discretise(&ctx)
     }
 }
 

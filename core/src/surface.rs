@@ -1,0 +1,330 @@
+//! Chosen faces of a part's mesh and the distance in space to them: the surface
+//! features of the papers (a material distance field from selected faces of the part,
+//! distance-field paper; the outer-surface grading source of Fig. 1d, grading-step-width
+//! paper), shared here so that every stage selects and measures alike.
+
+use serde::Deserialize;
+
+use crate::mesh::{Mesh, Point3, Vector3};
+
+/// Which faces of the mesh form the surface.
+#[derive(Debug, Clone, PartialEq, Deserialize, Default)]
+#[serde(deny_unknown_fields)]
+pub struct FaceSelection {
+    /// Faces whose outward normal lies within `within` degrees of this direction.
+    #[serde(default)]
+    pub normal: Option<[f64; 3]>,
+    /// Angle (degrees) for `normal`.
+    #[serde(default = "default_within")]
+    pub within: f64,
+    /// Faces of these named groups (a 3MF object's base materials).
+    #[serde(default)]
+    pub groups: Vec<String>,
+}
+
+fn default_within() -> f64 {
+    30.0
+}
+
+impl FaceSelection {
+    /// Refuses a zero normal or an angle outside [0, 180].
+    pub fn check(&self) -> std::result::Result<(), String> {
+        if let Some(n) = self.normal
+            && !(n.iter().all(|c| c.is_finite()) && n.iter().any(|c| *c != 0.0))
+        {
+            return Err(format!("`normal` must be a non-zero direction, not {n:?}"));
+        }
+        if !(0.0..=180.0).contains(&self.within) {
+            return Err(format!(
+                "`within` must be an angle in [0, 180] degrees, not {}",
+                self.within
+            ));
+        }
+        Ok(())
+    }
+
+    /// The selected triangles of `mesh`: all when nothing is asked, else those that
+    /// meet every given criterion.
+    pub fn select(&self, mesh: &Mesh) -> std::result::Result<Vec<usize>, String> {
+        let mut groups = Vec::with_capacity(self.groups.len());
+        for g in &self.groups {
+            match mesh.material_names.iter().position(|n| n == g) {
+                Some(i) => groups.push(i as u32),
+                None if mesh.material_names.is_empty() => {
+                    return Err(format!(
+                        "mesh `{}` has no named face groups (asked for `{g}`)",
+                        mesh.name
+                    ));
+                }
+                None => {
+                    return Err(format!(
+                        "mesh `{}` has no face group `{g}` (it has: {})",
+                        mesh.name,
+                        mesh.material_names.join(", ")
+                    ));
+                }
+            }
+        }
+        let cos = self.within.to_radians().cos();
+        let dir = self.normal.map(|n| Vector3::from(n).normalize());
+        Ok((0..mesh.triangles.len())
+            .filter(|&t| {
+                let by_group =
+                    groups.is_empty() || mesh.triangle_materials.get(t).is_some_and(|m| groups.contains(m));
+                let by_normal = dir.is_none_or(|d| {
+                    let [a, b, c] = mesh.triangle(t);
+                    let n = (b - a).cross(&(c - a));
+                    let len = n.norm();
+                    len > 0.0 && n.dot(&d) / len >= cos - 1e-12
+                });
+                by_group && by_normal
+            })
+            .collect())
+    }
+}
+
+/// The chosen triangles bucketed on a uniform grid, for distance queries.
+#[derive(Debug, Clone)]
+pub struct Surface {
+    triangles: Vec<[Point3; 3]>,
+    min: Point3,
+    cell: f64,
+    dims: [usize; 3],
+    cells: Vec<Vec<u32>>,
+}
+
+impl Surface {
+    /// The surface of the given triangles of `mesh`; `None` when there are none.
+    pub fn new(mesh: &Mesh, chosen: &[usize]) -> Option<Self> {
+        if chosen.is_empty() {
+            return None;
+        }
+        let triangles: Vec<[Point3; 3]> = chosen.iter().map(|&t| mesh.triangle(t)).collect();
+        let mut lo = Point3::new(f64::INFINITY, f64::INFINITY, f64::INFINITY);
+        let mut hi = Point3::new(f64::NEG_INFINITY, f64::NEG_INFINITY, f64::NEG_INFINITY);
+        for p in triangles.iter().flatten() {
+            lo = lo.inf(p);
+            hi = hi.sup(p);
+        }
+        let size = hi - lo;
+        let extent = size.x.max(size.y).max(size.z);
+        if !(extent.is_finite() && extent > 0.0) {
+            return None;
+        }
+        // About one triangle per cell on average, at most 128 cells a side.
+        let side = ((triangles.len() as f64).cbrt().ceil() as usize).clamp(1, 128);
+        let cell = extent / side as f64;
+        let dims = [0, 1, 2].map(|k| ((size[k] / cell) as usize + 1).min(side + 1));
+        let mut surface = Surface {
+            triangles,
+            min: lo,
+            cell,
+            dims,
+            cells: vec![Vec::new(); dims[0] * dims[1] * dims[2]],
+        };
+        for (i, t) in surface.triangles.iter().enumerate() {
+            let a = t[0].inf(&t[1]).inf(&t[2]);
+            let b = t[0].sup(&t[1]).sup(&t[2]);
+            let (i0, i1) = (surface.index(&a), surface.index(&b));
+            for z in i0[2]..=i1[2] {
+                for y in i0[1]..=i1[1] {
+                    for x in i0[0]..=i1[0] {
+                        let k = (z * dims[1] + y) * dims[0] + x;
+                        surface.cells[k].push(i as u32);
+                    }
+                }
+            }
+        }
+        Some(surface)
+    }
+
+    fn index(&self, p: &Point3) -> [usize; 3] {
+        [0, 1, 2].map(|k| {
+            let v = (p[k] - self.min[k]) / self.cell;
+            if v.is_nan() || v <= 0.0 {
+                0
+            } else {
+                (v as usize).min(self.dims[k] - 1)
+            }
+        })
+    }
+
+    /// The distance from `p` to the nearest chosen triangle: cells searched in shells
+    /// about the cell nearest to `p` until no farther shell can hold a nearer one.
+    pub fn distance(&self, p: Point3) -> f64 {
+        let c = self.index(&p);
+        // How far p lies outside the grid's box: shells start counting from there.
+        let outside = {
+            let hi = self.min + Vector3::from(self.dims.map(|d| d as f64 * self.cell));
+            let d = Vector3::new(
+                (self.min.x - p.x).max(p.x - hi.x).max(0.0),
+                (self.min.y - p.y).max(p.y - hi.y).max(0.0),
+                (self.min.z - p.z).max(p.z - hi.z).max(0.0),
+            );
+            d.norm()
+        };
+        let mut best = f64::INFINITY;
+        let max_shell = self.dims.iter().copied().max().unwrap_or(1);
+        for r in 0..=max_shell {
+            // Every cell of shell r is at least (r - 1) cells from p, and no nearer than
+            // the grid's box.
+            if outside.max((r as f64 - 1.0) * self.cell) > best {
+                break;
+            }
+            let r = r as isize;
+            for z in -r..=r {
+                for y in -r..=r {
+                    for x in -r..=r {
+                        if x.abs().max(y.abs()).max(z.abs()) != r {
+                            continue;
+                        }
+                        let q = [c[0] as isize + x, c[1] as isize + y, c[2] as isize + z];
+                        if (0..3).any(|k| q[k] < 0 || q[k] as usize >= self.dims[k]) {
+                            continue;
+                        }
+                        let k = (q[2] as usize * self.dims[1] + q[1] as usize) * self.dims[0] + q[0] as usize;
+                        // A triangle in several cells is measured again: cheaper than
+                        // remembering which were.
+                        for &t in &self.cells[k] {
+                            best = best.min(triangle_distance(p, &self.triangles[t as usize]));
+                        }
+                    }
+                }
+            }
+        }
+        best
+    }
+}
+
+/// Distance from `p` to a triangle (Ericson, Real-Time Collision Detection, 5.1.5:
+/// the closest point by the Voronoi regions of the corners, edges and face).
+pub fn triangle_distance(p: Point3, t: &[Point3; 3]) -> f64 {
+    let [a, b, c] = *t;
+    let (ab, ac, ap) = (b - a, c - a, p - a);
+    let (d1, d2) = (ab.dot(&ap), ac.dot(&ap));
+    if d1 <= 0.0 && d2 <= 0.0 {
+        return ap.norm();
+    }
+    let bp = p - b;
+    let (d3, d4) = (ab.dot(&bp), ac.dot(&bp));
+    if d3 >= 0.0 && d4 <= d3 {
+        return bp.norm();
+    }
+    let vc = d1 * d4 - d3 * d2;
+    if vc <= 0.0 && d1 >= 0.0 && d3 <= 0.0 {
+        let v = d1 / (d1 - d3);
+        return (p - (a + ab * v)).norm();
+    }
+    let cp = p - c;
+    let (d5, d6) = (ab.dot(&cp), ac.dot(&cp));
+    if d6 >= 0.0 && d5 <= d6 {
+        return cp.norm();
+    }
+    let vb = d5 * d2 - d1 * d6;
+    if vb <= 0.0 && d2 >= 0.0 && d6 <= 0.0 {
+        let w = d2 / (d2 - d6);
+        return (p - (a + ac * w)).norm();
+    }
+    let va = d3 * d6 - d5 * d4;
+    if va <= 0.0 && (d4 - d3) >= 0.0 && (d5 - d6) >= 0.0 {
+        let w = (d4 - d3) / ((d4 - d3) + (d5 - d6));
+        return (p - (b + (c - b) * w)).norm();
+    }
+    let denom = va + vb + vc;
+    if denom.abs() < f64::MIN_POSITIVE {
+        // A degenerate triangle: the nearest of its edges.
+        return [(a, b), (b, c), (c, a)]
+            .iter()
+            .map(|&(s, e)| {
+                let d = e - s;
+                let l2 = d.norm_squared();
+                let u = if l2 > 0.0 {
+                    ((p - s).dot(&d) / l2).clamp(0.0, 1.0)
+                } else {
+                    0.0
+                };
+                (p - (s + d * u)).norm()
+            })
+            .fold(f64::INFINITY, f64::min);
+    }
+    let (v, w) = (vb / denom, vc / denom);
+    (p - (a + ab * v + ac * w)).norm()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn cube() -> Mesh {
+        // A unit cube, outward winding.
+        let v = |x: f64, y: f64, z: f64| Point3::new(x, y, z);
+        let vertices = vec![
+            v(0.0, 0.0, 0.0),
+            v(1.0, 0.0, 0.0),
+            v(1.0, 1.0, 0.0),
+            v(0.0, 1.0, 0.0),
+            v(0.0, 0.0, 1.0),
+            v(1.0, 0.0, 1.0),
+            v(1.0, 1.0, 1.0),
+            v(0.0, 1.0, 1.0),
+        ];
+        let triangles = vec![
+            [0, 2, 1],
+            [0, 3, 2],
+            [4, 5, 6],
+            [4, 6, 7],
+            [0, 1, 5],
+            [0, 5, 4],
+            [2, 3, 7],
+            [2, 7, 6],
+            [1, 2, 6],
+            [1, 6, 5],
+            [0, 4, 7],
+            [0, 7, 3],
+        ];
+        Mesh::new("cube", vertices, triangles)
+    }
+
+    #[test]
+    fn faces_chosen_by_normal_and_their_distance() {
+        let mesh = cube();
+        let top = FaceSelection {
+            normal: Some([0.0, 0.0, 1.0]),
+            ..FaceSelection::default()
+        };
+        let chosen = top.select(&mesh).unwrap();
+        assert_eq!(chosen, [2, 3]);
+        let s = Surface::new(&mesh, &chosen).unwrap();
+        assert!((s.distance(Point3::new(0.5, 0.5, 0.25)) - 0.75).abs() < 1e-12);
+        assert!((s.distance(Point3::new(3.0, 0.5, 1.0)) - 2.0).abs() < 1e-12);
+        let all = Surface::new(&mesh, &FaceSelection::default().select(&mesh).unwrap()).unwrap();
+        assert!((all.distance(Point3::new(0.5, 0.4, 0.5)) - 0.4).abs() < 1e-12);
+        assert!(
+            FaceSelection {
+                groups: vec!["skin".into()],
+                ..FaceSelection::default()
+            }
+            .select(&mesh)
+            .unwrap_err()
+            .contains("no named face groups")
+        );
+    }
+
+    #[test]
+    fn point_to_triangle_in_every_region() {
+        let t = [
+            Point3::new(0.0, 0.0, 0.0),
+            Point3::new(2.0, 0.0, 0.0),
+            Point3::new(0.0, 2.0, 0.0),
+        ];
+        for (p, d) in [
+            (Point3::new(0.5, 0.5, 3.0), 3.0),
+            (Point3::new(-1.0, -1.0, 0.0), 2f64.sqrt()),
+            (Point3::new(1.0, -2.0, 0.0), 2.0),
+            (Point3::new(2.0, 2.0, 0.0), 2f64.sqrt()),
+            (Point3::new(3.0, 0.0, 0.0), 1.0),
+        ] {
+            assert!((triangle_distance(p, &t) - d).abs() < 1e-12, "{p:?}");
+        }
+    }
+}
