@@ -78,6 +78,8 @@ struct Options {
     cells_around: Option<usize>,
     #[serde(default)]
     cell_length: Option<f64>,
+    #[serde(default)]
+    cell_cuts: Option<crate::cells::Cuts>,
 }
 
 fn default_feature() -> Feature {
@@ -353,7 +355,7 @@ impl Discretiser for DistanceField {
             Ok(any)
         })?;
         let mut regions = from_bands(ctx, &grid, &bands, count, |k| cut.levels[k]);
-        self.around.split(&grid, &mut regions);
+        self.around.split(&grid, &polygon, &mut regions);
         Ok(regions)
     }
 }
@@ -426,7 +428,7 @@ fn build(config: &StageConfig<'_>) -> Result<AnyStage> {
         levels,
         cells: o.cells,
         cell_size: o.cell_size,
-        around: Cells::checked(o.cells_around, o.cell_length, config)?,
+        around: Cells::checked(o.cells_around, o.cell_length, o.cell_cuts, config)?,
     })))
 }
 
@@ -498,6 +500,7 @@ lamina_core::register_stage!(StageFactory {
             ),
             crate::cells::AROUND_OPTION,
             crate::cells::LENGTH_OPTION,
+            crate::cells::CUTS_OPTION,
         ],
         example: "use = \"distance-field\"\nfeature = \"outer\"\ncount = 4",
     },

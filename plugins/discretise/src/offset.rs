@@ -42,6 +42,8 @@ struct Options {
     cells_around: Option<usize>,
     #[serde(default)]
     cell_length: Option<f64>,
+    #[serde(default)]
+    cell_cuts: Option<crate::cells::Cuts>,
 }
 
 fn default_nozzle() -> f64 {
@@ -111,7 +113,7 @@ impl Discretiser for Offset {
         }
         let bands = offset_bands(&base, grid.scale(), count, &self.inset, |k| k as f64 * spacing)?;
         let mut regions = from_bands(ctx, &grid, &bands, count, |j| uniform_level(j, count));
-        self.cells.split(&grid, &mut regions);
+        self.cells.split(&grid, &polygon, &mut regions);
         Ok(regions)
     }
 }
@@ -137,7 +139,7 @@ fn checked(o: &Options, config: &StageConfig<'_>) -> Result<Offset> {
             join: o.join,
             tolerance: o.tolerance,
         },
-        cells: Cells::checked(o.cells_around, o.cell_length, config)?,
+        cells: Cells::checked(o.cells_around, o.cell_length, o.cell_cuts, config)?,
     })
 }
 
@@ -165,6 +167,7 @@ lamina_core::register_stage!(StageFactory {
             options::TOLERANCE,
             crate::cells::AROUND_OPTION,
             crate::cells::LENGTH_OPTION,
+            crate::cells::CUTS_OPTION,
         ],
         example: "use = \"offset\"\nnozzle = 0.2",
     },

@@ -47,6 +47,8 @@ struct Options {
     cells_around: Option<usize>,
     #[serde(default)]
     cell_length: Option<f64>,
+    #[serde(default)]
+    cell_cuts: Option<crate::cells::Cuts>,
 }
 
 fn default_nozzle() -> f64 {
@@ -474,7 +476,7 @@ impl Discretiser for Radial {
             Ok(true)
         })?;
         let mut regions = from_bands(ctx, &grid, &bands, count, |j| uniform_level(j, count));
-        self.cells.split(&grid, &mut regions);
+        self.cells.split(&grid, &polygon, &mut regions);
         Ok(regions)
     }
 }
@@ -483,7 +485,7 @@ fn build(config: &StageConfig<'_>) -> Result<AnyStage> {
     let o: Options = config.parse()?;
     positive_mm(config, "nozzle", o.nozzle)?;
     options::count(config, o.count)?;
-    let cells = Cells::checked(o.cells_around, o.cell_length, config)?;
+    let cells = Cells::checked(o.cells_around, o.cell_length, o.cell_cuts, config)?;
     Ok(AnyStage::Discretise(Box::new(Radial {
         nozzle: o.nozzle,
         count: o.count,
@@ -501,6 +503,7 @@ lamina_core::register_stage!(StageFactory {
             options::COUNT,
             crate::cells::AROUND_OPTION,
             crate::cells::LENGTH_OPTION,
+            crate::cells::CUTS_OPTION,
         ],
         example: "use = \"radial\"\ncount = 10",
     },

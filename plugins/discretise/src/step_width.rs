@@ -39,6 +39,8 @@ struct Options {
     cells_around: Option<usize>,
     #[serde(default)]
     cell_length: Option<f64>,
+    #[serde(default)]
+    cell_cuts: Option<crate::cells::Cuts>,
 }
 
 fn default_step() -> f64 {
@@ -110,7 +112,7 @@ impl Discretiser for StepWidth {
         let depth = |k: usize| if k == 0 { 0.0 } else { distances[k - 1] };
         let bands = offset_bands(&base, grid.scale(), count, &self.inset, depth)?;
         let mut regions = from_bands(ctx, &grid, &bands, count, |k| self.truncation.level(k));
-        self.cells.split(&grid, &mut regions);
+        self.cells.split(&grid, &polygon, &mut regions);
         Ok(regions)
     }
 }
@@ -134,7 +136,7 @@ fn build(config: &StageConfig<'_>) -> Result<AnyStage> {
             join: o.join,
             tolerance: o.tolerance,
         },
-        cells: Cells::checked(o.cells_around, o.cell_length, config)?,
+        cells: Cells::checked(o.cells_around, o.cell_length, o.cell_cuts, config)?,
     })))
 }
 
@@ -172,6 +174,7 @@ lamina_core::register_stage!(StageFactory {
             crate::options::TOLERANCE,
             crate::cells::AROUND_OPTION,
             crate::cells::LENGTH_OPTION,
+            crate::cells::CUTS_OPTION,
         ],
         example: "use = \"step-width\"\nstep = 0.25",
     },

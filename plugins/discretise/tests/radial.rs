@@ -147,6 +147,8 @@ fn cells_split_every_ring_around_and_still_tile() {
         "use = \"radial\"\ncount = 4\ncells_around = 8",
         "use = \"step-width\"\nstep = 0.25\nfrom = \"outer\"\ncells_around = 8",
         "use = \"distance-field\"\nfeature = \"outer\"\ncount = 4\ncells_around = 8",
+        "use = \"offset\"\ncount = 4\ncells_around = 8\ncell_cuts = \"arc\"",
+        "use = \"distance-field\"\nfeature = \"outer\"\ncount = 4\ncells_around = 8\ncell_cuts = \"arc\"",
     ] {
         let regions = fam.run(&*stage(text));
         assert_tiles(&fam.polygon(), &regions);
@@ -172,14 +174,17 @@ fn cells_split_every_ring_around_and_still_tile() {
     assert!(ring0.abs_diff(want) <= 1, "{ring0} cells vs {want}");
 }
 
-/// Fig. 13's cells divide each sub-region along its own offset contour into equal arc
-/// lengths, also where the hole is off centre (equal angles about the hole would give
-/// the cells of the outer rings very unequal lengths).
+/// Fig. 13's cells as `cell_cuts = "arc"` cuts them: each sub-region divided along its
+/// own offset contour into equal arc lengths, also where the hole is off centre (equal
+/// angles about the hole, the `sectors` cut, give the outer rings' cells very unequal
+/// lengths: this test fails with them).
 #[test]
 fn cells_have_equal_arc_lengths_along_their_own_contour() {
     let fam = OneFamily::new(circle(0.0, 0.0, 10.0, 720), vec![circle(4.0, 0.0, 3.0, 360)]);
     // L_s = 3: rings 10..9 and 9..8 are annuli about the origin, the last reaches the hole.
-    let regions = fam.run(&*stage("use = \"offset\"\nnozzle = 1.0\ncells_around = 8"));
+    let regions = fam.run(&*stage(
+        "use = \"offset\"\nnozzle = 1.0\ncells_around = 8\ncell_cuts = \"arc\"",
+    ));
     assert_tiles(&fam.polygon(), &regions);
     for (j, radius) in [(0, 10.0), (1, 9.0)] {
         let ring: Vec<_> = regions.iter().filter(|r| r.index == j).collect();
@@ -203,7 +208,9 @@ fn cells_have_equal_arc_lengths_along_their_own_contour() {
         }
     }
     // With a cell length instead of a count, the cells still tile.
-    let regions = fam.run(&*stage("use = \"offset\"\nnozzle = 1.0\ncell_length = 3.0"));
+    let regions = fam.run(&*stage(
+        "use = \"offset\"\nnozzle = 1.0\ncell_length = 3.0\ncell_cuts = \"arc\"",
+    ));
     assert_tiles(&fam.polygon(), &regions);
 }
 
