@@ -6,7 +6,7 @@
 //! far end, as the paper's green-to-black example does.
 
 use lamina_core::stage::{AnyStage, FamilyContext, Grader, OptionSpec, StageConfig, StageInfo, StageKind};
-use lamina_core::{Region, Result, StageFactory};
+use lamina_core::{Composition, Point2, Polygon, Region, Result, StageFactory};
 use serde::Deserialize;
 
 use crate::control::{CONTROL_OPTIONS, Control, ControlOptions, region_args};
@@ -19,6 +19,12 @@ enum LevelSource {
     Index,
     /// The level the discretiser gave the region (a distance ratio).
     Level,
+    /// Eq. 18 at points: r = D_e / L_r at every point of a grid inside the region (the
+    /// distance from the outer contour over the length of the line through the point
+    /// from the outer contour to the nearest hole, or to the family's most inland point
+    /// without holes); the control function is evaluated at each point, with its x and
+    /// y, and the region takes the mean composition.
+    Points,
 }
 
 #[derive(Debug, Deserialize)]
@@ -31,11 +37,71 @@ struct Options {
     k: Option<f64>,
     #[serde(default)]
     r: LevelSource,
+    #[serde(default)]
+    grid: Option<f64>,
 }
+
+/// The default spacing (mm) of the points of `r = "points"`.
+const DEFAULT_GRID: f64 = 0.5;
+
+/// At most this many points a region: beyond it the grid coarsens.
+const MAX_POINTS: usize = 4096;
 
 struct InPlane {
     control: Control,
     source: LevelSource,
+    grid: f64,
+}
+
+/// Points of a square grid of `step` mm inside `polygon` (at cell centres), coarsened
+/// to at most `MAX_POINTS`; `fallback` when none falls inside.
+fn grid_points(polygon: &Polygon, fallback: Point2, step: f64) -> Vec<Point2> {
+    let b = polygon.bbox();
+    let mut step = step;
+    while (b.width() / step).ceil() * (b.height() / step).ceil() > MAX_POINTS as f64 {
+        step *= 2.0;
+    }
+    let (nx, ny) = (
+        (b.width() / step).ceil() as usize,
+        (b.height() / step).ceil() as usize,
+    );
+    let mut points = Vec::new();
+    for j in 0..ny {
+        for i in 0..nx {
+            let p = Point2::new(
+                b.min.x + (i as f64 + 0.5) * step,
+                b.min.y + (j as f64 + 0.5) * step,
+            );
+            if polygon.contains(p) {
+                points.push(p);
+            }
+        }
+    }
+    if points.is_empty() {
+        points.push(fallback);
+    }
+    points
+}
+
+/// Eq. 18 at a point: the distance from the family's outer contour over the length of
+/// the line from the outer contour through the point to the nearest hole (to `pole`
+/// without holes).
+pub fn point_level(family: &Polygon, pole: Option<Point2>, p: Point2) -> f64 {
+    let d_out = family.outer.distance(p);
+    let d_in = if family.holes.is_empty() {
+        pole.map_or(0.0, |c| (p - c).norm())
+    } else {
+        family
+            .holes
+            .iter()
+            .map(|h| h.distance(p))
+            .fold(f64::INFINITY, f64::min)
+    };
+    if d_out + d_in > 0.0 {
+        (d_out / (d_out + d_in)).clamp(0.0, 1.0)
+    } else {
+        0.0
+    }
 }
 
 /// Eq. 21: r_j = j / (N_R - 1); a family that is one region sits at r = 0.
@@ -51,10 +117,40 @@ impl Grader for InPlane {
     fn grade(&self, ctx: &FamilyContext<'_>, regions: &mut [Region]) -> Result<()> {
         let part = &ctx.info.parts[ctx.part];
         let n = part.materials.len();
+        if self.source == LevelSource::Points {
+            let family = ctx.tree.family_polygon(&ctx.layer.contours, ctx.family);
+            // Without holes the lines run to the family's centre: the most inland of a
+            // coarse grid of its points.
+            let pole = family.holes.is_empty().then(|| {
+                grid_points(&family, family.bbox().center(), family.bbox().diagonal() / 64.0)
+                    .into_iter()
+                    .max_by(|a, b| family.outer.distance(*a).total_cmp(&family.outer.distance(*b)))
+                    .unwrap_or_else(|| family.bbox().center())
+            });
+            for region in regions.iter_mut() {
+                let points = grid_points(&region.polygon, region.reference, self.grid);
+                let mut sum = vec![0.0; n];
+                for &p in &points {
+                    let r = point_level(&family, pole, p);
+                    let mut args = region_args(ctx, region, r);
+                    (args.x, args.y) = (p.x, p.y);
+                    let context = format!(
+                        "part `{}`, layer {} (z = {:.4}), family {}, region {} at ({:.3}, {:.3}) (r = {r})",
+                        part.name, ctx.layer.index, ctx.layer.z, ctx.family, region.index, p.x, p.y
+                    );
+                    let c = self.control.composition(&args, n, &context)?;
+                    sum.iter_mut().zip(&c.fractions).for_each(|(s, f)| *s += f);
+                }
+                let total: f64 = sum.iter().sum();
+                let mean: Vec<f64> = sum.iter().map(|s| s / total).collect();
+                region.composition = Some(Composition::new(mean)?);
+            }
+            return Ok(());
+        }
         for region in regions.iter_mut() {
             let r = match self.source {
                 LevelSource::Index => index_level(region.index, region.count),
-                LevelSource::Level => region.level,
+                LevelSource::Level | LevelSource::Points => region.level,
             };
             let args = region_args(ctx, region, r);
             let context = format!(
@@ -80,7 +176,18 @@ fn build(config: &StageConfig<'_>) -> Result<AnyStage> {
         },
         (-1.0, 1.0),
     )?;
-    Ok(AnyStage::Grade(Box::new(InPlane { control, source: o.r })))
+    let grid = o.grid.unwrap_or(DEFAULT_GRID);
+    if !(grid.is_finite() && grid > 0.0) {
+        return Err(config.error(
+            "grid",
+            format!("`grid` must be a positive number of mm, not {grid}"),
+        ));
+    }
+    Ok(AnyStage::Grade(Box::new(InPlane {
+        control,
+        source: o.r,
+        grid,
+    })))
 }
 
 lamina_core::register_stage!(StageFactory {
@@ -98,7 +205,13 @@ lamina_core::register_stage!(StageFactory {
                 "r",
                 "string",
                 "\"index\"",
-                "\"index\" (j / (N_R - 1), Eq. 21) or \"level\" (the discretiser's distance ratio)"
+                "\"index\" (j / (N_R - 1), Eq. 21), \"level\" (the discretiser's distance ratio) or \"points\" (Eq. 18 at the points of a grid in each region, x and y given to the function, the mean composition)"
+            ),
+            OptionSpec::new(
+                "grid",
+                "float",
+                "0.5",
+                "spacing (mm) of the points of `r = \"points\"`"
             ),
         ],
         example: "use = \"xy\"\nf = \"linear\"\nmu = -1.0\nlambda = 1.0",
@@ -176,6 +289,7 @@ mod tests {
                 lambda: 1.0,
             },
             source: LevelSource::Index,
+            grid: DEFAULT_GRID,
         };
         let mut rs = regions(10);
         grader.grade(&ctx, &mut rs).expect("grades");
@@ -224,8 +338,70 @@ mod tests {
                 lambda: std::f64::consts::PI,
             },
             source: LevelSource::Index,
+            grid: DEFAULT_GRID,
         };
         let err = grader.grade(&ctx, &mut regions(3)).expect_err("three materials");
         assert!(err.to_string().contains("returns 3 fractions"), "{err}");
+    }
+
+    /// Eq. 18 at points: in a tube of radii 10 and 5, r = (10 - rho) / 5 at radius
+    /// rho; with f = 1 - r the green share of the whole ring is its mean over the
+    /// area, 1 - 4/9; a thin outer ring is nearly pure green, a thin inner one black.
+    #[test]
+    fn points_grade_by_eq_18_at_every_point() {
+        let info = info();
+        let circle = |r: f64, ccw: bool| {
+            Contour::new(
+                (0..720)
+                    .map(|k| {
+                        let a = std::f64::consts::TAU * k as f64 / 720.0;
+                        Point2::new(r * a.cos(), r * a.sin())
+                    })
+                    .collect(),
+            )
+            .oriented(ccw)
+        };
+        let layer = Layer {
+            contours: vec![circle(10.0, true), circle(5.0, false)],
+            ..Layer::default()
+        };
+        let tree = ContourTree {
+            nodes: Vec::new(),
+            families: vec![lamina_core::Family {
+                outer: 0,
+                holes: vec![1],
+            }],
+        };
+        let ctx = FamilyContext {
+            info: &info,
+            layer: &layer,
+            tree: &tree,
+            mesh: None,
+            part: 0,
+            family: 0,
+        };
+        let grader = InPlane {
+            control: Control::Linear {
+                mu: -1.0,
+                lambda: 1.0,
+            },
+            source: LevelSource::Points,
+            grid: 0.1,
+        };
+        let ring = |a: f64, b: f64, index: usize| Region {
+            family: 0,
+            index,
+            count: 3,
+            level: 0.0,
+            polygon: Polygon::new(circle(a, true), vec![circle(b, false)]),
+            cell: None,
+            reference: Point2::new(-(a + b) / 2.0, 0.0),
+            composition: None,
+        };
+        let mut rs = vec![ring(10.0, 5.0, 0), ring(10.0, 9.9, 1), ring(5.1, 5.0, 2)];
+        grader.grade(&ctx, &mut rs).expect("grades");
+        let green = |r: &Region| r.composition.as_ref().expect("graded").fractions[0];
+        assert!((green(&rs[0]) - 5.0 / 9.0).abs() < 5e-3, "{}", green(&rs[0]));
+        assert!(green(&rs[1]) > 0.98 && green(&rs[2]) < 0.02);
     }
 }
