@@ -27,6 +27,7 @@ fn registry() -> Registry {
     use lamina_model as _;
     use lamina_slice as _;
     use lamina_sort as _;
+    use lamina_sources as _;
     Registry::linked().expect("registry")
 }
 
@@ -306,10 +307,27 @@ fn discretiser(text: &str) -> Box<dyn lamina_core::stage::Discretiser> {
     }
 }
 
-/// Every discretiser's sub-regions tile every family of the sampled layers of every
-/// model at 0.2 mm: areas within 1e-3 of the family's, no overlap, simple polygons
-/// oriented outer counter-clockwise and holes clockwise. At most 12 layers per model,
-/// spread over its height, keep the run short.
+/// OGC validity (simple rings, holes inside their outer and touching it at most at a
+/// point), checked by the `geo` crate: independent of Lamina's own geometry.
+fn ogc_errors(p: &lamina_core::Polygon) -> Vec<String> {
+    use geo::Validation;
+    let ring = |c: &lamina_core::Contour| {
+        geo::LineString::from(c.points.iter().map(|q| (q.x, q.y)).collect::<Vec<_>>())
+    };
+    let polygon = geo::Polygon::new(ring(&p.outer), p.holes.iter().map(ring).collect());
+    polygon
+        .validation_errors()
+        .iter()
+        .map(|e| e.to_string())
+        .collect()
+}
+
+/// Every discretiser's sub-regions tile every family of every model at 0.2 mm: areas
+/// within 1e-3 of the family's, no overlap, simple polygons oriented outer
+/// counter-clockwise and holes clockwise, and valid polygons by an independent check
+/// (`geo`). The families the slicer gives and the default discretiser's sub-regions are
+/// checked on every layer; the other discretisers on 12 layers per model, spread over
+/// its height, to keep the run short.
 #[test]
 #[ignore = "needs ../shared/models; run by .ci/run"]
 fn real_models_discretise_into_tiling_sub_regions() {
@@ -330,10 +348,22 @@ fn real_models_discretise_into_tiling_sub_regions() {
         let mesh = Arc::new(load(&dir, m.file, m.scale));
         let bb = mesh.bbox();
         let prepared: Box<dyn MeshSlicer> = slicer.prepare(mesh.clone()).expect("prepare");
+        // One part of two materials, for the stages that grade (sources).
+        let material = |name: &str| lamina_core::Material {
+            name: name.into(),
+            colour: [0, 0, 0],
+            layer_thickness: None,
+        };
         let info = RunInfo {
             base_dir: dir.clone(),
-            materials: Vec::new(),
-            parts: Vec::new(),
+            materials: vec![material("a"), material("b")],
+            parts: vec![lamina_core::PartInfo {
+                name: m.file.into(),
+                materials: vec![0, 1],
+                mesh: 0,
+                z_min: bb.min.z,
+                z_max: bb.max.z,
+            }],
             z_min: bb.min.z,
             z_max: bb.max.z,
             xy_bounds: lamina_core::BBox2::EMPTY,
@@ -344,11 +374,19 @@ fn real_models_discretise_into_tiling_sub_regions() {
             .expect("slots");
         let step = slots.len().div_ceil(12).max(1);
         let (mut families, mut regions, mut worst_area, mut worst_overlap) = (0, 0, 0.0f64, 0.0f64);
-        for slot in slots.iter().step_by(step) {
+        for slot in &slots {
+            let sampled = slot.index % step == 0;
             let layer = prepared.slice(slot).expect("slices");
             let tree = sorter.sort(&layer).expect("sorts");
             for f in 0..tree.families.len() {
                 let family = tree.family_polygon(&layer.contours, f);
+                let invalid = ogc_errors(&family);
+                assert!(
+                    invalid.is_empty(),
+                    "{}: layer {} family {f} is not a valid polygon: {invalid:?}",
+                    m.file,
+                    slot.index
+                );
                 families += 1;
                 let ctx = lamina_core::stage::FamilyContext {
                     info: &info,
@@ -358,9 +396,23 @@ fn real_models_discretise_into_tiling_sub_regions() {
                     part: 0,
                     family: f,
                 };
-                for (text, stage) in &stages {
+                for (k, (text, stage)) in stages.iter().enumerate() {
+                    // The first is the default (the paper's Method 1): on every layer.
+                    if k > 0 && !sampled {
+                        continue;
+                    }
                     let out = stage.discretise(&ctx).expect("discretises");
                     regions += out.len();
+                    for r in &out {
+                        let invalid = ogc_errors(&r.polygon);
+                        assert!(
+                            invalid.is_empty(),
+                            "{}: layer {} family {f} ({text}): region {} is not a valid polygon: {invalid:?}",
+                            m.file,
+                            slot.index,
+                            r.index
+                        );
+                    }
                     let t = lamina_discretise::check::tiling(&family, &out);
                     assert!(
                         t.is_ok(1e-3),
@@ -376,7 +428,7 @@ fn real_models_discretise_into_tiling_sub_regions() {
         println!(
             "{:<36} {:>4} layers {:>5} families {:>7} regions  area error <= {:.1e}  overlap <= {:.1e} {:>8.1} ms",
             m.file,
-            slots.len().div_ceil(step),
+            slots.len(),
             families,
             regions,
             worst_area,
@@ -388,11 +440,15 @@ fn real_models_discretise_into_tiling_sub_regions() {
 
 /// The discretisers the tiling acceptance runs on every family: both offset references
 /// (the nozzle rule makes dozens of rings on the large models), radial lines,
-/// step-width with circumferential cells, and a distance field.
+/// step-width with circumferential cells of both cuts, a distance field, and grading
+/// sources (the outer surface and a plane, overlaid).
 const DISCRETISERS: &[&str] = &[
-    "use = \"offset\"\ncount = 10\nspacing = 0.4\nfrom = \"all\"",
     "use = \"offset\"\nnozzle = 0.4",
+    "use = \"offset\"\ncount = 10\nspacing = 0.4\nfrom = \"all\"",
     "use = \"radial\"\ncount = 10",
     "use = \"step-width\"\nstep = 0.25\ncells_around = 6",
     "use = \"distance-field\"\ncount = 5",
+    "use = \"step-width\"\nstep = 0.5\ncell_length = 5.0\ncell_cuts = \"arc\"",
+    "use = \"sources\"\nsources = [{ kind = \"surface\", width = 3.0, start = [1.0, 0.0], end = [0.0, 1.0] }, \
+     { kind = \"plane\", at = [0.0, 0.0, 0.0], direction = [1.0, 0.0, 0.0], width = 50.0, start = [0.0, 1.0], end = [1.0, 0.0] }]",
 ];

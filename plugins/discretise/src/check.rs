@@ -1,6 +1,10 @@
 //! Checks that sub-regions tile their family: areas add up, no two overlap (measured by
-//! a boolean union), every polygon is simple and oriented (outer counter-clockwise,
-//! holes clockwise). Used by the tests and the acceptance suite on real models.
+//! a boolean union), every ring of every region (and of the family) is simple and
+//! oriented (outer counter-clockwise, holes clockwise). Simple means what OGC asks of a
+//! ring: no two edges meet except neighbours at their shared vertex, so a ring that
+//! crosses itself, visits a vertex twice or touches itself (a vertex on another edge,
+//! an edge folding back over the previous one) is not. Used by the tests and the
+//! acceptance suite on real models.
 
 use i_overlay::core::fill_rule::FillRule;
 use i_overlay::core::overlay_rule::OverlayRule;
@@ -20,8 +24,10 @@ pub struct Tiling {
     pub overlap: f64,
     /// Contours wrongly oriented (outer clockwise or hole counter-clockwise).
     pub misoriented: usize,
-    /// Contours with crossing edges or with fewer than 3 points.
+    /// Region contours that are not simple ([`is_simple`]).
     pub non_simple: usize,
+    /// The family's own contours that are not simple (the slicer's output).
+    pub family_non_simple: usize,
 }
 
 impl Tiling {
@@ -31,6 +37,7 @@ impl Tiling {
             && self.overlap <= tolerance
             && self.misoriented == 0
             && self.non_simple == 0
+            && self.family_non_simple == 0
     }
 }
 
@@ -64,12 +71,9 @@ pub fn tiling(family: &Polygon, regions: &[Region]) -> Tiling {
             misoriented += 1;
         }
         misoriented += r.polygon.holes.iter().filter(|h| h.is_ccw()).count();
-        non_simple += r
-            .polygon
-            .contours()
-            .filter(|c| c.len() < 3 || self_crossings(c) > 0)
-            .count();
+        non_simple += r.polygon.contours().filter(|c| !is_simple(c)).count();
     }
+    let family_non_simple = family.contours().filter(|c| !is_simple(c)).count();
     Tiling {
         family_area,
         region_area,
@@ -77,12 +81,36 @@ pub fn tiling(family: &Polygon, regions: &[Region]) -> Tiling {
         overlap: ((region_area - union_area) / scale).max(0.0),
         misoriented,
         non_simple,
+        family_non_simple,
     }
 }
 
-/// Proper crossings between non-adjacent edges of one contour, found by a sweep over
-/// the edges sorted by their lowest x.
-pub fn self_crossings(c: &Contour) -> usize {
+/// Whether a contour is a simple ring: at least 3 points, no zero-length edge, no
+/// vertex visited twice, no two edges meeting anywhere but at the vertex neighbours
+/// share, no neighbour folding back over the other. Exact: the overlay's output is on a
+/// power-of-two grid, so a vertex it visits twice repeats bit for bit.
+pub fn is_simple(c: &Contour) -> bool {
+    let n = c.len();
+    if n < 3 {
+        return false;
+    }
+    let p = &c.points;
+    let mut keys: Vec<(u64, u64)> = p.iter().map(|q| (q.x.to_bits(), q.y.to_bits())).collect();
+    keys.sort_unstable();
+    if keys.windows(2).any(|w| w[0] == w[1]) {
+        return false;
+    }
+    // Neighbours (a, b), (b, c) folding back: c on the line through a and b, on a's side.
+    let folds = (0..n).any(|i| {
+        let (a, b, q) = (p[i], p[(i + 1) % n], p[(i + 2) % n]);
+        orient(a, b, q) == 0.0 && (a - b).dot(&(q - b)) > 0.0
+    });
+    !folds && meetings(c, false) == 0
+}
+
+/// Pairs of non-adjacent edges of one contour that meet: at a point interior to both
+/// (a crossing), or anywhere, touches included, unless `proper_only`.
+fn meetings(c: &Contour, proper_only: bool) -> usize {
     let n = c.len();
     if n < 4 {
         return 0;
@@ -99,7 +127,12 @@ pub fn self_crossings(c: &Contour) -> usize {
         active.retain(|&j| hi(j) >= x);
         for &j in &active {
             let adjacent = (i + 1) % n == j || (j + 1) % n == i;
-            if !adjacent && crosses(edges[i], edges[j]) {
+            let hit = if proper_only {
+                crosses(edges[i], edges[j])
+            } else {
+                meets(edges[i], edges[j])
+            };
+            if !adjacent && hit {
                 count += 1;
             }
         }
@@ -108,18 +141,40 @@ pub fn self_crossings(c: &Contour) -> usize {
     count
 }
 
+/// Proper crossings between non-adjacent edges of one contour, found by a sweep over
+/// the edges sorted by their lowest x. Touches are not crossings: use [`is_simple`].
+pub fn self_crossings(c: &Contour) -> usize {
+    meetings(c, true)
+}
+
 type Seg = (lamina_core::Point2, lamina_core::Point2);
+
+fn orient(p: lamina_core::Point2, q: lamina_core::Point2, r: lamina_core::Point2) -> f64 {
+    (q.x - p.x) * (r.y - p.y) - (q.y - p.y) * (r.x - p.x)
+}
 
 /// Whether two segments cross at a point interior to both.
 fn crosses((a, b): Seg, (c, d): Seg) -> bool {
-    let orient = |p: lamina_core::Point2, q: lamina_core::Point2, r: lamina_core::Point2| {
-        (q.x - p.x) * (r.y - p.y) - (q.y - p.y) * (r.x - p.x)
-    };
     let d1 = orient(a, b, c);
     let d2 = orient(a, b, d);
     let d3 = orient(c, d, a);
     let d4 = orient(c, d, b);
     d1 * d2 < 0.0 && d3 * d4 < 0.0
+}
+
+/// Whether two closed segments share a point: a crossing, an end on the other segment
+/// (a shared vertex included), or a collinear overlap.
+fn meets((a, b): Seg, (c, d): Seg) -> bool {
+    if crosses((a, b), (c, d)) {
+        return true;
+    }
+    let within = |p: lamina_core::Point2, q: lamina_core::Point2, r: lamina_core::Point2| {
+        r.x >= p.x.min(q.x) && r.x <= p.x.max(q.x) && r.y >= p.y.min(q.y) && r.y <= p.y.max(q.y)
+    };
+    (orient(a, b, c) == 0.0 && within(a, b, c))
+        || (orient(a, b, d) == 0.0 && within(a, b, d))
+        || (orient(c, d, a) == 0.0 && within(c, d, a))
+        || (orient(c, d, b) == 0.0 && within(c, d, b))
 }
 
 #[cfg(test)]
@@ -137,6 +192,40 @@ mod tests {
         ]);
         assert_eq!(self_crossings(&bow), 1);
         assert_eq!(self_crossings(&crate::shapes::rect(0.0, 0.0, 1.0, 1.0)), 0);
+        assert!(!is_simple(&bow));
+        assert!(is_simple(&crate::shapes::rect(0.0, 0.0, 1.0, 1.0)));
+    }
+
+    /// 3DBenchy's layers 44-52: a hole ring ...A, B, C, A... with a sub-micron lobe.
+    /// It crosses nothing, so only the touch test sees it.
+    #[test]
+    fn a_ring_through_a_vertex_twice_is_not_simple() {
+        let pts = |v: &[(f64, f64)]| Contour::new(v.iter().map(|&(x, y)| Point2::new(x, y)).collect());
+        let pinched = pts(&[
+            (5.0, 5.0),
+            (5.0, 15.0),
+            (15.0, 15.0),
+            (15.0, 5.0),
+            (9.0, 5.0),
+            (10.0, 5.01),
+            (8.5, 5.0),
+            (9.0, 5.0),
+            (8.0, 4.99),
+        ]);
+        assert_eq!(self_crossings(&pinched), 0);
+        assert!(!is_simple(&pinched));
+        // The same lobe without the repeated vertex: A's second visit moved onto the
+        // edge before it (a T-touch), and an edge that folds back over the previous one.
+        let touching = pts(&[(0.0, 0.0), (4.0, 0.0), (4.0, 4.0), (2.0, 0.0), (0.0, 4.0)]);
+        assert!(!is_simple(&touching));
+        let spike = pts(&[(0.0, 0.0), (2.0, 0.0), (1.0, 0.0), (1.0, 1.0)]);
+        assert!(!is_simple(&spike));
+        assert!(!is_simple(&pts(&[
+            (0.0, 0.0),
+            (1.0, 0.0),
+            (1.0, 0.0),
+            (0.0, 1.0)
+        ])));
     }
 
     #[test]

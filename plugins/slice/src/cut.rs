@@ -422,7 +422,14 @@ fn union(loops: &[Contour], options: CutOptions) -> Vec<Contour> {
         FillRule::NonZero => Rule::NonZero,
         FillRule::EvenOdd => Rule::EvenOdd,
     };
+    // OGC-valid output: every ring simple. Without it i_overlay walks a ring that
+    // touches itself at a vertex as one ring through that vertex twice (3DBenchy, layers
+    // 44-52: a sliver triangle's cut curls back across the previous segment, the
+    // non-zero rule fills the curl, and the hole came out as ...A, B, C, A... with a
+    // 4e-11 mm² lobe). In OGC mode the lobe is a shape of its own, and `min_output_area`
+    // drops it; a hole pinched to its outer becomes a hole touching it at one point.
     let mut overlay_options = OverlayOptions::<f64>::default();
+    overlay_options.ogc = true;
     overlay_options.min_output_area = options.min_area;
     // The runtime already runs layers in parallel; the overlay stays on this thread.
     let solver = Solver {
@@ -971,5 +978,44 @@ mod tests {
         let area = |cs: &[Contour]| cs.iter().map(Contour::signed_area).sum::<f64>();
         assert_eq!(union.len(), 3);
         assert!((area(&union) - area(&loops)).abs() < 1e-9);
+    }
+
+    /// The cut of 3DBenchy's layers 44-52 in miniature: a hole whose loop runs back over
+    /// itself (a sliver triangle), so the loop crosses its own previous segment at A =
+    /// (9, 5) and the non-zero rule fills the small curl A, (8.5, 5), (10, 5 + h). The
+    /// union must return simple rings: no vertex visited twice, the curl dropped when
+    /// it is under `min_area` and a shape of its own otherwise.
+    #[test]
+    fn a_curl_in_a_hole_gives_simple_rings() {
+        for (h, curl_kept) in [(0.01, true), (1e-9, false)] {
+            let outer = square(10.0, 10.0, 10.0, true);
+            let hole = Contour::new(
+                [
+                    (5.0, 5.0),
+                    (5.0, 15.0),
+                    (15.0, 15.0),
+                    (15.0, 5.0),
+                    (8.5, 5.0),
+                    (10.0, 5.0 + h),
+                    (8.0, 5.0 - h),
+                ]
+                .iter()
+                .map(|&(x, y)| Point2::new(x, y))
+                .collect(),
+            );
+            let loops = [outer, hole];
+            assert!(!already_simple(&loops));
+            let out = union(&loops, CutOptions::default());
+            for c in &out {
+                let mut pts: Vec<(u64, u64)> =
+                    c.points.iter().map(|p| (p.x.to_bits(), p.y.to_bits())).collect();
+                pts.sort_unstable();
+                let n = pts.len();
+                pts.dedup();
+                assert_eq!(pts.len(), n, "a ring visits a vertex twice: {c:?}");
+            }
+            // outer, hole, and the curl as an island of its own when it is large enough
+            assert_eq!(out.len(), if curl_kept { 3 } else { 2 }, "{out:?}");
+        }
     }
 }

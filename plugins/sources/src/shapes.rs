@@ -4,7 +4,9 @@
 
 use i_overlay::core::fill_rule::FillRule;
 use i_overlay::core::overlay_rule::OverlayRule;
-use i_overlay::float::single::SingleFloatOverlay;
+use i_overlay::core::solver::Solver;
+use i_overlay::float::overlay::{FloatOverlay, OverlayOptions};
+use i_overlay::float::simplify::SimplifyShape;
 use i_overlay::mesh::float::outline::offset::OutlineOffset;
 use i_overlay::mesh::float::style::{LineJoin, OutlineStyle};
 use lamina_core::{BBox2, Contour, Point2, Polygon};
@@ -22,18 +24,47 @@ pub enum Set {
     Shapes(Shapes),
 }
 
+/// OGC-valid results (every ring simple: a ring pinched at a vertex comes out as an
+/// outer and a hole touching it, not as one ring through the vertex twice), hairline
+/// pieces under `MIN_AREA` dropped, on the caller's thread.
+fn options() -> OverlayOptions<f64> {
+    let mut o = OverlayOptions::<f64>::default();
+    o.ogc = true;
+    o.min_output_area = MIN_AREA;
+    o
+}
+
+/// Pieces under this (mm²) are rounding residue of successive booleans.
+const MIN_AREA: f64 = 1e-8;
+
+fn solver() -> Solver {
+    Solver {
+        multithreading: None,
+        ..Solver::default()
+    }
+}
+
+fn overlay(a: &Shapes, b: &Shapes, rule: OverlayRule) -> Shapes {
+    FloatOverlay::with_subj_and_clip_custom(a, b, options(), solver()).overlay(rule, FillRule::EvenOdd)
+}
+
+/// The shapes resolved into OGC-valid ones (the family as the slicer gave it may not be).
+pub fn clean(a: &Shapes) -> Shapes {
+    a.simplify_shape_custom(FillRule::EvenOdd, options(), solver())
+}
+
 pub fn intersect(a: &Shapes, b: &Shapes) -> Shapes {
     if a.is_empty() || b.is_empty() {
         return Vec::new();
     }
-    a.overlay(b, OverlayRule::Intersect, FillRule::EvenOdd)
+    overlay(a, b, OverlayRule::Intersect)
 }
 
 pub fn difference(a: &Shapes, b: &Shapes) -> Shapes {
     if a.is_empty() || b.is_empty() {
         return a.clone();
     }
-    a.overlay(b, OverlayRule::Difference, FillRule::EvenOdd)
+    overlay(a, b, OverlayRule::Difference)
 }
 
 pub fn union(a: &Shapes, b: &Shapes) -> Shapes {
@@ -43,7 +74,7 @@ pub fn union(a: &Shapes, b: &Shapes) -> Shapes {
     if b.is_empty() {
         return a.clone();
     }
-    a.overlay(b, OverlayRule::Union, FillRule::EvenOdd)
+    overlay(a, b, OverlayRule::Union)
 }
 
 impl Set {

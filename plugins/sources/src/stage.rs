@@ -8,7 +8,7 @@ use lamina_core::steps::Truncation;
 use lamina_core::{Composition, Error, Region, Result, StageFactory};
 use serde::Deserialize;
 
-use crate::shapes::{Set, Shapes, closer_than, inside_point, polygon_shapes, to_polygons, union};
+use crate::shapes::{Set, Shapes, clean, closer_than, inside_point, polygon_shapes, to_polygons, union};
 use crate::source::{Datum, Source, combine};
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize)]
@@ -166,7 +166,7 @@ impl Discretiser for Sources {
         }
         // Cells of the overlay: a piece of the family, the step of each source and
         // whether it is in that source's effective grading region.
-        let family_shapes = polygon_shapes(&family);
+        let family_shapes = clean(&polygon_shapes(&family));
         let mut cells = vec![Cell {
             shapes: family_shapes.clone(),
             steps: Vec::new(),
