@@ -202,8 +202,9 @@ impl Cells {
         let mut out = Vec::with_capacity(regions.len());
         for r in regions.drain(..) {
             let n = self.count(&r.polygon);
+            let walk = Walk::new(&r.polygon.outer);
             let cuts = if n > 1 {
-                cuts(grid, &r.polygon, n)
+                cuts(grid, &r.polygon, &walk, n)
             } else {
                 Vec::new()
             };
@@ -219,10 +220,7 @@ impl Cells {
                 .filter(|p| p.outer.len() >= 3)
                 .map(|p| {
                     (
-                        arc_position(
-                            &r.polygon.outer,
-                            interior_point(&p).unwrap_or_else(|| p.bbox().center()),
-                        ),
+                        walk.position(interior_point(&p).unwrap_or_else(|| p.bbox().center())),
                         p,
                     )
                 })
@@ -272,48 +270,67 @@ fn sector(grid: &Grid, centre: Point2, far: f64, m: usize, n: usize) -> Vec<IntP
     points
 }
 
-/// Where a point projects onto a closed contour, as a fraction of its length from the
-/// contour's start point of [`start`].
-fn arc_position(outer: &Contour, p: Point2) -> f64 {
-    let pts = start(outer);
-    let total: f64 = perimeter(&pts);
-    let (mut best, mut at, mut run) = (f64::INFINITY, 0.0, 0.0);
-    for k in 0..pts.len() {
-        let (a, b) = (pts[k], pts[(k + 1) % pts.len()]);
-        let d = b - a;
-        let len = d.norm();
-        let t = if len > 0.0 {
-            ((p - a).dot(&d) / (len * len)).clamp(0.0, 1.0)
-        } else {
-            0.0
-        };
-        let dist = (a + d * t - p).norm();
-        if dist < best {
-            best = dist;
-            at = run + t * len;
-        }
-        run += len;
+/// A closed contour walked by arc length: its points counter-clockwise from its point
+/// farthest along +x (the lowest of those), so that cells start at the same side of
+/// every ring, and its length. Built once per region.
+struct Walk {
+    pts: Vec<Point2>,
+    total: f64,
+}
+
+impl Walk {
+    fn new(outer: &Contour) -> Self {
+        let c = outer.clone().oriented(true);
+        let k = (0..c.points.len())
+            .max_by(|&i, &j| {
+                let (p, q) = (c.points[i], c.points[j]);
+                p.x.total_cmp(&q.x).then(q.y.total_cmp(&p.y))
+            })
+            .unwrap_or(0);
+        let pts: Vec<Point2> = c.points[k..].iter().chain(&c.points[..k]).copied().collect();
+        let total = (0..pts.len())
+            .map(|i| (pts[(i + 1) % pts.len()] - pts[i]).norm())
+            .sum();
+        Walk { pts, total }
     }
-    if total > 0.0 { at / total } else { 0.0 }
-}
 
-fn perimeter(pts: &[Point2]) -> f64 {
-    (0..pts.len())
-        .map(|k| (pts[(k + 1) % pts.len()] - pts[k]).norm())
-        .sum()
-}
+    fn edges(&self) -> impl Iterator<Item = (Point2, Point2)> + '_ {
+        (0..self.pts.len()).map(|k| (self.pts[k], self.pts[(k + 1) % self.pts.len()]))
+    }
 
-/// The contour's points counter-clockwise from its point farthest along +x (the lowest
-/// of those), so that cells start at the same side of every ring.
-fn start(outer: &Contour) -> Vec<Point2> {
-    let c = outer.clone().oriented(true);
-    let k = (0..c.points.len())
-        .max_by(|&i, &j| {
-            let (p, q) = (c.points[i], c.points[j]);
-            p.x.total_cmp(&q.x).then(q.y.total_cmp(&p.y))
-        })
-        .unwrap_or(0);
-    c.points[k..].iter().chain(&c.points[..k]).copied().collect()
+    /// The point at arc length `s` (taken around, any sign).
+    fn at(&self, s: f64) -> Point2 {
+        let mut s = s.rem_euclid(self.total);
+        for (a, b) in self.edges() {
+            let len = (b - a).norm();
+            if s <= len {
+                return if len > 0.0 { a + (b - a) * (s / len) } else { a };
+            }
+            s -= len;
+        }
+        self.pts[0]
+    }
+
+    /// Where `p` projects onto the contour, as a fraction of its length.
+    fn position(&self, p: Point2) -> f64 {
+        let (mut best, mut at, mut run) = (f64::INFINITY, 0.0, 0.0);
+        for (a, b) in self.edges() {
+            let d = b - a;
+            let len = d.norm();
+            let t = if len > 0.0 {
+                ((p - a).dot(&d) / (len * len)).clamp(0.0, 1.0)
+            } else {
+                0.0
+            };
+            let dist = (a + d * t - p).norm();
+            if dist < best {
+                best = dist;
+                at = run + t * len;
+            }
+            run += len;
+        }
+        if self.total > 0.0 { at / self.total } else { 0.0 }
+    }
 }
 
 /// The cut lines of a region into `n` cells of equal arc length along its outer
@@ -323,28 +340,25 @@ fn start(outer: &Contour) -> Vec<Point2> {
 /// where normals converge), toward one centre instead, the pole (most inland point) of
 /// the region's largest hole, or of the region itself without holes, where the cuts
 /// meet. Cuts aimed at one point never cross, however thick the region.
-fn cuts(grid: &Grid, polygon: &Polygon, n: usize) -> Vec<IntLine<i32>> {
-    let pts = start(&polygon.outer);
-    if pts.len() < 3 {
+fn cuts(grid: &Grid, polygon: &Polygon, walk: &Walk, n: usize) -> Vec<IntLine<i32>> {
+    if walk.pts.len() < 3 {
         return Vec::new();
     }
-    let total = perimeter(&pts);
+    let total = walk.total;
     let extent = polygon.bbox().diagonal();
     if !(total > 0.0 && extent > 0.0) {
         return Vec::new();
     }
     // Beyond the boundary by a little, so that the cut crosses it cleanly.
     let overshoot = 1e-3 * extent;
-    let starts: Vec<Point2> = (0..n)
-        .map(|i| at_length(&pts, total * i as f64 / n as f64))
-        .collect();
+    let starts: Vec<Point2> = (0..n).map(|i| walk.at(total * i as f64 / n as f64)).collect();
     // The normal: square to the chord a quarter cell either side, so that the jagged
     // edges of sampled contours (iso-lines) do not tilt it.
     let h = 0.25 * total / n as f64;
     let mut straight = Vec::with_capacity(n);
     for (i, &p) in starts.iter().enumerate() {
         let s = total * i as f64 / n as f64;
-        let d = at_length(&pts, s + h) - at_length(&pts, s - h);
+        let d = walk.at(s + h) - walk.at(s - h);
         let len = d.norm();
         if len.is_nan() || len <= 0.0 {
             continue;
@@ -400,21 +414,6 @@ fn any_crossing(segments: &[(Point2, Point2)]) -> bool {
     let n = segments.len();
     let reach = if n <= 300 { n } else { 3 };
     (0..n).any(|i| (1..reach.min(n)).any(|k| cross(segments[i], segments[(i + k) % n])))
-}
-
-/// The point at arc length `s` (taken around, any sign) along the closed contour `pts`.
-fn at_length(pts: &[Point2], s: f64) -> Point2 {
-    let total = perimeter(pts);
-    let mut s = s.rem_euclid(total);
-    for k in 0..pts.len() {
-        let (a, b) = (pts[k], pts[(k + 1) % pts.len()]);
-        let len = (b - a).norm();
-        if s <= len {
-            return if len > 0.0 { a + (b - a) * (s / len) } else { a };
-        }
-        s -= len;
-    }
-    pts[0]
 }
 
 /// How far the ray from `p` (on the outer contour) along `dir` runs inside the

@@ -225,7 +225,7 @@ impl Discretiser for Sources {
             let levels: Vec<f64> = sources
                 .iter()
                 .zip(&cell.steps)
-                .map(|(s, &u)| s.levels()[u])
+                .map(|(s, &u)| s.steps.level(u))
                 .collect();
             let any = cell.effective.iter().any(|&e| e);
             let counted: Vec<usize> = (0..sources.len())
