@@ -222,6 +222,7 @@ fn field_part(layers: &[(Layer, ContourTree)], runs: usize) {
         cells: 512,
         cell_size: None,
         around: Default::default(),
+        limits: Default::default(),
     };
     let start = Instant::now();
     let mut loops = 0;

@@ -114,15 +114,24 @@ fn plugin_of_another_abi_is_refused_naming_both_versions() {
     let lib = library("lamina-fixture-bad-abi");
     let dir = tempfile::tempdir().expect("tempdir");
     let pipeline = write_pipeline(dir.path(), "");
-    let out = lamina(&[
-        "check",
-        pipeline.to_str().expect("utf-8"),
-        "--plugin",
-        lib.to_str().expect("utf-8"),
-    ]);
+    let marker = dir.path().join("initialiser-ran");
+    let out = Command::new(env!("CARGO_BIN_EXE_lamina"))
+        .args([
+            "check",
+            pipeline.to_str().expect("utf-8"),
+            "--plugin",
+            lib.to_str().expect("utf-8"),
+        ])
+        .env("LAMINA_FIXTURE_MARKER", &marker)
+        .output()
+        .expect("lamina runs");
     assert_eq!(out.status.code(), Some(2));
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(err.contains("ABI 99.0"), "{err}");
+    // Refused from the file: the library was never handed to the loader.
+    if cfg!(target_os = "linux") {
+        assert!(!marker.exists(), "the refused library's initialiser ran");
+    }
     assert!(
         err.contains(&format!("supports ABI {}.", lamina_core::plugin::ABI_MAJOR)),
         "{err}"
@@ -167,4 +176,48 @@ fn a_file_that_is_not_a_plugin_is_refused() {
     ]);
     assert_eq!(out.status.code(), Some(2));
     assert!(String::from_utf8_lossy(&out.stderr).contains("fake.so"));
+}
+
+#[test]
+fn truncated_and_foreign_files_are_refused_with_the_reason_before_loading() {
+    let lib = std::fs::read(library("lamina-zigzag")).expect("the zigzag library");
+    let dir = tempfile::tempdir().expect("tempdir");
+    let pipeline = write_pipeline(dir.path(), "");
+    let cases: [(&str, &[u8], &str); 4] = [
+        ("header-only.so", &lib[..64], "truncated"),
+        ("third.so", &lib[..lib.len() / 3], "truncated"),
+        ("text.so", b"not a library\n", "not a complete shared library"),
+        ("empty.so", b"", "not a complete shared library"),
+    ];
+    for (name, bytes, expected) in cases {
+        let path = dir.path().join(name);
+        std::fs::write(&path, bytes).expect("write");
+        let out = lamina(&[
+            "check",
+            pipeline.to_str().expect("utf-8"),
+            "--plugin",
+            path.to_str().expect("utf-8"),
+        ]);
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(2), "{name}: {err}");
+        assert!(err.contains(expected) && err.contains(name), "{name}: {err}");
+    }
+    // A real library that is not a Lamina plugin: refused by its exports.
+    let other = dir.path().join("plain.so");
+    let mut plain = lib.clone();
+    let at = plain
+        .windows(b"lamina_plugin_entry_v1".len())
+        .position(|w| w == b"lamina_plugin_entry_v1")
+        .expect("the entry symbol's name");
+    plain[at] = b'X';
+    std::fs::write(&other, &plain).expect("write");
+    let out = lamina(&[
+        "check",
+        pipeline.to_str().expect("utf-8"),
+        "--plugin",
+        other.to_str().expect("utf-8"),
+    ]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{err}");
+    assert!(err.contains("exports no `lamina_plugin_entry_v1`"), "{err}");
 }

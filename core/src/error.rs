@@ -49,6 +49,17 @@ pub enum Error {
     #[error("stage `{stage}` panicked: {message}")]
     Panic { stage: String, message: String },
 
+    /// Input or options would need more of a resource than the run allows.
+    #[error(
+        "{what} needs {needed}, more than the limit `limits.{key}` = {allowed} (raise it in the pipeline's [limits] table if this is meant)"
+    )]
+    Limit {
+        what: String,
+        needed: String,
+        key: &'static str,
+        allowed: u64,
+    },
+
     /// A stage failed for a reason of its own.
     #[error("{stage}: {message}")]
     Stage { stage: String, message: String },

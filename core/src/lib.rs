@@ -7,6 +7,7 @@
 
 pub mod error;
 pub mod geom;
+pub mod limits;
 pub mod machine;
 pub mod mesh;
 pub mod model;
@@ -23,6 +24,7 @@ pub mod surface;
 
 pub use error::{Error, Result};
 pub use geom::{BBox2, Contour, Point2, Polygon, Vector2};
+pub use limits::{Limit, Limits};
 pub use machine::Machine;
 pub use mesh::{BBox3, Mesh, Point3};
 pub use model::*;

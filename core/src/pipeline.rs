@@ -11,6 +11,7 @@ use toml::Spanned;
 use toml::de::{DeTable, DeValue};
 
 use crate::error::{Error, Result};
+use crate::limits::Limits;
 use crate::machine::Machine;
 use crate::machine::load::MachineSpec;
 use crate::model::Material;
@@ -120,7 +121,7 @@ impl TableRef {
     /// or value in the file.
     pub fn parse<T: DeserializeOwned>(&self) -> Result<T> {
         if !self.overridden
-            && let Ok(doc) = DeTable::parse(&self.file.text)
+            && let Some(doc) = self.file.toml()
             && let Some(value) = navigate_de(doc, &self.path)
         {
             let span = value.span();
@@ -186,8 +187,7 @@ impl TableRef {
     /// Where `key` of this table is written, or the table itself when `key` is `None` or
     /// absent.
     pub fn location_of(&self, key: Option<&str>) -> Option<Location> {
-        let doc = DeTable::parse(&self.file.text).ok()?;
-        let value = navigate_de(doc, &self.path)?;
+        let value = navigate_de(self.file.toml()?, &self.path)?;
         let table_span = value.span();
         if let (Some(k), DeValue::Table(t)) = (key, value.get_ref())
             && let Some((kk, _)) = t.iter().find(|(kk, _)| kk.get_ref().as_ref() == k)
@@ -237,25 +237,30 @@ pub fn plain(message: &str) -> String {
     out
 }
 
-pub(crate) fn navigate_de<'i>(doc: Spanned<DeTable<'i>>, path: &[PathElem]) -> Option<Spanned<DeValue<'i>>> {
-    let span = doc.span();
-    let mut cur = Spanned::new(span, DeValue::Table(doc.into_inner()));
-    for elem in path {
-        let next = match (cur.into_inner(), elem) {
-            (DeValue::Table(mut t), PathElem::Key(k)) => {
-                let found = t
-                    .iter()
-                    .find(|(kk, _)| kk.get_ref().as_ref() == k.as_str())?
-                    .0
-                    .clone();
-                t.remove(&found)?
-            }
-            (DeValue::Array(a), PathElem::Index(i)) => a.get(*i)?.clone(),
+/// The value at `path` in a parsed document, copied out of it (only that value is
+/// copied, not the document).
+pub(crate) fn navigate_de<'i>(doc: &Spanned<DeTable<'i>>, path: &[PathElem]) -> Option<Spanned<DeValue<'i>>> {
+    let Some((first, rest)) = path.split_first() else {
+        return Some(Spanned::new(doc.span(), DeValue::Table(doc.get_ref().clone())));
+    };
+    let PathElem::Key(k) = first else {
+        return None;
+    };
+    let mut cur = find_key(doc.get_ref(), k)?;
+    for elem in rest {
+        cur = match (cur.get_ref(), elem) {
+            (DeValue::Table(t), PathElem::Key(k)) => find_key(t, k)?,
+            (DeValue::Array(a), PathElem::Index(i)) => a.get(*i)?,
             _ => return None,
         };
-        cur = next;
     }
-    Some(cur)
+    Some(cur.clone())
+}
+
+fn find_key<'a, 'i>(t: &'a DeTable<'i>, k: &str) -> Option<&'a Spanned<DeValue<'i>>> {
+    t.iter()
+        .find(|(kk, _)| kk.get_ref().as_ref() == k)
+        .map(|(_, v)| v)
 }
 
 /// Converts a TOML syntax or type error of the whole file into a located error.
@@ -274,6 +279,9 @@ pub struct Override {
     pub value: toml::Value,
 }
 
+/// Most parts of a `--set` path.
+const MAX_SET_DEPTH: usize = 16;
+
 impl std::str::FromStr for Override {
     type Err = Error;
 
@@ -283,6 +291,13 @@ impl std::str::FromStr for Override {
         let (path, value) = s
             .split_once('=')
             .ok_or_else(|| Error::config(format!("--set {s}: expected TABLE.KEY=VALUE")))?;
+        // No pipeline nests tables this deep; a longer path would only build a
+        // tower of tables that overflows the stack when it is dropped.
+        if path.split('.').count() > MAX_SET_DEPTH {
+            return Err(Error::config(format!(
+                "--set: the path has more than {MAX_SET_DEPTH} parts"
+            )));
+        }
         let path: Vec<PathElem> = path
             .trim()
             .split('.')
@@ -367,6 +382,8 @@ struct RawPipeline {
     description: Option<String>,
     #[serde(default)]
     plugins: Vec<String>,
+    #[serde(default)]
+    script_dirs: Vec<String>,
     model: Option<toml::Table>,
     machine: Option<toml::Value>,
     #[serde(default)]
@@ -382,6 +399,7 @@ struct RawPipeline {
     plan: Option<toml::Table>,
     #[serde(default)]
     output: Vec<toml::Table>,
+    limits: Option<toml::Table>,
 }
 
 #[derive(Debug, Deserialize)]
@@ -491,6 +509,8 @@ pub struct Pipeline {
     pub name: String,
     /// Dynamic plugin libraries to load, resolved against `base_dir`.
     pub plugins: Vec<PathBuf>,
+    /// Folders besides `base_dir` whose Rhai scripts the pipeline may use.
+    pub script_dirs: Vec<PathBuf>,
     pub model: Option<ModelSpec>,
     pub materials: Vec<Material>,
     pub parts: Vec<PartSpec>,
@@ -500,9 +520,19 @@ pub struct Pipeline {
     pub outputs: Vec<TableRef>,
     /// The machine the `machine` key names, resolved and validated.
     pub machine: Option<Machine>,
+    /// The `[limits]` table: the resource limits every stage checks sizes against.
+    pub limits: Limits,
 }
 
 impl Pipeline {
+    /// What every stage of this pipeline is built with besides its own table.
+    pub fn context(&self) -> crate::stage::PipelineContext<'_> {
+        crate::stage::PipelineContext {
+            machine: self.machine.as_ref(),
+            limits: self.limits,
+        }
+    }
+
     /// Reads and parses a pipeline file, applying `--set` overrides.
     pub fn load(path: &Path, overrides: &[Override]) -> Result<Pipeline> {
         let file = SourceFile::read(path)?;
@@ -689,17 +719,24 @@ impl Pipeline {
                 .unwrap_or_else(|| "pipeline".into())
         });
         let plugins = raw.plugins.iter().map(|p| base_dir.join(p)).collect();
+        let script_dirs = raw.script_dirs.iter().map(|p| base_dir.join(p)).collect();
+        let limits = match raw.limits {
+            Some(t) => table_ref(vec![key("limits")], t).with_host_keys(&[]).parse()?,
+            None => Limits::default(),
+        };
         Ok(Pipeline {
             file,
             base_dir,
             name,
             plugins,
+            script_dirs,
             model,
             materials,
             parts,
             stages,
             outputs,
             machine,
+            limits,
         })
     }
 }

@@ -89,11 +89,69 @@ struct DescriptorPrefix {
 /// Signature of the entry symbol.
 pub type EntryFn = unsafe extern "C" fn() -> *const PluginDescriptor;
 
+/// Length of the [`abi_note`] a plugin carries in its [`ABI_SECTION`].
+pub const ABI_NOTE_LEN: usize = 128;
+
+/// The section that holds a plugin's ABI note, per object format (an ELF or PE section
+/// name, a Mach-O `segment,section`).
+#[cfg(target_os = "macos")]
+pub const ABI_SECTION: &str = "__DATA,__lamina_abi";
+#[cfg(windows)]
+pub const ABI_SECTION: &str = ".lamabi";
+#[cfg(not(any(target_os = "macos", windows)))]
+pub const ABI_SECTION: &str = ".lamina_abi";
+
+/// The plugin's ABI, readable from the library file without loading it: the magic, the
+/// ABI major and minor (little-endian `u32`s), then the lamina-core version (32 bytes)
+/// and the compiler's version (80 bytes), NUL-padded. The host refuses a mismatch
+/// before the dynamic loader runs any of the library's initialisers.
+pub const fn abi_note() -> [u8; ABI_NOTE_LEN] {
+    let mut note = [0u8; ABI_NOTE_LEN];
+    let magic = PLUGIN_MAGIC.to_le_bytes();
+    let major = ABI_MAJOR.to_le_bytes();
+    let minor = ABI_MINOR.to_le_bytes();
+    let mut i = 0;
+    while i < 8 {
+        note[i] = magic[i];
+        i += 1;
+    }
+    i = 0;
+    while i < 4 {
+        note[8 + i] = major[i];
+        note[12 + i] = minor[i];
+        i += 1;
+    }
+    let version = crate::VERSION.as_bytes();
+    i = 0;
+    while i < version.len() && i < 31 {
+        note[16 + i] = version[i];
+        i += 1;
+    }
+    let rustc = RUSTC_VERSION.as_bytes();
+    i = 0;
+    while i < rustc.len() && i < 79 {
+        note[48 + i] = rustc[i];
+        i += 1;
+    }
+    note
+}
+
 /// Declares a crate's entry symbol: the crate becomes a loadable plugin whose stages are
-/// those it registered with [`register_stage!`](crate::register_stage).
+/// those it registered with [`register_stage!`](crate::register_stage). It also places
+/// the [`abi_note`] in the library's [`ABI_SECTION`].
 #[macro_export]
 macro_rules! export_plugin {
     ($name:expr) => {
+        /// The ABI this plugin was built for, read by the host before it loads the file.
+        #[used]
+        #[cfg_attr(target_os = "macos", unsafe(link_section = "__DATA,__lamina_abi"))]
+        #[cfg_attr(windows, unsafe(link_section = ".lamabi"))]
+        #[cfg_attr(
+            not(any(target_os = "macos", windows)),
+            unsafe(link_section = ".lamina_abi")
+        )]
+        static LAMINA_PLUGIN_ABI: [u8; $crate::plugin::ABI_NOTE_LEN] = $crate::plugin::abi_note();
+
         /// Entry point read by Lamina's plugin loader.
         #[unsafe(no_mangle)]
         pub extern "C" fn lamina_plugin_entry_v1() -> *const $crate::plugin::PluginDescriptor {
@@ -186,11 +244,125 @@ pub fn load(registry: &mut Registry, path: &Path) -> Result<String> {
     Ok(plugin.name)
 }
 
+/// A NUL-padded string field of an ABI note.
+fn note_str(field: &[u8]) -> String {
+    let end = field.iter().position(|&b| b == 0).unwrap_or(field.len());
+    String::from_utf8_lossy(&field[..end]).into_owned()
+}
+
+/// Reads a library file as an object file and refuses it before the dynamic loader
+/// sees it: a file that is not a library of this platform, a truncated one (the loader
+/// would map pages past its end, and touching them kills the process with SIGBUS), one
+/// without Lamina's entry symbol, or one whose ABI note names another ABI, lamina-core
+/// or compiler. Nothing of the library runs here.
+pub fn inspect(path: &Path) -> Result<()> {
+    use object::{Object, ObjectSection, ObjectSegment};
+    let data = std::fs::read(path).map_err(|e| refuse(path, format!("cannot read: {e}")))?;
+    let file = object::File::parse(&*data).map_err(|e| {
+        refuse(
+            path,
+            format!("not a complete shared library of this platform (truncated, or of another format): {e}"),
+        )
+    })?;
+    let size = data.len() as u64;
+    for segment in file.segments() {
+        let (offset, length) = segment.file_range();
+        if offset.checked_add(length).is_none_or(|end| end > size) {
+            return Err(refuse(
+                path,
+                format!(
+                    "truncated: a segment needs bytes {offset}..{} of the file, which has {size}",
+                    offset.saturating_add(length)
+                ),
+            ));
+        }
+    }
+    let exports = file
+        .exports()
+        .map_err(|e| refuse(path, format!("cannot read its exported symbols: {e}")))?;
+    let exported = exports.iter().any(|e| {
+        let name = e.name();
+        name == ENTRY_SYMBOL.as_bytes() || name.strip_prefix(b"_") == Some(ENTRY_SYMBOL.as_bytes())
+    });
+    if !exported {
+        return Err(refuse(
+            path,
+            format!("not a Lamina plugin: it exports no `{ENTRY_SYMBOL}` (use lamina_core::export_plugin!)"),
+        ));
+    }
+    let section_name = ABI_SECTION.rsplit(',').next().unwrap_or(ABI_SECTION);
+    let note = file
+        .section_by_name(section_name)
+        .and_then(|s| s.data().ok())
+        .filter(|d| d.len() >= ABI_NOTE_LEN)
+        .ok_or_else(|| {
+            refuse(
+                path,
+                format!(
+                    "it carries no ABI note (section `{ABI_SECTION}`): it was built against an older lamina-core; rebuild it against lamina-core {}",
+                    crate::VERSION
+                ),
+            )
+        })?;
+    let word = |at: usize| u32::from_le_bytes([note[at], note[at + 1], note[at + 2], note[at + 3]]);
+    let magic = u64::from_le_bytes([
+        note[0], note[1], note[2], note[3], note[4], note[5], note[6], note[7],
+    ]);
+    if magic != PLUGIN_MAGIC {
+        return Err(refuse(path, "its ABI note is not a Lamina plugin's"));
+    }
+    let (major, minor) = (word(8), word(12));
+    let (core_version, rustc_version) = (note_str(&note[16..48]), note_str(&note[48..128]));
+    if major != ABI_MAJOR || minor > ABI_MINOR {
+        return Err(refuse(
+            path,
+            format!(
+                "built for plugin ABI {major}.{minor}, this lamina {} supports ABI {ABI_MAJOR}.{ABI_MINOR}: rebuild the plugin against lamina-core {}",
+                crate::VERSION,
+                crate::VERSION
+            ),
+        ));
+    }
+    if core_version != crate::VERSION {
+        return Err(refuse(
+            path,
+            format!(
+                "built against lamina-core {core_version}, this lamina is {}: rebuild it",
+                crate::VERSION
+            ),
+        ));
+    }
+    if rustc_version != RUSTC_VERSION {
+        return Err(refuse(
+            path,
+            format!(
+                "built by `{rustc_version}`, this lamina by `{RUSTC_VERSION}`: rebuild it with the same compiler"
+            ),
+        ));
+    }
+    Ok(())
+}
+
+/// An error and its sources, `a: b: c`: the loader's own reason is in the source.
+fn chain(e: &dyn std::error::Error) -> String {
+    let mut out = e.to_string();
+    let mut cur = e.source();
+    while let Some(s) = cur {
+        let s_text = s.to_string();
+        if !out.contains(&s_text) {
+            out = format!("{out}: {s_text}");
+        }
+        cur = s.source();
+    }
+    out
+}
+
 fn open(path: &Path) -> Result<LoadedPlugin> {
+    inspect(path)?;
     // SAFETY: loading a library runs its initialisers; plugins are code the user chose to
-    // run, like the pipeline that names them.
+    // run, like the pipeline that names them, and the file was inspected first.
     let lib = unsafe { libloading::Library::new(path) }
-        .map_err(|e| refuse(path, format!("cannot load library: {e}")))?;
+        .map_err(|e| refuse(path, format!("cannot load library: {}", chain(&e))))?;
     let symbol = format!("{ENTRY_SYMBOL}\0");
     // SAFETY: the symbol, if present, has the signature `export_plugin!` gives it.
     let entry: EntryFn = unsafe { lib.get::<EntryFn>(symbol.as_bytes()) }

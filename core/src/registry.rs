@@ -5,10 +5,9 @@
 use std::path::{Path, PathBuf};
 
 use crate::error::{Error, Result};
-use crate::machine::Machine;
 use crate::pipeline::TableRef;
 use crate::script::ScriptHost;
-use crate::stage::{AnyStage, StageConfig, StageInfo, StageKind};
+use crate::stage::{AnyStage, PipelineContext, StageConfig, StageInfo, StageKind};
 
 /// A named stage implementation: its self-description and how to build it from its
 /// pipeline table.
@@ -163,10 +162,10 @@ impl Registry {
         scripts: &ScriptHost,
         base_dir: &Path,
     ) -> Result<AnyStage> {
-        self.build_for(kind, table, scripts, base_dir, None)
+        self.build_for(kind, table, scripts, base_dir, PipelineContext::default())
     }
 
-    /// Builds the stage a table names for a pipeline that names `machine`, which the
+    /// Builds the stage a table names for a pipeline whose machine and limits the
     /// stage may consult (and check its options against).
     pub fn build_for(
         &self,
@@ -174,7 +173,7 @@ impl Registry {
         table: &TableRef,
         scripts: &ScriptHost,
         base_dir: &Path,
-        machine: Option<&Machine>,
+        context: PipelineContext<'_>,
     ) -> Result<AnyStage> {
         let name = match table.get("use") {
             Some(toml::Value::String(s)) => s.as_str(),
@@ -190,7 +189,7 @@ impl Registry {
                 .error_at("use", format!("no {kind} stage named `{name}`"))
                 .with_help(format!("available: {}", self.names(kind)))
         })?;
-        self.build_entry_for(entry, table, scripts, base_dir, machine)
+        self.build_entry_for(entry, table, scripts, base_dir, context)
     }
 
     /// Builds a stage from a given registry entry.
@@ -201,23 +200,24 @@ impl Registry {
         scripts: &ScriptHost,
         base_dir: &Path,
     ) -> Result<AnyStage> {
-        self.build_entry_for(entry, table, scripts, base_dir, None)
+        self.build_entry_for(entry, table, scripts, base_dir, PipelineContext::default())
     }
 
-    /// Builds a stage from a given registry entry for a pipeline that names `machine`.
+    /// Builds a stage from a given registry entry for a pipeline's context.
     pub fn build_entry_for(
         &self,
         entry: &Registered,
         table: &TableRef,
         scripts: &ScriptHost,
         base_dir: &Path,
-        machine: Option<&Machine>,
+        context: PipelineContext<'_>,
     ) -> Result<AnyStage> {
         let config = StageConfig {
             table,
             scripts,
             base_dir,
-            machine,
+            machine: context.machine,
+            limits: context.limits,
         };
         let stage = match (&entry.origin, entry.guarded_build) {
             (Origin::Dynamic { plugin, .. }, Some(build)) => {

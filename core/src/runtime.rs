@@ -177,13 +177,13 @@ fn build_default(
     default: &str,
 ) -> Result<AnyStage> {
     match pipeline.stages.get(&kind) {
-        Some(t) => registry.build_for(kind, t, scripts, &pipeline.base_dir, pipeline.machine.as_ref()),
+        Some(t) => registry.build_for(kind, t, scripts, &pipeline.base_dir, pipeline.context()),
         None => {
             let mut table = toml::Table::new();
             table.insert("use".into(), toml::Value::String(default.into()));
             let t = TableRef::detached(kind.name(), table);
             registry
-                .build(kind, &t, scripts, &pipeline.base_dir)
+                .build_for(kind, &t, scripts, &pipeline.base_dir, pipeline.context())
                 .map_err(|e| {
                     Error::config(format!(
                         "the pipeline has no [{kind}] table and the default {kind} stage \
@@ -202,7 +202,7 @@ fn build_optional(
     pipeline: &Pipeline,
 ) -> Result<Option<AnyStage>> {
     table
-        .map(|t| registry.build_for(kind, t, scripts, &pipeline.base_dir, pipeline.machine.as_ref()))
+        .map(|t| registry.build_for(kind, t, scripts, &pipeline.base_dir, pipeline.context()))
         .transpose()
 }
 
@@ -227,10 +227,11 @@ fn build_model(
     spec: &ModelSpec,
     scripts: &ScriptHost,
     base_dir: &Path,
+    context: PipelineContext<'_>,
 ) -> Result<Box<dyn ModelSource>> {
     let table = &spec.table;
     let stage = if table.get("use").is_some() {
-        registry.build(StageKind::Model, table, scripts, base_dir)?
+        registry.build_for(StageKind::Model, table, scripts, base_dir, context)?
     } else {
         let file = table.get("file").and_then(|v| v.as_str()).ok_or_else(|| {
             table
@@ -246,7 +247,7 @@ fn build_model(
                 .error_at("file", format!("no model reader for `.{ext}` files"))
                 .with_help("name the reader with `use = \"...\"`; see `lamina plugins model`")
         })?;
-        registry.build_entry(entry, table, scripts, base_dir)?
+        registry.build_entry_for(entry, table, scripts, base_dir, context)?
     };
     Ok(expect_kind!(stage, Model))
 }
@@ -274,7 +275,8 @@ impl Engine {
         for path in pipeline.plugins.iter().chain(&options.plugins) {
             crate::plugin::load(&mut registry, path)?;
         }
-        let scripts = ScriptHost::new(&pipeline.base_dir, options.script_limits);
+        let scripts = ScriptHost::new(&pipeline.base_dir, options.script_limits)
+            .with_script_dirs(pipeline.script_dirs.clone());
         let base = pipeline.base_dir.clone();
 
         if options.model.is_some() && pipeline.parts.len() > 1 {
@@ -293,7 +295,7 @@ impl Engine {
                     None => spec.clone(),
                 };
                 models.push(ModelStage {
-                    source: build_model(&registry, &spec, &scripts, &base)?,
+                    source: build_model(&registry, &spec, &scripts, &base, pipeline.context())?,
                     label: describe_model(&spec),
                     spec,
                 });
@@ -311,7 +313,7 @@ impl Engine {
                         None => spec.clone(),
                     };
                     models.push(ModelStage {
-                        source: build_model(&registry, &spec, &scripts, &base)?,
+                        source: build_model(&registry, &spec, &scripts, &base, pipeline.context())?,
                         label: describe_model(&spec),
                         spec,
                     });
@@ -413,7 +415,7 @@ impl Engine {
         let mut exporters = Vec::new();
         for t in &pipeline.outputs {
             exporters.push(expect_kind!(
-                registry.build_for(StageKind::Export, t, &scripts, &base, pipeline.machine.as_ref())?,
+                registry.build_for(StageKind::Export, t, &scripts, &base, pipeline.context())?,
                 Export
             ));
         }
@@ -490,6 +492,24 @@ impl Engine {
                 check_units(&meshes, &m.spec, &m.label)?;
             }
             place(&mut meshes, m.spec.factor(), m.spec.place);
+            let bbox = meshes.iter().fold(BBox3::EMPTY, |b, m| b.union(&m.bbox()));
+            let corners = [
+                bbox.min.x, bbox.min.y, bbox.min.z, bbox.max.x, bbox.max.y, bbox.max.z,
+            ];
+            if !corners.into_iter().all(crate::limits::is_coordinate) {
+                return Err(Error::config(format!(
+                    "model {} reaches ({}, {}, {}) to ({}, {}, {}) mm once scaled and placed: \
+                     Lamina works within ±{} mm (a kilometre) of the origin",
+                    m.label,
+                    short(bbox.min.x),
+                    short(bbox.min.y),
+                    short(bbox.min.z),
+                    short(bbox.max.x),
+                    short(bbox.max.y),
+                    short(bbox.max.z),
+                    crate::limits::MAX_COORDINATE
+                )));
+            }
             out.push(meshes);
         }
         Ok(out)
@@ -633,7 +653,9 @@ impl Engine {
                 chunk
                     .par_iter()
                     .map(|slot| {
-                        self.process_layer(slot, &shared)
+                        // A stage that panics on some input ends the run with an
+                        // error naming the layer, not with an abort.
+                        crate::plugin::guard_call("a layer's stages", || self.process_layer(slot, &shared))
                             .map_err(|e| e.in_layer(slot.index, slot.z))
                     })
                     .collect()
@@ -1201,6 +1223,9 @@ fn check_units(meshes: &[Mesh], spec: &ModelSpec, label: &str) -> Result<()> {
 
 /// A length for messages: three significant digits, no trailing zeros.
 fn short(v: f64) -> String {
+    if v.abs() >= 1e7 {
+        return format!("{v:.2e}");
+    }
     let digits = if v == 0.0 {
         0
     } else {

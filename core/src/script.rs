@@ -28,6 +28,8 @@ pub struct ScriptLimits {
     pub max_array_size: usize,
     /// Wall-clock budget of one call.
     pub time_limit: Duration,
+    /// Functions one script file may define.
+    pub max_functions: usize,
 }
 
 impl Default for ScriptLimits {
@@ -39,6 +41,7 @@ impl Default for ScriptLimits {
             max_string_size: 64 * 1024,
             max_array_size: 100_000,
             time_limit: Duration::from_millis(500),
+            max_functions: 10_000,
         }
     }
 }
@@ -89,8 +92,15 @@ impl ScriptArgs<'_> {
 pub struct ScriptHost {
     engine: Arc<Engine>,
     base_dir: PathBuf,
+    /// Folders besides `base_dir` whose scripts may be read (the pipeline's
+    /// `script_dirs`).
+    script_dirs: Vec<PathBuf>,
     time_limit: Duration,
+    max_functions: usize,
 }
+
+/// Largest script file read (bytes).
+pub const MAX_SCRIPT_BYTES: u64 = 1 << 20;
 
 impl std::fmt::Debug for ScriptHost {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
@@ -198,8 +208,44 @@ impl ScriptHost {
         Self {
             engine: Arc::new(engine),
             base_dir: base_dir.into(),
+            script_dirs: Vec::new(),
             time_limit: limits.time_limit,
+            max_functions: limits.max_functions,
         }
+    }
+
+    /// Also lets scripts be read from these folders (the pipeline's `script_dirs`).
+    pub fn with_script_dirs(mut self, dirs: Vec<PathBuf>) -> Self {
+        self.script_dirs = dirs;
+        self
+    }
+
+    /// Refuses a script file outside the pipeline's folder and its `script_dirs` (after
+    /// following links: a `.rhai` link to a system file must not be read, and its
+    /// lines must not be quoted in an error) or larger than [`MAX_SCRIPT_BYTES`].
+    fn check_script_path(&self, path: &Path) -> std::result::Result<(), String> {
+        let real = path
+            .canonicalize()
+            .map_err(|e| format!("cannot read script {}: {e}", path.display()))?;
+        let inside = std::iter::once(&self.base_dir)
+            .chain(&self.script_dirs)
+            .filter_map(|d| d.canonicalize().ok())
+            .any(|d| real.starts_with(d));
+        if !inside {
+            return Err(format!(
+                "script {} lies outside the pipeline's folder {}: list its folder in the pipeline's `script_dirs` to allow it",
+                path.display(),
+                self.base_dir.display()
+            ));
+        }
+        let size = std::fs::metadata(&real).map(|m| m.len()).unwrap_or(0);
+        if size > MAX_SCRIPT_BYTES {
+            return Err(format!(
+                "script {} has {size} bytes, more than the {MAX_SCRIPT_BYTES} a grading script may have",
+                path.display()
+            ));
+        }
+        Ok(())
     }
 
     /// Compiles a script reference from a pipeline: `file.rhai#function` names a
@@ -249,10 +295,24 @@ impl ScriptHost {
 
     /// Compiles a `.rhai` file and selects one of its functions.
     pub fn function(&self, path: &Path, name: &str, origin: Option<Location>) -> Result<ScriptFn> {
+        let at = |message: String| match origin.clone() {
+            Some(o) => Error::config_at(o, message),
+            None => Error::config(message),
+        };
+        self.check_script_path(path).map_err(at)?;
         let source = SourceFile::read(path).map_err(|e| match origin.clone() {
             Some(o) => Error::config_at(o, format!("cannot read script: {e}")),
             None => e,
         })?;
+        // Rhai's parser slows down with the square of the number of functions.
+        let functions = source.text.split_whitespace().filter(|w| *w == "fn").count();
+        if functions > self.max_functions {
+            return Err(at(format!(
+                "{} defines {functions} functions, more than the {} a grading script may have",
+                path.display(),
+                self.max_functions
+            )));
+        }
         let ast = self.engine.compile(&source.text).map_err(|e| {
             script_error(
                 &source,
@@ -528,7 +588,7 @@ mod tests {
     use super::*;
 
     fn host() -> ScriptHost {
-        ScriptHost::new(".", ScriptLimits::default())
+        ScriptHost::new(".", ScriptLimits::default()).with_script_dirs(vec![std::env::temp_dir()])
     }
 
     #[test]

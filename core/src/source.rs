@@ -3,22 +3,76 @@
 
 use std::fmt;
 use std::path::{Path, PathBuf};
-use std::sync::Arc;
+use std::sync::{Arc, OnceLock};
+
+use toml::Spanned;
+use toml::de::DeTable;
 
 /// A text file the user wrote: a pipeline or a Rhai script. Kept whole so errors can
 /// quote the offending line.
-#[derive(Debug, Clone, PartialEq, Eq)]
 pub struct SourceFile {
     pub path: PathBuf,
     pub text: String,
+    /// The text read as a TOML document with spans, once: every table of a pipeline
+    /// deserialises from its part of this tree, so a file of N tables is read once,
+    /// not N times.
+    toml: OnceLock<SpannedToml>,
 }
+
+self_cell::self_cell!(
+    /// A copy of the text and its span-carrying TOML tree (`None` when it does not parse).
+    struct SpannedToml {
+        owner: String,
+        #[covariant]
+        dependent: SpannedDoc,
+    }
+);
+
+type SpannedDoc<'a> = Option<Spanned<DeTable<'a>>>;
+
+impl fmt::Debug for SourceFile {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.debug_struct("SourceFile")
+            .field("path", &self.path)
+            .field("text", &self.text)
+            .finish()
+    }
+}
+
+impl Clone for SourceFile {
+    fn clone(&self) -> Self {
+        Self {
+            path: self.path.clone(),
+            text: self.text.clone(),
+            toml: OnceLock::new(),
+        }
+    }
+}
+
+impl PartialEq for SourceFile {
+    fn eq(&self, other: &Self) -> bool {
+        self.path == other.path && self.text == other.text
+    }
+}
+
+impl Eq for SourceFile {}
 
 impl SourceFile {
     pub fn new(path: impl Into<PathBuf>, text: impl Into<String>) -> Arc<Self> {
         Arc::new(Self {
             path: path.into(),
             text: text.into(),
+            toml: OnceLock::new(),
         })
+    }
+
+    /// The text as a TOML document with spans, parsed on first use; `None` when it is
+    /// not valid TOML.
+    pub fn toml(&self) -> Option<&Spanned<DeTable<'_>>> {
+        self.toml
+            .get_or_init(|| SpannedToml::new(self.text.clone(), |text| DeTable::parse(text).ok()))
+            .borrow_dependent()
+            .as_ref()
     }
 
     /// Reads a file; the error names the path.

@@ -325,6 +325,16 @@ pub struct StageConfig<'a> {
     /// The machine the pipeline names, so a stage can check its options against it
     /// when the pipeline is checked rather than when it runs.
     pub machine: Option<&'a Machine>,
+    /// The run's resource limits: a stage checks the sizes its options imply when it
+    /// is built, and the sizes its input implies before it allocates.
+    pub limits: crate::Limits,
+}
+
+/// What a pipeline gives every stage it builds besides the stage's own table.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct PipelineContext<'a> {
+    pub machine: Option<&'a Machine>,
+    pub limits: crate::Limits,
 }
 
 impl StageConfig<'_> {

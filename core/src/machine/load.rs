@@ -193,7 +193,7 @@ fn inline_layer(table: &TableRef, base_dir: &Path) -> Result<Layer> {
     table.parse::<RawMachine>()?;
     let mut locations = BTreeMap::new();
     if !table.is_overridden()
-        && let Ok(doc) = DeTable::parse(&table.file().text)
+        && let Some(doc) = table.file().toml()
         && let Some(value) = crate::pipeline::navigate_de(doc, table.path())
     {
         record(&value, "", table.file(), &mut locations);

@@ -128,8 +128,9 @@ impl Levels {
             },
             Levels::Spacing(s) => {
                 // Contours strictly below the maximum: one at the maximum itself would
-                // bound nothing. The guard keeps a tiny spacing on a huge part finite.
-                let n = ((max / s).ceil() as usize).clamp(1, crate::options::MAX_COUNT);
+                // bound nothing. The guard keeps a tiny spacing on a huge part finite:
+                // levels closer than the field's cells cannot be told apart anyway.
+                let n = ((max / s).ceil() as usize).clamp(1, MAX_SPACING_LEVELS);
                 let levels: Vec<f64> = (0..n).map(|k| (k as f64 * s / max).min(1.0)).collect();
                 Cut {
                     thresholds: levels[1..].to_vec(),
@@ -202,9 +203,23 @@ pub struct DistanceField {
     /// distance: one scale for every layer (a surface feature's distance varies along
     /// Z, not only in the layer).
     pub width: Option<f64>,
+    /// The run's limits: a grid that `cell_size` makes too fine is refused.
+    pub limits: lamina_core::Limits,
 }
 
+/// Most iso-levels a `spacing` makes: more than a field has cells along its side.
+const MAX_SPACING_LEVELS: usize = 1 << 15;
+
 impl DistanceField {
+    /// Samples along the longer side of the family's box: `cells`, or what
+    /// `cell_size` gives.
+    fn resolution(&self, bbox: &lamina_core::BBox2) -> usize {
+        match self.cell_size {
+            Some(s) => ((bbox.width().max(bbox.height()) / s).ceil() as usize + 3).clamp(4, 1 << 15),
+            None => self.cells,
+        }
+    }
+
     /// The line or polyline as a closed contour that runs there and back, so that its
     /// edges are the path's segments (a line extended across the family).
     fn path(&self, polygon: &Polygon) -> Contour {
@@ -233,11 +248,7 @@ impl DistanceField {
     /// inside at the grid's resolution.
     pub fn iso_sets(&self, polygon: &Polygon, space: Option<(&Surface, f64)>) -> Option<IsoSets> {
         let bbox = polygon.bbox();
-        let cells = match self.cell_size {
-            Some(s) => ((bbox.width().max(bbox.height()) / s).ceil() as usize + 3).clamp(4, 8192),
-            None => self.cells,
-        };
-        let mut field = Field::over(&bbox, cells);
+        let mut field = Field::over(&bbox, self.resolution(&bbox));
         let all: Vec<&Contour> = polygon.contours().collect();
         let inside = field.inside(&all);
         match self.feature {
@@ -314,6 +325,19 @@ impl DistanceField {
 impl Discretiser for DistanceField {
     fn discretise(&self, ctx: &FamilyContext<'_>) -> Result<Vec<Region>> {
         let polygon = ctx.tree.family_polygon(&ctx.layer.contours, ctx.family);
+        if self.cell_size.is_some() {
+            let bbox = polygon.bbox();
+            let n = self.resolution(&bbox) as f64;
+            let (w, h) = (bbox.width(), bbox.height());
+            self.limits.check(
+                lamina_core::Limit::GridCells,
+                n * n * w.min(h) / w.max(h).max(f64::MIN_POSITIVE),
+                &format!(
+                    "a distance field of {w:.1} x {h:.1} mm in cells of {} mm",
+                    self.cell_size.unwrap_or(0.0)
+                ),
+            )?;
+        }
         let Ok(grid) = Grid::for_polygon(&polygon, STAGE) else {
             return Ok(whole(ctx, polygon));
         };
@@ -366,21 +390,22 @@ fn build(config: &StageConfig<'_>) -> Result<AnyStage> {
         (Some(_), Some(_)) => return Err(config.error("spacing", "give `step` or `spacing`, not both")),
         (Some(step), None) => Levels::Steps(Truncation::new(step).map_err(|e| config.error("step", e))?),
         (None, Some(s)) => Levels::Spacing(crate::options::positive_mm(config, "spacing", s)?),
-        (None, None) if (1..=crate::options::MAX_COUNT).contains(&o.count) => Levels::Equal(o.count),
-        (None, None) => {
-            return Err(config.error(
-                "count",
-                format!(
-                    "`count` must be in 1..={}, not {}",
-                    crate::options::MAX_COUNT,
-                    o.count
-                ),
-            ));
-        }
+        (None, None) => Levels::Equal(crate::options::count(config, Some(o.count))?.unwrap_or(1)),
     };
-    if !(8..=8192).contains(&o.cells) {
-        return Err(config.error("cells", format!("`cells` must be in 8..=8192, not {}", o.cells)));
+    if let Levels::Steps(t) = &levels {
+        crate::options::regions(config, "step", t.count as f64)?;
     }
+    if o.cells < 8 {
+        return Err(config.error("cells", format!("`cells` must be at least 8, not {}", o.cells)));
+    }
+    config
+        .limits
+        .check(
+            lamina_core::Limit::GridCells,
+            (o.cells as f64).powi(2),
+            "`cells` squared",
+        )
+        .map_err(|e| config.error("cells", e.to_string()))?;
     if let Some(s) = o.cell_size
         && (s.is_nan() || s <= 0.0 || s.is_infinite())
     {
@@ -429,6 +454,7 @@ fn build(config: &StageConfig<'_>) -> Result<AnyStage> {
         cells: o.cells,
         cell_size: o.cell_size,
         around: Cells::checked(o.cells_around, o.cell_length, o.cell_cuts, config)?,
+        limits: config.limits,
     })))
 }
 

@@ -18,7 +18,7 @@ use crate::cells::Cells;
 use crate::grid::Grid;
 use crate::inset::{From, Inset, Join};
 use crate::measure::{min_contour_distance, pole};
-use crate::options::{self, MAX_COUNT, positive_mm};
+use crate::options::{self, derived_count, positive_mm};
 use crate::regions::{from_bands, uniform_level, whole};
 
 const STAGE: &str = "discretise:offset";
@@ -67,6 +67,8 @@ pub struct Offset {
     pub spacing: Option<f64>,
     pub inset: Inset,
     pub cells: Cells,
+    /// The run's limits: a count the geometry implies is checked against them.
+    pub limits: lamina_core::Limits,
 }
 
 /// How deep the offsets can go before they meet: L_s from the outer contour to the
@@ -82,15 +84,28 @@ pub fn reach(polygon: &Polygon, from: From, precision: f64) -> Option<f64> {
 impl Offset {
     /// N_R and the spacing d (mm) for a family: Eq. 14 with d = D_N unless `count`
     /// or `spacing` says otherwise.
-    pub fn plan(&self, polygon: &Polygon) -> Option<(usize, f64)> {
+    pub fn plan(&self, polygon: &Polygon) -> Result<Option<(usize, f64)>> {
+        let rings = |r: f64, s: f64| {
+            derived_count(
+                &self.limits,
+                r / s,
+                &format!("{r:.3} mm of reach in rings {s} mm apart"),
+            )
+            .map(|n| Some((n, s)))
+        };
         match (self.count, self.spacing) {
-            (Some(n), Some(s)) => Some((n, s)),
-            (Some(n), None) => reach(polygon, self.inset.from, self.nozzle * 0.05).map(|r| (n, r / n as f64)),
-            (None, Some(s)) => {
-                reach(polygon, self.inset.from, s * 0.05).map(|r| (((r / s) as usize).clamp(1, MAX_COUNT), s))
+            (Some(n), Some(s)) => Ok(Some((n, s))),
+            (Some(n), None) => {
+                Ok(reach(polygon, self.inset.from, self.nozzle * 0.05).map(|r| (n, r / n as f64)))
             }
-            (None, None) => reach(polygon, self.inset.from, self.nozzle * 0.05)
-                .map(|r| (((r / self.nozzle) as usize).clamp(1, MAX_COUNT), self.nozzle)),
+            (None, Some(s)) => match reach(polygon, self.inset.from, s * 0.05) {
+                Some(r) => rings(r, s),
+                None => Ok(None),
+            },
+            (None, None) => match reach(polygon, self.inset.from, self.nozzle * 0.05) {
+                Some(r) => rings(r, self.nozzle),
+                None => Ok(None),
+            },
         }
     }
 }
@@ -105,7 +120,7 @@ impl Discretiser for Offset {
         if base.is_empty() {
             return Ok(whole(ctx, polygon));
         }
-        let Some((count, spacing)) = self.plan(&polygon) else {
+        let Some((count, spacing)) = self.plan(&polygon)? else {
             return Ok(whole(ctx, polygon));
         };
         if spacing.is_nan() || spacing <= 0.0 || spacing.is_infinite() {
@@ -125,7 +140,7 @@ fn build(config: &StageConfig<'_>) -> Result<AnyStage> {
 
 fn checked(o: &Options, config: &StageConfig<'_>) -> Result<Offset> {
     positive_mm(config, "nozzle", o.nozzle)?;
-    positive_mm(config, "tolerance", o.tolerance)?;
+    options::tolerance(config, o.tolerance)?;
     if let Some(s) = o.spacing {
         positive_mm(config, "spacing", s)?;
     }
@@ -140,6 +155,7 @@ fn checked(o: &Options, config: &StageConfig<'_>) -> Result<Offset> {
             tolerance: o.tolerance,
         },
         cells: Cells::checked(o.cells_around, o.cell_length, o.cell_cuts, config)?,
+        limits: config.limits,
     })
 }
 

@@ -1,11 +1,13 @@
 //! Options that several discretisers share, with their documentation and checks, so
 //! that `nozzle`, `count`, `join` and `tolerance` read and fail alike everywhere.
 
-use lamina_core::Result;
+use lamina_core::limits::{MAX_COORDINATE, is_coordinate};
 use lamina_core::stage::{OptionSpec, StageConfig};
+use lamina_core::{Limit, Limits, Result};
 
-/// More rings than any nozzle could deposit in a layer: a guard against typos.
-pub const MAX_COUNT: usize = 10_000;
+/// Finest arc-to-chord tolerance (mm): a tenth of a micrometre, far below any
+/// machine's resolution. Finer ones only multiply the vertices of round corners.
+pub const MIN_TOLERANCE: f64 = 1e-4;
 
 pub const NOZZLE: OptionSpec = OptionSpec::new(
     "nozzle",
@@ -35,21 +37,55 @@ pub const TOLERANCE: OptionSpec = OptionSpec::new(
     "largest arc-to-chord distance of round corners (mm)",
 );
 
-/// `v` when it is a positive, finite number of millimetres.
+/// `v` when it is a positive number of millimetres, at most a kilometre.
 pub fn positive_mm(config: &StageConfig<'_>, key: &str, v: f64) -> Result<f64> {
-    if v > 0.0 && v.is_finite() {
+    if v > 0.0 && is_coordinate(v) {
         Ok(v)
     } else {
-        Err(config.error(key, format!("`{key}` must be a positive number of mm, not {v}")))
+        Err(config.error(
+            key,
+            format!("`{key}` must be a positive number of mm up to {MAX_COORDINATE}, not {v}"),
+        ))
     }
 }
 
-/// A `count` within `1..=MAX_COUNT`, when given.
+/// An arc-to-chord `tolerance`: a length of at least [`MIN_TOLERANCE`].
+pub fn tolerance(config: &StageConfig<'_>, v: f64) -> Result<f64> {
+    positive_mm(config, "tolerance", v)?;
+    if v < MIN_TOLERANCE {
+        return Err(config.error(
+            "tolerance",
+            format!("`tolerance` must be at least {MIN_TOLERANCE} mm, not {v}"),
+        ));
+    }
+    Ok(v)
+}
+
+/// A `count` of at least 1 and within the run's `limits.regions`, when given.
 pub fn count(config: &StageConfig<'_>, count: Option<usize>) -> Result<Option<usize>> {
     match count {
-        Some(n) if !(1..=MAX_COUNT).contains(&n) => {
-            Err(config.error("count", format!("`count` must be in 1..={MAX_COUNT}, not {n}")))
+        Some(0) => Err(config.error("count", "`count` must be at least 1")),
+        Some(n) => {
+            regions(config, "count", n as f64)?;
+            Ok(Some(n))
         }
-        n => Ok(n),
+        None => Ok(None),
     }
+}
+
+/// Refuses an option that asks for more sub-regions per family than `limits.regions`.
+pub fn regions(config: &StageConfig<'_>, key: &str, n: f64) -> Result<()> {
+    config
+        .limits
+        .check(Limit::Regions, n, &format!("`{key}`"))
+        .map_err(|e| config.error(key, e.to_string()))
+}
+
+/// A count the geometry implies (a reach over a spacing), at least 1, refused when it
+/// exceeds `limits.regions`: a spacing of a micrometre on a large part is a typo, and
+/// its millions of rings would take hours.
+pub fn derived_count(limits: &Limits, n: f64, what: &str) -> Result<usize> {
+    let n = n.floor().max(1.0);
+    limits.check(Limit::Regions, n, what)?;
+    Ok(n as usize)
 }

@@ -20,7 +20,7 @@ use crate::grid::Grid;
 use crate::inset::From;
 use crate::measure::pole;
 use crate::offset::reach;
-use crate::options::{self, MAX_COUNT, positive_mm};
+use crate::options::{self, derived_count, positive_mm};
 use crate::regions::{from_bands, uniform_level, whole};
 
 const STAGE: &str = "discretise:radial";
@@ -59,6 +59,7 @@ struct Radial {
     nozzle: f64,
     count: Option<usize>,
     cells: Cells,
+    limits: lamina_core::Limits,
 }
 
 /// An inner contour with its centre and its edges binned by the angle they span as
@@ -453,7 +454,11 @@ impl Discretiser for Radial {
         let count = match self.count {
             Some(n) => n,
             None => match reach(&polygon, From::Outer, self.nozzle * 0.05) {
-                Some(r) => ((r / self.nozzle) as usize).clamp(1, MAX_COUNT),
+                Some(r) => derived_count(
+                    &self.limits,
+                    r / self.nozzle,
+                    &format!("{r:.3} mm of reach in rings of the {} mm nozzle", self.nozzle),
+                )?,
                 None => return Ok(whole(ctx, polygon)),
             },
         };
@@ -490,6 +495,7 @@ fn build(config: &StageConfig<'_>) -> Result<AnyStage> {
         nozzle: o.nozzle,
         count: o.count,
         cells,
+        limits: config.limits,
     })))
 }
 

@@ -87,6 +87,7 @@ fn fig_7_iso_contours_every_one_and_a_half_over_a_maximum_of_11_76() {
         cells: 256,
         cell_size: None,
         around: Default::default(),
+        limits: Default::default(),
     };
     let iso = df.iso_sets(&fam.polygon(), None).expect("a field");
     assert!((iso.max - 11.76).abs() < 0.05, "max(d) = {}", iso.max);

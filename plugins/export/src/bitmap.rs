@@ -19,7 +19,7 @@ use std::path::PathBuf;
 use lamina_core::stage::{
     AnyStage, ExportContext, Exporter, LayerSink, OptionSpec, StageConfig, StageInfo, StageKind,
 };
-use lamina_core::{BBox2, Contour, Error, LayerPlan, Result, RunInfo, StageFactory};
+use lamina_core::{BBox2, Contour, Error, LayerPlan, Limit, Limits, Result, RunInfo, StageFactory};
 use serde::Deserialize;
 
 #[derive(Debug, Deserialize)]
@@ -51,9 +51,6 @@ fn d_period() -> [f64; 3] {
 fn d_radius() -> f64 {
     0.3
 }
-
-/// The most pixels one layer may have (a guard against a pixel size typed in metres).
-const MAX_PIXELS: f64 = 2.0e8;
 
 /// A lattice of spherical voids.
 #[derive(Debug, Clone, Copy)]
@@ -112,19 +109,19 @@ pub struct Raster {
 }
 
 impl Raster {
-    /// A grid aligned to multiples of `pixel` covering `bbox`.
-    pub fn covering(bbox: &BBox2, pixel: f64) -> Result<Self> {
+    /// A grid aligned to multiples of `pixel` covering `bbox`, refused when it would
+    /// hold more pixels than `limits.grid_cells`.
+    pub fn covering(bbox: &BBox2, pixel: f64, limits: &Limits) -> Result<Self> {
         let x0 = (bbox.min.x / pixel).floor();
         let y0 = (bbox.min.y / pixel).floor();
         let w = (bbox.max.x / pixel).ceil() - x0;
         let h = (bbox.max.y / pixel).ceil() - y0;
-        // NaN (an empty box) fails the test too.
-        if (w * h).is_nan() || w * h > MAX_PIXELS {
-            return Err(Error::stage(
-                "export:bitmap",
-                format!("a layer would need {w} x {h} pixels of {pixel} mm: choose a larger pixel"),
-            ));
-        }
+        // NaN (an empty box) fails the check too.
+        limits.check(
+            Limit::GridCells,
+            w * h,
+            &format!("a bitmap layer of {w} x {h} pixels of {pixel} mm"),
+        )?;
         let (width, height) = (w.max(0.0) as usize, h.max(0.0) as usize);
         Ok(Self {
             origin: [x0 * pixel, y0 * pixel],
@@ -196,6 +193,7 @@ impl Raster {
 struct Bitmap {
     options: Options,
     lattice: Lattice,
+    limits: Limits,
 }
 
 struct Sink {
@@ -206,6 +204,7 @@ struct Sink {
     parts: Vec<usize>,
     pixel: f64,
     lattice: Lattice,
+    limits: Limits,
     offset: u64,
 }
 
@@ -265,6 +264,7 @@ impl Exporter for Bitmap {
             parts,
             pixel: self.options.pixel,
             lattice: self.lattice,
+            limits: self.limits,
             offset: 0,
         }))
     }
@@ -284,7 +284,7 @@ impl LayerSink for Sink {
             return Ok(());
         }
         let bbox = contours.iter().fold(BBox2::EMPTY, |b, c| b.union(&c.bbox()));
-        let mut raster = Raster::covering(&bbox, self.pixel)?;
+        let mut raster = Raster::covering(&bbox, self.pixel, &self.limits)?;
         raster.fill(&contours);
         // The voids are cut at the layer's mid-height, as the contours are.
         let cut_z = plan.z - plan.thickness / 2.0;
@@ -341,12 +341,34 @@ fn build(config: &StageConfig<'_>) -> Result<AnyStage> {
     if !(options.void_radius.is_finite() && options.void_radius >= 0.0) {
         return Err(config.error("void_radius", "must be a non-negative number of mm"));
     }
+    // Each void must be drawable and the voids of one layer countable: a period below
+    // the pixel, or a void wider than the lattice (which already removes all
+    // material), would only multiply the circles to clear.
+    if options.period.iter().any(|&p| p < options.pixel) {
+        return Err(config.error(
+            "period",
+            format!("every period must be at least the pixel ({} mm)", options.pixel),
+        ));
+    }
+    let smallest = options.period.iter().copied().fold(f64::INFINITY, f64::min);
+    if options.void_radius > smallest {
+        return Err(config.error(
+            "void_radius",
+            format!(
+                "must be at most the smallest period ({smallest} mm): voids that large leave no material"
+            ),
+        ));
+    }
     let lattice = Lattice {
         period: options.period,
         origin: options.origin,
         radius: options.void_radius,
     };
-    Ok(AnyStage::Export(Box::new(Bitmap { options, lattice })))
+    Ok(AnyStage::Export(Box::new(Bitmap {
+        options,
+        lattice,
+        limits: config.limits,
+    })))
 }
 
 lamina_core::register_stage!(StageFactory {
@@ -432,7 +454,7 @@ mod tests {
         let outer = square(0.0, 0.0, 10.0);
         let hole = square(3.0, 3.0, 4.0).oriented(false);
         let bbox = outer.bbox();
-        let mut r = Raster::covering(&bbox, 0.1).expect("raster");
+        let mut r = Raster::covering(&bbox, 0.1, &Limits::default()).expect("raster");
         r.fill(&[&outer, &hole]);
         assert_eq!(r.count(), 10_000 - 1_600);
     }
@@ -440,7 +462,7 @@ mod tests {
     #[test]
     fn voids_remove_their_circles() {
         let outer = square(0.0, 0.0, 10.0);
-        let mut r = Raster::covering(&outer.bbox(), 0.01).expect("raster");
+        let mut r = Raster::covering(&outer.bbox(), 0.01, &Limits::default()).expect("raster");
         r.fill(&[&outer]);
         r.clear_circle(5.0, 5.0, 2.0);
         let area = r.count() as f64 * 1e-4;
@@ -451,6 +473,6 @@ mod tests {
     #[test]
     fn huge_grids_are_refused() {
         let bbox = BBox2::from_points([Point2::new(0.0, 0.0), Point2::new(1000.0, 1000.0)]);
-        assert!(Raster::covering(&bbox, 1e-4).is_err());
+        assert!(Raster::covering(&bbox, 1e-4, &Limits::default()).is_err());
     }
 }

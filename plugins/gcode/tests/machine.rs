@@ -652,7 +652,16 @@ fn options_the_machine_sets_are_refused_at_their_key() {
         let text = format!("use = \"gcode\"\n{key}");
         let table = lamina_core::pipeline::TableRef::parse_snippet("gcode", &text).expect("table");
         let err = registry
-            .build_for(StageKind::Export, &table, &scripts, &dir, Some(&m))
+            .build_for(
+                StageKind::Export,
+                &table,
+                &scripts,
+                &dir,
+                lamina_core::stage::PipelineContext {
+                    machine: Some(&m),
+                    ..Default::default()
+                },
+            )
             .err()
             .unwrap_or_else(|| panic!("{key} accepted"));
         let k = key.split(' ').next().unwrap_or("");

@@ -3,7 +3,7 @@
 use std::path::{Path, PathBuf};
 
 use lamina_core::stage::{AnyStage, ModelSource, OptionSpec, StageConfig, StageInfo, StageKind};
-use lamina_core::{Error, Mesh, Point2, Result, StageFactory};
+use lamina_core::{Error, Limit, Limits, Mesh, Point2, Result, StageFactory};
 use serde::Deserialize;
 
 use crate::blade::{Blade, Naca};
@@ -38,6 +38,7 @@ struct FileSource {
     file: PathBuf,
     weld: f64,
     format: Format,
+    limits: Limits,
 }
 
 fn read(path: &Path) -> Result<Vec<u8>> {
@@ -47,10 +48,24 @@ fn read(path: &Path) -> Result<Vec<u8>> {
 impl ModelSource for FileSource {
     fn load(&self, base_dir: &Path) -> Result<Vec<Mesh>> {
         let path = base_dir.join(&self.file);
+        let meshes = self.read(&path)?;
+        let triangles: usize = meshes.iter().map(|m| m.triangles.len()).sum();
+        self.limits
+            .check(Limit::Triangles, triangles as f64, &path.display().to_string())?;
+        Ok(meshes)
+    }
+}
+
+impl FileSource {
+    fn read(&self, path: &Path) -> Result<Vec<Mesh>> {
+        let path = path.to_path_buf();
+        let bytes = std::fs::metadata(&path).map_err(|e| Error::io(&path, e))?.len();
+        self.limits
+            .check(Limit::ModelBytes, bytes as f64, &path.display().to_string())?;
         let soups: Vec<(String, Soup)> = match self.format {
             Format::Stl => return crate::stl::read_welded(&path, self.weld),
             Format::ThreeMf => {
-                return Ok(crate::threemf::read(&path, &read(&path)?)?
+                return Ok(crate::threemf::read_within(&path, &read(&path)?, &self.limits)?
                     .iter()
                     .map(|m| crate::weld::weld_mesh(m, self.weld))
                     .collect());
@@ -85,6 +100,7 @@ fn build_file(config: &StageConfig<'_>, format: Format) -> Result<AnyStage> {
         file: o.file,
         weld: o.weld,
         format,
+        limits: config.limits,
     })))
 }
 

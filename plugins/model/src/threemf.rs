@@ -10,11 +10,9 @@ use std::collections::HashMap;
 use std::io::Read;
 use std::path::Path;
 
-use lamina_core::{Error, Mesh, Point3, Result};
+use lamina_core::{Error, Limit, Limits, Mesh, Point3, Result};
 use quick_xml::events::{BytesStart, Event};
 
-/// Largest model part read (bytes, uncompressed): a guard against ZIP bombs.
-const MAX_MODEL_BYTES: u64 = 4 << 30;
 /// Deepest component nesting followed.
 const MAX_DEPTH: usize = 32;
 
@@ -64,8 +62,16 @@ struct Object {
     components: Vec<(u32, Transform)>,
 }
 
-/// Reads a 3MF file into one mesh per build item.
+/// Reads a 3MF file into one mesh per build item, within the default limits.
 pub fn read(path: &Path, bytes: &[u8]) -> Result<Vec<Mesh>> {
+    read_within(path, bytes, &Limits::default())
+}
+
+/// Reads a 3MF file into one mesh per build item. The model part is read only up to
+/// `limits.model_bytes` uncompressed (a ZIP bomb stops there), and the triangles the
+/// build items expand to (components instantiate their objects again and again) are
+/// counted before any is copied.
+pub fn read_within(path: &Path, bytes: &[u8], limits: &Limits) -> Result<Vec<Mesh>> {
     let mut archive = zip::ZipArchive::new(std::io::Cursor::new(bytes))
         .map_err(|e| err(path, format!("not a 3MF (ZIP) package: {e}")))?;
     let model_name = model_part_name(&mut archive).unwrap_or_else(|| "3D/3dmodel.model".to_string());
@@ -74,12 +80,16 @@ pub fn read(path: &Path, bytes: &[u8]) -> Result<Vec<Mesh>> {
         let entry = archive
             .by_name(model_name.trim_start_matches('/'))
             .map_err(|e| err(path, format!("no model part `{model_name}`: {e}")))?;
+        let what = format!("the model part {model_name} of {}", path.display());
+        limits.check(Limit::ModelBytes, entry.size() as f64, &what)?;
+        // The declared size may lie: read one byte past the limit to know.
         entry
-            .take(MAX_MODEL_BYTES)
+            .take(limits.model_bytes.saturating_add(1))
             .read_to_string(&mut text)
             .map_err(|e| err(path, format!("{model_name}: cannot read: {e}")))?;
+        limits.check(Limit::ModelBytes, text.len() as f64, &what)?;
     }
-    parse_model(path, &model_name, &text)
+    parse_model(path, &model_name, &text, limits)
 }
 
 /// The model part named by `_rels/.rels` (the 3D model relationship), if any.
@@ -132,7 +142,7 @@ fn unit_scale(unit: &str) -> Option<f64> {
     })
 }
 
-fn parse_model(path: &Path, part: &str, text: &str) -> Result<Vec<Mesh>> {
+fn parse_model(path: &Path, part: &str, text: &str, limits: &Limits) -> Result<Vec<Mesh>> {
     let mut reader = quick_xml::Reader::from_str(text);
     let line_of = |pos: u64| {
         text.as_bytes()[..(pos as usize).min(text.len())]
@@ -292,6 +302,19 @@ fn parse_model(path: &Path, part: &str, text: &str) -> Result<Vec<Mesh>> {
         material_names.extend(base_groups[&g].iter().cloned());
     }
     let units: Transform = [scale, 0.0, 0.0, 0.0, scale, 0.0, 0.0, 0.0, scale, 0.0, 0.0, 0.0];
+    let mut expanded = HashMap::new();
+    let mut total = 0.0;
+    for (object, _) in &items {
+        total += expanded_triangles(path, &objects, *object, 0, &mut expanded)?;
+    }
+    limits.check(
+        Limit::Triangles,
+        total,
+        &format!(
+            "{} (its build items with every component instance)",
+            path.display()
+        ),
+    )?;
     let mut meshes = Vec::new();
     for (n, (object, transform)) in items.iter().enumerate() {
         let mut mesh = Mesh::new(format!("item {n}"), Vec::new(), Vec::new());
@@ -319,6 +342,36 @@ fn parse_model(path: &Path, part: &str, text: &str) -> Result<Vec<Mesh>> {
         meshes.push(mesh);
     }
     Ok(meshes)
+}
+
+/// Triangles object `id` expands to with its components, each object counted once
+/// (memoised): a chain of objects that each instantiate the one below twice doubles
+/// per level, and is refused before it is built. Floats, so the count cannot wrap.
+fn expanded_triangles(
+    path: &Path,
+    objects: &HashMap<u32, Object>,
+    id: u32,
+    depth: usize,
+    memo: &mut HashMap<u32, f64>,
+) -> Result<f64> {
+    if let Some(&n) = memo.get(&id) {
+        return Ok(n);
+    }
+    if depth > MAX_DEPTH {
+        return Err(err(
+            path,
+            format!("components nest deeper than {MAX_DEPTH} (a cycle?)"),
+        ));
+    }
+    let o = objects
+        .get(&id)
+        .ok_or_else(|| err(path, format!("the build names object {id}, which is not defined")))?;
+    let mut n = o.triangles.len() as f64;
+    for (child, _) in &o.components {
+        n += expanded_triangles(path, objects, *child, depth + 1, memo)?;
+    }
+    memo.insert(id, n);
+    Ok(n)
 }
 
 #[allow(clippy::too_many_arguments)]

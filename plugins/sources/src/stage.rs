@@ -305,8 +305,11 @@ fn build(config: &StageConfig<'_>) -> Result<AnyStage> {
     let mut sources = Vec::new();
     for (i, s) in o.sources.into_iter().enumerate() {
         let bad = |m: &str| config.error("sources", format!("source {i}: {m}"));
-        if !s.at.iter().all(|v| v.is_finite()) {
-            return Err(bad("`at` must be three finite numbers"));
+        if !s.at.iter().all(|&v| lamina_core::limits::is_coordinate(v)) {
+            return Err(bad(&format!(
+                "`at` must be three numbers within ±{} mm",
+                lamina_core::limits::MAX_COORDINATE
+            )));
         }
         let datum = match s.kind {
             Kind::Point => Datum::Point(s.at),
@@ -328,8 +331,11 @@ fn build(config: &StageConfig<'_>) -> Result<AnyStage> {
             (None, None) => return Err(bad("give `width` (mm over which f runs from 0 to 1) or `alpha`")),
             _ => return Err(bad("give either `width` (positive) or `alpha`, not both")),
         };
-        if !(alpha.is_finite() && alpha > 0.0) {
-            return Err(bad("`alpha` must be a positive number"));
+        if !(alpha.is_finite() && alpha >= 1.0 / lamina_core::limits::MAX_COORDINATE) {
+            return Err(bad(&format!(
+                "`alpha` must be at least 1e-6 per mm (a `width` of at most {} mm)",
+                lamina_core::limits::MAX_COORDINATE
+            )));
         }
         if !(s.k.is_finite() && s.k > 0.0) {
             return Err(bad("`k` must be a positive number"));

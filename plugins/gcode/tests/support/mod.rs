@@ -42,8 +42,16 @@ pub fn export(
     let dir = std::env::temp_dir();
     let scripts = lamina_core::script::ScriptHost::new(&dir, Default::default());
     let table = lamina_core::pipeline::TableRef::parse_snippet("gcode", table).expect("table");
-    let AnyStage::Export(exporter) =
-        registry.build_for(StageKind::Export, &table, &scripts, &dir, info.machine.as_ref())?
+    let AnyStage::Export(exporter) = registry.build_for(
+        StageKind::Export,
+        &table,
+        &scripts,
+        &dir,
+        lamina_core::stage::PipelineContext {
+            machine: info.machine.as_ref(),
+            ..Default::default()
+        },
+    )?
     else {
         panic!("not an exporter")
     };
