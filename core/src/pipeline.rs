@@ -197,6 +197,20 @@ impl TableRef {
         Some(Location::new(self.file.clone(), table_span))
     }
 
+    /// Where the string value of `key` is written in the file, when the file still
+    /// holds the value the table has: `None` when a `--set` override replaced it, so
+    /// that positions inside the string (a script's) are not read off another text.
+    pub fn string_location(&self, key: &str) -> Option<Location> {
+        let current = self.table.get(key)?.as_str()?;
+        let mut path = self.path.clone();
+        path.push(PathElem::Key(key.to_string()));
+        let written = navigate_de(self.file.toml()?, &path)?;
+        match written.get_ref() {
+            DeValue::String(s) if s.as_ref() == current => self.location_of(Some(key)),
+            _ => None,
+        }
+    }
+
     /// A configuration error at `key` of this table.
     pub fn error_at(&self, key: &str, message: impl Into<String>) -> Error {
         let message = format!("[{}] {}: {}", self.path_string(), key, message.into());

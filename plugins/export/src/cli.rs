@@ -145,15 +145,16 @@ impl Exporter for Cli {
         header.push_str(&format!("$$LAYERS/{}\n", ctx.layer_count));
         for (i, p) in ctx.info.parts.iter().enumerate() {
             // Labels are text up to the end of the line: keep them on one line.
-            let name: String = p
-                .name
-                .chars()
-                .map(|c| if c.is_control() { ' ' } else { c })
-                .collect();
-            header.push_str(&format!("$$LABEL/{},{name}\n", i + 1));
+            header.push_str(&format!("$$LABEL/{},{}\n", i + 1, one_line(&p.name)));
         }
         if self.options.format == Format::Modified {
-            let names: Vec<&str> = ctx.info.materials.iter().map(|m| m.name.as_str()).collect();
+            // Inside a `//...//` comment: one line, and no `//` that would end it.
+            let names: Vec<String> = ctx
+                .info
+                .materials
+                .iter()
+                .map(|m| one_line(&m.name).replace("//", "/ /"))
+                .collect();
             header.push_str(&format!(
                 "//modified CLI: $$MATERIAL/R,G,B then the fractions of the polyline's part materials; materials: {}//\n",
                 names.join(", ")
@@ -233,6 +234,20 @@ impl LayerSink for Sink {
         }
         self.out.flush().map_err(io(&path))
     }
+}
+
+/// A name on one line: control characters and Unicode line breaks become spaces, so
+/// that no name can start a command line of the file.
+fn one_line(name: &str) -> String {
+    name.chars()
+        .map(|c| {
+            if c.is_control() || matches!(c, '\u{2028}' | '\u{2029}' | '\u{85}') {
+                ' '
+            } else {
+                c
+            }
+        })
+        .collect()
 }
 
 fn build(config: &StageConfig<'_>) -> Result<AnyStage> {

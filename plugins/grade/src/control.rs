@@ -112,7 +112,7 @@ impl Control {
                     ("alpha", o.alpha.is_some()),
                     ("k", o.k.is_some()),
                 ])?;
-                let origin = config.table.location_of(Some("f"));
+                let origin = config.table.string_location("f");
                 Control::Script(config.scripts.compile(script, origin)?)
             }
         })

@@ -117,9 +117,15 @@ fn flat(c: &Contour, digits: i32) -> Vec<f64> {
         .collect()
 }
 
-/// JSON that may sit inside a `<script>` element: `</` never appears in it.
+/// JSON that may sit inside a `<script>` element: no `<`, `>` or `&` appears in it
+/// (each is written as a `\u` escape, which only a JSON string can hold), so no name
+/// can close the element or switch the HTML parser into another state (`<!--` then
+/// `<script` would hide the closing tag).
 fn script_json<T: Serialize>(v: &T) -> std::result::Result<String, serde_json::Error> {
-    Ok(serde_json::to_string(v)?.replace("</", "<\\/"))
+    Ok(serde_json::to_string(v)?
+        .replace('<', "\\u003c")
+        .replace('>', "\\u003e")
+        .replace('&', "\\u0026"))
 }
 
 fn io(path: &std::path::Path) -> impl Fn(std::io::Error) -> Error + '_ {
