@@ -36,9 +36,11 @@ pub fn lcm_all(values: impl IntoIterator<Item = u64>) -> Option<u64> {
 /// The work cycle of regions with thicknesses `thickness_um[i]` (`regions[i]` names
 /// them): one step per height in `(0, lcm]` that is a multiple of some thickness; at
 /// each step every region whose thickness divides the height deposits one layer, in
-/// the given order. `None` when the least common multiple overflows.
-pub fn work_cycle(regions: &[(usize, u64)]) -> Option<WorkCycle> {
-    let height = lcm_all(regions.iter().map(|&(_, t)| t))?;
+/// the given order. `None` when the least common multiple overflows or exceeds
+/// `max_um`: checked before a step is built, since a cycle of a metre in micrometre
+/// thicknesses has hundreds of thousands of steps.
+pub fn work_cycle(regions: &[(usize, u64)], max_um: u64) -> Option<WorkCycle> {
+    let height = lcm_all(regions.iter().map(|&(_, t)| t)).filter(|&h| h <= max_um)?;
     let steps = steps_up_to(regions, height);
     Some(WorkCycle {
         height_um: height,
@@ -84,8 +86,9 @@ pub fn mm_to_um(mm: f64) -> i64 {
 
 /// Cuts the object into blocks at every region boundary: each block holds whole region
 /// heights, and its regions deposit in the block's work cycle. Heights between regions
-/// that nothing occupies make no block. `None` when a cycle's height overflows.
-pub fn blocks(regions: &[MaterialRegion]) -> Option<Vec<Block>> {
+/// that nothing occupies make no block. `None` when a cycle's height overflows or
+/// exceeds `max_cycle_um`.
+pub fn blocks(regions: &[MaterialRegion], max_cycle_um: u64) -> Option<Vec<Block>> {
     let spans: Vec<(i64, i64)> = regions
         .iter()
         .map(|r| (mm_to_um(r.z_start), mm_to_um(r.z_end)))
@@ -93,7 +96,9 @@ pub fn blocks(regions: &[MaterialRegion]) -> Option<Vec<Block>> {
     let mut planes: Vec<i64> = spans.iter().flat_map(|&(a, b)| [a, b]).collect();
     planes.sort_unstable();
     planes.dedup();
-    let mut out = Vec::new();
+    // Every block's regions and cycle height first: a cycle over the limit refuses
+    // the whole sequence before any block's steps are built.
+    let mut pending = Vec::new();
     for w in planes.windows(2) {
         let (lo, hi) = (w[0], w[1]);
         let present: Vec<(usize, u64)> = spans
@@ -105,7 +110,12 @@ pub fn blocks(regions: &[MaterialRegion]) -> Option<Vec<Block>> {
         if present.is_empty() {
             continue;
         }
-        let cycle = work_cycle(&present)?;
+        lcm_all(present.iter().map(|&(_, t)| t)).filter(|&h| h <= max_cycle_um)?;
+        pending.push((lo, hi, present));
+    }
+    let mut out = Vec::new();
+    for (lo, hi, present) in pending {
+        let cycle = work_cycle(&present, max_cycle_um)?;
         let height = u64::try_from(hi - lo).ok()?;
         out.push(Block {
             z_start: lo as f64 / 1000.0,
@@ -147,7 +157,7 @@ mod tests {
     /// 1.5 mm, ties one after another.
     #[test]
     fn the_papers_work_cycle_has_eighteen_steps() {
-        let c = work_cycle(&[(0, 200), (1, 500), (2, 1500)]).expect("cycle");
+        let c = work_cycle(&[(0, 200), (1, 500), (2, 1500)], u64::MAX).expect("cycle");
         assert_eq!(c.height_um, 3000);
         assert_eq!(c.steps.len(), 18);
         let heights: Vec<u64> = c.steps.iter().map(|s| s.height_um).collect();
@@ -193,7 +203,7 @@ mod tests {
             region("inner", 200, (0.0, 6.1)),
             region("outer", 1500, (2.0, 6.1)),
         ];
-        let b = blocks(&regions).expect("blocks");
+        let b = blocks(&regions, u64::MAX).expect("blocks");
         assert_eq!(b.len(), 2);
         assert_eq!((b[0].z_start, b[0].z_end), (0.0, 2.0));
         assert_eq!(b[0].regions, [0]);
@@ -229,7 +239,7 @@ mod tests {
     #[test]
     fn empty_gaps_make_no_block() {
         let regions = [region("a", 500, (0.0, 1.0)), region("b", 500, (2.0, 3.0))];
-        let b = blocks(&regions).expect("blocks");
+        let b = blocks(&regions, u64::MAX).expect("blocks");
         assert_eq!(b.len(), 2);
         assert_eq!((b[1].z_start, b[1].z_end), (2.0, 3.0));
     }

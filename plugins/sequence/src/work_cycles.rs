@@ -200,23 +200,21 @@ fn round_um(mm: f64) -> f64 {
 impl Sequencer for WorkCycles {
     fn sequence(&self, info: &RunInfo) -> Result<Sequence> {
         let regions = self.regions(info)?;
-        let blocks = blocks(&regions)
-            .filter(|b| b.iter().all(|b| b.cycle.height_um <= MAX_CYCLE_UM))
-            .ok_or_else(|| {
-                let t: Vec<String> = regions
-                    .iter()
-                    .map(|r| format!("{} {} mm", r.name, r.thickness_um as f64 / 1000.0))
-                    .collect();
-                Error::stage(
-                    "sequence:work-cycles",
-                    format!(
-                        "the work cycle of {} is longer than {} mm: choose thicknesses with a \
+        let blocks = blocks(&regions, MAX_CYCLE_UM).ok_or_else(|| {
+            let t: Vec<String> = regions
+                .iter()
+                .map(|r| format!("{} {} mm", r.name, r.thickness_um as f64 / 1000.0))
+                .collect();
+            Error::stage(
+                "sequence:work-cycles",
+                format!(
+                    "the work cycle of {} is longer than {} mm: choose thicknesses with a \
                          smaller common multiple",
-                        t.join(", "),
-                        MAX_CYCLE_UM / 1000
-                    ),
-                )
-            })?;
+                    t.join(", "),
+                    MAX_CYCLE_UM / 1000
+                ),
+            )
+        })?;
         Ok(Sequence { regions, blocks })
     }
 }

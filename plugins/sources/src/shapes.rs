@@ -144,6 +144,61 @@ fn ellipse(c: [f64; 2], e1: [f64; 2], a: f64, b: f64, tolerance: f64) -> Shapes 
     vec![vec![ring]]
 }
 
+/// The ellipse of [`ellipse`] as far as it matters within `bbox`: itself when it is
+/// not much larger than the box; otherwise only its part over the box (grown by a
+/// margin), built from the ellipse's own arcs. An axis nearly parallel to the layer
+/// cuts an ellipse kilometres long; handed whole to the boolean operations it would
+/// coarsen their integer grid until the family's own edges snap.
+fn ellipse_over(c: [f64; 2], e1: [f64; 2], a: f64, b: f64, tolerance: f64, bbox: &BBox2) -> Set {
+    let diagonal = bbox.diagonal().max(tolerance);
+    let centre = bbox.center();
+    let far = (c[0] - centre.x).hypot(c[1] - centre.y) + a.max(b);
+    if far <= 4.0 * diagonal {
+        return Set::Shapes(ellipse(c, e1, a, b, tolerance));
+    }
+    // The box in the ellipse's frame: s along e1, t across, from its centre.
+    let m = [-e1[1], e1[0]];
+    let margin = 0.1 * diagonal;
+    let corners = [
+        [bbox.min.x - margin, bbox.min.y - margin],
+        [bbox.max.x + margin, bbox.min.y - margin],
+        [bbox.max.x + margin, bbox.max.y + margin],
+        [bbox.min.x - margin, bbox.max.y + margin],
+    ];
+    let frame = |p: [f64; 2]| {
+        let (x, y) = (p[0] - c[0], p[1] - c[1]);
+        (x * e1[0] + y * e1[1], x * m[0] + y * m[1])
+    };
+    let (mut s_lo, mut s_hi, mut t_lo, mut t_hi) =
+        (f64::INFINITY, f64::NEG_INFINITY, f64::INFINITY, f64::NEG_INFINITY);
+    for p in corners {
+        let (s, t) = frame(p);
+        s_lo = s_lo.min(s);
+        s_hi = s_hi.max(s);
+        t_lo = t_lo.min(t);
+        t_hi = t_hi.max(t);
+    }
+    if s_hi <= -a || s_lo >= a || t_hi <= -b || t_lo >= b {
+        return Set::Empty;
+    }
+    // The arcs over [s_lo, s_hi]: angles θ with s = a cos θ, in steps whose chords
+    // stray at most `tolerance`; across, the box's range clamps them.
+    let (th1, th2) = (
+        (s_hi / a).clamp(-1.0, 1.0).acos(),
+        (s_lo / a).clamp(-1.0, 1.0).acos(),
+    );
+    let step = (8.0 * tolerance / a.max(b)).sqrt();
+    let n = (((th2 - th1) / step).ceil() as usize).clamp(2, 20_000);
+    let point = |th: f64, side: f64| {
+        let (s, t) = (a * th.cos(), (side * b * th.sin()).clamp(t_lo, t_hi));
+        [c[0] + s * e1[0] + t * m[0], c[1] + s * e1[1] + t * m[1]]
+    };
+    let angle = |i: usize| th1 + (th2 - th1) * i as f64 / n as f64;
+    let mut ring: Vec<[f64; 2]> = (0..=n).map(|i| point(angle(i), 1.0)).collect();
+    ring.extend((0..=n).rev().map(|i| point(angle(i), -1.0)));
+    Set::Shapes(vec![vec![ring]])
+}
+
 /// The box `b` cut to the side n . p < c (a convex polygon, Sutherland-Hodgman).
 fn half_plane(b: &BBox2, n: [f64; 2], c: f64) -> Set {
     let corners = [
@@ -208,13 +263,13 @@ pub fn closer_than(datum: &Datum, d: f64, z: f64, bbox: &BBox2, tolerance: f64, 
                 return Set::Empty;
             }
             let r = r2.sqrt();
-            Set::Shapes(ellipse([c[0], c[1]], [1.0, 0.0], r, r, tolerance))
+            ellipse_over([c[0], c[1]], [1.0, 0.0], r, r, tolerance, bbox)
         }
         Datum::Axis { at, direction: u } => {
             let h = u[0].hypot(u[1]);
             let dz = z - at[2];
             if h < 1e-12 {
-                return Set::Shapes(ellipse([at[0], at[1]], [1.0, 0.0], d, d, tolerance));
+                return ellipse_over([at[0], at[1]], [1.0, 0.0], d, d, tolerance, bbox);
             }
             let e1 = [u[0] / h, u[1] / h];
             if u[2].abs() < 1e-12 {
@@ -238,7 +293,7 @@ pub fn closer_than(datum: &Datum, d: f64, z: f64, bbox: &BBox2, tolerance: f64, 
             // ellipse centred where a = h dz / u_z.
             let a0 = h * dz / u[2];
             let c = [at[0] + a0 * e1[0], at[1] + a0 * e1[1]];
-            Set::Shapes(ellipse(c, e1, d / u[2].abs(), d, tolerance))
+            ellipse_over(c, e1, d / u[2].abs(), d, tolerance, bbox)
         }
         Datum::Plane { at, normal: n } => {
             // n_xy . (p - at_xy) < d - n_z (z - at_z)
