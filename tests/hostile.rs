@@ -358,6 +358,24 @@ fn option_values_that_would_exhaust_the_machine_are_refused_before_work() {
             "max_layers",
         ),
         (
+            "cells a nanometre long",
+            "blade-idw.toml",
+            &["discretise.cell_length=1e-7"],
+            "limits.regions",
+        ),
+        (
+            "a bead of a nanometre",
+            "gear-mixing-gcode.toml",
+            &["plan.width=1e-7"],
+            "between 0.01 and 50",
+        ),
+        (
+            "a check every nanosecond",
+            "assembly-two-tools.toml",
+            &["plan.step=1e-9"],
+            "between",
+        ),
+        (
             "a source far away",
             "grading-sources.toml",
             &["discretise.sources.1.at=[1e308, 0, 0]"],

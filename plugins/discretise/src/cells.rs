@@ -21,7 +21,7 @@ use i_overlay::i_float::int::point::IntPoint;
 use i_overlay::string::line::IntLine;
 use i_overlay::string::slice::IntSlice;
 use lamina_core::stage::{OptionSpec, StageConfig};
-use lamina_core::{Contour, Point2, Polygon, Region, Result, Vector2};
+use lamina_core::{Contour, Limit, Limits, Point2, Polygon, Region, Result, Vector2};
 use serde::Deserialize;
 
 use crate::bands::{options, solver};
@@ -134,14 +134,29 @@ impl Cells {
 
     /// Splits every region of `regions` (one family `family` on `grid`) into its
     /// cells, each with `cell = Some(i)` and a reference point inside it.
-    pub fn split(&self, grid: &Grid, family: &Polygon, regions: &mut Vec<Region>) {
+    /// Refused when the cells of all regions would exceed `limits.regions` (a
+    /// `cell_length` of a micrometre on a large family).
+    pub fn split(
+        &self,
+        grid: &Grid,
+        family: &Polygon,
+        regions: &mut Vec<Region>,
+        limits: &Limits,
+    ) -> Result<()> {
         if self.count == Count::None || regions.is_empty() {
-            return;
+            return Ok(());
         }
+        let total: usize = regions.iter().map(|r| self.count(&r.polygon)).sum();
+        limits.check(
+            Limit::Regions,
+            total as f64,
+            "the circumferential cells of one family",
+        )?;
         match self.cuts {
             Cuts::Sectors => self.sectors(grid, family, regions),
             Cuts::Arc => self.arcs(grid, regions),
         }
+        Ok(())
     }
 
     /// Cells of equal angles about the family's centre, numbered counter-clockwise

@@ -379,7 +379,7 @@ impl Discretiser for DistanceField {
             Ok(any)
         })?;
         let mut regions = from_bands(ctx, &grid, &bands, count, |k| cut.levels[k]);
-        self.around.split(&grid, &polygon, &mut regions);
+        self.around.split(&grid, &polygon, &mut regions, &self.limits)?;
         Ok(regions)
     }
 }

@@ -128,7 +128,7 @@ impl Discretiser for Offset {
         }
         let bands = offset_bands(&base, grid.scale(), count, &self.inset, |k| k as f64 * spacing)?;
         let mut regions = from_bands(ctx, &grid, &bands, count, |j| uniform_level(j, count));
-        self.cells.split(&grid, &polygon, &mut regions);
+        self.cells.split(&grid, &polygon, &mut regions, &self.limits)?;
         Ok(regions)
     }
 }

@@ -481,7 +481,7 @@ impl Discretiser for Radial {
             Ok(true)
         })?;
         let mut regions = from_bands(ctx, &grid, &bands, count, |j| uniform_level(j, count));
-        self.cells.split(&grid, &polygon, &mut regions);
+        self.cells.split(&grid, &polygon, &mut regions, &self.limits)?;
         Ok(regions)
     }
 }

@@ -57,6 +57,7 @@ struct StepWidth {
     width: Option<f64>,
     inset: Inset,
     cells: Cells,
+    limits: lamina_core::Limits,
 }
 
 /// The largest distance from the reference inside the family, which normalises d:
@@ -112,7 +113,7 @@ impl Discretiser for StepWidth {
         let depth = |k: usize| if k == 0 { 0.0 } else { distances[k - 1] };
         let bands = offset_bands(&base, grid.scale(), count, &self.inset, depth)?;
         let mut regions = from_bands(ctx, &grid, &bands, count, |k| self.truncation.level(k));
-        self.cells.split(&grid, &polygon, &mut regions);
+        self.cells.split(&grid, &polygon, &mut regions, &self.limits)?;
         Ok(regions)
     }
 }
@@ -138,6 +139,7 @@ fn build(config: &StageConfig<'_>) -> Result<AnyStage> {
             tolerance: o.tolerance,
         },
         cells: Cells::checked(o.cells_around, o.cell_length, o.cell_cuts, config)?,
+        limits: config.limits,
     })))
 }
 

@@ -100,32 +100,41 @@ fn d_change() -> f64 {
     5.0
 }
 
+/// Narrowest and widest bead (mm): from a fine nozzle to a wide laser-deposition track.
+const MIN_WIDTH: f64 = 0.01;
+const MAX_WIDTH: f64 = 50.0;
+/// Fastest move (mm/s).
+const MAX_SPEED: f64 = 10_000.0;
+
 /// Name of the single tool when `mixing = true`.
 pub const MIXER: &str = "mixer";
 
 impl Options {
     fn check(&self, config: &StageConfig<'_>, concurrent: bool) -> Result<()> {
-        let positive = |k: &str, v: f64| {
-            if v.is_finite() && v > 0.0 {
+        // Each value within what a machine can do: a bead of a nanometre or a check
+        // every nanosecond would only multiply the work without bound.
+        let within = |k: &str, v: f64, lo: f64, hi: f64, unit: &str| {
+            if v.is_finite() && v >= lo && v <= hi {
                 Ok(())
             } else {
-                Err(config.error(k, "must be a positive number"))
+                Err(config.error(k, format!("must be between {lo} and {hi} {unit}, not {v}")))
             }
         };
-        positive("width", self.width())?;
+        let positive = |k: &str, v: f64| within(k, v, 1e-3, 1e5, "");
+        within("width", self.width(), MIN_WIDTH, MAX_WIDTH, "mm")?;
         let [lo, hi] = self.width_range;
-        if !(lo.is_finite() && hi.is_finite() && lo > 0.0 && lo <= 1.0 && hi >= 1.0) {
+        if !(lo.is_finite() && hi.is_finite() && lo >= 0.05 && lo <= 1.0 && (1.0..=10.0).contains(&hi)) {
             return Err(config.error(
                 "width_range",
-                "must be [min, max] fractions of `width` with 0 < min <= 1 <= max",
+                "must be [min, max] fractions of `width` with 0.05 <= min <= 1 <= max <= 10",
             ));
         }
         if !(self.min_fill.is_finite() && (0.0..=1.0).contains(&self.min_fill)) {
             return Err(config.error("min_fill", "must be a share between 0 and 1"));
         }
-        positive("speed", self.speed)?;
-        positive("travel_speed", self.travel_speed)?;
-        positive("envelope", self.envelope)?;
+        within("speed", self.speed, 0.01, MAX_SPEED, "mm/s")?;
+        within("travel_speed", self.travel_speed, 0.01, MAX_SPEED, "mm/s")?;
+        within("envelope", self.envelope, 1e-3, 1e4, "mm")?;
         if !(self.tool_change.is_finite() && self.tool_change >= 0.0) {
             return Err(config.error("tool_change", "must be zero or more seconds"));
         }
@@ -134,7 +143,7 @@ impl Options {
         // concurrent pipeline.
         let _ = concurrent;
         if let Some(s) = self.step {
-            positive("step", s)?;
+            within("step", s, 1e-4, 10.0, "s")?;
         }
         for (name, t) in &self.tools {
             for (k, v) in [
@@ -143,9 +152,12 @@ impl Options {
                 ("envelope", t.envelope),
             ] {
                 if let Some(v) = v
-                    && !(v.is_finite() && v > 0.0)
+                    && positive(k, v).is_err()
                 {
-                    return Err(config.error("tools", format!("tools.{name}.{k} must be a positive number")));
+                    return Err(config.error(
+                        "tools",
+                        format!("tools.{name}.{k} must be a positive number up to 1e5"),
+                    ));
                 }
             }
         }
