@@ -123,7 +123,7 @@ impl Options {
         let positive = |k: &str, v: f64| within(k, v, 1e-3, 1e5, "");
         within("width", self.width(), MIN_WIDTH, MAX_WIDTH, "mm")?;
         let [lo, hi] = self.width_range;
-        if !(lo.is_finite() && hi.is_finite() && lo >= 0.05 && lo <= 1.0 && (1.0..=10.0).contains(&hi)) {
+        if !((0.05..=1.0).contains(&lo) && (1.0..=10.0).contains(&hi)) {
             return Err(config.error(
                 "width_range",
                 "must be [min, max] fractions of `width` with 0.05 <= min <= 1 <= max <= 10",
