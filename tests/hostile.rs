@@ -842,3 +842,64 @@ fn a_full_disk_or_a_read_only_folder_gives_a_clear_error_and_no_file() {
     assert_eq!(o.code, Some(1), "{}", o.stderr);
     assert!(o.stderr.contains("Read-only file system"), "{}", o.stderr);
 }
+
+/// A UV sphere of radius `r` standing on the bed, `n` rings of `n` segments: about
+/// 2 n² triangles, written as binary STL.
+fn sphere_stl(path: &Path, n: usize, r: f64) -> usize {
+    let vertex = |i: usize, j: usize| {
+        let (th, ph) = (
+            std::f64::consts::PI * i as f64 / n as f64,
+            std::f64::consts::TAU * (j % n) as f64 / n as f64,
+        );
+        [r * th.sin() * ph.cos(), r * th.sin() * ph.sin(), r + r * th.cos()]
+    };
+    let mut triangles = Vec::new();
+    for i in 0..n {
+        for j in 0..n {
+            let (a, b, c, d) = (
+                vertex(i, j),
+                vertex(i + 1, j),
+                vertex(i + 1, j + 1),
+                vertex(i, j + 1),
+            );
+            // The pole rows have one degenerate triangle each: left out.
+            if i > 0 {
+                triangles.push([a, b, c]);
+            }
+            if i + 1 < n {
+                triangles.push([a, c, d]);
+            }
+        }
+    }
+    let mut out = std::io::BufWriter::new(std::fs::File::create(path).expect("create"));
+    out.write_all(&[0u8; 80]).expect("write");
+    out.write_all(&(triangles.len() as u32).to_le_bytes())
+        .expect("write");
+    for t in &triangles {
+        out.write_all(&[0u8; 12]).expect("write");
+        for v in t {
+            for c in v {
+                out.write_all(&(*c as f32).to_le_bytes()).expect("write");
+            }
+        }
+        out.write_all(&[0, 0]).expect("write");
+    }
+    out.flush().expect("flush");
+    triangles.len()
+}
+
+#[test]
+fn a_five_million_triangle_mesh_runs_within_budget() {
+    let s = Scratch::new();
+    let count = sphere_stl(&s.path().join("sphere.stl"), 1582, 20.0);
+    assert!(count >= 5_000_000, "{count}");
+    let pipeline = pipeline_for("sphere.stl").replace("place = \"centre\"\n", "")
+        + "\n[discretise]\nuse = \"offset\"\ncount = 4\n";
+    let p = s.write("p.toml", pipeline);
+    let o = s.run(&p, &["slice.thickness=0.2"]);
+    within_budget("5 M triangles", &o);
+    assert_eq!(o.code, Some(0), "{}", o.stderr);
+    let plan: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(s.out().join("plan.json")).expect("the plan")).expect("JSON");
+    assert_eq!(plan["layers"].as_array().map(Vec::len), Some(200));
+}
