@@ -358,6 +358,12 @@ fn option_values_that_would_exhaust_the_machine_are_refused_before_work() {
             "max_layers",
         ),
         (
+            "iso-contours a nanometre apart",
+            "blade-skin.toml",
+            &["discretise={use = \"distance-field\", spacing = 1e-7}"],
+            "limits.regions",
+        ),
+        (
             "cells a nanometre long",
             "blade-idw.toml",
             &["discretise.cell_length=1e-7"],

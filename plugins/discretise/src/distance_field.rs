@@ -115,8 +115,9 @@ pub struct Cut {
 }
 
 impl Levels {
-    /// The cut for a field whose largest distance inside the family is `max` mm.
-    pub fn cut(&self, max: f64) -> Cut {
+    /// The cut for a field whose largest distance inside the family is `max` mm, with at
+    /// most `most` levels.
+    pub fn cut(&self, max: f64, most: usize) -> Cut {
         match self {
             Levels::Equal(n) => Cut {
                 thresholds: (1..*n).map(|k| k as f64 / *n as f64).collect(),
@@ -128,9 +129,8 @@ impl Levels {
             },
             Levels::Spacing(s) => {
                 // Contours strictly below the maximum: one at the maximum itself would
-                // bound nothing. The guard keeps a tiny spacing on a huge part finite:
-                // levels closer than the field's cells cannot be told apart anyway.
-                let n = ((max / s).ceil() as usize).clamp(1, MAX_SPACING_LEVELS);
+                // bound nothing.
+                let n = ((max / s).ceil() as usize).clamp(1, most.max(1));
                 let levels: Vec<f64> = (0..n).map(|k| (k as f64 * s / max).min(1.0)).collect();
                 Cut {
                     thresholds: levels[1..].to_vec(),
@@ -206,9 +206,6 @@ pub struct DistanceField {
     /// The run's limits: a grid that `cell_size` makes too fine is refused.
     pub limits: lamina_core::Limits,
 }
-
-/// Most iso-levels a `spacing` makes: more than a field has cells along its side.
-const MAX_SPACING_LEVELS: usize = 1 << 15;
 
 impl DistanceField {
     /// Samples along the longer side of the family's box: `cells`, or what
@@ -311,7 +308,11 @@ impl DistanceField {
                 };
             }
         }
-        let cut = self.levels.cut(max);
+        // Never more iso-levels than the limit allows (the discretiser refuses the
+        // family when a spacing asks for more): the iso-lines cost per level.
+        let cut = self
+            .levels
+            .cut(max, self.limits.regions.saturating_add(1) as usize);
         let sets = iso_levels(&field, &field.values, &cut.thresholds);
         Some(IsoSets {
             field,
@@ -360,10 +361,18 @@ impl Discretiser for DistanceField {
         }
         let z = ctx.layer.z - ctx.layer.thickness / 2.0;
         let space = surface.as_deref().map(|s| (s, z));
-        let Some(IsoSets { cut, sets, .. }) = self.iso_sets(&polygon, space).filter(|_| !base.is_empty())
+        let Some(IsoSets { cut, sets, max, .. }) =
+            self.iso_sets(&polygon, space).filter(|_| !base.is_empty())
         else {
             return Ok(whole(ctx, polygon));
         };
+        if let Levels::Spacing(s) = self.levels {
+            self.limits.check(
+                lamina_core::Limit::Regions,
+                (max / s).ceil(),
+                &format!("iso-contours every {s} mm over a largest distance of {max:.3} mm"),
+            )?;
+        }
         let count = cut.levels.len();
         // Loops keep the set on their left: the non-zero rule in the band overlay reads
         // them as outers and holes.
