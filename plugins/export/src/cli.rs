@@ -145,7 +145,11 @@ impl Exporter for Cli {
         header.push_str(&format!("$$LAYERS/{}\n", ctx.layer_count));
         for (i, p) in ctx.info.parts.iter().enumerate() {
             // Labels are text up to the end of the line: keep them on one line.
-            header.push_str(&format!("$$LABEL/{},{}\n", i + 1, one_line(&p.name)));
+            header.push_str(&format!(
+                "$$LABEL/{},{}\n",
+                i + 1,
+                lamina_core::output::one_line(&p.name)
+            ));
         }
         if self.options.format == Format::Modified {
             // Inside a `//...//` comment: one line, and no `//` that would end it.
@@ -153,7 +157,7 @@ impl Exporter for Cli {
                 .info
                 .materials
                 .iter()
-                .map(|m| one_line(&m.name).replace("//", "/ /"))
+                .map(|m| lamina_core::output::one_line(&m.name).replace("//", "/ /"))
                 .collect();
             header.push_str(&format!(
                 "//modified CLI: $$MATERIAL/R,G,B then the fractions of the polyline's part materials; materials: {}//\n",
@@ -234,20 +238,6 @@ impl LayerSink for Sink {
         }
         self.out.flush().map_err(io(&path))
     }
-}
-
-/// A name on one line: control characters and Unicode line breaks become spaces, so
-/// that no name can start a command line of the file.
-fn one_line(name: &str) -> String {
-    name.chars()
-        .map(|c| {
-            if c.is_control() || matches!(c, '\u{2028}' | '\u{2029}' | '\u{85}') {
-                ' '
-            } else {
-                c
-            }
-        })
-        .collect()
 }
 
 fn build(config: &StageConfig<'_>) -> Result<AnyStage> {

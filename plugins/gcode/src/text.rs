@@ -8,15 +8,8 @@ const MAX_NAME: usize = 80;
 /// characters and Unicode line breaks become spaces, so that a name with a newline can
 /// never start an executable line, and very long names are cut.
 pub fn clean(name: &str) -> String {
-    let mut out: String = name
+    let mut out: String = lamina_core::output::one_line(name)
         .chars()
-        .map(|c| {
-            if c.is_control() || matches!(c, '\u{2028}' | '\u{2029}' | '\u{85}') {
-                ' '
-            } else {
-                c
-            }
-        })
         .take(MAX_NAME)
         .collect();
     if name.chars().count() > MAX_NAME {
