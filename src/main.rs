@@ -134,6 +134,11 @@ impl From<lamina_core::Error> for Failure {
     }
 }
 
+/// Counts what each thread holds, so that a script call holding more than its budget
+/// is stopped (`ScriptLimits::max_memory`).
+#[global_allocator]
+static ALLOCATOR: lamina_core::script::CountingAllocator = lamina_core::script::CountingAllocator;
+
 fn main() -> ExitCode {
     let cli = Cli::parse();
     match execute(cli) {

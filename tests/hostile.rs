@@ -233,6 +233,11 @@ fn scripts_that_hang_or_hoard_are_stopped_with_their_location() {
             "grade.f=let m = #{}; for i in 0..1000000 { m[`k${i}`] = i; } 0.5",
             "limit",
         ),
+        (
+            "a map of large arrays",
+            "grade.f=let a = []; a.pad(99999, 1.0); let m = #{}; for i in 0..99999 { m[`${i}`] = a; } 0.5",
+            "memory limit",
+        ),
         ("import", "grade.f=import \"x\" as y; 0.5", "modules"),
         ("eval", "grade.f=eval(\"0.5\")", "eval"),
         ("NaN", "grade.f=0.0 / 0.0", "NaN"),

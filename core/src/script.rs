@@ -28,6 +28,10 @@ pub struct ScriptLimits {
     pub max_array_size: usize,
     /// Wall-clock budget of one call.
     pub time_limit: Duration,
+    /// Bytes one call may hold, counted when the program installs
+    /// [`CountingAllocator`] (the `lamina` binary does): the size limits do not see
+    /// every copy (a map whose entries are large arrays).
+    pub max_memory: usize,
     /// Functions one script file may define.
     pub max_functions: usize,
 }
@@ -42,6 +46,7 @@ impl Default for ScriptLimits {
             max_array_size: 100_000,
             time_limit: Duration::from_millis(500),
             max_functions: 10_000,
+            max_memory: 128 << 20,
         }
     }
 }
@@ -53,6 +58,61 @@ thread_local! {
     /// Rhai's functions swallow their callbacks' errors (a sort comparator that is
     /// stopped only makes the sort go on): once stopped, the whole call fails.
     static STOPPED: Cell<bool> = const { Cell::new(false) };
+    /// Why the call running on this thread was stopped.
+    static STOP_REASON: Cell<&'static str> = const { Cell::new("time limit exceeded") };
+    /// Bytes this thread holds, as [`CountingAllocator`] counts them.
+    static HELD: Cell<isize> = const { Cell::new(0) };
+    /// What this thread held when its script call started.
+    static HELD_AT_START: Cell<isize> = const { Cell::new(0) };
+}
+
+/// A global allocator that counts the bytes each thread holds, so that a script call
+/// is stopped when it holds more than [`ScriptLimits::max_memory`]. A program opts in
+/// with `#[global_allocator] static A: CountingAllocator = CountingAllocator;`;
+/// without it no memory limit applies. The count is a thread-local addition per
+/// allocation.
+#[derive(Debug, Default, Clone, Copy)]
+pub struct CountingAllocator;
+
+fn count_held(bytes: isize) {
+    // The counter is a const-initialised `Cell` without destructor: using it allocates
+    // nothing, and after the thread's end `try_with` just skips.
+    let _ = HELD.try_with(|h| h.set(h.get().wrapping_add(bytes)));
+}
+
+// SAFETY: every call is passed unchanged to the system allocator, which upholds the
+// `GlobalAlloc` contract; the counting touches no allocation.
+unsafe impl std::alloc::GlobalAlloc for CountingAllocator {
+    unsafe fn alloc(&self, layout: std::alloc::Layout) -> *mut u8 {
+        count_held(layout.size() as isize);
+        // SAFETY: the caller keeps `alloc`'s contract, which `System` shares.
+        unsafe { std::alloc::System.alloc(layout) }
+    }
+
+    unsafe fn alloc_zeroed(&self, layout: std::alloc::Layout) -> *mut u8 {
+        count_held(layout.size() as isize);
+        // SAFETY: as for `alloc`.
+        unsafe { std::alloc::System.alloc_zeroed(layout) }
+    }
+
+    unsafe fn dealloc(&self, ptr: *mut u8, layout: std::alloc::Layout) {
+        count_held(-(layout.size() as isize));
+        // SAFETY: `ptr` came from `System` through this allocator with `layout`.
+        unsafe { std::alloc::System.dealloc(ptr, layout) }
+    }
+
+    unsafe fn realloc(&self, ptr: *mut u8, layout: std::alloc::Layout, new_size: usize) -> *mut u8 {
+        count_held(new_size as isize - layout.size() as isize);
+        // SAFETY: as for `dealloc`, with the caller's valid `new_size`.
+        unsafe { std::alloc::System.realloc(ptr, layout, new_size) }
+    }
+}
+
+/// Stops the call running on this thread for `reason`.
+fn stop(reason: &'static str) -> Option<Dynamic> {
+    STOPPED.with(|s| s.set(true));
+    STOP_REASON.with(|r| r.set(reason));
+    Some(Dynamic::from(reason.to_string()))
 }
 
 /// The names a script may read; anything else is refused when the script is compiled.
@@ -134,16 +194,20 @@ impl ScriptHost {
             .on_print(|_| {})
             .on_debug(|_, _, _| {});
         let max_operations = limits.max_operations;
+        let max_memory = isize::try_from(limits.max_memory).unwrap_or(isize::MAX);
         engine.on_progress(move |ops| {
+            // Memory at every operation: one operation may copy megabytes.
+            if HELD.with(Cell::get).wrapping_sub(HELD_AT_START.with(Cell::get)) > max_memory {
+                return stop("memory limit exceeded");
+            }
             let over = ops >= max_operations;
             if ops % 1024 != 0 && !over {
                 return None;
             }
-            let late = over || DEADLINE.with(|d| d.get().is_some_and(|t| Instant::now() > t));
-            if late {
-                STOPPED.with(|s| s.set(true));
+            if over || DEADLINE.with(|d| d.get().is_some_and(|t| Instant::now() > t)) {
+                return stop("time limit exceeded");
             }
-            late.then(|| Dynamic::from("time limit exceeded".to_string()))
+            None
         });
         // A grading function has no business waiting.
         engine.register_fn(
@@ -458,6 +522,8 @@ impl ScriptFn {
     pub fn call(&self, args: &ScriptArgs<'_>, context: &str) -> Result<Dynamic> {
         DEADLINE.with(|d| d.set(Some(Instant::now() + self.time_limit)));
         STOPPED.with(|s| s.set(false));
+        HELD_AT_START.with(|h| h.set(HELD.with(Cell::get)));
+        STOP_REASON.with(|r| r.set("time limit exceeded"));
         let _guard = DeadlineGuard;
         let result = match &self.function {
             None => {
@@ -475,7 +541,7 @@ impl ScriptFn {
         // Stopped inside a function that swallowed the error: the call still fails.
         let result = match result {
             Ok(_) if STOPPED.with(Cell::get) => Err(Box::new(EvalAltResult::ErrorTerminated(
-                Dynamic::from("time limit exceeded".to_string()),
+                Dynamic::from(STOP_REASON.with(Cell::get).to_string()),
                 Position::NONE,
             ))),
             other => other,
@@ -486,9 +552,10 @@ impl ScriptFn {
                 // No position (a limit hit deep inside): the function, not the file's top.
                 return self.value_error(
                     match *e {
-                        EvalAltResult::ErrorTerminated(..) => {
-                            "stopped: time or operation limit exceeded".to_string()
-                        }
+                        EvalAltResult::ErrorTerminated(..) => match STOP_REASON.with(Cell::get) {
+                            "memory limit exceeded" => "stopped: memory limit exceeded".to_string(),
+                            _ => "stopped: time or operation limit exceeded".to_string(),
+                        },
                         EvalAltResult::ErrorStackOverflow(..) => {
                             "stopped: too many nested function calls (endless recursion?)".to_string()
                         }
@@ -498,7 +565,7 @@ impl ScriptFn {
                 );
             }
             let message = match *e {
-                EvalAltResult::ErrorTerminated(..) => "stopped: time limit exceeded".to_string(),
+                EvalAltResult::ErrorTerminated(..) => format!("stopped: {}", STOP_REASON.with(Cell::get)),
                 EvalAltResult::ErrorTooManyOperations(..) => {
                     "stopped: too many operations (an endless loop?)".to_string()
                 }
