@@ -405,6 +405,12 @@ fn option_values_that_would_exhaust_the_machine_are_refused_before_work() {
             "micrometres",
         ),
         (
+            "a tiny box",
+            "grading-sources.toml",
+            &["model.size=[1e-6, 1e-6, 1e-6]"],
+            "in metres",
+        ),
+        (
             "a huge scale",
             "grading-sources.toml",
             &["model.scale=1e300"],
@@ -426,6 +432,20 @@ fn option_values_that_would_exhaust_the_machine_are_refused_before_work() {
         }
         let o = s.run(&p(pipeline), &sets);
         refused(&s, label, &o, expected);
+    }
+}
+
+#[test]
+fn a_model_scaled_thinner_than_a_layer_is_planned_with_a_warning() {
+    let s = Scratch::new();
+    for scale in ["1e-300", "1e-3"] {
+        let o = s.run(
+            &pipelines().join("grading-sources.toml"),
+            &[&format!("model.scale={scale}")],
+        );
+        within_budget(scale, &o);
+        assert_eq!(o.code, Some(0), "{}", o.stderr);
+        assert!(o.stderr.contains("thinner than a layer"), "{scale}: {}", o.stderr);
     }
 }
 

@@ -609,6 +609,21 @@ impl Engine {
         let slots = timings.time(StageKind::Slice, || {
             self.slicer.layers(&meshes, &info, sequence.as_ref())
         })?;
+        // A part thinner than the thinnest layer is most likely scaled wrong: it is
+        // planned, but said.
+        let thinnest = slots.iter().map(|s| s.thickness).fold(f64::INFINITY, f64::min);
+        for p in &info.parts {
+            let tall = p.z_max - p.z_min;
+            if tall < thinnest {
+                observer.warning(&format!(
+                    "part `{}` is {} mm tall, thinner than a layer ({} mm): is its scale right?",
+                    p.name,
+                    short(tall),
+                    short(thinnest)
+                ));
+                warnings += 1;
+            }
+        }
         let prepared: Vec<Box<dyn MeshSlicer>> = pool.install(|| {
             meshes
                 .par_iter()
