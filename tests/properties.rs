@@ -621,7 +621,7 @@ fn discretise_and_check(f: &RandomFamily, text: &str) -> Result<(), TestCaseErro
         Ok(regions) => regions,
         // Options that ask for more sub-regions than the run's limits allow (a fine
         // nozzle times many cells) are refused by name: the answer the limits promise.
-        Err(lamina_core::Error::Limit { key, .. }) if key == "regions" => return Ok(()),
+        Err(lamina_core::Error::Limit { key: "regions", .. }) => return Ok(()),
         Err(e) => return Err(TestCaseError::fail(format!("{text}: {e}"))),
     };
     check_tiling(&family, &regions, stage.as_ref())
