@@ -323,11 +323,17 @@ pub fn inspect(path: &Path) -> Result<()> {
             ),
         ));
     }
+    same_build(path, "", &core_version, &rustc_version)
+}
+
+/// Refuses a plugin built against another lamina-core or by another compiler; `who`
+/// starts the message (`plugin `x` was `), or is empty.
+fn same_build(path: &Path, who: &str, core_version: &str, rustc_version: &str) -> Result<()> {
     if core_version != crate::VERSION {
         return Err(refuse(
             path,
             format!(
-                "built against lamina-core {core_version}, this lamina is {}: rebuild it",
+                "{who}built against lamina-core {core_version}, this lamina is {}: rebuild it",
                 crate::VERSION
             ),
         ));
@@ -336,7 +342,7 @@ pub fn inspect(path: &Path) -> Result<()> {
         return Err(refuse(
             path,
             format!(
-                "built by `{rustc_version}`, this lamina by `{RUSTC_VERSION}`: rebuild it with the same compiler"
+                "{who}built by `{rustc_version}`, this lamina by `{RUSTC_VERSION}`: rebuild it with the same compiler"
             ),
         ));
     }
@@ -423,23 +429,12 @@ fn open(path: &Path) -> Result<LoadedPlugin> {
             plugin_str(d.name).unwrap_or_else(|| "unnamed".into()),
         )
     };
-    if core_version != crate::VERSION {
-        return Err(refuse(
-            path,
-            format!(
-                "plugin `{name}` was built against lamina-core {core_version}, this lamina is {}: rebuild it",
-                crate::VERSION
-            ),
-        ));
-    }
-    if rustc_version != RUSTC_VERSION {
-        return Err(refuse(
-            path,
-            format!(
-                "plugin `{name}` was built by `{rustc_version}`, this lamina by `{RUSTC_VERSION}`: rebuild it with the same compiler"
-            ),
-        ));
-    }
+    same_build(
+        path,
+        &format!("plugin `{name}` was "),
+        &core_version,
+        &rustc_version,
+    )?;
     let stages = if d.stage_count == 0 || d.stages.is_null() {
         Vec::new()
     } else {

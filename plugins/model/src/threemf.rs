@@ -344,6 +344,24 @@ fn parse_model(path: &Path, part: &str, text: &str, limits: &Limits) -> Result<V
     Ok(meshes)
 }
 
+/// Object `id`, met `depth` components down; refused past [`MAX_DEPTH`] (a cycle).
+fn object_at<'a>(
+    path: &Path,
+    objects: &'a HashMap<u32, Object>,
+    id: u32,
+    depth: usize,
+) -> Result<&'a Object> {
+    if depth > MAX_DEPTH {
+        return Err(err(
+            path,
+            format!("components nest deeper than {MAX_DEPTH} (a cycle?)"),
+        ));
+    }
+    objects
+        .get(&id)
+        .ok_or_else(|| err(path, format!("the build names object {id}, which is not defined")))
+}
+
 /// Triangles object `id` expands to with its components, each object counted once
 /// (memoised): a chain of objects that each instantiate the one below twice doubles
 /// per level, and is refused before it is built. Floats, so the count cannot wrap.
@@ -357,15 +375,7 @@ fn expanded_triangles(
     if let Some(&n) = memo.get(&id) {
         return Ok(n);
     }
-    if depth > MAX_DEPTH {
-        return Err(err(
-            path,
-            format!("components nest deeper than {MAX_DEPTH} (a cycle?)"),
-        ));
-    }
-    let o = objects
-        .get(&id)
-        .ok_or_else(|| err(path, format!("the build names object {id}, which is not defined")))?;
+    let o = object_at(path, objects, id, depth)?;
     let mut n = o.triangles.len() as f64;
     for (child, _) in &o.components {
         n += expanded_triangles(path, objects, *child, depth + 1, memo)?;
@@ -387,15 +397,7 @@ fn collect(
     groups: &HashMap<u32, Vec<String>>,
     any_material: &mut bool,
 ) -> Result<()> {
-    if depth > MAX_DEPTH {
-        return Err(err(
-            path,
-            format!("components nest deeper than {MAX_DEPTH} (a cycle?)"),
-        ));
-    }
-    let o = objects
-        .get(&id)
-        .ok_or_else(|| err(path, format!("the build names object {id}, which is not defined")))?;
+    let o = object_at(path, objects, id, depth)?;
     let base = mesh.vertices.len() as u32;
     mesh.vertices
         .extend(o.vertices.iter().map(|&p| apply(transform, p)));
