@@ -1,18 +1,37 @@
-//! Records the compiler version: a dynamic plugin hands Rust trait objects across the
-//! library boundary, which is only sound when host and plugin were built by the same
-//! compiler, so the loader compares this string.
+//! Computes the wire fingerprint: a hash of the source of every type that travels
+//! between the host and a dynamic plugin as a message, comments and whitespace aside.
+//! Two builds with the same fingerprint read and write the same messages; the plugin
+//! loader refuses a plugin whose fingerprint differs, naming both.
 
-use std::process::Command;
+use std::path::Path;
+
+/// Files whose types are serialised across the plugin boundary.
+const WIRE_SOURCES: &[&str] = &[
+    "src/geom.rs",
+    "src/limits.rs",
+    "src/machine/mod.rs",
+    "src/machine/template.rs",
+    "src/mesh.rs",
+    "src/model.rs",
+    "src/plugin/wire.rs",
+    "src/stage.rs",
+];
 
 fn main() {
-    let rustc = std::env::var("RUSTC").unwrap_or_else(|_| "rustc".into());
-    let version = Command::new(rustc)
-        .arg("--version")
-        .output()
-        .ok()
-        .and_then(|o| String::from_utf8(o.stdout).ok())
-        .map(|s| s.trim().to_string())
-        .unwrap_or_else(|| "unknown".into());
-    println!("cargo:rustc-env=LAMINA_RUSTC_VERSION={version}");
-    println!("cargo:rerun-if-env-changed=RUSTC");
+    let mut hash: u64 = 0xcbf2_9ce4_8422_2325;
+    for file in WIRE_SOURCES {
+        println!("cargo:rerun-if-changed={file}");
+        let text = std::fs::read_to_string(Path::new(file)).unwrap_or_else(|e| panic!("{file}: {e}"));
+        for line in text.lines() {
+            let code = line.trim();
+            if code.is_empty() || code.starts_with("//") {
+                continue;
+            }
+            for byte in code.bytes().filter(|b| !b.is_ascii_whitespace()) {
+                hash ^= u64::from(byte);
+                hash = hash.wrapping_mul(0x0100_0000_01b3);
+            }
+        }
+    }
+    println!("cargo:rustc-env=LAMINA_WIRE_FINGERPRINT={hash:016x}");
 }

@@ -1,5 +1,8 @@
-//! Dynamic plugins end to end: the example `zigzag` crate and two fixtures are built as
+//! Dynamic plugins end to end: the example `zigzag` crate and the fixtures are built as
 //! shared libraries, loaded by the `lamina` binary, and run, refused or contained.
+//!
+//! `LAMINA_PLUGIN_HOST` names another `lamina` binary to load them with (continuous
+//! integration uses the release build).
 
 use std::path::{Path, PathBuf};
 use std::process::Command;
@@ -39,11 +42,15 @@ fn library(crate_name: &str) -> PathBuf {
     ))
 }
 
+/// The host that loads the plugins.
+fn host() -> PathBuf {
+    std::env::var_os("LAMINA_PLUGIN_HOST")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| PathBuf::from(env!("CARGO_BIN_EXE_lamina")))
+}
+
 fn lamina(args: &[&str]) -> std::process::Output {
-    Command::new(env!("CARGO_BIN_EXE_lamina"))
-        .args(args)
-        .output()
-        .expect("lamina runs")
+    Command::new(host()).args(args).output().expect("lamina runs")
 }
 
 fn write_pipeline(dir: &Path, extra: &str) -> PathBuf {
@@ -115,7 +122,7 @@ fn plugin_of_another_abi_is_refused_naming_both_versions() {
     let dir = tempfile::tempdir().expect("tempdir");
     let pipeline = write_pipeline(dir.path(), "");
     let marker = dir.path().join("initialiser-ran");
-    let out = Command::new(env!("CARGO_BIN_EXE_lamina"))
+    let out = Command::new(host())
         .args([
             "check",
             pipeline.to_str().expect("utf-8"),
@@ -205,11 +212,15 @@ fn truncated_and_foreign_files_are_refused_with_the_reason_before_loading() {
     // A real library that is not a Lamina plugin: refused by its exports.
     let other = dir.path().join("plain.so");
     let mut plain = lib.clone();
-    let at = plain
-        .windows(b"lamina_plugin_entry_v1".len())
-        .position(|w| w == b"lamina_plugin_entry_v1")
-        .expect("the entry symbol's name");
-    plain[at] = b'X';
+    for at in plain
+        .windows(b"lamina_plugin_zigzag".len())
+        .enumerate()
+        .filter(|(_, w)| *w == b"lamina_plugin_zigzag")
+        .map(|(i, _)| i)
+        .collect::<Vec<_>>()
+    {
+        plain[at] = b'X';
+    }
     std::fs::write(&other, &plain).expect("write");
     let out = lamina(&[
         "check",
@@ -219,5 +230,144 @@ fn truncated_and_foreign_files_are_refused_with_the_reason_before_loading() {
     ]);
     let err = String::from_utf8_lossy(&out.stderr);
     assert_eq!(out.status.code(), Some(2), "{err}");
-    assert!(err.contains("exports no `lamina_plugin_entry_v1`"), "{err}");
+    assert!(err.contains("exports no `lamina_plugin_<name>`"), "{err}");
+}
+
+#[test]
+fn plugin_whose_boundary_struct_changed_is_refused_before_loading() {
+    let lib = library("lamina-fixture-changed-layout");
+    let dir = tempfile::tempdir().expect("tempdir");
+    let pipeline = write_pipeline(dir.path(), "");
+    let marker = dir.path().join("initialiser-ran");
+    let out = Command::new(host())
+        .args([
+            "check",
+            pipeline.to_str().expect("utf-8"),
+            "--plugin",
+            lib.to_str().expect("utf-8"),
+        ])
+        .env("LAMINA_FIXTURE_MARKER", &marker)
+        .output()
+        .expect("lamina runs");
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{err}");
+    assert!(
+        err.contains("plugin `changed_layout`")
+            && err.contains("lays out the boundary's C types differently"),
+        "{err}"
+    );
+    assert!(err.contains("rebuild it against lamina-core"), "{err}");
+    if cfg!(target_os = "linux") {
+        assert!(!marker.exists(), "the refused library's initialiser ran");
+    }
+}
+
+/// Runs a two-material tube graded by `grade` (with the dynamic script fixture loaded)
+/// and returns the exit code, the error output, the plan and the run's wall time.
+fn graded_run(dir: &Path, grade: &str) -> (Option<i32>, String, Option<String>, std::time::Duration) {
+    std::fs::write(
+        dir.join("grading.rhai"),
+        "fn smooth(z) { let t = clamp01(z / 2.0); 1.0 - t * t * (3.0 - 2.0 * t) }\n\
+         fn by_array(r, x, y, layer, part) { let a = []; a.push(lerp(0.0, 1.0, clamp01(r))); a.push(1.0 - a[0]); if a.len() != 2 { throw \"len\"; } a }\n\
+         fn clock(z) { let t = timestamp(); clamp01(sin(z * PI / 4.0).abs()) }\n\
+         fn forever(z) { loop { } }\n\
+         fn too_much(z) { 2.0 }\n",
+    )
+    .expect("script");
+    let path = dir.join("g.toml");
+    std::fs::write(
+        &path,
+        format!(
+            "[model]\nuse = \"tube\"\nheight = 2.0\n\n[materials.a]\ncolour = [255, 0, 0]\n[materials.b]\ncolour = [0, 0, 255]\n\n[slice]\nuse = \"uniform\"\nthickness = 0.5\n\n[discretise]\nuse = \"offset\"\ncount = 3\n\n[grade]\n{grade}\n\n[[output]]\nuse = \"json\"\npath = \"plan.json\"\n"
+        ),
+    )
+    .expect("pipeline");
+    let out_dir = dir.join("out");
+    let _ = std::fs::remove_dir_all(&out_dir);
+    let lib = library("lamina-fixture-script");
+    let start = std::time::Instant::now();
+    let out = lamina(&[
+        "run",
+        path.to_str().expect("utf-8"),
+        "--plugin",
+        lib.to_str().expect("utf-8"),
+        "--out",
+        out_dir.to_str().expect("utf-8"),
+    ]);
+    let took = start.elapsed();
+    let plan = std::fs::read_to_string(out_dir.join("plan.json")).ok();
+    (
+        out.status.code(),
+        String::from_utf8_lossy(&out.stderr).into_owned(),
+        plan,
+        took,
+    )
+}
+
+#[test]
+fn a_dynamic_plugins_scripts_run_in_the_hosts_sandbox_as_the_built_in_graders_do() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let cases = [
+        "f = \"sin(r * PI) * 0.5 + 0.25\"",
+        "f = \"clamp01(z / 2.0)\"",
+        "f = \"grading.rhai#smooth\"",
+        "f = \"grading.rhai#by_array\"",
+        "f = \"grading.rhai#clock\"",
+        "f = \"lerp(0.2, 0.8, r) + power(1.0, 0.0, 1.0) * 0.0 + linear(0.0, 0.1, r) * 0.0\"",
+    ];
+    for case in cases {
+        let (code, err, plan, _) = graded_run(dir.path(), &format!("use = \"script\"\n{case}"));
+        assert_eq!(code, Some(0), "built in, {case}: {err}");
+        let (dyn_code, dyn_err, dyn_plan, _) =
+            graded_run(dir.path(), &format!("use = \"dyn-script\"\n{case}"));
+        assert_eq!(dyn_code, Some(0), "dynamic, {case}: {dyn_err}");
+        assert_eq!(plan, dyn_plan, "{case}: the dynamic grader's plan differs");
+    }
+    // Failures: the same error, pointing at the same place, and an endless script is
+    // stopped by the host's clock.
+    let failures = [
+        ("f = \"grading.rhai#forever\"", "stopped"),
+        ("f = \"grading.rhai#too_much\"", "outside [0, 1]"),
+        ("f = \"undefined_function(r)\"", "Function not found"),
+        ("f = \"grading.rhai#missing\"", "has no function `missing`"),
+    ];
+    for (case, expected) in failures {
+        let (code, err, plan, took) = graded_run(dir.path(), &format!("use = \"script\"\n{case}"));
+        let (dyn_code, dyn_err, dyn_plan, dyn_took) =
+            graded_run(dir.path(), &format!("use = \"dyn-script\"\n{case}"));
+        assert!(
+            code.is_some_and(|c| c != 0) && plan.is_none(),
+            "built in, {case}: {err}"
+        );
+        assert_eq!(dyn_code, code, "dynamic, {case}: {dyn_err}");
+        assert!(dyn_plan.is_none());
+        assert!(err.contains(expected), "built in, {case}: {err}");
+        // The messages differ only in the stage's name.
+        assert_eq!(
+            dyn_err
+                .replace("script_fixture/grade:dyn-script", "grade:script")
+                .replace("use = \"dyn-script\"", "use = \"script\""),
+            err,
+            "{case}"
+        );
+        if expected == "stopped" {
+            assert!(
+                took.as_secs_f64() < 2.0 && dyn_took.as_secs_f64() < 2.0,
+                "{took:?} {dyn_took:?}"
+            );
+        }
+    }
+}
+
+#[test]
+fn an_endless_script_in_a_dynamic_plugin_is_stopped_within_a_second() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    for f in ["loop { }", "let a = [3, 1, 2]; a.sort(|x, y| { loop { } }); 0.5"] {
+        let (code, err, plan, took) = graded_run(dir.path(), &format!("use = \"dyn-script\"\nf = '{f}'"));
+        assert_eq!(code, Some(1), "{f}: {err}");
+        assert!(plan.is_none());
+        assert!(err.contains("stopped"), "{f}: {err}");
+        // One script call is stopped after 0.5 s; the whole run takes little more.
+        assert!(took.as_secs_f64() < 1.5, "{f}: {took:?}");
+    }
 }

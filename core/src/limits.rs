@@ -6,7 +6,7 @@
 //! The defaults fit a 2 GiB machine with room to spare and are far above what real
 //! parts need; a pipeline raises one in its `[limits]` table.
 
-use serde::Deserialize;
+use serde::{Deserialize, Serialize};
 
 use crate::error::{Error, Result};
 
@@ -21,7 +21,7 @@ pub fn is_coordinate(v: f64) -> bool {
 }
 
 /// The `[limits]` table of a pipeline.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct Limits {
     /// Triangles of one model (a 3MF counts every component instance).
@@ -56,6 +56,13 @@ pub enum Limit {
 }
 
 impl Limit {
+    pub const ALL: [Limit; 4] = [
+        Limit::Triangles,
+        Limit::ModelBytes,
+        Limit::GridCells,
+        Limit::Regions,
+    ];
+
     /// What the limit counts.
     pub fn unit(self) -> &'static str {
         match self {

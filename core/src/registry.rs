@@ -45,8 +45,8 @@ pub enum Origin {
 pub struct Registered {
     pub factory: &'static StageFactory,
     pub origin: Origin,
-    /// For dynamic plugins: builds the stage inside the plugin, guarded there.
-    guarded_build: Option<crate::plugin::GuardedBuild>,
+    /// For dynamic plugins: the library and stage number that build it.
+    remote: Option<crate::plugin::host::RemoteFactory>,
 }
 
 impl Registered {
@@ -87,21 +87,21 @@ impl Registry {
         self.insert(factory, origin, None)
     }
 
-    /// Adds a factory of a dynamic plugin with the plugin's guarded builder.
-    pub fn add_dynamic(
+    /// Adds a stage of a dynamic plugin, built by its library.
+    pub(crate) fn add_dynamic(
         &mut self,
         factory: &'static StageFactory,
         origin: Origin,
-        build: crate::plugin::GuardedBuild,
+        remote: crate::plugin::host::RemoteFactory,
     ) -> Result<()> {
-        self.insert(factory, origin, Some(build))
+        self.insert(factory, origin, Some(remote))
     }
 
     fn insert(
         &mut self,
         factory: &'static StageFactory,
         origin: Origin,
-        guarded_build: Option<crate::plugin::GuardedBuild>,
+        remote: Option<crate::plugin::host::RemoteFactory>,
     ) -> Result<()> {
         if let Some(existing) = self.get(factory.info.kind, factory.info.name) {
             let describe = |o: &Origin| match o {
@@ -124,7 +124,7 @@ impl Registry {
         self.entries.push(Registered {
             factory,
             origin,
-            guarded_build,
+            remote,
         });
         Ok(())
     }
@@ -219,10 +219,13 @@ impl Registry {
             machine: context.machine,
             limits: context.limits,
         };
-        let stage = match (&entry.origin, entry.guarded_build) {
-            (Origin::Dynamic { plugin, .. }, Some(build)) => {
-                build(entry.factory, &format!("{plugin}/{}", entry.label()), &config)?
-            }
+        let stage = match (&entry.origin, &entry.remote) {
+            (Origin::Dynamic { plugin, .. }, Some(remote)) => crate::plugin::host::build(
+                remote,
+                entry.factory.info.kind,
+                &format!("{plugin}/{}", entry.label()),
+                &config,
+            )?,
             _ => (entry.factory.build)(&config)?,
         };
         if stage.kind() != entry.factory.info.kind {

@@ -148,8 +148,86 @@ impl ScriptArgs<'_> {
 }
 
 /// Compiles scripts for the stages of one run. Cheap to share between threads.
+///
+/// In a dynamic plugin, the host's scripts are reached through the host: a script is
+/// compiled and run by the host's engine under the host's limits, whatever copy of
+/// Rhai the plugin links.
+#[derive(Clone, Debug)]
+pub struct ScriptHost(HostKind);
+
+#[derive(Clone, Debug)]
+enum HostKind {
+    Local(LocalHost),
+    /// In a dynamic plugin: every script goes to the host.
+    Remote,
+}
+
+impl ScriptHost {
+    pub fn new(base_dir: impl Into<PathBuf>, limits: ScriptLimits) -> Self {
+        Self(HostKind::Local(LocalHost::new(base_dir, limits)))
+    }
+
+    /// The scripts of the host that called into this dynamic plugin.
+    pub(crate) fn remote() -> Self {
+        Self(HostKind::Remote)
+    }
+
+    /// Also lets scripts be read from these folders (the pipeline's `script_dirs`).
+    pub fn with_script_dirs(self, dirs: Vec<PathBuf>) -> Self {
+        match self.0 {
+            HostKind::Local(host) => Self(HostKind::Local(host.with_script_dirs(dirs))),
+            remote => Self(remote),
+        }
+    }
+
+    /// Compiles a script reference from a pipeline: `file.rhai#function` names a
+    /// function in a file beside the pipeline; anything else is an inline expression.
+    /// `origin` is where the reference is written (for error positions).
+    pub fn compile(&self, spec: &str, origin: Option<Location>) -> Result<ScriptFn> {
+        match &self.0 {
+            HostKind::Local(host) => host.compile(spec, origin).map(|f| ScriptFn(FnKind::Local(f))),
+            HostKind::Remote => {
+                crate::plugin::guest::compile(spec, origin).map(|id| ScriptFn(FnKind::Remote(id)))
+            }
+        }
+    }
+}
+
+/// A compiled script: call it as often as needed, from any thread (in a dynamic
+/// plugin: from the threads the host calls the plugin's stages on).
+#[derive(Clone, Debug)]
+pub struct ScriptFn(FnKind);
+
+#[derive(Clone, Debug)]
+enum FnKind {
+    Local(LocalFn),
+    /// A script the host compiled for this dynamic plugin, by the host's number.
+    Remote(u64),
+}
+
+impl ScriptFn {
+    /// Calls the script for a single number (any finite value).
+    pub fn number(&self, args: &ScriptArgs<'_>, context: &str) -> Result<f64> {
+        match &self.0 {
+            FnKind::Local(f) => f.number(args, context),
+            FnKind::Remote(id) => crate::plugin::guest::number(*id, args, context),
+        }
+    }
+
+    /// Calls the script for the volume fractions of `n` materials. A single number `f`
+    /// means `[f, 1 - f]` when `n == 2`; otherwise an array of `n` numbers is expected.
+    /// Every fraction must lie in [0, 1] and they must sum to 1 (1e-9).
+    pub fn fractions(&self, args: &ScriptArgs<'_>, n: usize, context: &str) -> Result<Vec<f64>> {
+        match &self.0 {
+            FnKind::Local(f) => f.fractions(args, n, context),
+            FnKind::Remote(id) => crate::plugin::guest::fractions(*id, args, n, context),
+        }
+    }
+}
+
+/// The host's own Rhai engine and the folders its scripts may come from.
 #[derive(Clone)]
-pub struct ScriptHost {
+struct LocalHost {
     engine: Arc<Engine>,
     base_dir: PathBuf,
     /// Folders besides `base_dir` whose scripts may be read (the pipeline's
@@ -162,9 +240,9 @@ pub struct ScriptHost {
 /// Largest script file read (bytes).
 pub const MAX_SCRIPT_BYTES: u64 = 1 << 20;
 
-impl std::fmt::Debug for ScriptHost {
+impl std::fmt::Debug for LocalHost {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.debug_struct("ScriptHost")
+        f.debug_struct("LocalHost")
             .field("base_dir", &self.base_dir)
             .finish()
     }
@@ -178,8 +256,8 @@ fn num(v: Dynamic, what: &str) -> std::result::Result<f64, Box<EvalAltResult>> {
     as_number(&v).ok_or_else(|| format!("{what}: expected a number, got {}", v.type_name()).into())
 }
 
-impl ScriptHost {
-    pub fn new(base_dir: impl Into<PathBuf>, limits: ScriptLimits) -> Self {
+impl LocalHost {
+    fn new(base_dir: impl Into<PathBuf>, limits: ScriptLimits) -> Self {
         let mut engine = Engine::new();
         engine
             .set_max_operations(limits.max_operations)
@@ -278,8 +356,7 @@ impl ScriptHost {
         }
     }
 
-    /// Also lets scripts be read from these folders (the pipeline's `script_dirs`).
-    pub fn with_script_dirs(mut self, dirs: Vec<PathBuf>) -> Self {
+    fn with_script_dirs(mut self, dirs: Vec<PathBuf>) -> Self {
         self.script_dirs = dirs;
         self
     }
@@ -312,10 +389,7 @@ impl ScriptHost {
         Ok(())
     }
 
-    /// Compiles a script reference from a pipeline: `file.rhai#function` names a
-    /// function in a file beside the pipeline; anything else is an inline expression.
-    /// `origin` is where the reference is written (for error positions).
-    pub fn compile(&self, spec: &str, origin: Option<Location>) -> Result<ScriptFn> {
+    fn compile(&self, spec: &str, origin: Option<Location>) -> Result<LocalFn> {
         match spec.split_once('#') {
             Some((file, function)) if file.trim_end().ends_with(".rhai") => {
                 self.function(&self.base_dir.join(file.trim()), function.trim(), origin)
@@ -325,7 +399,7 @@ impl ScriptHost {
     }
 
     /// Compiles an inline expression. Its variables are those of [`SCRIPT_VARIABLES`].
-    pub fn expression(&self, text: &str, origin: Option<Location>) -> Result<ScriptFn> {
+    fn expression(&self, text: &str, origin: Option<Location>) -> Result<LocalFn> {
         let source = match &origin {
             Some(o) => o.file.clone(),
             None => SourceFile::new("<expression>", text),
@@ -346,7 +420,7 @@ impl ScriptHost {
                     None,
                 )
             })?;
-        Ok(ScriptFn {
+        Ok(LocalFn {
             engine: self.engine.clone(),
             time_limit: self.time_limit,
             ast: Arc::new(ast),
@@ -358,7 +432,7 @@ impl ScriptHost {
     }
 
     /// Compiles a `.rhai` file and selects one of its functions.
-    pub fn function(&self, path: &Path, name: &str, origin: Option<Location>) -> Result<ScriptFn> {
+    fn function(&self, path: &Path, name: &str, origin: Option<Location>) -> Result<LocalFn> {
         let at = |message: String| match origin.clone() {
             Some(o) => Error::config_at(o, message),
             None => Error::config(message),
@@ -387,7 +461,10 @@ impl ScriptHost {
             )
         })?;
         let meta = ast.iter_functions().find(|f| f.name == name).ok_or_else(|| {
-            let names: Vec<_> = ast.iter_functions().map(|f| f.name.to_string()).collect();
+            // Sorted: the AST keeps its functions in a hash map.
+            let mut names: Vec<_> = ast.iter_functions().map(|f| f.name.to_string()).collect();
+            names.sort();
+            names.dedup();
             let msg = format!(
                 "{} has no function `{name}` (it has: {})",
                 path.display(),
@@ -412,7 +489,7 @@ impl ScriptHost {
             ));
         }
         let definition = find_definition(&source.text, name);
-        Ok(ScriptFn {
+        Ok(LocalFn {
             engine: self.engine.clone(),
             time_limit: self.time_limit,
             ast: Arc::new(ast),
@@ -483,9 +560,9 @@ fn script_error(
     }
 }
 
-/// A compiled script: call it as often as needed, from any thread.
+/// A script compiled by the host's engine.
 #[derive(Clone)]
-pub struct ScriptFn {
+struct LocalFn {
     engine: Arc<Engine>,
     time_limit: Duration,
     ast: Arc<AST>,
@@ -498,9 +575,9 @@ pub struct ScriptFn {
     definition: usize,
 }
 
-impl std::fmt::Debug for ScriptFn {
+impl std::fmt::Debug for LocalFn {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.debug_struct("ScriptFn")
+        f.debug_struct("LocalFn")
             .field("source", &self.source.path)
             .field("function", &self.function)
             .finish()
@@ -517,9 +594,9 @@ impl Drop for DeadlineGuard {
     }
 }
 
-impl ScriptFn {
+impl LocalFn {
     /// Runs the script with `args`, within the host's limits.
-    pub fn call(&self, args: &ScriptArgs<'_>, context: &str) -> Result<Dynamic> {
+    fn call(&self, args: &ScriptArgs<'_>, context: &str) -> Result<Dynamic> {
         DEADLINE.with(|d| d.set(Some(Instant::now() + self.time_limit)));
         STOPPED.with(|s| s.set(false));
         HELD_AT_START.with(|h| h.set(HELD.with(Cell::get)));
@@ -587,8 +664,7 @@ impl ScriptFn {
         }
     }
 
-    /// Calls the script for a single number (any finite value).
-    pub fn number(&self, args: &ScriptArgs<'_>, context: &str) -> Result<f64> {
+    fn number(&self, args: &ScriptArgs<'_>, context: &str) -> Result<f64> {
         let v = self.call(args, context)?;
         match as_number(&v) {
             Some(f) if f.is_finite() => Ok(f),
@@ -599,10 +675,7 @@ impl ScriptFn {
         }
     }
 
-    /// Calls the script for the volume fractions of `n` materials. A single number `f`
-    /// means `[f, 1 - f]` when `n == 2`; otherwise an array of `n` numbers is expected.
-    /// Every fraction must lie in [0, 1] and they must sum to 1 (1e-9).
-    pub fn fractions(&self, args: &ScriptArgs<'_>, n: usize, context: &str) -> Result<Vec<f64>> {
+    fn fractions(&self, args: &ScriptArgs<'_>, n: usize, context: &str) -> Result<Vec<f64>> {
         let v = self.call(args, context)?;
         let fractions = if let Some(f) = as_number(&v) {
             match n {
@@ -654,8 +727,8 @@ fn check_fractions(fractions: &[f64]) -> std::result::Result<(), String> {
 mod tests {
     use super::*;
 
-    fn host() -> ScriptHost {
-        ScriptHost::new(".", ScriptLimits::default()).with_script_dirs(vec![std::env::temp_dir()])
+    fn host() -> LocalHost {
+        LocalHost::new(".", ScriptLimits::default()).with_script_dirs(vec![std::env::temp_dir()])
     }
 
     #[test]

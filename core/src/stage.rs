@@ -155,7 +155,7 @@ impl fmt::Debug for AnyStage {
 }
 
 /// Read-only facts about the run every stage may consult.
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct RunInfo {
     /// Folder of the pipeline file: relative paths resolve against it.
     pub base_dir: PathBuf,

@@ -16,3 +16,7 @@ pub mod control;
 mod idw;
 mod in_plane;
 mod script;
+
+/// The name the `script` grader registers under (a test fixture builds the same source
+/// as a dynamic plugin under another name).
+const SCRIPT_STAGE: &str = "script";

@@ -46,7 +46,7 @@ fn build(config: &StageConfig<'_>) -> Result<AnyStage> {
 lamina_core::register_stage!(StageFactory {
     info: StageInfo {
         kind: StageKind::Grade,
-        name: "script",
+        name: crate::SCRIPT_STAGE,
         doc: "Fractions from a Rhai expression or `file.rhai#function` of r, x, y, z, layer and part, once per sub-region.",
         options: &[OptionSpec::required(
             "f",

@@ -1,0 +1,623 @@
+//! The plugin's side of the boundary: compiled into every dynamic plugin (through its
+//! own copy of lamina-core), it answers the host's requests with the plugin's stages
+//! and forwards the stages' scripts and output files to the host.
+//!
+//! Stages, prepared meshes and open outputs live here, in a table of handles; the host
+//! holds numbers only. Every request runs under this copy's `catch_unwind`, since a
+//! panic cannot cross into the host's copy of the standard library.
+
+use std::borrow::Cow;
+use std::cell::Cell;
+use std::collections::BTreeMap;
+use std::io::Write;
+use std::path::Path;
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::{Arc, Mutex, OnceLock};
+
+use super::abi::*;
+use super::guard_call;
+use super::wire::*;
+use crate::error::{Error, Result};
+use crate::mesh::Mesh;
+use crate::pipeline::TableRef;
+use crate::registry::StageFactory;
+use crate::script::{ScriptArgs, ScriptHost};
+use crate::source::Location;
+use crate::stage::*;
+
+/// A descriptor in a static of the plugin.
+#[derive(Debug)]
+pub struct StaticDescriptor(PluginDescriptor);
+
+// SAFETY: the descriptor's pointers point to `'static` string literals, never written;
+// its functions may be called from any thread.
+unsafe impl Sync for StaticDescriptor {}
+
+impl StaticDescriptor {
+    /// The descriptor of the plugin named `name`, built by
+    /// [`export_plugin!`](crate::export_plugin).
+    pub const fn new(name: &'static str) -> Self {
+        Self(PluginDescriptor {
+            magic: PLUGIN_MAGIC,
+            abi_major: ABI_MAJOR,
+            abi_minor: ABI_MINOR,
+            struct_size: std::mem::size_of::<PluginDescriptor>(),
+            layout: LAYOUT_FINGERPRINT,
+            wire: WIRE_FINGERPRINT,
+            name: Bytes {
+                ptr: name.as_ptr(),
+                len: name.len(),
+            },
+            core_version: Bytes {
+                ptr: crate::VERSION.as_ptr(),
+                len: crate::VERSION.len(),
+            },
+            call: guest_call,
+            release: guest_release,
+        })
+    }
+
+    pub fn get(&'static self) -> *const PluginDescriptor {
+        &self.0
+    }
+}
+
+/// What the plugin made for the host.
+enum Object {
+    Stage {
+        label: Arc<str>,
+        stage: AnyStage,
+        /// Meshes the host sent with family requests, by the host's number.
+        meshes: Mutex<BTreeMap<u64, Arc<Mesh>>>,
+    },
+    MeshSlicer {
+        label: Arc<str>,
+        slicer: Box<dyn MeshSlicer>,
+    },
+    Sink {
+        label: Arc<str>,
+        sink: Mutex<Option<Box<dyn LayerSink>>>,
+    },
+}
+
+impl Object {
+    fn label(&self) -> &str {
+        match self {
+            Object::Stage { label, .. } | Object::MeshSlicer { label, .. } | Object::Sink { label, .. } => {
+                label
+            }
+        }
+    }
+}
+
+static OBJECTS: Mutex<BTreeMap<u64, Arc<Object>>> = Mutex::new(BTreeMap::new());
+static NEXT_HANDLE: AtomicU64 = AtomicU64::new(1);
+
+fn keep(object: Object) -> u64 {
+    let handle = NEXT_HANDLE.fetch_add(1, Ordering::Relaxed);
+    OBJECTS
+        .lock()
+        .unwrap_or_else(|e| e.into_inner())
+        .insert(handle, Arc::new(object));
+    handle
+}
+
+fn object(handle: u64) -> Result<Arc<Object>> {
+    OBJECTS
+        .lock()
+        .unwrap_or_else(|e| e.into_inner())
+        .get(&handle)
+        .cloned()
+        .ok_or_else(|| {
+            Error::stage(
+                "plugin",
+                format!("the host named stage handle {handle}, which does not exist"),
+            )
+        })
+}
+
+/// The stages this library registered, in a fixed order.
+fn stages() -> &'static [&'static StageFactory] {
+    static STAGES: OnceLock<Vec<&'static StageFactory>> = OnceLock::new();
+    STAGES.get_or_init(|| {
+        let mut v: Vec<&'static StageFactory> = inventory::iter::<StageFactory>.into_iter().collect();
+        v.sort_by_key(|f| (f.info.kind, f.info.name));
+        v
+    })
+}
+
+thread_local! {
+    /// The host's services for the request this thread is handling.
+    static HOST: Cell<*const HostApi> = const { Cell::new(std::ptr::null()) };
+}
+
+/// Clears [`HOST`] when a request ends, however it ends.
+struct HostScope(*const HostApi);
+
+impl HostScope {
+    fn enter(host: *const HostApi) -> Self {
+        Self(HOST.with(|h| h.replace(host)))
+    }
+}
+
+impl Drop for HostScope {
+    fn drop(&mut self) {
+        HOST.with(|h| h.set(self.0));
+    }
+}
+
+/// Asks the host for a service, from within a request.
+fn host_call(request: &HostRequest<'_>) -> Result<HostResponse> {
+    let host = HOST.with(Cell::get);
+    if host.is_null() {
+        return Err(Error::stage(
+            "plugin",
+            "host services (scripts, output files) are available only on the thread the host called the stage on, during the call",
+        ));
+    }
+    let bytes = encode(request).map_err(|m| Error::stage("plugin", m))?;
+    let mut reply: Vec<u8> = Vec::new();
+    let sink = ReplySink {
+        ctx: (&raw mut reply).cast(),
+        write: super::copy_reply,
+    };
+    // SAFETY: `host` was handed to this thread by the host for the request being
+    // handled, which has not returned (the scope clears it); the request bytes and the
+    // sink outlive the call.
+    let status = unsafe { ((*host).call)((*host).ctx, Bytes::of(&bytes), &sink) };
+    if status != 0 {
+        return Err(Error::stage(
+            "plugin",
+            "the host failed to answer a service request",
+        ));
+    }
+    let reply: HostReply = decode(&reply).map_err(|m| Error::stage("plugin", m))?;
+    reply.map_err(Error::from)
+}
+
+/// Compiles a script with the host's engine.
+pub(crate) fn compile(spec: &str, origin: Option<Location>) -> Result<u64> {
+    match host_call(&HostRequest::Compile {
+        spec: Cow::Borrowed(spec),
+        origin: origin.as_ref().map(WireLocation::from),
+    })? {
+        HostResponse::Script(id) => Ok(id),
+        other => Err(unexpected(&other)),
+    }
+}
+
+/// Runs a host script for a number.
+pub(crate) fn number(script: u64, args: &ScriptArgs<'_>, context: &str) -> Result<f64> {
+    match host_call(&HostRequest::Number {
+        script,
+        args: args.into(),
+        context: Cow::Borrowed(context),
+    })? {
+        HostResponse::Number(v) => Ok(v),
+        other => Err(unexpected(&other)),
+    }
+}
+
+/// Runs a host script for fractions.
+pub(crate) fn fractions(script: u64, args: &ScriptArgs<'_>, n: usize, context: &str) -> Result<Vec<f64>> {
+    match host_call(&HostRequest::Fractions {
+        script,
+        args: args.into(),
+        n,
+        context: Cow::Borrowed(context),
+    })? {
+        HostResponse::Fractions(v) if v.len() == n => Ok(v),
+        other => Err(unexpected(&other)),
+    }
+}
+
+fn unexpected(r: &HostResponse) -> Error {
+    Error::stage("plugin", format!("the host answered {r:?} to a service request"))
+}
+
+/// Output files created through the host.
+struct HostFiles;
+
+impl OutputFiles for HostFiles {
+    fn create(&mut self, name: &Path) -> Result<Box<dyn Write + Send>> {
+        match host_call(&HostRequest::Create {
+            name: Cow::Borrowed(name),
+        })? {
+            HostResponse::File(file) => Ok(Box::new(std::io::BufWriter::with_capacity(
+                1 << 16,
+                HostFile { file, closed: false },
+            ))),
+            other => Err(unexpected(&other)),
+        }
+    }
+}
+
+/// An output file the host holds.
+struct HostFile {
+    file: u64,
+    closed: bool,
+}
+
+fn io_error(e: Error) -> std::io::Error {
+    std::io::Error::other(e.to_string())
+}
+
+impl Write for HostFile {
+    fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
+        host_call(&HostRequest::Write {
+            file: self.file,
+            bytes: Cow::Borrowed(serde_bytes::Bytes::new(buf)),
+        })
+        .map_err(io_error)?;
+        Ok(buf.len())
+    }
+
+    fn flush(&mut self) -> std::io::Result<()> {
+        host_call(&HostRequest::Flush { file: self.file }).map_err(io_error)?;
+        Ok(())
+    }
+}
+
+impl Drop for HostFile {
+    fn drop(&mut self) {
+        if !self.closed {
+            self.closed = true;
+            // Outside a request (the host dropped a failed run's output) there is no
+            // host to tell, and nothing of the file is kept.
+            let _ = host_call(&HostRequest::Close { file: self.file });
+        }
+    }
+}
+
+/// The entry of every request: decodes it, handles it under `catch_unwind` and writes
+/// the reply.
+unsafe extern "C" fn guest_call(request: Bytes, host: *const HostApi, reply: *const ReplySink) -> i32 {
+    let answer = std::panic::catch_unwind(|| {
+        // SAFETY: the host lends the request bytes for the length of the call.
+        let bytes = unsafe { request.as_slice() };
+        let _scope = HostScope::enter(host);
+        let reply: Reply = match decode::<Request<'static>>(bytes) {
+            Ok(request) => handle(request).map_err(|e| WireError::from(&e)),
+            Err(m) => Err(WireError::from(&Error::stage("plugin", m))),
+        };
+        encode(&reply).ok()
+    });
+    match answer {
+        Ok(Some(bytes)) if !reply.is_null() => {
+            // SAFETY: the host's sink is valid for the call and copies the bytes
+            // before returning.
+            unsafe { ((*reply).write)((*reply).ctx, Bytes::of(&bytes)) };
+            0
+        }
+        _ => 1,
+    }
+}
+
+unsafe extern "C" fn guest_release(handle: u64) {
+    let _ = std::panic::catch_unwind(|| {
+        let removed = OBJECTS.lock().unwrap_or_else(|e| e.into_inner()).remove(&handle);
+        drop(removed);
+    });
+}
+
+fn stage_of(handle: u64) -> Result<Arc<Object>> {
+    object(handle)
+}
+
+fn wrong(o: &Object, what: &str) -> Error {
+    Error::stage(
+        o.label().to_string(),
+        format!("the host asked it to {what}, which it does not do"),
+    )
+}
+
+/// Rebuilds a family's context from its message and calls `f` with it.
+fn with_family<T>(
+    o: &Object,
+    family: WireFamily<'static>,
+    f: impl FnOnce(&FamilyContext<'_>) -> Result<T>,
+) -> Result<T> {
+    let Object::Stage { meshes, .. } = o else {
+        return Err(wrong(o, "work on a family"));
+    };
+    let mesh = match family.mesh {
+        None => None,
+        Some(MeshRef { id, mesh: Some(m) }) => {
+            let m = Arc::new(m.into_owned());
+            meshes
+                .lock()
+                .unwrap_or_else(|e| e.into_inner())
+                .insert(id, m.clone());
+            Some(m)
+        }
+        Some(MeshRef { id, mesh: None }) => Some(
+            meshes
+                .lock()
+                .unwrap_or_else(|e| e.into_inner())
+                .get(&id)
+                .cloned()
+                .ok_or_else(|| {
+                    Error::stage(
+                        o.label().to_string(),
+                        format!("the host named mesh {id} before sending it"),
+                    )
+                })?,
+        ),
+    };
+    let ctx = FamilyContext {
+        info: &family.info,
+        layer: &family.layer,
+        tree: &family.tree,
+        mesh: mesh.as_deref(),
+        part: family.part,
+        family: family.family,
+    };
+    f(&ctx)
+}
+
+fn handle(request: Request<'static>) -> Result<Response> {
+    match request {
+        Request::Describe => Ok(Response::Stages(
+            stages()
+                .iter()
+                .map(|f| WireStage {
+                    kind: f.info.kind,
+                    name: f.info.name.to_string(),
+                    doc: f.info.doc.to_string(),
+                    options: f
+                        .info
+                        .options
+                        .iter()
+                        .map(|o| WireOption {
+                            name: o.name.to_string(),
+                            ty: o.ty.to_string(),
+                            default: o.default.map(ToString::to_string),
+                            doc: o.doc.to_string(),
+                        })
+                        .collect(),
+                    example: f.info.example.to_string(),
+                })
+                .collect(),
+        )),
+        Request::Build { stage, label, config } => {
+            let factory = stages().get(stage).ok_or_else(|| {
+                Error::stage(
+                    label.to_string(),
+                    format!("the plugin has no stage number {stage}"),
+                )
+            })?;
+            let table = TableRef::from_wire(config.table)?;
+            let scripts = ScriptHost::remote();
+            let machine = config.machine.map(Cow::into_owned);
+            let stage_config = StageConfig {
+                table: &table,
+                scripts: &scripts,
+                base_dir: &config.base_dir,
+                machine: machine.as_ref(),
+                limits: config.limits,
+            };
+            let stage = guard_call(&label, || (factory.build)(&stage_config))?;
+            Ok(Response::Handle(keep(Object::Stage {
+                label: label.into(),
+                stage,
+                meshes: Mutex::new(BTreeMap::new()),
+            })))
+        }
+        Request::Load { handle, base_dir } => {
+            let o = stage_of(handle)?;
+            match &*o {
+                Object::Stage {
+                    stage: AnyStage::Model(s),
+                    label,
+                    ..
+                } => {
+                    let meshes = guard_call(label, || s.load(&base_dir))?;
+                    Ok(Response::Meshes(
+                        meshes
+                            .into_iter()
+                            .map(|mut mesh| WireMesh {
+                                warnings: std::mem::take(&mut mesh.warnings),
+                                mesh,
+                            })
+                            .collect(),
+                    ))
+                }
+                o => Err(wrong(o, "load a model")),
+            }
+        }
+        Request::Orient { handle, meshes } => {
+            let o = stage_of(handle)?;
+            match &*o {
+                Object::Stage {
+                    stage: AnyStage::Orient(s),
+                    label,
+                    ..
+                } => {
+                    let refs: Vec<&Mesh> = meshes.iter().map(|m| &**m).collect();
+                    guard_call(label, || s.orient(&refs)).map(Response::Orientation)
+                }
+                o => Err(wrong(o, "orient")),
+            }
+        }
+        Request::Layers {
+            handle,
+            meshes,
+            info,
+            sequence,
+        } => {
+            let o = stage_of(handle)?;
+            match &*o {
+                Object::Stage {
+                    stage: AnyStage::Slice(s),
+                    label,
+                    ..
+                } => {
+                    let meshes: Vec<Arc<Mesh>> =
+                        meshes.into_iter().map(|m| Arc::new(m.into_owned())).collect();
+                    guard_call(label, || s.layers(&meshes, &info, sequence.as_deref())).map(Response::Slots)
+                }
+                o => Err(wrong(o, "choose layers")),
+            }
+        }
+        Request::Prepare { handle, mesh } => {
+            let o = stage_of(handle)?;
+            match &*o {
+                Object::Stage {
+                    stage: AnyStage::Slice(s),
+                    label,
+                    ..
+                } => {
+                    let slicer = guard_call(label, || s.prepare(Arc::new(mesh.into_owned())))?;
+                    Ok(Response::Handle(keep(Object::MeshSlicer {
+                        label: label.clone(),
+                        slicer,
+                    })))
+                }
+                o => Err(wrong(o, "prepare a mesh")),
+            }
+        }
+        Request::Slice { handle, slot } => {
+            let o = stage_of(handle)?;
+            match &*o {
+                Object::MeshSlicer { label, slicer } => {
+                    guard_call(label, || slicer.slice(&slot)).map(Response::Layer)
+                }
+                o => Err(wrong(o, "slice a prepared mesh")),
+            }
+        }
+        Request::Sort { handle, layer } => {
+            let o = stage_of(handle)?;
+            match &*o {
+                Object::Stage {
+                    stage: AnyStage::Sort(s),
+                    label,
+                    ..
+                } => guard_call(label, || s.sort(&layer)).map(Response::Tree),
+                o => Err(wrong(o, "sort")),
+            }
+        }
+        Request::Discretise { handle, family } => {
+            let o = stage_of(handle)?;
+            match &*o {
+                Object::Stage {
+                    stage: AnyStage::Discretise(s),
+                    label,
+                    ..
+                } => with_family(&o, family, |ctx| guard_call(label, || s.discretise(ctx)))
+                    .map(Response::Regions),
+                o => Err(wrong(o, "discretise")),
+            }
+        }
+        Request::Grades { handle } => {
+            let o = stage_of(handle)?;
+            match &*o {
+                Object::Stage {
+                    stage: AnyStage::Discretise(s),
+                    label,
+                    ..
+                } => guard_call(label, || Ok(s.grades())).map(Response::Bool),
+                o => Err(wrong(o, "say whether it grades")),
+            }
+        }
+        Request::Grade {
+            handle,
+            family,
+            regions,
+        } => {
+            let o = stage_of(handle)?;
+            match &*o {
+                Object::Stage {
+                    stage: AnyStage::Grade(s),
+                    label,
+                    ..
+                } => {
+                    let mut regions = regions.into_owned();
+                    with_family(&o, family, |ctx| guard_call(label, || s.grade(ctx, &mut regions)))?;
+                    Ok(Response::Regions(regions))
+                }
+                o => Err(wrong(o, "grade")),
+            }
+        }
+        Request::Sequence { handle, info } => {
+            let o = stage_of(handle)?;
+            match &*o {
+                Object::Stage {
+                    stage: AnyStage::Sequence(s),
+                    label,
+                    ..
+                } => guard_call(label, || s.sequence(&info)).map(Response::Sequence),
+                o => Err(wrong(o, "sequence")),
+            }
+        }
+        Request::Plan { handle, info, plan } => {
+            let o = stage_of(handle)?;
+            match &*o {
+                Object::Stage {
+                    stage: AnyStage::Plan(s),
+                    label,
+                    ..
+                } => {
+                    let mut plan = plan.into_owned();
+                    guard_call(label, || s.plan(&info, &mut plan))?;
+                    Ok(Response::Plan(plan))
+                }
+                o => Err(wrong(o, "plan")),
+            }
+        }
+        Request::Open { handle, export } => {
+            let o = stage_of(handle)?;
+            match &*o {
+                Object::Stage {
+                    stage: AnyStage::Export(s),
+                    label,
+                    ..
+                } => {
+                    let mut files = HostFiles;
+                    let mut ctx = ExportContext {
+                        info: &export.info,
+                        sequence: export.sequence.as_deref(),
+                        orientation: export.orientation.as_deref(),
+                        layer_count: export.layer_count,
+                        pipeline_name: &export.pipeline_name,
+                        files: &mut files,
+                    };
+                    let sink = guard_call(label, || s.open(&mut ctx))?;
+                    Ok(Response::Handle(keep(Object::Sink {
+                        label: label.clone(),
+                        sink: Mutex::new(Some(sink)),
+                    })))
+                }
+                o => Err(wrong(o, "open an output")),
+            }
+        }
+        Request::Layer { handle, info, plan } => {
+            let o = stage_of(handle)?;
+            match &*o {
+                Object::Sink { label, sink } => {
+                    let mut sink = sink.lock().unwrap_or_else(|e| e.into_inner());
+                    let sink = sink
+                        .as_mut()
+                        .ok_or_else(|| Error::stage(label.to_string(), "output already finished"))?;
+                    guard_call(label, || sink.layer_with_files(&info, &plan, &mut HostFiles))?;
+                    Ok(Response::Done)
+                }
+                o => Err(wrong(o, "write a layer")),
+            }
+        }
+        Request::Finish { handle, info } => {
+            let o = stage_of(handle)?;
+            let result = match &*o {
+                Object::Sink { label, sink } => {
+                    let taken = sink.lock().unwrap_or_else(|e| e.into_inner()).take();
+                    let sink =
+                        taken.ok_or_else(|| Error::stage(label.to_string(), "output already finished"))?;
+                    guard_call(label, || sink.finish_with_files(&info, &mut HostFiles))
+                        .map(|()| Response::Done)
+                }
+                o => Err(wrong(o, "finish an output")),
+            };
+            OBJECTS.lock().unwrap_or_else(|e| e.into_inner()).remove(&handle);
+            result
+        }
+    }
+}

@@ -1,0 +1,187 @@
+//! Reads a plugin file as an object file, before the dynamic loader sees it: nothing of
+//! the library runs until its format, entry symbol and ABI note say it can be loaded.
+
+use std::path::Path;
+
+use super::abi::*;
+use super::refuse;
+use crate::error::Result;
+
+/// Refuses a file that is not a loadable plugin of this host: not a library of this
+/// platform, truncated (the loader would map pages past its end, and touching them
+/// kills the process with SIGBUS), without an entry symbol, or whose ABI note names
+/// another ABI, layout or message set. Nothing of the library runs here.
+pub fn inspect(path: &Path) -> Result<()> {
+    entry_symbol(path).map(drop)
+}
+
+/// [`inspect`], giving the name of the entry symbol to look up.
+pub(crate) fn entry_symbol(path: &Path) -> Result<String> {
+    use object::{Object, ObjectSection, ObjectSegment};
+    let data = std::fs::read(path).map_err(|e| refuse(path, format!("cannot read: {e}")))?;
+    let file = object::File::parse(&*data).map_err(|e| {
+        refuse(
+            path,
+            format!("not a complete shared library of this platform (truncated, or of another format): {e}"),
+        )
+    })?;
+    let size = data.len() as u64;
+    for segment in file.segments() {
+        let (offset, length) = segment.file_range();
+        if offset.checked_add(length).is_none_or(|end| end > size) {
+            return Err(refuse(
+                path,
+                format!(
+                    "truncated: a segment needs bytes {offset}..{} of the file, which has {size}",
+                    offset.saturating_add(length)
+                ),
+            ));
+        }
+    }
+    let exports = file
+        .exports()
+        .map_err(|e| refuse(path, format!("cannot read its exported symbols: {e}")))?;
+    let entries: Vec<String> = exports
+        .iter()
+        .filter_map(|e| {
+            let name = e.name();
+            let name = name
+                .strip_prefix(b"_")
+                .filter(|n| n.starts_with(ENTRY_PREFIX.as_bytes()))
+                .unwrap_or(name);
+            name.starts_with(ENTRY_PREFIX.as_bytes())
+                .then(|| String::from_utf8_lossy(name).into_owned())
+        })
+        .collect();
+    let symbol = match entries.as_slice() {
+        [one] => one.clone(),
+        [] => {
+            return Err(refuse(
+                path,
+                format!(
+                    "not a Lamina plugin: it exports no `{ENTRY_PREFIX}<name>` (use lamina_core::export_plugin!)"
+                ),
+            ));
+        }
+        several => {
+            return Err(refuse(
+                path,
+                format!(
+                    "it exports several plugins ({}): a library is one plugin",
+                    several.join(", ")
+                ),
+            ));
+        }
+    };
+    let name = &symbol[ENTRY_PREFIX.len()..];
+    let section_name = ABI_SECTION.rsplit(',').next().unwrap_or(ABI_SECTION);
+    let note = file
+        .section_by_name(section_name)
+        .and_then(|s| s.data().ok())
+        .and_then(AbiNote::parse)
+        .ok_or_else(|| {
+            refuse(
+                path,
+                format!(
+                    "plugin `{name}` carries no ABI note (section `{ABI_SECTION}`): rebuild it against lamina-core {}",
+                    crate::VERSION
+                ),
+            )
+        })?;
+    if note.magic != PLUGIN_MAGIC {
+        return Err(refuse(
+            path,
+            format!("plugin `{name}`: its ABI note is not a Lamina plugin's"),
+        ));
+    }
+    check(
+        path,
+        name,
+        &Declared {
+            abi_major: note.abi_major,
+            abi_minor: note.abi_minor,
+            layout: note.layout,
+            wire: note.wire,
+            core_version: Some(&note.core_version),
+        },
+    )?;
+    Ok(symbol)
+}
+
+/// What a plugin declares about its build, from its note or its descriptor.
+struct Declared<'a> {
+    abi_major: u32,
+    abi_minor: u32,
+    layout: u64,
+    wire: u64,
+    core_version: Option<&'a str>,
+}
+
+fn check(path: &Path, name: &str, d: &Declared<'_>) -> Result<()> {
+    let rebuild = |what: String| {
+        let built = d
+            .core_version
+            .map(|v| format!(" (it was built against lamina-core {v})"))
+            .unwrap_or_default();
+        refuse(
+            path,
+            format!(
+                "plugin `{name}` {what}{built}: rebuild it against lamina-core {}",
+                crate::VERSION
+            ),
+        )
+    };
+    if d.abi_major != ABI_MAJOR {
+        return Err(rebuild(format!(
+            "was built for plugin ABI {}.{}, this lamina {} supports ABI {ABI_MAJOR}.{ABI_MINOR}",
+            d.abi_major,
+            d.abi_minor,
+            crate::VERSION
+        )));
+    }
+    if d.layout != LAYOUT_FINGERPRINT {
+        return Err(rebuild(format!(
+            "lays out the boundary's C types differently (layout fingerprint {:016x}, this lamina's {LAYOUT_FINGERPRINT:016x})",
+            d.layout
+        )));
+    }
+    if d.wire != WIRE_FINGERPRINT {
+        return Err(rebuild(format!(
+            "exchanges other message types (wire fingerprint {:016x}, this lamina's {WIRE_FINGERPRINT:016x})",
+            d.wire
+        )));
+    }
+    Ok(())
+}
+
+/// Checks a descriptor's prefix once the library is loaded: the note could have lied.
+pub(crate) fn check_descriptor(path: &Path, name: &str, prefix: &DescriptorPrefix) -> Result<()> {
+    if prefix.magic != PLUGIN_MAGIC {
+        return Err(refuse(
+            path,
+            "the entry point returned something that is not a Lamina plugin descriptor",
+        ));
+    }
+    check(
+        path,
+        name,
+        &Declared {
+            abi_major: prefix.abi_major,
+            abi_minor: prefix.abi_minor,
+            layout: prefix.layout,
+            wire: prefix.wire,
+            core_version: None,
+        },
+    )?;
+    if prefix.struct_size < std::mem::size_of::<PluginDescriptor>() {
+        return Err(refuse(
+            path,
+            format!(
+                "its descriptor has {} bytes, this lamina's has {}",
+                prefix.struct_size,
+                std::mem::size_of::<PluginDescriptor>()
+            ),
+        ));
+    }
+    Ok(())
+}

@@ -1,0 +1,525 @@
+//! The messages between the host and a dynamic plugin, and their encoding.
+//!
+//! Every stage call becomes a [`Request`] the plugin answers with a [`Reply`]; during a
+//! call the plugin may ask the host for services with a [`HostRequest`] (compile or
+//! run a script under the host's sandbox, create and write output files). Messages
+//! are MessagePack with named fields: a field one side does not know is ignored, and a
+//! missing or malformed one is an error naming it, never a misread value.
+//!
+//! Requests borrow what the host already holds (`Cow::Borrowed`); the plugin decodes
+//! them into owned values.
+
+use std::borrow::Cow;
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+
+use serde::de::DeserializeOwned;
+use serde::{Deserialize, Serialize};
+
+use crate::error::Error;
+use crate::limits::{Limit, Limits};
+use crate::machine::Machine;
+use crate::mesh::Mesh;
+use crate::model::*;
+use crate::source::{Location, SourceFile};
+use crate::stage::{RunInfo, StageKind};
+
+/// A call of the host into a plugin.
+#[derive(Debug, Serialize, Deserialize)]
+pub enum Request<'a> {
+    /// The plugin's stages, in the order `Build` numbers them.
+    Describe,
+    /// Builds stage number `stage` from its configuration; replies with a handle.
+    Build {
+        stage: usize,
+        label: Cow<'a, str>,
+        config: WireConfig<'a>,
+    },
+    Load {
+        handle: u64,
+        base_dir: Cow<'a, Path>,
+    },
+    Orient {
+        handle: u64,
+        meshes: Vec<Cow<'a, Mesh>>,
+    },
+    Layers {
+        handle: u64,
+        meshes: Vec<Cow<'a, Mesh>>,
+        info: Cow<'a, RunInfo>,
+        sequence: Option<Cow<'a, Sequence>>,
+    },
+    /// Prepares a mesh for slicing; replies with the handle of the prepared mesh.
+    Prepare {
+        handle: u64,
+        mesh: Cow<'a, Mesh>,
+    },
+    Slice {
+        handle: u64,
+        slot: LayerSlot,
+    },
+    Sort {
+        handle: u64,
+        layer: Cow<'a, Layer>,
+    },
+    Discretise {
+        handle: u64,
+        family: WireFamily<'a>,
+    },
+    Grades {
+        handle: u64,
+    },
+    Grade {
+        handle: u64,
+        family: WireFamily<'a>,
+        regions: Cow<'a, [Region]>,
+    },
+    Sequence {
+        handle: u64,
+        info: Cow<'a, RunInfo>,
+    },
+    Plan {
+        handle: u64,
+        info: Cow<'a, RunInfo>,
+        plan: Cow<'a, LayerPlan>,
+    },
+    /// Opens an exporter's output; replies with the handle of its layer sink.
+    Open {
+        handle: u64,
+        export: WireExport<'a>,
+    },
+    Layer {
+        handle: u64,
+        info: Cow<'a, RunInfo>,
+        plan: Cow<'a, LayerPlan>,
+    },
+    /// Completes a layer sink's output; the sink is released with it.
+    Finish {
+        handle: u64,
+        info: Cow<'a, RunInfo>,
+    },
+}
+
+/// A plugin's answer to a [`Request`].
+#[derive(Debug, Serialize, Deserialize)]
+pub enum Response {
+    Stages(Vec<WireStage>),
+    Handle(u64),
+    Meshes(Vec<WireMesh>),
+    Orientation(Orientation),
+    Slots(Vec<LayerSlot>),
+    Layer(Layer),
+    Tree(ContourTree),
+    Regions(Vec<Region>),
+    Bool(bool),
+    Sequence(Sequence),
+    Plan(LayerPlan),
+    Done,
+}
+
+/// What a plugin writes back for every request.
+pub type Reply = Result<Response, WireError>;
+
+/// A call of a plugin into the host, made during a [`Request`].
+#[derive(Debug, Serialize, Deserialize)]
+pub enum HostRequest<'a> {
+    /// Compiles a script reference (`"expression"` or `"file.rhai#function"`) with the
+    /// host's engine; replies with the script's number.
+    Compile {
+        spec: Cow<'a, str>,
+        origin: Option<WireLocation>,
+    },
+    /// Runs a script for one number, within the host's limits.
+    Number {
+        script: u64,
+        args: WireArgs<'a>,
+        context: Cow<'a, str>,
+    },
+    /// Runs a script for the fractions of `n` materials, within the host's limits.
+    Fractions {
+        script: u64,
+        args: WireArgs<'a>,
+        n: usize,
+        context: Cow<'a, str>,
+    },
+    /// Creates an output file (a name relative to the output folder); replies with
+    /// the file's number.
+    Create {
+        name: Cow<'a, Path>,
+    },
+    Write {
+        file: u64,
+        bytes: Cow<'a, serde_bytes::Bytes>,
+    },
+    Flush {
+        file: u64,
+    },
+    Close {
+        file: u64,
+    },
+}
+
+/// The host's answer to a [`HostRequest`].
+#[derive(Debug, Serialize, Deserialize)]
+pub enum HostResponse {
+    Script(u64),
+    Number(f64),
+    Fractions(Vec<f64>),
+    File(u64),
+    Done,
+}
+
+/// What the host writes back for every host request.
+pub type HostReply = Result<HostResponse, WireError>;
+
+/// A stage's self-description.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct WireStage {
+    pub kind: StageKind,
+    pub name: String,
+    pub doc: String,
+    pub options: Vec<WireOption>,
+    pub example: String,
+}
+
+/// One option of a [`WireStage`].
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct WireOption {
+    pub name: String,
+    pub ty: String,
+    pub default: Option<String>,
+    pub doc: String,
+}
+
+/// A mesh a model stage made, with what its reader repaired.
+#[derive(Debug, Serialize, Deserialize)]
+pub struct WireMesh {
+    pub mesh: Mesh,
+    pub warnings: Vec<String>,
+}
+
+/// A stage's configuration: its table (as the file has it and as overrides left it),
+/// the pipeline's folder, machine and limits.
+#[derive(Debug, Serialize, Deserialize)]
+pub struct WireConfig<'a> {
+    pub table: WireTable<'a>,
+    pub base_dir: Cow<'a, Path>,
+    pub machine: Option<Cow<'a, Machine>>,
+    pub limits: Limits,
+}
+
+/// A stage's table: the file it is in (so that errors point into it), its path in the
+/// file and its values after `--set` overrides, as TOML text.
+#[derive(Debug, Serialize, Deserialize)]
+pub struct WireTable<'a> {
+    pub file: WireFile<'a>,
+    pub path: Vec<WireStep>,
+    pub values: String,
+    pub overridden: bool,
+    pub host_keys: Vec<String>,
+}
+
+/// A user's file: its path and text.
+#[derive(Debug, Serialize, Deserialize)]
+pub struct WireFile<'a> {
+    pub path: Cow<'a, Path>,
+    pub text: Cow<'a, str>,
+}
+
+/// One step of a table's path in its file.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub enum WireStep {
+    Key(String),
+    Index(usize),
+}
+
+/// What a discretiser or grader knows about a family. The mesh travels once per
+/// stage: later requests name it by `id` only.
+#[derive(Debug, Serialize, Deserialize)]
+pub struct WireFamily<'a> {
+    pub info: Cow<'a, RunInfo>,
+    pub layer: Cow<'a, Layer>,
+    pub tree: Cow<'a, ContourTree>,
+    pub mesh: Option<MeshRef<'a>>,
+    pub part: usize,
+    pub family: usize,
+}
+
+/// A mesh named by a number, with its data the first time the stage sees it.
+#[derive(Debug, Serialize, Deserialize)]
+pub struct MeshRef<'a> {
+    pub id: u64,
+    pub mesh: Option<Cow<'a, Mesh>>,
+}
+
+/// What an exporter knows when it opens its output.
+#[derive(Debug, Serialize, Deserialize)]
+pub struct WireExport<'a> {
+    pub info: Cow<'a, RunInfo>,
+    pub sequence: Option<Cow<'a, Sequence>>,
+    pub orientation: Option<Cow<'a, Orientation>>,
+    pub layer_count: usize,
+    pub pipeline_name: Cow<'a, str>,
+}
+
+/// The values a script call receives.
+#[derive(Debug, Serialize, Deserialize)]
+pub struct WireArgs<'a> {
+    pub r: f64,
+    pub d: f64,
+    pub x: f64,
+    pub y: f64,
+    pub z: f64,
+    pub layer: i64,
+    pub part: Cow<'a, str>,
+}
+
+impl<'a> From<&crate::script::ScriptArgs<'a>> for WireArgs<'a> {
+    fn from(a: &crate::script::ScriptArgs<'a>) -> Self {
+        Self {
+            r: a.r,
+            d: a.d,
+            x: a.x,
+            y: a.y,
+            z: a.z,
+            layer: a.layer,
+            part: Cow::Borrowed(a.part),
+        }
+    }
+}
+
+impl WireArgs<'_> {
+    pub fn args(&self) -> crate::script::ScriptArgs<'_> {
+        crate::script::ScriptArgs {
+            r: self.r,
+            d: self.d,
+            x: self.x,
+            y: self.y,
+            z: self.z,
+            layer: self.layer,
+            part: &self.part,
+        }
+    }
+}
+
+/// A place in a user's file, with the file's text so that the receiver can show it.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct WireLocation {
+    pub path: PathBuf,
+    pub text: String,
+    pub start: usize,
+    pub end: usize,
+}
+
+impl From<&Location> for WireLocation {
+    fn from(l: &Location) -> Self {
+        Self {
+            path: l.file.path.clone(),
+            text: l.file.text.clone(),
+            start: l.span.start,
+            end: l.span.end,
+        }
+    }
+}
+
+impl From<WireLocation> for Location {
+    fn from(l: WireLocation) -> Self {
+        Location::new(SourceFile::new(l.path, l.text), l.start..l.end)
+    }
+}
+
+/// An [`Error`] as data.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub enum WireError {
+    Io {
+        path: PathBuf,
+        message: String,
+    },
+    Config {
+        location: Option<WireLocation>,
+        message: String,
+        help: Option<String>,
+    },
+    Script {
+        location: Option<WireLocation>,
+        message: String,
+        context: Option<String>,
+    },
+    Model {
+        path: PathBuf,
+        message: String,
+    },
+    Plugin {
+        path: PathBuf,
+        message: String,
+    },
+    Panic {
+        stage: String,
+        message: String,
+    },
+    Limit {
+        what: String,
+        needed: String,
+        key: String,
+        allowed: u64,
+    },
+    Stage {
+        stage: String,
+        message: String,
+    },
+    Composition(String),
+    Layer {
+        index: usize,
+        z: f64,
+        source: Box<WireError>,
+    },
+    Part {
+        part: String,
+        source: Box<WireError>,
+    },
+}
+
+impl From<&Error> for WireError {
+    fn from(e: &Error) -> Self {
+        let at = |l: &Option<Location>| l.as_ref().map(WireLocation::from);
+        match e {
+            Error::Io { path, source } => WireError::Io {
+                path: path.clone(),
+                message: source.to_string(),
+            },
+            Error::Config {
+                location,
+                message,
+                help,
+            } => WireError::Config {
+                location: at(location),
+                message: message.clone(),
+                help: help.clone(),
+            },
+            Error::Script {
+                location,
+                message,
+                context,
+            } => WireError::Script {
+                location: at(location),
+                message: message.clone(),
+                context: context.clone(),
+            },
+            Error::Model { path, message } => WireError::Model {
+                path: path.clone(),
+                message: message.clone(),
+            },
+            Error::Plugin { path, message } => WireError::Plugin {
+                path: path.clone(),
+                message: message.clone(),
+            },
+            Error::Panic { stage, message } => WireError::Panic {
+                stage: stage.clone(),
+                message: message.clone(),
+            },
+            Error::Limit {
+                what,
+                needed,
+                key,
+                allowed,
+            } => WireError::Limit {
+                what: what.clone(),
+                needed: needed.clone(),
+                key: key.to_string(),
+                allowed: *allowed,
+            },
+            Error::Stage { stage, message } => WireError::Stage {
+                stage: stage.clone(),
+                message: message.clone(),
+            },
+            Error::Composition(m) => WireError::Composition(m.clone()),
+            Error::Layer { index, z, source } => WireError::Layer {
+                index: *index,
+                z: *z,
+                source: Box::new(WireError::from(&**source)),
+            },
+            Error::Part { part, source } => WireError::Part {
+                part: part.clone(),
+                source: Box::new(WireError::from(&**source)),
+            },
+        }
+    }
+}
+
+impl From<WireError> for Error {
+    fn from(e: WireError) -> Self {
+        match e {
+            WireError::Io { path, message } => Error::Io {
+                path,
+                source: std::io::Error::other(message),
+            },
+            WireError::Config {
+                location,
+                message,
+                help,
+            } => Error::Config {
+                location: location.map(Location::from),
+                message,
+                help,
+            },
+            WireError::Script {
+                location,
+                message,
+                context,
+            } => Error::Script {
+                location: location.map(Location::from),
+                message,
+                context,
+            },
+            WireError::Model { path, message } => Error::Model { path, message },
+            WireError::Plugin { path, message } => Error::Plugin { path, message },
+            WireError::Panic { stage, message } => Error::Panic { stage, message },
+            WireError::Limit {
+                what,
+                needed,
+                key,
+                allowed,
+            } => match Limit::ALL.into_iter().find(|l| l.key() == key) {
+                Some(limit) => Error::Limit {
+                    what,
+                    needed,
+                    key: limit.key(),
+                    allowed,
+                },
+                None => Error::stage(
+                    what,
+                    format!("needs {needed}, more than the limit `limits.{key}` = {allowed}"),
+                ),
+            },
+            WireError::Stage { stage, message } => Error::Stage { stage, message },
+            WireError::Composition(m) => Error::Composition(m),
+            WireError::Layer { index, z, source } => Error::Layer {
+                index,
+                z,
+                source: Box::new(Error::from(*source)),
+            },
+            WireError::Part { part, source } => Error::Part {
+                part,
+                source: Box::new(Error::from(*source)),
+            },
+        }
+    }
+}
+
+/// Encodes a message.
+pub fn encode<T: Serialize + ?Sized>(message: &T) -> Result<Vec<u8>, String> {
+    rmp_serde::to_vec_named(message).map_err(|e| format!("cannot encode a message: {e}"))
+}
+
+/// Decodes a message.
+pub fn decode<T: DeserializeOwned>(bytes: &[u8]) -> Result<T, String> {
+    rmp_serde::from_slice(bytes).map_err(|e| format!("malformed message: {e}"))
+}
+
+/// A file's path and text as a [`WireFile`].
+pub fn file_of(file: &Arc<SourceFile>) -> WireFile<'_> {
+    WireFile {
+        path: Cow::Borrowed(&file.path),
+        text: Cow::Borrowed(&file.text),
+    }
+}
