@@ -371,3 +371,113 @@ fn an_endless_script_in_a_dynamic_plugin_is_stopped_within_a_second() {
         assert!(took.as_secs_f64() < 1.5, "{f}: {took:?}");
     }
 }
+
+/// Builds the plugin crate outside the workspace, with its own lock file.
+fn outside_library() -> PathBuf {
+    let target = std::env::var_os("CARGO_TARGET_DIR")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| root().join("target"))
+        .join("outside");
+    let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
+    let status = Command::new(cargo)
+        .current_dir(root())
+        .args([
+            "build",
+            "--quiet",
+            "--manifest-path",
+            "tests/outside/skewed-plugin/Cargo.toml",
+            "--target-dir",
+        ])
+        .arg(&target)
+        .status()
+        .expect("cargo runs");
+    assert!(status.success(), "building the outside plugin failed");
+    target.join("debug").join(format!(
+        "{}lamina_fixture_skewed{}",
+        std::env::consts::DLL_PREFIX,
+        std::env::consts::DLL_SUFFIX
+    ))
+}
+
+/// The lock file of a crate, as `name -> version`.
+fn locked_versions(lock: &Path) -> std::collections::BTreeMap<String, String> {
+    let text = std::fs::read_to_string(lock).expect("lock file");
+    let doc: toml::Table = text.parse().expect("lock file is TOML");
+    doc["package"]
+        .as_array()
+        .expect("packages")
+        .iter()
+        .filter_map(|p| {
+            Some((
+                p.get("name")?.as_str()?.to_string(),
+                p.get("version")?.as_str()?.to_string(),
+            ))
+        })
+        .collect()
+}
+
+#[test]
+fn a_plugin_resolving_other_releases_of_the_boundarys_dependencies_runs_correctly() {
+    let lib = outside_library();
+    // The premise: its lock file and the host's disagree on crates whose types cross.
+    let ours = locked_versions(&root().join("Cargo.lock"));
+    let theirs = locked_versions(&root().join("tests/outside/skewed-plugin/Cargo.lock"));
+    for name in ["serde", "toml", "rmp-serde"] {
+        assert_ne!(
+            ours.get(name),
+            theirs.get(name),
+            "{name} resolves the same release in both"
+        );
+    }
+    let dir = tempfile::tempdir().expect("tempdir");
+    let path = dir.path().join("s.toml");
+    std::fs::write(
+        &path,
+        "[model]\nuse = \"skewed-box\"\nsize = [10.0, 8.0, 2.0]\n\n[materials.a]\ncolour = [255, 0, 0]\n[materials.b]\ncolour = [0, 0, 255]\n\n\
+         [slice]\nuse = \"uniform\"\nthickness = 0.5\n\n[discretise]\nuse = \"offset\"\ncount = 2\n\n\
+         [grade]\nuse = \"skewed-z\"\nf = \"clamp01(z / 2.0)\"\n\n[[output]]\nuse = \"json\"\npath = \"plan.json\"\n",
+    )
+    .expect("pipeline");
+    let out_dir = dir.path().join("out");
+    let out = lamina(&[
+        "run",
+        path.to_str().expect("utf-8"),
+        "--plugin",
+        lib.to_str().expect("utf-8"),
+        "--out",
+        out_dir.to_str().expect("utf-8"),
+    ]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let plan: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(out_dir.join("plan.json")).expect("written")).expect("json");
+    let layers = plan["layers"].as_array().expect("layers");
+    assert_eq!(layers.len(), 4);
+    for layer in layers {
+        let z = layer["z"].as_f64().expect("z");
+        let regions = layer["parts"][0]["families"][0]["regions"]
+            .as_array()
+            .expect("regions");
+        let area: f64 = regions.iter().map(|r| r["area"].as_f64().expect("area")).sum();
+        assert!((area - 80.0).abs() < 1e-9, "z = {z}: {area}");
+        for r in regions {
+            let a = r["composition"]["a"].as_f64().expect("graded");
+            assert!((a - (z / 2.0).clamp(0.0, 1.0)).abs() < 1e-12, "z = {z}: {a}");
+        }
+    }
+    // An option the plugin's own serde refuses is reported at its place in the file.
+    let text = std::fs::read_to_string(&path).expect("read");
+    std::fs::write(
+        &path,
+        text.replace("size = [10.0, 8.0, 2.0]", "size = [10.0, 8.0]"),
+    )
+    .expect("write");
+    let out = lamina(&[
+        "check",
+        path.to_str().expect("utf-8"),
+        "--plugin",
+        lib.to_str().expect("utf-8"),
+    ]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{err}");
+    assert!(err.contains("s.toml:3:") && err.contains("size"), "{err}");
+}

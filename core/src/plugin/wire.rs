@@ -523,3 +523,55 @@ pub fn file_of(file: &Arc<SourceFile>) -> WireFile<'_> {
         text: Cow::Borrowed(&file.text),
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::machine::load::MachineSpec;
+
+    /// Every built-in machine travels in a run's facts and reads back the same.
+    #[test]
+    fn run_facts_with_every_built_in_machine_read_back_the_same() {
+        for profile in crate::machine::builtin::PROFILES {
+            let spec = MachineSpec::Named {
+                reference: profile.name.to_string(),
+                at: None,
+            };
+            let machine = crate::machine::resolve(&spec, Path::new(".")).expect("built-in profile");
+            let info = RunInfo {
+                base_dir: PathBuf::from("/p"),
+                materials: Vec::new(),
+                parts: Vec::new(),
+                z_min: 0.0,
+                z_max: f64::MAX,
+                xy_bounds: crate::geom::BBox2::EMPTY,
+                machine: Some(machine.clone()),
+            };
+            let bytes = encode(&info).expect("encodes");
+            let back: RunInfo = decode(&bytes).expect("decodes");
+            assert_eq!(encode(&back).expect("encodes"), bytes, "{}", profile.name);
+            let mut back_machine = back.machine.expect("machine");
+            back_machine.origin = machine.origin.clone();
+            assert_eq!(back_machine, machine, "{}", profile.name);
+        }
+    }
+
+    /// An error keeps its kind, place and text across the boundary.
+    #[test]
+    fn errors_read_back_with_their_place() {
+        let file = SourceFile::new("p.toml", "[grade]\nf = \"x\"\n");
+        let e = Error::config_at(Location::new(file, 8..9), "bad").in_layer(3, 1.5);
+        let back = Error::from(
+            decode::<WireError>(&encode(&WireError::from(&e)).expect("encodes")).expect("decodes"),
+        );
+        assert_eq!(back.to_string(), e.to_string());
+        assert!(back.is_usage());
+        let limit = Limits::default()
+            .check(Limit::Regions, 1e9, "the offsets")
+            .expect_err("over");
+        let back = Error::from(
+            decode::<WireError>(&encode(&WireError::from(&limit)).expect("encodes")).expect("decodes"),
+        );
+        assert_eq!(back.to_string(), limit.to_string());
+    }
+}
