@@ -1,0 +1,217 @@
+//! Test support for Lamina stages, built-in or third-party: runs every stage's declared
+//! example in a small pipeline on a generated model, and runs whole pipelines
+//! in-process, with every built-in stage linked.
+//!
+//! A plugin crate's tests link the crate itself (`use my_plugin as _;`), so its stages
+//! register with the same registry as the built-in ones:
+//!
+//! ```no_run
+//! // tests/examples.rs of a plugin crate named `my_plugin`
+//! use my_plugin as _;
+//!
+//! #[test]
+//! fn my_stages_examples_run() {
+//!     lamina_test_support::assert_examples_run(&["my-grader"]);
+//! }
+//!
+//! #[test]
+//! fn a_pipeline_with_my_stage_runs() {
+//!     let run = lamina_test_support::run_pipeline(include_str!("../pipeline.toml"));
+//!     assert!(run.report.layers > 0);
+//! }
+//! # mod my_plugin {}
+//! ```
+
+use std::path::{Path, PathBuf};
+
+use lamina_core::pipeline::Pipeline;
+use lamina_core::registry::Registered;
+use lamina_core::runtime::{Engine, RunOptions, RunReport, Silent};
+use lamina_core::{Registry, SourceFile, StageKind};
+
+// Linked for their registrations.
+use lamina_discretise as _;
+use lamina_export as _;
+use lamina_gcode as _;
+use lamina_grade as _;
+use lamina_orient as _;
+use lamina_plan as _;
+use lamina_preview as _;
+use lamina_sequence as _;
+use lamina_slice as _;
+use lamina_sort as _;
+use lamina_sources as _;
+
+/// Every stage linked into the test program: the built-in ones and those of the crates
+/// the test links.
+pub fn registry() -> Registry {
+    Registry::linked().unwrap_or_else(|e| panic!("the linked stages: {e}"))
+}
+
+/// The model every example runs on: a tube 2 mm high (20 mm across, 14 mm bore).
+pub const MODEL: &str = "use = \"tube\"\nheight = 2.0";
+
+/// Writes the tube as `part.stl`, `part.obj` and `part.3mf` in `dir`, for examples that
+/// read a file.
+pub fn write_models(dir: &Path) {
+    let table =
+        lamina_core::pipeline::TableRef::parse_snippet("model", MODEL).unwrap_or_else(|e| panic!("{e}"));
+    let scripts = lamina_core::script::ScriptHost::new(dir, Default::default());
+    let mesh = match registry().build(StageKind::Model, &table, &scripts, dir) {
+        Ok(lamina_core::AnyStage::Model(m)) => m.load(dir).unwrap_or_else(|e| panic!("{e}")).remove(0),
+        other => panic!("the tube generator: {other:?}"),
+    };
+    let mut stl = Vec::new();
+    lamina_model::stl::write_binary(&mesh, &mut stl).unwrap_or_else(|e| panic!("{e}"));
+    write(&dir.join("part.stl"), &stl);
+    let mut obj = String::new();
+    for v in &mesh.vertices {
+        obj.push_str(&format!("v {} {} {}\n", v.x, v.y, v.z));
+    }
+    for t in &mesh.triangles {
+        obj.push_str(&format!("f {} {} {}\n", t[0] + 1, t[1] + 1, t[2] + 1));
+    }
+    write(&dir.join("part.obj"), obj.as_bytes());
+    let package = lamina_model::threemf::write(std::slice::from_ref(&mesh)).unwrap_or_else(|e| panic!("{e}"));
+    write(&dir.join("part.3mf"), &package);
+}
+
+fn write(path: &Path, bytes: &[u8]) {
+    std::fs::write(path, bytes).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+}
+
+/// A pipeline around one stage's table: the tube, uniform 0.5 mm layers, two materials
+/// mixed by a constant grader (unless the stage is the grader) and a JSON plan (unless
+/// the stage is the output).
+pub fn pipeline_for(kind: StageKind, table: &str) -> String {
+    let mut tables = vec![
+        ("model", MODEL.to_string()),
+        ("slice", "use = \"uniform\"\nthickness = 0.5".to_string()),
+    ];
+    let mut outputs = vec!["use = \"json\"\npath = \"plan.json\"".to_string()];
+    match kind {
+        StageKind::Export => outputs = vec![table.to_string()],
+        k => {
+            if let Some(t) = tables.iter_mut().find(|(n, _)| *n == k.name()) {
+                t.1 = table.to_string();
+            } else {
+                tables.push((k.name(), table.to_string()));
+            }
+        }
+    }
+    let mut text =
+        String::from("[materials.red]\ncolour = [255, 0, 0]\n[materials.green]\ncolour = [0, 255, 0]\n\n");
+    if kind != StageKind::Grade {
+        // Both materials stay on the part (a discretiser may name them) and a constant
+        // grader says how they mix.
+        text.push_str("[grade]\nuse = \"constant\"\nmaterial = \"red\"\n\n");
+    }
+    for (name, body) in tables {
+        text.push_str(&format!("[{name}]\n{body}\n\n"));
+    }
+    for o in outputs {
+        text.push_str(&format!("[[output]]\n{o}\n\n"));
+    }
+    text
+}
+
+/// Checks what a stage says about itself (one-line doc, every option documented, an
+/// example that names the stage) and runs its example in [`pipeline_for`] inside
+/// `dir`, which must hold [`write_models`]'s files. Returns the run's report.
+pub fn check_example(registry: &Registry, entry: &Registered, dir: &Path) -> Result<RunReport, String> {
+    let info = entry.info();
+    let label = entry.label();
+    if info.doc.is_empty() || info.doc.contains('\n') {
+        return Err(format!("{label}: its doc must be one line"));
+    }
+    if !info.example.contains(&format!("use = \"{}\"", info.name)) {
+        return Err(format!(
+            "{label}: its example must name the stage (use = \"{}\")",
+            info.name
+        ));
+    }
+    if let Some(o) = info.options.iter().find(|o| o.doc.is_empty()) {
+        return Err(format!("{label}: option `{}` is undocumented", o.name));
+    }
+    let text = pipeline_for(info.kind, info.example);
+    let file = SourceFile::new(
+        dir.join(format!("{}-{}.toml", info.kind, info.name)),
+        text.clone(),
+    );
+    let pipeline =
+        Pipeline::parse(file, dir.to_path_buf(), &[]).map_err(|e| format!("{label}: {e}\n{text}"))?;
+    let engine = Engine::build(pipeline, registry.clone(), &RunOptions::default())
+        .map_err(|e| format!("{label}: its example does not build: {e}\n{text}"))?;
+    let out = dir.join("out").join(label.replace(':', "-"));
+    let report = engine
+        .run(&out, &Silent)
+        .map_err(|e| format!("{label}: its example does not run: {e}\n{text}"))?;
+    if report.layers == 0 || report.regions == 0 {
+        return Err(format!("{label}: its example produced nothing\n{text}"));
+    }
+    if report.files.is_empty() {
+        return Err(format!("{label}: its example wrote nothing\n{text}"));
+    }
+    Ok(report)
+}
+
+/// Runs the examples of the linked stages named in `names` (every linked stage when
+/// `names` is empty) and panics with every failure. Each name must be registered.
+pub fn assert_examples_run(names: &[&str]) {
+    let registry = registry();
+    let dir = tempfile::tempdir().unwrap_or_else(|e| panic!("a temporary folder: {e}"));
+    write_models(dir.path());
+    for name in names {
+        assert!(
+            registry.list(None).iter().any(|e| e.info().name == *name),
+            "no stage named `{name}` is linked: does the test link the crate (`use my_crate as _;`)?"
+        );
+    }
+    let failures: Vec<String> = registry
+        .list(None)
+        .into_iter()
+        .filter(|e| names.is_empty() || names.contains(&e.info().name))
+        .filter_map(|e| check_example(&registry, e, dir.path()).err())
+        .collect();
+    assert!(failures.is_empty(), "{}", failures.join("\n\n"));
+}
+
+/// A finished run of [`run_pipeline`]: its folder (removed when dropped), report and
+/// output folder.
+#[derive(Debug)]
+pub struct Run {
+    pub dir: tempfile::TempDir,
+    pub report: RunReport,
+    pub out: PathBuf,
+}
+
+impl Run {
+    /// An output file's bytes.
+    pub fn file(&self, name: &str) -> Vec<u8> {
+        let path = self.out.join(name);
+        std::fs::read(&path).unwrap_or_else(|e| panic!("{}: {e}", path.display()))
+    }
+
+    /// A JSON output, parsed.
+    pub fn json(&self, name: &str) -> serde_json::Value {
+        serde_json::from_slice(&self.file(name)).unwrap_or_else(|e| panic!("{name}: {e}"))
+    }
+}
+
+/// Runs a pipeline given as text, in a temporary folder holding [`write_models`]'s
+/// files; panics with the error if it fails.
+pub fn run_pipeline(text: &str) -> Run {
+    try_run_pipeline(text).unwrap_or_else(|e| panic!("{e}"))
+}
+
+/// [`run_pipeline`], returning the error instead (for tests of refusals).
+pub fn try_run_pipeline(text: &str) -> Result<Run, lamina_core::Error> {
+    let dir = tempfile::tempdir().map_err(|e| lamina_core::Error::io(std::env::temp_dir(), e))?;
+    write_models(dir.path());
+    let file = SourceFile::new(dir.path().join("pipeline.toml"), text);
+    let pipeline = Pipeline::parse(file, dir.path().to_path_buf(), &[])?;
+    let engine = Engine::build(pipeline, registry(), &RunOptions::default())?;
+    let out = dir.path().join("out");
+    let report = engine.run(&out, &Silent)?;
+    Ok(Run { dir, report, out })
+}
