@@ -5,6 +5,7 @@ mod catalogue;
 mod generate;
 mod progress;
 mod report;
+mod scaffold;
 
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -103,6 +104,21 @@ enum Command {
         /// a string.
         #[arg(trailing_var_arg = true, allow_hyphen_values = true, value_name = "OPTIONS")]
         options: Vec<String>,
+    },
+    /// Writes a plugin crate with one stage, its tests and a pipeline that uses it.
+    NewPlugin {
+        /// The stage's name, also the crate's (lower case, digits, `-`, `_`).
+        name: String,
+        /// The stage kind: grade, discretise, export or model.
+        #[arg(long, default_value = "grade")]
+        kind: String,
+        /// The crate's folder (default: the name, in the current directory).
+        #[arg(long, value_name = "DIR")]
+        dir: Option<PathBuf>,
+        /// Lamina's source folder, which the crate depends on (default: the one this
+        /// lamina was built from).
+        #[arg(long, value_name = "PATH")]
+        lamina: Option<PathBuf>,
     },
     /// Lists the available stages with their documentation and options.
     Plugins {
@@ -256,6 +272,28 @@ fn execute(cli: Cli) -> Result<(), Failure> {
                     println!("  {line}");
                 }
             }
+            Ok(())
+        }
+        Command::NewPlugin {
+            name,
+            kind,
+            dir,
+            lamina,
+        } => {
+            let request = scaffold::Request::new(&name, &kind, dir, lamina)
+                .map_err(|error| Failure { error, usage: true })?;
+            let files = request.write()?;
+            println!("{}", request.dir.display());
+            for f in files {
+                println!("  {}", f.display());
+            }
+            println!(
+                "build it with `cargo build` in {}, test it with `cargo test`, and load it with `lamina run pipeline.toml --plugin target/debug/{}{}{}`",
+                request.dir.display(),
+                std::env::consts::DLL_PREFIX,
+                name.replace('-', "_"),
+                std::env::consts::DLL_SUFFIX
+            );
             Ok(())
         }
         Command::Plugins {

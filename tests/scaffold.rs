@@ -1,0 +1,156 @@
+//! docs/plugins.md, step by step: `lamina new-plugin` writes a crate outside the
+//! workspace, `cargo build` and `cargo test` pass in it, and `lamina` loads the library
+//! and runs the pipeline the crate comes with. Every kind with a template is built and
+//! tested; the grader's output is checked against what its template computes.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+fn root() -> &'static Path {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+}
+
+fn lamina(dir: &Path, args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_lamina"))
+        .current_dir(dir)
+        .args(args)
+        .output()
+        .expect("lamina runs")
+}
+
+/// Where the scaffolded crates build: one folder for all, so their dependencies are
+/// compiled once.
+fn target_dir() -> PathBuf {
+    std::env::var_os("CARGO_TARGET_DIR")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| root().join("target"))
+        .join("outside")
+}
+
+fn cargo(dir: &Path, args: &[&str]) {
+    let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
+    let out = Command::new(cargo)
+        .current_dir(dir)
+        .args(args)
+        .arg("--target-dir")
+        .arg(target_dir())
+        .output()
+        .expect("cargo runs");
+    assert!(
+        out.status.success(),
+        "cargo {args:?} in {}:\n{}\n{}",
+        dir.display(),
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr)
+    );
+}
+
+fn library(name: &str) -> PathBuf {
+    target_dir().join("debug").join(format!(
+        "{}{}{}",
+        std::env::consts::DLL_PREFIX,
+        name.replace('-', "_"),
+        std::env::consts::DLL_SUFFIX
+    ))
+}
+
+/// Scaffolds, builds and tests a crate of `kind`, then runs its pipeline with the
+/// library loaded; returns the crate's folder and the run's output folder.
+fn scaffold(work: &Path, name: &str, kind: &str) -> (PathBuf, PathBuf) {
+    let out = lamina(work, &["new-plugin", name, "--kind", kind]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let krate = work.join(name);
+    cargo(&krate, &["build", "--quiet"]);
+    cargo(&krate, &["test", "--quiet"]);
+    let lib = library(name);
+    let listed = lamina(
+        &krate,
+        &["plugins", kind, "--plugin", lib.to_str().expect("utf-8")],
+    );
+    assert!(listed.status.success());
+    assert!(
+        String::from_utf8_lossy(&listed.stdout).contains(name),
+        "{}",
+        String::from_utf8_lossy(&listed.stdout)
+    );
+    let run = lamina(
+        &krate,
+        &[
+            "run",
+            "pipeline.toml",
+            "--plugin",
+            lib.to_str().expect("utf-8"),
+            "--out",
+            "out",
+            "-q",
+        ],
+    );
+    assert!(run.status.success(), "{}", String::from_utf8_lossy(&run.stderr));
+    (krate.clone(), krate.join("out"))
+}
+
+#[test]
+fn the_plugin_guide_works_from_scaffold_to_a_loaded_plugin() {
+    let guide = std::fs::read_to_string(root().join("docs/plugins.md")).expect("the guide");
+    let lib = library("my-grader");
+    let lib_name = lib.file_name().expect("name").to_string_lossy().into_owned();
+    for step in [
+        "lamina new-plugin my-grader --kind grade".to_string(),
+        "cargo build".to_string(),
+        "cargo test".to_string(),
+        format!("lamina run pipeline.toml --plugin target/debug/{lib_name} --out out"),
+        format!("lamina plugins grade --plugin target/debug/{lib_name}"),
+    ] {
+        assert!(guide.contains(&step), "docs/plugins.md no longer says `{step}`");
+    }
+    let work = tempfile::tempdir().expect("tempdir");
+    let (_, out) = scaffold(work.path(), "my-grader", "grade");
+    // The template blends red into green between z = 0 and 2 mm.
+    let plan: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(out.join("plan.json")).expect("the plan")).expect("json");
+    for layer in plan["layers"].as_array().expect("layers") {
+        let z = layer["z"].as_f64().expect("z");
+        for region in layer["parts"][0]["families"][0]["regions"]
+            .as_array()
+            .expect("regions")
+        {
+            let red = region["composition"]["red"].as_f64().expect("graded");
+            assert!(
+                (red - (1.0 - z / 2.0).clamp(0.0, 1.0)).abs() < 1e-12,
+                "z = {z}: {red}"
+            );
+        }
+    }
+    // A second scaffold into the same folder is refused and leaves the first alone.
+    let again = lamina(work.path(), &["new-plugin", "my-grader"]);
+    assert_eq!(again.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&again.stderr).contains("exists already"));
+}
+
+#[test]
+fn every_template_builds_tests_and_runs() {
+    let work = tempfile::tempdir().expect("tempdir");
+    let (_, out) = scaffold(work.path(), "my-regions", "discretise");
+    assert!(out.join("plan.json").is_file());
+    let (_, out) = scaffold(work.path(), "my-box", "model");
+    let plan: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(out.join("plan.json")).expect("the plan")).expect("json");
+    for layer in plan["layers"].as_array().expect("layers") {
+        let area: f64 = layer["parts"][0]["families"][0]["area"].as_f64().expect("area");
+        assert!((area - 60.0).abs() < 1e-9, "{area}");
+    }
+    let (_, out) = scaffold(work.path(), "my-table", "export");
+    let csv = std::fs::read_to_string(out.join("regions.csv")).expect("the table");
+    let mut lines = csv.lines();
+    assert_eq!(lines.next(), Some("layer,z,part,family,region,area,red,green"));
+    assert_eq!(lines.count(), 4, "{csv}");
+    // No template for a kind is a clear refusal.
+    let refused = lamina(work.path(), &["new-plugin", "my-slicer", "--kind", "slice"]);
+    assert_eq!(refused.status.code(), Some(2));
+    let err = String::from_utf8_lossy(&refused.stderr);
+    assert!(
+        err.contains("no plugin template") && err.contains("zigzag"),
+        "{err}"
+    );
+    assert!(!work.path().join("my-slicer").exists());
+}
