@@ -43,7 +43,7 @@ fn key(k: &str) -> PathElem {
 #[derive(Debug, Clone)]
 pub struct TableRef {
     /// The table as it is after `--set` overrides.
-    pub table: toml::Table,
+    pub(crate) table: toml::Table,
     file: Arc<SourceFile>,
     path: Vec<PathElem>,
     /// True when an override changed something in this table: spans then no longer
@@ -107,8 +107,13 @@ impl TableRef {
         self.table.get("use").and_then(|v| v.as_str())
     }
 
-    pub fn get(&self, k: &str) -> Option<&toml::Value> {
+    pub(crate) fn get(&self, k: &str) -> Option<&toml::Value> {
         self.table.get(k)
+    }
+
+    /// True when the table sets `key` (after overrides).
+    pub fn has(&self, key: &str) -> bool {
+        self.table.contains_key(key)
     }
 
     /// Same table with a different set of host-consumed keys.

@@ -348,4 +348,16 @@ impl StageConfig<'_> {
     pub fn error(&self, key: &str, message: impl Into<String>) -> crate::Error {
         self.table.error_at(key, message)
     }
+
+    /// True when the stage's table sets `key` (rather than leaving its default).
+    pub fn has(&self, key: &str) -> bool {
+        self.table.has(key)
+    }
+
+    /// Where the string value of `key` is written in the user's file (for a script
+    /// written inline, so that its errors point into the file); `None` when a `--set`
+    /// override gave the value.
+    pub fn string_location(&self, key: &str) -> Option<crate::source::Location> {
+        self.table.string_location(key)
+    }
 }

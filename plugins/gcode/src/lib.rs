@@ -186,7 +186,7 @@ fn build(config: &StageConfig<'_>) -> Result<AnyStage> {
     let o: Options = config.parse()?;
     if let Some(m) = config.machine {
         for (key, what) in MACHINE_KEYS {
-            if config.table.get(key).is_some() {
+            if config.has(key) {
                 return Err(config
                     .error(
                         key,

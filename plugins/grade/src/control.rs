@@ -112,7 +112,7 @@ impl Control {
                     ("alpha", o.alpha.is_some()),
                     ("k", o.k.is_some()),
                 ])?;
-                let origin = config.table.string_location("f");
+                let origin = config.string_location("f");
                 Control::Script(config.scripts.compile(script, origin)?)
             }
         })

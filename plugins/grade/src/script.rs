@@ -38,7 +38,7 @@ impl Grader for Script {
 
 fn build(config: &StageConfig<'_>) -> Result<AnyStage> {
     let o: Options = config.parse()?;
-    let origin = config.table.string_location("f");
+    let origin = config.string_location("f");
     let f = config.scripts.compile(&o.f, origin)?;
     Ok(AnyStage::Grade(Box::new(Script { f })))
 }

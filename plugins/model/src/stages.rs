@@ -560,9 +560,7 @@ fn build_blade(config: &StageConfig<'_>) -> Result<AnyStage> {
     let mesh = blade.mesh().map_err(|e| {
         // The profile's checks name the parameters; a code sets all three.
         let option = match e.option {
-            "max_camber" | "camber_position" | "thickness"
-                if o.naca.is_some() && config.table.get(e.option).is_none() =>
-            {
+            "max_camber" | "camber_position" | "thickness" if o.naca.is_some() && !config.has(e.option) => {
                 "naca"
             }
             other => other,

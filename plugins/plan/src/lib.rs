@@ -216,7 +216,7 @@ impl Options {
             .machine
             .and_then(|m| m.tools.iter().filter_map(|t| t.envelope).reduce(f64::max));
         if let Some(e) = machine {
-            if config.table.get("envelope").is_none() {
+            if !config.has("envelope") {
                 o.envelope = e + ENVELOPE_MARGIN;
             } else if o.envelope < e {
                 return Err(config.error(

@@ -99,7 +99,7 @@ impl Grader for SkewedGrade {
 
 fn build_grade(config: &StageConfig<'_>) -> Result<AnyStage> {
     let o: GradeOptions = config.parse()?;
-    let f = config.scripts.compile(&o.f, config.table.string_location("f"))?;
+    let f = config.scripts.compile(&o.f, config.string_location("f"))?;
     Ok(AnyStage::Grade(Box::new(SkewedGrade(f))))
 }
 
