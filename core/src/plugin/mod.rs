@@ -190,3 +190,25 @@ pub fn guard_call<T>(label: &str, f: impl FnOnce() -> Result<T>) -> Result<T> {
         })
     })
 }
+
+/// Adds the stages linked into this program to `registry` as if a plugin library named
+/// `name` held them: every call goes through the boundary (messages, handles, the
+/// host's services) without a library file. For tests of the boundary: a pipeline run
+/// this way must give what the linked stages give.
+pub fn add_linked_through_boundary(registry: &mut Registry, name: &'static str) -> Result<()> {
+    let descriptor: &'static StaticDescriptor = Box::leak(Box::new(StaticDescriptor::new(name)));
+    let path = PathBuf::from(format!("<{name}>"));
+    // SAFETY: the descriptor is this copy's own, leaked for the life of the process.
+    let library = Arc::new(unsafe { host::Library::new(&path, descriptor.get()) }?);
+    for (factory, remote) in library.describe()? {
+        registry.add_dynamic(
+            factory,
+            Origin::Dynamic {
+                path: path.clone(),
+                plugin: name.to_string(),
+            },
+            remote,
+        )?;
+    }
+    Ok(())
+}

@@ -1,0 +1,75 @@
+//! Every built-in stage through the plugin boundary: each stage's example pipeline runs
+//! once with the linked stages and once with every stage reached through the boundary's
+//! messages, handles and host services (as a dynamic plugin's are), and writes the same
+//! bytes.
+
+use lamina_core::pipeline::Pipeline;
+use lamina_core::runtime::{Engine, RunOptions, Silent};
+use lamina_core::{Registry, SourceFile};
+
+fn run(
+    registry: &Registry,
+    text: &str,
+    dir: &std::path::Path,
+    out: &std::path::Path,
+) -> Result<Vec<(String, Vec<u8>)>, String> {
+    let file = SourceFile::new(dir.join("p.toml"), text);
+    let pipeline = Pipeline::parse(file, dir.to_path_buf(), &[]).map_err(|e| e.to_string())?;
+    let engine =
+        Engine::build(pipeline, registry.clone(), &RunOptions::default()).map_err(|e| e.to_string())?;
+    let report = engine.run(out, &Silent).map_err(|e| e.to_string())?;
+    let mut files: Vec<(String, Vec<u8>)> = report
+        .files
+        .iter()
+        .map(|f| {
+            let name = f.strip_prefix(out).unwrap_or(f).display().to_string();
+            (name, std::fs::read(f).unwrap_or_default())
+        })
+        .collect();
+    files.sort();
+    Ok(files)
+}
+
+#[test]
+fn every_built_in_stage_gives_the_same_output_through_the_boundary() {
+    let linked = lamina_test_support::registry();
+    let mut remote = Registry::new();
+    lamina_core::plugin::add_linked_through_boundary(&mut remote, "loopback")
+        .expect("the linked stages as a plugin");
+    assert_eq!(remote.list(None).len(), linked.list(None).len());
+    assert!(
+        remote
+            .list(None)
+            .iter()
+            .all(|e| matches!(e.origin, lamina_core::registry::Origin::Dynamic { .. }))
+    );
+    let dir = tempfile::tempdir().expect("tempdir");
+    lamina_test_support::write_models(dir.path());
+    for entry in linked.list(None) {
+        let info = entry.info();
+        let text = lamina_test_support::pipeline_for(info.kind, info.example);
+        let label = entry.label().replace(':', "-");
+        let direct = run(
+            &linked,
+            &text,
+            dir.path(),
+            &dir.path().join("linked").join(&label),
+        )
+        .unwrap_or_else(|e| panic!("{label}: {e}"));
+        let through = run(
+            &remote,
+            &text,
+            dir.path(),
+            &dir.path().join("remote").join(&label),
+        )
+        .unwrap_or_else(|e| panic!("{label} through the boundary: {e}"));
+        assert_eq!(
+            direct.iter().map(|f| &f.0).collect::<Vec<_>>(),
+            through.iter().map(|f| &f.0).collect::<Vec<_>>(),
+            "{label}"
+        );
+        for ((name, a), (_, b)) in direct.iter().zip(&through) {
+            assert!(a == b, "{label}: {name} differs through the boundary");
+        }
+    }
+}
