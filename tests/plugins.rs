@@ -116,9 +116,11 @@ fn example_plugin_is_loaded_and_plans_toolpaths() {
     );
 }
 
-#[test]
-fn plugin_of_another_abi_is_refused_naming_both_versions() {
-    let lib = library("lamina-fixture-bad-abi");
+/// `lamina check` with a fixture library that must be refused from its file: returns
+/// the error output, after checking the exit code and (on Linux, where the fixtures
+/// carry an initialiser that leaves a marker) that the loader never ran the library.
+fn refused_before_loading(crate_name: &str) -> String {
+    let lib = library(crate_name);
     let dir = tempfile::tempdir().expect("tempdir");
     let pipeline = write_pipeline(dir.path(), "");
     let marker = dir.path().join("initialiser-ran");
@@ -132,13 +134,18 @@ fn plugin_of_another_abi_is_refused_naming_both_versions() {
         .env("LAMINA_FIXTURE_MARKER", &marker)
         .output()
         .expect("lamina runs");
-    assert_eq!(out.status.code(), Some(2));
-    let err = String::from_utf8_lossy(&out.stderr);
-    assert!(err.contains("ABI 99.0"), "{err}");
-    // Refused from the file: the library was never handed to the loader.
+    let err = String::from_utf8_lossy(&out.stderr).into_owned();
+    assert_eq!(out.status.code(), Some(2), "{err}");
     if cfg!(target_os = "linux") {
         assert!(!marker.exists(), "the refused library's initialiser ran");
     }
+    err
+}
+
+#[test]
+fn plugin_of_another_abi_is_refused_naming_both_versions() {
+    let err = refused_before_loading("lamina-fixture-bad-abi");
+    assert!(err.contains("ABI 99.0"), "{err}");
     assert!(
         err.contains(&format!("supports ABI {}.", lamina_core::plugin::ABI_MAJOR)),
         "{err}"
@@ -235,31 +242,13 @@ fn truncated_and_foreign_files_are_refused_with_the_reason_before_loading() {
 
 #[test]
 fn plugin_whose_boundary_struct_changed_is_refused_before_loading() {
-    let lib = library("lamina-fixture-changed-layout");
-    let dir = tempfile::tempdir().expect("tempdir");
-    let pipeline = write_pipeline(dir.path(), "");
-    let marker = dir.path().join("initialiser-ran");
-    let out = Command::new(host())
-        .args([
-            "check",
-            pipeline.to_str().expect("utf-8"),
-            "--plugin",
-            lib.to_str().expect("utf-8"),
-        ])
-        .env("LAMINA_FIXTURE_MARKER", &marker)
-        .output()
-        .expect("lamina runs");
-    let err = String::from_utf8_lossy(&out.stderr);
-    assert_eq!(out.status.code(), Some(2), "{err}");
+    let err = refused_before_loading("lamina-fixture-changed-layout");
     assert!(
         err.contains("plugin `changed_layout`")
             && err.contains("lays out the boundary's C types differently"),
         "{err}"
     );
     assert!(err.contains("rebuild it against lamina-core"), "{err}");
-    if cfg!(target_os = "linux") {
-        assert!(!marker.exists(), "the refused library's initialiser ran");
-    }
 }
 
 /// Runs a two-material tube graded by `grade` (with the dynamic script fixture loaded)

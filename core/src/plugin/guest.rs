@@ -300,15 +300,25 @@ unsafe extern "C" fn guest_release(handle: u64) {
     });
 }
 
-fn stage_of(handle: u64) -> Result<Arc<Object>> {
-    object(handle)
-}
-
 fn wrong(o: &Object, what: &str) -> Error {
     Error::stage(
         o.label().to_string(),
         format!("the host asked it to {what}, which it does not do"),
     )
+}
+
+/// Runs `f` on the stage behind `handle`; `f` answers `None` when the stage is not of
+/// the kind the request is for (`what` the request asked).
+fn on_stage<T>(
+    handle: u64,
+    what: &str,
+    f: impl FnOnce(&Object, &AnyStage, &Arc<str>) -> Option<Result<T>>,
+) -> Result<T> {
+    let o = object(handle)?;
+    match &*o {
+        Object::Stage { stage, label, .. } => f(&o, stage, label).unwrap_or_else(|| Err(wrong(&o, what))),
+        other => Err(wrong(other, what)),
+    }
 }
 
 /// Rebuilds a family's context from its message and calls `f` with it.
@@ -404,15 +414,9 @@ fn handle(request: Request<'static>) -> Result<Response> {
             })))
         }
         Request::Load { handle, base_dir } => {
-            let o = stage_of(handle)?;
-            match &*o {
-                Object::Stage {
-                    stage: AnyStage::Model(s),
-                    label,
-                    ..
-                } => {
-                    let meshes = guard_call(label, || s.load(&base_dir))?;
-                    Ok(Response::Meshes(
+            on_stage(handle, "load a model", |_, stage, label| match stage {
+                AnyStage::Model(s) => Some(guard_call(label, || s.load(&base_dir)).map(|meshes| {
+                    Response::Meshes(
                         meshes
                             .into_iter()
                             .map(|mut mesh| WireMesh {
@@ -420,64 +424,45 @@ fn handle(request: Request<'static>) -> Result<Response> {
                                 mesh,
                             })
                             .collect(),
-                    ))
-                }
-                o => Err(wrong(o, "load a model")),
-            }
+                    )
+                })),
+                _ => None,
+            })
         }
-        Request::Orient { handle, meshes } => {
-            let o = stage_of(handle)?;
-            match &*o {
-                Object::Stage {
-                    stage: AnyStage::Orient(s),
-                    label,
-                    ..
-                } => {
-                    let refs: Vec<&Mesh> = meshes.iter().map(|m| &**m).collect();
-                    guard_call(label, || s.orient(&refs)).map(Response::Orientation)
-                }
-                o => Err(wrong(o, "orient")),
+        Request::Orient { handle, meshes } => on_stage(handle, "orient", |_, stage, label| match stage {
+            AnyStage::Orient(s) => {
+                let refs: Vec<&Mesh> = meshes.iter().map(|m| &**m).collect();
+                Some(guard_call(label, || s.orient(&refs)).map(Response::Orientation))
             }
-        }
+            _ => None,
+        }),
         Request::Layers {
             handle,
             meshes,
             info,
             sequence,
-        } => {
-            let o = stage_of(handle)?;
-            match &*o {
-                Object::Stage {
-                    stage: AnyStage::Slice(s),
-                    label,
-                    ..
-                } => {
-                    let meshes: Vec<Arc<Mesh>> =
-                        meshes.into_iter().map(|m| Arc::new(m.into_owned())).collect();
-                    guard_call(label, || s.layers(&meshes, &info, sequence.as_deref())).map(Response::Slots)
-                }
-                o => Err(wrong(o, "choose layers")),
+        } => on_stage(handle, "choose layers", |_, stage, label| match stage {
+            AnyStage::Slice(s) => {
+                let meshes: Vec<Arc<Mesh>> = meshes.into_iter().map(|m| Arc::new(m.into_owned())).collect();
+                Some(guard_call(label, || s.layers(&meshes, &info, sequence.as_deref())).map(Response::Slots))
             }
-        }
+            _ => None,
+        }),
         Request::Prepare { handle, mesh } => {
-            let o = stage_of(handle)?;
-            match &*o {
-                Object::Stage {
-                    stage: AnyStage::Slice(s),
-                    label,
-                    ..
-                } => {
-                    let slicer = guard_call(label, || s.prepare(Arc::new(mesh.into_owned())))?;
-                    Ok(Response::Handle(keep(Object::MeshSlicer {
-                        label: label.clone(),
-                        slicer,
-                    })))
-                }
-                o => Err(wrong(o, "prepare a mesh")),
-            }
+            on_stage(handle, "prepare a mesh", |_, stage, label| match stage {
+                AnyStage::Slice(s) => Some(guard_call(label, || s.prepare(Arc::new(mesh.into_owned()))).map(
+                    |slicer| {
+                        Response::Handle(keep(Object::MeshSlicer {
+                            label: label.clone(),
+                            slicer,
+                        }))
+                    },
+                )),
+                _ => None,
+            })
         }
         Request::Slice { handle, slot } => {
-            let o = stage_of(handle)?;
+            let o = object(handle)?;
             match &*o {
                 Object::MeshSlicer { label, slicer } => {
                     guard_call(label, || slicer.slice(&slot)).map(Response::Layer)
@@ -485,93 +470,53 @@ fn handle(request: Request<'static>) -> Result<Response> {
                 o => Err(wrong(o, "slice a prepared mesh")),
             }
         }
-        Request::Sort { handle, layer } => {
-            let o = stage_of(handle)?;
-            match &*o {
-                Object::Stage {
-                    stage: AnyStage::Sort(s),
-                    label,
-                    ..
-                } => guard_call(label, || s.sort(&layer)).map(Response::Tree),
-                o => Err(wrong(o, "sort")),
-            }
-        }
+        Request::Sort { handle, layer } => on_stage(handle, "sort", |_, stage, label| match stage {
+            AnyStage::Sort(s) => Some(guard_call(label, || s.sort(&layer)).map(Response::Tree)),
+            _ => None,
+        }),
         Request::Discretise { handle, family } => {
-            let o = stage_of(handle)?;
-            match &*o {
-                Object::Stage {
-                    stage: AnyStage::Discretise(s),
-                    label,
-                    ..
-                } => with_family(&o, family, |ctx| guard_call(label, || s.discretise(ctx)))
-                    .map(Response::Regions),
-                o => Err(wrong(o, "discretise")),
-            }
+            on_stage(handle, "discretise", |o, stage, label| match stage {
+                AnyStage::Discretise(s) => Some(
+                    with_family(o, family, |ctx| guard_call(label, || s.discretise(ctx)))
+                        .map(Response::Regions),
+                ),
+                _ => None,
+            })
         }
         Request::Grades { handle } => {
-            let o = stage_of(handle)?;
-            match &*o {
-                Object::Stage {
-                    stage: AnyStage::Discretise(s),
-                    label,
-                    ..
-                } => guard_call(label, || Ok(s.grades())).map(Response::Bool),
-                o => Err(wrong(o, "say whether it grades")),
-            }
+            on_stage(handle, "say whether it grades", |_, stage, label| match stage {
+                AnyStage::Discretise(s) => Some(guard_call(label, || Ok(s.grades())).map(Response::Bool)),
+                _ => None,
+            })
         }
         Request::Grade {
             handle,
             family,
             regions,
-        } => {
-            let o = stage_of(handle)?;
-            match &*o {
-                Object::Stage {
-                    stage: AnyStage::Grade(s),
-                    label,
-                    ..
-                } => {
-                    let mut regions = regions.into_owned();
-                    with_family(&o, family, |ctx| guard_call(label, || s.grade(ctx, &mut regions)))?;
-                    Ok(Response::Regions(regions))
-                }
-                o => Err(wrong(o, "grade")),
+        } => on_stage(handle, "grade", |o, stage, label| match stage {
+            AnyStage::Grade(s) => {
+                let mut regions = regions.into_owned();
+                Some(
+                    with_family(o, family, |ctx| guard_call(label, || s.grade(ctx, &mut regions)))
+                        .map(|()| Response::Regions(regions)),
+                )
             }
-        }
-        Request::Sequence { handle, info } => {
-            let o = stage_of(handle)?;
-            match &*o {
-                Object::Stage {
-                    stage: AnyStage::Sequence(s),
-                    label,
-                    ..
-                } => guard_call(label, || s.sequence(&info)).map(Response::Sequence),
-                o => Err(wrong(o, "sequence")),
+            _ => None,
+        }),
+        Request::Sequence { handle, info } => on_stage(handle, "sequence", |_, stage, label| match stage {
+            AnyStage::Sequence(s) => Some(guard_call(label, || s.sequence(&info)).map(Response::Sequence)),
+            _ => None,
+        }),
+        Request::Plan { handle, info, plan } => on_stage(handle, "plan", |_, stage, label| match stage {
+            AnyStage::Plan(s) => {
+                let mut plan = plan.into_owned();
+                Some(guard_call(label, || s.plan(&info, &mut plan)).map(|()| Response::Plan(plan)))
             }
-        }
-        Request::Plan { handle, info, plan } => {
-            let o = stage_of(handle)?;
-            match &*o {
-                Object::Stage {
-                    stage: AnyStage::Plan(s),
-                    label,
-                    ..
-                } => {
-                    let mut plan = plan.into_owned();
-                    guard_call(label, || s.plan(&info, &mut plan))?;
-                    Ok(Response::Plan(plan))
-                }
-                o => Err(wrong(o, "plan")),
-            }
-        }
+            _ => None,
+        }),
         Request::Open { handle, export } => {
-            let o = stage_of(handle)?;
-            match &*o {
-                Object::Stage {
-                    stage: AnyStage::Export(s),
-                    label,
-                    ..
-                } => {
+            on_stage(handle, "open an output", |_, stage, label| match stage {
+                AnyStage::Export(s) => {
                     let mut files = HostFiles;
                     let mut ctx = ExportContext {
                         info: &export.info,
@@ -581,17 +526,18 @@ fn handle(request: Request<'static>) -> Result<Response> {
                         pipeline_name: &export.pipeline_name,
                         files: &mut files,
                     };
-                    let sink = guard_call(label, || s.open(&mut ctx))?;
-                    Ok(Response::Handle(keep(Object::Sink {
-                        label: label.clone(),
-                        sink: Mutex::new(Some(sink)),
-                    })))
+                    Some(guard_call(label, || s.open(&mut ctx)).map(|sink| {
+                        Response::Handle(keep(Object::Sink {
+                            label: label.clone(),
+                            sink: Mutex::new(Some(sink)),
+                        }))
+                    }))
                 }
-                o => Err(wrong(o, "open an output")),
-            }
+                _ => None,
+            })
         }
         Request::Layer { handle, info, plan } => {
-            let o = stage_of(handle)?;
+            let o = object(handle)?;
             match &*o {
                 Object::Sink { label, sink } => {
                     let mut sink = sink.lock().unwrap_or_else(|e| e.into_inner());
@@ -605,7 +551,7 @@ fn handle(request: Request<'static>) -> Result<Response> {
             }
         }
         Request::Finish { handle, info } => {
-            let o = stage_of(handle)?;
+            let o = object(handle)?;
             let result = match &*o {
                 Object::Sink { label, sink } => {
                     let taken = sink.lock().unwrap_or_else(|e| e.into_inner()).take();
