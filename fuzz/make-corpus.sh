@@ -6,7 +6,9 @@ cd "$(dirname "$0")"
 lamina="${LAMINA:-../target/release/lamina}"
 [ -x "$lamina" ] || (cd .. && cargo build --release --quiet --bin lamina)
 c=corpus
-mkdir -p $c/stl $c/obj $c/threemf $c/pipeline $c/script $c/pipeline_values $c/cli_roundtrip
+mkdir -p $c/stl $c/obj $c/threemf $c/pipeline $c/script $c/pipeline_values $c/cli_roundtrip $c/plugin_messages
+# The plugin boundary's messages: a sample of each direction, written by a unit test.
+(cd .. && LAMINA_FUZZ_CORPUS="$PWD/fuzz/$c/plugin_messages" cargo test --quiet -p lamina-core --lib sample_messages_read_back >/dev/null)
 for ext in stl obj 3mf; do
     dir=$ext; [ $ext = 3mf ] && dir=threemf
     "$lamina" generate tube --segments 12 --height 4 -o $c/$dir/tube.$ext -q

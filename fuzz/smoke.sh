@@ -19,7 +19,7 @@ fi
 "${fuzz[@]}" build -O
 scratch="$(mktemp -d)"
 trap 'rm -rf "$scratch"' EXIT
-targets="stl obj threemf pipeline script cli_roundtrip pipeline_values"
+targets="stl obj threemf pipeline script cli_roundtrip pipeline_values plugin_messages"
 for t in $targets; do
     mkdir -p "$scratch/$t"
     echo "== fuzz $t (${seconds} s)"

@@ -41,7 +41,7 @@ fn check(f: &lamina_core::script::ScriptFn) {
 
 fuzz_target!(|data: &[u8]| {
     let text = String::from_utf8_lossy(data);
-    if let Ok(f) = host().expression(&text, None) {
+    if let Ok(f) = host().compile(&text, None) {
         check(&f);
     }
     if text.contains("fn ") {

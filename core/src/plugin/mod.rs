@@ -25,7 +25,7 @@ pub mod abi;
 pub(crate) mod guest;
 pub(crate) mod host;
 mod inspect;
-pub(crate) mod wire;
+pub mod wire;
 
 use std::ffi::c_void;
 use std::panic::{AssertUnwindSafe, catch_unwind};

@@ -323,8 +323,19 @@ impl From<&Location> for WireLocation {
 }
 
 impl From<WireLocation> for Location {
+    /// A place the other side sent: its span is kept inside the text and on character
+    /// boundaries, whatever the numbers say.
     fn from(l: WireLocation) -> Self {
-        Location::new(SourceFile::new(l.path, l.text), l.start..l.end)
+        let floor = |mut i: usize| {
+            i = i.min(l.text.len());
+            while !l.text.is_char_boundary(i) {
+                i -= 1;
+            }
+            i
+        };
+        let start = floor(l.start);
+        let end = floor(l.end.max(start));
+        Location::new(SourceFile::new(l.path, l.text), start..end)
     }
 }
 
@@ -511,9 +522,16 @@ pub fn encode<T: Serialize + ?Sized>(message: &T) -> Result<Vec<u8>, String> {
     rmp_serde::to_vec_named(message).map_err(|e| format!("cannot encode a message: {e}"))
 }
 
-/// Decodes a message.
+/// Deepest nesting a message may have: the deepest message (a layer's plan) nests about
+/// ten levels; a peer's bytes nested deeper are refused before they can exhaust the
+/// stack.
+pub const MAX_DEPTH: usize = 64;
+
+/// Decodes a message from the other side, which may be anything.
 pub fn decode<T: DeserializeOwned>(bytes: &[u8]) -> Result<T, String> {
-    rmp_serde::from_slice(bytes).map_err(|e| format!("malformed message: {e}"))
+    let mut de = rmp_serde::Deserializer::from_read_ref(bytes);
+    de.set_max_depth(MAX_DEPTH);
+    T::deserialize(&mut de).map_err(|e| format!("malformed message: {e}"))
 }
 
 /// A file's path and text as a [`WireFile`].
@@ -556,6 +574,34 @@ mod tests {
         }
     }
 
+    /// Hostile replies are refused, not followed: errors nested past the depth limit,
+    /// lengths past the end, truncations.
+    #[test]
+    fn malformed_messages_are_errors() {
+        let mut e = WireError::Composition("x".into());
+        for i in 0..(MAX_DEPTH + 10) {
+            e = WireError::Layer {
+                index: i,
+                z: 0.0,
+                source: Box::new(e),
+            };
+        }
+        let deep: Reply = Err(e);
+        let bytes = encode(&deep).expect("encodes");
+        assert!(
+            decode::<Reply>(&bytes)
+                .expect_err("too deep")
+                .contains("malformed")
+        );
+        let fine: Reply = Ok(Response::Regions(Vec::new()));
+        let bytes = encode(&fine).expect("encodes");
+        for cut in 0..bytes.len() {
+            assert!(decode::<Reply>(&bytes[..cut]).is_err(), "{cut}");
+        }
+        // An array that claims four billion entries, with none there.
+        assert!(decode::<Vec<f64>>(&[0xdd, 0xff, 0xff, 0xff, 0xff]).is_err());
+    }
+
     /// An error keeps its kind, place and text across the boundary.
     #[test]
     fn errors_read_back_with_their_place() {
@@ -573,5 +619,97 @@ mod tests {
             decode::<WireError>(&encode(&WireError::from(&limit)).expect("encodes")).expect("decodes"),
         );
         assert_eq!(back.to_string(), limit.to_string());
+    }
+
+    /// A sample of every direction's messages reads back as it was written. With
+    /// `LAMINA_FUZZ_CORPUS` set to a folder, they are written there as the seeds of the
+    /// `plugin_messages` fuzz target (fuzz/make-corpus.sh).
+    #[test]
+    fn sample_messages_read_back() {
+        use crate::geom::{Contour, Point2, Polygon};
+        let square = Contour::new(vec![
+            Point2::new(0.0, 0.0),
+            Point2::new(1.0, 0.0),
+            Point2::new(1.0, 1.0),
+            Point2::new(0.0, 1.0),
+        ]);
+        let layer = Layer {
+            index: 2,
+            z: 0.75,
+            thickness: 0.25,
+            contours: vec![square.clone()],
+            warnings: Vec::new(),
+        };
+        let region = Region {
+            family: 0,
+            index: 0,
+            count: 1,
+            level: 0.5,
+            polygon: Polygon::new(square, Vec::new()),
+            cell: None,
+            reference: Point2::new(0.5, 0.5),
+            composition: Some(Composition::binary(0.25).expect("fractions")),
+        };
+        let file = SourceFile::new("p.toml", "[grade]\nf = \"x\"\n");
+        let samples: Vec<(&str, Vec<u8>)> = vec![
+            ("describe", encode(&Request::Describe).expect("encodes")),
+            (
+                "sort",
+                encode(&Request::Sort {
+                    handle: 3,
+                    layer: Cow::Borrowed(&layer),
+                })
+                .expect("encodes"),
+            ),
+            (
+                "regions",
+                encode(&Ok::<_, WireError>(Response::Regions(vec![region]))).expect("encodes"),
+            ),
+            (
+                "error",
+                encode(&Err::<Response, _>(WireError::from(
+                    &Error::config_at(Location::new(file, 8..9), "bad").in_layer(2, 0.75),
+                )))
+                .expect("encodes"),
+            ),
+            (
+                "fractions",
+                encode(&HostRequest::Fractions {
+                    script: 0,
+                    args: WireArgs {
+                        r: 0.5,
+                        d: 0.0,
+                        x: 1.0,
+                        y: 2.0,
+                        z: 0.75,
+                        layer: 2,
+                        part: Cow::Borrowed("part"),
+                    },
+                    n: 2,
+                    context: Cow::Borrowed("region 0"),
+                })
+                .expect("encodes"),
+            ),
+            (
+                "host-reply",
+                encode(&Ok::<_, WireError>(HostResponse::Fractions(vec![0.25, 0.75]))).expect("encodes"),
+            ),
+        ];
+        for (name, bytes) in &samples {
+            let again = match *name {
+                "describe" | "sort" => encode(&decode::<Request<'static>>(bytes).expect("decodes")),
+                "regions" | "error" => encode(&decode::<Reply>(bytes).expect("decodes")),
+                "fractions" => encode(&decode::<HostRequest<'static>>(bytes).expect("decodes")),
+                _ => encode(&decode::<HostReply>(bytes).expect("decodes")),
+            };
+            assert_eq!(&again.expect("encodes"), bytes, "{name}");
+        }
+        if let Some(dir) = std::env::var_os("LAMINA_FUZZ_CORPUS") {
+            let dir = PathBuf::from(dir);
+            std::fs::create_dir_all(&dir).expect("corpus folder");
+            for (name, bytes) in samples {
+                std::fs::write(dir.join(name), bytes).expect("seed");
+            }
+        }
     }
 }
