@@ -13,6 +13,19 @@ fn origin(r: &Registered) -> String {
     }
 }
 
+/// Said of the stage a pipeline gets when it has no table for the stage's kind.
+fn default_mark(registry: &Registry, r: &Registered) -> String {
+    let info = r.info();
+    if registry.default_for(info.kind) == Some(info.name) {
+        format!(
+            " (the default: a pipeline without a [{}] table uses it)",
+            info.kind
+        )
+    } else {
+        String::new()
+    }
+}
+
 pub fn text(registry: &Registry, kind: Option<StageKind>) -> String {
     let mut out = String::new();
     let mut last = None;
@@ -26,7 +39,13 @@ pub fn text(registry: &Registry, kind: Option<StageKind>) -> String {
             Origin::Linked => String::new(),
             _ => format!("  [{}]", origin(r)),
         };
-        let _ = writeln!(out, "  {:<16} {}{from}", info.name, info.doc);
+        let _ = writeln!(
+            out,
+            "  {:<16} {}{from}{}",
+            info.name,
+            info.doc,
+            default_mark(registry, r)
+        );
         for o in info.options {
             let default = o
                 .default
@@ -105,7 +124,13 @@ pub fn markdown(registry: &Registry, kind: Option<StageKind>) -> String {
             let _ = write!(out, "\n## {}\n", info.kind);
             last = Some(info.kind);
         }
-        let _ = write!(out, "\n### `{}`\n\n{}\n", info.name, info.doc);
+        let _ = write!(
+            out,
+            "\n### `{}`\n\n{}{}\n",
+            info.name,
+            info.doc,
+            default_mark(registry, r)
+        );
         if !info.options.is_empty() {
             out.push_str("\n| option | type | default | meaning |\n|---|---|---|---|\n");
             for o in info.options {

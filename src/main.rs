@@ -67,6 +67,10 @@ enum Command {
         /// No progress bar and no summary; warnings and errors are still printed.
         #[arg(long, short)]
         quiet: bool,
+        /// Prints every warning and note as it comes, each with its layer, rather than
+        /// one line for each kind of warning (with the layers it hit) at the end.
+        #[arg(long, short)]
+        verbose: bool,
         /// Prints the time spent in each stage.
         #[arg(long)]
         timings: bool,
@@ -189,15 +193,17 @@ fn execute(cli: Cli) -> Result<(), Failure> {
             out,
             threads,
             quiet,
+            verbose,
             timings,
         } => {
             if threads == Some(0) {
                 return Err(lamina_core::Error::config("--threads must be at least 1").into());
             }
             let engine = engine(&args, threads)?;
-            let observer = progress::Progress::new(quiet);
-            let report = engine.run(&out, &observer)?;
+            let observer = progress::Progress::new(quiet, verbose);
+            let report = engine.run(&out, &observer);
             observer.finish();
+            let report = report?;
             if !quiet {
                 progress::summary(&report, timings);
             } else if timings {
@@ -224,9 +230,10 @@ fn execute(cli: Cli) -> Result<(), Failure> {
                 Engine::build(pipeline, Registry::linked()?, &options)
             };
             let engine = build().map_err(|error| Failure { error, usage: true })?;
-            let observer = progress::Progress::new(false);
-            let report = engine.run(&out, &observer)?;
+            let observer = progress::Progress::new(false, false);
+            let report = engine.run(&out, &observer);
             observer.finish();
+            let report = report?;
             let page = report
                 .files
                 .iter()

@@ -1,28 +1,32 @@
 //! Progress and summaries on the terminal: a progress bar when stderr is a terminal,
-//! nothing otherwise; warnings are printed above the bar.
+//! nothing otherwise; diagnostics grouped by what they say, one line a group, once the
+//! run ends (`--verbose`: each as it comes, above the bar).
 
 use std::io::IsTerminal;
 
 use indicatif::{ProgressBar, ProgressStyle};
 use lamina_core::runtime::{Observer, RunReport};
+use lamina_core::{Diagnostic, Severity, StageKind};
 
 pub struct Progress {
     bar: Option<ProgressBar>,
     quiet: bool,
-    /// Warnings by their shape (numbers left out): how many of each, and the first
-    /// one's text. A layer-by-layer warning is printed once, with its count at the end.
-    seen: std::sync::Mutex<Vec<Seen>>,
+    /// Every diagnostic printed as it comes, rather than grouped at the end.
+    verbose: bool,
+    /// Diagnostics grouped by what they say: one line each at the end.
+    groups: std::sync::Mutex<Vec<Group>>,
 }
 
-/// One shape of warning: the shape, the first one's text and how many came.
-#[derive(Clone)]
-struct Seen {
-    shape: String,
-    first: String,
+/// Diagnostics that say the same thing (same severity, stage and part, and the same
+/// words once their numbers are left out) on different layers.
+struct Group {
+    key: (Severity, StageKind, Option<String>, String),
+    first: Diagnostic,
+    layers: Vec<usize>,
     count: usize,
 }
 
-/// A warning with its numbers left out: the same warning on another layer.
+/// A message with its numbers left out: the same message about another place.
 fn shape(message: &str) -> String {
     let mut out = String::with_capacity(message.len());
     let mut digits = false;
@@ -38,12 +42,64 @@ fn shape(message: &str) -> String {
     out
 }
 
+/// Layer indices as ranges: `3-17, 20, 31-33`; past `MAX_RANGES` ranges the rest are
+/// counted.
+fn layer_ranges(layers: &[usize]) -> String {
+    const MAX_RANGES: usize = 6;
+    let mut sorted = layers.to_vec();
+    sorted.sort_unstable();
+    sorted.dedup();
+    let mut ranges: Vec<(usize, usize)> = Vec::new();
+    for l in sorted {
+        match ranges.last_mut() {
+            Some(r) if r.1 + 1 == l => r.1 = l,
+            _ => ranges.push((l, l)),
+        }
+    }
+    let shown: Vec<String> = ranges
+        .iter()
+        .take(MAX_RANGES)
+        .map(|&(a, b)| if a == b { a.to_string() } else { format!("{a}-{b}") })
+        .collect();
+    let mut out = shown.join(", ");
+    if ranges.len() > MAX_RANGES {
+        out.push_str(&format!(" and {} more ranges", ranges.len() - MAX_RANGES));
+    }
+    out
+}
+
+impl Group {
+    /// One line: the first diagnostic's words, with the layers and count of all.
+    fn line(&self) -> String {
+        let d = &self.first;
+        if self.count == 1 {
+            return format!("{}: {d}", d.severity.name());
+        }
+        let mut place = Vec::new();
+        if !self.layers.is_empty() {
+            let word = if self.layers.len() == 1 { "layer" } else { "layers" };
+            place.push(format!("{word} {}", layer_ranges(&self.layers)));
+        }
+        if let Some(p) = &d.part {
+            place.push(format!("part `{p}`"));
+        }
+        place.push(format!("{} times", self.count));
+        format!(
+            "{}: {}: {} (the first; numbers differ from one to the next)",
+            d.severity.name(),
+            place.join(", "),
+            d.message
+        )
+    }
+}
+
 impl Progress {
-    pub fn new(quiet: bool) -> Self {
+    pub fn new(quiet: bool, verbose: bool) -> Self {
         Self {
             bar: None,
             quiet,
-            seen: std::sync::Mutex::new(Vec::new()),
+            verbose,
+            groups: std::sync::Mutex::new(Vec::new()),
         }
         .with_bar()
     }
@@ -61,13 +117,25 @@ impl Progress {
         self
     }
 
+    /// Clears the bar and prints the grouped diagnostics, one line a group. Called
+    /// whether the run succeeded or not: what was said before a failure still counts.
     pub fn finish(&self) {
         if let Some(bar) = &self.bar {
             bar.finish_and_clear();
         }
-        let seen = self.seen.lock().map(|s| s.clone()).unwrap_or_default();
-        for w in seen.iter().filter(|w| w.count > 1) {
-            eprintln!("warning: {} more like \"{}\"", w.count - 1, w.first);
+        if self.verbose {
+            return;
+        }
+        let Ok(groups) = self.groups.lock() else { return };
+        for g in groups.iter() {
+            eprintln!("{}", g.line());
+        }
+    }
+
+    fn print(&self, line: &str) {
+        match &self.bar {
+            Some(bar) => bar.suspend(|| eprintln!("{line}")),
+            None => eprintln!("{line}"),
         }
     }
 }
@@ -86,26 +154,29 @@ impl Observer for Progress {
         }
     }
 
-    /// Warnings are printed even when quiet: `-q` silences the chatter, not what a
-    /// user must know about the output.
-    fn warning(&self, message: &str) {
-        if let Ok(mut seen) = self.seen.lock() {
-            let key = shape(message);
-            match seen.iter_mut().find(|w| w.shape == key) {
-                Some(w) => {
-                    w.count += 1;
-                    return;
-                }
-                None => seen.push(Seen {
-                    shape: key,
-                    first: message.to_string(),
-                    count: 1,
-                }),
-            }
+    /// Diagnostics are printed even when quiet: `-q` silences the chatter, not what a
+    /// user must know about the output. `--verbose` prints each as it comes; otherwise
+    /// they are grouped and printed at the end.
+    fn diagnostic(&self, d: &Diagnostic) {
+        if self.verbose {
+            self.print(&format!("{}: {d}", d.severity.name()));
+            return;
         }
-        match &self.bar {
-            Some(bar) => bar.suspend(|| eprintln!("warning: {message}")),
-            None => eprintln!("warning: {message}"),
+        let Ok(mut groups) = self.groups.lock() else {
+            return;
+        };
+        let key = (d.severity, d.stage, d.part.clone(), shape(&d.message));
+        match groups.iter_mut().find(|g| g.key == key) {
+            Some(g) => {
+                g.count += 1;
+                g.layers.extend(d.layer);
+            }
+            None => groups.push(Group {
+                key,
+                first: d.clone(),
+                layers: d.layer.into_iter().collect(),
+                count: 1,
+            }),
         }
     }
 }
@@ -115,7 +186,7 @@ pub fn summary(report: &RunReport, timings: bool) {
         "{} layers, {} regions, {} warnings in {:.2} s",
         report.layers,
         report.regions,
-        report.warnings,
+        report.warnings(),
         report.timings.wall().as_secs_f64()
     );
     match (report.build_time, report.sequential_time) {

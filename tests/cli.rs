@@ -377,22 +377,28 @@ fn view_writes_a_viewer_even_when_the_pipeline_has_none() {
     assert!(page.starts_with(dir.path()));
 }
 
-#[test]
-fn quiet_runs_still_print_warnings() {
-    let dir = tempfile::tempdir().expect("tempdir");
-    let out = dir.path().join("out");
+/// The blade with layers so thick that the planner leaves sub-regions out on every
+/// layer: the same warning, layer after layer.
+fn blade_with_a_warning_on_every_layer(out: &Path, flag: &str) -> Output {
     let pipeline = pipelines().join("blade-idw.toml");
-    let o = lamina(&[
+    lamina(&[
         "run",
         pipeline.to_str().expect("utf-8"),
         "--out",
         out.to_str().expect("utf-8"),
-        "-q",
+        flag,
         "--set",
         "plan.use=\"sequential\"",
         "--set",
         "slice.thickness=10",
-    ]);
+    ])
+}
+
+#[test]
+fn quiet_runs_still_print_warnings_one_line_for_every_kind() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let out = dir.path().join("out");
+    let o = blade_with_a_warning_on_every_layer(&out, "-q");
     assert!(o.status.success(), "{}", text(&o.stderr));
     let err = text(&o.stderr);
     assert!(
@@ -400,13 +406,67 @@ fn quiet_runs_still_print_warnings() {
         "{err}"
     );
     assert!(!err.contains("layers,"), "no summary when quiet: {err}");
-    // The same warning on every layer is printed once, then counted.
-    assert_eq!(
-        err.matches("narrower than the narrowest bead").count(),
-        2,
-        "{err}"
+    // The same warning on every layer is one line, with the layers it hit and a count.
+    let lines: Vec<&str> = err
+        .lines()
+        .filter(|l| l.contains("narrower than the narrowest bead"))
+        .collect();
+    assert_eq!(lines.len(), 1, "{err}");
+
+    // The JSON plan carries each one as data: severity, stage, layer, message.
+    let plan: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("blade-idw.json")).expect("the JSON plan"))
+            .expect("JSON");
+    let said: Vec<&serde_json::Value> = plan["layers"]
+        .as_array()
+        .expect("layers")
+        .iter()
+        .flat_map(|l| l["diagnostics"].as_array().into_iter().flatten())
+        .filter(|d| {
+            d["message"]
+                .as_str()
+                .is_some_and(|m| m.contains("narrower than the narrowest bead"))
+        })
+        .collect();
+    assert!(said.len() >= 2, "{said:?}");
+    let layers: Vec<u64> = said.iter().map(|d| d["layer"].as_u64().expect("layer")).collect();
+    assert!(
+        said.iter()
+            .all(|d| d["severity"] == "warning" && d["stage"] == "plan"),
+        "{said:?}"
     );
-    assert!(err.contains("more like"), "{err}");
+    let first = layers.iter().min().expect("one");
+    let last = layers.iter().max().expect("one");
+    assert!(
+        lines[0].contains(&format!("layers {first}-{last}"))
+            && lines[0].contains(&format!("{} times", said.len())),
+        "{} against {layers:?}",
+        lines[0]
+    );
+}
+
+#[test]
+fn verbose_runs_print_every_warning_with_its_layer() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let out = dir.path().join("out");
+    let o = blade_with_a_warning_on_every_layer(&out, "--verbose");
+    assert!(o.status.success(), "{}", text(&o.stderr));
+    let err = text(&o.stderr);
+    let lines: Vec<&str> = err
+        .lines()
+        .filter(|l| l.contains("narrower than the narrowest bead"))
+        .collect();
+    assert!(lines.len() >= 2, "{err}");
+    // Each names its layer, in build order.
+    let layers: Vec<usize> = lines
+        .iter()
+        .map(|l| {
+            let rest = l.strip_prefix("warning: layer ").expect(l);
+            assert!(rest.contains(" (z = "), "{l}");
+            rest.split(' ').next().and_then(|n| n.parse().ok()).expect(l)
+        })
+        .collect();
+    assert!(layers.windows(2).all(|w| w[0] < w[1]), "{layers:?}");
 }
 
 #[test]

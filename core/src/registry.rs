@@ -31,6 +31,29 @@ macro_rules! register_stage {
     };
 }
 
+/// The stage a pipeline gets for a kind every run needs (slice, sort) when it has no
+/// table for that kind. The plugin that provides the stage declares it, so core names
+/// no stage.
+#[derive(Debug)]
+pub struct DefaultStage {
+    pub kind: StageKind,
+    pub name: &'static str,
+}
+
+inventory::collect!(DefaultStage);
+
+/// Declares a linked stage as the default of its kind ([`DefaultStage`]).
+///
+/// ```ignore
+/// lamina_core::register_default!(StageKind::Slice, "uniform");
+/// ```
+#[macro_export]
+macro_rules! register_default {
+    ($kind:expr, $name:literal) => {
+        $crate::inventory::submit! { $crate::registry::DefaultStage { kind: $kind, name: $name } }
+    };
+}
+
 /// Where a factory came from.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub enum Origin {
@@ -64,6 +87,8 @@ impl Registered {
 #[derive(Debug, Default, Clone)]
 pub struct Registry {
     entries: Vec<Registered>,
+    /// `(kind, stage)`: the defaults the linked plugins declare.
+    defaults: Vec<(StageKind, &'static str)>,
 }
 
 impl Registry {
@@ -79,7 +104,30 @@ impl Registry {
         for f in inventory::iter::<StageFactory> {
             r.add(f, Origin::Linked)?;
         }
+        for d in inventory::iter::<DefaultStage> {
+            r.set_default(d.kind, d.name)?;
+        }
         Ok(r)
+    }
+
+    /// Makes `name` the default `kind` stage; a second, different default for one kind
+    /// is refused, naming both.
+    pub fn set_default(&mut self, kind: StageKind, name: &'static str) -> Result<()> {
+        match self.defaults.iter().find(|(k, _)| *k == kind) {
+            Some((_, existing)) if *existing != name => Err(Error::config(format!(
+                "two linked plugins declare the default {kind} stage: `{existing}` and `{name}`"
+            ))),
+            Some(_) => Ok(()),
+            None => {
+                self.defaults.push((kind, name));
+                Ok(())
+            }
+        }
+    }
+
+    /// The default stage of `kind`, if a plugin declared one.
+    pub fn default_for(&self, kind: StageKind) -> Option<&'static str> {
+        self.defaults.iter().find(|(k, _)| *k == kind).map(|(_, n)| *n)
     }
 
     /// Adds a factory; a second factory with the same kind and name is refused.

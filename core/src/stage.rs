@@ -292,28 +292,16 @@ pub trait Exporter: Send + Sync {
 }
 
 /// Receives the layers of a run in build order, as they are finished.
+///
+/// Both calls get the run's files: a sink that writes one stream keeps what it
+/// created at `open` and ignores them; one that writes a file per layer, or a picture
+/// drawn from all layers at the end, creates it here. Files appear under their final
+/// names only when the whole run succeeds, as those made at `open` do.
 pub trait LayerSink: Send {
-    fn layer(&mut self, info: &RunInfo, plan: &LayerPlan) -> Result<()>;
-    /// What the runtime calls: [`layer`](Self::layer), with the means to create files
-    /// as layers come (a picture per layer), which appear only when the run succeeds,
-    /// as those made at `open` do.
-    fn layer_with_files(
-        &mut self,
-        info: &RunInfo,
-        plan: &LayerPlan,
-        files: &mut dyn OutputFiles,
-    ) -> Result<()> {
-        let _ = files;
-        self.layer(info, plan)
-    }
-    /// Completes the output (trailers, flushing).
-    fn finish(self: Box<Self>, info: &RunInfo) -> Result<()>;
-    /// What the runtime calls: [`finish`](Self::finish), with the means to create files
-    /// (a picture drawn from all layers).
-    fn finish_with_files(self: Box<Self>, info: &RunInfo, files: &mut dyn OutputFiles) -> Result<()> {
-        let _ = files;
-        self.finish(info)
-    }
+    /// Takes the next layer in build order.
+    fn layer(&mut self, info: &RunInfo, plan: &LayerPlan, files: &mut dyn OutputFiles) -> Result<()>;
+    /// Completes the output (trailers, flushing, a picture of all layers).
+    fn finish(self: Box<Self>, info: &RunInfo, files: &mut dyn OutputFiles) -> Result<()>;
 }
 
 /// The configuration a stage factory receives: its pipeline table and the services it

@@ -544,7 +544,7 @@ fn handle(request: Request<'static>) -> Result<Response> {
                     let sink = sink
                         .as_mut()
                         .ok_or_else(|| Error::stage(label.to_string(), "output already finished"))?;
-                    guard_call(label, || sink.layer_with_files(&info, &plan, &mut HostFiles))?;
+                    guard_call(label, || sink.layer(&info, &plan, &mut HostFiles))?;
                     Ok(Response::Done)
                 }
                 o => Err(wrong(o, "write a layer")),
@@ -557,8 +557,7 @@ fn handle(request: Request<'static>) -> Result<Response> {
                     let taken = sink.lock().unwrap_or_else(|e| e.into_inner()).take();
                     let sink =
                         taken.ok_or_else(|| Error::stage(label.to_string(), "output already finished"))?;
-                    guard_call(label, || sink.finish_with_files(&info, &mut HostFiles))
-                        .map(|()| Response::Done)
+                    guard_call(label, || sink.finish(&info, &mut HostFiles)).map(|()| Response::Done)
                 }
                 o => Err(wrong(o, "finish an output")),
             };

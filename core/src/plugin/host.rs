@@ -664,52 +664,34 @@ impl Exporter for Remote {
 }
 
 impl LayerSink for Remote {
-    fn layer(&mut self, info: &RunInfo, plan: &LayerPlan) -> Result<()> {
-        self.send_layer(info, plan, None)
+    fn layer(&mut self, info: &RunInfo, plan: &LayerPlan, files: &mut dyn OutputFiles) -> Result<()> {
+        self.send_layer(info, plan, files)
     }
 
-    fn layer_with_files(
-        &mut self,
-        info: &RunInfo,
-        plan: &LayerPlan,
-        files: &mut dyn OutputFiles,
-    ) -> Result<()> {
-        self.send_layer(info, plan, Some(files))
-    }
-
-    fn finish(self: Box<Self>, info: &RunInfo) -> Result<()> {
-        self.send_finish(info, None)
-    }
-
-    fn finish_with_files(self: Box<Self>, info: &RunInfo, files: &mut dyn OutputFiles) -> Result<()> {
-        self.send_finish(info, Some(files))
+    fn finish(self: Box<Self>, info: &RunInfo, files: &mut dyn OutputFiles) -> Result<()> {
+        self.send_finish(info, files)
     }
 }
 
 impl Remote {
-    fn send_layer(
-        &self,
-        info: &RunInfo,
-        plan: &LayerPlan,
-        files: Option<&mut dyn OutputFiles>,
-    ) -> Result<()> {
+    fn send_layer(&self, info: &RunInfo, plan: &LayerPlan, files: &mut dyn OutputFiles) -> Result<()> {
         let request = Request::Layer {
             handle: self.handle,
             info: Cow::Borrowed(info),
             plan: Cow::Borrowed(plan),
         };
-        match self.request_with(&request, files)? {
+        match self.request_with(&request, Some(files))? {
             Response::Done => Ok(()),
             other => Err(self.unexpected(&other)),
         }
     }
 
-    fn send_finish(&self, info: &RunInfo, files: Option<&mut dyn OutputFiles>) -> Result<()> {
+    fn send_finish(&self, info: &RunInfo, files: &mut dyn OutputFiles) -> Result<()> {
         let request = Request::Finish {
             handle: self.handle,
             info: Cow::Borrowed(info),
         };
-        match self.request_with(&request, files)? {
+        match self.request_with(&request, Some(files))? {
             Response::Done => {
                 let left = std::mem::take(&mut *self.files.open.lock().unwrap_or_else(|e| e.into_inner()));
                 for (file, mut w) in left {

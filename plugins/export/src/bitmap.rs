@@ -17,7 +17,7 @@ use std::io::Write;
 use std::path::PathBuf;
 
 use lamina_core::stage::{
-    AnyStage, ExportContext, Exporter, LayerSink, OptionSpec, StageConfig, StageInfo, StageKind,
+    AnyStage, ExportContext, Exporter, LayerSink, OptionSpec, OutputFiles, StageConfig, StageInfo, StageKind,
 };
 use lamina_core::{BBox2, Contour, Error, LayerPlan, Limit, Limits, Result, RunInfo, StageFactory};
 use serde::Deserialize;
@@ -271,7 +271,7 @@ impl Exporter for Bitmap {
 }
 
 impl LayerSink for Sink {
-    fn layer(&mut self, _info: &RunInfo, plan: &LayerPlan) -> Result<()> {
+    fn layer(&mut self, _info: &RunInfo, plan: &LayerPlan, _files: &mut dyn OutputFiles) -> Result<()> {
         let mut contours: Vec<&Contour> = Vec::new();
         for pl in plan.parts.iter().filter(|pl| self.parts.contains(&pl.part)) {
             for &f in &pl.families {
@@ -321,7 +321,7 @@ impl LayerSink for Sink {
         Ok(())
     }
 
-    fn finish(mut self: Box<Self>, _info: &RunInfo) -> Result<()> {
+    fn finish(mut self: Box<Self>, _info: &RunInfo, _files: &mut dyn OutputFiles) -> Result<()> {
         self.header.flush().map_err(io(&self.header_path))?;
         self.data.flush().map_err(io(&self.data_path))
     }

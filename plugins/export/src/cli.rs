@@ -18,7 +18,7 @@ use std::io::Write;
 use std::path::PathBuf;
 
 use lamina_core::stage::{
-    AnyStage, ExportContext, Exporter, LayerSink, OptionSpec, StageConfig, StageInfo, StageKind,
+    AnyStage, ExportContext, Exporter, LayerSink, OptionSpec, OutputFiles, StageConfig, StageInfo, StageKind,
 };
 use lamina_core::{Contour, Error, LayerPlan, Result, RunInfo, StageFactory};
 use serde::Deserialize;
@@ -180,7 +180,7 @@ impl Exporter for Cli {
 }
 
 impl LayerSink for Sink {
-    fn layer(&mut self, info: &RunInfo, plan: &LayerPlan) -> Result<()> {
+    fn layer(&mut self, info: &RunInfo, plan: &LayerPlan, _files: &mut dyn OutputFiles) -> Result<()> {
         let path = self.path.clone();
         let z = plan.z / self.units;
         match self.format {
@@ -231,7 +231,7 @@ impl LayerSink for Sink {
         Ok(())
     }
 
-    fn finish(mut self: Box<Self>, _info: &RunInfo) -> Result<()> {
+    fn finish(mut self: Box<Self>, _info: &RunInfo, _files: &mut dyn OutputFiles) -> Result<()> {
         let path = self.path.clone();
         if self.format != Format::Binary {
             self.out.write_all(b"$$GEOMETRYEND\n").map_err(io(&path))?;

@@ -7,7 +7,7 @@ use std::io::Write;
 use std::path::PathBuf;
 
 use lamina_core::stage::{
-    AnyStage, ExportContext, Exporter, LayerSink, OptionSpec, StageConfig, StageInfo, StageKind,
+    AnyStage, ExportContext, Exporter, LayerSink, OptionSpec, OutputFiles, StageConfig, StageInfo, StageKind,
 };
 use lamina_core::{Contour, Error, LayerPlan, Polygon, Result, RunInfo, StageFactory, Toolpath};
 use serde::{Deserialize, Serialize};
@@ -84,8 +84,8 @@ struct LayerOut<'a> {
     sequential_time: Option<f64>,
     #[serde(skip_serializing_if = "Option::is_none")]
     fill: Option<lamina_core::Fill>,
-    #[serde(skip_serializing_if = "<[String]>::is_empty")]
-    warnings: &'a [String],
+    #[serde(skip_serializing_if = "<[lamina_core::Diagnostic]>::is_empty")]
+    diagnostics: &'a [lamina_core::Diagnostic],
 }
 
 #[derive(Serialize)]
@@ -184,7 +184,7 @@ fn layer_out<'a>(info: &'a RunInfo, plan: &'a LayerPlan, toolpaths: bool) -> Lay
         build_time: plan.build_time,
         sequential_time: plan.sequential_time,
         fill: plan.fill,
-        warnings: &plan.warnings,
+        diagnostics: &plan.diagnostics,
     }
 }
 
@@ -263,7 +263,7 @@ impl Exporter for Json {
 }
 
 impl LayerSink for Sink {
-    fn layer(&mut self, info: &RunInfo, plan: &LayerPlan) -> Result<()> {
+    fn layer(&mut self, info: &RunInfo, plan: &LayerPlan, _files: &mut dyn OutputFiles) -> Result<()> {
         let layer = layer_out(info, plan, self.toolpaths);
         let path = self.path.clone();
         match self.form {
@@ -287,7 +287,7 @@ impl LayerSink for Sink {
         Ok(())
     }
 
-    fn finish(mut self: Box<Self>, _info: &RunInfo) -> Result<()> {
+    fn finish(mut self: Box<Self>, _info: &RunInfo, _files: &mut dyn OutputFiles) -> Result<()> {
         let path = self.path.clone();
         if self.form == Form::Document {
             self.out.write_all(b"]}\n").map_err(io(&path))?;

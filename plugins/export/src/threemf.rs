@@ -11,7 +11,7 @@ use std::io::Write;
 use std::path::PathBuf;
 
 use lamina_core::stage::{
-    AnyStage, ExportContext, Exporter, LayerSink, OptionSpec, StageConfig, StageInfo, StageKind,
+    AnyStage, ExportContext, Exporter, LayerSink, OptionSpec, OutputFiles, StageConfig, StageInfo, StageKind,
 };
 use lamina_core::{Contour, Error, LayerPlan, Polygon, Result, RunInfo, StageFactory};
 use serde::Deserialize;
@@ -186,7 +186,7 @@ impl Exporter for ThreeMf {
 }
 
 impl LayerSink for Sink {
-    fn layer(&mut self, info: &RunInfo, plan: &LayerPlan) -> Result<()> {
+    fn layer(&mut self, info: &RunInfo, plan: &LayerPlan, _files: &mut dyn OutputFiles) -> Result<()> {
         let n_materials = info.materials.len();
         // The layer's compositions over all pipeline materials, each once.
         let mut composites: Vec<Vec<f64>> = Vec::new();
@@ -259,7 +259,7 @@ impl LayerSink for Sink {
         self.zip.write_all(self.text.as_bytes()).map_err(io(&path))
     }
 
-    fn finish(mut self: Box<Self>, _info: &RunInfo) -> Result<()> {
+    fn finish(mut self: Box<Self>, _info: &RunInfo, _files: &mut dyn OutputFiles) -> Result<()> {
         let path = self.path.clone();
         let mut tail = String::from("</resources>\n<build>\n");
         for id in &self.objects {

@@ -39,7 +39,7 @@ use std::collections::BTreeMap;
 use std::path::PathBuf;
 
 use lamina_core::stage::{
-    AnyStage, ExportContext, Exporter, LayerSink, OptionSpec, StageConfig, StageInfo, StageKind,
+    AnyStage, ExportContext, Exporter, LayerSink, OptionSpec, OutputFiles, StageConfig, StageInfo, StageKind,
 };
 use lamina_core::{Error, LayerPlan, Result, RunInfo, StageFactory};
 use serde::Deserialize;
@@ -173,11 +173,11 @@ impl Exporter for Gcode {
 struct Sink(Box<Writer>);
 
 impl LayerSink for Sink {
-    fn layer(&mut self, info: &RunInfo, plan: &LayerPlan) -> Result<()> {
+    fn layer(&mut self, info: &RunInfo, plan: &LayerPlan, _files: &mut dyn OutputFiles) -> Result<()> {
         self.0.write_layer(info, plan)
     }
 
-    fn finish(self: Box<Self>, info: &RunInfo) -> Result<()> {
+    fn finish(self: Box<Self>, info: &RunInfo, _files: &mut dyn OutputFiles) -> Result<()> {
         self.0.finish_file(info)
     }
 }

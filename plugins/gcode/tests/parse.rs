@@ -106,7 +106,7 @@ fn layers(seed: u64) -> Vec<LayerPlan> {
                 build_time: Some(t),
                 sequential_time: None,
                 fill: None,
-                warnings: Vec::new(),
+                diagnostics: Vec::new(),
             }
         })
         .collect()

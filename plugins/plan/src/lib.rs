@@ -264,24 +264,27 @@ fn prepare(o: &Options, info: &RunInfo, plan: &mut LayerPlan, step: f64) -> Resu
             .map(|(part, r, a)| format!("part `{part}` sub-region {r} ({a:.3} mm²)"))
             .collect();
         let more = work.thin.len().saturating_sub(5);
-        plan.warnings.push(format!(
-            "{} sub-region(s) narrower than the narrowest bead ({:.3} mm){} are not deposited: {}{}",
-            work.thin.len(),
-            widths.min,
-            match o.thin {
-                Thin::Merge => ", even with their neighbours,",
-                Thin::Skip => "",
-            },
-            list.join(", "),
-            if more > 0 {
-                format!(" and {more} more")
-            } else {
-                String::new()
-            }
-        ));
+        plan.warn(
+            StageKind::Plan,
+            format!(
+                "{} sub-region(s) narrower than the narrowest bead ({:.3} mm){} are not deposited: {}{}",
+                work.thin.len(),
+                widths.min,
+                match o.thin {
+                    Thin::Merge => ", even with their neighbours,",
+                    Thin::Skip => "",
+                },
+                list.join(", "),
+                if more > 0 {
+                    format!(" and {more} more")
+                } else {
+                    String::new()
+                }
+            ),
+        );
     }
     if work.merged > 0 {
-        plan.warnings.push(format!(
+        plan.warn(StageKind::Plan, format!(
             "{} sub-region(s) narrower than the narrowest bead ({:.3} mm) are deposited together with their neighbours, \
              with the area-weighted mean composition (`thin = \"skip\"` leaves them out)",
             work.merged, widths.min
@@ -385,7 +388,7 @@ impl Planner for Concurrent {
             // said, and the concurrent schedule kept unless asked for the faster one
             // (the sequential schedule is collision-free too).
             Ok((paths, t)) if t > seq_time => {
-                plan.warnings.push(format!(
+                plan.warn(StageKind::Plan, format!(
                     "the concurrent schedule ({t:.2} s) is slower than one tool at a time ({seq_time:.2} s); {}",
                     if o.keep_faster {
                         "this layer is deposited one tool at a time (`keep_faster`)"
@@ -401,17 +404,23 @@ impl Planner for Concurrent {
             }
             Ok(r) => r,
             Err(e) => {
-                plan.warnings.push(format!(
-                    "concurrent planning gave up ({e:?}); this layer is deposited one tool at a time"
-                ));
+                plan.warn(
+                    StageKind::Plan,
+                    format!(
+                        "concurrent planning gave up ({e:?}); this layer is deposited one tool at a time"
+                    ),
+                );
                 (seq_paths, seq_time)
             }
         };
         if o.compare {
-            plan.warnings.push(format!(
-                "build time {t:.2} s concurrent, {seq_time:.2} s sequential (ratio {:.3})",
-                if seq_time > 0.0 { t / seq_time } else { 1.0 }
-            ));
+            plan.note(
+                StageKind::Plan,
+                format!(
+                    "build time {t:.2} s concurrent, {seq_time:.2} s sequential (ratio {:.3})",
+                    if seq_time > 0.0 { t / seq_time } else { 1.0 }
+                ),
+            );
         }
         plan.toolpaths.extend(paths);
         plan.build_time = Some(plan.build_time.unwrap_or(0.0) + t);

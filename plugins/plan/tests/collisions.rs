@@ -132,7 +132,7 @@ fn layout(rng: &mut Rng, tools: usize) -> (RunInfo, LayerPlan) {
         build_time: None,
         sequential_time: None,
         fill: None,
-        warnings: Vec::new(),
+        diagnostics: Vec::new(),
     };
     (info, plan)
 }
@@ -302,9 +302,9 @@ fn busy_time(plan: &LayerPlan, tool: usize) -> f64 {
 }
 
 fn says_slower(plan: &LayerPlan) -> bool {
-    plan.warnings
+    plan.diagnostics
         .iter()
-        .any(|w| w.contains("is slower than one tool at a time"))
+        .any(|d| d.message.contains("is slower than one tool at a time"))
 }
 
 #[test]
@@ -352,14 +352,14 @@ fn random_layouts_of_two_to_four_tools_never_collide() {
                 "case {case}: {tc} s for tool {tool}'s {own} s of work"
             );
         }
-        if !conc.warnings.iter().any(|w| w.contains("gave up")) {
+        if !conc.diagnostics.iter().any(|d| d.message.contains("gave up")) {
             // The concurrent schedule is what is planned, faster or not; a slower one
             // is said.
             assert_eq!(
                 says_slower(&conc),
                 tc > ts,
                 "case {case}: {tc} s against {ts} s, {:?}",
-                conc.warnings
+                conc.diagnostics
             );
             if tc < ts {
                 faster += 1;
@@ -449,12 +449,12 @@ fn thin_regions_are_reported() {
         .plan(&info, &mut plan)
         .expect("plans");
     assert!(
-        plan.warnings
+        plan.diagnostics
             .iter()
-            .any(|w| w.contains("narrower than the narrowest bead")
-                && w.contains("even with their neighbours")),
+            .any(|d| d.message.contains("narrower than the narrowest bead")
+                && d.message.contains("even with their neighbours")),
         "{:?}",
-        plan.warnings
+        plan.diagnostics
     );
 }
 

@@ -7,7 +7,7 @@ use std::io::Write;
 use std::path::PathBuf;
 
 use lamina_core::stage::{
-    AnyStage, ExportContext, Exporter, LayerSink, OptionSpec, StageConfig, StageInfo, StageKind,
+    AnyStage, ExportContext, Exporter, LayerSink, OptionSpec, OutputFiles, StageConfig, StageInfo, StageKind,
 };
 use lamina_core::{Contour, Error, LayerPlan, PathKind, Result, RunInfo, StageFactory};
 use serde::{Deserialize, Serialize};
@@ -191,7 +191,7 @@ impl Exporter for Html {
 }
 
 impl LayerSink for Sink {
-    fn layer(&mut self, info: &RunInfo, plan: &LayerPlan) -> Result<()> {
+    fn layer(&mut self, info: &RunInfo, plan: &LayerPlan, _files: &mut dyn OutputFiles) -> Result<()> {
         if !plan.index.is_multiple_of(self.options.every) {
             return Ok(());
         }
@@ -255,7 +255,7 @@ impl LayerSink for Sink {
         writeln!(self.out, "<script>LAYERS.push({json});</script>").map_err(io(&path))
     }
 
-    fn finish(mut self: Box<Self>, _info: &RunInfo) -> Result<()> {
+    fn finish(mut self: Box<Self>, _info: &RunInfo, _files: &mut dyn OutputFiles) -> Result<()> {
         let path = self.path.clone();
         write!(self.out, "<script>\n{VIEWER_JS}</script>\n</body>\n</html>\n").map_err(io(&path))?;
         self.out.flush().map_err(io(&path))

@@ -194,19 +194,7 @@ impl Exporter for Png {
 }
 
 impl LayerSink for PngSink {
-    fn layer(&mut self, _info: &RunInfo, _plan: &LayerPlan) -> Result<()> {
-        Err(Error::stage(
-            "export:png",
-            "writes a file per layer: call layer_with_files",
-        ))
-    }
-
-    fn layer_with_files(
-        &mut self,
-        info: &RunInfo,
-        plan: &LayerPlan,
-        files: &mut dyn OutputFiles,
-    ) -> Result<()> {
+    fn layer(&mut self, info: &RunInfo, plan: &LayerPlan, files: &mut dyn OutputFiles) -> Result<()> {
         let o = &self.options;
         let Some(name) = layer_file(&o.path, o.every, &o.layers, self.layer_count, plan.index, "png") else {
             return Ok(());
@@ -232,7 +220,7 @@ impl LayerSink for PngSink {
         write_file(files, &name, &bytes)
     }
 
-    fn finish(self: Box<Self>, _info: &RunInfo) -> Result<()> {
+    fn finish(self: Box<Self>, _info: &RunInfo, _files: &mut dyn OutputFiles) -> Result<()> {
         Ok(())
     }
 }
@@ -351,7 +339,7 @@ impl Exporter for Sheet {
 }
 
 impl LayerSink for SheetSink {
-    fn layer(&mut self, info: &RunInfo, plan: &LayerPlan) -> Result<()> {
+    fn layer(&mut self, info: &RunInfo, plan: &LayerPlan, _files: &mut dyn OutputFiles) -> Result<()> {
         if let Some(slot) = self.chosen.iter().position(|&l| l == plan.index) {
             let t = self.options.tile as f32;
             let (col, row) = (slot % self.options.columns, slot / self.options.columns);
@@ -361,14 +349,7 @@ impl LayerSink for SheetSink {
         Ok(())
     }
 
-    fn finish(self: Box<Self>, _info: &RunInfo) -> Result<()> {
-        Err(Error::stage(
-            "export:contact-sheet",
-            "writes its picture at the end: call finish_with_files",
-        ))
-    }
-
-    fn finish_with_files(self: Box<Self>, _info: &RunInfo, files: &mut dyn OutputFiles) -> Result<()> {
+    fn finish(self: Box<Self>, _info: &RunInfo, files: &mut dyn OutputFiles) -> Result<()> {
         let bytes = encode(&self.pixmap, &self.options.path)?;
         write_file(files, &self.options.path, &bytes)
     }
@@ -460,21 +441,14 @@ impl Exporter for Stack {
 }
 
 impl LayerSink for StackSink {
-    fn layer(&mut self, info: &RunInfo, plan: &LayerPlan) -> Result<()> {
+    fn layer(&mut self, info: &RunInfo, plan: &LayerPlan, _files: &mut dyn OutputFiles) -> Result<()> {
         if plan.index.is_multiple_of(self.every) {
             self.layers.push((plan.z as f32, shapes(info, plan)));
         }
         Ok(())
     }
 
-    fn finish(self: Box<Self>, _info: &RunInfo) -> Result<()> {
-        Err(Error::stage(
-            "export:stack",
-            "writes its picture at the end: call finish_with_files",
-        ))
-    }
-
-    fn finish_with_files(self: Box<Self>, _info: &RunInfo, files: &mut dyn OutputFiles) -> Result<()> {
+    fn finish(self: Box<Self>, _info: &RunInfo, files: &mut dyn OutputFiles) -> Result<()> {
         let mut b = [f32::INFINITY, f32::INFINITY, f32::NEG_INFINITY, f32::NEG_INFINITY];
         for (z, shapes) in &self.layers {
             for s in shapes {

@@ -154,19 +154,7 @@ impl Exporter for Svg {
 }
 
 impl LayerSink for Sink {
-    fn layer(&mut self, _info: &RunInfo, _plan: &LayerPlan) -> Result<()> {
-        Err(Error::stage(
-            "export:svg",
-            "writes a file per layer: call layer_with_files",
-        ))
-    }
-
-    fn layer_with_files(
-        &mut self,
-        info: &RunInfo,
-        plan: &LayerPlan,
-        files: &mut dyn OutputFiles,
-    ) -> Result<()> {
+    fn layer(&mut self, info: &RunInfo, plan: &LayerPlan, files: &mut dyn OutputFiles) -> Result<()> {
         let o = &self.options;
         let Some(name) = layer_file(&o.path, o.every, &o.layers, self.layer_count, plan.index, "svg") else {
             return Ok(());
@@ -180,7 +168,7 @@ impl LayerSink for Sink {
             .map_err(|e| Error::io(&name, e))
     }
 
-    fn finish(self: Box<Self>, _info: &RunInfo) -> Result<()> {
+    fn finish(self: Box<Self>, _info: &RunInfo, _files: &mut dyn OutputFiles) -> Result<()> {
         Ok(())
     }
 }

@@ -173,6 +173,9 @@ fn build(config: &StageConfig<'_>) -> Result<AnyStage> {
     })))
 }
 
+// A pipeline without a [slice] table gets this stage.
+lamina_core::register_default!(StageKind::Slice, "uniform");
+
 lamina_core::register_stage!(StageFactory {
     info: StageInfo {
         kind: StageKind::Slice,

@@ -101,6 +101,9 @@ impl Sorter for Hierarchy {
 #[serde(deny_unknown_fields)]
 struct Options {}
 
+// A pipeline without a [sort] table gets this stage.
+lamina_core::register_default!(StageKind::Sort, "hierarchy");
+
 lamina_core::register_stage!(StageFactory {
     info: StageInfo {
         kind: StageKind::Sort,

@@ -67,9 +67,9 @@ pub fn export(
     };
     let mut sink = exporter.open(&mut ctx)?;
     for p in plans {
-        sink.layer(info, p)?;
+        sink.layer(info, p, &mut files)?;
     }
-    sink.finish(info)?;
+    sink.finish(info, &mut files)?;
     let bytes = buffer.0.lock().expect("lock").clone();
     Ok(String::from_utf8(bytes).expect("utf-8"))
 }

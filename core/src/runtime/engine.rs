@@ -1,0 +1,387 @@
+//! Building a pipeline's stages: each kind from its table, or the default its plugin
+//! declares; one model source per model table; the checks that need several stages at
+//! once (a part with several materials needs a grader).
+
+use std::path::Path;
+
+use super::RunOptions;
+use crate::error::{Error, Result};
+use crate::pipeline::{ModelSpec, Pipeline, TableRef};
+use crate::registry::Registry;
+use crate::script::ScriptHost;
+use crate::stage::*;
+
+pub(super) struct ModelStage {
+    pub(super) source: Box<dyn ModelSource>,
+    pub(super) spec: ModelSpec,
+    /// What the model is, for messages: the generator or the file.
+    pub(super) label: String,
+}
+
+pub(super) struct PartStages {
+    pub(super) name: String,
+    pub(super) family_at: Option<[f64; 3]>,
+    /// Where `family_at` is written, for errors.
+    pub(super) family_at_location: Option<crate::source::Location>,
+    pub(super) materials: Vec<usize>,
+    /// Index into `Engine::models`.
+    pub(super) model: usize,
+    pub(super) mesh: Option<usize>,
+    pub(super) discretiser: Option<Box<dyn Discretiser>>,
+    pub(super) grader: Option<Box<dyn Grader>>,
+}
+
+/// A pipeline with every stage built, ready to run.
+pub struct Engine {
+    pub(super) pipeline: Pipeline,
+    pub(super) threads: Option<usize>,
+    pub(super) models: Vec<ModelStage>,
+    pub(super) parts: Vec<PartStages>,
+    pub(super) slicer: Box<dyn Slicer>,
+    pub(super) sorter: Box<dyn Sorter>,
+    pub(super) orienter: Option<Box<dyn Orienter>>,
+    pub(super) sequencer: Option<Box<dyn Sequencer>>,
+    pub(super) planner: Option<Box<dyn Planner>>,
+    pub(super) exporters: Vec<Box<dyn Exporter>>,
+}
+
+impl std::fmt::Debug for Engine {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Engine")
+            .field("pipeline", &self.pipeline.name)
+            .field("parts", &self.parts.len())
+            .field("exporters", &self.exporters.len())
+            .finish()
+    }
+}
+
+/// Builds the `kind` stage from its table, or the default its plugin declares when
+/// the pipeline has none.
+fn build_default(
+    registry: &Registry,
+    kind: StageKind,
+    pipeline: &Pipeline,
+    scripts: &ScriptHost,
+) -> Result<AnyStage> {
+    if let Some(t) = pipeline.stages.get(&kind) {
+        return registry.build_for(kind, t, scripts, &pipeline.base_dir, pipeline.context());
+    }
+    let default = registry.default_for(kind).ok_or_else(|| {
+        Error::config(format!(
+            "the pipeline has no [{kind}] table, and no plugin declares a default {kind} stage"
+        ))
+        .with_help(format!(
+            "add a [{kind}] table; `lamina plugins {kind}` lists the stages"
+        ))
+    })?;
+    let mut table = toml::Table::new();
+    table.insert("use".into(), toml::Value::String(default.into()));
+    let t = TableRef::detached(kind.name(), table);
+    registry
+        .build_for(kind, &t, scripts, &pipeline.base_dir, pipeline.context())
+        .map_err(|e| {
+            Error::config(format!(
+                "the pipeline has no [{kind}] table and the default {kind} stage \
+                 `{default}` could not be built: {e}"
+            ))
+        })
+}
+
+fn build_optional(
+    registry: &Registry,
+    kind: StageKind,
+    table: Option<&TableRef>,
+    scripts: &ScriptHost,
+    pipeline: &Pipeline,
+) -> Result<Option<AnyStage>> {
+    table
+        .map(|t| registry.build_for(kind, t, scripts, &pipeline.base_dir, pipeline.context()))
+        .transpose()
+}
+
+macro_rules! expect_kind {
+    ($stage:expr, $variant:ident) => {
+        match $stage {
+            AnyStage::$variant(s) => s,
+            other => {
+                return Err(Error::stage(
+                    stringify!($variant),
+                    format!("expected a {} stage, got {}", stringify!($variant), other.kind()),
+                ));
+            }
+        }
+    };
+}
+
+/// Builds the model source a model table names: `use = "..."`, or a reader chosen by
+/// the extension of `file`.
+fn build_model(
+    registry: &Registry,
+    spec: &ModelSpec,
+    scripts: &ScriptHost,
+    base_dir: &Path,
+    context: PipelineContext<'_>,
+) -> Result<Box<dyn ModelSource>> {
+    let table = &spec.table;
+    let stage = if table.get("use").is_some() {
+        registry.build_for(StageKind::Model, table, scripts, base_dir, context)?
+    } else {
+        let file = table.get("file").and_then(|v| v.as_str()).ok_or_else(|| {
+            table
+                .error_at("use", "a model table needs `use = \"...\"` or `file = \"...\"`")
+                .with_help("e.g. file = \"part.stl\", or use = \"gear\" for a generated model")
+        })?;
+        let ext = Path::new(file)
+            .extension()
+            .map(|e| e.to_string_lossy().to_ascii_lowercase())
+            .unwrap_or_default();
+        let entry = registry.get(StageKind::Model, &ext).ok_or_else(|| {
+            table
+                .error_at("file", format!("no model reader for `.{ext}` files"))
+                .with_help("name the reader with `use = \"...\"`; see `lamina plugins model`")
+        })?;
+        registry.build_entry_for(entry, table, scripts, base_dir, context)?
+    };
+    Ok(expect_kind!(stage, Model))
+}
+
+/// A model spec whose file is replaced by `path` (the `--model` option).
+fn replace_model_file(spec: &ModelSpec, path: &Path) -> Result<ModelSpec> {
+    let abs = std::path::absolute(path).map_err(|e| Error::io(path, e))?;
+    let mut table = toml::Table::new();
+    table.insert(
+        "file".into(),
+        toml::Value::String(abs.to_string_lossy().into_owned()),
+    );
+    Ok(ModelSpec {
+        table: TableRef::detached("--model", table).with_host_keys(crate::pipeline::MODEL_HOST_KEYS),
+        scale: spec.scale,
+        units: spec.units,
+        place: spec.place,
+    })
+}
+
+impl Engine {
+    /// Loads plugins and builds every stage of `pipeline`. Scripts are compiled here, so
+    /// a pipeline that builds is a pipeline whose configuration is valid.
+    pub fn build(pipeline: Pipeline, mut registry: Registry, options: &RunOptions) -> Result<Engine> {
+        for path in pipeline.plugins.iter().chain(&options.plugins) {
+            crate::plugin::load(&mut registry, path)?;
+        }
+        let scripts = ScriptHost::new(&pipeline.base_dir, options.script_limits)
+            .with_script_dirs(pipeline.script_dirs.clone());
+        let base = pipeline.base_dir.clone();
+
+        if options.model.is_some() && pipeline.parts.len() > 1 {
+            return Err(Error::config(format!(
+                "--model replaces the model of a single-part pipeline, and `{}` has {} parts",
+                pipeline.file.path.display(),
+                pipeline.parts.len()
+            )));
+        }
+
+        let mut models = Vec::new();
+        let global_model = match &pipeline.model {
+            Some(spec) => {
+                let spec = match &options.model {
+                    Some(p) => replace_model_file(spec, p)?,
+                    None => spec.clone(),
+                };
+                models.push(ModelStage {
+                    source: build_model(&registry, &spec, &scripts, &base, pipeline.context())?,
+                    label: describe_model(&spec),
+                    spec,
+                });
+                Some(0)
+            }
+            None => None,
+        };
+
+        let mut parts = Vec::new();
+        for part in &pipeline.parts {
+            let model = match &part.model {
+                Some(spec) => {
+                    let spec = match &options.model {
+                        Some(p) => replace_model_file(spec, p)?,
+                        None => spec.clone(),
+                    };
+                    models.push(ModelStage {
+                        source: build_model(&registry, &spec, &scripts, &base, pipeline.context())?,
+                        label: describe_model(&spec),
+                        spec,
+                    });
+                    models.len() - 1
+                }
+                None => {
+                    global_model.ok_or_else(|| Error::config(format!("part `{}` has no model", part.name)))?
+                }
+            };
+            let discretiser = build_optional(
+                &registry,
+                StageKind::Discretise,
+                part.discretise
+                    .as_ref()
+                    .or(pipeline.stages.get(&StageKind::Discretise)),
+                &scripts,
+                &pipeline,
+            )?
+            .map(|s| -> Result<_> { Ok(expect_kind!(s, Discretise)) })
+            .transpose()?;
+            let grade_table = part.grade.as_ref().or(pipeline.stages.get(&StageKind::Grade));
+            let grader = build_optional(&registry, StageKind::Grade, grade_table, &scripts, &pipeline)?
+                .map(|s| -> Result<_> { Ok(expect_kind!(s, Grade)) })
+                .transpose()?;
+            let discretiser_grades = discretiser.as_ref().is_some_and(|d| d.grades());
+            if grader.is_none() && !discretiser_grades && part.materials.len() > 1 {
+                let names: Vec<_> = part
+                    .materials
+                    .iter()
+                    .map(|&m| pipeline.materials[m].name.as_str())
+                    .collect();
+                let err = Error::config(format!(
+                    "part `{}` has {} materials ({}) but no [grade] table says how to mix them",
+                    part.name,
+                    names.len(),
+                    names.join(", ")
+                ))
+                .with_help(
+                    "add a [grade] table, or give the part a single material with `materials = [\"...\"]`",
+                );
+                return Err(
+                    match part.table.as_ref().and_then(|t| t.location_of(Some("materials"))) {
+                        Some(loc) => Error::Config {
+                            location: Some(loc),
+                            message: err.to_string(),
+                            help: err.help().map(str::to_string),
+                        },
+                        None => err,
+                    },
+                );
+            }
+            parts.push(PartStages {
+                name: part.name.clone(),
+                family_at: part.family_at,
+                family_at_location: part.table.as_ref().and_then(|t| t.location_of(Some("family_at"))),
+                materials: part.materials.clone(),
+                model,
+                mesh: part.mesh,
+                discretiser,
+                grader,
+            });
+        }
+
+        let slicer = expect_kind!(
+            build_default(&registry, StageKind::Slice, &pipeline, &scripts)?,
+            Slice
+        );
+        let sorter = expect_kind!(
+            build_default(&registry, StageKind::Sort, &pipeline, &scripts)?,
+            Sort
+        );
+        let orienter = build_optional(
+            &registry,
+            StageKind::Orient,
+            pipeline.stages.get(&StageKind::Orient),
+            &scripts,
+            &pipeline,
+        )?
+        .map(|s| -> Result<_> { Ok(expect_kind!(s, Orient)) })
+        .transpose()?;
+        let sequencer = build_optional(
+            &registry,
+            StageKind::Sequence,
+            pipeline.stages.get(&StageKind::Sequence),
+            &scripts,
+            &pipeline,
+        )?
+        .map(|s| -> Result<_> { Ok(expect_kind!(s, Sequence)) })
+        .transpose()?;
+        let planner = build_optional(
+            &registry,
+            StageKind::Plan,
+            pipeline.stages.get(&StageKind::Plan),
+            &scripts,
+            &pipeline,
+        )?
+        .map(|s| -> Result<_> { Ok(expect_kind!(s, Plan)) })
+        .transpose()?;
+        let mut exporters = Vec::new();
+        for t in &pipeline.outputs {
+            exporters.push(expect_kind!(
+                registry.build_for(StageKind::Export, t, &scripts, &base, pipeline.context())?,
+                Export
+            ));
+        }
+
+        Ok(Engine {
+            threads: options.threads,
+            pipeline,
+            models,
+            parts,
+            slicer,
+            sorter,
+            orienter,
+            sequencer,
+            planner,
+            exporters,
+        })
+    }
+
+    pub fn pipeline(&self) -> &Pipeline {
+        &self.pipeline
+    }
+
+    /// Short descriptions of what will run, for `lamina check`.
+    pub fn summary(&self) -> Vec<String> {
+        let mut lines = Vec::new();
+        for m in &self.models {
+            lines.push(format!("model: {}", m.label));
+        }
+        for p in &self.parts {
+            let mats: Vec<_> = p
+                .materials
+                .iter()
+                .map(|&m| self.pipeline.materials[m].name.as_str())
+                .collect();
+            lines.push(format!(
+                "part `{}`: materials {}; discretise: {}; grade: {}",
+                p.name,
+                mats.join(", "),
+                if p.discretiser.is_some() {
+                    "yes"
+                } else {
+                    "whole families"
+                },
+                if p.grader.is_some() {
+                    "yes"
+                } else {
+                    "pure material"
+                },
+            ));
+        }
+        if let Some(m) = &self.pipeline.machine {
+            lines.push(format!(
+                "machine: {} ({}, {}, {} bed, {} tool(s))",
+                m.name,
+                m.flavor.name(),
+                m.firmware.name(),
+                m.bed.describe(),
+                m.tools.len()
+            ));
+        }
+        lines.push(format!("outputs: {}", self.exporters.len()));
+        lines
+    }
+}
+
+fn describe_model(spec: &ModelSpec) -> String {
+    match (
+        spec.table.use_name(),
+        spec.table.get("file").and_then(|v| v.as_str()),
+    ) {
+        (Some(u), Some(f)) => format!("{u} ({f})"),
+        (Some(u), None) => u.to_string(),
+        (None, Some(f)) => f.to_string(),
+        (None, None) => "?".into(),
+    }
+}

@@ -1,0 +1,219 @@
+//! One layer through its stages: each distinct mesh cut and sorted once, each part's
+//! families discretised and graded, the compositions checked, the layer planned.
+
+use std::sync::Arc;
+
+use super::engine::Engine;
+use super::families::Selections;
+use super::report::Timings;
+use crate::error::{Error, Result};
+use crate::mesh::Mesh;
+use crate::model::{Composition, Diagnostic, Layer, LayerPlan, LayerSlot, PartLayer, Region, Sequence};
+use crate::stage::*;
+
+impl Engine {
+    /// Slices, sorts, discretises, grades and plans one layer.
+    pub(super) fn process_layer(&self, slot: &LayerSlot, shared: &LayerShared<'_>) -> Result<LayerPlan> {
+        let LayerShared {
+            info,
+            sequence,
+            prepared,
+            part_mesh,
+            selections,
+            timings,
+            meshes: _,
+        } = *shared;
+        // Each distinct mesh is cut and sorted once per layer.
+        let mut cut: Vec<Option<(Layer, crate::model::ContourTree)>> =
+            (0..prepared.len()).map(|_| None).collect();
+        let mut diagnostics = Vec::new();
+        let mut parts = Vec::new();
+        // A layer of a material region deposits only that region's parts.
+        let region_parts = match (slot.region, sequence) {
+            (Some(r), Some(seq)) => {
+                Some(seq.regions.get(r).map(|r| r.parts.as_slice()).ok_or_else(|| {
+                    Error::stage(
+                        "slice",
+                        format!(
+                            "layer names material region {r}, the sequence has {}",
+                            seq.regions.len()
+                        ),
+                    )
+                })?)
+            }
+            (Some(r), None) => {
+                return Err(Error::stage(
+                    "slice",
+                    format!("layer names material region {r}, but the pipeline has no [sequence]"),
+                ));
+            }
+            (None, _) => None,
+        };
+        for (pi, p) in self.parts.iter().enumerate() {
+            if region_parts.is_some_and(|rp| !rp.contains(&pi)) {
+                continue;
+            }
+            let mi = part_mesh[pi];
+            if cut[mi].is_none() {
+                let layer = timings
+                    .time(StageKind::Slice, || prepared[mi].slice(slot))
+                    .map_err(|e| e.in_part(&p.name))?;
+                let tree = timings
+                    .time(StageKind::Sort, || self.sorter.sort(&layer))
+                    .map_err(|e| e.in_part(&p.name))?;
+                check_tree(&layer, &tree).map_err(|e| e.in_part(&p.name))?;
+                diagnostics.extend(layer.warnings.iter().map(|w| {
+                    Diagnostic::warning(StageKind::Slice, w.as_str())
+                        .at_layer(slot.index, slot.z)
+                        .in_part(&p.name)
+                }));
+                cut[mi] = Some((layer, tree));
+            }
+            let Some((layer, tree)) = &cut[mi] else { continue };
+            let families = selections.families(pi, slot.index, layer, tree, part_mesh);
+            let part_layer = self
+                .process_part(pi, layer, tree, families, shared)
+                .map_err(|e| e.in_part(&p.name))?;
+            parts.push(part_layer);
+        }
+        let mut plan = LayerPlan {
+            index: slot.index,
+            z: slot.z,
+            thickness: slot.thickness,
+            region: slot.region,
+            parts,
+            toolpaths: Vec::new(),
+            build_time: None,
+            sequential_time: None,
+            fill: None,
+            diagnostics,
+        };
+        if let Some(planner) = &self.planner {
+            timings.time(StageKind::Plan, || planner.plan(info, &mut plan))?;
+        }
+        Ok(plan)
+    }
+
+    fn process_part(
+        &self,
+        pi: usize,
+        layer: &Layer,
+        tree: &crate::model::ContourTree,
+        families: Vec<usize>,
+        shared: &LayerShared<'_>,
+    ) -> Result<PartLayer> {
+        let (info, timings) = (shared.info, shared.timings);
+        let mesh = shared.meshes.get(shared.part_mesh[pi]).map(|m| &**m);
+        let p = &self.parts[pi];
+        let n_materials = p.materials.len();
+        let mut regions = Vec::new();
+        for &f in &families {
+            let ctx = FamilyContext {
+                info,
+                layer,
+                tree,
+                mesh,
+                part: pi,
+                family: f,
+            };
+            let mut family_regions = match &p.discretiser {
+                Some(d) => timings.time(StageKind::Discretise, || d.discretise(&ctx))?,
+                None => vec![whole_family(tree, layer, f)],
+            };
+            match &p.grader {
+                Some(g) => timings.time(StageKind::Grade, || g.grade(&ctx, &mut family_regions))?,
+                None => {
+                    // A discretiser whose regions follow the material (grading sources)
+                    // grades them itself; the rest are the part's first material.
+                    for r in family_regions.iter_mut().filter(|r| r.composition.is_none()) {
+                        r.composition = Some(Composition::pure(0, n_materials));
+                    }
+                }
+            }
+            for r in &family_regions {
+                let c = r.composition.as_ref().ok_or_else(|| {
+                    Error::stage(
+                        "grade",
+                        format!("region {} of family {f} was left without a composition", r.index),
+                    )
+                })?;
+                if c.fractions.len() != n_materials {
+                    return Err(Error::stage(
+                        "grade",
+                        format!(
+                            "region {} of family {f} has {} fractions, the part has {n_materials} materials",
+                            r.index,
+                            c.fractions.len()
+                        ),
+                    ));
+                }
+                Composition::check(&c.fractions)
+                    .map_err(|e| Error::stage("grade", format!("region {} of family {f}: {e}", r.index)))?;
+            }
+            regions.extend(family_regions);
+        }
+        Ok(PartLayer {
+            part: pi,
+            contours: layer.contours.clone(),
+            tree: tree.clone(),
+            families,
+            regions,
+        })
+    }
+}
+
+/// What every layer of a run reads: the run's facts and what was prepared once.
+#[derive(Clone, Copy)]
+pub(super) struct LayerShared<'a> {
+    pub(super) info: &'a RunInfo,
+    /// The meshes as sliced (placed and oriented), for stages that measure in space.
+    pub(super) meshes: &'a [Arc<Mesh>],
+    pub(super) sequence: Option<&'a Sequence>,
+    pub(super) prepared: &'a [Box<dyn MeshSlicer>],
+    pub(super) part_mesh: &'a [usize],
+    pub(super) selections: &'a Selections,
+    pub(super) timings: &'a Timings,
+}
+
+/// The single region of a family that is not discretised.
+fn whole_family(tree: &crate::model::ContourTree, layer: &Layer, f: usize) -> Region {
+    let polygon = tree.family_polygon(&layer.contours, f);
+    let reference = polygon
+        .outer
+        .interior_point()
+        .unwrap_or_else(|| polygon.bbox().center());
+    Region {
+        family: f,
+        index: 0,
+        count: 1,
+        level: 0.0,
+        polygon,
+        cell: None,
+        reference,
+        composition: None,
+    }
+}
+
+/// A sorter's output must describe the layer it was given.
+pub(super) fn check_tree(layer: &Layer, tree: &crate::model::ContourTree) -> Result<()> {
+    if tree.nodes.len() != layer.contours.len() {
+        return Err(Error::stage(
+            "sort",
+            format!(
+                "tree has {} nodes for {} contours",
+                tree.nodes.len(),
+                layer.contours.len()
+            ),
+        ));
+    }
+    let n = layer.contours.len();
+    for fam in &tree.families {
+        if fam.outer >= n || fam.holes.iter().any(|&h| h >= n) {
+            return Err(Error::stage(
+                "sort",
+                "a family names a contour the layer does not have",
+            ));
+        }
+    }
+    Ok(())
+}

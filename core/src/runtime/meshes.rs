@@ -1,0 +1,249 @@
+//! The meshes of a run: loaded from their sources, checked for units and size, placed
+//! on the bed, turned by an orienter, merged per part, and checked against the
+//! machine's bed.
+
+use crate::error::{Error, Result};
+use crate::geom::{Point2, Vector2};
+use crate::mesh::{BBox3, Mesh, Vector3};
+use crate::model::Orientation;
+use crate::pipeline::{ModelSpec, Placement};
+use crate::stage::{Orienter, StageKind};
+
+use super::engine::Engine;
+use super::report::Timings;
+
+impl Engine {
+    /// Loads and places the meshes, one entry per model stage.
+    pub(super) fn load_models(&self, timings: &Timings) -> Result<Vec<Vec<Mesh>>> {
+        let mut out = Vec::new();
+        for m in &self.models {
+            let mut meshes = timings.time(StageKind::Model, || m.source.load(&self.pipeline.base_dir))?;
+            if meshes.is_empty() || meshes.iter().all(|m| m.triangles.is_empty()) {
+                return Err(Error::config(format!("model {} holds no triangles", m.label)));
+            }
+            if !m.spec.size_given() {
+                check_units(&meshes, &m.spec, &m.label)?;
+            }
+            place(&mut meshes, m.spec.factor(), m.spec.place);
+            let bbox = meshes.iter().fold(BBox3::EMPTY, |b, m| b.union(&m.bbox()));
+            let corners = [
+                bbox.min.x, bbox.min.y, bbox.min.z, bbox.max.x, bbox.max.y, bbox.max.z,
+            ];
+            if !corners.into_iter().all(crate::limits::is_coordinate) {
+                return Err(Error::config(format!(
+                    "model {} reaches ({}, {}, {}) to ({}, {}, {}) mm once scaled and placed: \
+                     Lamina works within ±{} mm (a kilometre) of the origin",
+                    m.label,
+                    short(bbox.min.x),
+                    short(bbox.min.y),
+                    short(bbox.min.z),
+                    short(bbox.max.x),
+                    short(bbox.max.y),
+                    short(bbox.max.z),
+                    crate::limits::MAX_COORDINATE
+                )));
+            }
+            out.push(meshes);
+        }
+        Ok(out)
+    }
+}
+
+/// Merges the meshes of a model into one, keeping per-triangle materials.
+pub(super) fn merge(meshes: &[Mesh], name: &str) -> Mesh {
+    if meshes.len() == 1 {
+        return meshes[0].clone();
+    }
+    let mut out = Mesh::new(name, Vec::new(), Vec::new());
+    for m in meshes {
+        let base = out.vertices.len() as u32;
+        out.vertices.extend_from_slice(&m.vertices);
+        out.triangles.extend(
+            m.triangles
+                .iter()
+                .map(|t| [t[0] + base, t[1] + base, t[2] + base]),
+        );
+    }
+    out
+}
+
+/// Turns every mesh of every model by the orienter's choice, rotating about the
+/// object's centre and putting the object back on the bed: the models keep their
+/// places relative to each other.
+pub(super) fn orient(orienter: &dyn Orienter, models: &mut [Vec<Mesh>]) -> Result<Orientation> {
+    let all: Vec<&Mesh> = models.iter().flatten().collect();
+    let orientation = orienter.orient(&all)?;
+    let r = &orientation.rotation;
+    let m = nalgebra::Matrix3::from_fn(|i, j| r[i][j]);
+    let det = m.determinant();
+    if !((det - 1.0).abs() < 1e-6 && (m.transpose() * m - nalgebra::Matrix3::identity()).norm() < 1e-6) {
+        return Err(Error::stage(
+            "orient",
+            format!("the orienter returned a matrix that is not a rotation: {r:?}"),
+        ));
+    }
+    let bbox = models
+        .iter()
+        .flatten()
+        .fold(BBox3::EMPTY, |b, m| b.union(&m.bbox()));
+    if bbox.is_empty() {
+        return Ok(orientation);
+    }
+    let centre = (bbox.min.coords + bbox.max.coords) * 0.5;
+    for mesh in models.iter_mut().flatten() {
+        mesh.transform(1.0, -centre);
+        mesh.rotate(r);
+        mesh.transform(1.0, centre);
+    }
+    let after = models
+        .iter()
+        .flatten()
+        .fold(BBox3::EMPTY, |b, m| b.union(&m.bbox()));
+    for mesh in models.iter_mut().flatten() {
+        mesh.transform(1.0, Vector3::new(0.0, 0.0, -after.min.z));
+    }
+    Ok(orientation)
+}
+
+/// Applies a model table's `scale` and `place` to all meshes of the model together, so
+/// the meshes of an assembly keep their relative positions.
+pub fn place(meshes: &mut [Mesh], scale: f64, placement: Placement) {
+    for m in meshes.iter_mut() {
+        m.transform(scale, Vector3::zeros());
+    }
+    let bbox = meshes.iter().fold(BBox3::EMPTY, |b, m| b.union(&m.bbox()));
+    if bbox.is_empty() {
+        return;
+    }
+    let offset = match placement {
+        Placement::Keep => return,
+        Placement::Bed => Vector3::new(0.0, 0.0, -bbox.min.z),
+        Placement::Centre => {
+            let c = Vector2::new(bbox.min.x + bbox.max.x, bbox.min.y + bbox.max.y) * 0.5;
+            Vector3::new(-c.x, -c.y, -bbox.min.z)
+        }
+    };
+    for m in meshes.iter_mut() {
+        m.transform(1.0, offset);
+    }
+}
+
+/// A model whose extents are all under this (mm) is most likely in metres.
+const SMALLEST_PLAUSIBLE_MM: f64 = 1.0;
+/// A model with an extent over this (mm) is most likely in micrometres (or tenths).
+const LARGEST_PLAUSIBLE_MM: f64 = 2000.0;
+
+/// Refuses a model whose size says its file is not in millimetres (a mesh in metres
+/// slices to a single layer and an empty file), unless the pipeline gives `scale` or
+/// `units`.
+fn check_units(meshes: &[Mesh], spec: &ModelSpec, label: &str) -> Result<()> {
+    let bbox = meshes.iter().fold(BBox3::EMPTY, |b, m| b.union(&m.bbox()));
+    if bbox.is_empty() {
+        return Ok(());
+    }
+    let size = bbox.size();
+    let extents = [("wide", size.x), ("deep", size.y), ("tall", size.z)];
+    let (word, largest) = extents
+        .into_iter()
+        .max_by(|a, b| a.1.total_cmp(&b.1))
+        .unwrap_or(("tall", size.z));
+    let (guess, fix) = if largest < SMALLEST_PLAUSIBLE_MM {
+        ("is it in metres?", "scale = 1000 or units = \"m\"")
+    } else if largest > LARGEST_PLAUSIBLE_MM {
+        ("is it in micrometres?", "scale = 0.001")
+    } else {
+        return Ok(());
+    };
+    let table = spec.table.path_string();
+    let table = if table.is_empty() {
+        "model".to_string()
+    } else {
+        table
+    };
+    let message = format!(
+        "the model `{label}` is {} mm {word} ({} x {} x {} mm): {guess} set [{table}] {fix}",
+        short(largest),
+        short(size.x),
+        short(size.y),
+        short(size.z)
+    );
+    let help = format!(
+        "Lamina works in millimetres; `scale` or `units` (\"mm\", \"cm\", \"m\", \"in\") in [{table}] says what the file's numbers mean, and turns this check off"
+    );
+    Err(match spec
+        .table
+        .location_of(Some("file"))
+        .filter(|_| !spec.table.is_overridden())
+    {
+        Some(loc) => Error::config_at(loc, message),
+        None => Error::config(message),
+    }
+    .with_help(help))
+}
+
+/// A length for messages: three significant digits, no trailing zeros.
+pub(super) fn short(v: f64) -> String {
+    if v.abs() >= 1e7 {
+        return format!("{v:.2e}");
+    }
+    let digits = if v == 0.0 {
+        0
+    } else {
+        (2 - v.abs().log10().floor() as i32).max(0) as usize
+    };
+    let s = format!("{v:.digits$}");
+    if s.contains('.') {
+        s.trim_end_matches('0').trim_end_matches('.').to_string()
+    } else {
+        s
+    }
+}
+
+/// Refuses a part that does not fit the machine: placed as the machine says, every
+/// vertex must lie on the bed and below the machine's build height.
+pub(super) fn check_on_bed(
+    machine: &crate::machine::Machine,
+    part: &str,
+    mesh: &Mesh,
+    all: &crate::geom::BBox2,
+) -> Result<()> {
+    let offset = machine.placement_offset(all);
+    let bbox = mesh.bbox();
+    if bbox.is_empty() {
+        return Ok(());
+    }
+    let bed = &machine.bed;
+    let on_bed = match bed.shape {
+        crate::machine::BedShape::Rectangle { .. } => bed.contains_box(
+            &crate::geom::BBox2::from_points([
+                Point2::new(bbox.min.x, bbox.min.y) + offset,
+                Point2::new(bbox.max.x, bbox.max.y) + offset,
+            ]),
+            0.0,
+        ),
+        crate::machine::BedShape::Circle { .. } => mesh
+            .vertices
+            .iter()
+            .all(|v| bed.contains(Point2::new(v.x, v.y) + offset, 0.0)),
+    };
+    if !on_bed {
+        return Err(machine.error(format!(
+            "part `{part}` ({} x {} mm, placed at X {:.1}..{:.1}, Y {:.1}..{:.1}) does not fit the {} bed",
+            short(bbox.max.x - bbox.min.x),
+            short(bbox.max.y - bbox.min.y),
+            bbox.min.x + offset.x,
+            bbox.max.x + offset.x,
+            bbox.min.y + offset.y,
+            bbox.max.y + offset.y,
+            bed.describe()
+        )));
+    }
+    if bbox.max.z > bed.max_height {
+        return Err(machine.error(format!(
+            "part `{part}` is {} mm tall, the machine builds up to {} mm",
+            short(bbox.max.z),
+            bed.max_height
+        )));
+    }
+    Ok(())
+}
