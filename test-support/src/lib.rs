@@ -25,9 +25,11 @@
 use std::path::{Path, PathBuf};
 
 use lamina_core::pipeline::Pipeline;
+use lamina_core::pipeline::TableRef;
 use lamina_core::registry::Registered;
 use lamina_core::runtime::{Engine, RunOptions, RunReport, Silent};
-use lamina_core::{Registry, SourceFile, StageKind};
+use lamina_core::script::ScriptHost;
+use lamina_core::{AnyStage, Registry, SourceFile, StageKind};
 
 // Linked for their registrations.
 use lamina_discretise as _;
@@ -46,6 +48,62 @@ use lamina_sources as _;
 /// the test links.
 pub fn registry() -> Registry {
     Registry::linked().unwrap_or_else(|e| panic!("the linked stages: {e}"))
+}
+
+/// Builds the `kind` stage a table names (`use = "..."` and its options, as a pipeline
+/// table holds them without its header), with scripts and files relative to `dir`.
+pub fn try_stage(kind: StageKind, table: &str, dir: &Path) -> lamina_core::Result<AnyStage> {
+    let table = TableRef::parse_snippet(kind.name(), table)?;
+    let scripts = ScriptHost::new(dir, Default::default());
+    registry().build(kind, &table, &scripts, dir)
+}
+
+/// [`try_stage`], which must build.
+pub fn stage(kind: StageKind, table: &str, dir: &Path) -> AnyStage {
+    try_stage(kind, table, dir).unwrap_or_else(|e| panic!("[{kind}] {table:?}: {e}"))
+}
+
+macro_rules! typed_stage {
+    ($(#[$doc:meta])* $name:ident, $kind:ident, $trait:ident) => {
+        $(#[$doc])*
+        pub fn $name(table: &str) -> Box<dyn lamina_core::stage::$trait> {
+            match stage(StageKind::$kind, table, Path::new(".")) {
+                AnyStage::$kind(s) => s,
+                other => panic!("[{}] {table:?} built a {} stage", StageKind::$kind, other.kind()),
+            }
+        }
+    };
+}
+
+typed_stage!(
+    /// The slicer a `[slice]` table names.
+    slicer, Slice, Slicer
+);
+typed_stage!(
+    /// The sorter a `[sort]` table names.
+    sorter, Sort, Sorter
+);
+typed_stage!(
+    /// The discretiser a `[discretise]` table names.
+    discretiser, Discretise, Discretiser
+);
+typed_stage!(
+    /// The grader a `[grade]` table names.
+    grader, Grade, Grader
+);
+typed_stage!(
+    /// The planner a `[plan]` table names.
+    planner, Plan, Planner
+);
+
+/// The meshes of the model a `[model]` table names, read relative to `dir`.
+pub fn meshes(table: &str, dir: &Path) -> Vec<lamina_core::Mesh> {
+    match stage(StageKind::Model, table, dir) {
+        AnyStage::Model(source) => source
+            .load(dir)
+            .unwrap_or_else(|e| panic!("[model] {table:?}: {e}")),
+        other => panic!("[model] {table:?} built a {} stage", other.kind()),
+    }
 }
 
 /// The model every example runs on: a tube 2 mm high (20 mm across, 14 mm bore).

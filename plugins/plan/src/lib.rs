@@ -494,7 +494,7 @@ lamina_core::register_stage!(StageFactory {
                 "compare",
                 "bool",
                 "false",
-                "add a layer warning with the sequential build time"
+                "add a note to each layer with the sequential build time"
             ),
             OptionSpec::new(
                 "priority",

@@ -3,78 +3,25 @@
 //! are `#[ignore]`d in the ordinary suite and run by .ci/run in release mode; they skip
 //! with a printed note when the models are absent.
 
-use std::path::PathBuf;
 use std::sync::Arc;
 
+use crate::support::{models_dir, skip};
 use lamina_core::stage::{MeshSlicer, Slicer};
-use lamina_core::{Contour, Mesh, Point2, Registry, RunInfo, StageKind};
-
-fn models_dir() -> Option<PathBuf> {
-    let dir = std::env::var_os("LAMINA_MODELS")
-        .map(PathBuf::from)
-        .unwrap_or_else(|| PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../shared/models"));
-    if dir.is_dir() {
-        Some(dir)
-    } else {
-        println!("note: {} not found; acceptance test skipped", dir.display());
-        None
-    }
-}
-
-fn registry() -> Registry {
-    // Reference the plugin crates so their stages are linked into this test.
-    use lamina_discretise as _;
-    use lamina_model as _;
-    use lamina_slice as _;
-    use lamina_sort as _;
-    use lamina_sources as _;
-    Registry::linked().expect("registry")
-}
+use lamina_core::{Contour, Mesh, Point2, RunInfo};
 
 fn load(dir: &std::path::Path, file: &str, scale: f64) -> Mesh {
-    let table =
-        lamina_core::pipeline::TableRef::parse_snippet("model", &format!("use = \"stl\"\nfile = \"{file}\""))
-            .expect("snippet");
-    let scripts = lamina_core::script::ScriptHost::new(dir, Default::default());
-    let stage = registry()
-        .build(StageKind::Model, &table, &scripts, dir)
-        .expect("builds");
-    let lamina_core::AnyStage::Model(source) = stage else {
-        panic!("not a model source")
-    };
-    let mut meshes = source.load(dir).expect("loads");
+    let mut meshes = lamina_test_support::meshes(&format!("use = \"stl\"\nfile = \"{file}\""), dir);
     lamina_core::runtime::place(&mut meshes, scale, lamina_core::pipeline::Placement::Bed);
     assert_eq!(meshes.len(), 1);
     meshes.remove(0)
 }
 
 fn slicer(thickness: f64) -> Box<dyn Slicer> {
-    let table = lamina_core::pipeline::TableRef::parse_snippet(
-        "slice",
-        &format!("use = \"uniform\"\nthickness = {thickness}"),
-    )
-    .expect("snippet");
-    let scripts = lamina_core::script::ScriptHost::new(".", Default::default());
-    match registry()
-        .build(StageKind::Slice, &table, &scripts, std::path::Path::new("."))
-        .expect("slicer")
-    {
-        lamina_core::AnyStage::Slice(s) => s,
-        _ => panic!("not a slicer"),
-    }
+    lamina_test_support::slicer(&format!("use = \"uniform\"\nthickness = {thickness}"))
 }
 
 fn sorter() -> Box<dyn lamina_core::stage::Sorter> {
-    let table =
-        lamina_core::pipeline::TableRef::parse_snippet("sort", "use = \"hierarchy\"").expect("snippet");
-    let scripts = lamina_core::script::ScriptHost::new(".", Default::default());
-    match registry()
-        .build(StageKind::Sort, &table, &scripts, std::path::Path::new("."))
-        .expect("sorter")
-    {
-        lamina_core::AnyStage::Sort(s) => s,
-        _ => panic!("not a sorter"),
-    }
+    lamina_test_support::sorter("use = \"hierarchy\"")
 }
 
 /// Proper crossings between edges of the given contours (shared endpoints excluded),
@@ -206,7 +153,7 @@ fn real_models_slice_into_closed_simple_nested_contours() {
     for m in MODELS {
         let path = dir.join(m.file);
         if !path.exists() {
-            println!("note: {} absent, skipped", path.display());
+            skip(&format!("{} not found", path.display()));
             continue;
         }
         let start = std::time::Instant::now();
@@ -296,15 +243,7 @@ fn real_models_slice_into_closed_simple_nested_contours() {
 }
 
 fn discretiser(text: &str) -> Box<dyn lamina_core::stage::Discretiser> {
-    let table = lamina_core::pipeline::TableRef::parse_snippet("discretise", text).expect("snippet");
-    let scripts = lamina_core::script::ScriptHost::new(".", Default::default());
-    match registry()
-        .build(StageKind::Discretise, &table, &scripts, std::path::Path::new("."))
-        .expect("discretiser")
-    {
-        lamina_core::AnyStage::Discretise(d) => d,
-        _ => panic!("not a discretiser"),
-    }
+    lamina_test_support::discretiser(text)
 }
 
 /// OGC validity (simple rings, holes inside their outer and touching it at most at a
@@ -341,7 +280,7 @@ fn real_models_discretise_into_tiling_sub_regions() {
     for m in MODELS {
         let path = dir.join(m.file);
         if !path.exists() {
-            println!("note: {} absent, skipped", path.display());
+            skip(&format!("{} not found", path.display()));
             continue;
         }
         let start = std::time::Instant::now();

@@ -1,23 +1,9 @@
 //! The `lamina` command line as users and scripts rely on it: exit codes, error
 //! positions, listings, and outputs that do not depend on the thread count.
 
+use crate::support::{lamina, pipelines, text};
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
-
-fn lamina(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_lamina"))
-        .args(args)
-        .output()
-        .expect("lamina runs")
-}
-
-fn pipelines() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("pipelines")
-}
-
-fn text(out: &[u8]) -> String {
-    String::from_utf8_lossy(out).into_owned()
-}
+use std::process::Output;
 
 #[test]
 fn version_is_printed() {

@@ -3,6 +3,7 @@
 //! ASCII commands or binary commands: a little-endian u16 command index followed by
 //! its parameters). The contours it reads must give the plan's areas.
 
+use crate::support::run_text;
 use std::path::Path;
 use std::process::Command;
 
@@ -163,17 +164,7 @@ fn signed_area(points: &[[f64; 2]]) -> f64 {
 
 fn run(pipeline: &str) -> (tempfile::TempDir, serde_json::Value) {
     let dir = tempfile::tempdir().expect("tempdir");
-    let path = dir.path().join("p.toml");
-    std::fs::write(&path, pipeline).expect("write");
-    let out = Command::new(env!("CARGO_BIN_EXE_lamina"))
-        .args(["run", "--quiet", "--out"])
-        .arg(dir.path().join("out"))
-        .arg(&path)
-        .output()
-        .expect("lamina runs");
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
-    let plan = std::fs::read_to_string(dir.path().join("out/plan.json")).expect("json");
-    let plan = serde_json::from_str(&plan).expect("valid json");
+    let plan = run_text(dir.path(), pipeline, "plan.json");
     (dir, plan)
 }
 

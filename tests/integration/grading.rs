@@ -2,23 +2,11 @@
 //! colour table along Z (topological-hierarchy-fgm Fig. 3) and the wave function of
 //! Fig. 4.
 
-use std::path::Path;
-use std::process::Command;
+use crate::support::{pipelines, run_plan};
 
 fn run(pipeline: &str, json: &str) -> serde_json::Value {
     let dir = tempfile::tempdir().expect("tempdir");
-    let path = Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("pipelines")
-        .join(pipeline);
-    let out = Command::new(env!("CARGO_BIN_EXE_lamina"))
-        .args(["run", "--quiet", "--out"])
-        .arg(dir.path())
-        .arg(&path)
-        .output()
-        .expect("lamina runs");
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
-    let text = std::fs::read_to_string(dir.path().join(json)).expect("json written");
-    serde_json::from_str(&text).expect("valid json")
+    run_plan(&pipelines().join(pipeline), dir.path(), &[], json)
 }
 
 /// Colour and red fraction of one region.

@@ -3,29 +3,13 @@
 //! through the model stages with the same triangles.
 
 use std::path::Path;
-use std::process::{Command, Output};
+use std::process::Output;
 
-use lamina_core::{AnyStage, Mesh, Registry, StageKind};
+use crate::support::lamina;
+use lamina_core::{Mesh, StageKind};
 
 fn model(text: &str) -> Vec<Mesh> {
-    use lamina_model as _;
-    let table = lamina_core::pipeline::TableRef::parse_snippet("model", text).expect("snippet");
-    let scripts = lamina_core::script::ScriptHost::new(".", Default::default());
-    let stage = Registry::linked()
-        .expect("registry")
-        .build(StageKind::Model, &table, &scripts, Path::new("."))
-        .unwrap_or_else(|e| panic!("{text}: {e}"));
-    let AnyStage::Model(m) = stage else {
-        panic!("not a model")
-    };
-    m.load(Path::new(".")).expect("loads")
-}
-
-fn lamina(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_lamina"))
-        .args(args)
-        .output()
-        .expect("lamina runs")
+    lamina_test_support::meshes(text, Path::new("."))
 }
 
 fn closed(m: &Mesh) {
@@ -109,16 +93,8 @@ fn blade_options_are_checked_and_named() {
         ("thickness = 0.6", "thickness"),
         ("chord = -1.0", "chord"),
     ] {
-        let table =
-            lamina_core::pipeline::TableRef::parse_snippet("model", &format!("use = \"blade\"\n{text}"))
-                .expect("snippet");
-        let scripts = lamina_core::script::ScriptHost::new(".", Default::default());
-        let e = match Registry::linked().expect("registry").build(
-            StageKind::Model,
-            &table,
-            &scripts,
-            Path::new("."),
-        ) {
+        let blade = format!("use = \"blade\"\n{text}");
+        let e = match lamina_test_support::try_stage(StageKind::Model, &blade, Path::new(".")) {
             Ok(_) => panic!("{text} accepted"),
             Err(e) => e,
         };

@@ -3,7 +3,8 @@
 //! the two-material 3DBenchy are re-simulated here, segment by segment, and no two tool
 //! envelopes may ever overlap; each tool's motion must be continuous in time.
 
-use std::path::{Path, PathBuf};
+use crate::support::model;
+use std::path::Path;
 use std::process::Command;
 
 /// One tool's motion: (t, x, y) breakpoints in time order.
@@ -137,19 +138,10 @@ fn concurrent_tools_never_collide_on_the_assembly() {
     println!("{checked} tool pairs checked; closest approach {closest_seen:.3} mm");
 }
 
-/// The folder of the real models, when present.
-fn models_dir() -> Option<PathBuf> {
-    let dir = std::env::var_os("LAMINA_MODELS")
-        .map(PathBuf::from)
-        .unwrap_or_else(|| PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../shared/models"));
-    dir.join("3DBenchy.stl").is_file().then_some(dir)
-}
-
 #[test]
 #[ignore = "needs ../shared/models/3DBenchy.stl; run with --ignored"]
 fn concurrent_tools_never_collide_on_the_two_material_benchy() {
-    let Some(models) = models_dir() else {
-        println!("note: 3DBenchy.stl not found; the Benchy collision check is skipped");
+    let Some(benchy) = model("3DBenchy.stl") else {
         return;
     };
     let source = Path::new(env!("CARGO_MANIFEST_DIR")).join("pipelines/benchy-two-tools.toml");
@@ -157,7 +149,7 @@ fn concurrent_tools_never_collide_on_the_two_material_benchy() {
         toml::from_str(&std::fs::read_to_string(&source).expect("pipeline")).expect("toml");
     // The shipped pipeline with the model from `models` and a JSON Lines plan instead
     // of G-code, read one layer at a time.
-    let model = models.join("3DBenchy.stl").canonicalize().expect("model path");
+    let model = benchy.canonicalize().expect("model path");
     table["model"]
         .as_table_mut()
         .expect("[model]")

@@ -20,6 +20,6 @@ fn pipeline_reference_is_current() {
     let current = std::fs::read_to_string(&path).unwrap_or_default();
     assert!(
         current == generated,
-        "docs/pipeline-reference.md is out of date: run `LAMINA_UPDATE_DOCS=1 cargo test --test docs`"
+        "docs/pipeline-reference.md is out of date: run `LAMINA_UPDATE_DOCS=1 cargo test --test integration docs::`"
     );
 }

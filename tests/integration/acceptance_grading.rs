@@ -6,20 +6,9 @@
 //! tests are `#[ignore]`d in the ordinary suite and run by .ci/run; they skip with a
 //! printed note when the models are absent.
 
-use std::path::{Path, PathBuf};
+use crate::support::{models_dir, skip};
+use std::path::Path;
 use std::process::Command;
-
-fn models_dir() -> Option<PathBuf> {
-    let dir = std::env::var_os("LAMINA_MODELS")
-        .map(PathBuf::from)
-        .unwrap_or_else(|| PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../shared/models"));
-    if dir.is_dir() {
-        Some(dir.canonicalize().unwrap_or(dir))
-    } else {
-        println!("note: {} not found; grading acceptance skipped", dir.display());
-        None
-    }
-}
 
 /// (file, scale to mm, layer thickness): a few dozen layers each.
 const MODELS: [(&str, f64, f64); 10] = [
@@ -117,7 +106,7 @@ fn every_region_of_every_model_has_a_valid_composition() {
     let dir = tempfile::tempdir().expect("tempdir");
     for (file, scale, thickness) in MODELS {
         if !models.join(file).exists() {
-            println!("note: {file} absent; skipped");
+            skip(&format!("{file} not found in the models folder"));
             continue;
         }
         let started = std::time::Instant::now();

@@ -2,26 +2,19 @@
 //! gives, and with three sources every region's composition is what Eq. 2 and 8 give
 //! at its reference point, recomputed here independently.
 
+use crate::support::run_text;
 use std::path::Path;
-use std::process::Command;
 
+/// Runs a pipeline's text; its JSON plan is `plan.json` or, for the example, the
+/// example's own.
 fn run(pipeline_text: &str) -> serde_json::Value {
     let dir = tempfile::tempdir().expect("tempdir");
-    let path = dir.path().join("p.toml");
-    std::fs::write(&path, pipeline_text).expect("write");
-    let out = Command::new(env!("CARGO_BIN_EXE_lamina"))
-        .args(["run", "--quiet", "--out"])
-        .arg(dir.path().join("out"))
-        .arg(&path)
-        .output()
-        .expect("lamina runs");
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
-    let json = std::fs::read_dir(dir.path().join("out"))
-        .expect("out")
-        .filter_map(|e| e.ok())
-        .find(|e| e.path().extension().is_some_and(|x| x == "json"))
-        .expect("a json output");
-    serde_json::from_str(&std::fs::read_to_string(json.path()).expect("read")).expect("valid json")
+    let json = if pipeline_text.contains("grading-sources.json") {
+        "grading-sources.json"
+    } else {
+        "plan.json"
+    };
+    run_text(dir.path(), pipeline_text, json)
 }
 
 fn regions(layer: &serde_json::Value) -> Vec<&serde_json::Value> {

@@ -11,16 +11,9 @@
 //! skip with a note, unless `LAMINA_REQUIRE` is set (as `.ci/run` does), where a skip is
 //! a failure.
 
+use crate::support::{model, root, skip};
 use std::path::{Path, PathBuf};
 use std::process::Command;
-
-fn root() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-}
-
-fn required() -> bool {
-    std::env::var_os("LAMINA_REQUIRE").is_some_and(|v| !v.is_empty() && v != "0")
-}
 
 /// Whether the checker's Python dependencies are there; a note (or a failure under
 /// `LAMINA_REQUIRE`) when not.
@@ -30,11 +23,7 @@ fn checker_ready() -> bool {
         .output()
         .is_ok_and(|o| o.status.success());
     if !ok {
-        assert!(
-            !required(),
-            "LAMINA_REQUIRE is set but python3 with numpy, shapely and trimesh is missing"
-        );
-        eprintln!("note: python3 with numpy, shapely and trimesh not found; G-code replay skipped");
+        skip("python3 with numpy, shapely and trimesh is missing (the G-code replay checker)");
     }
     ok
 }
@@ -323,20 +312,10 @@ fn three_material_blade_on_a_mixing_head_replays() {
 #[test]
 #[ignore = "needs ../shared/models/3DBenchy.stl"]
 fn benchy_replays_on_every_machine() {
-    let models = std::env::var("LAMINA_MODELS")
-        .map(PathBuf::from)
-        .unwrap_or_else(|_| root().join("../shared/models"));
-    let models = std::fs::canonicalize(&models).unwrap_or(models);
-    if !models.join("3DBenchy.stl").exists() {
-        assert!(
-            !required(),
-            "LAMINA_REQUIRE is set but {} has no 3DBenchy.stl",
-            models.display()
-        );
-        eprintln!("note: {} has no 3DBenchy.stl; skipped", models.display());
+    let Some(benchy) = model("3DBenchy.stl") else {
         return;
-    }
-    let file = format!("model.file=\"{}\"", models.join("3DBenchy.stl").display());
+    };
+    let file = format!("model.file=\"{}\"", benchy.display());
     replay("pipelines/benchy-two-tools.toml", None, &[&file], 10);
     replay(
         "pipelines/benchy-two-tools.toml",
@@ -411,11 +390,7 @@ fn prusa_slicer_and_lamina_deposit_the_same_volume_for_the_gear() {
     }
     let prusa = Command::new("prusa-slicer").arg("--help").output();
     if prusa.is_err() {
-        assert!(
-            !required(),
-            "LAMINA_REQUIRE is set but prusa-slicer is not installed (Debian package prusa-slicer)"
-        );
-        eprintln!("note: prusa-slicer not found; the reference volume check skipped");
+        skip("prusa-slicer is not installed (Debian package prusa-slicer)");
         return;
     }
     let dir = tempfile::tempdir().expect("temp dir");

@@ -3,20 +3,9 @@
 //! and runs the pipeline the crate comes with. Every kind with a template is built and
 //! tested; the grader's output is checked against what its template computes.
 
+use crate::support::{lamina_in, root};
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
-
-fn root() -> &'static Path {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
-}
-
-fn lamina(dir: &Path, args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_lamina"))
-        .current_dir(dir)
-        .args(args)
-        .output()
-        .expect("lamina runs")
-}
+use std::process::Command;
 
 /// Where the scaffolded crates build: one folder for all, so their dependencies are
 /// compiled once.
@@ -57,13 +46,13 @@ fn library(name: &str) -> PathBuf {
 /// Scaffolds, builds and tests a crate of `kind`, then runs its pipeline with the
 /// library loaded; returns the crate's folder and the run's output folder.
 fn scaffold(work: &Path, name: &str, kind: &str) -> (PathBuf, PathBuf) {
-    let out = lamina(work, &["new-plugin", name, "--kind", kind]);
+    let out = lamina_in(work, &["new-plugin", name, "--kind", kind]);
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
     let krate = work.join(name);
     cargo(&krate, &["build", "--quiet"]);
     cargo(&krate, &["test", "--quiet"]);
     let lib = library(name);
-    let listed = lamina(
+    let listed = lamina_in(
         &krate,
         &["plugins", kind, "--plugin", lib.to_str().expect("utf-8")],
     );
@@ -73,7 +62,7 @@ fn scaffold(work: &Path, name: &str, kind: &str) -> (PathBuf, PathBuf) {
         "{}",
         String::from_utf8_lossy(&listed.stdout)
     );
-    let run = lamina(
+    let run = lamina_in(
         &krate,
         &[
             "run",
@@ -122,7 +111,7 @@ fn the_plugin_guide_works_from_scaffold_to_a_loaded_plugin() {
         }
     }
     // A second scaffold into the same folder is refused and leaves the first alone.
-    let again = lamina(work.path(), &["new-plugin", "my-grader"]);
+    let again = lamina_in(work.path(), &["new-plugin", "my-grader"]);
     assert_eq!(again.status.code(), Some(2));
     assert!(String::from_utf8_lossy(&again.stderr).contains("exists already"));
 }
@@ -145,7 +134,7 @@ fn every_template_builds_tests_and_runs() {
     assert_eq!(lines.next(), Some("layer,z,part,family,region,area,red,green"));
     assert_eq!(lines.count(), 4, "{csv}");
     // No template for a kind is a clear refusal.
-    let refused = lamina(work.path(), &["new-plugin", "my-slicer", "--kind", "slice"]);
+    let refused = lamina_in(work.path(), &["new-plugin", "my-slicer", "--kind", "slice"]);
     assert_eq!(refused.status.code(), Some(2));
     let err = String::from_utf8_lossy(&refused.stderr);
     assert!(

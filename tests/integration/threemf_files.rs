@@ -2,6 +2,7 @@
 //! (every region a closed prism, the volumes add up), and by lib3mf when its Python
 //! package is installed (skipped with a note when it is not).
 
+use crate::support::{run_text, skip};
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
@@ -13,20 +14,8 @@ fn run(dir: &Path) -> (PathBuf, serde_json::Value) {
         [slice]\nuse = \"uniform\"\nthickness = 0.5\n\
         [[output]]\nuse = \"json\"\npath = \"plan.json\"\n\
         [[output]]\nuse = \"3mf\"\npath = \"plan.3mf\"\n";
-    let path = dir.join("p.toml");
-    std::fs::write(&path, pipeline).expect("write");
-    let out = Command::new(env!("CARGO_BIN_EXE_lamina"))
-        .args(["run", "--quiet", "--out"])
-        .arg(dir.join("out"))
-        .arg(&path)
-        .output()
-        .expect("lamina runs");
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
-    let plan = std::fs::read_to_string(dir.join("out/plan.json")).expect("json");
-    (
-        dir.join("out/plan.3mf"),
-        serde_json::from_str(&plan).expect("valid json"),
-    )
+    let plan = run_text(dir, pipeline, "plan.json");
+    (dir.join("out/plan.3mf"), plan)
 }
 
 #[test]
@@ -56,7 +45,7 @@ fn regions_are_closed_prisms_with_the_plans_volume() {
 fn lib3mf_opens_the_package() {
     let probe = Command::new("python3").args(["-c", "import lib3mf"]).output();
     if !probe.map(|o| o.status.success()).unwrap_or(false) {
-        println!("note: the lib3mf Python package is not installed; skipping (pip install lib3mf)");
+        skip("the lib3mf Python package is not installed (pip install lib3mf)");
         return;
     }
     let dir = tempfile::tempdir().expect("tempdir");

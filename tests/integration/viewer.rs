@@ -3,6 +3,7 @@
 //! and a region's composition, taking a screenshot). The Chromium test is skipped with
 //! a printed reason when no Chromium is installed.
 
+use crate::support::{run_text, skip};
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
@@ -15,16 +16,7 @@ const PIPELINE: &str = "name = \"viewer-test\"\n[model]\nuse = \"tube\"\nouter_r
     [[output]]\nuse = \"svg\"\npath = \"svg/layer\"\n";
 
 fn run(dir: &Path) -> serde_json::Value {
-    let path = dir.join("p.toml");
-    std::fs::write(&path, PIPELINE).expect("write");
-    let out = Command::new(env!("CARGO_BIN_EXE_lamina"))
-        .args(["run", "--quiet", "--out"])
-        .arg(dir.join("out"))
-        .arg(&path)
-        .output()
-        .expect("lamina runs");
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
-    serde_json::from_str(&std::fs::read_to_string(dir.join("out/plan.json")).expect("json")).expect("valid")
+    run_text(dir, PIPELINE, "plan.json")
 }
 
 fn regions(layer: &serde_json::Value) -> &Vec<serde_json::Value> {
@@ -86,7 +78,7 @@ fn headless(browser: &Path, profile: &Path) -> Command {
 #[test]
 fn the_viewer_shows_the_chosen_layer_and_a_regions_composition_in_chromium() {
     let Some(browser) = chromium() else {
-        println!("note: no Chromium installed (Debian: apt-get install chromium); viewer test skipped");
+        skip("no Chromium is installed (Debian: apt-get install chromium)");
         return;
     };
     let dir = tempfile::tempdir().expect("tempdir");

@@ -3,15 +3,9 @@
 //! refused with its name and the bed's size; a model in metres is refused with the fix;
 //! an inline machine extends a built-in one.
 
+use crate::support::{lamina, text};
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
-
-fn lamina(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_lamina"))
-        .args(args)
-        .output()
-        .expect("lamina runs")
-}
+use std::process::Output;
 
 /// `lamina run --quiet` of `pipeline` into `out`.
 fn run(pipeline: &Path, out: &Path) -> Output {
@@ -22,10 +16,6 @@ fn run(pipeline: &Path, out: &Path) -> Output {
         &out.to_string_lossy(),
         &pipeline.to_string_lossy(),
     ])
-}
-
-fn text(out: &[u8]) -> String {
-    String::from_utf8_lossy(out).into_owned()
 }
 
 fn write(dir: &Path, name: &str, text: &str) -> PathBuf {

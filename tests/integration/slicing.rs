@@ -5,18 +5,10 @@ use std::path::Path;
 use std::sync::Arc;
 
 use lamina_core::stage::{MeshSlicer, Sorter};
-use lamina_core::{AnyStage, LayerSlot, Mesh, Registry, StageKind};
+use lamina_core::{AnyStage, LayerSlot, Mesh, StageKind};
 
 fn stage(kind: StageKind, text: &str) -> AnyStage {
-    use lamina_model as _;
-    use lamina_slice as _;
-    use lamina_sort as _;
-    let table = lamina_core::pipeline::TableRef::parse_snippet(kind.name(), text).expect("snippet");
-    let scripts = lamina_core::script::ScriptHost::new(".", Default::default());
-    Registry::linked()
-        .expect("registry")
-        .build(kind, &table, &scripts, Path::new("."))
-        .expect("builds")
+    lamina_test_support::stage(kind, text, Path::new("."))
 }
 
 fn model(text: &str) -> Vec<Mesh> {

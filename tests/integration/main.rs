@@ -1,0 +1,35 @@
+//! Lamina's integration tests, one binary (as ripgrep keeps its own): each module
+//! tests one side of the program through the `lamina` binary or the library, and
+//! `support` holds what they share (running the binary, the example pipelines, the
+//! real models, skipping with a note or, under `LAMINA_REQUIRE`, failing).
+//!
+//! Run one module with `cargo test --test integration cli::`; the real-model
+//! acceptance tests are `#[ignore]`d: `LAMINA_MODELS=../shared/models cargo test
+//! --test integration -- --ignored`.
+
+mod support;
+
+mod acceptance;
+mod acceptance_grading;
+mod boundary;
+mod cli;
+mod cli_files;
+mod docs;
+mod examples;
+mod gcode_replay;
+mod generate;
+mod grading;
+mod hostile;
+mod linked_plugins;
+mod machine;
+mod orient;
+mod plugins;
+mod properties;
+mod scaffold;
+mod sequence;
+mod slicing;
+mod sources;
+mod stages;
+mod threemf_files;
+mod toolpaths;
+mod viewer;

@@ -1,0 +1,106 @@
+//! What the integration tests share: the `lamina` binary, the repository's folders,
+//! the real models of `../shared/models`, and the rule for what a test needs but may
+//! not find (skip with a note; fail under `LAMINA_REQUIRE`, as `.ci/run` sets it).
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+/// The repository's root.
+pub fn root() -> &'static Path {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+}
+
+/// The example pipelines.
+pub fn pipelines() -> PathBuf {
+    root().join("pipelines")
+}
+
+/// Runs the `lamina` binary with `args` in the current folder.
+pub fn lamina(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_lamina"))
+        .args(args)
+        .output()
+        .expect("lamina runs")
+}
+
+/// Runs the `lamina` binary with `args` in `dir`.
+pub fn lamina_in(dir: &Path, args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_lamina"))
+        .current_dir(dir)
+        .args(args)
+        .output()
+        .expect("lamina runs")
+}
+
+/// A process's output as text.
+pub fn text(out: &[u8]) -> String {
+    String::from_utf8_lossy(out).into_owned()
+}
+
+/// `lamina run --quiet --out <out> <pipeline> [extra]`, which must succeed, and the
+/// JSON plan it wrote as `json` (a path under `out`).
+pub fn run_plan(pipeline: &Path, out: &Path, extra: &[&str], json: &str) -> serde_json::Value {
+    let mut args = vec!["run", "--quiet", "--out"];
+    let out_str = out.to_str().expect("utf-8 path");
+    let pipeline_str = pipeline.to_str().expect("utf-8 path");
+    args.extend([out_str, pipeline_str]);
+    args.extend(extra);
+    let o = lamina(&args);
+    assert!(
+        o.status.success(),
+        "lamina run {}: {}",
+        pipeline.display(),
+        text(&o.stderr)
+    );
+    read_json(&out.join(json))
+}
+
+/// Writes `text` as `dir/p.toml` and runs it into `dir/out` (which must succeed);
+/// returns the JSON plan the pipeline writes as `json`.
+pub fn run_text(dir: &Path, text: &str, json: &str) -> serde_json::Value {
+    let path = dir.join("p.toml");
+    std::fs::write(&path, text).expect("pipeline written");
+    run_plan(&path, &dir.join("out"), &[], json)
+}
+
+/// A JSON file, parsed.
+pub fn read_json(path: &Path) -> serde_json::Value {
+    let s = std::fs::read_to_string(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+    serde_json::from_str(&s).unwrap_or_else(|e| panic!("{}: {e}", path.display()))
+}
+
+/// Whether what the tests need must be there (`LAMINA_REQUIRE` set and not `0`).
+pub fn required() -> bool {
+    std::env::var_os("LAMINA_REQUIRE").is_some_and(|v| !v.is_empty() && v != "0")
+}
+
+/// A test that cannot run here: a note, or under `LAMINA_REQUIRE` a failure.
+pub fn skip(what: &str) {
+    assert!(!required(), "LAMINA_REQUIRE is set, but {what}");
+    println!("note: {what}; skipped");
+}
+
+/// `../shared/models` (or `LAMINA_MODELS`), when it exists; otherwise the test skips
+/// (or fails under `LAMINA_REQUIRE`).
+pub fn models_dir() -> Option<PathBuf> {
+    let dir = std::env::var_os("LAMINA_MODELS")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| root().join("../shared/models"));
+    if dir.is_dir() {
+        Some(dir.canonicalize().unwrap_or(dir))
+    } else {
+        skip(&format!("{} not found", dir.display()));
+        None
+    }
+}
+
+/// A model of `models_dir()`, when it is there; otherwise the test skips (or fails).
+pub fn model(name: &str) -> Option<PathBuf> {
+    let path = models_dir()?.join(name);
+    if path.is_file() {
+        Some(path)
+    } else {
+        skip(&format!("{} not found", path.display()));
+        None
+    }
+}
