@@ -18,7 +18,7 @@ fn default_mark(registry: &Registry, r: &Registered) -> String {
     let info = r.info();
     if registry.default_for(info.kind) == Some(info.name) {
         format!(
-            " (the default: a pipeline without a [{}] table uses it)",
+            " The default: a pipeline without a [{}] table uses it.",
             info.kind
         )
     } else {

@@ -49,8 +49,15 @@ impl Engine {
             }
             (None, _) => None,
         };
+        let in_layer = |pi: usize| region_parts.is_none_or(|rp| rp.contains(&pi));
+        // Parts still to come that read each mesh's cut: the last one takes the cut
+        // into its part layer rather than copying it.
+        let mut readers = vec![0usize; prepared.len()];
+        for pi in (0..self.parts.len()).filter(|&pi| in_layer(pi)) {
+            readers[part_mesh[pi]] += 1;
+        }
         for (pi, p) in self.parts.iter().enumerate() {
-            if region_parts.is_some_and(|rp| !rp.contains(&pi)) {
+            if !in_layer(pi) {
                 continue;
             }
             let mi = part_mesh[pi];
@@ -71,10 +78,24 @@ impl Engine {
             }
             let Some((layer, tree)) = &cut[mi] else { continue };
             let families = selections.families(pi, slot.index, layer, tree, part_mesh);
-            let part_layer = self
-                .process_part(pi, layer, tree, families, shared)
+            let regions = self
+                .process_part(pi, layer, tree, &families, shared)
                 .map_err(|e| e.in_part(&p.name))?;
-            parts.push(part_layer);
+            readers[mi] -= 1;
+            let (contours, tree) = match readers[mi] {
+                0 => match cut[mi].take() {
+                    Some((layer, tree)) => (layer.contours, tree),
+                    None => continue,
+                },
+                _ => (layer.contours.clone(), tree.clone()),
+            };
+            parts.push(PartLayer {
+                part: pi,
+                contours,
+                tree,
+                families,
+                regions,
+            });
         }
         let mut plan = LayerPlan {
             index: slot.index,
@@ -99,15 +120,15 @@ impl Engine {
         pi: usize,
         layer: &Layer,
         tree: &crate::model::ContourTree,
-        families: Vec<usize>,
+        families: &[usize],
         shared: &LayerShared<'_>,
-    ) -> Result<PartLayer> {
+    ) -> Result<Vec<Region>> {
         let (info, timings) = (shared.info, shared.timings);
         let mesh = shared.meshes.get(shared.part_mesh[pi]).map(|m| &**m);
         let p = &self.parts[pi];
         let n_materials = p.materials.len();
         let mut regions = Vec::new();
-        for &f in &families {
+        for &f in families {
             let ctx = FamilyContext {
                 info,
                 layer,
@@ -152,13 +173,7 @@ impl Engine {
             }
             regions.extend(family_regions);
         }
-        Ok(PartLayer {
-            part: pi,
-            contours: layer.contours.clone(),
-            tree: tree.clone(),
-            families,
-            regions,
-        })
+        Ok(regions)
     }
 }
 

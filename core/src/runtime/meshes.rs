@@ -49,12 +49,15 @@ impl Engine {
     }
 }
 
-/// Merges the meshes of a model into one, keeping per-triangle materials.
+/// Merges the meshes of a model into one, keeping per-triangle materials: the names
+/// of all meshes, each triangle's index moved to that list (`u32::MAX` for the
+/// triangles of a mesh without materials).
 pub(super) fn merge(meshes: &[Mesh], name: &str) -> Mesh {
     if meshes.len() == 1 {
         return meshes[0].clone();
     }
     let mut out = Mesh::new(name, Vec::new(), Vec::new());
+    let with_materials = meshes.iter().any(|m| !m.triangle_materials.is_empty());
     for m in meshes {
         let base = out.vertices.len() as u32;
         out.vertices.extend_from_slice(&m.vertices);
@@ -63,8 +66,35 @@ pub(super) fn merge(meshes: &[Mesh], name: &str) -> Mesh {
                 .iter()
                 .map(|t| [t[0] + base, t[1] + base, t[2] + base]),
         );
+        if with_materials {
+            let index: Vec<u32> = m
+                .material_names
+                .iter()
+                .map(|n| match out.material_names.iter().position(|o| o == n) {
+                    Some(i) => i as u32,
+                    None => {
+                        out.material_names.push(n.clone());
+                        (out.material_names.len() - 1) as u32
+                    }
+                })
+                .collect();
+            out.triangle_materials.extend((0..m.triangles.len()).map(|t| {
+                m.triangle_materials
+                    .get(t)
+                    .and_then(|&k| index.get(k as usize).copied())
+                    .unwrap_or(u32::MAX)
+            }));
+        }
     }
     out
+}
+
+/// [`merge`] of meshes nothing else needs: a model of one mesh is moved, not copied.
+pub(super) fn merge_owned(mut meshes: Vec<Mesh>, name: &str) -> Mesh {
+    if meshes.len() == 1 {
+        return meshes.pop().unwrap_or_default();
+    }
+    merge(&meshes, name)
 }
 
 /// Turns every mesh of every model by the orienter's choice, rotating about the
@@ -246,4 +276,34 @@ pub(super) fn check_on_bed(
         )));
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn triangle(names: &[&str], materials: Vec<u32>) -> Mesh {
+        let v = vec![
+            crate::mesh::Point3::new(0.0, 0.0, 0.0),
+            crate::mesh::Point3::new(1.0, 0.0, 0.0),
+            crate::mesh::Point3::new(0.0, 1.0, 0.0),
+        ];
+        let mut m = Mesh::new("t", v, vec![[0, 1, 2]]);
+        m.material_names = names.iter().map(|s| s.to_string()).collect();
+        m.triangle_materials = materials;
+        m
+    }
+
+    #[test]
+    fn merging_keeps_each_triangles_material_by_name() {
+        let a = triangle(&["skin", "core"], vec![1]);
+        let b = triangle(&["core"], vec![0]);
+        let c = triangle(&[], vec![]);
+        let m = merge(&[a, b, c], "all");
+        assert_eq!(m.triangles, vec![[0, 1, 2], [3, 4, 5], [6, 7, 8]]);
+        assert_eq!(m.material_names, vec!["skin", "core"]);
+        assert_eq!(m.triangle_materials, vec![1, 1, u32::MAX]);
+        let plain = merge(&[triangle(&[], vec![]), triangle(&[], vec![])], "plain");
+        assert!(plain.triangle_materials.is_empty() && plain.material_names.is_empty());
+    }
 }

@@ -10,12 +10,12 @@ use rayon::prelude::*;
 
 use super::engine::Engine;
 use super::layer::LayerShared;
-use super::meshes::{check_on_bed, merge, orient, short};
+use super::meshes::{check_on_bed, merge, merge_owned, orient, short};
 use super::report::{Observer, RunReport, Timings};
 use crate::error::{Error, Result};
 use crate::geom::Point2;
 use crate::mesh::{BBox3, Mesh};
-use crate::model::{Diagnostic, LayerPlan, PartInfo};
+use crate::model::{Diagnostic, LayerPlan, LayerSlot, PartInfo};
 use crate::output::AtomicOutputs;
 use crate::stage::*;
 
@@ -52,33 +52,48 @@ impl Engine {
                 say(Diagnostic::warning(StageKind::Model, w.as_str()));
             }
         }
-        let mut meshes: Vec<Arc<Mesh>> = Vec::new();
-        let mut part_mesh = Vec::new();
+        // Parts taking the same mesh of the same model (told apart by `family_at`)
+        // share it: it is cut once per layer. Each distinct mesh is made once, moved out
+        // of the loaded models when nothing else needs it, and the loaded models are
+        // dropped: a run holds each mesh once.
         let mut mesh_keys: Vec<(usize, Option<usize>)> = Vec::new();
-        let mut parts_info = Vec::new();
         for p in &self.parts {
             let model = &loaded[p.model];
-            let mesh = match p.mesh {
-                Some(i) => model.get(i).cloned().ok_or_else(|| {
-                    Error::config(format!(
-                        "part `{}` asks for mesh {i}, but its model holds {} meshes",
-                        p.name,
-                        model.len()
-                    ))
-                })?,
-                None => merge(model, &self.models[p.model].label),
-            };
-            // Parts taking the same mesh of the same model (told apart by `family_at`)
-            // share it: it is cut once per layer.
-            let key = (p.model, p.mesh);
-            let idx = match mesh_keys.iter().position(|k| *k == key) {
-                Some(i) => i,
-                None => {
-                    mesh_keys.push(key);
-                    meshes.push(Arc::new(mesh));
-                    meshes.len() - 1
-                }
-            };
+            if let Some(i) = p.mesh
+                && i >= model.len()
+            {
+                return Err(Error::config(format!(
+                    "part `{}` asks for mesh {i}, but its model holds {} meshes",
+                    p.name,
+                    model.len()
+                )));
+            }
+            if !mesh_keys.contains(&(p.model, p.mesh)) {
+                mesh_keys.push((p.model, p.mesh));
+            }
+        }
+        let meshes: Vec<Arc<Mesh>> = (0..mesh_keys.len())
+            .map(|k| {
+                let (m, which) = mesh_keys[k];
+                // Another key still to be made that reads this model's meshes.
+                let needed_later = mesh_keys[k + 1..].iter().any(|&(o, _)| o == m);
+                let mesh = match which {
+                    Some(i) if needed_later => loaded[m][i].clone(),
+                    Some(i) => std::mem::take(&mut loaded[m][i]),
+                    None if needed_later => merge(&loaded[m], &self.models[m].label),
+                    None => merge_owned(std::mem::take(&mut loaded[m]), &self.models[m].label),
+                };
+                Arc::new(mesh)
+            })
+            .collect();
+        drop(loaded);
+        let mut part_mesh = Vec::new();
+        let mut parts_info = Vec::new();
+        for p in &self.parts {
+            let idx = mesh_keys
+                .iter()
+                .position(|&k| k == (p.model, p.mesh))
+                .unwrap_or_default();
             let bb = meshes[idx].bbox();
             part_mesh.push(idx);
             parts_info.push(PartInfo {
@@ -173,8 +188,9 @@ impl Engine {
         let mut sequential_time: Option<f64> = None;
         let mut fill: Option<(f64, f64)> = None;
         let mut min_fill = 0.0f64;
-        for chunk in slots.chunks(window) {
-            let plans: Vec<Result<LayerPlan>> = pool.install(|| {
+        // One window of layers on the pool.
+        let compute = |chunk: &[LayerSlot]| -> Vec<Result<LayerPlan>> {
+            pool.install(|| {
                 chunk
                     .par_iter()
                     .map(|slot| {
@@ -184,31 +200,48 @@ impl Engine {
                             .map_err(|e| e.in_layer(slot.index, slot.z))
                     })
                     .collect()
-            });
-            for plan in plans {
-                let plan = plan?;
-                for d in &plan.diagnostics {
-                    say(d.clone());
+            })
+        };
+        let compute = &compute;
+        let chunks: Vec<&[LayerSlot]> = slots.chunks(window).collect();
+        // The exporters take window k on this thread while the pool computes window
+        // k + 1: exporting never leaves the workers idle, and at most two windows are
+        // held. Layers still reach the exporters in build order.
+        std::thread::scope(|scope| -> Result<()> {
+            let mut next = chunks.first().map(|&c| scope.spawn(move || compute(c)));
+            let mut k = 0;
+            while let Some(handle) = next.take() {
+                let plans = handle
+                    .join()
+                    .map_err(|_| Error::stage("runtime", "a window of layers stopped with a panic"))?;
+                k += 1;
+                next = chunks.get(k).map(|&c| scope.spawn(move || compute(c)));
+                for plan in plans {
+                    let plan = plan?;
+                    for d in &plan.diagnostics {
+                        say(d.clone());
+                    }
+                    regions += plan.parts.iter().map(|p| p.regions.len()).sum::<usize>();
+                    if let Some(t) = plan.build_time {
+                        *build_time.get_or_insert(0.0) += t;
+                    }
+                    if let Some(t) = plan.sequential_time {
+                        *sequential_time.get_or_insert(0.0) += t;
+                    }
+                    if let Some(f) = plan.fill {
+                        let sum = fill.get_or_insert((0.0, 0.0));
+                        sum.0 += f.deposited * plan.thickness;
+                        sum.1 += f.area * plan.thickness;
+                        min_fill = min_fill.max(f.min_ratio);
+                    }
+                    for sink in &mut sinks {
+                        timings.time(StageKind::Export, || sink.layer(&info, &plan, &mut outputs))?;
+                    }
+                    observer.layer_done(plan.index);
                 }
-                regions += plan.parts.iter().map(|p| p.regions.len()).sum::<usize>();
-                if let Some(t) = plan.build_time {
-                    *build_time.get_or_insert(0.0) += t;
-                }
-                if let Some(t) = plan.sequential_time {
-                    *sequential_time.get_or_insert(0.0) += t;
-                }
-                if let Some(f) = plan.fill {
-                    let sum = fill.get_or_insert((0.0, 0.0));
-                    sum.0 += f.deposited * plan.thickness;
-                    sum.1 += f.area * plan.thickness;
-                    min_fill = min_fill.max(f.min_ratio);
-                }
-                for sink in &mut sinks {
-                    timings.time(StageKind::Export, || sink.layer(&info, &plan, &mut outputs))?;
-                }
-                observer.layer_done(plan.index);
             }
-        }
+            Ok(())
+        })?;
         if let Some((deposited, volume)) = fill
             && volume > 0.0
             && deposited < min_fill * volume

@@ -12,11 +12,18 @@
 mod along_z;
 mod both;
 mod constant;
+/// The name the `script` grader registers under, as a macro so that its example can
+/// name it too (a test fixture builds the same source as a dynamic plugin under
+/// another name).
+macro_rules! script_stage {
+    () => {
+        "script"
+    };
+}
+
 pub mod control;
 mod idw;
 mod in_plane;
 mod script;
 
-/// The name the `script` grader registers under (a test fixture builds the same source
-/// as a dynamic plugin under another name).
-const SCRIPT_STAGE: &str = "script";
+const SCRIPT_STAGE: &str = script_stage!();

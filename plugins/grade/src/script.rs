@@ -53,7 +53,7 @@ lamina_core::register_stage!(StageFactory {
             "string",
             "an expression (e.g. \"sin(r * PI)\") or \"file.rhai#name\"; one number f means [f, 1 - f] for two materials, else an array of one fraction per material"
         )],
-        example: "use = \"script\"\nf = \"clamp01(z / 2.0)\"",
+        example: concat!("use = \"", script_stage!(), "\"\nf = \"clamp01(z / 2.0)\""),
     },
     build,
 });
