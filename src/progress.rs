@@ -24,6 +24,8 @@ struct Group {
     first: Diagnostic,
     layers: Vec<usize>,
     count: usize,
+    /// Whether every one said exactly the first one's words.
+    identical: bool,
 }
 
 /// A message with its numbers left out: the same message about another place.
@@ -83,11 +85,17 @@ impl Group {
         if let Some(p) = &d.part {
             place.push(format!("part `{p}`"));
         }
-        place.push(format!("{} times", self.count));
+        // When the words differ in their numbers, the ones shown are the first's.
+        let first = match (self.identical, d.layer) {
+            (false, Some(l)) => format!(", as on layer {l}"),
+            (false, None) => ", the first shown".to_string(),
+            (true, _) => String::new(),
+        };
         format!(
-            "{}: {}: {} (the first; numbers differ from one to the next)",
+            "{}: {} ({} times{first}): {}",
             d.severity.name(),
             place.join(", "),
+            self.count,
             d.message
         )
     }
@@ -170,12 +178,14 @@ impl Observer for Progress {
             Some(g) => {
                 g.count += 1;
                 g.layers.extend(d.layer);
+                g.identical &= g.first.message == d.message;
             }
             None => groups.push(Group {
                 key,
                 first: d.clone(),
                 layers: d.layer.into_iter().collect(),
                 count: 1,
+                identical: true,
             }),
         }
     }

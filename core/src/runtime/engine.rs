@@ -278,33 +278,23 @@ impl Engine {
             build_default(&registry, StageKind::Sort, &pipeline, &scripts)?,
             Sort
         );
-        let orienter = build_optional(
-            &registry,
-            StageKind::Orient,
-            pipeline.stages.get(&StageKind::Orient),
-            &scripts,
-            &pipeline,
-        )?
-        .map(|s| -> Result<_> { Ok(expect_kind!(s, Orient)) })
-        .transpose()?;
-        let sequencer = build_optional(
-            &registry,
-            StageKind::Sequence,
-            pipeline.stages.get(&StageKind::Sequence),
-            &scripts,
-            &pipeline,
-        )?
-        .map(|s| -> Result<_> { Ok(expect_kind!(s, Sequence)) })
-        .transpose()?;
-        let planner = build_optional(
-            &registry,
-            StageKind::Plan,
-            pipeline.stages.get(&StageKind::Plan),
-            &scripts,
-            &pipeline,
-        )?
-        .map(|s| -> Result<_> { Ok(expect_kind!(s, Plan)) })
-        .transpose()?;
+        // The kinds a pipeline may leave out, each from its top-level table.
+        macro_rules! optional {
+            ($kind:ident) => {
+                build_optional(
+                    &registry,
+                    StageKind::$kind,
+                    pipeline.stages.get(&StageKind::$kind),
+                    &scripts,
+                    &pipeline,
+                )?
+                .map(|s| -> Result<_> { Ok(expect_kind!(s, $kind)) })
+                .transpose()?
+            };
+        }
+        let orienter = optional!(Orient);
+        let sequencer = optional!(Sequence);
+        let planner = optional!(Plan);
         let mut exporters = Vec::new();
         for t in &pipeline.outputs {
             exporters.push(expect_kind!(

@@ -9,9 +9,9 @@
 //! - `zxy`: a Z grading and an X-Y grading at once, combined by weights (Eq. 8);
 //! - `idw`: inverse-distance weighting of materials carried by a family's contours.
 
-mod along_z;
-mod both;
 mod constant;
+mod z;
+mod zxy;
 /// The name the `script` grader registers under, as a macro so that its example can
 /// name it too (a test fixture builds the same source as a dynamic plugin under
 /// another name).
@@ -23,7 +23,7 @@ macro_rules! script_stage {
 
 pub mod control;
 mod idw;
-mod in_plane;
 mod script;
+mod xy;
 
 const SCRIPT_STAGE: &str = script_stage!();

@@ -8,9 +8,9 @@ use lamina_core::stage::{AnyStage, FamilyContext, Grader, OptionSpec, StageConfi
 use lamina_core::{Composition, Error, Region, Result, StageFactory};
 use serde::Deserialize;
 
-use crate::along_z::{Span, level, span};
 use crate::control::{Control, ControlOptions, region_args};
-use crate::in_plane::index_level;
+use crate::xy::index_level;
+use crate::z::{Span, level, span};
 
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
