@@ -7,6 +7,7 @@ use std::path::Path;
 
 /// Files whose types are serialised across the plugin boundary.
 const WIRE_SOURCES: &[&str] = &[
+    "src/diagnostic.rs",
     "src/geom.rs",
     "src/limits.rs",
     "src/machine/mod.rs",

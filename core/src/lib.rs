@@ -5,6 +5,7 @@
 //! This crate knows no concrete algorithm: slicers, sorters, discretisers, graders,
 //! sequencers, planners and exporters live in plugin crates that depend on this one.
 
+pub mod diagnostic;
 pub mod error;
 pub mod geom;
 pub mod limits;
@@ -22,6 +23,7 @@ pub mod stage;
 pub mod steps;
 pub mod surface;
 
+pub use diagnostic::{Diagnostic, Severity};
 pub use error::{Error, Result};
 pub use geom::{BBox2, Contour, Point2, Polygon, Vector2};
 pub use limits::{Limit, Limits};

@@ -6,9 +6,10 @@ use std::sync::Arc;
 use super::engine::Engine;
 use super::families::Selections;
 use super::report::Timings;
+use crate::diagnostic::Diagnostic;
 use crate::error::{Error, Result};
 use crate::mesh::Mesh;
-use crate::model::{Composition, Diagnostic, Layer, LayerPlan, LayerSlot, PartLayer, Region, Sequence};
+use crate::model::{Composition, Layer, LayerPlan, LayerSlot, PartLayer, Region, Sequence};
 use crate::stage::*;
 
 impl Engine {

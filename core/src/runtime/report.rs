@@ -4,7 +4,8 @@ use std::path::PathBuf;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::time::{Duration, Instant};
 
-use crate::model::{Diagnostic, Orientation, Severity};
+use crate::diagnostic::{Diagnostic, Severity};
+use crate::model::Orientation;
 use crate::stage::StageKind;
 
 /// Receives progress from a run. Only the CLI knows the terminal: the runtime reports

@@ -12,10 +12,11 @@ use super::engine::Engine;
 use super::layer::LayerShared;
 use super::meshes::{check_on_bed, merge, merge_owned, orient, short};
 use super::report::{Observer, RunReport, Timings};
+use crate::diagnostic::Diagnostic;
 use crate::error::{Error, Result};
 use crate::geom::Point2;
 use crate::mesh::{BBox3, Mesh};
-use crate::model::{Diagnostic, LayerPlan, LayerSlot, PartInfo};
+use crate::model::{LayerPlan, LayerSlot, PartInfo};
 use crate::output::AtomicOutputs;
 use crate::stage::*;
 
