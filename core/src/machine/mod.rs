@@ -13,9 +13,12 @@
 //! ([`template`]), and what the commands mean is the exporters' business.
 
 pub mod builtin;
+mod check;
 pub mod load;
 mod raw;
 pub mod template;
+mod tools;
+mod validate;
 
 use serde::{Deserialize, Serialize};
 

@@ -1,0 +1,417 @@
+//! A merged machine profile's values, checked and turned into a [`Machine`]: the bed,
+//! temperatures, fan, first layer, retraction, motion, skirt, prime line, wipe tower,
+//! mixer, G-code templates; the tools in [`super::tools`].
+
+use super::check::Check;
+use super::raw::{RawMachine, RawPlacement, RawShape, Switch};
+use super::template::TemplateKind;
+use super::tools::{MAX_BED_TEMPERATURE, check_motion_systems, tools};
+use super::*;
+use crate::error::Result;
+
+pub(super) fn validate(raw: RawMachine, c: &Check<'_>) -> Result<Machine> {
+    let name = c.required(raw.name, "name", "the profile's name")?;
+    if name.trim().is_empty() {
+        return Err(c.err("name", "must not be empty"));
+    }
+    let flavor = c.required(
+        raw.flavor,
+        "flavor",
+        "how the firmware changes material: \"tool-change\", \"marlin-mixing\" or \"reprap-mixing\"",
+    )?;
+    let firmware = match (flavor, raw.firmware) {
+        (Flavor::MarlinMixing, Some(Firmware::RepRapFirmware))
+        | (Flavor::ReprapMixing, Some(Firmware::Marlin)) => {
+            return Err(c.err(
+                "firmware",
+                format!("the `{}` flavor is for another firmware", flavor.name()),
+            ));
+        }
+        (_, Some(f)) => f,
+        (Flavor::ReprapMixing, None) => Firmware::RepRapFirmware,
+        (_, None) => Firmware::Marlin,
+    };
+
+    let raw_bed = c.required(raw.bed, "bed", "the [bed] table (size or diameter, max_height)")?;
+    let shape = match (raw_bed.shape, raw_bed.size, raw_bed.diameter) {
+        (Some(RawShape::Circle), Some(_), _)
+        | (Some(RawShape::Rectangle), _, Some(_))
+        | (None, Some(_), Some(_)) => {
+            return Err(c.err(
+                "bed",
+                "a rectangular bed has `size = [x, y]`, a circular one `diameter`: give one",
+            ));
+        }
+        (Some(RawShape::Rectangle) | None, Some(size), None) => {
+            c.positive(size[0], "bed.size")?;
+            c.positive(size[1], "bed.size")?;
+            BedShape::Rectangle { size }
+        }
+        (Some(RawShape::Circle) | None, None, Some(d)) => BedShape::Circle {
+            diameter: c.positive(d, "bed.diameter")?,
+        },
+        (_, None, None) => {
+            return Err(c.err(
+                "bed.size",
+                "missing: `size = [x, y]` (mm), or `diameter` for a round bed",
+            ));
+        }
+    };
+    let origin = raw_bed.origin.unwrap_or(match shape {
+        BedShape::Rectangle { .. } => BedOrigin::FrontLeft,
+        BedShape::Circle { .. } => BedOrigin::Centre,
+    });
+    let max_height = c.positive(
+        c.required(
+            raw_bed.max_height,
+            "bed.max_height",
+            "how high the machine builds (mm)",
+        )?,
+        "bed.max_height",
+    )?;
+    let bed = Bed {
+        shape,
+        origin,
+        max_height,
+    };
+    let placement = match raw.placement.unwrap_or(RawPlacement::Centre) {
+        RawPlacement::Centre => BedPlacement::Centre,
+        RawPlacement::At(p) => {
+            if !bed.contains(Point2::new(p[0], p[1]), 0.0) {
+                return Err(c.err(
+                    "placement",
+                    format!("[{}, {}] is not on the {} bed", p[0], p[1], bed.describe()),
+                ));
+            }
+            BedPlacement::At(p)
+        }
+    };
+
+    let nozzle_diameter = c.within(
+        raw.nozzle_diameter.unwrap_or(0.4),
+        0.05,
+        3.0,
+        "nozzle_diameter",
+        "mm",
+    )?;
+    let filament_diameter = c.within(
+        raw.filament_diameter.unwrap_or(1.75),
+        0.5,
+        5.0,
+        "filament_diameter",
+        "mm",
+    )?;
+    let bed_temperature = c.within(
+        raw.bed_temperature.unwrap_or(0.0),
+        0.0,
+        MAX_BED_TEMPERATURE,
+        "bed_temperature",
+        "°C",
+    )?;
+    let first_layer_bed_temperature = c.within(
+        raw.first_layer_bed_temperature.unwrap_or(bed_temperature),
+        0.0,
+        MAX_BED_TEMPERATURE,
+        "first_layer_bed_temperature",
+        "°C",
+    )?;
+
+    let tools = tools(raw.tools, flavor, c)?;
+    let raw_fan = raw.fan.unwrap_or_default();
+    let fan = Fan {
+        speed: c.within(raw_fan.speed.unwrap_or(100.0), 0.0, 100.0, "fan.speed", "%")?,
+        first_layer: raw_fan.first_layer.unwrap_or(false),
+        full_speed_layer: raw_fan.full_speed_layer.unwrap_or(1),
+    };
+    let raw_first = raw.first_layer.unwrap_or_default();
+    let max_layer_height = c.within(
+        raw.max_layer_height.unwrap_or(0.75 * nozzle_diameter),
+        0.01,
+        nozzle_diameter,
+        "max_layer_height",
+        "mm (at most the nozzle's bore)",
+    )?;
+    let first_layer = FirstLayer {
+        height: raw_first
+            .height
+            .map(|h| {
+                c.within(
+                    h,
+                    0.01,
+                    max_layer_height,
+                    "first_layer.height",
+                    "mm (at most max_layer_height)",
+                )
+            })
+            .transpose()?,
+        speed: match (raw_first.speed, raw_first.speed_factor) {
+            (Some(_), Some(_)) => {
+                return Err(c.err("first_layer", "give `speed` (mm/s) or `speed_factor`, not both"));
+            }
+            (Some(s), None) => FirstLayerSpeed::Speed(c.positive(s, "first_layer.speed")?),
+            (None, Some(f)) => {
+                FirstLayerSpeed::Factor(c.within(f, 0.05, 1.0, "first_layer.speed_factor", "")?)
+            }
+            (None, None) => FirstLayerSpeed::Factor(0.5),
+        },
+    };
+    let raw_retraction = raw.retraction.unwrap_or_default();
+    let length = c.within(
+        raw_retraction.length.unwrap_or(1.0),
+        0.0,
+        30.0,
+        "retraction.length",
+        "mm",
+    )?;
+    let retraction = Retraction {
+        length,
+        tool_change_length: c.within(
+            raw_retraction.tool_change_length.unwrap_or(length),
+            0.0,
+            100.0,
+            "retraction.tool_change_length",
+            "mm",
+        )?,
+        speed: c.positive(raw_retraction.speed.unwrap_or(35.0), "retraction.speed")?,
+        z_hop: c.within(
+            raw_retraction.z_hop.unwrap_or(0.0),
+            0.0,
+            10.0,
+            "retraction.z_hop",
+            "mm",
+        )?,
+    };
+    let travel_speed = c.positive(raw.travel_speed.unwrap_or(150.0), "travel_speed")?;
+
+    let raw_motion = c.required(
+        raw.motion,
+        "motion",
+        "the [motion] table (accelerations, junction_deviation or jerk)",
+    )?;
+    let print_acceleration = c.positive(
+        c.required(
+            raw_motion.print_acceleration,
+            "motion.print_acceleration",
+            "mm/s²",
+        )?,
+        "motion.print_acceleration",
+    )?;
+    let cornering = match (raw_motion.junction_deviation, raw_motion.jerk) {
+        (Some(_), Some(_)) => {
+            return Err(c.err("motion", "give `junction_deviation` or `jerk`, not both"));
+        }
+        (Some(_), None) if firmware == Firmware::RepRapFirmware => {
+            return Err(c.err(
+                "motion.junction_deviation",
+                "RepRapFirmware corners by jerk (M566): give `jerk = { x, y, z, e }` (mm/s)",
+            ));
+        }
+        (Some(jd), None) => {
+            Cornering::JunctionDeviation(c.within(jd, 0.001, 1.0, "motion.junction_deviation", "mm")?)
+        }
+        (None, Some(j)) => Cornering::Jerk(c.axes(j, "motion.jerk")?),
+        (None, None) => {
+            return Err(c.err(
+                "motion.junction_deviation",
+                "missing: how the firmware corners, `junction_deviation` (Marlin) or `jerk = { x, y, z, e }`",
+            ));
+        }
+    };
+    let motion = Motion {
+        print_acceleration,
+        travel_acceleration: c.positive(
+            raw_motion.travel_acceleration.unwrap_or(print_acceleration),
+            "motion.travel_acceleration",
+        )?,
+        retract_acceleration: c.positive(
+            raw_motion.retract_acceleration.unwrap_or(print_acceleration),
+            "motion.retract_acceleration",
+        )?,
+        cornering,
+        max_speed: raw_motion
+            .max_speed
+            .map(|a| c.axes(a, "motion.max_speed"))
+            .transpose()?,
+        max_acceleration: raw_motion
+            .max_acceleration
+            .map(|a| c.axes(a, "motion.max_acceleration"))
+            .transpose()?,
+    };
+
+    let skirt = match raw.skirt {
+        None | Some(Switch::Off) => None,
+        Some(Switch::On) => {
+            return Err(c.err(
+                "skirt",
+                "`true` needs a base profile's [skirt], or give the table",
+            ));
+        }
+        Some(Switch::Table(s)) => {
+            let loops = s.loops.unwrap_or(1);
+            if loops == 0 {
+                return Err(c.err("skirt.loops", "at least one loop (or `skirt = false`)"));
+            }
+            let layers = s.layers.unwrap_or(1);
+            if layers == 0 {
+                return Err(c.err("skirt.layers", "at least one layer (or `skirt = false`)"));
+            }
+            Some(Skirt {
+                loops,
+                distance: c.within(s.distance.unwrap_or(3.0), 0.0, 100.0, "skirt.distance", "mm")?,
+                layers,
+            })
+        }
+    };
+    let prime_line = match raw.prime_line {
+        None | Some(Switch::Off) => None,
+        Some(Switch::On) => {
+            return Err(c.err(
+                "prime_line",
+                "`true` needs a base profile's [prime_line], or give the table",
+            ));
+        }
+        Some(Switch::Table(p)) => Some(PrimeLine {
+            length: c.positive(
+                c.required(p.length, "prime_line.length", "mm")?,
+                "prime_line.length",
+            )?,
+            width: c.within(
+                p.width.unwrap_or(nozzle_diameter * 1.5),
+                nozzle_diameter * 0.5,
+                nozzle_diameter * 3.0,
+                "prime_line.width",
+                "mm",
+            )?,
+        }),
+    };
+    let wipe_tower = match raw.wipe_tower {
+        None | Some(Switch::Off) => None,
+        Some(Switch::On) => {
+            return Err(c.err(
+                "wipe_tower",
+                "`true` needs a base profile's [wipe_tower], or give the table",
+            ));
+        }
+        Some(Switch::Table(w)) => {
+            let size = c.required(w.size, "wipe_tower.size", "the footprint [x, y] (mm)")?;
+            let min = 6.0 * nozzle_diameter;
+            c.within(size[0], min, 1000.0, "wipe_tower.size", "mm")?;
+            c.within(size[1], min, 1000.0, "wipe_tower.size", "mm")?;
+            if let Some(p) = w.position {
+                let b = BBox2 {
+                    min: Point2::new(p[0], p[1]),
+                    max: Point2::new(p[0] + size[0], p[1] + size[1]),
+                };
+                if !bed.contains_box(&b, 0.0) {
+                    return Err(c.err(
+                        "wipe_tower.position",
+                        format!(
+                            "a {} x {} mm tower at [{}, {}] is not on the {} bed",
+                            size[0],
+                            size[1],
+                            p[0],
+                            p[1],
+                            bed.describe()
+                        ),
+                    ));
+                }
+            }
+            Some(WipeTower {
+                position: w.position,
+                size,
+                purge_volume: match (flavor.is_mixing(), w.purge_volume) {
+                    (true, Some(_)) => {
+                        return Err(c.err(
+                            "wipe_tower.purge_volume",
+                            "a mixing head purges `mixer.transition_volume` after each mix change; remove this key",
+                        ));
+                    }
+                    (true, None) => 0.0,
+                    (false, v) => c.within(
+                        c.required(v, "wipe_tower.purge_volume", "mm³ purged after each tool change")?,
+                        0.0,
+                        10_000.0,
+                        "wipe_tower.purge_volume",
+                        "mm³",
+                    )?,
+                },
+            })
+        }
+    };
+    let mixer = match (flavor.is_mixing(), raw.mixer) {
+        (true, Some(m)) => {
+            let transition_volume = c.within(
+                c.required(
+                    m.transition_volume,
+                    "mixer.transition_volume",
+                    "mm³ purged after a mix change",
+                )?,
+                0.0,
+                10_000.0,
+                "mixer.transition_volume",
+                "mm³",
+            )?;
+            if transition_volume > 0.0 && wipe_tower.is_none() {
+                return Err(c.err(
+                    "mixer.transition_volume",
+                    "the transition is purged on the wipe tower: add a [wipe_tower] with its size",
+                ));
+            }
+            let blend_below = c.within(m.blend_below.unwrap_or(0.0), 0.0, 1.0, "mixer.blend_below", "")?;
+            Some(Mixer {
+                transition_volume,
+                blend_below,
+            })
+        }
+        (true, None) => {
+            return Err(c.err(
+                "mixer",
+                "missing: a mixing head's [mixer] with transition_volume (mm³ purged after a mix change)",
+            ));
+        }
+        (false, Some(_)) => return Err(c.err("mixer", "only a mixing flavor has a mixer")),
+        (false, None) => None,
+    };
+
+    let raw_gcode = raw.gcode.unwrap_or_default();
+    let n = tools.len();
+    let gcode = Templates {
+        start: c.template(raw_gcode.start, "gcode.start", TemplateKind::Start, n)?,
+        end: c.template(raw_gcode.end, "gcode.end", TemplateKind::End, n)?,
+        tool_change: c.template(
+            raw_gcode.tool_change.or_else(|| Some("T{next_tool}".into())),
+            "gcode.tool_change",
+            TemplateKind::ToolChange,
+            n,
+        )?,
+    };
+
+    let motion_systems = raw.motion_systems.unwrap_or(1);
+    check_motion_systems(c, motion_systems, firmware, flavor, &tools)?;
+    Ok(Machine {
+        name,
+        motion_systems,
+        description: raw.description.unwrap_or_default(),
+        flavor,
+        firmware,
+        bed,
+        placement,
+        nozzle_diameter,
+        max_layer_height,
+        filament_diameter,
+        tools,
+        bed_temperature,
+        first_layer_bed_temperature,
+        fan,
+        first_layer,
+        retraction,
+        travel_speed,
+        motion,
+        skirt,
+        prime_line,
+        wipe_tower,
+        mixer,
+        gcode,
+        origin: MachineOrigin::default(),
+    })
+}
