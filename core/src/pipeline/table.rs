@@ -1,0 +1,342 @@
+//! A table of a pipeline file as stages see it: its values, its path from the
+//! document's root, and the places of its keys for errors; deserialiser messages in
+//! the words of a pipeline's reader.
+
+use std::sync::Arc;
+
+use serde::de::DeserializeOwned;
+use toml::Spanned;
+use toml::de::{DeTable, DeValue};
+
+use crate::error::{Error, Result};
+use crate::source::{Location, SourceFile};
+
+use super::MODEL_HOST_KEYS;
+
+/// One step of a path from the document root to a table.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum PathElem {
+    Key(String),
+    Index(usize),
+}
+
+impl std::fmt::Display for PathElem {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            PathElem::Key(k) => f.write_str(k),
+            PathElem::Index(i) => write!(f, "{i}"),
+        }
+    }
+}
+
+pub(super) fn key(k: &str) -> PathElem {
+    PathElem::Key(k.to_string())
+}
+
+/// A table of a pipeline file together with where it came from, so that a stage can
+/// deserialise its options and point errors at the right key.
+#[derive(Debug, Clone)]
+pub struct TableRef {
+    /// The table as it is after `--set` overrides.
+    pub(crate) table: toml::Table,
+    pub(super) file: Arc<SourceFile>,
+    pub(super) path: Vec<PathElem>,
+    /// True when an override changed something in this table: spans then no longer
+    /// describe the values, and errors name the override instead.
+    pub(super) overridden: bool,
+    /// Keys the host consumes before the stage sees the table (`use`, placement).
+    pub(super) host_keys: &'static [&'static str],
+}
+
+impl TableRef {
+    /// A table that did not come from a file (tests, examples, generated pipelines).
+    pub fn detached(name: &str, table: toml::Table) -> Self {
+        let text = toml::to_string(&table).unwrap_or_default();
+        Self {
+            table,
+            file: SourceFile::new(format!("<{name}>"), text),
+            path: Vec::new(),
+            overridden: false,
+            host_keys: &["use"],
+        }
+    }
+
+    /// Parses `text` as the body of one table (e.g. a stage's example snippet).
+    pub fn parse_snippet(name: &str, text: &str) -> Result<Self> {
+        let file = SourceFile::new(format!("<{name}>"), text);
+        let table: toml::Table = toml::from_str(text).map_err(|e| toml_error(&file, &e))?;
+        Ok(Self {
+            table,
+            file,
+            path: Vec::new(),
+            overridden: false,
+            host_keys: &["use"],
+        })
+    }
+
+    pub fn file(&self) -> &Arc<SourceFile> {
+        &self.file
+    }
+
+    /// Where this table is in its file, from the document root.
+    pub fn path(&self) -> &[PathElem] {
+        &self.path
+    }
+
+    /// True when a `--set` override changed this table, so its spans are stale.
+    pub fn is_overridden(&self) -> bool {
+        self.overridden
+    }
+
+    /// The dotted path of this table in its file (`slice`, `parts.0.grade`).
+    pub fn path_string(&self) -> String {
+        self.path
+            .iter()
+            .map(ToString::to_string)
+            .collect::<Vec<_>>()
+            .join(".")
+    }
+
+    /// The `use = "name"` of a stage table.
+    pub fn use_name(&self) -> Option<&str> {
+        self.table.get("use").and_then(|v| v.as_str())
+    }
+
+    pub(crate) fn get(&self, k: &str) -> Option<&toml::Value> {
+        self.table.get(k)
+    }
+
+    /// True when the table sets `key` (after overrides).
+    pub fn has(&self, key: &str) -> bool {
+        self.table.contains_key(key)
+    }
+
+    /// Same table with a different set of host-consumed keys.
+    pub fn with_host_keys(mut self, keys: &'static [&'static str]) -> Self {
+        self.host_keys = keys;
+        self
+    }
+
+    /// Deserialises the table, less the host's keys, into `T`. Errors point at the key
+    /// or value in the file.
+    pub fn parse<T: DeserializeOwned>(&self) -> Result<T> {
+        if !self.overridden
+            && let Some(doc) = self.file.toml()
+            && let Some(value) = navigate_de(doc, &self.path)
+        {
+            let span = value.span();
+            let mut inner = value.into_inner();
+            if let DeValue::Table(t) = &mut inner {
+                let host: Vec<_> = t
+                    .iter()
+                    .filter(|(k, _)| self.host_keys.contains(&k.get_ref().as_ref()))
+                    .map(|(k, _)| k.clone())
+                    .collect();
+                for k in host {
+                    t.remove(&k);
+                }
+            }
+            let de = toml::de::ValueDeserializer::from(Spanned::new(span, inner));
+            return T::deserialize(de).map_err(|e| self.de_error(&e));
+        }
+        let mut table = self.table.clone();
+        for k in self.host_keys {
+            table.remove(*k);
+        }
+        // The table as the overrides left it has no file: write it out and read it
+        // back, so that an error still finds the key it is about.
+        let text = toml::to_string(&table).unwrap_or_default();
+        if let Ok(doc) = DeTable::parse(&text) {
+            let span = doc.span();
+            let keys: Vec<(String, std::ops::Range<usize>)> = doc
+                .get_ref()
+                .iter()
+                .map(|(k, v)| (k.get_ref().to_string(), k.span().start..v.span().end))
+                .collect();
+            let de = toml::de::ValueDeserializer::from(Spanned::new(span, DeValue::Table(doc.into_inner())));
+            return T::deserialize(de).map_err(|e| {
+                let key = e.span().and_then(|at| {
+                    keys.iter()
+                        .filter(|(_, r)| r.start <= at.start && at.end <= r.end.max(r.start + 1))
+                        .min_by_key(|(_, r)| r.end - r.start)
+                        .map(|(k, _)| k.clone())
+                });
+                let message = plain(e.message().trim());
+                match key {
+                    Some(k) => self.error_at(&k, message),
+                    None => Error::config(format!("[{}] {message}", self.path_string())),
+                }
+            });
+        }
+        T::deserialize(toml::Value::Table(table))
+            .map_err(|e| Error::config(format!("[{}] {}", self.path_string(), plain(e.message().trim()))))
+    }
+
+    fn de_error(&self, e: &toml::de::Error) -> Error {
+        let location = e
+            .span()
+            .map(|s| Location::new(self.file.clone(), s))
+            .or_else(|| self.location_of(None));
+        Error::Config {
+            location,
+            message: format!("[{}] {}", self.path_string(), plain(e.message().trim())),
+            help: None,
+        }
+    }
+
+    /// Where `key` of this table is written, or the table itself when `key` is `None` or
+    /// absent.
+    pub fn location_of(&self, key: Option<&str>) -> Option<Location> {
+        let value = navigate_de(self.file.toml()?, &self.path)?;
+        let table_span = value.span();
+        if let (Some(k), DeValue::Table(t)) = (key, value.get_ref())
+            && let Some((kk, _)) = t.iter().find(|(kk, _)| kk.get_ref().as_ref() == k)
+        {
+            return Some(Location::new(self.file.clone(), kk.span()));
+        }
+        Some(Location::new(self.file.clone(), table_span))
+    }
+
+    /// Where the string value of `key` is written in the file, when the file still
+    /// holds the value the table has: `None` when a `--set` override replaced it, so
+    /// that positions inside the string (a script's) are not read off another text.
+    pub fn string_location(&self, key: &str) -> Option<Location> {
+        let current = self.table.get(key)?.as_str()?;
+        let mut path = self.path.clone();
+        path.push(PathElem::Key(key.to_string()));
+        let written = navigate_de(self.file.toml()?, &path)?;
+        match written.get_ref() {
+            DeValue::String(s) if s.as_ref() == current => self.location_of(Some(key)),
+            _ => None,
+        }
+    }
+
+    /// The table as a message to a dynamic plugin.
+    pub(crate) fn to_wire(&self) -> Result<crate::plugin::wire::WireTable<'_>> {
+        use crate::plugin::wire::{WireStep, WireTable, file_of};
+        Ok(WireTable {
+            file: file_of(&self.file),
+            path: self
+                .path
+                .iter()
+                .map(|p| match p {
+                    PathElem::Key(k) => WireStep::Key(k.clone()),
+                    PathElem::Index(i) => WireStep::Index(*i),
+                })
+                .collect(),
+            values: toml::to_string(&self.table)
+                .map_err(|e| Error::config(format!("[{}] cannot be written out: {e}", self.path_string())))?,
+            overridden: self.overridden,
+            host_keys: self.host_keys.iter().map(ToString::to_string).collect(),
+        })
+    }
+
+    /// A table a host sent to this dynamic plugin.
+    pub(crate) fn from_wire(w: crate::plugin::wire::WireTable<'_>) -> Result<Self> {
+        use crate::plugin::wire::WireStep;
+        let file = SourceFile::new(w.file.path.into_owned(), w.file.text.into_owned());
+        let table: toml::Table = toml::from_str(&w.values)
+            .map_err(|e| Error::config(format!("a table the host sent is not TOML: {e}")))?;
+        // The host's keys are one of a few lists; an unknown one is kept for good.
+        let known: [&'static [&'static str]; 3] = [&[], &["use"], MODEL_HOST_KEYS];
+        let host_keys = known
+            .into_iter()
+            .find(|k| k.iter().copied().eq(w.host_keys.iter().map(String::as_str)))
+            .unwrap_or_else(|| {
+                let keys: Vec<&'static str> = w
+                    .host_keys
+                    .into_iter()
+                    .map(|k| &*Box::leak(k.into_boxed_str()))
+                    .collect();
+                Box::leak(keys.into_boxed_slice())
+            });
+        Ok(Self {
+            table,
+            file,
+            path: w
+                .path
+                .into_iter()
+                .map(|p| match p {
+                    WireStep::Key(k) => PathElem::Key(k),
+                    WireStep::Index(i) => PathElem::Index(i),
+                })
+                .collect(),
+            overridden: w.overridden,
+            host_keys,
+        })
+    }
+
+    /// A configuration error at `key` of this table.
+    pub fn error_at(&self, key: &str, message: impl Into<String>) -> Error {
+        let message = format!("[{}] {}: {}", self.path_string(), key, message.into());
+        match (self.overridden, self.location_of(Some(key))) {
+            (false, Some(loc)) => Error::config_at(loc, message),
+            _ => Error::config(message),
+        }
+    }
+}
+
+/// A deserialiser's message in the words of a pipeline's reader, not of Rust: `usize`
+/// is "a whole number", `f64` "a number", and so on.
+pub fn plain(message: &str) -> String {
+    const WORDS: &[(&str, &str)] = &[
+        ("expected usize", "expected a whole number (0 or more)"),
+        ("expected u64", "expected a whole number (0 or more)"),
+        ("expected u32", "expected a whole number (0 or more)"),
+        ("expected u16", "expected a whole number (0 or more)"),
+        ("expected u8", "expected a whole number (0 or more)"),
+        ("expected i64", "expected a whole number"),
+        ("expected i32", "expected a whole number"),
+        ("expected isize", "expected a whole number"),
+        ("expected f64", "expected a number"),
+        ("expected f32", "expected a number"),
+        ("expected a boolean", "expected true or false"),
+        ("invalid type: floating point", "got the decimal number"),
+        ("invalid type: integer", "got the whole number"),
+        ("invalid type: string", "got the string"),
+        ("invalid type: boolean", "got"),
+        ("invalid type: sequence", "got an array"),
+        ("invalid type: map", "got a table"),
+        ("invalid type: unit variant", "got a value of the wrong kind"),
+    ];
+    let mut out = message.to_string();
+    for (from, to) in WORDS {
+        out = out.replace(from, to);
+    }
+    out
+}
+
+/// The value at `path` in a parsed document, copied out of it (only that value is
+/// copied, not the document).
+pub(crate) fn navigate_de<'i>(doc: &Spanned<DeTable<'i>>, path: &[PathElem]) -> Option<Spanned<DeValue<'i>>> {
+    let Some((first, rest)) = path.split_first() else {
+        return Some(Spanned::new(doc.span(), DeValue::Table(doc.get_ref().clone())));
+    };
+    let PathElem::Key(k) = first else {
+        return None;
+    };
+    let mut cur = find_key(doc.get_ref(), k)?;
+    for elem in rest {
+        cur = match (cur.get_ref(), elem) {
+            (DeValue::Table(t), PathElem::Key(k)) => find_key(t, k)?,
+            (DeValue::Array(a), PathElem::Index(i)) => a.get(*i)?,
+            _ => return None,
+        };
+    }
+    Some(cur.clone())
+}
+
+fn find_key<'a, 'i>(t: &'a DeTable<'i>, k: &str) -> Option<&'a Spanned<DeValue<'i>>> {
+    t.iter()
+        .find(|(kk, _)| kk.get_ref().as_ref() == k)
+        .map(|(_, v)| v)
+}
+
+/// Converts a TOML syntax or type error of the whole file into a located error.
+pub(super) fn toml_error(file: &Arc<SourceFile>, e: &toml::de::Error) -> Error {
+    Error::Config {
+        location: e.span().map(|s| Location::new(file.clone(), s)),
+        message: e.message().trim().to_string(),
+        help: None,
+    }
+}
