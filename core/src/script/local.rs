@@ -1,11 +1,5 @@
-//! Rhai scripting for user grading functions: each script compiled once per run, run in
-//! a sandbox (operation, depth, size and time limits; no modules, no files, no network),
-//! and its results checked as volume fractions before anyone uses them.
-//!
-//! A script is either an inline expression of the pipeline (`f = "sin(r * PI)"`) or a
-//! function in a `.rhai` file beside it (`f = "grading.rhai#ceramic"`). Functions receive
-//! their parameters by name from the variables the caller offers (r, d, x, y, z, layer,
-//! part), so `fn f(r)` and `fn f(z, r)` both work.
+//! The host's own Rhai engine: scripts compiled from inline expressions and `.rhai`
+//! files within the allowed folders, and called under the sandbox's limits.
 
 use std::cell::Cell;
 use std::path::{Path, PathBuf};
@@ -18,216 +12,12 @@ use crate::error::{Error, Result};
 use crate::model::COMPOSITION_TOLERANCE;
 use crate::source::{Location, SourceFile};
 
-/// Sandbox limits of every script call.
-#[derive(Debug, Clone, Copy)]
-pub struct ScriptLimits {
-    pub max_operations: u64,
-    pub max_call_levels: usize,
-    pub max_expr_depth: usize,
-    pub max_string_size: usize,
-    pub max_array_size: usize,
-    /// Wall-clock budget of one call.
-    pub time_limit: Duration,
-    /// Bytes one call may hold, counted when the program installs
-    /// [`CountingAllocator`] (the `lamina` binary does): the size limits do not see
-    /// every copy (a map whose entries are large arrays).
-    pub max_memory: usize,
-    /// Functions one script file may define.
-    pub max_functions: usize,
-}
-
-impl Default for ScriptLimits {
-    fn default() -> Self {
-        Self {
-            max_operations: 5_000_000,
-            max_call_levels: 48,
-            max_expr_depth: 64,
-            max_string_size: 64 * 1024,
-            max_array_size: 100_000,
-            time_limit: Duration::from_millis(500),
-            max_functions: 10_000,
-            max_memory: 128 << 20,
-        }
-    }
-}
-
-thread_local! {
-    /// Deadline of the script call running on this thread.
-    static DEADLINE: Cell<Option<Instant>> = const { Cell::new(None) };
-    /// Whether the call running on this thread was stopped at least once. Some of
-    /// Rhai's functions swallow their callbacks' errors (a sort comparator that is
-    /// stopped only makes the sort go on): once stopped, the whole call fails.
-    static STOPPED: Cell<bool> = const { Cell::new(false) };
-    /// Why the call running on this thread was stopped.
-    static STOP_REASON: Cell<&'static str> = const { Cell::new("time limit exceeded") };
-    /// Bytes this thread holds, as [`CountingAllocator`] counts them.
-    static HELD: Cell<isize> = const { Cell::new(0) };
-    /// What this thread held when its script call started.
-    static HELD_AT_START: Cell<isize> = const { Cell::new(0) };
-}
-
-/// A global allocator that counts the bytes each thread holds, so that a script call
-/// is stopped when it holds more than [`ScriptLimits::max_memory`]. A program opts in
-/// with `#[global_allocator] static A: CountingAllocator = CountingAllocator;`;
-/// without it no memory limit applies. The count is a thread-local addition per
-/// allocation.
-#[derive(Debug, Default, Clone, Copy)]
-pub struct CountingAllocator;
-
-fn count_held(bytes: isize) {
-    // The counter is a const-initialised `Cell` without destructor: using it allocates
-    // nothing, and after the thread's end `try_with` just skips.
-    let _ = HELD.try_with(|h| h.set(h.get().wrapping_add(bytes)));
-}
-
-// SAFETY: every call is passed unchanged to the system allocator, which upholds the
-// `GlobalAlloc` contract; the counting touches no allocation.
-unsafe impl std::alloc::GlobalAlloc for CountingAllocator {
-    unsafe fn alloc(&self, layout: std::alloc::Layout) -> *mut u8 {
-        count_held(layout.size() as isize);
-        // SAFETY: the caller keeps `alloc`'s contract, which `System` shares.
-        unsafe { std::alloc::System.alloc(layout) }
-    }
-
-    unsafe fn alloc_zeroed(&self, layout: std::alloc::Layout) -> *mut u8 {
-        count_held(layout.size() as isize);
-        // SAFETY: as for `alloc`.
-        unsafe { std::alloc::System.alloc_zeroed(layout) }
-    }
-
-    unsafe fn dealloc(&self, ptr: *mut u8, layout: std::alloc::Layout) {
-        count_held(-(layout.size() as isize));
-        // SAFETY: `ptr` came from `System` through this allocator with `layout`.
-        unsafe { std::alloc::System.dealloc(ptr, layout) }
-    }
-
-    unsafe fn realloc(&self, ptr: *mut u8, layout: std::alloc::Layout, new_size: usize) -> *mut u8 {
-        count_held(new_size as isize - layout.size() as isize);
-        // SAFETY: as for `dealloc`, with the caller's valid `new_size`.
-        unsafe { std::alloc::System.realloc(ptr, layout, new_size) }
-    }
-}
-
-/// Stops the call running on this thread for `reason`.
-fn stop(reason: &'static str) -> Option<Dynamic> {
-    STOPPED.with(|s| s.set(true));
-    STOP_REASON.with(|r| r.set(reason));
-    Some(Dynamic::from(reason.to_string()))
-}
-
-/// The names a script may read; anything else is refused when the script is compiled.
-pub const SCRIPT_VARIABLES: &[&str] = &["r", "d", "x", "y", "z", "layer", "part"];
-
-/// Values offered to a script call.
-#[derive(Debug, Clone, Copy, Default)]
-pub struct ScriptArgs<'a> {
-    /// Normalised level in [0, 1].
-    pub r: f64,
-    /// A distance (mm), e.g. to a grading source.
-    pub d: f64,
-    pub x: f64,
-    pub y: f64,
-    pub z: f64,
-    pub layer: i64,
-    pub part: &'a str,
-}
-
-impl ScriptArgs<'_> {
-    fn value(&self, name: &str) -> Option<Dynamic> {
-        Some(match name {
-            "r" => Dynamic::from_float(self.r),
-            "d" => Dynamic::from_float(self.d),
-            "x" => Dynamic::from_float(self.x),
-            "y" => Dynamic::from_float(self.y),
-            "z" => Dynamic::from_float(self.z),
-            "layer" => Dynamic::from_int(self.layer),
-            "part" => Dynamic::from(self.part.to_string()),
-            _ => return None,
-        })
-    }
-}
-
-/// Compiles scripts for the stages of one run. Cheap to share between threads.
-///
-/// In a dynamic plugin, the host's scripts are reached through the host: a script is
-/// compiled and run by the host's engine under the host's limits, whatever copy of
-/// Rhai the plugin links.
-#[derive(Clone, Debug)]
-pub struct ScriptHost(HostKind);
-
-#[derive(Clone, Debug)]
-enum HostKind {
-    Local(LocalHost),
-    /// In a dynamic plugin: every script goes to the host.
-    Remote,
-}
-
-impl ScriptHost {
-    pub fn new(base_dir: impl Into<PathBuf>, limits: ScriptLimits) -> Self {
-        Self(HostKind::Local(LocalHost::new(base_dir, limits)))
-    }
-
-    /// The scripts of the host that called into this dynamic plugin.
-    pub(crate) fn remote() -> Self {
-        Self(HostKind::Remote)
-    }
-
-    /// Also lets scripts be read from these folders (the pipeline's `script_dirs`).
-    pub fn with_script_dirs(self, dirs: Vec<PathBuf>) -> Self {
-        match self.0 {
-            HostKind::Local(host) => Self(HostKind::Local(host.with_script_dirs(dirs))),
-            remote => Self(remote),
-        }
-    }
-
-    /// Compiles a script reference from a pipeline: `file.rhai#function` names a
-    /// function in a file beside the pipeline; anything else is an inline expression.
-    /// `origin` is where the reference is written (for error positions).
-    pub fn compile(&self, spec: &str, origin: Option<Location>) -> Result<ScriptFn> {
-        match &self.0 {
-            HostKind::Local(host) => host.compile(spec, origin).map(|f| ScriptFn(FnKind::Local(f))),
-            HostKind::Remote => {
-                crate::plugin::guest::compile(spec, origin).map(|id| ScriptFn(FnKind::Remote(id)))
-            }
-        }
-    }
-}
-
-/// A compiled script: call it as often as needed, from any thread (in a dynamic
-/// plugin: from the threads the host calls the plugin's stages on).
-#[derive(Clone, Debug)]
-pub struct ScriptFn(FnKind);
-
-#[derive(Clone, Debug)]
-enum FnKind {
-    Local(LocalFn),
-    /// A script the host compiled for this dynamic plugin, by the host's number.
-    Remote(u64),
-}
-
-impl ScriptFn {
-    /// Calls the script for a single number (any finite value).
-    pub fn number(&self, args: &ScriptArgs<'_>, context: &str) -> Result<f64> {
-        match &self.0 {
-            FnKind::Local(f) => f.number(args, context),
-            FnKind::Remote(id) => crate::plugin::guest::number(*id, args, context),
-        }
-    }
-
-    /// Calls the script for the volume fractions of `n` materials. A single number `f`
-    /// means `[f, 1 - f]` when `n == 2`; otherwise an array of `n` numbers is expected.
-    /// Every fraction must lie in [0, 1] and they must sum to 1 (1e-9).
-    pub fn fractions(&self, args: &ScriptArgs<'_>, n: usize, context: &str) -> Result<Vec<f64>> {
-        match &self.0 {
-            FnKind::Local(f) => f.fractions(args, n, context),
-            FnKind::Remote(id) => crate::plugin::guest::fractions(*id, args, n, context),
-        }
-    }
-}
+use super::stop::*;
+use super::*;
 
 /// The host's own Rhai engine and the folders its scripts may come from.
 #[derive(Clone)]
-struct LocalHost {
+pub(super) struct LocalHost {
     engine: Arc<Engine>,
     base_dir: PathBuf,
     /// Folders besides `base_dir` whose scripts may be read (the pipeline's
@@ -257,7 +47,7 @@ fn num(v: Dynamic, what: &str) -> std::result::Result<f64, Box<EvalAltResult>> {
 }
 
 impl LocalHost {
-    fn new(base_dir: impl Into<PathBuf>, limits: ScriptLimits) -> Self {
+    pub(super) fn new(base_dir: impl Into<PathBuf>, limits: ScriptLimits) -> Self {
         let mut engine = Engine::new();
         engine
             .set_max_operations(limits.max_operations)
@@ -356,7 +146,7 @@ impl LocalHost {
         }
     }
 
-    fn with_script_dirs(mut self, dirs: Vec<PathBuf>) -> Self {
+    pub(super) fn with_script_dirs(mut self, dirs: Vec<PathBuf>) -> Self {
         self.script_dirs = dirs;
         self
     }
@@ -389,7 +179,7 @@ impl LocalHost {
         Ok(())
     }
 
-    fn compile(&self, spec: &str, origin: Option<Location>) -> Result<LocalFn> {
+    pub(super) fn compile(&self, spec: &str, origin: Option<Location>) -> Result<LocalFn> {
         match spec.split_once('#') {
             Some((file, function)) if file.trim_end().ends_with(".rhai") => {
                 self.function(&self.base_dir.join(file.trim()), function.trim(), origin)
@@ -399,7 +189,7 @@ impl LocalHost {
     }
 
     /// Compiles an inline expression. Its variables are those of [`SCRIPT_VARIABLES`].
-    fn expression(&self, text: &str, origin: Option<Location>) -> Result<LocalFn> {
+    pub(super) fn expression(&self, text: &str, origin: Option<Location>) -> Result<LocalFn> {
         let source = match &origin {
             Some(o) => o.file.clone(),
             None => SourceFile::new("<expression>", text),
@@ -432,7 +222,7 @@ impl LocalHost {
     }
 
     /// Compiles a `.rhai` file and selects one of its functions.
-    fn function(&self, path: &Path, name: &str, origin: Option<Location>) -> Result<LocalFn> {
+    pub(super) fn function(&self, path: &Path, name: &str, origin: Option<Location>) -> Result<LocalFn> {
         let at = |message: String| match origin.clone() {
             Some(o) => Error::config_at(o, message),
             None => Error::config(message),
@@ -562,7 +352,7 @@ fn script_error(
 
 /// A script compiled by the host's engine.
 #[derive(Clone)]
-struct LocalFn {
+pub(super) struct LocalFn {
     engine: Arc<Engine>,
     time_limit: Duration,
     ast: Arc<AST>,
@@ -664,7 +454,7 @@ impl LocalFn {
         }
     }
 
-    fn number(&self, args: &ScriptArgs<'_>, context: &str) -> Result<f64> {
+    pub(super) fn number(&self, args: &ScriptArgs<'_>, context: &str) -> Result<f64> {
         let v = self.call(args, context)?;
         match as_number(&v) {
             Some(f) if f.is_finite() => Ok(f),
@@ -675,7 +465,7 @@ impl LocalFn {
         }
     }
 
-    fn fractions(&self, args: &ScriptArgs<'_>, n: usize, context: &str) -> Result<Vec<f64>> {
+    pub(super) fn fractions(&self, args: &ScriptArgs<'_>, n: usize, context: &str) -> Result<Vec<f64>> {
         let v = self.call(args, context)?;
         let fractions = if let Some(f) = as_number(&v) {
             match n {
@@ -721,136 +511,4 @@ fn check_fractions(fractions: &[f64]) -> std::result::Result<(), String> {
         return Err(format!("fractions {fractions:?} sum to {sum}, not 1"));
     }
     Ok(())
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    fn host() -> LocalHost {
-        LocalHost::new(".", ScriptLimits::default()).with_script_dirs(vec![std::env::temp_dir()])
-    }
-
-    #[test]
-    fn inline_expression_sees_variables_and_constants() {
-        let f = host().expression("sin(r * PI)", None).expect("compiles");
-        let args = ScriptArgs {
-            r: 0.5,
-            ..Default::default()
-        };
-        assert!((f.number(&args, "t").expect("runs") - 1.0).abs() < 1e-12);
-        let f = host().expression("1", None).expect("compiles");
-        assert_eq!(f.fractions(&args, 2, "t").expect("int accepted"), vec![1.0, 0.0]);
-    }
-
-    #[test]
-    fn integer_arguments_are_accepted() {
-        let f = host()
-            .expression("linear(1, 0, r) + sin(0)", None)
-            .expect("compiles");
-        let args = ScriptArgs {
-            r: 0.25,
-            ..Default::default()
-        };
-        assert_eq!(f.number(&args, "t").expect("runs"), 0.25);
-    }
-
-    #[test]
-    fn functions_take_parameters_by_name() {
-        let dir = tempfile::tempdir().expect("tempdir");
-        let path = dir.path().join("g.rhai");
-        std::fs::write(&path, "let big = 1000;\nfn f(z, r) { [r, 1.0 - r - z] }\n").expect("write");
-        let f = host().function(&path, "f", None).expect("compiles");
-        let args = ScriptArgs {
-            r: 0.25,
-            z: 0.0,
-            ..Default::default()
-        };
-        assert_eq!(f.fractions(&args, 2, "t").expect("runs"), vec![0.25, 0.75]);
-    }
-
-    #[test]
-    fn endless_loop_is_stopped_quickly() {
-        let dir = tempfile::tempdir().expect("tempdir");
-        let path = dir.path().join("g.rhai");
-        std::fs::write(&path, "fn f(r) {\n  loop { }\n}\n").expect("write");
-        let f = host().function(&path, "f", None).expect("compiles");
-        let t = Instant::now();
-        let e = f
-            .fractions(&ScriptArgs::default(), 2, "layer 3")
-            .expect_err("stopped");
-        assert!(t.elapsed() < Duration::from_secs(1), "took {:?}", t.elapsed());
-        assert!(e.to_string().contains("stopped"), "{e}");
-    }
-
-    #[test]
-    fn fractions_not_summing_to_one_are_refused_with_position() {
-        let dir = tempfile::tempdir().expect("tempdir");
-        let path = dir.path().join("g.rhai");
-        std::fs::write(&path, "// grading\n\nfn bad(r) { [0.5, 0.4] }\n").expect("write");
-        let f = host().function(&path, "bad", None).expect("compiles");
-        let e = f
-            .fractions(&ScriptArgs::default(), 2, "layer 2, region 1")
-            .expect_err("refused");
-        let loc = e.location().expect("located");
-        assert_eq!(loc.line_col(), (3, 1));
-        let text = e.to_string();
-        assert!(
-            text.contains("0.9") && text.contains("layer 2, region 1"),
-            "{text}"
-        );
-    }
-
-    #[test]
-    fn scripts_cannot_import_or_eval() {
-        assert!(
-            host().expression("import \"x\" as y; 1", None).is_err()
-                || host()
-                    .expression("import \"x\" as y; 1", None)
-                    .and_then(|f| f.number(&ScriptArgs::default(), "t"))
-                    .is_err()
-        );
-        assert!(host().expression("eval(\"1\")", None).is_err());
-    }
-
-    #[test]
-    fn unknown_parameter_is_refused() {
-        let dir = tempfile::tempdir().expect("tempdir");
-        let path = dir.path().join("g.rhai");
-        std::fs::write(&path, "fn f(q) { q }\n").expect("write");
-        assert!(host().function(&path, "f", None).is_err());
-    }
-
-    #[test]
-    fn limits_hold_inside_callbacks_sleep_and_recursion() {
-        let dir = tempfile::tempdir().expect("tempdir");
-        let path = dir.path().join("g.rhai");
-        std::fs::write(
-            &path,
-            "fn sorter(r) {\n  let a = [3, 1, 2, 5, 4];\n  a.sort(|x, y| { loop { } });\n  0.5\n}\n\n\
-             fn deep(r) {\n  deep(((((r + 1.0)))))\n}\n\nfn nap(r) {\n  sleep(1);\n  0.5\n}\n",
-        )
-        .expect("write");
-        // A sort swallows its comparator's stop; the call fails all the same.
-        let f = host().function(&path, "sorter", None).expect("compiles");
-        let t = Instant::now();
-        let e = f.number(&ScriptArgs::default(), "t").expect_err("stopped");
-        assert!(t.elapsed() < Duration::from_secs(2), "took {:?}", t.elapsed());
-        assert!(e.to_string().contains("stopped"), "{e}");
-        assert_eq!(e.location().expect("located").line_col(), (1, 1));
-        // Endless recursion: stopped at the depth limit, pointed at the function.
-        let f = host().function(&path, "deep", None).expect("compiles");
-        let e = f.number(&ScriptArgs::default(), "t").expect_err("stopped");
-        assert!(e.to_string().contains("recursion"), "{e}");
-        assert_eq!(e.location().expect("located").line_col(), (7, 1));
-        // No sleeping.
-        let f = host().function(&path, "nap", None).expect("compiles");
-        let t = Instant::now();
-        let e = f.number(&ScriptArgs::default(), "t").expect_err("refused");
-        assert!(t.elapsed() < Duration::from_millis(500), "took {:?}", t.elapsed());
-        assert!(e.to_string().contains("sleep"), "{e}");
-        // A later call on the same thread starts afresh.
-        let ok = host().expression("r + 0.25", None).expect("compiles");
-        assert_eq!(ok.number(&ScriptArgs::default(), "t").expect("runs"), 0.25);
-    }
 }
