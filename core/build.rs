@@ -14,7 +14,8 @@ const WIRE_SOURCES: &[&str] = &[
     "src/machine/template.rs",
     "src/mesh.rs",
     "src/model.rs",
-    "src/plugin/wire.rs",
+    "src/plugin/wire/error.rs",
+    "src/plugin/wire/mod.rs",
     "src/stage.rs",
 ];
 
