@@ -17,10 +17,7 @@ pub fn pipelines() -> PathBuf {
 
 /// Runs the `lamina` binary with `args` in the current folder.
 pub fn lamina(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_lamina"))
-        .args(args)
-        .output()
-        .expect("lamina runs")
+    lamina_in(Path::new("."), args)
 }
 
 /// Runs the `lamina` binary with `args` in `dir`.
