@@ -8,7 +8,7 @@ use std::path::Path;
 /// Files whose types are serialised across the plugin boundary.
 const WIRE_SOURCES: &[&str] = &[
     "src/diagnostic.rs",
-    "src/geom.rs",
+    "../geom/src/shape.rs",
     "src/limits.rs",
     "src/machine/mod.rs",
     "src/machine/template.rs",

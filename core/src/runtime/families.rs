@@ -1,6 +1,7 @@
-//! Parts that share a mesh and pick their solid with `family_at`: the family holding
-//! the point in the layer at its height, then, layer by layer upward and downward, the
-//! families overlapping those picked in the layer before.
+//! Parts that share a mesh and pick their solid with `family_at`: a pre-pass cuts the
+//! layers of that mesh and follows the selection through them with
+//! [`lamina_geom::follow`]; the cuts are kept for the layer pass, so no layer is cut
+//! twice.
 
 use rayon::prelude::*;
 
@@ -8,8 +9,12 @@ use super::engine::Engine;
 use super::layer::check_tree;
 use super::report::Timings;
 use crate::error::{Error, Result};
+use std::sync::Mutex;
+
+use lamina_geom::follow::{Area, follow};
+
 use crate::geom::Point2;
-use crate::model::{Layer, LayerSlot};
+use crate::model::{ContourTree, Layer, LayerSlot};
 use crate::stage::{MeshSlicer, StageKind};
 
 /// Which families of each layer belong to parts that select theirs with `family_at`:
@@ -17,16 +22,30 @@ use crate::stage::{MeshSlicer, StageKind};
 pub(super) struct Selections {
     /// `None` for parts without `family_at`.
     samples: Vec<Option<Vec<Vec<Point2>>>>,
+    /// Per mesh followed, per layer, its cut and tree until the layer pass takes it.
+    cuts: Vec<Option<Vec<Mutex<Option<Cut>>>>>,
 }
 
+/// A layer of one mesh, cut and sorted.
+pub(super) type Cut = (Layer, ContourTree);
+
 impl Selections {
+    /// The cut of mesh `mesh` at layer `layer_index` made while following the
+    /// selections, if it was made and not taken yet.
+    pub(super) fn take_cut(&self, mesh: usize, layer_index: usize) -> Option<Cut> {
+        let slot = self.cuts.get(mesh)?.as_ref()?.get(layer_index)?;
+        slot.lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner)
+            .take()
+    }
+
     /// The families of `layer` that belong to part `pi`.
     pub(super) fn families(
         &self,
         pi: usize,
         layer_index: usize,
         layer: &Layer,
-        tree: &crate::model::ContourTree,
+        tree: &ContourTree,
         part_mesh: &[usize],
     ) -> Vec<usize> {
         let selecting_on_mesh = |o: usize| part_mesh[o] == part_mesh[pi] && self.samples[o].is_some();
@@ -59,21 +78,10 @@ impl Selections {
     }
 }
 
-/// A family's polygon and a point inside it.
-type FamilySample = (crate::geom::Polygon, Point2);
-
-/// Per layer, its families with their points.
-type LayerFamilies = Vec<Vec<FamilySample>>;
-
-/// Two families of neighbouring layers overlap when either holds a point of the other.
-fn overlaps(a: &FamilySample, b: &FamilySample) -> bool {
-    a.0.contains(b.1) || b.0.contains(a.1)
-}
-
 impl Engine {
-    /// Follows each `family_at` selection through the layers: the family containing the
-    /// point in the layer at its height, then in each neighbouring layer the families
-    /// overlapping those selected in the layer before, upward and downward.
+    /// Follows each `family_at` selection through the layers (see
+    /// [`lamina_geom::follow`]). The layers cut and sorted for it are kept in the
+    /// selections, for the layer pass to take instead of cutting them again.
     pub(super) fn select_families(
         &self,
         slots: &[LayerSlot],
@@ -83,37 +91,39 @@ impl Engine {
         timings: &Timings,
     ) -> Result<Selections> {
         let mut samples: Vec<Option<Vec<Vec<Point2>>>> = vec![None; self.parts.len()];
+        let mut cuts: Vec<Option<Vec<Mutex<Option<Cut>>>>> = (0..prepared.len()).map(|_| None).collect();
         if self.parts.iter().all(|p| p.family_at.is_none()) || slots.is_empty() {
-            return Ok(Selections { samples });
+            return Ok(Selections { samples, cuts });
         }
-        // Families (polygon and inner point) of every layer of the meshes concerned.
-        let mut by_mesh: Vec<Option<LayerFamilies>> = (0..prepared.len()).map(|_| None).collect();
+        // The areas of every layer of the meshes concerned.
+        let mut by_mesh: Vec<Option<Vec<Vec<Area>>>> = (0..prepared.len()).map(|_| None).collect();
         for (pi, p) in self.parts.iter().enumerate() {
             let mi = part_mesh[pi];
             if p.family_at.is_none() || by_mesh[mi].is_some() {
                 continue;
             }
-            let layers: Vec<Vec<FamilySample>> = pool.install(|| {
+            let layers: Vec<(Cut, Vec<Area>)> = pool.install(|| {
                 slots
                     .par_iter()
                     .map(|slot| {
                         let layer = timings.time(StageKind::Slice, || prepared[mi].slice(slot))?;
                         let tree = timings.time(StageKind::Sort, || self.sorter.sort(&layer))?;
                         check_tree(&layer, &tree)?;
-                        Ok((0..tree.families.len())
-                            .map(|f| {
-                                let poly = tree.family_polygon(&layer.contours, f);
-                                let inside = poly
-                                    .outer
-                                    .interior_point()
-                                    .unwrap_or(Point2::new(f64::NAN, f64::NAN));
-                                (poly, inside)
-                            })
-                            .collect())
+                        let areas = (0..tree.families.len())
+                            .map(|f| Area::new(tree.family_polygon(&layer.contours, f)))
+                            .collect();
+                        Ok(((layer, tree), areas))
                     })
                     .collect::<Result<Vec<_>>>()
             })?;
-            by_mesh[mi] = Some(layers);
+            let (cut, areas): (Vec<Cut>, Vec<Vec<Area>>) = layers.into_iter().unzip();
+            // Kept by layer index (a slot whose index is not its place is cut again).
+            let kept = cut
+                .into_iter()
+                .enumerate()
+                .map(|(k, c)| Mutex::new((slots[k].index == k).then_some(c)));
+            cuts[mi] = Some(kept.collect());
+            by_mesh[mi] = Some(areas);
         }
         for (pi, p) in self.parts.iter().enumerate() {
             let Some([x, y, z]) = p.family_at else { continue };
@@ -129,11 +139,7 @@ impl Engine {
                         .min_by(|&a, &b| (slots[a].cut_z - z).abs().total_cmp(&(slots[b].cut_z - z).abs()))
                         .unwrap_or(0)
                 });
-            let point = Point2::new(x, y);
-            let first: Vec<usize> = (0..layers[start].len())
-                .filter(|&f| layers[start][f].0.contains(point))
-                .collect();
-            if first.is_empty() {
+            let Some(selected) = follow(layers, start, Point2::new(x, y)) else {
                 let message = format!(
                     "part `{}`: no solid at family_at = [{x}, {y}, {z}] (layer {} at z = {:.4} mm has {} families)",
                     p.name,
@@ -145,30 +151,15 @@ impl Engine {
                     Some(loc) => Error::config_at(loc.clone(), message),
                     None => Error::config(message),
                 });
-            }
-            let mut selected: Vec<Vec<usize>> = vec![Vec::new(); slots.len()];
-            selected[start] = first;
-            for k in start + 1..slots.len() {
-                selected[k] = next_selection(&layers[k - 1], &selected[k - 1], &layers[k]);
-            }
-            for k in (0..start).rev() {
-                selected[k] = next_selection(&layers[k + 1], &selected[k + 1], &layers[k]);
-            }
+            };
             samples[pi] = Some(
                 selected
                     .iter()
                     .zip(layers)
-                    .map(|(sel, fams)| sel.iter().map(|&f| fams[f].1).collect())
+                    .map(|(sel, areas)| sel.iter().map(|&f| areas[f].inside).collect())
                     .collect(),
             );
         }
-        Ok(Selections { samples })
+        Ok(Selections { samples, cuts })
     }
-}
-
-/// Families of `next` overlapping the `selected` families of `prev`.
-fn next_selection(prev: &[FamilySample], selected: &[usize], next: &[FamilySample]) -> Vec<usize> {
-    (0..next.len())
-        .filter(|&f| selected.iter().any(|&s| overlaps(&prev[s], &next[f])))
-        .collect()
 }

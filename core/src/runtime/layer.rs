@@ -62,6 +62,16 @@ impl Engine {
                 continue;
             }
             let mi = part_mesh[pi];
+            if cut[mi].is_none()
+                && let Some((layer, tree)) = selections.take_cut(mi, slot.index)
+            {
+                diagnostics.extend(layer.warnings.iter().map(|w| {
+                    Diagnostic::warning(StageKind::Slice, w.as_str())
+                        .at_layer(slot.index, slot.z)
+                        .in_part(&p.name)
+                }));
+                cut[mi] = Some((layer, tree));
+            }
             if cut[mi].is_none() {
                 let layer = timings
                     .time(StageKind::Slice, || prepared[mi].slice(slot))

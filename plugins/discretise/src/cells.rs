@@ -22,6 +22,7 @@ use i_overlay::string::line::IntLine;
 use i_overlay::string::slice::IntSlice;
 use lamina_core::stage::{OptionSpec, StageConfig};
 use lamina_core::{Contour, Limit, Limits, Point2, Polygon, Region, Result, Vector2};
+use lamina_geom::segment_parameter;
 use serde::Deserialize;
 
 use crate::bands::{options, solver};
@@ -332,11 +333,7 @@ impl Walk {
         for (a, b) in self.edges() {
             let d = b - a;
             let len = d.norm();
-            let t = if len > 0.0 {
-                ((p - a).dot(&d) / (len * len)).clamp(0.0, 1.0)
-            } else {
-                0.0
-            };
+            let t = segment_parameter(p, a, b);
             let dist = (a + d * t - p).norm();
             if dist < best {
                 best = dist;

@@ -10,6 +10,8 @@ use i_overlay::core::fill_rule::FillRule;
 use i_overlay::core::overlay_rule::OverlayRule;
 use i_overlay::float::single::SingleFloatOverlay;
 use lamina_core::{Contour, Polygon, Region};
+use lamina_geom::Ring;
+use lamina_geom::ring::{ring_area, ring_of};
 
 /// How well a set of regions tiles a family.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -46,12 +48,12 @@ impl Tiling {
 pub fn tiling(family: &Polygon, regions: &[Region]) -> Tiling {
     let family_area = family.area();
     let region_area: f64 = regions.iter().map(Region::area).sum();
-    let paths: Vec<Vec<[f64; 2]>> = regions
+    let paths: Vec<Ring> = regions
         .iter()
         .flat_map(|r| r.polygon.contours())
-        .map(|c| c.points.iter().map(|p| [p.x, p.y]).collect())
+        .map(ring_of)
         .collect();
-    let empty: Vec<Vec<[f64; 2]>> = Vec::new();
+    let empty: Vec<Ring> = Vec::new();
     // Each region's holes are clockwise: the positive rule counts every covered point
     // once, the union's area is what the regions cover.
     let union = if paths.is_empty() {
@@ -59,11 +61,7 @@ pub fn tiling(family: &Polygon, regions: &[Region]) -> Tiling {
     } else {
         paths.overlay(&empty, OverlayRule::Subject, FillRule::Positive)
     };
-    let union_area: f64 = union
-        .iter()
-        .flatten()
-        .map(|c| Contour::new(c.iter().map(|p| lamina_core::Point2::new(p[0], p[1])).collect()).signed_area())
-        .sum();
+    let union_area: f64 = union.iter().flatten().map(|c| ring_area(c)).sum();
     let scale = family_area.abs().max(f64::MIN_POSITIVE);
     let mut misoriented = 0;
     let mut non_simple = 0;

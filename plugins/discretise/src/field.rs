@@ -7,6 +7,7 @@
 //! lie outside the family.
 
 use lamina_core::{BBox2, Contour, Point2};
+use lamina_geom::closest_on_segment;
 
 /// Samples of a field over a padded bounding box.
 #[derive(Debug, Clone)]
@@ -98,7 +99,6 @@ impl Field {
         for c in contours {
             for (a, b) in c.edges() {
                 let ab = b - a;
-                let len2 = ab.norm_squared();
                 let (x0, x1) = (a.x.min(b.x) - h, a.x.max(b.x) + h);
                 let i0 = ((x0 - ox) / h).ceil().max(0.0) as usize;
                 let i1 = (((x1 - ox) / h).floor().max(-1.0) + 1.0) as usize;
@@ -117,12 +117,7 @@ impl Field {
                     let j1 = (((y1 - oy) / h).floor().max(-1.0) + 1.0) as usize;
                     for j in j0..j1.min(ny) {
                         let q = Point2::new(x, oy + j as f64 * h);
-                        let t = if len2 > 0.0 {
-                            ((q - a).dot(&ab) / len2).clamp(0.0, 1.0)
-                        } else {
-                            0.0
-                        };
-                        let on = a + ab * t;
+                        let on = closest_on_segment(q, a, b);
                         let d2 = (q - on).norm_squared();
                         let k = j * nx + i;
                         if d2 <= h2 && d2 < seed_d2[k] {

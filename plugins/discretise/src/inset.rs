@@ -13,6 +13,7 @@
 use i_overlay::core::overlay::{Overlay, ShapeType};
 use i_overlay::i_float::int::point::IntPoint;
 use i_overlay::i_shape::int::shape::IntShapes;
+use lamina_geom::simplify::simplify_into;
 use serde::Deserialize;
 
 /// Which boundaries the offsets start from: the grading reference.
@@ -112,7 +113,12 @@ impl Inset {
     /// The raw loop of one contour (material on its left) into `scratch.out`; `false`
     /// for a contour with no area left after simplifying.
     fn contour(&self, contour: &[IntPoint<i32>], delta: f64, eps: f64, step: f64, s: &mut Scratch) -> bool {
-        simplify(contour, eps, &mut s.points);
+        simplify_into(
+            contour.len(),
+            |i| [f64::from(contour[i].x), f64::from(contour[i].y)],
+            eps,
+            &mut s.points,
+        );
         let n = s.points.len();
         if n < 3 {
             return false;
@@ -212,82 +218,5 @@ fn push(out: &mut Vec<IntPoint<i32>>, p: [f64; 2]) {
     let q = IntPoint::new(p[0].round() as i32, p[1].round() as i32);
     if out.last() != Some(&q) {
         out.push(q);
-    }
-}
-
-/// The contour without the vertices that lie within `eps` of the segment joining the
-/// last kept vertex and the next one. Starts at the sharpest corner so that the vertex
-/// kept unconditionally is a real one.
-fn simplify(contour: &[IntPoint<i32>], eps: f64, out: &mut Vec<[f64; 2]>) {
-    out.clear();
-    let n = contour.len();
-    if n < 3 {
-        return;
-    }
-    let p = |i: usize| {
-        let q = contour[i % n];
-        [f64::from(q.x), f64::from(q.y)]
-    };
-    let start = (0..n)
-        .max_by(|&a, &b| turn(p(a + n - 1), p(a), p(a + 1)).total_cmp(&turn(p(b + n - 1), p(b), p(b + 1))))
-        .unwrap_or(0);
-    out.push(p(start));
-    // Greedy chords: a vertex is dropped only while every vertex skipped since the
-    // last one kept stays within `eps` of the chord replacing them, so the error never
-    // adds up along a gentle curve (runs are capped to bound the work).
-    let mut anchor = 0;
-    for k in 1..n {
-        let next = p(start + k + 1);
-        let a = out[out.len() - 1];
-        let fits = k - anchor < 64 && (anchor + 1..=k).all(|j| segment_distance(p(start + j), a, next) < eps);
-        if !fits {
-            out.push(p(start + k));
-            anchor = k;
-        }
-    }
-    // The last kept vertex against the chord back to the start.
-    while out.len() >= 3 && segment_distance(out[out.len() - 1], out[out.len() - 2], out[0]) < eps {
-        out.pop();
-    }
-}
-
-/// 1 - cos of the turn at `b`: 0 straight on, 2 turning back.
-fn turn(a: [f64; 2], b: [f64; 2], c: [f64; 2]) -> f64 {
-    let (u, v) = ([b[0] - a[0], b[1] - a[1]], [c[0] - b[0], c[1] - b[1]]);
-    let norm = u[0].hypot(u[1]) * v[0].hypot(v[1]);
-    if norm > 0.0 {
-        1.0 - (u[0] * v[0] + u[1] * v[1]) / norm
-    } else {
-        0.0
-    }
-}
-
-fn segment_distance(p: [f64; 2], a: [f64; 2], b: [f64; 2]) -> f64 {
-    let (ab, ap) = ([b[0] - a[0], b[1] - a[1]], [p[0] - a[0], p[1] - a[1]]);
-    let len2 = ab[0] * ab[0] + ab[1] * ab[1];
-    let t = if len2 > 0.0 {
-        ((ap[0] * ab[0] + ap[1] * ab[1]) / len2).clamp(0.0, 1.0)
-    } else {
-        0.0
-    };
-    (ap[0] - t * ab[0]).hypot(ap[1] - t * ab[1])
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn nearly_collinear_vertices_are_dropped() {
-        let square: Vec<IntPoint<i32>> = [(0, 0), (500, 1), (1000, 0), (1000, 1000), (0, 1000)]
-            .iter()
-            .map(|&(x, y)| IntPoint::new(x, y))
-            .collect();
-        let mut out = Vec::new();
-        simplify(&square, 2.0, &mut out);
-        assert_eq!(out.len(), 4);
-        simplify(&square, 0.5, &mut out);
-        assert_eq!(out.len(), 5);
-        assert!(fits(&square, 499.0) && !fits(&square, 500.0));
     }
 }

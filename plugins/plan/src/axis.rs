@@ -15,6 +15,7 @@
 use std::collections::HashMap;
 
 use lamina_core::Point2;
+use lamina_geom::ring::ring_area;
 use spade::handles::FixedFaceHandle;
 use spade::{ConstrainedDelaunayTriangulation, Triangulation};
 
@@ -240,15 +241,6 @@ fn clean(ring: &[[f64; 2]]) -> Vec<[f64; 2]> {
         return Vec::new();
     }
     out
-}
-
-/// The shoelace area of an open ring (positive counter-clockwise).
-pub(crate) fn ring_area(r: &[[f64; 2]]) -> f64 {
-    let n = r.len();
-    (0..n)
-        .map(|i| r[i][0] * r[(i + 1) % n][1] - r[(i + 1) % n][0] * r[i][1])
-        .sum::<f64>()
-        / 2.0
 }
 
 fn inside_area(cdt: &Cdt, inside: &[bool]) -> f64 {

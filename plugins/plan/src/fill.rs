@@ -22,7 +22,10 @@ use i_overlay::mesh::float::outline::offset::OutlineOffset;
 use i_overlay::mesh::float::style::{LineJoin, OutlineStyle};
 use lamina_core::{Point2, Polygon};
 
-use crate::axis::{centre_beads, ring_area};
+use lamina_geom::ring::{ring_area, ring_of, ring_perimeter};
+use lamina_geom::{Shapes, simplify_ring};
+
+use crate::axis::centre_beads;
 use crate::bead::Bead;
 
 /// Largest distance (mm) between a round offset corner and its chords.
@@ -85,11 +88,8 @@ pub fn mean_width(p: &Polygon) -> f64 {
 /// ring's inner and outer offsets cross at every wiggle). Dropping what strays less
 /// than the chord tolerance moves no pass by more than that tolerance.
 /// A region whose outer contour simplifies to a sliver has no shape.
-fn shapes_of(p: &Polygon) -> Vec<Vec<Vec<[f64; 2]>>> {
-    let ring = |c: &lamina_core::Contour| {
-        let ring: Vec<[f64; 2]> = c.points.iter().map(|q| [q.x, q.y]).collect();
-        simplify(&ring, TOLERANCE)
-    };
+fn shapes_of(p: &Polygon) -> Shapes {
+    let ring = |c: &lamina_core::Contour| simplify_ring(&ring_of(c), TOLERANCE);
     let outer = ring(&p.outer);
     if outer.len() < 3 {
         return Vec::new();
@@ -98,8 +98,6 @@ fn shapes_of(p: &Polygon) -> Vec<Vec<Vec<[f64; 2]>>> {
     shape.extend(p.holes.iter().map(ring).filter(|c| c.len() >= 3));
     vec![shape]
 }
-
-type Shapes = Vec<Vec<Vec<[f64; 2]>>>;
 
 /// `shapes` offset by `d` (negative: inward) with round joins, simplified.
 fn offset(shapes: &Shapes, d: f64) -> Shapes {
@@ -119,7 +117,7 @@ fn tidy(shapes: Shapes) -> Shapes {
         .map(|shape| {
             shape
                 .into_iter()
-                .map(|c| simplify(&c, TOLERANCE))
+                .map(|c| simplify_ring(&c, TOLERANCE))
                 .filter(|c| c.len() >= 3)
                 .collect::<Vec<_>>()
         })
@@ -140,17 +138,7 @@ const HAIRLINE: f64 = 0.05;
 
 /// Twice the area over the perimeter of a shape (outer ring and holes).
 fn shape_mean_width(shape: &[Vec<[f64; 2]>]) -> f64 {
-    let perimeter: f64 = shape
-        .iter()
-        .map(|r| {
-            (0..r.len())
-                .map(|i| {
-                    let (a, b) = (r[i], r[(i + 1) % r.len()]);
-                    (b[0] - a[0]).hypot(b[1] - a[1])
-                })
-                .sum::<f64>()
-        })
-        .sum();
+    let perimeter: f64 = shape.iter().map(|r| ring_perimeter(r)).sum();
     if perimeter > 0.0 {
         2.0 * shape_area(shape) / perimeter
     } else {
@@ -349,52 +337,6 @@ fn surely_thin(shape: &[Vec<[f64; 2]>], d: f64) -> bool {
         }
     }
     true
-}
-
-/// A closed ring with the vertices dropped that stray less than `tol` from the chord
-/// replacing them (greedy, runs of at most 64 vertices).
-pub fn simplify(ring: &[[f64; 2]], tol: f64) -> Vec<[f64; 2]> {
-    let n = ring.len();
-    if n <= 3 {
-        return ring.to_vec();
-    }
-    let mut out = Vec::with_capacity(n / 2 + 3);
-    let mut a = 0;
-    out.push(ring[0]);
-    while a < n {
-        // Extend the chord from `a` as far as every skipped vertex stays within `tol`.
-        let mut b = a + 1;
-        while b < n && b - a < 64 {
-            let next = b + 1;
-            let end = ring[next % n];
-            let ok = (a + 1..next).all(|k| chord_distance2(ring[k % n], ring[a % n], end) <= tol * tol);
-            if !ok {
-                break;
-            }
-            b = next;
-        }
-        if b >= n {
-            break;
-        }
-        out.push(ring[b % n]);
-        a = b;
-    }
-    out
-}
-
-/// Squared distance from `p` to segment `ab`: the simplifier compares it with the
-/// squared tolerance for every skipped vertex of every chord it tries, so no root.
-fn chord_distance2(p: [f64; 2], a: [f64; 2], b: [f64; 2]) -> f64 {
-    let (abx, aby) = (b[0] - a[0], b[1] - a[1]);
-    let (apx, apy) = (p[0] - a[0], p[1] - a[1]);
-    let len2 = abx * abx + aby * aby;
-    let t = if len2 > 0.0 {
-        ((apx * abx + apy * aby) / len2).clamp(0.0, 1.0)
-    } else {
-        0.0
-    };
-    let (dx, dy) = (apx - abx * t, apy - aby * t);
-    dx * dx + dy * dy
 }
 
 #[cfg(test)]

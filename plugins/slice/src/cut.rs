@@ -12,6 +12,8 @@
 use std::sync::Arc;
 
 use lamina_core::{Contour, Layer, LayerSlot, Mesh, Point2, Result};
+use lamina_geom::ring::{Ring, contour_of, ring_of};
+use lamina_geom::segment_distance;
 use rayon::prelude::*;
 use rustc_hash::FxHashMap;
 
@@ -392,7 +394,7 @@ fn drop_straight(c: &Contour) -> Contour {
     let mut out: Vec<Point2> = Vec::with_capacity(n);
     for (i, &p) in pts.iter().enumerate() {
         let prev = out.last().copied().unwrap_or(pts[n - 1]);
-        if point_segment(p, prev, pts[(i + 1) % n]) > tol {
+        if segment_distance(p, prev, pts[(i + 1) % n]) > tol {
             out.push(p);
         }
     }
@@ -409,10 +411,7 @@ fn union(loops: &[Contour], options: CutOptions) -> Vec<Contour> {
     use i_overlay::float::overlay::OverlayOptions;
     use i_overlay::float::simplify::SimplifyShape;
 
-    let paths: Vec<Vec<[f64; 2]>> = loops
-        .iter()
-        .map(|c| c.points.iter().map(|p| [p.x, p.y]).collect())
-        .collect();
+    let paths: Vec<Ring> = loops.iter().map(ring_of).collect();
     let rule = match options.fill_rule {
         FillRule::NonZero => Rule::NonZero,
         FillRule::EvenOdd => Rule::EvenOdd,
@@ -436,7 +435,7 @@ fn union(loops: &[Contour], options: CutOptions) -> Vec<Contour> {
         .into_iter()
         .flatten()
         .filter(|path| path.len() >= 3)
-        .map(|path| Contour::new(path.into_iter().map(|[x, y]| Point2::new(x, y)).collect()))
+        .map(|path| contour_of(&path))
         .collect()
 }
 
@@ -473,7 +472,7 @@ fn already_simple(loops: &[Contour]) -> bool {
         }
         for i in 0..pts.len() {
             let (a, b, next) = (pts[i], pts[(i + 1) % pts.len()], pts[(i + 2) % pts.len()]);
-            if point_segment(next, a, b) <= eps || point_segment(a, b, next) <= eps {
+            if segment_distance(next, a, b) <= eps || segment_distance(a, b, next) <= eps {
                 return false;
             }
             length += (b - a).norm();
@@ -590,24 +589,12 @@ struct Seg {
     at: (u32, u32, u32),
 }
 
-/// Distance from `p` to the segment `a b`.
-fn point_segment(p: Point2, a: Point2, b: Point2) -> f64 {
-    let d = b - a;
-    let len2 = d.norm_squared();
-    let t = if len2 > 0.0 {
-        ((p - a).dot(&d) / len2).clamp(0.0, 1.0)
-    } else {
-        0.0
-    };
-    (p - (a + d * t)).norm()
-}
-
 /// Whether segments `a b` and `c d` come within `eps` of each other (or cross).
 fn segments_within(a: Point2, b: Point2, c: Point2, d: Point2, eps: f64) -> bool {
-    if point_segment(a, c, d) <= eps
-        || point_segment(b, c, d) <= eps
-        || point_segment(c, a, b) <= eps
-        || point_segment(d, a, b) <= eps
+    if segment_distance(a, c, d) <= eps
+        || segment_distance(b, c, d) <= eps
+        || segment_distance(c, a, b) <= eps
+        || segment_distance(d, a, b) <= eps
     {
         return true;
     }

@@ -9,12 +9,12 @@ use i_overlay::float::overlay::{FloatOverlay, OverlayOptions};
 use i_overlay::float::simplify::SimplifyShape;
 use i_overlay::mesh::float::outline::offset::OutlineOffset;
 use i_overlay::mesh::float::style::{LineJoin, OutlineStyle};
-use lamina_core::{BBox2, Contour, Point2, Polygon};
+use lamina_core::{BBox2, Point2, Polygon};
+use lamina_geom::simplify_ring;
 
 use crate::source::Datum;
 
-/// Polygons with holes as i_overlay takes them: shapes of contours, the first outer.
-pub type Shapes = Vec<Vec<Vec<[f64; 2]>>>;
+pub use lamina_geom::Shapes;
 
 /// A set of the plane, kept symbolic when it is all or nothing.
 #[derive(Debug, Clone)]
@@ -93,29 +93,6 @@ impl Set {
             Set::Shapes(s) => difference(a, s),
         }
     }
-}
-
-pub fn polygon_shapes(p: &Polygon) -> Shapes {
-    vec![
-        p.contours()
-            .map(|c| c.points.iter().map(|q| [q.x, q.y]).collect())
-            .collect(),
-    ]
-}
-
-/// Polygons of a boolean result: outer counter-clockwise, holes clockwise.
-pub fn to_polygons(shapes: &Shapes) -> Vec<Polygon> {
-    let contour = |c: &Vec<[f64; 2]>| Contour::new(c.iter().map(|p| Point2::new(p[0], p[1])).collect());
-    shapes
-        .iter()
-        .filter(|s| !s.is_empty())
-        .map(|s| {
-            Polygon::new(
-                contour(&s[0]).oriented(true),
-                s[1..].iter().map(|h| contour(h).oriented(false)).collect(),
-            )
-        })
-        .collect()
 }
 
 /// Segments for an arc of radius `r` whose chords stray at most `tolerance`.
@@ -248,7 +225,7 @@ pub fn closer_than(datum: &Datum, d: f64, z: f64, bbox: &BBox2, tolerance: f64, 
             let style = OutlineStyle::new(-d).line_join(LineJoin::Round(step.max(0.01)));
             let simple: Shapes = family
                 .iter()
-                .map(|shape| shape.iter().map(|c| simplify(c, tolerance / 2.0)).collect())
+                .map(|shape| shape.iter().map(|c| simplify_ring(c, tolerance / 2.0)).collect())
                 .collect();
             let inset: Shapes = simple.outline(&style);
             if inset.is_empty() {
@@ -306,55 +283,6 @@ pub fn closer_than(datum: &Datum, d: f64, z: f64, bbox: &BBox2, tolerance: f64, 
     }
 }
 
-/// The closed contour with the vertices dropped that lie within `eps` of the chord
-/// that replaces them (Douglas-Peucker on a ring, split at its two farthest vertices),
-/// so no point of the original is further than `eps` from the result.
-pub fn simplify(ring: &[[f64; 2]], eps: f64) -> Vec<[f64; 2]> {
-    let n = ring.len();
-    if n <= 4 {
-        return ring.to_vec();
-    }
-    let d2 = |a: [f64; 2], b: [f64; 2]| (a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2);
-    let far = (1..n).max_by(|&i, &j| d2(ring[0], ring[i]).total_cmp(&d2(ring[0], ring[j])));
-    let Some(far) = far else { return ring.to_vec() };
-    let mut keep = vec![false; n];
-    keep[0] = true;
-    keep[far] = true;
-    // Spans (start, end) of ring indices, end exclusive of wrap handled by modulo.
-    let mut stack = vec![(0usize, far), (far, n)];
-    while let Some((a, b)) = stack.pop() {
-        if b <= a + 1 {
-            continue;
-        }
-        let (p, q) = (ring[a], ring[b % n]);
-        let (ux, uy) = (q[0] - p[0], q[1] - p[1]);
-        let len = (ux * ux + uy * uy).sqrt();
-        let mut worst = (0.0, a);
-        for (i, r) in ring.iter().enumerate().take(b).skip(a + 1) {
-            let dev = if len > 0.0 {
-                ((r[0] - p[0]) * uy - (r[1] - p[1]) * ux).abs() / len
-            } else {
-                d2(*r, p).sqrt()
-            };
-            if dev > worst.0 {
-                worst = (dev, i);
-            }
-        }
-        if worst.0 > eps {
-            keep[worst.1] = true;
-            stack.push((a, worst.1));
-            stack.push((worst.1, b));
-        }
-    }
-    let out: Vec<[f64; 2]> = ring
-        .iter()
-        .zip(&keep)
-        .filter(|&(_, &k)| k)
-        .map(|(p, _)| *p)
-        .collect();
-    if out.len() < 3 { ring.to_vec() } else { out }
-}
-
 /// A point inside the polygon (not in a hole), for graders that vary with position:
 /// the centroid when it is inside, else the middle of the widest inside span of a few
 /// horizontal lines.
@@ -393,9 +321,10 @@ pub fn inside_point(p: &Polygon) -> Point2 {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use lamina_geom::ring::polygons_of;
 
     fn area(s: &Shapes) -> f64 {
-        to_polygons(s).iter().map(Polygon::area).sum()
+        polygons_of(s).iter().map(Polygon::area).sum()
     }
 
     fn bbox() -> BBox2 {
@@ -427,7 +356,7 @@ mod tests {
         let want = std::f64::consts::PI * 2.0 * 2.0 / s;
         assert!((area(&e) - want).abs() < 1e-3 * want);
         // Centred where the axis crosses z = 1: x = 1.
-        let c = inside_point(&to_polygons(&e)[0]);
+        let c = inside_point(&polygons_of(&e)[0]);
         assert!((c.x - 1.0).abs() < 1e-6 && c.y.abs() < 1e-6, "{c:?}");
     }
 
@@ -461,28 +390,6 @@ mod tests {
             panic!("a strip")
         };
         assert!((area(&strip) - 8.0 * 100.0).abs() < 1e-6);
-    }
-
-    #[test]
-    fn simplifying_drops_collinear_vertices_only() {
-        let mut ring = Vec::new();
-        for i in 0..100 {
-            ring.push([i as f64 * 0.1, 0.0]);
-        }
-        for i in 0..100 {
-            ring.push([10.0, i as f64 * 0.1]);
-        }
-        ring.push([10.0, 10.0]);
-        ring.push([0.0, 10.0]);
-        let s = simplify(&ring, 1e-6);
-        assert_eq!(s.len(), 4, "{s:?}");
-        let bumpy: Vec<[f64; 2]> = (0..40)
-            .map(|i| {
-                let t = std::f64::consts::TAU * i as f64 / 40.0;
-                [t.cos(), t.sin()]
-            })
-            .collect();
-        assert_eq!(simplify(&bumpy, 1e-6).len(), 40, "a circle keeps its vertices");
     }
 
     #[test]

@@ -8,7 +8,9 @@ use lamina_core::steps::Truncation;
 use lamina_core::{Composition, Error, Region, Result, StageFactory};
 use serde::Deserialize;
 
-use crate::shapes::{Set, Shapes, clean, closer_than, inside_point, polygon_shapes, to_polygons, union};
+use lamina_geom::ring::{polygons_of, shape_of};
+
+use crate::shapes::{Set, Shapes, clean, closer_than, inside_point, union};
 use crate::source::{Datum, Source, combine};
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize)]
@@ -166,7 +168,7 @@ impl Discretiser for Sources {
         }
         // Cells of the overlay: a piece of the family, the step of each source and
         // whether it is in that source's effective grading region.
-        let family_shapes = clean(&polygon_shapes(&family));
+        let family_shapes = clean(&vec![shape_of(&family)]);
         let mut cells = vec![Cell {
             shapes: family_shapes.clone(),
             steps: Vec::new(),
@@ -257,7 +259,7 @@ impl Discretiser for Sources {
         let pieces: Vec<_> = pieces
             .into_iter()
             .filter_map(|(shapes, _, fractions, level)| {
-                let polygons: Vec<_> = to_polygons(&shapes)
+                let polygons: Vec<_> = polygons_of(&shapes)
                     .into_iter()
                     .filter(|p| p.area() > sliver)
                     .collect();

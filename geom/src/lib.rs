@@ -1,0 +1,22 @@
+//! Lamina's planar geometry: the shapes every stage passes on (contours, polygons with
+//! holes, boxes) and the algorithms more than one plugin needs, written once. Plugins
+//! depend on `lamina-core` (the stage API, which re-exports the shapes) and on this
+//! crate, never on each other.
+//!
+//! - [`shape`]: contours, polygons and boxes with their measures; they cross the
+//!   plugin boundary.
+//! - [`segment`]: a point against a segment.
+//! - [`ring`]: the `[x, y]` rings and shapes the boolean engine takes, and conversions.
+//! - [`simplify`]: the one ring simplifier.
+//! - [`follow`]: one solid area followed from layer to layer.
+
+pub mod follow;
+pub mod ring;
+pub mod segment;
+pub mod shape;
+pub mod simplify;
+
+pub use ring::{Ring, Shape, Shapes};
+pub use segment::{closest_on_segment, segment_distance, segment_distance2, segment_parameter};
+pub use shape::{BBox2, Contour, Point2, Polygon, Vector2};
+pub use simplify::simplify_ring;
