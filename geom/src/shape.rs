@@ -23,6 +23,37 @@ impl Contour {
         Self { points }
     }
 
+    /// The regular polygon of `n` vertices (at least 3) inscribed in the circle of
+    /// `radius` about `centre`, counter-clockwise from angle 0.
+    pub fn circle(centre: Point2, radius: f64, n: usize) -> Self {
+        let n = n.max(3);
+        Self::new(
+            (0..n)
+                .map(|i| {
+                    let a = std::f64::consts::TAU * i as f64 / n as f64;
+                    centre + Vector2::new(a.cos(), a.sin()) * radius
+                })
+                .collect(),
+        )
+    }
+
+    /// The axis-aligned rectangle with corners `min` and `max`, counter-clockwise
+    /// from `min`.
+    pub fn rectangle(min: Point2, max: Point2) -> Self {
+        Self::new(vec![
+            min,
+            Point2::new(max.x, min.y),
+            max,
+            Point2::new(min.x, max.y),
+        ])
+    }
+
+    /// The square of side `2 * half` about `centre`, counter-clockwise.
+    pub fn square(centre: Point2, half: f64) -> Self {
+        let h = Vector2::new(half, half);
+        Self::rectangle(centre - h, centre + h)
+    }
+
     pub fn len(&self) -> usize {
         self.points.len()
     }
@@ -263,12 +294,7 @@ mod tests {
     use super::*;
 
     fn square(x0: f64, y0: f64, s: f64) -> Contour {
-        Contour::new(vec![
-            Point2::new(x0, y0),
-            Point2::new(x0 + s, y0),
-            Point2::new(x0 + s, y0 + s),
-            Point2::new(x0, y0 + s),
-        ])
+        Contour::rectangle(Point2::new(x0, y0), Point2::new(x0 + s, y0 + s))
     }
 
     #[test]

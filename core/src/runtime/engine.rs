@@ -181,37 +181,25 @@ impl Engine {
         }
 
         let mut models = Vec::new();
-        let global_model = match &pipeline.model {
-            Some(spec) => {
-                let spec = match &options.model {
-                    Some(p) => replace_model_file(spec, p)?,
-                    None => spec.clone(),
-                };
-                models.push(ModelStage {
-                    source: build_model(&registry, &spec, &scripts, &base, pipeline.context())?,
-                    label: describe_model(&spec),
-                    spec,
-                });
-                Some(0)
-            }
-            None => None,
+        // A model table (the pipeline's or a part's) built, with `--model` applied.
+        let mut add_model = |spec: &ModelSpec| -> Result<usize> {
+            let spec = match &options.model {
+                Some(p) => replace_model_file(spec, p)?,
+                None => spec.clone(),
+            };
+            models.push(ModelStage {
+                source: build_model(&registry, &spec, &scripts, &base, pipeline.context())?,
+                label: describe_model(&spec),
+                spec,
+            });
+            Ok(models.len() - 1)
         };
+        let global_model = pipeline.model.as_ref().map(&mut add_model).transpose()?;
 
         let mut parts = Vec::new();
         for part in &pipeline.parts {
             let model = match &part.model {
-                Some(spec) => {
-                    let spec = match &options.model {
-                        Some(p) => replace_model_file(spec, p)?,
-                        None => spec.clone(),
-                    };
-                    models.push(ModelStage {
-                        source: build_model(&registry, &spec, &scripts, &base, pipeline.context())?,
-                        label: describe_model(&spec),
-                        spec,
-                    });
-                    models.len() - 1
-                }
+                Some(spec) => add_model(spec)?,
                 None => {
                     global_model.ok_or_else(|| Error::config(format!("part `{}` has no model", part.name)))?
                 }

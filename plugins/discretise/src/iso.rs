@@ -158,18 +158,25 @@ mod tests {
     use super::*;
     use crate::shapes::circle;
 
-    #[test]
-    fn a_disc_level_is_one_counter_clockwise_circle() {
-        let c = circle(0.0, 0.0, 10.0, 200);
-        let mut f = Field::over(&c.bbox(), 100);
-        f.distance_to(&[&c]);
-        let inside = f.inside(&[&c]);
-        let values: Vec<f64> = f
+    /// The field over the first contour's box at 100 cells: distance inside the
+    /// contours, its negative outside.
+    fn signed(contours: &[&Contour]) -> (Field, Vec<f64>) {
+        let mut f = Field::over(&contours[0].bbox(), 100);
+        f.distance_to(contours);
+        let inside = f.inside(contours);
+        let values = f
             .values
             .iter()
             .zip(&inside)
             .map(|(&d, &i)| if i { d } else { -d })
             .collect();
+        (f, values)
+    }
+
+    #[test]
+    fn a_disc_level_is_one_counter_clockwise_circle() {
+        let c = circle(0.0, 0.0, 10.0, 200);
+        let (f, values) = signed(&[&c]);
         let loops = iso_loops(&f, &values, 4.0);
         assert_eq!(loops.len(), 1);
         let want = std::f64::consts::PI * 36.0;
@@ -180,15 +187,7 @@ mod tests {
         );
         // A disc with a hole: {d >= 1} is an annulus, two loops of positive total area.
         let hole = circle(0.0, 0.0, 3.0, 100).oriented(false);
-        let mut f = Field::over(&c.bbox(), 100);
-        f.distance_to(&[&c, &hole]);
-        let inside = f.inside(&[&c, &hole]);
-        let values: Vec<f64> = f
-            .values
-            .iter()
-            .zip(&inside)
-            .map(|(&d, &i)| if i { d } else { -d })
-            .collect();
+        let (f, values) = signed(&[&c, &hole]);
         let ring = iso_loops(&f, &values, 1.0);
         let area: f64 = ring.iter().map(Contour::signed_area).sum();
         let want = std::f64::consts::PI * (81.0 - 16.0);

@@ -420,12 +420,7 @@ mod tests {
     use lamina_core::Point2;
 
     fn square(x0: f64, y0: f64, s: f64) -> Contour {
-        Contour::new(vec![
-            Point2::new(x0, y0),
-            Point2::new(x0 + s, y0),
-            Point2::new(x0 + s, y0 + s),
-            Point2::new(x0, y0 + s),
-        ])
+        Contour::rectangle(Point2::new(x0, y0), Point2::new(x0 + s, y0 + s))
     }
 
     #[test]

@@ -168,13 +168,7 @@ mod tests {
     use lamina_core::{ContourTree, Family, Point2, Polygon};
 
     fn square(c: f64, h: f64, ccw: bool) -> Contour {
-        let pts = vec![
-            Point2::new(c - h, c - h),
-            Point2::new(c + h, c - h),
-            Point2::new(c + h, c + h),
-            Point2::new(c - h, c + h),
-        ];
-        Contour::new(pts).oriented(ccw)
+        Contour::square(Point2::new(c, c), h).oriented(ccw)
     }
 
     fn region(index: usize, count: usize, outer: f64, hole: Option<f64>) -> Region {

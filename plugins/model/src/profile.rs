@@ -7,25 +7,12 @@ use lamina_core::{Contour, Point2, Polygon};
 
 /// A circle of `segments` vertices, counter-clockwise.
 pub fn circle(centre: Point2, radius: f64, segments: usize) -> Contour {
-    let n = segments.max(3);
-    Contour::new(
-        (0..n)
-            .map(|i| {
-                let a = TAU * i as f64 / n as f64;
-                centre + lamina_core::Vector2::new(a.cos(), a.sin()) * radius
-            })
-            .collect(),
-    )
+    Contour::circle(centre, radius, segments)
 }
 
 /// An axis-aligned rectangle, counter-clockwise.
 pub fn rectangle(min: Point2, max: Point2) -> Contour {
-    Contour::new(vec![
-        min,
-        Point2::new(max.x, min.y),
-        max,
-        Point2::new(min.x, max.y),
-    ])
+    Contour::rectangle(min, max)
 }
 
 /// Parameters of a spur gear profile.

@@ -345,12 +345,7 @@ mod tests {
     use lamina_core::Contour;
 
     fn square(c: f64, h: f64) -> Contour {
-        Contour::new(vec![
-            Point2::new(c - h, c - h),
-            Point2::new(c + h, c - h),
-            Point2::new(c + h, c + h),
-            Point2::new(c - h, c + h),
-        ])
+        Contour::square(Point2::new(c, c), h)
     }
 
     const NOZZLE: Widths = Widths {

@@ -336,12 +336,7 @@ mod tests {
     };
 
     fn rect(x0: f64, y0: f64, x1: f64, y1: f64) -> Contour {
-        Contour::new(vec![
-            Point2::new(x0, y0),
-            Point2::new(x1, y0),
-            Point2::new(x1, y1),
-            Point2::new(x0, y1),
-        ])
+        Contour::rectangle(Point2::new(x0, y0), Point2::new(x1, y1))
     }
 
     /// A 1 mm × 20 mm strip cut into `n` bands across its width, graded from the

@@ -1,10 +1,12 @@
-//! What the previews share: the region's colour and composition as text, and coordinates
-//! rounded for output.
+//! What the previews share: the region's colour and composition as text, coordinates
+//! rounded for output, and the sink of the one-picture-per-layer exporters.
 
 use std::fmt::Write as _;
+use std::io::Write;
 use std::path::{Path, PathBuf};
 
-use lamina_core::{Contour, LayerPlan, Region, RunInfo};
+use lamina_core::stage::{LayerSink, OutputFiles};
+use lamina_core::{Contour, Error, LayerPlan, Region, Result, RunInfo};
 
 /// `#rrggbb` of a region's property colour (grey when ungraded).
 pub fn hex(info: &RunInfo, part: usize, r: &Region) -> String {
@@ -70,6 +72,52 @@ pub fn escape(s: &str) -> String {
         .replace('<', "&lt;")
         .replace('>', "&gt;")
         .replace('"', "&quot;")
+}
+
+/// Draws one layer's picture as the bytes of its file (named for errors).
+pub type Render = Box<dyn Fn(&RunInfo, &LayerPlan, &Path) -> Result<Vec<u8>> + Send>;
+
+/// The sink of the exporters that write one picture per layer (PNG, SVG): it picks the
+/// layers (every n-th, or a list), names their files `stem-007.ext`, skips layers with
+/// nothing to draw, and writes what `render` draws.
+pub struct EachLayer {
+    pub stem: PathBuf,
+    pub every: usize,
+    pub layers: Vec<usize>,
+    pub ext: &'static str,
+    pub layer_count: usize,
+    pub render: Render,
+}
+
+impl LayerSink for EachLayer {
+    fn layer(&mut self, info: &RunInfo, plan: &LayerPlan, files: &mut dyn OutputFiles) -> Result<()> {
+        let name = layer_file(
+            &self.stem,
+            self.every,
+            &self.layers,
+            self.layer_count,
+            plan.index,
+            self.ext,
+        );
+        let Some(name) = name else { return Ok(()) };
+        if layer_bounds(plan).is_none() {
+            return Ok(());
+        }
+        let bytes = (self.render)(info, plan, &name)?;
+        write_file(files, &name, &bytes)
+    }
+
+    fn finish(self: Box<Self>, _info: &RunInfo, _files: &mut dyn OutputFiles) -> Result<()> {
+        Ok(())
+    }
+}
+
+/// Writes one whole file of the run's output.
+pub fn write_file(files: &mut dyn OutputFiles, name: &Path, bytes: &[u8]) -> Result<()> {
+    let mut out = files.create(name)?;
+    out.write_all(bytes)
+        .and_then(|()| out.flush())
+        .map_err(|e| Error::io(name, e))
 }
 
 /// The file of a layer for exporters that write one picture per layer: `stem-007.ext`

@@ -3,7 +3,6 @@
 //! overview of all layers piled up, painted from the bottom so upper layers cover lower
 //! ones as they do in the part).
 
-use std::io::Write;
 use std::path::PathBuf;
 
 use lamina_core::stage::{
@@ -13,7 +12,7 @@ use lamina_core::{Contour, Error, LayerPlan, PathKind, Result, RunInfo, StageFac
 use serde::Deserialize;
 use tiny_skia::{Color, FillRule, Paint, PathBuilder, Pixmap, Stroke, Transform};
 
-use crate::draw::{layer_bounds, layer_file};
+use crate::draw::{EachLayer, layer_bounds, write_file};
 
 /// Most pixels on a picture's longer side.
 const MAX_SIZE: u32 = 8192;
@@ -138,13 +137,6 @@ fn encode(pixmap: &Pixmap, name: &std::path::Path) -> Result<Vec<u8>> {
         .map_err(|e| Error::io(name, std::io::Error::other(e.to_string())))
 }
 
-fn write_file(files: &mut dyn OutputFiles, name: &std::path::Path, bytes: &[u8]) -> Result<()> {
-    let mut out = files.create(name)?;
-    out.write_all(bytes)
-        .and_then(|()| out.flush())
-        .map_err(|e| Error::io(name, e))
-}
-
 // ---- png: one picture per layer ------------------------------------------------------
 
 #[derive(Debug, Clone, Deserialize)]
@@ -179,49 +171,36 @@ struct Png {
     options: PngOptions,
 }
 
-struct PngSink {
-    options: PngOptions,
-    layer_count: usize,
-}
-
 impl Exporter for Png {
     fn open(&self, ctx: &mut ExportContext<'_>) -> Result<Box<dyn LayerSink>> {
-        Ok(Box::new(PngSink {
-            options: self.options.clone(),
+        let o = self.options.clone();
+        Ok(Box::new(EachLayer {
+            stem: o.path.clone(),
+            every: o.every,
+            layers: o.layers.clone(),
+            ext: "png",
             layer_count: ctx.layer_count,
+            render: Box::new(move |info, plan, name| {
+                let Some(b) = layer_bounds(plan) else {
+                    return Ok(Vec::new());
+                };
+                let aspect = ((b[3] - b[1]) / (b[2] - b[0]).max(1e-9)).clamp(0.05, 20.0);
+                let (w, h) = if aspect <= 1.0 {
+                    (o.size, ((o.size as f64 * aspect).ceil() as u32).max(16))
+                } else {
+                    (((o.size as f64 / aspect).ceil() as u32).max(16), o.size)
+                };
+                let mut pixmap = new_pixmap(w, h)?;
+                paint_layer(
+                    &mut pixmap,
+                    [0.0, 0.0, w as f32, h as f32],
+                    plan,
+                    info,
+                    o.toolpaths,
+                );
+                encode(&pixmap, name)
+            }),
         }))
-    }
-}
-
-impl LayerSink for PngSink {
-    fn layer(&mut self, info: &RunInfo, plan: &LayerPlan, files: &mut dyn OutputFiles) -> Result<()> {
-        let o = &self.options;
-        let Some(name) = layer_file(&o.path, o.every, &o.layers, self.layer_count, plan.index, "png") else {
-            return Ok(());
-        };
-        let Some(b) = layer_bounds(plan) else {
-            return Ok(());
-        };
-        let aspect = ((b[3] - b[1]) / (b[2] - b[0]).max(1e-9)).clamp(0.05, 20.0);
-        let (w, h) = if aspect <= 1.0 {
-            (o.size, ((o.size as f64 * aspect).ceil() as u32).max(16))
-        } else {
-            (((o.size as f64 / aspect).ceil() as u32).max(16), o.size)
-        };
-        let mut pixmap = new_pixmap(w, h)?;
-        paint_layer(
-            &mut pixmap,
-            [0.0, 0.0, w as f32, h as f32],
-            plan,
-            info,
-            o.toolpaths,
-        );
-        let bytes = encode(&pixmap, &name)?;
-        write_file(files, &name, &bytes)
-    }
-
-    fn finish(self: Box<Self>, _info: &RunInfo, _files: &mut dyn OutputFiles) -> Result<()> {
-        Ok(())
     }
 }
 

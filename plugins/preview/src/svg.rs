@@ -4,16 +4,15 @@
 //! written as the layers come and appear when the run succeeds.
 
 use std::fmt::Write as _;
-use std::io::Write;
 use std::path::PathBuf;
 
 use lamina_core::stage::{
-    AnyStage, ExportContext, Exporter, LayerSink, OptionSpec, OutputFiles, StageConfig, StageInfo, StageKind,
+    AnyStage, ExportContext, Exporter, LayerSink, OptionSpec, StageConfig, StageInfo, StageKind,
 };
-use lamina_core::{Error, LayerPlan, PathKind, Result, RunInfo, StageFactory};
+use lamina_core::{LayerPlan, PathKind, Result, RunInfo, StageFactory};
 use serde::Deserialize;
 
-use crate::draw::{composition_text, escape, hex, layer_bounds, layer_file, path_data, round};
+use crate::draw::{EachLayer, composition_text, escape, hex, layer_bounds, path_data, round};
 
 #[derive(Debug, Clone, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -45,11 +44,6 @@ fn d_size() -> f64 {
 
 struct Svg {
     options: Options,
-}
-
-struct Sink {
-    options: Options,
-    layer_count: usize,
 }
 
 /// The SVG text of one layer.
@@ -146,30 +140,17 @@ pub fn layer_svg(info: &RunInfo, plan: &LayerPlan, toolpaths: bool, size: f64) -
 
 impl Exporter for Svg {
     fn open(&self, ctx: &mut ExportContext<'_>) -> Result<Box<dyn LayerSink>> {
-        Ok(Box::new(Sink {
-            options: self.options.clone(),
+        let o = self.options.clone();
+        Ok(Box::new(EachLayer {
+            stem: o.path.clone(),
+            every: o.every,
+            layers: o.layers.clone(),
+            ext: "svg",
             layer_count: ctx.layer_count,
+            render: Box::new(
+                move |info, plan, _| Ok(layer_svg(info, plan, o.toolpaths, o.size).into_bytes()),
+            ),
         }))
-    }
-}
-
-impl LayerSink for Sink {
-    fn layer(&mut self, info: &RunInfo, plan: &LayerPlan, files: &mut dyn OutputFiles) -> Result<()> {
-        let o = &self.options;
-        let Some(name) = layer_file(&o.path, o.every, &o.layers, self.layer_count, plan.index, "svg") else {
-            return Ok(());
-        };
-        if layer_bounds(plan).is_none() {
-            return Ok(());
-        }
-        let mut out = files.create(&name)?;
-        out.write_all(layer_svg(info, plan, o.toolpaths, o.size).as_bytes())
-            .and_then(|()| out.flush())
-            .map_err(|e| Error::io(&name, e))
-    }
-
-    fn finish(self: Box<Self>, _info: &RunInfo, _files: &mut dyn OutputFiles) -> Result<()> {
-        Ok(())
     }
 }
 

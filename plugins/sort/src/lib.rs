@@ -123,12 +123,7 @@ mod tests {
     use super::*;
 
     fn square(c: f64, half: f64) -> Contour {
-        Contour::new(vec![
-            Point2::new(c - half, c - half),
-            Point2::new(c + half, c - half),
-            Point2::new(c + half, c + half),
-            Point2::new(c - half, c + half),
-        ])
+        Contour::square(Point2::new(c, c), half)
     }
 
     /// The paper's Fig. 2: C3 contains C2, which contains C1; C3 and C2 form one
