@@ -121,6 +121,8 @@ option_type! {
     bool = "bool", array "array of bool";
     String = "string", array "array of string";
     PathBuf = "string", array "array of string";
+    crate::surface::FaceSelection = "table", array "array of table";
+    crate::machine::Flavor = "string";
 }
 
 /// Default and doc of an option that several stages accept alike; each stage names
