@@ -15,6 +15,8 @@ use i_overlay::i_float::int::point::IntPoint;
 use i_overlay::i_shape::int::shape::IntShapes;
 use serde::Deserialize;
 
+lamina_core::option_type!(From = "string"; Join = "string");
+
 /// Which boundaries the offsets start from: the grading reference.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Deserialize)]
 #[serde(rename_all = "lowercase")]
