@@ -47,10 +47,11 @@ pub fn text(registry: &Registry, kind: Option<StageKind>) -> String {
             default_mark(registry, r)
         );
         for o in info.options {
-            let default = o
-                .default
-                .map(|d| format!(" = {d}"))
-                .unwrap_or_else(|| " (required)".into());
+            let default = match o.default {
+                Some(d) => format!(" = {d}"),
+                None if o.required => " (required)".into(),
+                None => " (optional)".into(),
+            };
             let _ = writeln!(out, "      {} : {}{default}  {}", o.name, o.ty, o.doc);
         }
     }
@@ -139,9 +140,11 @@ pub fn markdown(registry: &Registry, kind: Option<StageKind>) -> String {
                     "| `{}` | {} | {} | {} |",
                     o.name,
                     o.ty,
-                    o.default
-                        .map(|d| format!("`{d}`"))
-                        .unwrap_or_else(|| "required".into()),
+                    match o.default {
+                        Some(d) => format!("`{d}`"),
+                        None if o.required => "required".into(),
+                        None => "none".into(),
+                    },
                     o.doc.replace('|', "\\|")
                 );
             }

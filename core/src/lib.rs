@@ -12,6 +12,7 @@ pub mod limits;
 pub mod machine;
 pub mod mesh;
 pub mod model;
+pub mod options;
 pub mod output;
 pub mod pipeline;
 pub mod plugin;

@@ -78,9 +78,12 @@ pub struct OptionSpec {
     pub name: &'static str,
     /// The TOML type, e.g. `float`, `integer`, `string`, `bool`, `array of float`.
     pub ty: &'static str,
-    /// The default as a TOML literal; `None` when the option is required.
+    /// The default as a TOML literal; `None` when the option has none.
     pub default: Option<&'static str>,
     pub doc: &'static str,
+    /// True when the user must give the option; one without a default that is not
+    /// required has no value when absent (its doc says what that means).
+    pub required: bool,
 }
 
 impl OptionSpec {
@@ -91,6 +94,18 @@ impl OptionSpec {
             ty,
             default: None,
             doc,
+            required: true,
+        }
+    }
+
+    /// An option the user may leave out, without a default value.
+    pub const fn optional(name: &'static str, ty: &'static str, doc: &'static str) -> Self {
+        Self {
+            name,
+            ty,
+            default: None,
+            doc,
+            required: false,
         }
     }
 
@@ -101,6 +116,7 @@ impl OptionSpec {
             ty,
             default: Some(default),
             doc,
+            required: false,
         }
     }
 }
@@ -326,7 +342,8 @@ pub struct PipelineContext<'a> {
 }
 
 impl StageConfig<'_> {
-    /// Deserialises the table into the stage's options struct (use
+    /// Deserialises the table into the stage's options struct (one declared with
+    /// [`stage_options!`](crate::stage_options), or with
     /// `#[serde(deny_unknown_fields)]`); errors point at the offending key or value.
     pub fn parse<T: serde::de::DeserializeOwned>(&self) -> Result<T> {
         self.table.parse()

@@ -68,3 +68,44 @@ fn the_expected_built_in_stages_are_registered() {
         );
     }
 }
+
+/// Every documented default is a TOML literal the stage accepts: each stage is built
+/// from its example's options that have no default plus every option that has one,
+/// set to its documented default.
+#[test]
+fn every_documented_default_is_toml_the_stage_accepts() {
+    let registry = registry();
+    let dir = tempfile::tempdir().unwrap_or_else(|e| panic!("a temporary folder: {e}"));
+    lamina_test_support::write_models(dir.path());
+    let mut failures = Vec::new();
+    for entry in registry.list(None) {
+        let info = entry.info();
+        let label = entry.label();
+        let mut example: toml::Table =
+            toml::from_str(info.example).unwrap_or_else(|e| panic!("{label}: its example is not TOML: {e}"));
+        for o in info.options {
+            if let Some(d) = o.default {
+                match toml::from_str::<toml::Table>(&format!("v = {d}")) {
+                    Ok(mut t) => {
+                        if let Some(v) = t.remove("v") {
+                            example.insert(o.name.to_string(), v);
+                        }
+                    }
+                    Err(e) => failures.push(format!(
+                        "{label}: the default of `{}`, {d}, is not TOML: {e}",
+                        o.name
+                    )),
+                }
+            } else if o.required && !example.contains_key(o.name) {
+                failures.push(format!("{label}: its example lacks the required `{}`", o.name));
+            }
+        }
+        let text = toml::to_string(&example).unwrap_or_default();
+        if let Err(e) = lamina_test_support::try_stage(info.kind, &text, dir.path()) {
+            failures.push(format!(
+                "{label}: its documented defaults do not build: {e}\n{text}"
+            ));
+        }
+    }
+    assert!(failures.is_empty(), "{}", failures.join("\n\n"));
+}

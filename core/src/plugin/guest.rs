@@ -383,6 +383,7 @@ fn handle(request: Request<'static>) -> Result<Response> {
                             ty: o.ty.to_string(),
                             default: o.default.map(ToString::to_string),
                             doc: o.doc.to_string(),
+                            required: o.required,
                         })
                         .collect(),
                     example: f.info.example.to_string(),

@@ -20,7 +20,8 @@ use i_overlay::core::overlay_rule::OverlayRule;
 use i_overlay::i_float::int::point::IntPoint;
 use i_overlay::string::line::IntLine;
 use i_overlay::string::slice::IntSlice;
-use lamina_core::stage::{OptionSpec, StageConfig};
+use lamina_core::options::SharedOption;
+use lamina_core::stage::StageConfig;
 use lamina_core::{Contour, Limit, Limits, Point2, Polygon, Region, Result, Vector2};
 use lamina_geom::segment_parameter;
 use serde::Deserialize;
@@ -33,24 +34,16 @@ use crate::regions::region;
 /// More cells around one region than anyone could deposit: a guard against typos.
 pub const MAX_CELLS: usize = 1000;
 
-pub const AROUND_OPTION: OptionSpec = OptionSpec::new(
-    "cells_around",
-    "integer",
-    "none",
+pub const AROUND_OPTION: SharedOption = SharedOption::without_default(
     "split every sub-region into this many circumferential cells of equal arc length along its outer contour",
 );
 
-pub const CUTS_OPTION: OptionSpec = OptionSpec::new(
-    "cell_cuts",
-    "string",
+pub const CUTS_OPTION: SharedOption = SharedOption::new(
     "\"sectors\"",
     "how cells are cut: `sectors` (equal angles about the family's centre) or `arc` (equal arc lengths along each sub-region's own outer contour, Fig. 13)",
 );
 
-pub const LENGTH_OPTION: OptionSpec = OptionSpec::new(
-    "cell_length",
-    "float",
-    "none",
+pub const LENGTH_OPTION: SharedOption = SharedOption::without_default(
     "split every sub-region into circumferential cells of equal arc length about this long (mm, along its middle)",
 );
 
@@ -64,6 +57,8 @@ pub enum Count {
     /// Cells about this long (mm) along the region's middle.
     Length(f64),
 }
+
+lamina_core::option_type!(Cuts = "string");
 
 /// How the cells are cut.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Deserialize)]

@@ -5,9 +5,7 @@
 //! truncation instead of equal parts.
 
 use lamina_core::mesh::Point3;
-use lamina_core::stage::{
-    AnyStage, Discretiser, FamilyContext, OptionSpec, StageConfig, StageInfo, StageKind,
-};
+use lamina_core::stage::{AnyStage, Discretiser, FamilyContext, StageConfig, StageInfo, StageKind};
 use lamina_core::steps::Truncation;
 use lamina_core::surface::{FaceSelection, Surface};
 use lamina_core::{Contour, Error, Mesh, Point2, Polygon, Region, Result, StageFactory};
@@ -30,6 +28,8 @@ const STAGE: &str = "discretise:distance-field";
 /// Below every level: keeps iso-loops closed at the grid's border.
 const FLOOR: f64 = -1e300;
 
+lamina_core::option_type!(Feature = "string");
+
 /// The material feature distances are measured from (r = 0 there).
 #[derive(Debug, Clone, Copy, PartialEq, Deserialize)]
 #[serde(rename_all = "lowercase")]
@@ -51,45 +51,33 @@ pub enum Feature {
     Surface,
 }
 
-#[derive(Debug, Deserialize)]
-#[serde(deny_unknown_fields)]
-struct Options {
-    #[serde(default = "default_feature")]
-    feature: Feature,
-    #[serde(default)]
-    point: Option<[f64; 2]>,
-    #[serde(default)]
-    points: Option<Vec<[f64; 2]>>,
-    #[serde(default)]
-    faces: Option<FaceSelection>,
-    #[serde(default = "default_count")]
-    count: usize,
-    #[serde(default)]
-    step: Option<f64>,
-    #[serde(default)]
-    spacing: Option<f64>,
-    #[serde(default)]
-    width: Option<f64>,
-    #[serde(default = "default_cells")]
-    cells: usize,
-    #[serde(default)]
-    cell_size: Option<f64>,
-    #[serde(default)]
-    cells_around: Option<usize>,
-    #[serde(default)]
-    cell_length: Option<f64>,
-    #[serde(default)]
-    cell_cuts: Option<crate::cells::Cuts>,
-}
-
-fn default_feature() -> Feature {
-    Feature::Boundary
-}
-fn default_count() -> usize {
-    10
-}
-fn default_cells() -> usize {
-    256
+lamina_core::stage_options! {
+    #[derive(Debug)]
+    struct Options {
+        /// where r = 0: `boundary` (signed), `outer`, `holes`, `centre`, `point`, `line`, `polyline` or `surface` (chosen faces of the part's mesh, measured in space)
+        feature: Feature = r#""boundary""#,
+        /// [x, y] (mm) of the feature `point`
+        point: Option<[f64; 2]>,
+        /// [[x, y], ...] (mm): two points of the feature `line`, or the points of the `polyline`
+        points: Option<Vec<[f64; 2]>>,
+        /// the faces of the feature `surface`: `{ normal = [x, y, z], within = 30.0 }` (outward normal within that many degrees) and/or `{ groups = ["name"] }` (named face groups of a 3MF)
+        faces: Option<FaceSelection>,
+        /// number of equal parts of r; levels j / (count - 1)
+        count: usize = "10",
+        /// grading step-width t_g: levels 0, t_g, ..., 1 at half steps
+        step: Option<f64>,
+        /// iso-contours every `spacing` mm of distance (Fig. 7) instead of `count` parts of r; levels d / max(d) (Eq. 2)
+        spacing: Option<f64>,
+        /// distance (mm) that r = 1 stands for (farther is r = 1); default each family's largest distance (Eq. 2's max(d_ij))
+        width: Option<f64>,
+        /// samples along the family's longer side
+        cells: usize = "256",
+        /// sample spacing (mm) instead of `cells`
+        cell_size: Option<f64>,
+        cells_around: Option<usize> = use crate::cells::AROUND_OPTION,
+        cell_length: Option<f64> = use crate::cells::LENGTH_OPTION,
+        cell_cuts: Option<crate::cells::Cuts> = use crate::cells::CUTS_OPTION,
+    }
 }
 
 /// How the normalised distance is cut into levels.
@@ -472,71 +460,7 @@ lamina_core::register_stage!(StageFactory {
         kind: StageKind::Discretise,
         name: "distance-field",
         doc: "Iso-contours of a normalised distance field to a material feature bound the sub-regions, clipped to the family.",
-        options: &[
-            OptionSpec::new(
-                "feature",
-                "string",
-                "\"boundary\"",
-                "where r = 0: `boundary` (signed), `outer`, `holes`, `centre`, `point`, `line`, `polyline` or `surface` (chosen faces of the part's mesh, measured in space)"
-            ),
-            OptionSpec::new(
-                "point",
-                "array of float",
-                "none",
-                "[x, y] (mm) of the feature `point`"
-            ),
-            OptionSpec::new(
-                "points",
-                "array of array of float",
-                "none",
-                "[[x, y], ...] (mm): two points of the feature `line`, or the points of the `polyline`"
-            ),
-            OptionSpec::new(
-                "faces",
-                "table",
-                "all faces",
-                "the faces of the feature `surface`: `{ normal = [x, y, z], within = 30.0 }` (outward normal within that many degrees) and/or `{ groups = [\"name\"] }` (named face groups of a 3MF)"
-            ),
-            OptionSpec::new(
-                "count",
-                "integer",
-                "10",
-                "number of equal parts of r; levels j / (count - 1)"
-            ),
-            OptionSpec::new(
-                "step",
-                "float",
-                "none",
-                "grading step-width t_g: levels 0, t_g, ..., 1 at half steps"
-            ),
-            OptionSpec::new(
-                "spacing",
-                "float",
-                "none",
-                "iso-contours every `spacing` mm of distance (Fig. 7) instead of `count` parts of r; levels d / max(d) (Eq. 2)"
-            ),
-            OptionSpec::new(
-                "width",
-                "float",
-                "none",
-                "distance (mm) that r = 1 stands for (farther is r = 1); default each family's largest distance (Eq. 2's max(d_ij))"
-            ),
-            OptionSpec::new(
-                "cells",
-                "integer",
-                "256",
-                "samples along the family's longer side"
-            ),
-            OptionSpec::new(
-                "cell_size",
-                "float",
-                "none",
-                "sample spacing (mm) instead of `cells`"
-            ),
-            crate::cells::AROUND_OPTION,
-            crate::cells::LENGTH_OPTION,
-            crate::cells::CUTS_OPTION,
-        ],
+        options: Options::SPECS,
         example: "use = \"distance-field\"\nfeature = \"outer\"\ncount = 4",
     },
     build,

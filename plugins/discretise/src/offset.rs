@@ -7,11 +7,8 @@
 //! band on the outer side and one about each hole. `count` and `spacing` override N_R
 //! and d; a `count` alone spreads the rings over the whole reach.
 
-use lamina_core::stage::{
-    AnyStage, Discretiser, FamilyContext, OptionSpec, StageConfig, StageInfo, StageKind,
-};
+use lamina_core::stage::{AnyStage, Discretiser, FamilyContext, StageConfig, StageInfo, StageKind};
 use lamina_core::{Polygon, Region, Result, StageFactory};
-use serde::Deserialize;
 
 use crate::bands::{clean, offset_bands};
 use crate::cells::Cells;
@@ -23,40 +20,21 @@ use crate::regions::{from_bands, uniform_level, whole};
 
 const STAGE: &str = "discretise:offset";
 
-#[derive(Debug, Deserialize)]
-#[serde(deny_unknown_fields)]
-struct Options {
-    #[serde(default = "default_nozzle")]
-    nozzle: f64,
-    #[serde(default)]
-    count: Option<usize>,
-    #[serde(default)]
-    spacing: Option<f64>,
-    #[serde(default = "default_from")]
-    from: From,
-    #[serde(default)]
-    join: Join,
-    #[serde(default = "default_tolerance")]
-    tolerance: f64,
-    #[serde(default)]
-    cells_around: Option<usize>,
-    #[serde(default)]
-    cell_length: Option<f64>,
-    #[serde(default)]
-    cell_cuts: Option<crate::cells::Cuts>,
-}
-
-fn default_nozzle() -> f64 {
-    0.4
-}
-
-/// The paper's reference: the family's outer contour.
-fn default_from() -> From {
-    From::Outer
-}
-
-pub fn default_tolerance() -> f64 {
-    0.005
+lamina_core::stage_options! {
+    #[derive(Debug)]
+    struct Options {
+        nozzle: f64 = use crate::options::NOZZLE,
+        count: Option<usize> = use crate::options::COUNT,
+        /// offset distance d (mm); default D_N (the nozzle), or reach / count when only `count` is given
+        spacing: Option<f64>,
+        /// grading reference: `outer` (the paper's: the outer contour moves toward the holes, reach L_s) or `all` (outer and holes move together and meet halfway, reach L_s / 2, a band on each side per index)
+        from: From = r#""outer""#,
+        join: Join = use crate::options::JOIN,
+        tolerance: f64 = use crate::options::TOLERANCE,
+        cells_around: Option<usize> = use crate::cells::AROUND_OPTION,
+        cell_length: Option<f64> = use crate::cells::LENGTH_OPTION,
+        cell_cuts: Option<crate::cells::Cuts> = use crate::cells::CUTS_OPTION,
+    }
 }
 
 /// The offset discretiser with its checked options.
@@ -164,27 +142,7 @@ lamina_core::register_stage!(StageFactory {
         kind: StageKind::Discretise,
         name: "offset",
         doc: "Method 1: rings between inward offsets of the outer contour toward the holes, one nozzle apart, N_R = int(L_s / D_N); the last ring takes the remainder.",
-        options: &[
-            options::NOZZLE,
-            options::COUNT,
-            OptionSpec::new(
-                "spacing",
-                "float",
-                "none",
-                "offset distance d (mm); default D_N (the nozzle), or reach / count when only `count` is given"
-            ),
-            OptionSpec::new(
-                "from",
-                "string",
-                "\"outer\"",
-                "grading reference: `outer` (the paper's: the outer contour moves toward the holes, reach L_s) or `all` (outer and holes move together and meet halfway, reach L_s / 2, a band on each side per index)"
-            ),
-            options::JOIN,
-            options::TOLERANCE,
-            crate::cells::AROUND_OPTION,
-            crate::cells::LENGTH_OPTION,
-            crate::cells::CUTS_OPTION,
-        ],
+        options: Options::SPECS,
         example: "use = \"offset\"\nnozzle = 0.2",
     },
     build,

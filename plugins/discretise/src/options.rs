@@ -2,40 +2,27 @@
 //! that `nozzle`, `count`, `join` and `tolerance` read and fail alike everywhere.
 
 use lamina_core::limits::{MAX_COORDINATE, is_coordinate};
-use lamina_core::stage::{OptionSpec, StageConfig};
+use lamina_core::options::SharedOption;
+use lamina_core::stage::StageConfig;
 use lamina_core::{Limit, Limits, Result};
 
 /// Finest arc-to-chord tolerance (mm): a tenth of a micrometre, far below any
 /// machine's resolution. Finer ones only multiply the vertices of round corners.
 pub const MIN_TOLERANCE: f64 = 1e-4;
 
-pub const NOZZLE: OptionSpec = OptionSpec::new(
-    "nozzle",
-    "float",
-    "0.4",
-    "nozzle diameter D_N (mm) for N_R = int(L_s / D_N)",
-);
+pub const NOZZLE: SharedOption =
+    SharedOption::new("0.4", "nozzle diameter D_N (mm) for N_R = int(L_s / D_N)");
 
-pub const COUNT: OptionSpec = OptionSpec::new(
-    "count",
-    "integer",
-    "none",
-    "number of sub-regions N_R instead of the nozzle rule",
-);
+pub const COUNT: SharedOption =
+    SharedOption::without_default("number of sub-regions N_R instead of the nozzle rule");
 
-pub const JOIN: OptionSpec = OptionSpec::new(
-    "join",
-    "string",
+pub const JOIN: SharedOption = SharedOption::new(
     "\"round\"",
     "offset corners: `round` (exact distance), `miter` or `bevel`",
 );
 
-pub const TOLERANCE: OptionSpec = OptionSpec::new(
-    "tolerance",
-    "float",
-    "0.005",
-    "largest arc-to-chord distance of round corners (mm)",
-);
+pub const TOLERANCE: SharedOption =
+    SharedOption::new("0.005", "largest arc-to-chord distance of round corners (mm)");
 
 /// `v` when it is a positive number of millimetres, at most a kilometre.
 pub fn positive_mm(config: &StageConfig<'_>, key: &str, v: f64) -> Result<f64> {

@@ -12,7 +12,6 @@ use i_overlay::core::fill_rule::FillRule;
 use i_overlay::core::overlay::ShapeType;
 use lamina_core::stage::{AnyStage, Discretiser, FamilyContext, StageConfig, StageInfo, StageKind};
 use lamina_core::{Contour, Point2, Polygon, Region, Result, StageFactory};
-use serde::Deserialize;
 
 use crate::bands::{clean, nested_bands};
 use crate::cells::Cells;
@@ -36,23 +35,15 @@ const MAX_ADDED: usize = 4096;
 /// Angular bins per inner contour for finding where a ray meets it.
 const BINS: usize = 128;
 
-#[derive(Debug, Deserialize)]
-#[serde(deny_unknown_fields)]
-struct Options {
-    #[serde(default = "default_nozzle")]
-    nozzle: f64,
-    #[serde(default)]
-    count: Option<usize>,
-    #[serde(default)]
-    cells_around: Option<usize>,
-    #[serde(default)]
-    cell_length: Option<f64>,
-    #[serde(default)]
-    cell_cuts: Option<crate::cells::Cuts>,
-}
-
-fn default_nozzle() -> f64 {
-    0.4
+lamina_core::stage_options! {
+    #[derive(Debug)]
+    struct Options {
+        nozzle: f64 = use crate::options::NOZZLE,
+        count: Option<usize> = use crate::options::COUNT,
+        cells_around: Option<usize> = use crate::cells::AROUND_OPTION,
+        cell_length: Option<f64> = use crate::cells::LENGTH_OPTION,
+        cell_cuts: Option<crate::cells::Cuts> = use crate::cells::CUTS_OPTION,
+    }
 }
 
 struct Radial {
@@ -504,13 +495,7 @@ lamina_core::register_stage!(StageFactory {
         kind: StageKind::Discretise,
         name: "radial",
         doc: "Method 2: radial lines from the outer contour to the inner contours (or the centre), divided into N_R equal parts; offset contours through the dividing points (Eq. 17).",
-        options: &[
-            options::NOZZLE,
-            options::COUNT,
-            crate::cells::AROUND_OPTION,
-            crate::cells::LENGTH_OPTION,
-            crate::cells::CUTS_OPTION,
-        ],
+        options: Options::SPECS,
         example: "use = \"radial\"\ncount = 10",
     },
     build,

@@ -3,12 +3,9 @@
 //! f = 0 below t_g / 2 and f = t_g (u + 1) for (u + 1/2) t_g <= f < (u + 3/2) t_g, which
 //! gives N_c = 1 / t_g + 1 homogeneous regions bounded by offsets at the half steps.
 
-use lamina_core::stage::{
-    AnyStage, Discretiser, FamilyContext, OptionSpec, StageConfig, StageInfo, StageKind,
-};
+use lamina_core::stage::{AnyStage, Discretiser, FamilyContext, StageConfig, StageInfo, StageKind};
 use lamina_core::steps::Truncation;
 use lamina_core::{Polygon, Region, Result, StageFactory};
-use serde::Deserialize;
 
 use crate::bands::{clean, offset_bands};
 use crate::cells::Cells;
@@ -20,35 +17,23 @@ use crate::regions::{from_bands, whole};
 
 const STAGE: &str = "discretise:step-width";
 
-#[derive(Debug, Deserialize)]
-#[serde(deny_unknown_fields)]
-struct Options {
-    #[serde(default = "default_step")]
-    step: f64,
-    #[serde(default = "default_power")]
-    power: f64,
-    #[serde(default)]
-    width: Option<f64>,
-    #[serde(default)]
-    from: From,
-    #[serde(default)]
-    join: Join,
-    #[serde(default = "crate::offset::default_tolerance")]
-    tolerance: f64,
-    #[serde(default)]
-    cells_around: Option<usize>,
-    #[serde(default)]
-    cell_length: Option<f64>,
-    #[serde(default)]
-    cell_cuts: Option<crate::cells::Cuts>,
-}
-
-fn default_step() -> f64 {
-    0.25
-}
-
-fn default_power() -> f64 {
-    1.0
+lamina_core::stage_options! {
+    #[derive(Debug)]
+    struct Options {
+        /// grading step-width t_g in (0, 1]; N_c = int(1 / t_g) + 1 levels, the last one 1
+        step: f64 = "0.25",
+        /// f(d) = (d / width)^power, the grading function of the distance
+        power: f64 = "1.0",
+        /// grading width (mm): f = 1 beyond it; default the family's deepest point from the reference
+        width: Option<f64>,
+        /// distance reference: `all` boundaries or the `outer` contour
+        from: From = r#""all""#,
+        join: Join = use crate::options::JOIN,
+        tolerance: f64 = use crate::options::TOLERANCE,
+        cells_around: Option<usize> = use crate::cells::AROUND_OPTION,
+        cell_length: Option<f64> = use crate::cells::LENGTH_OPTION,
+        cell_cuts: Option<crate::cells::Cuts> = use crate::cells::CUTS_OPTION,
+    }
 }
 
 struct StepWidth {
@@ -148,37 +133,7 @@ lamina_core::register_stage!(StageFactory {
         kind: StageKind::Discretise,
         name: "step-width",
         doc: "Grading step-width truncation: N_c = 1 / t_g + 1 regions at levels 0, t_g, ..., 1, split at the half steps (u + 1/2) t_g of f(d).",
-        options: &[
-            OptionSpec::new(
-                "step",
-                "float",
-                "0.25",
-                "grading step-width t_g in (0, 1]; N_c = int(1 / t_g) + 1 levels, the last one 1"
-            ),
-            OptionSpec::new(
-                "power",
-                "float",
-                "1.0",
-                "f(d) = (d / width)^power, the grading function of the distance"
-            ),
-            OptionSpec::new(
-                "width",
-                "float",
-                "none",
-                "grading width (mm): f = 1 beyond it; default the family's deepest point from the reference"
-            ),
-            OptionSpec::new(
-                "from",
-                "string",
-                "\"all\"",
-                "distance reference: `all` boundaries or the `outer` contour"
-            ),
-            crate::options::JOIN,
-            crate::options::TOLERANCE,
-            crate::cells::AROUND_OPTION,
-            crate::cells::LENGTH_OPTION,
-            crate::cells::CUTS_OPTION,
-        ],
+        options: Options::SPECS,
         example: "use = \"step-width\"\nstep = 0.25",
     },
     build,

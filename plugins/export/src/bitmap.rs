@@ -17,39 +17,26 @@ use std::io::Write;
 use std::path::PathBuf;
 
 use lamina_core::stage::{
-    AnyStage, ExportContext, Exporter, LayerSink, OptionSpec, OutputFiles, StageConfig, StageInfo, StageKind,
+    AnyStage, ExportContext, Exporter, LayerSink, OutputFiles, StageConfig, StageInfo, StageKind,
 };
 use lamina_core::{BBox2, Contour, Error, LayerPlan, Limit, Limits, Result, RunInfo, StageFactory};
-use serde::Deserialize;
 
-#[derive(Debug, Deserialize)]
-#[serde(deny_unknown_fields)]
-struct Options {
-    #[serde(default = "d_path")]
-    path: PathBuf,
-    #[serde(default)]
-    parts: Vec<String>,
-    #[serde(default = "d_pixel")]
-    pixel: f64,
-    #[serde(default = "d_period")]
-    period: [f64; 3],
-    #[serde(default)]
-    origin: [f64; 3],
-    #[serde(default = "d_radius")]
-    void_radius: f64,
-}
-
-fn d_path() -> PathBuf {
-    PathBuf::from("bitmap")
-}
-fn d_pixel() -> f64 {
-    0.05
-}
-fn d_period() -> [f64; 3] {
-    [1.0, 1.0, 1.0]
-}
-fn d_radius() -> f64 {
-    0.3
+lamina_core::stage_options! {
+    #[derive(Debug)]
+    struct Options {
+        /// output name: `<path>.hdr` (one line per layer) and `<path>.dat` (the bitmaps)
+        path: PathBuf = r#""bitmap""#,
+        /// the microstructure parts; default: all
+        parts: Vec<String> = "[]",
+        /// pixel size (mm)
+        pixel: f64 = "0.05",
+        /// lattice spacing in x, y, z (mm)
+        period: [f64; 3] = "[1.0, 1.0, 1.0]",
+        /// one inserting point of the lattice (mm)
+        origin: [f64; 3] = "[0.0, 0.0, 0.0]",
+        /// radius of the spherical void at each inserting point (mm)
+        void_radius: f64 = "0.3",
+    }
 }
 
 /// A lattice of spherical voids.
@@ -376,39 +363,7 @@ lamina_core::register_stage!(StageFactory {
         kind: StageKind::Export,
         name: "bitmap",
         doc: "Bitmap layers of periodic-microstructure parts: 1 for material, 0 for the lattice's spherical voids; one header and one data file.",
-        options: &[
-            OptionSpec::new(
-                "path",
-                "string",
-                "\"bitmap\"",
-                "output name: `<path>.hdr` (one line per layer) and `<path>.dat` (the bitmaps)"
-            ),
-            OptionSpec::new(
-                "parts",
-                "array of string",
-                "[]",
-                "the microstructure parts; default: all"
-            ),
-            OptionSpec::new("pixel", "float", "0.05", "pixel size (mm)"),
-            OptionSpec::new(
-                "period",
-                "array of float",
-                "[1.0, 1.0, 1.0]",
-                "lattice spacing in x, y, z (mm)"
-            ),
-            OptionSpec::new(
-                "origin",
-                "array of float",
-                "[0.0, 0.0, 0.0]",
-                "one inserting point of the lattice (mm)"
-            ),
-            OptionSpec::new(
-                "void_radius",
-                "float",
-                "0.3",
-                "radius of the spherical void at each inserting point (mm)"
-            ),
-        ],
+        options: Options::SPECS,
         example: "use = \"bitmap\"\npixel = 0.1\nperiod = [2.0, 2.0, 1.0]\nvoid_radius = 0.4",
     },
     build,

@@ -18,10 +18,12 @@ use std::io::Write;
 use std::path::PathBuf;
 
 use lamina_core::stage::{
-    AnyStage, ExportContext, Exporter, LayerSink, OptionSpec, OutputFiles, StageConfig, StageInfo, StageKind,
+    AnyStage, ExportContext, Exporter, LayerSink, OutputFiles, StageConfig, StageInfo, StageKind,
 };
 use lamina_core::{Contour, Error, LayerPlan, Result, RunInfo, StageFactory};
 use serde::Deserialize;
+
+lamina_core::option_type!(Format = "string");
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize)]
 #[serde(rename_all = "lowercase")]
@@ -32,25 +34,16 @@ enum Format {
     Modified,
 }
 
-#[derive(Debug, Deserialize)]
-#[serde(deny_unknown_fields)]
-struct Options {
-    #[serde(default = "d_path")]
-    path: PathBuf,
-    #[serde(default = "d_format")]
-    format: Format,
-    #[serde(default = "d_units")]
-    units: f64,
-}
-
-fn d_path() -> PathBuf {
-    PathBuf::from("layers.cli")
-}
-fn d_format() -> Format {
-    Format::Ascii
-}
-fn d_units() -> f64 {
-    0.001
+lamina_core::stage_options! {
+    #[derive(Debug)]
+    struct Options {
+        /// output file, relative to the output folder
+        path: PathBuf = r#""layers.cli""#,
+        /// "ascii", "binary" (long commands, little-endian) or "modified" (sub-regions with material data)
+        format: Format = r#""ascii""#,
+        /// mm per coordinate unit ($$UNITS)
+        units: f64 = "0.001",
+    }
 }
 
 /// CLI 2.0 binary command indices.
@@ -253,21 +246,7 @@ lamina_core::register_stage!(StageFactory {
         kind: StageKind::Export,
         name: "cli",
         doc: "Common Layer Interface layer files: ASCII or binary contours per layer, or the modified CLI with sub-regions, contour ids, colours and fractions.",
-        options: &[
-            OptionSpec::new(
-                "path",
-                "string",
-                "\"layers.cli\"",
-                "output file, relative to the output folder"
-            ),
-            OptionSpec::new(
-                "format",
-                "string",
-                "\"ascii\"",
-                "\"ascii\", \"binary\" (long commands, little-endian) or \"modified\" (sub-regions with material data)"
-            ),
-            OptionSpec::new("units", "float", "0.001", "mm per coordinate unit ($$UNITS)"),
-        ],
+        options: Options::SPECS,
         example: "use = \"cli\"\npath = \"layers.cli\"\nformat = \"binary\"",
     },
     build,

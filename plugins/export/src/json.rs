@@ -7,13 +7,15 @@ use std::io::Write;
 use std::path::PathBuf;
 
 use lamina_core::stage::{
-    AnyStage, ExportContext, Exporter, LayerSink, OptionSpec, OutputFiles, StageConfig, StageInfo, StageKind,
+    AnyStage, ExportContext, Exporter, LayerSink, OutputFiles, StageConfig, StageInfo, StageKind,
 };
 use lamina_core::{Contour, Error, LayerPlan, Polygon, Result, RunInfo, StageFactory, Toolpath};
 use serde::{Deserialize, Serialize};
 
 /// Version of the JSON schema; bumped on incompatible changes.
 pub const SCHEMA_VERSION: u32 = 1;
+
+lamina_core::option_type!(Form = "string");
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize)]
 #[serde(rename_all = "lowercase")]
@@ -22,27 +24,18 @@ enum Form {
     Lines,
 }
 
-#[derive(Debug, Deserialize)]
-#[serde(deny_unknown_fields)]
-struct Options {
-    #[serde(default = "d_path")]
-    path: PathBuf,
-    #[serde(default = "d_form")]
-    form: Form,
-    #[serde(default)]
-    pretty: bool,
-    #[serde(default = "d_true")]
-    toolpaths: bool,
-}
-
-fn d_path() -> PathBuf {
-    PathBuf::from("plan.json")
-}
-fn d_form() -> Form {
-    Form::Document
-}
-fn d_true() -> bool {
-    true
+lamina_core::stage_options! {
+    #[derive(Debug)]
+    struct Options {
+        /// output file, relative to the output folder
+        path: PathBuf = r#""plan.json""#,
+        /// "document" (one JSON value) or "lines" (JSON Lines: header, then one line per layer)
+        form: Form = r#""document""#,
+        /// indent the document
+        pretty: bool = "false",
+        /// include planned toolpaths
+        toolpaths: bool = "true",
+    }
 }
 
 #[derive(Serialize)]
@@ -306,22 +299,7 @@ lamina_core::register_stage!(StageFactory {
         kind: StageKind::Export,
         name: "json",
         doc: "The plan as JSON: materials, parts, sequence, and per layer the families, sub-regions with compositions and colours, and toolpaths.",
-        options: &[
-            OptionSpec::new(
-                "path",
-                "string",
-                "\"plan.json\"",
-                "output file, relative to the output folder"
-            ),
-            OptionSpec::new(
-                "form",
-                "string",
-                "\"document\"",
-                "\"document\" (one JSON value) or \"lines\" (JSON Lines: header, then one line per layer)"
-            ),
-            OptionSpec::new("pretty", "bool", "false", "indent the document"),
-            OptionSpec::new("toolpaths", "bool", "true", "include planned toolpaths"),
-        ],
+        options: Options::SPECS,
         example: "use = \"json\"\npath = \"plan.json\"",
     },
     build,

@@ -11,22 +11,18 @@ use std::io::Write;
 use std::path::PathBuf;
 
 use lamina_core::stage::{
-    AnyStage, ExportContext, Exporter, LayerSink, OptionSpec, OutputFiles, StageConfig, StageInfo, StageKind,
+    AnyStage, ExportContext, Exporter, LayerSink, OutputFiles, StageConfig, StageInfo, StageKind,
 };
 use lamina_core::{Contour, Error, LayerPlan, Polygon, Result, RunInfo, StageFactory};
-use serde::Deserialize;
 use zip::ZipWriter;
 use zip::write::{SimpleFileOptions, StreamWriter};
 
-#[derive(Debug, Deserialize)]
-#[serde(deny_unknown_fields)]
-struct Options {
-    #[serde(default = "d_path")]
-    path: PathBuf,
-}
-
-fn d_path() -> PathBuf {
-    PathBuf::from("plan.3mf")
+lamina_core::stage_options! {
+    #[derive(Debug)]
+    struct Options {
+        /// output file, relative to the output folder
+        path: PathBuf = r#""plan.3mf""#,
+    }
 }
 
 struct ThreeMf {
@@ -282,12 +278,7 @@ lamina_core::register_stage!(StageFactory {
         kind: StageKind::Export,
         name: "3mf",
         doc: "3MF with the materials extension: every sub-region a prism over its layer, coloured by a composite of the primary materials in its fractions.",
-        options: &[OptionSpec::new(
-            "path",
-            "string",
-            "\"plan.3mf\"",
-            "output file, relative to the output folder"
-        )],
+        options: Options::SPECS,
         example: "use = \"3mf\"\npath = \"plan.3mf\"",
     },
     build,

@@ -39,10 +39,9 @@ use std::collections::BTreeMap;
 use std::path::PathBuf;
 
 use lamina_core::stage::{
-    AnyStage, ExportContext, Exporter, LayerSink, OptionSpec, OutputFiles, StageConfig, StageInfo, StageKind,
+    AnyStage, ExportContext, Exporter, LayerSink, OutputFiles, StageConfig, StageInfo, StageKind,
 };
 use lamina_core::{Error, LayerPlan, Result, RunInfo, StageFactory};
-use serde::Deserialize;
 
 pub use lamina_core::machine::Flavor;
 pub use writer::percentages;
@@ -63,30 +62,32 @@ const MACHINE_KEYS: &[(&str, &str)] = &[
     ("channels", "each tool's `material` ([[machine.tools]])"),
 ];
 
-#[derive(Debug, Clone, Deserialize)]
-#[serde(deny_unknown_fields)]
-struct Options {
-    #[serde(default = "d_path")]
-    path: PathBuf,
-    flavor: Option<Flavor>,
-    filament_diameter: Option<f64>,
-    #[serde(default)]
-    relative_e: bool,
-    #[serde(default)]
-    direct_mixing: bool,
-    #[serde(default)]
-    virtual_tool: u32,
-    temperature: Option<f64>,
-    /// Per material name, for tool-change machines.
-    temperatures: Option<BTreeMap<String, f64>>,
-    retract: Option<f64>,
-    retract_speed: Option<f64>,
-    /// Channel order of the mixing head, as material names; default the pipeline's.
-    channels: Option<Vec<String>>,
-}
-
-fn d_path() -> PathBuf {
-    PathBuf::from("plan.gcode")
+lamina_core::stage_options! {
+    #[derive(Debug, Clone)]
+    struct Options {
+        /// output file
+        path: PathBuf = r#""plan.gcode""#,
+        /// without a machine: `tool-change` (T0, T1, ...), `marlin-mixing` (M163/M164 or M165) or `reprap-mixing` (M563/M567)
+        flavor: Flavor = r#""tool-change""#,
+        /// without a machine: filament diameter (mm); E = length x width x height / cross-section
+        filament_diameter: f64 = "1.75",
+        /// relative extrusion (M83) instead of absolute (M82)
+        relative_e: bool = "false",
+        /// marlin-mixing: one M165 per mix instead of M163 per channel and M164
+        direct_mixing: bool = "false",
+        /// marlin-mixing: the virtual tool M164 stores the mix in
+        virtual_tool: u32 = "0",
+        /// without a machine: nozzle temperature (°C)
+        temperature: f64 = "210.0",
+        /// without a machine, tool-change: temperature per material name
+        temperatures: BTreeMap<String, f64> = "{}",
+        /// without a machine: retraction before travel and tool changes (mm of filament; 0: none)
+        retract: f64 = "1.0",
+        /// without a machine: retraction speed (mm/s)
+        retract_speed: f64 = "35.0",
+        /// without a machine, mixing flavours: material of each channel, in channel order; unset: the pipeline's materials
+        channels: Option<Vec<String>>,
+    }
 }
 
 struct Gcode(Options);
@@ -100,12 +101,12 @@ pub fn filament_length(length: f64, width: f64, height: f64, filament_diameter: 
 impl Options {
     fn own(&self) -> OwnOptions {
         OwnOptions {
-            flavor: self.flavor.unwrap_or(Flavor::ToolChange),
-            filament_diameter: self.filament_diameter.unwrap_or(1.75),
-            temperature: self.temperature.unwrap_or(210.0),
-            temperatures: self.temperatures.clone().unwrap_or_default(),
-            retract: self.retract.unwrap_or(1.0),
-            retract_speed: self.retract_speed.unwrap_or(35.0),
+            flavor: self.flavor,
+            filament_diameter: self.filament_diameter,
+            temperature: self.temperature,
+            temperatures: self.temperatures.clone(),
+            retract: self.retract,
+            retract_speed: self.retract_speed,
             channels: self.channels.clone(),
         }
     }
@@ -211,26 +212,17 @@ fn build(config: &StageConfig<'_>) -> Result<AnyStage> {
         ("retract_speed", o.retract_speed),
         ("temperature", o.temperature),
     ] {
-        if let Some(v) = v
-            && !(v.is_finite() && v > 0.0)
-        {
+        if !(v.is_finite() && v > 0.0) {
             return Err(config.error(k, "must be a positive number"));
         }
     }
-    if let Some(r) = o.retract
-        && !(r.is_finite() && r >= 0.0)
-    {
+    if !(o.retract.is_finite() && o.retract >= 0.0) {
         return Err(config.error("retract", "must be zero or more mm"));
     }
-    if o.direct_mixing && config.machine.is_none() && o.flavor != Some(Flavor::MarlinMixing) {
+    if o.direct_mixing && config.machine.is_none() && o.flavor != Flavor::MarlinMixing {
         return Err(config.error("direct_mixing", "only the `marlin-mixing` flavor has M165"));
     }
-    if let Some((name, _)) = o
-        .temperatures
-        .iter()
-        .flatten()
-        .find(|(_, t)| !(t.is_finite() && **t > 0.0))
-    {
+    if let Some((name, _)) = o.temperatures.iter().find(|(_, t)| !(t.is_finite() && **t > 0.0)) {
         return Err(config.error("temperatures", format!("{name}: must be a positive temperature")));
     }
     if o.channels.as_ref().is_some_and(Vec::is_empty) {
@@ -244,69 +236,7 @@ lamina_core::register_stage!(StageFactory {
         kind: StageKind::Export,
         name: "gcode",
         doc: "G-code of the planned toolpaths for tool-change, Marlin mixing or RepRapFirmware mixing machines; with a `machine` profile, a complete print (homing, heating, placement, prime lines, skirt, wipe tower, fan) and its estimated time.",
-        options: &[
-            OptionSpec::new("path", "string", "\"plan.gcode\"", "output file"),
-            OptionSpec::new(
-                "flavor",
-                "string",
-                "\"tool-change\"",
-                "without a machine: `tool-change` (T0, T1, ...), `marlin-mixing` (M163/M164 or M165) or `reprap-mixing` (M563/M567)"
-            ),
-            OptionSpec::new(
-                "filament_diameter",
-                "float",
-                "1.75",
-                "without a machine: filament diameter (mm); E = length x width x height / cross-section"
-            ),
-            OptionSpec::new(
-                "relative_e",
-                "bool",
-                "false",
-                "relative extrusion (M83) instead of absolute (M82)"
-            ),
-            OptionSpec::new(
-                "direct_mixing",
-                "bool",
-                "false",
-                "marlin-mixing: one M165 per mix instead of M163 per channel and M164"
-            ),
-            OptionSpec::new(
-                "virtual_tool",
-                "integer",
-                "0",
-                "marlin-mixing: the virtual tool M164 stores the mix in"
-            ),
-            OptionSpec::new(
-                "temperature",
-                "float",
-                "210.0",
-                "without a machine: nozzle temperature (°C)"
-            ),
-            OptionSpec::new(
-                "temperatures",
-                "table",
-                "{}",
-                "without a machine, tool-change: temperature per material name"
-            ),
-            OptionSpec::new(
-                "retract",
-                "float",
-                "1.0",
-                "without a machine: retraction before travel and tool changes (mm of filament; 0: none)"
-            ),
-            OptionSpec::new(
-                "retract_speed",
-                "float",
-                "35.0",
-                "without a machine: retraction speed (mm/s)"
-            ),
-            OptionSpec::new(
-                "channels",
-                "array of string",
-                "the pipeline's materials",
-                "without a machine, mixing flavours: material of each channel, in channel order"
-            ),
-        ],
+        options: Options::SPECS,
         example: "use = \"gcode\"\npath = \"plan.gcode\"\nflavor = \"marlin-mixing\"",
     },
     build,

@@ -1,17 +1,17 @@
 //! `constant`: one composition for every region of the part, given as a material name
 //! or as fractions.
 
-use lamina_core::stage::{AnyStage, FamilyContext, Grader, OptionSpec, StageConfig, StageInfo, StageKind};
+use lamina_core::stage::{AnyStage, FamilyContext, Grader, StageConfig, StageInfo, StageKind};
 use lamina_core::{Composition, Error, Region, Result, StageFactory};
-use serde::Deserialize;
 
-#[derive(Debug, Deserialize)]
-#[serde(deny_unknown_fields)]
-struct Options {
-    #[serde(default)]
-    material: Option<String>,
-    #[serde(default)]
-    fractions: Option<Vec<f64>>,
+lamina_core::stage_options! {
+    #[derive(Debug)]
+    struct Options {
+        /// the single material of the part
+        material: Option<String>,
+        /// fractions over the part's materials, summing to 1
+        fractions: Option<Vec<f64>>,
+    }
 }
 
 enum Spec {
@@ -78,15 +78,7 @@ lamina_core::register_stage!(StageFactory {
         kind: StageKind::Grade,
         name: "constant",
         doc: "One composition for the whole part: a material by name, or fractions over the part's materials.",
-        options: &[
-            OptionSpec::new("material", "string", "none", "the single material of the part"),
-            OptionSpec::new(
-                "fractions",
-                "array of float",
-                "none",
-                "fractions over the part's materials, summing to 1"
-            ),
-        ],
+        options: Options::SPECS,
         example: "use = \"constant\"\nfractions = [0.25, 0.75]",
     },
     build,

@@ -3,6 +3,7 @@
 //! level r. With two materials the second fraction is 1 - f; a Rhai function may return
 //! one fraction per material instead, for any number of materials.
 
+use lamina_core::options::SharedOption;
 use lamina_core::script::{ScriptArgs, ScriptFn};
 use lamina_core::stage::{FamilyContext, StageConfig};
 use lamina_core::{Composition, Error, Region, Result};
@@ -34,19 +35,15 @@ pub enum Control {
     Script(ScriptFn),
 }
 
-/// Option descriptions shared by the graders that take a control function.
-pub const CONTROL_OPTIONS: [lamina_core::stage::OptionSpec; 5] = [
-    lamina_core::stage::OptionSpec::new(
-        "f",
-        "string",
-        "\"linear\"",
-        "\"linear\" (mu r + lambda), \"constant\" (mu), \"wave\" (mu sin(lambda r)), \"power\" ((alpha r)^k), or a Rhai expression / \"file.rhai#fn\" of r, x, y, z, layer, part",
-    ),
-    lamina_core::stage::OptionSpec::new("mu", "float", "see f", "linear: 1; constant: 1; wave: 1"),
-    lamina_core::stage::OptionSpec::new("lambda", "float", "see f", "linear: 0; wave: pi"),
-    lamina_core::stage::OptionSpec::new("alpha", "float", "1.0", "power: scale of r"),
-    lamina_core::stage::OptionSpec::new("k", "float", "1.0", "power: exponent"),
-];
+/// Options shared by the graders that take a control function.
+pub const F: SharedOption = SharedOption::new(
+    "\"linear\"",
+    "\"linear\" (mu r + lambda), \"constant\" (mu), \"wave\" (mu sin(lambda r)), \"power\" ((alpha r)^k), or a Rhai expression / \"file.rhai#fn\" of r, x, y, z, layer, part",
+);
+pub const MU: SharedOption = SharedOption::without_default("unset: linear: 1; constant: 1; wave: 1");
+pub const LAMBDA: SharedOption = SharedOption::without_default("unset: linear: 0; wave: pi");
+pub const ALPHA: SharedOption = SharedOption::without_default("power: scale of r; unset: 1.0");
+pub const K: SharedOption = SharedOption::without_default("power: exponent; unset: 1.0");
 
 impl Control {
     /// Builds the control function from a stage's options; `default_linear` gives the

@@ -6,9 +6,11 @@
 //! gives a point on a contour that contour's material alone. With circumferential cells
 //! (each with its own reference point) the composition varies around the family too.
 
-use lamina_core::stage::{AnyStage, FamilyContext, Grader, OptionSpec, StageConfig, StageInfo, StageKind};
+use lamina_core::stage::{AnyStage, FamilyContext, Grader, StageConfig, StageInfo, StageKind};
 use lamina_core::{Composition, Contour, Error, Point2, Region, Result, RunInfo, StageFactory};
 use serde::Deserialize;
+
+lamina_core::option_type!(HolesSpec = "string or array of table");
 
 #[derive(Debug, Deserialize)]
 #[serde(untagged)]
@@ -26,17 +28,16 @@ struct NearSpec {
     material: String,
 }
 
-#[derive(Debug, Deserialize)]
-#[serde(deny_unknown_fields)]
-struct Options {
-    outer: String,
-    holes: Option<HolesSpec>,
-    #[serde(default = "d_power")]
-    power: f64,
-}
-
-fn d_power() -> f64 {
-    1.0
+lamina_core::stage_options! {
+    #[derive(Debug)]
+    struct Options {
+        /// material of the family's outer contour
+        outer: String,
+        /// material of every hole (unset: the outer's material), or `[{ near = [x, y], material = "m" }, ...]`: each hole takes the material of the nearest listed point
+        holes: Option<HolesSpec>,
+        /// exponent of the distances (1 in the paper)
+        power: f64 = "1.0",
+    }
 }
 
 struct Idw {
@@ -154,21 +155,7 @@ lamina_core::register_stage!(StageFactory {
         kind: StageKind::Grade,
         name: "idw",
         doc: "Each contour of a family carries a material; a region's composition is the inverse-distance weighting (Eq. 22-23) of them at its reference point (cell centre).",
-        options: &[
-            OptionSpec::required("outer", "string", "material of the family's outer contour"),
-            OptionSpec::new(
-                "holes",
-                "string or array of table",
-                "outer's material",
-                "material of every hole, or `[{ near = [x, y], material = \"m\" }, ...]`: each hole takes the material of the nearest listed point"
-            ),
-            OptionSpec::new(
-                "power",
-                "float",
-                "1.0",
-                "exponent of the distances (1 in the paper)"
-            ),
-        ],
+        options: Options::SPECS,
         example: "use = \"idw\"\nouter = \"red\"\nholes = \"green\"",
     },
     build,

@@ -3,16 +3,17 @@
 //! their sum 1.
 
 use lamina_core::script::ScriptFn;
-use lamina_core::stage::{AnyStage, FamilyContext, Grader, OptionSpec, StageConfig, StageInfo, StageKind};
+use lamina_core::stage::{AnyStage, FamilyContext, Grader, StageConfig, StageInfo, StageKind};
 use lamina_core::{Composition, Region, Result, StageFactory};
-use serde::Deserialize;
 
 use crate::control::region_args;
 
-#[derive(Debug, Deserialize)]
-#[serde(deny_unknown_fields)]
-struct Options {
-    f: String,
+lamina_core::stage_options! {
+    #[derive(Debug)]
+    struct Options {
+        /// an expression (e.g. "sin(r * PI)") or "file.rhai#name"; one number f means [f, 1 - f] for two materials, else an array of one fraction per material
+        f: String,
+    }
 }
 
 struct Script {
@@ -48,11 +49,7 @@ lamina_core::register_stage!(StageFactory {
         kind: StageKind::Grade,
         name: crate::SCRIPT_STAGE,
         doc: "Fractions from a Rhai expression or `file.rhai#function` of r, x, y, z, layer and part, once per sub-region.",
-        options: &[OptionSpec::required(
-            "f",
-            "string",
-            "an expression (e.g. \"sin(r * PI)\") or \"file.rhai#name\"; one number f means [f, 1 - f] for two materials, else an array of one fraction per material"
-        )],
+        options: Options::SPECS,
         example: concat!("use = \"", script_stage!(), "\"\nf = \"clamp01(z / 2.0)\""),
     },
     build,

@@ -5,11 +5,13 @@
 //! f = 1 - r, puts the part's first material at the outer contour and the second at the
 //! far end, as the paper's green-to-black example does.
 
-use lamina_core::stage::{AnyStage, FamilyContext, Grader, OptionSpec, StageConfig, StageInfo, StageKind};
+use lamina_core::stage::{AnyStage, FamilyContext, Grader, StageConfig, StageInfo, StageKind};
 use lamina_core::{Composition, Point2, Polygon, Region, Result, StageFactory};
 use serde::Deserialize;
 
-use crate::control::{CONTROL_OPTIONS, Control, ControlOptions, region_args};
+use crate::control::{Control, ControlOptions, region_args};
+
+lamina_core::option_type!(LevelSource = "string");
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Deserialize)]
 #[serde(rename_all = "lowercase")]
@@ -27,21 +29,25 @@ enum LevelSource {
     Points,
 }
 
-#[derive(Debug, Deserialize)]
-#[serde(deny_unknown_fields)]
-struct Options {
-    f: Option<String>,
-    mu: Option<f64>,
-    lambda: Option<f64>,
-    alpha: Option<f64>,
-    k: Option<f64>,
-    #[serde(default)]
-    r: LevelSource,
-    #[serde(default)]
-    grid: Option<f64>,
+lamina_core::stage_options! {
+    #[derive(Debug)]
+    struct Options {
+        f: Option<String> = use crate::control::F,
+        /// unset: linear: -1 (f = 1 - r, the first material outside); constant: 1; wave: 1
+        mu: Option<f64>,
+        /// unset: linear: 1; wave: pi
+        lambda: Option<f64>,
+        alpha: Option<f64> = use crate::control::ALPHA,
+        k: Option<f64> = use crate::control::K,
+        /// "index" (j / (N_R - 1), Eq. 21), "level" (the discretiser's distance ratio) or "points" (Eq. 18 at the points of a grid in each region, x and y given to the function, the mean composition)
+        r: LevelSource = r#""index""#,
+        /// spacing (mm) of the points of `r = "points"`
+        grid: f64 = "0.5",
+    }
 }
 
 /// The default spacing (mm) of the points of `r = "points"`.
+#[cfg(test)]
 const DEFAULT_GRID: f64 = 0.5;
 
 /// At most this many points a region: beyond it the grid coarsens.
@@ -176,7 +182,7 @@ fn build(config: &StageConfig<'_>) -> Result<AnyStage> {
         },
         (-1.0, 1.0),
     )?;
-    let grid = o.grid.unwrap_or(DEFAULT_GRID);
+    let grid = o.grid;
     if !(grid.is_finite() && grid > 0.0) {
         return Err(config.error(
             "grid",
@@ -195,25 +201,7 @@ lamina_core::register_stage!(StageFactory {
         kind: StageKind::Grade,
         name: "xy",
         doc: "Grades across the layer: each sub-region j of N_R gets r = j / (N_R - 1) (or the discretiser's level), fractions from a control function of r (default f = 1 - r: first material at the outer contour).",
-        options: &[
-            CONTROL_OPTIONS[0],
-            CONTROL_OPTIONS[1],
-            CONTROL_OPTIONS[2],
-            CONTROL_OPTIONS[3],
-            CONTROL_OPTIONS[4],
-            OptionSpec::new(
-                "r",
-                "string",
-                "\"index\"",
-                "\"index\" (j / (N_R - 1), Eq. 21), \"level\" (the discretiser's distance ratio) or \"points\" (Eq. 18 at the points of a grid in each region, x and y given to the function, the mean composition)"
-            ),
-            OptionSpec::new(
-                "grid",
-                "float",
-                "0.5",
-                "spacing (mm) of the points of `r = \"points\"`"
-            ),
-        ],
+        options: Options::SPECS,
         example: "use = \"xy\"\nf = \"linear\"\nmu = -1.0\nlambda = 1.0",
     },
     build,

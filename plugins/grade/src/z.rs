@@ -3,24 +3,28 @@
 //! below the start and 1 above the end, and a control function of r gives the
 //! composition of every region of the layer.
 
-use lamina_core::stage::{AnyStage, FamilyContext, Grader, OptionSpec, StageConfig, StageInfo, StageKind};
+use lamina_core::stage::{AnyStage, FamilyContext, Grader, StageConfig, StageInfo, StageKind};
 use lamina_core::{Region, Result, StageFactory};
-use serde::Deserialize;
 
-use crate::control::{CONTROL_OPTIONS, Control, ControlOptions, region_args};
+use crate::control::{Control, ControlOptions, region_args};
 
-#[derive(Debug, Deserialize)]
-#[serde(deny_unknown_fields)]
-struct Options {
-    f: Option<String>,
-    mu: Option<f64>,
-    lambda: Option<f64>,
-    alpha: Option<f64>,
-    k: Option<f64>,
-    from_layer: Option<usize>,
-    to_layer: Option<usize>,
-    from_z: Option<f64>,
-    to_z: Option<f64>,
+lamina_core::stage_options! {
+    #[derive(Debug)]
+    struct Options {
+        f: Option<String> = use crate::control::F,
+        mu: Option<f64> = use crate::control::MU,
+        lambda: Option<f64> = use crate::control::LAMBDA,
+        alpha: Option<f64> = use crate::control::ALPHA,
+        k: Option<f64> = use crate::control::K,
+        /// layer index (from 0) where r = 0
+        from_layer: Option<usize>,
+        /// layer index where r = 1
+        to_layer: Option<usize>,
+        /// height (mm) where r = 0, compared with the layer's top; default: the part's bottom (mid-layer)
+        from_z: Option<f64>,
+        /// height (mm) where r = 1; default: the part's top
+        to_z: Option<f64>,
+    }
 }
 
 /// Where the grading starts and ends.
@@ -131,32 +135,7 @@ lamina_core::register_stage!(StageFactory {
         kind: StageKind::Grade,
         name: "z",
         doc: "Grades along Z: r = (z - z_start) / (z_end - z_start) between two layers or heights (held outside), fractions from a control function of r (default f = r for the first material).",
-        options: &[
-            CONTROL_OPTIONS[0],
-            CONTROL_OPTIONS[1],
-            CONTROL_OPTIONS[2],
-            CONTROL_OPTIONS[3],
-            CONTROL_OPTIONS[4],
-            OptionSpec::new(
-                "from_layer",
-                "integer",
-                "none",
-                "layer index (from 0) where r = 0"
-            ),
-            OptionSpec::new("to_layer", "integer", "none", "layer index where r = 1"),
-            OptionSpec::new(
-                "from_z",
-                "float",
-                "none",
-                "height (mm) where r = 0, compared with the layer's top; default: the part's bottom (mid-layer)"
-            ),
-            OptionSpec::new(
-                "to_z",
-                "float",
-                "none",
-                "height (mm) where r = 1; default: the part's top"
-            ),
-        ],
+        options: Options::SPECS,
         example: "use = \"z\"\nf = \"wave\"\nfrom_layer = 0\nto_layer = 3",
     },
     build,

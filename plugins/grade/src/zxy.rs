@@ -4,35 +4,37 @@
 //! two are combined by the weighted operator of the grading-step-width paper (Eq. 8),
 //! (k_z M_z + k_xy M_xy) / (k_z + k_xy).
 
-use lamina_core::stage::{AnyStage, FamilyContext, Grader, OptionSpec, StageConfig, StageInfo, StageKind};
+use lamina_core::stage::{AnyStage, FamilyContext, Grader, StageConfig, StageInfo, StageKind};
 use lamina_core::{Composition, Error, Region, Result, StageFactory};
-use serde::Deserialize;
 
 use crate::control::{Control, ControlOptions, region_args};
 use crate::xy::index_level;
 use crate::z::{Span, level, span};
 
-#[derive(Debug, Deserialize)]
-#[serde(deny_unknown_fields)]
-struct Options {
-    z_f: Option<String>,
-    xy_f: Option<String>,
-    from_layer: Option<usize>,
-    to_layer: Option<usize>,
-    from_z: Option<f64>,
-    to_z: Option<f64>,
-    #[serde(default = "d_weights")]
-    weights: [f64; 2],
-    #[serde(default)]
-    xy_level: bool,
-    #[serde(default)]
-    z_materials: Option<Vec<String>>,
-    #[serde(default)]
-    xy_materials: Option<Vec<String>>,
-}
-
-fn d_weights() -> [f64; 2] {
-    [1.0, 1.0]
+lamina_core::stage_options! {
+    #[derive(Debug)]
+    struct Options {
+        /// control function of the layer's level (a built-in name with its defaults, or Rhai): default f = r
+        z_f: String = r#""linear""#,
+        /// control function of the region's level: default f = 1 - r (first material outside)
+        xy_f: String = r#""linear""#,
+        /// layer index where r_z = 0
+        from_layer: Option<usize>,
+        /// layer index where r_z = 1
+        to_layer: Option<usize>,
+        /// height (mm) where r_z = 0
+        from_z: Option<f64>,
+        /// height (mm) where r_z = 1
+        to_z: Option<f64>,
+        /// k_z and k_xy of Eq. 8
+        weights: [f64; 2] = "[1.0, 1.0]",
+        /// use the discretiser's level for r_xy instead of j / (N_R - 1)
+        xy_level: bool = "false",
+        /// the part's materials the Z grading runs over (Fig. 19: ["red", "green"]); unset: all of them
+        z_materials: Option<Vec<String>>,
+        /// the part's materials the X-Y grading runs over (Fig. 19: ["ceramic", "metal"]); unset: all of them
+        xy_materials: Option<Vec<String>>,
+    }
 }
 
 struct Both {
@@ -141,8 +143,8 @@ fn build(config: &StageConfig<'_>) -> Result<AnyStage> {
         )
     };
     Ok(AnyStage::Grade(Box::new(Both {
-        z: control(o.z_f, (1.0, 0.0))?,
-        xy: control(o.xy_f, (-1.0, 1.0))?,
+        z: control(Some(o.z_f), (1.0, 0.0))?,
+        xy: control(Some(o.xy_f), (-1.0, 1.0))?,
         span,
         weights: o.weights,
         xy_level: o.xy_level,
@@ -169,43 +171,7 @@ lamina_core::register_stage!(StageFactory {
         kind: StageKind::Grade,
         name: "zxy",
         doc: "Grades along Z and across the layer at once: the Z and X-Y control functions' compositions combined by weights (Eq. 8 of the step-width paper).",
-        options: &[
-            OptionSpec::new(
-                "z_f",
-                "string",
-                "\"linear\"",
-                "control function of the layer's level (a built-in name with its defaults, or Rhai): default f = r"
-            ),
-            OptionSpec::new(
-                "xy_f",
-                "string",
-                "\"linear\"",
-                "control function of the region's level: default f = 1 - r (first material outside)"
-            ),
-            OptionSpec::new("from_layer", "integer", "none", "layer index where r_z = 0"),
-            OptionSpec::new("to_layer", "integer", "none", "layer index where r_z = 1"),
-            OptionSpec::new("from_z", "float", "none", "height (mm) where r_z = 0"),
-            OptionSpec::new("to_z", "float", "none", "height (mm) where r_z = 1"),
-            OptionSpec::new("weights", "array of float", "[1.0, 1.0]", "k_z and k_xy of Eq. 8"),
-            OptionSpec::new(
-                "z_materials",
-                "array of string",
-                "all",
-                "the part's materials the Z grading runs over (Fig. 19: [\"red\", \"green\"])"
-            ),
-            OptionSpec::new(
-                "xy_materials",
-                "array of string",
-                "all",
-                "the part's materials the X-Y grading runs over (Fig. 19: [\"ceramic\", \"metal\"])"
-            ),
-            OptionSpec::new(
-                "xy_level",
-                "bool",
-                "false",
-                "use the discretiser's level for r_xy instead of j / (N_R - 1)"
-            ),
-        ],
+        options: Options::SPECS,
         example: "use = \"zxy\"\nz_f = \"r\"\nxy_f = \"1.0 - r\"\nweights = [1.0, 3.0]",
     },
     build,

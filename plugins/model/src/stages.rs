@@ -2,7 +2,8 @@
 
 use std::path::{Path, PathBuf};
 
-use lamina_core::stage::{AnyStage, ModelSource, OptionSpec, StageConfig, StageInfo, StageKind};
+use lamina_core::options::SharedOption;
+use lamina_core::stage::{AnyStage, ModelSource, StageConfig, StageInfo, StageKind};
 use lamina_core::{Error, Limit, Limits, Mesh, Point2, Result, StageFactory};
 use serde::Deserialize;
 
@@ -11,20 +12,17 @@ use crate::extrude::extrude;
 use crate::profile::{GearProfile, circle, polygon, rectangle};
 use crate::weld::{Soup, weld};
 
-const WELD_DOC: &str = "vertices closer than this (mm) are merged";
+const WELD: SharedOption = SharedOption::new("1e-5", "vertices closer than this (mm) are merged");
 
 // ---------------------------------------------------------------- file readers
 
-#[derive(Debug, Deserialize)]
-#[serde(deny_unknown_fields)]
-struct FileOptions {
-    file: PathBuf,
-    #[serde(default = "default_weld")]
-    weld: f64,
-}
-
-fn default_weld() -> f64 {
-    1e-5
+lamina_core::stage_options! {
+    #[derive(Debug)]
+    struct FileOptions {
+        /// mesh file, relative to the pipeline file
+        file: PathBuf,
+        weld: f64 = use WELD,
+    }
 }
 
 #[derive(Debug, Clone, Copy)]
@@ -104,17 +102,12 @@ fn build_file(config: &StageConfig<'_>, format: Format) -> Result<AnyStage> {
     })))
 }
 
-const FILE_OPTIONS: &[OptionSpec] = &[
-    OptionSpec::required("file", "string", "mesh file, relative to the pipeline file"),
-    OptionSpec::new("weld", "float", "1e-5", WELD_DOC),
-];
-
 lamina_core::register_stage!(StageFactory {
     info: StageInfo {
         kind: StageKind::Model,
         name: "stl",
         doc: "Reads a binary or ASCII STL file (chosen automatically for `file = \"*.stl\"`).",
-        options: FILE_OPTIONS,
+        options: FileOptions::SPECS,
         example: "use = \"stl\"\nfile = \"part.stl\"",
     },
     build: |c| build_file(c, Format::Stl),
@@ -125,7 +118,7 @@ lamina_core::register_stage!(StageFactory {
         kind: StageKind::Model,
         name: "obj",
         doc: "Reads a Wavefront OBJ file; each `o` object is one mesh (chosen automatically for `file = \"*.obj\"`).",
-        options: FILE_OPTIONS,
+        options: FileOptions::SPECS,
         example: "use = \"obj\"\nfile = \"part.obj\"",
     },
     build: |c| build_file(c, Format::Obj),
@@ -136,7 +129,7 @@ lamina_core::register_stage!(StageFactory {
         kind: StageKind::Model,
         name: "3mf",
         doc: "Reads a 3MF package: one mesh per build item, in millimetres, with its base materials per triangle (chosen automatically for `file = \"*.3mf\"`).",
-        options: FILE_OPTIONS,
+        options: FileOptions::SPECS,
         example: "use = \"3mf\"\nfile = \"part.3mf\"",
     },
     build: |c| build_file(c, Format::ThreeMf),
@@ -168,123 +161,35 @@ fn segments_ok(config: &StageConfig<'_>, v: usize) -> Result<()> {
     }
 }
 
-#[derive(Debug, Deserialize)]
-#[serde(deny_unknown_fields)]
-struct GearOptions {
-    #[serde(default = "d_teeth")]
-    teeth: usize,
-    #[serde(default = "d_tip")]
-    tip_radius: f64,
-    #[serde(default = "d_root")]
-    root_radius: f64,
-    #[serde(default = "d_bore")]
-    bore: f64,
-    #[serde(default = "d_gear_height")]
-    height: f64,
-    #[serde(default = "d_tip_share")]
-    tip_share: f64,
-    #[serde(default = "d_root_share")]
-    root_share: f64,
-    #[serde(default = "d_arc")]
-    arc_segments: usize,
-    /// gear-shaft only
-    #[serde(default)]
-    shaft_length: Option<f64>,
-    #[serde(default = "d_clearance")]
-    clearance: f64,
+lamina_core::stage_options! {
+    #[derive(Debug)]
+    struct GearOptions {
+        /// number of teeth
+        teeth: usize = "20",
+        /// radius of the tooth tips (mm)
+        tip_radius: f64 = "20.0",
+        /// radius of the tooth roots (mm)
+        root_radius: f64 = "16.0",
+        /// radius of the central bore (mm); 0 for none (`gear-shaft`: the shaft fills it)
+        bore: f64 = "5.0",
+        /// thickness of the gear (mm)
+        height: f64 = "8.0",
+        /// share of the pitch a tooth takes at its tip
+        tip_share: f64 = "0.3",
+        /// share of the pitch a tooth takes at its root
+        root_share: f64 = "0.55",
+        /// vertices per tip or root land
+        arc_segments: usize = "4",
+        // `gear-shaft` only, after the GEAR_OPTIONS that `gear` documents.
+        /// length of the shaft from the bed (mm); unset: 2 * height
+        shaft_length: Option<f64>,
+        /// radial gap between shaft and bore (mm)
+        clearance: f64 = "0.2",
+    }
 }
 
-fn d_teeth() -> usize {
-    20
-}
-fn d_tip() -> f64 {
-    20.0
-}
-fn d_root() -> f64 {
-    16.0
-}
-fn d_bore() -> f64 {
-    5.0
-}
-fn d_gear_height() -> f64 {
-    8.0
-}
-fn d_tip_share() -> f64 {
-    0.3
-}
-fn d_root_share() -> f64 {
-    0.55
-}
-fn d_arc() -> usize {
-    4
-}
-fn d_clearance() -> f64 {
-    0.2
-}
-
-const GEAR_OPTIONS: &[OptionSpec] = &[
-    OptionSpec::new("teeth", "integer", "20", "number of teeth"),
-    OptionSpec::new("tip_radius", "float", "20.0", "radius of the tooth tips (mm)"),
-    OptionSpec::new("root_radius", "float", "16.0", "radius of the tooth roots (mm)"),
-    OptionSpec::new(
-        "bore",
-        "float",
-        "5.0",
-        "radius of the central bore (mm); 0 for none",
-    ),
-    OptionSpec::new("height", "float", "8.0", "thickness of the gear (mm)"),
-    OptionSpec::new(
-        "tip_share",
-        "float",
-        "0.3",
-        "share of the pitch a tooth takes at its tip",
-    ),
-    OptionSpec::new(
-        "root_share",
-        "float",
-        "0.55",
-        "share of the pitch a tooth takes at its root",
-    ),
-    OptionSpec::new("arc_segments", "integer", "4", "vertices per tip or root land"),
-];
-
-const GEAR_SHAFT_OPTIONS: &[OptionSpec] = &[
-    OptionSpec::new("teeth", "integer", "20", "number of teeth"),
-    OptionSpec::new("tip_radius", "float", "20.0", "radius of the tooth tips (mm)"),
-    OptionSpec::new("root_radius", "float", "16.0", "radius of the tooth roots (mm)"),
-    OptionSpec::new(
-        "bore",
-        "float",
-        "5.0",
-        "radius of the gear's bore (mm); the shaft fills it",
-    ),
-    OptionSpec::new("height", "float", "8.0", "thickness of the gear (mm)"),
-    OptionSpec::new(
-        "tip_share",
-        "float",
-        "0.3",
-        "share of the pitch a tooth takes at its tip",
-    ),
-    OptionSpec::new(
-        "root_share",
-        "float",
-        "0.55",
-        "share of the pitch a tooth takes at its root",
-    ),
-    OptionSpec::new("arc_segments", "integer", "4", "vertices per tip or root land"),
-    OptionSpec::new(
-        "shaft_length",
-        "float",
-        "2 * height",
-        "length of the shaft from the bed (mm)",
-    ),
-    OptionSpec::new(
-        "clearance",
-        "float",
-        "0.2",
-        "radial gap between shaft and bore (mm)",
-    ),
-];
+/// How many of [`GearOptions::SPECS`], from the first, the `gear` model documents.
+const GEAR_OPTIONS: usize = 8;
 
 fn gear_profile(config: &StageConfig<'_>, o: &GearOptions) -> Result<GearProfile> {
     if o.teeth < 3 || o.teeth > 10_000 {
@@ -374,7 +279,7 @@ lamina_core::register_stage!(StageFactory {
         kind: StageKind::Model,
         name: "gear",
         doc: "Generates a spur gear with trapezoidal teeth and an optional bore, standing on the bed.",
-        options: GEAR_OPTIONS,
+        options: GearOptions::SPECS.split_at(GEAR_OPTIONS).0,
         example: "use = \"gear\"\nteeth = 12\nheight = 4.0",
     },
     build: build_gear,
@@ -385,36 +290,24 @@ lamina_core::register_stage!(StageFactory {
         kind: StageKind::Model,
         name: "gear-shaft",
         doc: "Generates a gear (mesh 0) on a shaft through its bore (mesh 1): a two-part assembly.",
-        options: GEAR_SHAFT_OPTIONS,
+        options: GearOptions::SPECS,
         example: "use = \"gear-shaft\"\nteeth = 12\nheight = 4.0\nshaft_length = 10.0",
     },
     build: build_gear_shaft,
 });
 
-#[derive(Debug, Deserialize)]
-#[serde(deny_unknown_fields)]
-struct TubeOptions {
-    #[serde(default = "d_outer")]
-    outer_radius: f64,
-    #[serde(default = "d_inner")]
-    inner_radius: f64,
-    #[serde(default = "d_tube_height")]
-    height: f64,
-    #[serde(default = "d_segments")]
-    segments: usize,
-}
-
-fn d_outer() -> f64 {
-    10.0
-}
-fn d_inner() -> f64 {
-    7.0
-}
-fn d_tube_height() -> f64 {
-    20.0
-}
-fn d_segments() -> usize {
-    128
+lamina_core::stage_options! {
+    #[derive(Debug)]
+    struct TubeOptions {
+        /// outer radius (mm)
+        outer_radius: f64 = "10.0",
+        /// inner radius (mm); 0 makes a rod
+        inner_radius: f64 = "7.0",
+        /// height (mm)
+        height: f64 = "20.0",
+        /// vertices per circle
+        segments: usize = "128",
+    }
 }
 
 fn build_tube(config: &StageConfig<'_>) -> Result<AnyStage> {
@@ -440,26 +333,18 @@ lamina_core::register_stage!(StageFactory {
         kind: StageKind::Model,
         name: "tube",
         doc: "Generates a round tube (or a rod with inner_radius = 0) standing on the bed.",
-        options: &[
-            OptionSpec::new("outer_radius", "float", "10.0", "outer radius (mm)"),
-            OptionSpec::new("inner_radius", "float", "7.0", "inner radius (mm); 0 makes a rod"),
-            OptionSpec::new("height", "float", "20.0", "height (mm)"),
-            OptionSpec::new("segments", "integer", "128", "vertices per circle"),
-        ],
+        options: TubeOptions::SPECS,
         example: "use = \"tube\"\nouter_radius = 10.0\ninner_radius = 7.0\nheight = 5.0",
     },
     build: build_tube,
 });
 
-#[derive(Debug, Deserialize)]
-#[serde(deny_unknown_fields)]
-struct CubeOptions {
-    #[serde(default = "d_cube")]
-    size: f64,
-}
-
-fn d_cube() -> f64 {
-    20.0
+lamina_core::stage_options! {
+    #[derive(Debug)]
+    struct CubeOptions {
+        /// edge length (mm)
+        size: f64 = "20.0",
+    }
 }
 
 /// A box with equal sides; its own stage so that `size` is one number.
@@ -476,11 +361,13 @@ lamina_core::register_stage!(StageFactory {
         kind: StageKind::Model,
         name: "cube",
         doc: "Generates a cube with one corner at the origin.",
-        options: &[OptionSpec::new("size", "float", "20.0", "edge length (mm)")],
+        options: CubeOptions::SPECS,
         example: "use = \"cube\"\nsize = 5.0",
     },
     build: build_cube,
 });
+
+lamina_core::option_type!(NacaCode = "string");
 
 /// A NACA designation as written in TOML: `"2412"`, or `2412` (a code with leading
 /// zeros such as `0012` is no TOML integer and arrives as a string anyway).
@@ -491,41 +378,38 @@ enum NacaCode {
     Number(u32),
 }
 
-#[derive(Debug, Deserialize)]
-#[serde(deny_unknown_fields)]
-struct BladeOptions {
-    naca: Option<NacaCode>,
-    max_camber: Option<f64>,
-    camber_position: Option<f64>,
-    thickness: Option<f64>,
-    #[serde(default = "d_chord")]
-    chord: f64,
-    span: Option<f64>,
-    #[serde(default = "d_twist")]
-    twist: f64,
-    #[serde(default = "d_sections")]
-    sections: usize,
-    #[serde(default = "d_points")]
-    points: usize,
-    root_size: Option<[f64; 2]>,
-    root_height: Option<f64>,
-    #[serde(default)]
-    cavities: usize,
-    wall: Option<f64>,
-    rib: Option<f64>,
-}
-
-fn d_chord() -> f64 {
-    40.0
-}
-fn d_twist() -> f64 {
-    20.0
-}
-fn d_sections() -> usize {
-    21
-}
-fn d_points() -> usize {
-    48
+lamina_core::stage_options! {
+    #[derive(Debug)]
+    struct BladeOptions {
+        /// 4-digit NACA section: camber %, its position in tenths, thickness %; unset: 2412
+        naca: Option<NacaCode>,
+        /// maximum camber (fraction of the chord); overrides naca's first digit; unset: from naca
+        max_camber: Option<f64>,
+        /// chordwise position of the maximum camber (fraction); overrides naca's second digit; unset: from naca
+        camber_position: Option<f64>,
+        /// maximum thickness (fraction of the chord); overrides naca's last two digits; unset: from naca
+        thickness: Option<f64>,
+        /// chord length (mm)
+        chord: f64 = "40.0",
+        /// height of the airfoil above the root (mm); unset: 1.5 * chord
+        span: Option<f64>,
+        /// rotation of the tip against the base (degrees, about the quarter-chord line), linear along the span
+        twist: f64 = "20.0",
+        /// airfoil sections along the span, both ends included
+        sections: usize = "21",
+        /// vertices per airfoil surface, cosine spaced
+        points: usize = "48",
+        /// root block size along x and y (mm), centred under the airfoil; unset: [1.25 * chord, 0.5 * chord]
+        root_size: Option<[f64; 2]>,
+        /// root block height (mm); 0 for a bare airfoil; unset: 0.25 * chord
+        root_height: Option<f64>,
+        /// cooling cavities: 0, 1 or 2
+        cavities: usize = "0",
+        /// skin thickness around the cavities (mm); unset: 0.03 * chord
+        wall: Option<f64>,
+        /// rib thickness between two cavities (mm); unset: `wall`
+        rib: Option<f64>,
+    }
 }
 
 fn build_blade(config: &StageConfig<'_>) -> Result<AnyStage> {
@@ -575,91 +459,18 @@ lamina_core::register_stage!(StageFactory {
         kind: StageKind::Model,
         name: "blade",
         doc: "Generates a turbine-blade-like model: a NACA 4-digit airfoil twisted linearly along its span on a rectangular root block, with 0, 1 or 2 cooling cavities that run from the bed through the root and the airfoil and open at the tip (every layer is one area with `cavities` holes).",
-        options: &[
-            OptionSpec::new(
-                "naca",
-                "string",
-                "\"2412\"",
-                "4-digit NACA section: camber %, its position in tenths, thickness %"
-            ),
-            OptionSpec::new(
-                "max_camber",
-                "float",
-                "from naca",
-                "maximum camber (fraction of the chord); overrides naca's first digit"
-            ),
-            OptionSpec::new(
-                "camber_position",
-                "float",
-                "from naca",
-                "chordwise position of the maximum camber (fraction); overrides naca's second digit"
-            ),
-            OptionSpec::new(
-                "thickness",
-                "float",
-                "from naca",
-                "maximum thickness (fraction of the chord); overrides naca's last two digits"
-            ),
-            OptionSpec::new("chord", "float", "40.0", "chord length (mm)"),
-            OptionSpec::new(
-                "span",
-                "float",
-                "1.5 * chord",
-                "height of the airfoil above the root (mm)"
-            ),
-            OptionSpec::new(
-                "twist",
-                "float",
-                "20.0",
-                "rotation of the tip against the base (degrees, about the quarter-chord line), linear along the span"
-            ),
-            OptionSpec::new(
-                "sections",
-                "integer",
-                "21",
-                "airfoil sections along the span, both ends included"
-            ),
-            OptionSpec::new(
-                "points",
-                "integer",
-                "48",
-                "vertices per airfoil surface, cosine spaced"
-            ),
-            OptionSpec::new(
-                "root_size",
-                "array of float",
-                "[1.25 * chord, 0.5 * chord]",
-                "root block size along x and y (mm), centred under the airfoil"
-            ),
-            OptionSpec::new(
-                "root_height",
-                "float",
-                "0.25 * chord",
-                "root block height (mm); 0 for a bare airfoil"
-            ),
-            OptionSpec::new("cavities", "integer", "0", "cooling cavities: 0, 1 or 2"),
-            OptionSpec::new(
-                "wall",
-                "float",
-                "0.03 * chord",
-                "skin thickness around the cavities (mm)"
-            ),
-            OptionSpec::new("rib", "float", "wall", "rib thickness between two cavities (mm)"),
-        ],
+        options: BladeOptions::SPECS,
         example: "use = \"blade\"\ncavities = 2\nchord = 20.0\nspan = 10.0\nsections = 6",
     },
     build: build_blade,
 });
 
-#[derive(Debug, Deserialize)]
-#[serde(deny_unknown_fields)]
-struct BoxOptions {
-    #[serde(default = "d_size")]
-    size: [f64; 3],
-}
-
-fn d_size() -> [f64; 3] {
-    [20.0, 20.0, 10.0]
+lamina_core::stage_options! {
+    #[derive(Debug)]
+    struct BoxOptions {
+        /// size along x, y, z (mm)
+        size: [f64; 3] = "[20.0, 20.0, 10.0]",
+    }
 }
 
 fn build_box(config: &StageConfig<'_>) -> Result<AnyStage> {
@@ -677,12 +488,7 @@ lamina_core::register_stage!(StageFactory {
         kind: StageKind::Model,
         name: "box",
         doc: "Generates a rectangular box with one corner at the origin.",
-        options: &[OptionSpec::new(
-            "size",
-            "array of float",
-            "[20.0, 20.0, 10.0]",
-            "size along x, y, z (mm)"
-        )],
+        options: BoxOptions::SPECS,
         example: "use = \"box\"\nsize = [10.0, 5.0, 2.0]",
     },
     build: build_box,

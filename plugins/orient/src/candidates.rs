@@ -8,12 +8,14 @@
 //! go to the lower build height or the smaller surface angle, then to the larger flat
 //! base on the bed, then to the earlier candidate (+z first: no turn at all).
 
-use lamina_core::stage::{AnyStage, OptionSpec, Orienter, StageConfig, StageInfo, StageKind};
+use lamina_core::stage::{AnyStage, Orienter, StageConfig, StageInfo, StageKind};
 use lamina_core::{Error, Mesh, Orientation, OrientationCandidate, Result, StageFactory};
 use nalgebra::{Rotation3, Unit, Vector3};
 use serde::Deserialize;
 
 use crate::surfaces::{Facet, bed_contact, facets, flat_faces, height, surface_angle};
+
+lamina_core::option_type!(Criterion = "string");
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize)]
 #[serde(rename_all = "kebab-case")]
@@ -31,32 +33,20 @@ impl Criterion {
     }
 }
 
-fn d_criterion() -> Criterion {
-    Criterion::SurfaceAngle
-}
-fn d_samples() -> usize {
-    64
-}
-fn d_faces() -> usize {
-    8
-}
-fn d_main() -> f64 {
-    1.0
-}
-
-#[derive(Debug, Deserialize)]
-#[serde(deny_unknown_fields)]
-struct Options {
-    #[serde(default = "d_criterion")]
-    criterion: Criterion,
-    #[serde(default = "d_samples")]
-    samples: usize,
-    #[serde(default = "d_faces")]
-    faces: usize,
-    #[serde(default = "d_main")]
-    main_surfaces: f64,
-    #[serde(default)]
-    directions: Vec<[f64; 3]>,
+lamina_core::stage_options! {
+    #[derive(Debug)]
+    struct Options {
+        /// what to minimise: "surface-angle" (sum A_i alpha_i) or "height"
+        criterion: Criterion = r#""surface-angle""#,
+        /// directions sampled evenly over the sphere
+        samples: usize = "64",
+        /// the largest flat faces whose normals are candidates (both ways)
+        faces: usize = "8",
+        /// share of the area, largest flat faces first, that the surface angle counts
+        main_surfaces: f64 = "1.0",
+        /// more candidate directions
+        directions: Vec<[f64; 3]> = "[]",
+    }
 }
 
 struct Candidates {
@@ -267,38 +257,7 @@ lamina_core::register_stage!(StageFactory {
         kind: StageKind::Orient,
         name: "candidates",
         doc: "Turns the object to the candidate build direction with the least surface angle (sum of area x angle to the build direction) or build height, and reports the alternatives weighed.",
-        options: &[
-            OptionSpec::new(
-                "criterion",
-                "string",
-                "\"surface-angle\"",
-                "what to minimise: \"surface-angle\" (sum A_i alpha_i) or \"height\""
-            ),
-            OptionSpec::new(
-                "samples",
-                "integer",
-                "64",
-                "directions sampled evenly over the sphere"
-            ),
-            OptionSpec::new(
-                "faces",
-                "integer",
-                "8",
-                "the largest flat faces whose normals are candidates (both ways)"
-            ),
-            OptionSpec::new(
-                "main_surfaces",
-                "float",
-                "1.0",
-                "share of the area, largest flat faces first, that the surface angle counts"
-            ),
-            OptionSpec::new(
-                "directions",
-                "array of [x, y, z]",
-                "[]",
-                "more candidate directions"
-            ),
-        ],
+        options: Options::SPECS,
         example: "use = \"candidates\"\ncriterion = \"height\"\nsamples = 16",
     },
     build,

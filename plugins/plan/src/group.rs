@@ -18,6 +18,8 @@ use crate::bead::Bead;
 use crate::fill::{Widths, fill, mean_width};
 use crate::pieces;
 
+lamina_core::option_type!(Thin = "string");
+
 /// What to do with sub-regions too thin for one pass.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Deserialize)]
 #[serde(rename_all = "lowercase")]

@@ -22,7 +22,7 @@ pub mod sim;
 
 use std::collections::BTreeMap;
 
-use lamina_core::stage::{AnyStage, OptionSpec, Planner, StageConfig, StageInfo, StageKind};
+use lamina_core::stage::{AnyStage, Planner, StageConfig, StageInfo, StageKind};
 use lamina_core::{BBox2, Error, LayerPlan, Point2, Result, RunInfo, StageFactory, Toolpath};
 use serde::Deserialize;
 
@@ -42,63 +42,47 @@ struct ToolOptions {
     envelope: Option<f64>,
 }
 
-#[derive(Debug, Clone, Deserialize)]
-#[serde(deny_unknown_fields)]
-struct Options {
-    /// Nominal bead width; by default the machine's nozzle diameter (0.4 mm without a
-    /// machine).
-    width: Option<f64>,
-    #[serde(default = "d_width_range")]
-    width_range: [f64; 2],
-    #[serde(default = "d_min_fill")]
-    min_fill: f64,
-    #[serde(default)]
-    seam: Seam,
-    #[serde(default)]
-    mixing: bool,
-    #[serde(default)]
-    thin: Thin,
-    #[serde(default = "d_speed")]
-    speed: f64,
-    #[serde(default = "d_travel")]
-    travel_speed: f64,
-    #[serde(default = "d_envelope")]
-    envelope: f64,
-    #[serde(default = "d_change")]
-    tool_change: f64,
-    step: Option<f64>,
-    #[serde(default)]
-    compare: bool,
-    #[serde(default)]
-    priority: Priority,
-    /// Plan a layer one tool at a time when that is faster than the concurrent schedule.
-    #[serde(default)]
-    keep_faster: bool,
-    /// Per-tool settings by material name (or `mixer`).
-    #[serde(default)]
-    tools: BTreeMap<String, ToolOptions>,
+lamina_core::stage_options! {
+    #[derive(Debug, Clone)]
+    struct Options {
+        /// nominal bead width (mm), by default the machine's nozzle diameter: loops at w/2, 3w/2, ... inside each sub-region, the width bent within `width_range` to fill a band with a whole number of beads; what loops leave is filled by variable-width beads along its centre line
+        width: f64 = "0.4",
+        /// narrowest and widest bead as fractions of `width`; sub-regions narrower than the narrowest merge with their neighbours (`thin`)
+        width_range: [f64; 2] = "[0.6, 1.5]",
+        /// least share of the sub-regions' volume the beads must deposit over the run; below it the run fails
+        min_fill: f64 = "0.98",
+        /// where loops start: `nearest` (to the tool) or `aligned` (largest x)
+        seam: Seam = r#""nearest""#,
+        /// one mixing tool for everything (composition on the path) instead of one tool per material, each depositing the sub-regions its material dominates
+        mixing: bool = "false",
+        /// sub-regions narrower than the narrowest bead: `merge` (deposited with the next levels of their family, mean composition) or `skip` (left out); either way they are reported
+        thin: Thin = r#""merge""#,
+        /// deposition speed (mm/s)
+        speed: f64 = "30.0",
+        /// travel speed (mm/s)
+        travel_speed: f64 = "120.0",
+        /// tool envelope radius (mm); tools park outside each other's envelopes; the machine's head envelope plus 1 mm when it gives one (and at least the envelope)
+        envelope: f64 = "5.0",
+        /// seconds to change tools between two tools' turns (sequential)
+        tool_change: f64 = "5.0",
+        /// per-tool `speed`, `travel_speed`, `envelope`, keyed by material name (or `mixer`)
+        tools: BTreeMap<String, ToolOptions> = "{}",
+        // The concurrent planner's own options, after the COMMON_OPTIONS every planner
+        // documents.
+        /// seconds between collision checks
+        step: f64 = "0.01",
+        /// add a note to each layer with the sequential build time
+        compare: bool = "false",
+        /// who keeps going when two tools are about to collide: `x-speed` (the paper's rule: the tool faster along X at the check, the X component of its velocity, goes on and the other pauses; on a tie the first tool goes on), `clearing` (a tool whose pausing alone clears the conflict pauses, else one returning from a side-step, else `x-speed`) or `returning` (a tool returning from a side-step gives way, else `x-speed`)
+        priority: Priority = r#""x-speed""#,
+        /// deposit a layer one tool at a time when that is faster than the concurrent schedule (either way a warning says so); a layer whose tools stay blocked falls back to one tool at a time regardless
+        keep_faster: bool = "false",
+    }
 }
 
-/// Bead width when neither the stage nor a machine gives one (mm).
-const DEFAULT_WIDTH: f64 = 0.4;
-fn d_width_range() -> [f64; 2] {
-    [0.6, 1.5]
-}
-fn d_min_fill() -> f64 {
-    0.98
-}
-fn d_speed() -> f64 {
-    30.0
-}
-fn d_travel() -> f64 {
-    120.0
-}
-fn d_envelope() -> f64 {
-    5.0
-}
-fn d_change() -> f64 {
-    5.0
-}
+/// How many of [`Options::SPECS`], from the first, every planner documents; the
+/// others are the concurrent planner's.
+const COMMON_OPTIONS: usize = 11;
 
 /// Narrowest and widest bead (mm): from a fine nozzle to a wide laser-deposition track.
 const MIN_WIDTH: f64 = 0.01;
@@ -142,9 +126,7 @@ impl Options {
         // planner but are accepted, so that `--set plan.use=sequential` compares a
         // concurrent pipeline.
         let _ = concurrent;
-        if let Some(s) = self.step {
-            within("step", s, 1e-4, 10.0, "s")?;
-        }
+        within("step", self.step, 1e-4, 10.0, "s")?;
         for (name, t) in &self.tools {
             for (k, v) in [
                 ("speed", t.speed),
@@ -196,19 +178,21 @@ impl Options {
     }
 
     fn step(&self) -> f64 {
-        self.step.unwrap_or(0.01)
+        self.step
     }
 
     fn width(&self) -> f64 {
-        self.width.unwrap_or(DEFAULT_WIDTH)
+        self.width
     }
 
     /// Options as written, with the width the machine's nozzle gives when the stage
     /// names none.
     fn parse(config: &StageConfig<'_>) -> Result<Self> {
         let mut o: Options = config.parse()?;
-        if o.width.is_none() {
-            o.width = config.machine.map(|m| m.nozzle_diameter);
+        if !config.has("width")
+            && let Some(m) = config.machine
+        {
+            o.width = m.nozzle_diameter;
         }
         // Heads that must keep out of each other: the machine's envelopes are the least
         // the plan may keep.
@@ -442,31 +426,12 @@ fn build_concurrent(config: &StageConfig<'_>) -> Result<AnyStage> {
     Ok(AnyStage::Plan(Box::new(Concurrent(o))))
 }
 
-macro_rules! common_options {
-    ($($extra:expr),* $(,)?) => {
-        &[
-            OptionSpec::new("width", "float", "0.4", "nominal bead width (mm), by default the machine's nozzle diameter: loops at w/2, 3w/2, ... inside each sub-region, the width bent within `width_range` to fill a band with a whole number of beads; what loops leave is filled by variable-width beads along its centre line"),
-            OptionSpec::new("width_range", "array of float", "[0.6, 1.5]", "narrowest and widest bead as fractions of `width`; sub-regions narrower than the narrowest merge with their neighbours (`thin`)"),
-            OptionSpec::new("min_fill", "float", "0.98", "least share of the sub-regions' volume the beads must deposit over the run; below it the run fails"),
-            OptionSpec::new("seam", "string", "\"nearest\"", "where loops start: `nearest` (to the tool) or `aligned` (largest x)"),
-            OptionSpec::new("mixing", "bool", "false", "one mixing tool for everything (composition on the path) instead of one tool per material, each depositing the sub-regions its material dominates"),
-            OptionSpec::new("thin", "string", "\"merge\"", "sub-regions narrower than the narrowest bead: `merge` (deposited with the next levels of their family, mean composition) or `skip` (left out); either way they are reported"),
-            OptionSpec::new("speed", "float", "30.0", "deposition speed (mm/s)"),
-            OptionSpec::new("travel_speed", "float", "120.0", "travel speed (mm/s)"),
-            OptionSpec::new("envelope", "float", "5.0", "tool envelope radius (mm); tools park outside each other's envelopes; the machine's head envelope plus 1 mm when it gives one (and at least the envelope)"),
-            OptionSpec::new("tool_change", "float", "5.0", "seconds to change tools between two tools' turns (sequential)"),
-            OptionSpec::new("tools", "table", "{}", "per-tool `speed`, `travel_speed`, `envelope`, keyed by material name (or `mixer`)"),
-            $($extra),*
-        ]
-    };
-}
-
 lamina_core::register_stage!(StageFactory {
     info: StageInfo {
         kind: StageKind::Plan,
         name: "sequential",
         doc: "Contour-parallel loops in every sub-region, deposited one tool after another (the baseline).",
-        options: common_options!(),
+        options: Options::SPECS.split_at(COMMON_OPTIONS).0,
         example: "use = \"sequential\"\nwidth = 0.5",
     },
     build: build_sequential,
@@ -477,7 +442,7 @@ lamina_core::register_stage!(StageFactory {
         kind: StageKind::Plan,
         name: "contour",
         doc: "Toolpaths along the iso-material contours: closed contour-parallel loops filling every sub-region, deposited tool by tool (with `mixing = true`, by one mixing head). The fill of `sequential` and `concurrent`, under the name of the method.",
-        options: common_options!(),
+        options: Options::SPECS.split_at(COMMON_OPTIONS).0,
         example: "use = \"contour\"\nwidth = 0.4\nmixing = true\nseam = \"aligned\"",
     },
     build: build_sequential,
@@ -488,27 +453,7 @@ lamina_core::register_stage!(StageFactory {
         kind: StageKind::Plan,
         name: "concurrent",
         doc: "Contour-parallel loops deposited by all tools at once; on a predicted collision dynamic priority pauses one tool (by default the paper's rule: the tool slower along X pauses, the faster goes on). The concurrent schedule is planned even when one tool at a time would be faster (with a warning) unless `keep_faster` is set.",
-        options: common_options!(
-            OptionSpec::new("step", "float", "0.01", "seconds between collision checks"),
-            OptionSpec::new(
-                "compare",
-                "bool",
-                "false",
-                "add a note to each layer with the sequential build time"
-            ),
-            OptionSpec::new(
-                "priority",
-                "string",
-                "\"x-speed\"",
-                "who keeps going when two tools are about to collide: `x-speed` (the paper's rule: the tool faster along X at the check, the X component of its velocity, goes on and the other pauses; on a tie the first tool goes on), `clearing` (a tool whose pausing alone clears the conflict pauses, else one returning from a side-step, else `x-speed`) or `returning` (a tool returning from a side-step gives way, else `x-speed`)"
-            ),
-            OptionSpec::new(
-                "keep_faster",
-                "bool",
-                "false",
-                "deposit a layer one tool at a time when that is faster than the concurrent schedule (either way a warning says so); a layer whose tools stay blocked falls back to one tool at a time regardless"
-            ),
-        ),
+        options: Options::SPECS,
         example: "use = \"concurrent\"\nwidth = 0.5\nenvelope = 2.0\nstep = 0.02",
     },
     build: build_concurrent,

@@ -8,6 +8,8 @@ use crate::bead::Bead;
 use crate::fill::Widths;
 use crate::group::{Thin, group};
 
+lamina_core::option_type!(Seam = "string");
+
 /// Where each loop starts.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Deserialize)]
 #[serde(rename_all = "lowercase")]

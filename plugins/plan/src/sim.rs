@@ -31,6 +31,8 @@ fn push_point(path: &mut Toolpath, m: &Move, seg: usize, p: TimedPoint) {
     path.points.push(p);
 }
 
+lamina_core::option_type!(Priority = "string");
+
 /// Which of two tools about to collide keeps going; the other pauses.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Deserialize)]
 #[serde(rename_all = "kebab-case")]

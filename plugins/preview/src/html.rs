@@ -7,40 +7,28 @@ use std::io::Write;
 use std::path::PathBuf;
 
 use lamina_core::stage::{
-    AnyStage, ExportContext, Exporter, LayerSink, OptionSpec, OutputFiles, StageConfig, StageInfo, StageKind,
+    AnyStage, ExportContext, Exporter, LayerSink, OutputFiles, StageConfig, StageInfo, StageKind,
 };
 use lamina_core::{Contour, Error, LayerPlan, PathKind, Result, RunInfo, StageFactory};
-use serde::{Deserialize, Serialize};
+use serde::Serialize;
 
 use crate::draw::{composition_text, escape, hex, round};
 
 const VIEWER_JS: &str = include_str!("../assets/viewer.js");
 const VIEWER_CSS: &str = include_str!("../assets/viewer.css");
 
-#[derive(Debug, Clone, Deserialize)]
-#[serde(deny_unknown_fields)]
-struct Options {
-    #[serde(default = "d_path")]
-    path: PathBuf,
-    #[serde(default = "d_every")]
-    every: usize,
-    #[serde(default = "d_digits")]
-    digits: i32,
-    #[serde(default = "d_true")]
-    toolpaths: bool,
-}
-
-fn d_path() -> PathBuf {
-    PathBuf::from("viewer.html")
-}
-fn d_every() -> usize {
-    1
-}
-fn d_digits() -> i32 {
-    3
-}
-fn d_true() -> bool {
-    true
+lamina_core::stage_options! {
+    #[derive(Debug, Clone)]
+    struct Options {
+        /// output file, relative to the output folder
+        path: PathBuf = r#""viewer.html""#,
+        /// keep every n-th layer (large models)
+        every: usize = "1",
+        /// decimals kept of the coordinates (mm)
+        digits: i32 = "3",
+        /// include the planned toolpaths
+        toolpaths: bool = "true",
+    }
 }
 
 struct Html {
@@ -278,17 +266,7 @@ lamina_core::register_stage!(StageFactory {
         kind: StageKind::Export,
         name: "html",
         doc: "A self-contained HTML layer viewer: slider, zoom and pan, composition on hover, toolpath and tool toggles; no network needed.",
-        options: &[
-            OptionSpec::new(
-                "path",
-                "string",
-                "\"viewer.html\"",
-                "output file, relative to the output folder"
-            ),
-            OptionSpec::new("every", "integer", "1", "keep every n-th layer (large models)"),
-            OptionSpec::new("digits", "integer", "3", "decimals kept of the coordinates (mm)"),
-            OptionSpec::new("toolpaths", "bool", "true", "include the planned toolpaths"),
-        ],
+        options: Options::SPECS,
         example: "use = \"html\"\npath = \"viewer.html\"",
     },
     build,

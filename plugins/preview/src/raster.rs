@@ -6,10 +6,9 @@
 use std::path::PathBuf;
 
 use lamina_core::stage::{
-    AnyStage, ExportContext, Exporter, LayerSink, OptionSpec, OutputFiles, StageConfig, StageInfo, StageKind,
+    AnyStage, ExportContext, Exporter, LayerSink, OutputFiles, StageConfig, StageInfo, StageKind,
 };
 use lamina_core::{Contour, Error, LayerPlan, PathKind, Result, RunInfo, StageFactory};
-use serde::Deserialize;
 use tiny_skia::{Color, FillRule, Paint, PathBuilder, Pixmap, Stroke, Transform};
 
 use crate::draw::{EachLayer, layer_bounds, write_file};
@@ -139,32 +138,20 @@ fn encode(pixmap: &Pixmap, name: &std::path::Path) -> Result<Vec<u8>> {
 
 // ---- png: one picture per layer ------------------------------------------------------
 
-#[derive(Debug, Clone, Deserialize)]
-#[serde(deny_unknown_fields)]
-struct PngOptions {
-    #[serde(default = "d_png_path")]
-    path: PathBuf,
-    #[serde(default = "d_every")]
-    every: usize,
-    #[serde(default)]
-    layers: Vec<usize>,
-    #[serde(default = "d_size")]
-    size: u32,
-    #[serde(default = "d_true")]
-    toolpaths: bool,
-}
-
-fn d_png_path() -> PathBuf {
-    PathBuf::from("png/layer")
-}
-fn d_every() -> usize {
-    1
-}
-fn d_size() -> u32 {
-    800
-}
-fn d_true() -> bool {
-    true
+lamina_core::stage_options! {
+    #[derive(Debug, Clone)]
+    struct PngOptions {
+        /// file stem: layer 7 of 240 is `png/layer-007.png`
+        path: PathBuf = r#""png/layer""#,
+        /// write every n-th layer
+        every: usize = "1",
+        /// only these layers (indices from 0)
+        layers: Vec<usize> = "[]",
+        /// pixels on the longer side
+        size: u32 = "800",
+        /// draw the planned extrusion paths
+        toolpaths: bool = "true",
+    }
 }
 
 struct Png {
@@ -223,23 +210,7 @@ lamina_core::register_stage!(StageFactory {
         kind: StageKind::Export,
         name: "png",
         doc: "A PNG picture per layer: sub-regions in their property colours, contours, toolpaths.",
-        options: &[
-            OptionSpec::new(
-                "path",
-                "string",
-                "\"png/layer\"",
-                "file stem: layer 7 of 240 is `png/layer-007.png`"
-            ),
-            OptionSpec::new("every", "integer", "1", "write every n-th layer"),
-            OptionSpec::new(
-                "layers",
-                "array of integer",
-                "[]",
-                "only these layers (indices from 0)"
-            ),
-            OptionSpec::new("size", "integer", "800", "pixels on the longer side"),
-            OptionSpec::new("toolpaths", "bool", "true", "draw the planned extrusion paths"),
-        ],
+        options: PngOptions::SPECS,
         example: "use = \"png\"\nevery = 2\nsize = 256",
     },
     build: build_png,
@@ -247,32 +218,20 @@ lamina_core::register_stage!(StageFactory {
 
 // ---- contact sheet -------------------------------------------------------------------
 
-#[derive(Debug, Clone, Deserialize)]
-#[serde(deny_unknown_fields)]
-struct SheetOptions {
-    #[serde(default = "d_sheet_path")]
-    path: PathBuf,
-    #[serde(default)]
-    layers: Vec<usize>,
-    #[serde(default = "d_count")]
-    count: usize,
-    #[serde(default = "d_columns")]
-    columns: usize,
-    #[serde(default = "d_tile")]
-    tile: u32,
-}
-
-fn d_sheet_path() -> PathBuf {
-    PathBuf::from("contact-sheet.png")
-}
-fn d_count() -> usize {
-    12
-}
-fn d_columns() -> usize {
-    4
-}
-fn d_tile() -> u32 {
-    256
+lamina_core::stage_options! {
+    #[derive(Debug, Clone)]
+    struct SheetOptions {
+        /// output file
+        path: PathBuf = r#""contact-sheet.png""#,
+        /// the layers to show; default: `count` spread evenly
+        layers: Vec<usize> = "[]",
+        /// how many layers, first and last included
+        count: usize = "12",
+        /// tiles per row
+        columns: usize = "4",
+        /// tile size in pixels
+        tile: u32 = "256",
+    }
 }
 
 struct Sheet {
@@ -350,23 +309,7 @@ lamina_core::register_stage!(StageFactory {
         kind: StageKind::Export,
         name: "contact-sheet",
         doc: "Chosen layers side by side in one PNG, left to right and top to bottom in build order.",
-        options: &[
-            OptionSpec::new("path", "string", "\"contact-sheet.png\"", "output file"),
-            OptionSpec::new(
-                "layers",
-                "array of integer",
-                "[]",
-                "the layers to show; default: `count` spread evenly"
-            ),
-            OptionSpec::new(
-                "count",
-                "integer",
-                "12",
-                "how many layers, first and last included"
-            ),
-            OptionSpec::new("columns", "integer", "4", "tiles per row"),
-            OptionSpec::new("tile", "integer", "256", "tile size in pixels"),
-        ],
+        options: SheetOptions::SPECS,
         example: "use = \"contact-sheet\"\ncount = 4\ncolumns = 2\ntile = 128",
     },
     build: build_sheet,
@@ -374,22 +317,16 @@ lamina_core::register_stage!(StageFactory {
 
 // ---- stack: isometric overview -------------------------------------------------------
 
-#[derive(Debug, Clone, Deserialize)]
-#[serde(deny_unknown_fields)]
-struct StackOptions {
-    #[serde(default = "d_stack_path")]
-    path: PathBuf,
-    #[serde(default = "d_size")]
-    size: u32,
-    #[serde(default = "d_max_layers")]
-    max_layers: usize,
-}
-
-fn d_stack_path() -> PathBuf {
-    PathBuf::from("stack.png")
-}
-fn d_max_layers() -> usize {
-    400
+lamina_core::stage_options! {
+    #[derive(Debug, Clone)]
+    struct StackOptions {
+        /// output file
+        path: PathBuf = r#""stack.png""#,
+        /// pixels on the longer side
+        size: u32 = "800",
+        /// draw at most this many layers (every n-th beyond), which bounds the memory kept
+        max_layers: usize = "400",
+    }
 }
 
 struct Stack {
@@ -489,16 +426,7 @@ lamina_core::register_stage!(StageFactory {
         kind: StageKind::Export,
         name: "stack",
         doc: "An isometric overview of the stacked layers as one PNG, each sub-region in its property colour.",
-        options: &[
-            OptionSpec::new("path", "string", "\"stack.png\"", "output file"),
-            OptionSpec::new("size", "integer", "800", "pixels on the longer side"),
-            OptionSpec::new(
-                "max_layers",
-                "integer",
-                "400",
-                "draw at most this many layers (every n-th beyond), which bounds the memory kept"
-            ),
-        ],
+        options: StackOptions::SPECS,
         example: "use = \"stack\"\nsize = 256",
     },
     build: build_stack,

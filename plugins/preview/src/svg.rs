@@ -6,40 +6,25 @@
 use std::fmt::Write as _;
 use std::path::PathBuf;
 
-use lamina_core::stage::{
-    AnyStage, ExportContext, Exporter, LayerSink, OptionSpec, StageConfig, StageInfo, StageKind,
-};
+use lamina_core::stage::{AnyStage, ExportContext, Exporter, LayerSink, StageConfig, StageInfo, StageKind};
 use lamina_core::{LayerPlan, PathKind, Result, RunInfo, StageFactory};
-use serde::Deserialize;
 
 use crate::draw::{EachLayer, composition_text, escape, hex, layer_bounds, path_data, round};
 
-#[derive(Debug, Clone, Deserialize)]
-#[serde(deny_unknown_fields)]
-struct Options {
-    #[serde(default = "d_path")]
-    path: PathBuf,
-    #[serde(default = "d_every")]
-    every: usize,
-    #[serde(default)]
-    layers: Vec<usize>,
-    #[serde(default = "d_true")]
-    toolpaths: bool,
-    #[serde(default = "d_size")]
-    size: f64,
-}
-
-fn d_path() -> PathBuf {
-    PathBuf::from("svg/layer")
-}
-fn d_every() -> usize {
-    1
-}
-fn d_true() -> bool {
-    true
-}
-fn d_size() -> f64 {
-    800.0
+lamina_core::stage_options! {
+    #[derive(Debug, Clone)]
+    struct Options {
+        /// file stem: layer 7 of 240 is written to `svg/layer-007.svg`
+        path: PathBuf = r#""svg/layer""#,
+        /// write every n-th layer
+        every: usize = "1",
+        /// only these layers (indices from 0)
+        layers: Vec<usize> = "[]",
+        /// draw the planned toolpaths
+        toolpaths: bool = "true",
+        /// size of the longer side in pixels
+        size: f64 = "800.0",
+    }
 }
 
 struct Svg {
@@ -173,23 +158,7 @@ lamina_core::register_stage!(StageFactory {
         kind: StageKind::Export,
         name: "svg",
         doc: "An SVG picture per layer: sub-regions in their property colours titled with their compositions, contours, toolpaths.",
-        options: &[
-            OptionSpec::new(
-                "path",
-                "string",
-                "\"svg/layer\"",
-                "file stem: layer 7 of 240 is written to `svg/layer-007.svg`"
-            ),
-            OptionSpec::new("every", "integer", "1", "write every n-th layer"),
-            OptionSpec::new(
-                "layers",
-                "array of integer",
-                "[]",
-                "only these layers (indices from 0)"
-            ),
-            OptionSpec::new("toolpaths", "bool", "true", "draw the planned toolpaths"),
-            OptionSpec::new("size", "float", "800", "size of the longer side in pixels"),
-        ],
+        options: Options::SPECS,
         example: "use = \"svg\"\npath = \"svg/layer\"\nevery = 2",
     },
     build,

@@ -7,24 +7,25 @@
 use std::collections::BTreeMap;
 
 use lamina_core::pipeline::TableRef;
-use lamina_core::stage::{AnyStage, OptionSpec, Sequencer, StageConfig, StageInfo, StageKind};
+use lamina_core::stage::{AnyStage, Sequencer, StageConfig, StageInfo, StageKind};
 use lamina_core::{Error, MaterialRegion, Result, RunInfo, Sequence, StageFactory};
 use serde::Deserialize;
 
 use crate::cycle::{blocks, mm_to_um};
 
-#[derive(Debug, Deserialize)]
-#[serde(deny_unknown_fields)]
-struct Options {
-    /// Layer thickness by part name (mm).
-    #[serde(default)]
-    thickness: BTreeMap<String, f64>,
-    /// Explicit regions grouping parts; default: one region per part.
-    #[serde(default)]
-    regions: Vec<RegionSpec>,
-    /// Thickness of parts that neither `thickness` nor their materials give one (mm).
-    default_thickness: Option<f64>,
+lamina_core::stage_options! {
+    #[derive(Debug)]
+    struct Options {
+        /// layer thickness by part name (mm); default: the thinnest `layer_thickness` of the part's materials
+        thickness: BTreeMap<String, f64> = "{}",
+        /// regions grouping parts: `{ name, parts = [...], thickness }`; default: one region per part
+        regions: Vec<RegionSpec> = "[]",
+        /// thickness (mm) of parts that neither `thickness` nor their materials give one
+        default_thickness: Option<f64>,
+    }
 }
+
+lamina_core::option_type!(RegionSpec = "table", array "array of table");
 
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -243,26 +244,7 @@ lamina_core::register_stage!(StageFactory {
         kind: StageKind::Sequence,
         name: "work-cycles",
         doc: "Material regions with their own layer thickness: blocks at the regions' heights, work cycles of the least common multiple, every region cut at its own heights (with the `adaptive` slicer).",
-        options: &[
-            OptionSpec::new(
-                "thickness",
-                "table of float",
-                "{}",
-                "layer thickness by part name (mm); default: the thinnest `layer_thickness` of the part's materials"
-            ),
-            OptionSpec::new(
-                "default_thickness",
-                "float",
-                "none",
-                "thickness (mm) of parts that neither `thickness` nor their materials give one"
-            ),
-            OptionSpec::new(
-                "regions",
-                "array of table",
-                "[]",
-                "regions grouping parts: `{ name, parts = [...], thickness }`; default: one region per part"
-            ),
-        ],
+        options: Options::SPECS,
         example: "use = \"work-cycles\"\ndefault_thickness = 0.5",
     },
     build,

@@ -10,7 +10,7 @@
 
 use std::sync::Arc;
 
-use lamina_core::stage::{AnyStage, MeshSlicer, OptionSpec, Slicer, StageConfig, StageInfo, StageKind};
+use lamina_core::stage::{AnyStage, MeshSlicer, Slicer, StageConfig, StageInfo, StageKind};
 use lamina_core::{Error, LayerSlot, Mesh, Result, RunInfo, Sequence, StageFactory};
 use serde::Deserialize;
 
@@ -31,36 +31,25 @@ enum Mode {
     Material,
 }
 
-#[derive(Debug, Deserialize)]
-#[serde(deny_unknown_fields)]
-struct Options {
-    #[serde(default)]
-    mode: Mode,
-    #[serde(default = "d_min")]
-    min_thickness: f64,
-    #[serde(default = "d_max")]
-    max_thickness: f64,
-    #[serde(default = "d_cusp")]
-    cusp: f64,
-    /// Thickness of the first layer; the machine's `first_layer.height` when unset.
-    #[serde(default)]
-    first_layer: Option<f64>,
-    #[serde(default = "crate::cut::default_close_gaps")]
-    close_gaps: f64,
-    #[serde(default)]
-    fill_rule: FillRule,
-    #[serde(default = "crate::cut::default_max_layers")]
-    max_layers: usize,
-}
+lamina_core::option_type!(Mode = "string");
 
-fn d_min() -> f64 {
-    0.05
-}
-fn d_max() -> f64 {
-    0.3
-}
-fn d_cusp() -> f64 {
-    0.05
+lamina_core::stage_options! {
+    #[derive(Debug)]
+    struct Options {
+        /// "surface" (slope and cusp), "material" (the [sequence]'s work cycles) or "auto" (material when there is a [sequence])
+        mode: Mode = r#""auto""#,
+        /// thinnest layer (mm, surface mode)
+        min_thickness: f64 = "0.05",
+        /// thickest layer (mm, surface mode)
+        max_thickness: f64 = "0.3",
+        /// thickness of the first layer (mm, surface mode); unset: the machine's `first_layer.height`, else from the surface
+        first_layer: Option<f64>,
+        /// largest stair-step height allowed on sloped surfaces (mm)
+        cusp: f64 = "0.05",
+        close_gaps: f64 = use crate::cut::CLOSE_GAPS,
+        fill_rule: FillRule = use crate::cut::FILL_RULE,
+        max_layers: usize = use crate::cut::MAX_LAYERS,
+    }
 }
 
 struct Adaptive {
@@ -278,41 +267,7 @@ lamina_core::register_stage!(StageFactory {
         kind: StageKind::Slice,
         name: "adaptive",
         doc: "Layer thickness from the surface slope (thin where a stair step would show, ending on flat faces), or per material region following the work cycles of a [sequence].",
-        options: &[
-            OptionSpec::new(
-                "mode",
-                "string",
-                "\"auto\"",
-                "\"surface\" (slope and cusp), \"material\" (the [sequence]'s work cycles) or \"auto\" (material when there is a [sequence])"
-            ),
-            OptionSpec::new(
-                "min_thickness",
-                "float",
-                "0.05",
-                "thinnest layer (mm, surface mode)"
-            ),
-            OptionSpec::new(
-                "max_thickness",
-                "float",
-                "0.3",
-                "thickest layer (mm, surface mode)"
-            ),
-            OptionSpec::new(
-                "first_layer",
-                "float",
-                "none",
-                "thickness of the first layer (mm, surface mode); unset: the machine's `first_layer.height`, else from the surface"
-            ),
-            OptionSpec::new(
-                "cusp",
-                "float",
-                "0.05",
-                "largest stair-step height allowed on sloped surfaces (mm)"
-            ),
-            crate::cut::CLOSE_GAPS_OPTION,
-            crate::cut::FILL_RULE_OPTION,
-            crate::cut::MAX_LAYERS_OPTION,
-        ],
+        options: Options::SPECS,
         example: "use = \"adaptive\"\nmin_thickness = 0.1\nmax_thickness = 0.5\ncusp = 0.1",
     },
     build,

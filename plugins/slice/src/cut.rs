@@ -11,6 +11,7 @@
 
 use std::sync::Arc;
 
+use lamina_core::options::SharedOption;
 use lamina_core::{Contour, Layer, LayerSlot, Mesh, Point2, Result};
 use lamina_geom::ring::{Ring, contour_of, ring_of};
 use lamina_geom::segment_distance;
@@ -40,33 +41,20 @@ pub struct CutOptions {
     pub fill_rule: FillRule,
 }
 
+lamina_core::option_type!(FillRule = "string");
+
 /// Options every slicer takes, documented once.
-pub(crate) const CLOSE_GAPS_OPTION: lamina_core::stage::OptionSpec = lamina_core::stage::OptionSpec::new(
-    "close_gaps",
-    "float",
+pub(crate) const CLOSE_GAPS: SharedOption = SharedOption::new(
     "0.05",
     "open chains whose ends are closer than this (mm) are joined",
 );
-pub(crate) const FILL_RULE_OPTION: lamina_core::stage::OptionSpec = lamina_core::stage::OptionSpec::new(
-    "fill_rule",
-    "string",
+pub(crate) const FILL_RULE: SharedOption = SharedOption::new(
     "\"nonzero\"",
     "how overlapping loops combine: \"nonzero\" (shells merge) or \"evenodd\" (winding ignored)",
 );
-pub(crate) const MAX_LAYERS_OPTION: lamina_core::stage::OptionSpec = lamina_core::stage::OptionSpec::new(
-    "max_layers",
-    "integer",
-    "1000000",
-    "refuse to make more layers than this",
-);
-
-pub(crate) fn default_close_gaps() -> f64 {
-    CutOptions::default().close_gaps
-}
-
-pub(crate) fn default_max_layers() -> usize {
-    1_000_000
-}
+/// Upper bound on the layer count, against a mistyped thickness.
+pub(crate) const MAX_LAYERS: SharedOption =
+    SharedOption::new("1000000", "refuse to make more layers than this");
 
 impl CutOptions {
     /// The options a slicer's table gives, checked; errors point at the key.

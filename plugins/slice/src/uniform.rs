@@ -2,7 +2,7 @@
 
 use std::sync::Arc;
 
-use lamina_core::stage::{AnyStage, MeshSlicer, OptionSpec, Slicer, StageConfig, StageInfo, StageKind};
+use lamina_core::stage::{AnyStage, MeshSlicer, Slicer, StageConfig, StageInfo, StageKind};
 use lamina_core::{Error, Layer, LayerSlot, Mesh, Result, RunInfo, Sequence, StageFactory};
 use serde::Deserialize;
 
@@ -36,30 +36,21 @@ impl CutAt {
     }
 }
 
-#[derive(Debug, Deserialize)]
-#[serde(deny_unknown_fields)]
-struct Options {
-    #[serde(default = "d_thickness")]
-    thickness: f64,
-    /// Thickness of the first layer; the machine's `first_layer.height` when unset.
-    #[serde(default)]
-    first_layer: Option<f64>,
-    #[serde(default = "d_cut")]
-    cut: CutAt,
-    #[serde(default = "crate::cut::default_close_gaps")]
-    close_gaps: f64,
-    #[serde(default)]
-    fill_rule: crate::cut::FillRule,
-    /// Upper bound on the layer count, against a mistyped thickness.
-    #[serde(default = "crate::cut::default_max_layers")]
-    max_layers: usize,
-}
+lamina_core::option_type!(CutAt = "string or float");
 
-fn d_thickness() -> f64 {
-    0.2
-}
-fn d_cut() -> CutAt {
-    CutAt::Named(CutName::Mid)
+lamina_core::stage_options! {
+    #[derive(Debug)]
+    struct Options {
+        /// layer thickness (mm)
+        thickness: f64 = "0.2",
+        /// thickness of the first layer (mm); unset: the machine's `first_layer.height`, else `thickness`
+        first_layer: Option<f64>,
+        /// where a layer is cut: "bottom", "mid", "top" or a fraction of its thickness
+        cut: CutAt = r#""mid""#,
+        close_gaps: f64 = use crate::cut::CLOSE_GAPS,
+        fill_rule: crate::cut::FillRule = use crate::cut::FILL_RULE,
+        max_layers: usize = use crate::cut::MAX_LAYERS,
+    }
 }
 
 pub(crate) struct Uniform {
@@ -181,24 +172,7 @@ lamina_core::register_stage!(StageFactory {
         kind: StageKind::Slice,
         name: "uniform",
         doc: "Layers of one thickness from the bottom of the model to its top, each cut at a chosen height within it.",
-        options: &[
-            OptionSpec::new("thickness", "float", "0.2", "layer thickness (mm)"),
-            OptionSpec::new(
-                "first_layer",
-                "float",
-                "none",
-                "thickness of the first layer (mm); unset: the machine's `first_layer.height`, else `thickness`"
-            ),
-            OptionSpec::new(
-                "cut",
-                "string or float",
-                "\"mid\"",
-                "where a layer is cut: \"bottom\", \"mid\", \"top\" or a fraction of its thickness"
-            ),
-            crate::cut::CLOSE_GAPS_OPTION,
-            crate::cut::FILL_RULE_OPTION,
-            crate::cut::MAX_LAYERS_OPTION,
-        ],
+        options: Options::SPECS,
         example: "use = \"uniform\"\nthickness = 0.5\ncut = \"mid\"",
     },
     build,

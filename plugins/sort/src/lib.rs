@@ -7,11 +7,10 @@
 //! inside B. Candidate parents come from an R-tree of bounding boxes, which keeps a
 //! layer with thousands of contours far from quadratic.
 
-use lamina_core::stage::{AnyStage, OptionSpec, Sorter, StageConfig, StageInfo, StageKind};
+use lamina_core::stage::{AnyStage, Sorter, StageConfig, StageInfo, StageKind};
 use lamina_core::{Contour, ContourNode, ContourTree, Family, Layer, Point2, Result, StageFactory};
 use rstar::primitives::{GeomWithData, Rectangle};
 use rstar::{AABB, RTree};
-use serde::Deserialize;
 
 type Boxed = GeomWithData<Rectangle<[f64; 2]>, usize>;
 
@@ -97,9 +96,10 @@ impl Sorter for Hierarchy {
     }
 }
 
-#[derive(Debug, Deserialize)]
-#[serde(deny_unknown_fields)]
-struct Options {}
+lamina_core::stage_options! {
+    #[derive(Debug)]
+    struct Options {}
+}
 
 // A pipeline without a [sort] table gets this stage.
 lamina_core::register_default!(StageKind::Sort, "hierarchy");
@@ -109,7 +109,7 @@ lamina_core::register_stage!(StageFactory {
         kind: StageKind::Sort,
         name: "hierarchy",
         doc: "Containment hierarchy of each layer: levels, parents, children and contour families (outer contour with its holes).",
-        options: &[] as &[OptionSpec],
+        options: Options::SPECS,
         example: "use = \"hierarchy\"",
     },
     build: |config: &StageConfig<'_>| {

@@ -1,9 +1,7 @@
 //! `sources`: the discretiser that cuts each family along the step boundaries of its
 //! grading sources and gives every homogeneous region its composition.
 
-use lamina_core::stage::{
-    AnyStage, Discretiser, FamilyContext, OptionSpec, StageConfig, StageInfo, StageKind,
-};
+use lamina_core::stage::{AnyStage, Discretiser, FamilyContext, StageConfig, StageInfo, StageKind};
 use lamina_core::steps::Truncation;
 use lamina_core::{Composition, Error, Region, Result, StageFactory};
 use serde::Deserialize;
@@ -28,6 +26,8 @@ enum CompositionSpec {
     Material(String),
     Fractions(Vec<f64>),
 }
+
+lamina_core::option_type!(SourceSpec = "table", array "array of table");
 
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -54,9 +54,7 @@ fn one() -> f64 {
 fn d_step() -> f64 {
     0.25
 }
-fn d_tolerance() -> f64 {
-    0.001
-}
+lamina_core::option_type!(Combine = "string");
 
 /// Where the sources' compositions are combined by Eq. 8.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Deserialize)]
@@ -73,14 +71,16 @@ enum Combine {
     Everywhere,
 }
 
-#[derive(Debug, Deserialize)]
-#[serde(deny_unknown_fields)]
-struct Options {
-    sources: Vec<SourceSpec>,
-    #[serde(default = "d_tolerance")]
-    tolerance: f64,
-    #[serde(default)]
-    combine: Combine,
+lamina_core::stage_options! {
+    #[derive(Debug)]
+    struct Options {
+        /// each `{ kind = "point" | "axis" | "plane" | "surface" (the layer's boundary), at = [x, y, z], direction = [x, y, z] (axis direction or plane normal), width (or alpha), k = 1, start, end (material name or fractions), step = 0.25, weight = 1 }`
+        sources: Vec<SourceSpec>,
+        /// largest chord error of curved step boundaries (mm)
+        tolerance: f64 = "0.001",
+        /// where Eq. 8 blends: `intersection` (the paper's regularised booleans: only where effective grading regions 0 <= f <= 1 overlap; a source alone keeps its own composition) or `everywhere` (every source at every point)
+        combine: Combine = r#""intersection""#,
+    }
 }
 
 /// A source whose compositions are still named (materials are resolved per part).
@@ -377,25 +377,7 @@ lamina_core::register_stage!(StageFactory {
         kind: StageKind::Discretise,
         name: "sources",
         doc: "Grading sources (point, axis, plane, outer surface): f(d) = (alpha d)^k truncated in steps of t_g, regions cut along the steps and overlaid, compositions by Eq. 2 and 8.",
-        options: &[
-            OptionSpec::required(
-                "sources",
-                "array of table",
-                "each `{ kind = \"point\" | \"axis\" | \"plane\" | \"surface\" (the layer's boundary), at = [x, y, z], direction = [x, y, z] (axis direction or plane normal), width (or alpha), k = 1, start, end (material name or fractions), step = 0.25, weight = 1 }`"
-            ),
-            OptionSpec::new(
-                "tolerance",
-                "float",
-                "0.001",
-                "largest chord error of curved step boundaries (mm)"
-            ),
-            OptionSpec::new(
-                "combine",
-                "string",
-                "\"intersection\"",
-                "where Eq. 8 blends: `intersection` (the paper's regularised booleans: only where effective grading regions 0 <= f <= 1 overlap; a source alone keeps its own composition) or `everywhere` (every source at every point)"
-            ),
-        ],
+        options: Options::SPECS,
         example: "use = \"sources\"\nsources = [{ kind = \"axis\", at = [0.0, 0.0, 0.0], width = 10.0, start = \"red\", end = \"green\" }]",
     },
     build,

@@ -5,43 +5,27 @@
 //! It depends on lamina-core alone, registers its stage with `register_stage!`, and
 //! exports the entry point with `export_plugin!`; that is all a plugin needs.
 
-use lamina_core::stage::{AnyStage, OptionSpec, Planner, StageConfig, StageInfo, StageKind};
+use lamina_core::stage::{AnyStage, Planner, StageConfig, StageInfo, StageKind};
 use lamina_core::{
     Contour, LayerPlan, PathKind, Point2, Polygon, Result, RunInfo, StageFactory, TimedPoint, Toolpath,
 };
-use serde::Deserialize;
 
 lamina_core::export_plugin!("zigzag");
 
-#[derive(Debug, Clone, Deserialize)]
-#[serde(deny_unknown_fields)]
-struct Options {
-    #[serde(default = "d_width")]
-    width: f64,
-    #[serde(default = "d_angle")]
-    angle: f64,
-    #[serde(default = "d_true")]
-    alternate: bool,
-    #[serde(default = "d_speed")]
-    speed: f64,
-    #[serde(default = "d_travel")]
-    travel_speed: f64,
-}
-
-fn d_width() -> f64 {
-    0.4
-}
-fn d_angle() -> f64 {
-    45.0
-}
-fn d_true() -> bool {
-    true
-}
-fn d_speed() -> f64 {
-    40.0
-}
-fn d_travel() -> f64 {
-    150.0
+lamina_core::stage_options! {
+    #[derive(Debug, Clone)]
+    struct Options {
+        /// line spacing and extrusion width (mm)
+        width: f64 = "0.4",
+        /// line direction (degrees from x)
+        angle: f64 = "45.0",
+        /// turn the lines by 90 degrees every other layer
+        alternate: bool = "true",
+        /// deposition speed (mm/s)
+        speed: f64 = "40.0",
+        /// travel speed (mm/s)
+        travel_speed: f64 = "150.0",
+    }
 }
 
 struct ZigZag(Options);
@@ -174,18 +158,7 @@ lamina_core::register_stage!(StageFactory {
         kind: StageKind::Plan,
         name: "zigzag",
         doc: "Fills each sub-region with parallel extrusion lines joined boustrophedon-style (example dynamic plugin).",
-        options: &[
-            OptionSpec::new("width", "float", "0.4", "line spacing and extrusion width (mm)"),
-            OptionSpec::new("angle", "float", "45.0", "line direction (degrees from x)"),
-            OptionSpec::new(
-                "alternate",
-                "bool",
-                "true",
-                "turn the lines by 90 degrees every other layer"
-            ),
-            OptionSpec::new("speed", "float", "40.0", "deposition speed (mm/s)"),
-            OptionSpec::new("travel_speed", "float", "150.0", "travel speed (mm/s)"),
-        ],
+        options: Options::SPECS,
         example: "use = \"zigzag\"\nwidth = 0.5",
     },
     build,

@@ -111,6 +111,7 @@ impl Library {
                         ty: leak(o.ty),
                         default: o.default.map(leak),
                         doc: leak(o.doc),
+                        required: o.required,
                     })
                     .collect();
                 let factory: &'static StageFactory = Box::leak(Box::new(StageFactory {

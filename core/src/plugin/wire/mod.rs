@@ -192,6 +192,7 @@ pub struct WireOption {
     pub ty: String,
     pub default: Option<String>,
     pub doc: String,
+    pub required: bool,
 }
 
 /// A mesh a model stage made, with what its reader repaired.

@@ -1,0 +1,410 @@
+//! Stage options declared once: [`stage_options!`](crate::stage_options) turns one
+//! declaration per option (name, Rust type, doc comment, default as a TOML literal)
+//! into both the options struct a stage deserialises its table into and the
+//! [`OptionSpec`] list its [`StageInfo`](crate::stage::StageInfo) documents, so the
+//! two cannot drift: the documented default is parsed and used as the value.
+//!
+//! ```
+//! use lamina_core::stage_options;
+//!
+//! stage_options! {
+//!     #[derive(Debug)]
+//!     struct Options {
+//!         /// layer thickness (mm)
+//!         thickness: f64 = "0.2",
+//!         /// thickness of the first layer (mm); unset: `thickness`
+//!         first_layer: Option<f64>,
+//!         /// the file to read
+//!         file: String,
+//!     }
+//! }
+//!
+//! assert_eq!(Options::SPECS[0].default, Some("0.2"));
+//! assert_eq!(Options::SPECS[0].ty, "float");
+//! assert!(Options::SPECS[2].required && !Options::SPECS[1].required);
+//! let o: Options = toml::from_str("file = \"a.stl\"").unwrap();
+//! assert_eq!((o.thickness, o.first_layer), (0.2, None));
+//! ```
+//!
+//! A field is one of:
+//! - `name: T = "literal"`: optional, the TOML literal is its default;
+//! - `name: Option<T>`: optional without a value (its doc says what absence means);
+//! - `name: T`: required;
+//! - `name: T = use PATH`: an option several stages share, whose default and doc are
+//!   the [`SharedOption`] at `PATH`.
+//!
+//! The TOML type shown in the documentation comes from [`OptionType`], implemented
+//! here for the usual Rust types; a plugin's own types implement it with
+//! [`option_type!`](crate::option_type).
+
+use std::collections::{BTreeMap, HashMap};
+use std::marker::PhantomData;
+use std::path::PathBuf;
+
+use serde::de::{self, DeserializeOwned, Visitor};
+
+#[doc(hidden)]
+pub use crate::stage::OptionSpec;
+
+/// The TOML type of an option's Rust type, as the documentation names it.
+pub trait OptionType {
+    /// E.g. `float`, `integer`, `string`, `bool`, `array of float`.
+    const TOML: &'static str;
+    /// True for `Option<T>`: absent means no value rather than an error.
+    const OPTIONAL: bool = false;
+}
+
+/// A type whose `Vec` is an option: names the TOML type of that array.
+pub trait ArrayItem {
+    /// E.g. `array of float`.
+    const ARRAY: &'static str;
+}
+
+impl<T: OptionType> OptionType for Option<T> {
+    const TOML: &'static str = T::TOML;
+    const OPTIONAL: bool = true;
+}
+
+impl<T: ArrayItem> OptionType for Vec<T> {
+    const TOML: &'static str = T::ARRAY;
+}
+
+impl<K, V> OptionType for BTreeMap<K, V> {
+    const TOML: &'static str = "table";
+}
+
+impl<K, V, S> OptionType for HashMap<K, V, S> {
+    const TOML: &'static str = "table";
+}
+
+impl<const N: usize> OptionType for [f64; N] {
+    const TOML: &'static str = "array of float";
+}
+
+impl<const N: usize> ArrayItem for [f64; N] {
+    const ARRAY: &'static str = "array of array of float";
+}
+
+impl ArrayItem for Vec<f64> {
+    const ARRAY: &'static str = "array of array of float";
+}
+
+/// Implements [`OptionType`] (and, with `array "..."`, [`ArrayItem`]) for a type:
+/// `option_type!(CutAt = "string or float");`,
+/// `option_type!(Region = "table", array "array of table");`.
+#[macro_export]
+macro_rules! option_type {
+    ($($t:ty = $toml:literal $(, array $array:literal)?);+ $(;)?) => {
+        $(
+            impl $crate::options::OptionType for $t {
+                const TOML: &'static str = $toml;
+            }
+            $(
+                impl $crate::options::ArrayItem for $t {
+                    const ARRAY: &'static str = $array;
+                }
+            )?
+        )+
+    };
+}
+
+option_type! {
+    f64 = "float", array "array of float";
+    f32 = "float", array "array of float";
+    usize = "integer", array "array of integer";
+    u64 = "integer", array "array of integer";
+    u32 = "integer", array "array of integer";
+    u16 = "integer", array "array of integer";
+    u8 = "integer", array "array of integer";
+    i64 = "integer", array "array of integer";
+    i32 = "integer", array "array of integer";
+    bool = "bool", array "array of bool";
+    String = "string", array "array of string";
+    PathBuf = "string", array "array of string";
+    crate::surface::FaceSelection = "table", array "array of table";
+    crate::machine::Flavor = "string";
+}
+
+/// Default and doc of an option that several stages accept alike; each stage names
+/// it in its [`stage_options!`](crate::stage_options) with `name: T = use PATH`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct SharedOption {
+    /// The default as a TOML literal; `None` when the option has none.
+    pub default: Option<&'static str>,
+    pub doc: &'static str,
+}
+
+impl SharedOption {
+    /// An option whose default is the TOML literal `default`.
+    pub const fn new(default: &'static str, doc: &'static str) -> Self {
+        Self {
+            default: Some(default),
+            doc,
+        }
+    }
+
+    /// An option without a default: required, or absent when its type is an `Option`.
+    pub const fn without_default(doc: &'static str) -> Self {
+        Self { default: None, doc }
+    }
+}
+
+/// A doc comment's text: its lines joined, without the leading space.
+#[doc(hidden)]
+pub const fn doc_text(s: &'static str) -> &'static str {
+    s.trim_ascii()
+}
+
+/// True when an option declared with `default` and Rust type `T` must be given.
+#[doc(hidden)]
+pub const fn required<T: OptionType>(default: Option<&'static str>) -> bool {
+    default.is_none() && !T::OPTIONAL
+}
+
+/// Parses a documented default, a TOML literal, into the option's type.
+pub fn parse_default<T: DeserializeOwned>(name: &str, literal: &str) -> Result<T, String> {
+    let table: toml::Table = toml::from_str(&format!("v = {literal}")).map_err(|e| {
+        format!(
+            "the default of `{name}`, {literal}, is not a TOML value: {}",
+            e.message()
+        )
+    })?;
+    let value = table
+        .get("v")
+        .cloned()
+        .ok_or_else(|| format!("the default of `{name}`, {literal}, is not a TOML value"))?;
+    value
+        .try_into()
+        .map_err(|e: toml::de::Error| format!("the default of `{name}`, {literal}: {}", e.message()))
+}
+
+/// The value of one option: what the table gave, else its parsed default, else
+/// `None` for an `Option` and a "missing field" error for a required one.
+#[doc(hidden)]
+pub fn resolve<T: DeserializeOwned, E: de::Error>(
+    given: Option<T>,
+    name: &'static str,
+    default: Option<&'static str>,
+) -> Result<T, E> {
+    match (given, default) {
+        (Some(v), _) => Ok(v),
+        (None, Some(literal)) => parse_default(name, literal).map_err(E::custom),
+        (None, None) => T::deserialize(Absent(name, PhantomData)),
+    }
+}
+
+/// Deserialises an option that is absent: `None` for an `Option`, else the error a
+/// derived struct gives for a missing field.
+struct Absent<E>(&'static str, PhantomData<E>);
+
+impl<'de, E: de::Error> de::Deserializer<'de> for Absent<E> {
+    type Error = E;
+
+    fn deserialize_any<V: Visitor<'de>>(self, _visitor: V) -> Result<V::Value, E> {
+        Err(E::missing_field(self.0))
+    }
+
+    fn deserialize_option<V: Visitor<'de>>(self, visitor: V) -> Result<V::Value, E> {
+        visitor.visit_none()
+    }
+
+    serde::forward_to_deserialize_any! {
+        bool i8 i16 i32 i64 i128 u8 u16 u32 u64 u128 f32 f64 char str string
+        bytes byte_buf unit unit_struct newtype_struct seq tuple
+        tuple_struct map struct enum identifier ignored_any
+    }
+}
+
+/// Declares a stage's options once, generating the options struct (deserialised from
+/// the stage's table with `deny_unknown_fields`, defaults parsed from their TOML
+/// literals) and its `SPECS: &'static [OptionSpec]` for
+/// [`StageInfo::options`](crate::stage::StageInfo). See [the module](crate::options).
+///
+/// The crate using it must depend on `serde`.
+#[macro_export]
+macro_rules! stage_options {
+    (
+        $(#[$attr:meta])*
+        $vis:vis struct $name:ident { $($body:tt)* }
+    ) => {
+        $crate::stage_options!(@field [$(#[$attr])*] [$vis] $name [] $($body)*);
+    };
+
+    // An option shared with other stages: its default and doc are elsewhere.
+    (@field $attrs:tt $vis:tt $name:ident [$($done:tt)*]
+        $(#[doc = $doc:literal])* $fvis:vis $field:ident : $ty:ty = use $shared:path
+        $(, $($rest:tt)*)?
+    ) => {
+        $crate::stage_options!(@field $attrs $vis $name [$($done)*
+            { [$fvis] $field [$ty] [$shared.default] [$shared.doc] }
+        ] $($($rest)*)?);
+    };
+
+    // A default written as a TOML literal.
+    (@field $attrs:tt $vis:tt $name:ident [$($done:tt)*]
+        $(#[doc = $doc:literal])* $fvis:vis $field:ident : $ty:ty = $default:literal
+        $(, $($rest:tt)*)?
+    ) => {
+        $crate::stage_options!(@field $attrs $vis $name [$($done)*
+            { [$fvis] $field [$ty] [::core::option::Option::Some($default)]
+              [$crate::options::doc_text(::core::concat!($($doc),*))] }
+        ] $($($rest)*)?);
+    };
+
+    // No default: required, or absent when the type is an `Option`.
+    (@field $attrs:tt $vis:tt $name:ident [$($done:tt)*]
+        $(#[doc = $doc:literal])* $fvis:vis $field:ident : $ty:ty
+        $(, $($rest:tt)*)?
+    ) => {
+        $crate::stage_options!(@field $attrs $vis $name [$($done)*
+            { [$fvis] $field [$ty] [::core::option::Option::None]
+              [$crate::options::doc_text(::core::concat!($($doc),*))] }
+        ] $($($rest)*)?);
+    };
+
+    (@field [$($attr:tt)*] [$vis:vis] $name:ident [$(
+        { [$fvis:vis] $field:ident [$ty:ty] [$default:expr] [$doc:expr] }
+    )*]) => {
+        $($attr)*
+        $vis struct $name {
+            $($fvis $field: $ty,)*
+        }
+
+        impl $name {
+            /// The options as the stage's `StageInfo::options` documents them.
+            #[allow(dead_code)]
+            pub const SPECS: &'static [$crate::options::OptionSpec] = &[$(
+                $crate::options::OptionSpec {
+                    name: ::core::stringify!($field),
+                    ty: <$ty as $crate::options::OptionType>::TOML,
+                    default: $default,
+                    doc: $doc,
+                    required: $crate::options::required::<$ty>($default),
+                },
+            )*];
+        }
+
+        const _: () = {
+            #[derive(::serde::Deserialize)]
+            #[serde(deny_unknown_fields)]
+            struct Given {
+                $(
+                    #[serde(default)]
+                    $field: ::core::option::Option<$ty>,
+                )*
+            }
+
+            impl<'de> ::serde::Deserialize<'de> for $name {
+                fn deserialize<D: ::serde::Deserializer<'de>>(
+                    deserializer: D,
+                ) -> ::core::result::Result<Self, D::Error> {
+                    let given = <Given as ::serde::Deserialize<'de>>::deserialize(deserializer)?;
+                    ::core::result::Result::Ok($name {
+                        $($field: $crate::options::resolve(
+                            given.$field,
+                            ::core::stringify!($field),
+                            $default,
+                        )?,)*
+                    })
+                }
+            }
+        };
+    };
+}
+
+#[cfg(test)]
+mod tests {
+    #![allow(clippy::unwrap_used)]
+
+    use super::SharedOption;
+
+    const SHARED: SharedOption = SharedOption::new("\"round\"", "offset corners");
+
+    #[derive(Debug, Clone, Copy, PartialEq, serde::Deserialize)]
+    #[serde(rename_all = "lowercase")]
+    enum Join {
+        Round,
+        Miter,
+    }
+    crate::option_type!(Join = "string");
+
+    crate::stage_options! {
+        #[derive(Debug)]
+        struct Options {
+            /// layer thickness (mm)
+            thickness: f64 = "0.2",
+            /// first layer;
+            /// unset: `thickness`
+            first_layer: Option<f64>,
+            /// file
+            file: String,
+            join: Join = use SHARED,
+            point: [f64; 3] = "[0.0, 0.0, 1.0]",
+            layers: Vec<usize> = "[]",
+        }
+    }
+
+    #[test]
+    fn specs_follow_the_declaration() {
+        let s = Options::SPECS;
+        let names: Vec<_> = s.iter().map(|o| o.name).collect();
+        assert_eq!(
+            names,
+            ["thickness", "first_layer", "file", "join", "point", "layers"]
+        );
+        let tys: Vec<_> = s.iter().map(|o| o.ty).collect();
+        assert_eq!(
+            tys,
+            [
+                "float",
+                "float",
+                "string",
+                "string",
+                "array of float",
+                "array of integer"
+            ]
+        );
+        assert_eq!(s[0].doc, "layer thickness (mm)");
+        assert_eq!(s[1].doc, "first layer; unset: `thickness`");
+        assert_eq!(s[3].doc, "offset corners");
+        assert_eq!(s[3].default, Some("\"round\""));
+        let required: Vec<_> = s.iter().map(|o| o.required).collect();
+        assert_eq!(required, [false, false, true, false, false, false]);
+    }
+
+    #[test]
+    fn defaults_are_parsed_and_given_values_win() {
+        let o: Options = toml::from_str("file = \"a\"").unwrap();
+        assert_eq!(o.thickness, 0.2);
+        assert_eq!(o.first_layer, None);
+        assert_eq!(o.join, Join::Round);
+        assert_eq!(o.point, [0.0, 0.0, 1.0]);
+        assert!(o.layers.is_empty() && o.file == "a");
+        let o: Options =
+            toml::from_str("file = \"a\"\nthickness = 0.3\nfirst_layer = 0.1\njoin = \"miter\"").unwrap();
+        assert_eq!(
+            (o.thickness, o.first_layer, o.join),
+            (0.3, Some(0.1), Join::Miter)
+        );
+    }
+
+    #[test]
+    fn errors_are_those_of_a_derived_struct() {
+        let e = toml::from_str::<Options>("thickness = 0.3").unwrap_err();
+        assert!(e.message().contains("missing field `file`"), "{e}");
+        let e = toml::from_str::<Options>("file = \"a\"\nthikness = 0.3").unwrap_err();
+        assert!(
+            e.message().contains("unknown field `thikness`, expected one of"),
+            "{e}"
+        );
+        let e = toml::from_str::<Options>("file = \"a\"\nthickness = \"x\"").unwrap_err();
+        assert!(e.message().contains("invalid type"), "{e}");
+    }
+
+    #[test]
+    fn a_default_that_is_not_toml_is_an_error() {
+        assert!(super::parse_default::<f64>("span", "1.5 * chord").is_err());
+        assert!(super::parse_default::<f64>("x", "none").is_err());
+        assert_eq!(super::parse_default::<f64>("x", "1e-5"), Ok(1e-5));
+    }
+}
