@@ -22,8 +22,9 @@ pub struct LayerSlot {
     pub cut_z: f64,
     /// The material region of the fabrication sequence this layer deposits, when the
     /// layers follow work cycles: only that region's parts are cut. `None`: every part.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub region: Option<usize>,
+    /// Written `region` in files and messages.
+    #[serde(default, rename = "region", skip_serializing_if = "Option::is_none")]
+    pub material_region: Option<usize>,
 }
 
 impl LayerSlot {
@@ -34,7 +35,7 @@ impl LayerSlot {
             z,
             thickness,
             cut_z,
-            region: None,
+            material_region: None,
         }
     }
 }
@@ -114,7 +115,7 @@ impl ContourTree {
 
 /// A sub-region of constant material inside one family.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct Region {
+pub struct SubRegion {
     /// Family index in the layer's contour tree.
     pub family: usize,
     /// Order from the grading reference outward-in: 0, 1, ..., n-1.
@@ -134,7 +135,7 @@ pub struct Region {
     pub composition: Option<Composition>,
 }
 
-impl Region {
+impl SubRegion {
     pub fn area(&self) -> f64 {
         self.polygon.area()
     }
@@ -323,7 +324,7 @@ impl Sequence {
                         z,
                         thickness: t,
                         cut_z: z - t / 2.0,
-                        region: Some(d.region),
+                        material_region: Some(d.region),
                     });
                 }
             }
@@ -409,11 +410,12 @@ pub struct Toolpath {
     /// Composition deposited along the path (over the part's materials), if extruding.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub composition: Option<Composition>,
-    /// Part and region the path fills, if any.
+    /// Part and sub-region (index into the part layer's `regions`) the path fills, if
+    /// any; the sub-region is written `region` in files.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub part: Option<usize>,
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub region: Option<usize>,
+    #[serde(default, rename = "region", skip_serializing_if = "Option::is_none")]
+    pub sub_region: Option<usize>,
 }
 
 impl Toolpath {
@@ -447,7 +449,7 @@ pub struct PartLayer {
     pub tree: ContourTree,
     /// Families of the tree that belong to this part (all, unless selected by point).
     pub families: Vec<usize>,
-    pub regions: Vec<Region>,
+    pub regions: Vec<SubRegion>,
 }
 
 /// Everything planned for one layer: what exporters receive, in build order.
@@ -456,9 +458,10 @@ pub struct LayerPlan {
     pub index: usize,
     pub z: f64,
     pub thickness: f64,
-    /// The material region this layer deposits when the layers follow work cycles.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub region: Option<usize>,
+    /// The material region this layer deposits when the layers follow work cycles
+    /// (written `region` in files).
+    #[serde(default, rename = "region", skip_serializing_if = "Option::is_none")]
+    pub material_region: Option<usize>,
     pub parts: Vec<PartLayer>,
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub toolpaths: Vec<Toolpath>,

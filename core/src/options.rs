@@ -91,7 +91,7 @@ impl ArrayItem for Vec<f64> {
 
 /// Implements [`OptionType`] (and, with `array "..."`, [`ArrayItem`]) for a type:
 /// `option_type!(CutAt = "string or float");`,
-/// `option_type!(Region = "table", array "array of table");`.
+/// `option_type!(SubRegion = "table", array "array of table");`.
 #[macro_export]
 macro_rules! option_type {
     ($($t:ty = $toml:literal $(, array $array:literal)?);+ $(;)?) => {

@@ -258,7 +258,7 @@ pub struct FamilyContext<'a> {
 /// discretiser whose regions follow the material (grading sources) may set their
 /// compositions too; a grader, when the pipeline has one, overrides them.
 pub trait Discretiser: Send + Sync {
-    fn discretise(&self, ctx: &FamilyContext<'_>) -> Result<Vec<Region>>;
+    fn discretise(&self, ctx: &FamilyContext<'_>) -> Result<Vec<SubRegion>>;
 
     /// True when the regions come with their compositions, so a part of several
     /// materials needs no grader.
@@ -270,7 +270,7 @@ pub trait Discretiser: Send + Sync {
 /// Gives every sub-region of a family its composition.
 pub trait Grader: Send + Sync {
     /// Sets `composition` on every region; fractions are over the part's materials.
-    fn grade(&self, ctx: &FamilyContext<'_>, regions: &mut [Region]) -> Result<()>;
+    fn grade(&self, ctx: &FamilyContext<'_>, regions: &mut [SubRegion]) -> Result<()>;
 }
 
 /// Plans the fabrication sequence of the whole object, before slicing.

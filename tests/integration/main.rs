@@ -20,6 +20,7 @@ mod gcode_replay;
 mod generate;
 mod grading;
 mod hostile;
+mod layering;
 mod linked_plugins;
 mod machine;
 mod orient;

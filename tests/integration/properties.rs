@@ -28,7 +28,7 @@ use lamina_core::script::ScriptHost;
 use lamina_core::stage::{Discretiser, FamilyContext};
 use lamina_core::{
     AnyStage, Contour, ContourTree, Family, Layer, LayerSlot, Material, Mesh, PartInfo, Point2, Polygon,
-    Region, Registry, RunInfo, StageKind,
+    Registry, RunInfo, StageKind, SubRegion,
 };
 use proptest::prelude::*;
 use proptest::test_runner::TestCaseError;
@@ -630,7 +630,11 @@ fn discretise_and_check(f: &RandomFamily, text: &str) -> Result<(), TestCaseErro
 /// The regions tile the family: each a valid polygon with its reference point in it,
 /// their areas adding up to the family's, no overlap and nothing outside or missed,
 /// by Lamina's `Tiling` check and again by `geo`.
-fn check_tiling(family: &Polygon, regions: &[Region], stage: &dyn Discretiser) -> Result<(), TestCaseError> {
+fn check_tiling(
+    family: &Polygon,
+    regions: &[SubRegion],
+    stage: &dyn Discretiser,
+) -> Result<(), TestCaseError> {
     prop_assert!(!regions.is_empty(), "no regions");
     let area = family.area();
     let mut polygons = Vec::with_capacity(regions.len());
@@ -1535,7 +1539,7 @@ fn check_cycles(case: &CycleCase) -> Result<(), TestCaseError> {
         prop_assert!(w[0].z <= w[1].z + 1e-12);
     }
     for s in &slots {
-        let r = s.region.expect("each layer names its region");
+        let r = s.material_region.expect("each layer names its region");
         let part = &case.parts[r];
         prop_assert!(
             um(s.z - s.thickness) >= part.z.0 && um(s.z) <= part.z.1,

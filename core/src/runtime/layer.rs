@@ -9,7 +9,7 @@ use super::report::Timings;
 use crate::diagnostic::Diagnostic;
 use crate::error::{Error, Result};
 use crate::mesh::Mesh;
-use crate::model::{Composition, Layer, LayerPlan, LayerSlot, PartLayer, Region, Sequence};
+use crate::model::{Composition, Layer, LayerPlan, LayerSlot, PartLayer, Sequence, SubRegion};
 use crate::stage::*;
 
 impl Engine {
@@ -30,7 +30,7 @@ impl Engine {
         let mut diagnostics = Vec::new();
         let mut parts = Vec::new();
         // A layer of a material region deposits only that region's parts.
-        let region_parts = match (slot.region, sequence) {
+        let region_parts = match (slot.material_region, sequence) {
             (Some(r), Some(seq)) => {
                 Some(seq.regions.get(r).map(|r| r.parts.as_slice()).ok_or_else(|| {
                     Error::stage(
@@ -112,7 +112,7 @@ impl Engine {
             index: slot.index,
             z: slot.z,
             thickness: slot.thickness,
-            region: slot.region,
+            material_region: slot.material_region,
             parts,
             toolpaths: Vec::new(),
             build_time: None,
@@ -133,7 +133,7 @@ impl Engine {
         tree: &crate::model::ContourTree,
         families: &[usize],
         shared: &LayerShared<'_>,
-    ) -> Result<Vec<Region>> {
+    ) -> Result<Vec<SubRegion>> {
         let (info, timings) = (shared.info, shared.timings);
         let mesh = shared.meshes.get(shared.part_mesh[pi]).map(|m| &**m);
         let p = &self.parts[pi];
@@ -202,13 +202,13 @@ pub(super) struct LayerShared<'a> {
 }
 
 /// The single region of a family that is not discretised.
-fn whole_family(tree: &crate::model::ContourTree, layer: &Layer, f: usize) -> Region {
+fn whole_family(tree: &crate::model::ContourTree, layer: &Layer, f: usize) -> SubRegion {
     let polygon = tree.family_polygon(&layer.contours, f);
     let reference = polygon
         .outer
         .interior_point()
         .unwrap_or_else(|| polygon.bbox().center());
-    Region {
+    SubRegion {
         family: f,
         index: 0,
         count: 1,

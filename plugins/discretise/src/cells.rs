@@ -22,7 +22,7 @@ use i_overlay::string::line::IntLine;
 use i_overlay::string::slice::IntSlice;
 use lamina_core::options::SharedOption;
 use lamina_core::stage::StageConfig;
-use lamina_core::{Contour, Limit, Limits, Point2, Polygon, Region, Result, Vector2};
+use lamina_core::{Contour, Limit, Limits, Point2, Polygon, Result, SubRegion, Vector2};
 use lamina_geom::segment_parameter;
 use serde::Deserialize;
 
@@ -136,7 +136,7 @@ impl Cells {
         &self,
         grid: &Grid,
         family: &Polygon,
-        regions: &mut Vec<Region>,
+        regions: &mut Vec<SubRegion>,
         limits: &Limits,
     ) -> Result<()> {
         if self.count == Count::None || regions.is_empty() {
@@ -157,7 +157,7 @@ impl Cells {
 
     /// Cells of equal angles about the family's centre, numbered counter-clockwise
     /// from the +x direction.
-    fn sectors(&self, grid: &Grid, family: &Polygon, regions: &mut Vec<Region>) {
+    fn sectors(&self, grid: &Grid, family: &Polygon, regions: &mut Vec<SubRegion>) {
         let centre = centre(family);
         let bbox = family.bbox();
         let reach = [
@@ -178,7 +178,7 @@ impl Cells {
         for r in regions.drain(..) {
             let n = self.count(&r.polygon);
             if n <= 1 {
-                out.push(Region { cell: Some(0), ..r });
+                out.push(SubRegion { cell: Some(0), ..r });
                 continue;
             }
             let shape = grid.shape(&r.polygon);
@@ -209,7 +209,7 @@ impl Cells {
     /// contour it starts at): the cuts start at equal steps of arc length,
     /// counter-clockwise from the contour's point farthest along +x, and run across
     /// the region (see [`cuts`]).
-    fn arcs(&self, grid: &Grid, regions: &mut Vec<Region>) {
+    fn arcs(&self, grid: &Grid, regions: &mut Vec<SubRegion>) {
         let mut out = Vec::with_capacity(regions.len());
         for r in regions.drain(..) {
             let n = self.count(&r.polygon);
@@ -220,7 +220,7 @@ impl Cells {
                 Vec::new()
             };
             if cuts.is_empty() {
-                out.push(Region { cell: Some(0), ..r });
+                out.push(SubRegion { cell: Some(0), ..r });
                 continue;
             }
             let shape = vec![grid.shape(&r.polygon)];

@@ -9,7 +9,7 @@
 use i_overlay::core::fill_rule::FillRule;
 use i_overlay::core::overlay_rule::OverlayRule;
 use i_overlay::float::single::SingleFloatOverlay;
-use lamina_core::{Contour, Polygon, Region};
+use lamina_core::{Contour, Polygon, SubRegion};
 use lamina_geom::Ring;
 use lamina_geom::ring::{ring_area, ring_of};
 
@@ -26,7 +26,7 @@ pub struct Tiling {
     pub overlap: f64,
     /// Contours wrongly oriented (outer clockwise or hole counter-clockwise).
     pub misoriented: usize,
-    /// Region contours that are not simple ([`is_simple`]).
+    /// SubRegion contours that are not simple ([`is_simple`]).
     pub non_simple: usize,
     /// The family's own contours that are not simple (the slicer's output): reported,
     /// not part of [`Tiling::is_ok`], as a discretiser is given families of any shape
@@ -45,9 +45,9 @@ impl Tiling {
 }
 
 /// Measures how `regions` tile `family`.
-pub fn tiling(family: &Polygon, regions: &[Region]) -> Tiling {
+pub fn tiling(family: &Polygon, regions: &[SubRegion]) -> Tiling {
     let family_area = family.area();
-    let region_area: f64 = regions.iter().map(Region::area).sum();
+    let region_area: f64 = regions.iter().map(SubRegion::area).sum();
     let paths: Vec<Ring> = regions
         .iter()
         .flat_map(|r| r.polygon.contours())
@@ -230,7 +230,7 @@ mod tests {
     #[test]
     fn overlapping_regions_are_measured() {
         let family = Polygon::new(crate::shapes::rect(0.0, 0.0, 2.0, 1.0), vec![]);
-        let region = |x: f64| Region {
+        let region = |x: f64| SubRegion {
             family: 0,
             index: 0,
             count: 1,

@@ -8,7 +8,7 @@ use lamina_core::mesh::Point3;
 use lamina_core::stage::{AnyStage, Discretiser, FamilyContext, StageConfig, StageInfo, StageKind};
 use lamina_core::steps::Truncation;
 use lamina_core::surface::{FaceSelection, Surface};
-use lamina_core::{Contour, Error, Mesh, Point2, Polygon, Region, Result, StageFactory};
+use lamina_core::{Contour, Error, Mesh, Point2, Polygon, Result, StageFactory, SubRegion};
 use serde::Deserialize;
 use std::sync::{Arc, Mutex};
 
@@ -312,7 +312,7 @@ impl DistanceField {
 }
 
 impl Discretiser for DistanceField {
-    fn discretise(&self, ctx: &FamilyContext<'_>) -> Result<Vec<Region>> {
+    fn discretise(&self, ctx: &FamilyContext<'_>) -> Result<Vec<SubRegion>> {
         let polygon = ctx.tree.family_polygon(&ctx.layer.contours, ctx.family);
         if self.cell_size.is_some() {
             let bbox = polygon.bbox();

@@ -41,6 +41,15 @@ impl Grid {
         })
     }
 
+    /// The family's grid and its shape on it, cleaned; `None` when the grid cannot
+    /// hold the polygon or nothing of it is left on the grid (the discretisers then
+    /// keep the family as one region).
+    pub fn family(polygon: &Polygon, stage: &str) -> Option<(Self, IntShapes<i32>)> {
+        let grid = Self::for_polygon(polygon, stage).ok()?;
+        let base = crate::bands::clean(&vec![grid.shape(polygon)]);
+        (!base.is_empty()).then_some((grid, base))
+    }
+
     /// Grid units per mm.
     pub fn scale(&self) -> f64 {
         self.scale

@@ -8,9 +8,9 @@
 //! and d; a `count` alone spreads the rings over the whole reach.
 
 use lamina_core::stage::{AnyStage, Discretiser, FamilyContext, StageConfig, StageInfo, StageKind};
-use lamina_core::{Polygon, Region, Result, StageFactory};
+use lamina_core::{Polygon, Result, StageFactory, SubRegion};
 
-use crate::bands::{clean, offset_bands};
+use crate::bands::offset_bands;
 use crate::cells::Cells;
 use crate::grid::Grid;
 use crate::inset::{From, Inset, Join};
@@ -89,15 +89,11 @@ impl Offset {
 }
 
 impl Discretiser for Offset {
-    fn discretise(&self, ctx: &FamilyContext<'_>) -> Result<Vec<Region>> {
+    fn discretise(&self, ctx: &FamilyContext<'_>) -> Result<Vec<SubRegion>> {
         let polygon = ctx.tree.family_polygon(&ctx.layer.contours, ctx.family);
-        let Ok(grid) = Grid::for_polygon(&polygon, STAGE) else {
+        let Some((grid, base)) = Grid::family(&polygon, STAGE) else {
             return Ok(whole(ctx, polygon));
         };
-        let base = clean(&vec![grid.shape(&polygon)]);
-        if base.is_empty() {
-            return Ok(whole(ctx, polygon));
-        }
         let Some((count, spacing)) = self.plan(&polygon)? else {
             return Ok(whole(ctx, polygon));
         };

@@ -11,9 +11,9 @@
 use i_overlay::core::fill_rule::FillRule;
 use i_overlay::core::overlay::ShapeType;
 use lamina_core::stage::{AnyStage, Discretiser, FamilyContext, StageConfig, StageInfo, StageKind};
-use lamina_core::{Contour, Point2, Polygon, Region, Result, StageFactory};
+use lamina_core::{Contour, Point2, Polygon, Result, StageFactory, SubRegion};
 
-use crate::bands::{clean, nested_bands};
+use crate::bands::nested_bands;
 use crate::cells::Cells;
 use crate::grid::Grid;
 use crate::inset::From;
@@ -433,15 +433,11 @@ fn without_spikes(points: &mut Vec<Point2>) {
 }
 
 impl Discretiser for Radial {
-    fn discretise(&self, ctx: &FamilyContext<'_>) -> Result<Vec<Region>> {
+    fn discretise(&self, ctx: &FamilyContext<'_>) -> Result<Vec<SubRegion>> {
         let polygon = ctx.tree.family_polygon(&ctx.layer.contours, ctx.family);
-        let Ok(grid) = Grid::for_polygon(&polygon, STAGE) else {
+        let Some((grid, base)) = Grid::family(&polygon, STAGE) else {
             return Ok(whole(ctx, polygon));
         };
-        let base = clean(&vec![grid.shape(&polygon)]);
-        if base.is_empty() {
-            return Ok(whole(ctx, polygon));
-        }
         let count = match self.count {
             Some(n) => n,
             None => match reach(&polygon, From::Outer, self.nozzle * 0.05) {

@@ -1,9 +1,9 @@
-//! Turning bands of a family into `Region`s: one region per polygon of a band (a band
+//! Turning bands of a family into `SubRegion`s: one region per polygon of a band (a band
 //! that splits into islands gives several regions of the same index and level), each
 //! with a reference point inside it.
 
 use i_overlay::i_shape::int::shape::IntShapes;
-use lamina_core::{FamilyContext, Polygon, Region};
+use lamina_core::{FamilyContext, Polygon, SubRegion};
 
 use crate::grid::Grid;
 use crate::measure::interior_point;
@@ -15,7 +15,7 @@ pub fn from_bands(
     bands: &[IntShapes<i32>],
     count: usize,
     level: impl Fn(usize) -> f64,
-) -> Vec<Region> {
+) -> Vec<SubRegion> {
     let mut regions = Vec::new();
     for (index, band) in bands.iter().enumerate() {
         for polygon in grid.polygons(band) {
@@ -30,9 +30,9 @@ pub fn from_bands(
 
 /// One region with its reference point (a central point of its widest scan interval,
 /// the bounding-box centre if no scan line finds an inside).
-pub fn region(family: usize, index: usize, count: usize, level: f64, polygon: Polygon) -> Region {
+pub fn region(family: usize, index: usize, count: usize, level: f64, polygon: Polygon) -> SubRegion {
     let reference = interior_point(&polygon).unwrap_or_else(|| polygon.bbox().center());
-    Region {
+    SubRegion {
         family,
         index,
         count,
@@ -55,6 +55,6 @@ pub fn uniform_level(j: usize, count: usize) -> f64 {
 
 /// The family as one region: the fallback for a family the grid or the overlay cannot
 /// represent (no area at the grid's resolution).
-pub fn whole(ctx: &FamilyContext<'_>, polygon: Polygon) -> Vec<Region> {
+pub fn whole(ctx: &FamilyContext<'_>, polygon: Polygon) -> Vec<SubRegion> {
     vec![region(ctx.family, 0, 1, 0.0, polygon)]
 }

@@ -5,9 +5,9 @@
 
 use lamina_core::stage::{AnyStage, Discretiser, FamilyContext, StageConfig, StageInfo, StageKind};
 use lamina_core::steps::Truncation;
-use lamina_core::{Polygon, Region, Result, StageFactory};
+use lamina_core::{Polygon, Result, StageFactory, SubRegion};
 
-use crate::bands::{clean, offset_bands};
+use crate::bands::offset_bands;
 use crate::cells::Cells;
 use crate::grid::Grid;
 use crate::inset::{From, Inset, Join};
@@ -74,17 +74,16 @@ fn far_end(polygon: &Polygon, from: From) -> Option<f64> {
 }
 
 impl Discretiser for StepWidth {
-    fn discretise(&self, ctx: &FamilyContext<'_>) -> Result<Vec<Region>> {
+    fn discretise(&self, ctx: &FamilyContext<'_>) -> Result<Vec<SubRegion>> {
         let polygon = ctx.tree.family_polygon(&ctx.layer.contours, ctx.family);
-        let Ok(grid) = Grid::for_polygon(&polygon, STAGE) else {
+        let Some((grid, base)) = Grid::family(&polygon, STAGE) else {
             return Ok(whole(ctx, polygon));
         };
-        let base = clean(&vec![grid.shape(&polygon)]);
         let scale = match self.width {
             Some(w) => Some(w),
             None => far_end(&polygon, self.inset.from),
         };
-        let Some(scale) = scale.filter(|s| *s > 0.0 && !base.is_empty()) else {
+        let Some(scale) = scale.filter(|s| *s > 0.0) else {
             return Ok(whole(ctx, polygon));
         };
         // f(d) = (d / scale)^power: a threshold t on f is the distance scale t^(1 / power).

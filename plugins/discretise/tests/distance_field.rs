@@ -129,7 +129,7 @@ fn fig_7_iso_contours_every_one_and_a_half_over_a_maximum_of_11_76() {
 #[test]
 fn line_polyline_and_surface_features() {
     let fam = OneFamily::new(rect(0.0, 0.0, 40.0, 20.0), vec![]);
-    let strips = |regions: &[lamina_core::Region], want: &[f64]| {
+    let strips = |regions: &[lamina_core::SubRegion], want: &[f64]| {
         assert_tiles(&fam.polygon(), regions);
         assert_eq!(indices(regions), (0..want.len()).collect::<Vec<_>>());
         for (j, w) in want.iter().enumerate() {

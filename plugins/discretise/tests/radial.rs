@@ -14,7 +14,7 @@ fn moved(c: Contour, dx: f64, dy: f64) -> Contour {
 }
 
 /// Each index 0..n once, as one polygon with `holes` holes.
-fn one_ring_each(regions: &[lamina_core::Region], n: usize, holes: usize) {
+fn one_ring_each(regions: &[lamina_core::SubRegion], n: usize, holes: usize) {
     assert_eq!(indices(regions), (0..n).collect::<Vec<_>>());
     for j in 0..n {
         let ring: Vec<_> = regions.iter().filter(|r| r.index == j).collect();

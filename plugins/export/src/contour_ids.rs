@@ -14,7 +14,7 @@
 //! is written with the region it bounds: its outer boundary opens ring j (id j + 1),
 //! its holes close it (id j + 2, or 0 for the last ring).
 
-use lamina_core::{BBox2, Contour, PartLayer, Region};
+use lamina_core::{BBox2, Contour, PartLayer, SubRegion};
 
 /// Relative area difference and distance (mm) within which two rings are one contour.
 /// The sub-regions of a family share their vertices exactly (one integer grid), and the
@@ -97,7 +97,7 @@ pub fn entries(part: &PartLayer) -> Vec<Entry<'_>> {
 }
 
 fn family_entries(part: &PartLayer, family: usize) -> Vec<Entry<'_>> {
-    let regions: &[Region] = &part.regions;
+    let regions: &[SubRegion] = &part.regions;
     let mut rings = Vec::new();
     for (i, r) in regions.iter().enumerate().filter(|(_, r)| r.family == family) {
         rings.push(Ring::new(&r.polygon.outer, i, true));
@@ -171,8 +171,8 @@ mod tests {
         Contour::square(Point2::new(c, c), h).oriented(ccw)
     }
 
-    fn region(index: usize, count: usize, outer: f64, hole: Option<f64>) -> Region {
-        Region {
+    fn region(index: usize, count: usize, outer: f64, hole: Option<f64>) -> SubRegion {
+        SubRegion {
             family: 0,
             index,
             count,

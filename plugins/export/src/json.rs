@@ -171,7 +171,7 @@ fn layer_out<'a>(info: &'a RunInfo, plan: &'a LayerPlan, toolpaths: bool) -> Lay
         index: plan.index,
         z: plan.z,
         thickness: plan.thickness,
-        region: plan.region,
+        region: plan.material_region,
         parts,
         toolpaths: (toolpaths && !plan.toolpaths.is_empty()).then_some(plan.toolpaths.as_slice()),
         build_time: plan.build_time,

@@ -99,7 +99,7 @@ fn layers(seed: u64) -> Vec<LayerPlan> {
                         widths: Vec::new(),
                         composition: Some(Composition::binary(f).expect("valid")),
                         part: Some(0),
-                        region: Some(k),
+                        sub_region: Some(k),
                     }
                 })
                 .collect();
@@ -107,7 +107,7 @@ fn layers(seed: u64) -> Vec<LayerPlan> {
                 index,
                 z: 0.2 * (index + 1) as f64,
                 thickness: 0.2,
-                region: None,
+                material_region: None,
                 parts: Vec::new(),
                 toolpaths,
                 build_time: Some(t),

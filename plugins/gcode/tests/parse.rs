@@ -80,7 +80,7 @@ fn layers(seed: u64) -> Vec<LayerPlan> {
                     composition: (kind == PathKind::Extrude)
                         .then(|| Composition::binary(f.min(1.0)).expect("valid")),
                     part: Some(0),
-                    region: Some(k),
+                    sub_region: Some(k),
                 });
                 if k % 4 == 3 {
                     let p = points[points.len() - 1].p;
@@ -92,7 +92,7 @@ fn layers(seed: u64) -> Vec<LayerPlan> {
                         widths: Vec::new(),
                         composition: None,
                         part: None,
-                        region: None,
+                        sub_region: None,
                     });
                 }
             }
@@ -100,7 +100,7 @@ fn layers(seed: u64) -> Vec<LayerPlan> {
                 index,
                 z: 0.2 * (index + 1) as f64,
                 thickness: 0.2,
-                region: None,
+                material_region: None,
                 parts: Vec::new(),
                 toolpaths,
                 build_time: Some(t),

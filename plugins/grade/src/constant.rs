@@ -2,7 +2,7 @@
 //! or as fractions.
 
 use lamina_core::stage::{AnyStage, FamilyContext, Grader, StageConfig, StageInfo, StageKind};
-use lamina_core::{Composition, Error, Region, Result, StageFactory};
+use lamina_core::{Composition, Error, Result, StageFactory, SubRegion};
 
 lamina_core::stage_options! {
     #[derive(Debug)]
@@ -22,7 +22,7 @@ enum Spec {
 struct Constant(Spec);
 
 impl Grader for Constant {
-    fn grade(&self, ctx: &FamilyContext<'_>, regions: &mut [Region]) -> Result<()> {
+    fn grade(&self, ctx: &FamilyContext<'_>, regions: &mut [SubRegion]) -> Result<()> {
         let part = &ctx.info.parts[ctx.part];
         let n = part.materials.len();
         let composition = match &self.0 {

@@ -6,7 +6,7 @@
 use lamina_core::options::SharedOption;
 use lamina_core::script::{ScriptArgs, ScriptFn};
 use lamina_core::stage::{FamilyContext, StageConfig};
-use lamina_core::{Composition, Error, Region, Result};
+use lamina_core::{Composition, Error, Result, SubRegion};
 use serde::Deserialize;
 
 /// The options every control-function grader takes.
@@ -151,7 +151,7 @@ impl Control {
 
 /// What a control function of `r` sees for `region` of the family in `ctx`: its
 /// reference point, the layer's height and index, and the part's name.
-pub fn region_args<'a>(ctx: &FamilyContext<'a>, region: &Region, r: f64) -> ScriptArgs<'a> {
+pub fn region_args<'a>(ctx: &FamilyContext<'a>, region: &SubRegion, r: f64) -> ScriptArgs<'a> {
     ScriptArgs {
         r,
         d: 0.0,

@@ -7,7 +7,7 @@
 //! (each with its own reference point) the composition varies around the family too.
 
 use lamina_core::stage::{AnyStage, FamilyContext, Grader, StageConfig, StageInfo, StageKind};
-use lamina_core::{Composition, Contour, Error, Point2, Region, Result, RunInfo, StageFactory};
+use lamina_core::{Composition, Contour, Error, Point2, Result, RunInfo, StageFactory, SubRegion};
 use serde::Deserialize;
 
 lamina_core::option_type!(HolesSpec = "string or array of table");
@@ -98,7 +98,7 @@ impl Idw {
 }
 
 impl Grader for Idw {
-    fn grade(&self, ctx: &FamilyContext<'_>, regions: &mut [Region]) -> Result<()> {
+    fn grade(&self, ctx: &FamilyContext<'_>, regions: &mut [SubRegion]) -> Result<()> {
         let family = &ctx.tree.families[ctx.family];
         let contours: Vec<&Contour> = std::iter::once(family.outer)
             .chain(family.holes.iter().copied())

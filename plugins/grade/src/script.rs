@@ -4,7 +4,7 @@
 
 use lamina_core::script::ScriptFn;
 use lamina_core::stage::{AnyStage, FamilyContext, Grader, StageConfig, StageInfo, StageKind};
-use lamina_core::{Composition, Region, Result, StageFactory};
+use lamina_core::{Composition, Result, StageFactory, SubRegion};
 
 use crate::control::region_args;
 
@@ -21,7 +21,7 @@ struct Script {
 }
 
 impl Grader for Script {
-    fn grade(&self, ctx: &FamilyContext<'_>, regions: &mut [Region]) -> Result<()> {
+    fn grade(&self, ctx: &FamilyContext<'_>, regions: &mut [SubRegion]) -> Result<()> {
         let part = &ctx.info.parts[ctx.part];
         let n = part.materials.len();
         for region in regions.iter_mut() {

@@ -6,7 +6,7 @@
 //! far end, as the paper's green-to-black example does.
 
 use lamina_core::stage::{AnyStage, FamilyContext, Grader, StageConfig, StageInfo, StageKind};
-use lamina_core::{Composition, Point2, Polygon, Region, Result, StageFactory};
+use lamina_core::{Composition, Point2, Polygon, Result, StageFactory, SubRegion};
 use serde::Deserialize;
 
 use crate::control::{Control, ControlOptions, region_args};
@@ -120,7 +120,7 @@ pub fn index_level(index: usize, count: usize) -> f64 {
 }
 
 impl Grader for InPlane {
-    fn grade(&self, ctx: &FamilyContext<'_>, regions: &mut [Region]) -> Result<()> {
+    fn grade(&self, ctx: &FamilyContext<'_>, regions: &mut [SubRegion]) -> Result<()> {
         let part = &ctx.info.parts[ctx.part];
         let n = part.materials.len();
         if self.source == LevelSource::Points {
@@ -235,7 +235,7 @@ mod tests {
         }
     }
 
-    fn regions(n: usize) -> Vec<Region> {
+    fn regions(n: usize) -> Vec<SubRegion> {
         let square = Contour::new(vec![
             Point2::new(0.0, 0.0),
             Point2::new(1.0, 0.0),
@@ -243,7 +243,7 @@ mod tests {
             Point2::new(0.0, 1.0),
         ]);
         (0..n)
-            .map(|j| Region {
+            .map(|j| SubRegion {
                 family: 0,
                 index: j,
                 count: n,
@@ -376,7 +376,7 @@ mod tests {
             source: LevelSource::Points,
             grid: 0.1,
         };
-        let ring = |a: f64, b: f64, index: usize| Region {
+        let ring = |a: f64, b: f64, index: usize| SubRegion {
             family: 0,
             index,
             count: 3,
@@ -388,7 +388,7 @@ mod tests {
         };
         let mut rs = vec![ring(10.0, 5.0, 0), ring(10.0, 9.9, 1), ring(5.1, 5.0, 2)];
         grader.grade(&ctx, &mut rs).expect("grades");
-        let green = |r: &Region| r.composition.as_ref().expect("graded").fractions[0];
+        let green = |r: &SubRegion| r.composition.as_ref().expect("graded").fractions[0];
         assert!((green(&rs[0]) - 5.0 / 9.0).abs() < 5e-3, "{}", green(&rs[0]));
         assert!(green(&rs[1]) > 0.98 && green(&rs[2]) < 0.02);
     }

@@ -4,7 +4,7 @@
 //! composition of every region of the layer.
 
 use lamina_core::stage::{AnyStage, FamilyContext, Grader, StageConfig, StageInfo, StageKind};
-use lamina_core::{Region, Result, StageFactory};
+use lamina_core::{Result, StageFactory, SubRegion};
 
 use crate::control::{Control, ControlOptions, region_args};
 
@@ -62,7 +62,7 @@ pub(crate) fn level(span: Span, index: usize, z: f64, thickness: f64, part: (f64
 }
 
 impl Grader for AlongZ {
-    fn grade(&self, ctx: &FamilyContext<'_>, regions: &mut [Region]) -> Result<()> {
+    fn grade(&self, ctx: &FamilyContext<'_>, regions: &mut [SubRegion]) -> Result<()> {
         let part = &ctx.info.parts[ctx.part];
         let n = part.materials.len();
         let r = level(

@@ -5,7 +5,7 @@
 //! (k_z M_z + k_xy M_xy) / (k_z + k_xy).
 
 use lamina_core::stage::{AnyStage, FamilyContext, Grader, StageConfig, StageInfo, StageKind};
-use lamina_core::{Composition, Error, Region, Result, StageFactory};
+use lamina_core::{Composition, Error, Result, StageFactory, SubRegion};
 
 use crate::control::{Control, ControlOptions, region_args};
 use crate::xy::index_level;
@@ -76,7 +76,7 @@ impl Both {
 }
 
 impl Grader for Both {
-    fn grade(&self, ctx: &FamilyContext<'_>, regions: &mut [Region]) -> Result<()> {
+    fn grade(&self, ctx: &FamilyContext<'_>, regions: &mut [SubRegion]) -> Result<()> {
         let part = &ctx.info.parts[ctx.part];
         let n = part.materials.len();
         let rz = level(

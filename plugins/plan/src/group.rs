@@ -12,7 +12,7 @@ use std::collections::BTreeMap;
 
 use i_overlay::core::fill_rule::FillRule;
 use i_overlay::float::simplify::SimplifyShape;
-use lamina_core::{Composition, Contour, Point2, Polygon, Region};
+use lamina_core::{Composition, Contour, Point2, Polygon, SubRegion};
 
 use crate::bead::Bead;
 use crate::fill::{Widths, fill, mean_width};
@@ -61,7 +61,7 @@ impl Grouping {
 }
 
 /// Groups the sub-regions of one part for filling with beads of `widths`.
-pub fn group(regions: &[Region], widths: &Widths, thin: Thin) -> Grouping {
+pub fn group(regions: &[SubRegion], widths: &Widths, thin: Thin) -> Grouping {
     // A region whose mean width is below the narrowest bead cannot be laid alone.
     let width = widths.min;
     // Levels of each family and cell, in level order.
@@ -223,7 +223,7 @@ pub fn group(regions: &[Region], widths: &Widths, thin: Thin) -> Grouping {
 }
 
 /// The sub-regions among `members` that lie in `piece` of their union.
-fn inside(regions: &[Region], members: &[usize], piece: &Polygon) -> Vec<usize> {
+fn inside(regions: &[SubRegion], members: &[usize], piece: &Polygon) -> Vec<usize> {
     let bbox = piece.bbox();
     members
         .iter()
@@ -238,7 +238,7 @@ fn inside(regions: &[Region], members: &[usize], piece: &Polygon) -> Vec<usize> 
 
 /// Fills the union of the thin cells `members` of one family as one wall, each bead
 /// cut into pieces by the composition of the cells under it ([`pieces`]).
-fn wall(regions: &[Region], members: &[usize], widths: &Widths, out: &mut Grouping) {
+fn wall(regions: &[SubRegion], members: &[usize], widths: &Widths, out: &mut Grouping) {
     for piece in union(members.iter().map(|&m| &regions[m].polygon)) {
         let inside = inside(regions, members, &piece);
         let Some(&first) = inside.first() else {
@@ -271,7 +271,7 @@ fn wall(regions: &[Region], members: &[usize], widths: &Widths, out: &mut Groupi
 const PIECE_TOLERANCE: f64 = 0.01;
 
 /// The area-weighted mean composition of `members` (none when they are not graded).
-fn mean_composition(regions: &[Region], members: &[usize]) -> Option<Composition> {
+fn mean_composition(regions: &[SubRegion], members: &[usize]) -> Option<Composition> {
     let mut sum: Vec<f64> = Vec::new();
     let mut total = 0.0;
     for &m in members {
@@ -343,12 +343,12 @@ mod tests {
 
     /// A 1 mm × 20 mm strip cut into `n` bands across its width, graded from the
     /// first material to the second.
-    fn strip(n: usize) -> Vec<Region> {
+    fn strip(n: usize) -> Vec<SubRegion> {
         (0..n)
             .map(|j| {
                 let (y0, y1) = (j as f64 / n as f64, (j + 1) as f64 / n as f64);
                 let f = j as f64 / (n - 1) as f64;
-                Region {
+                SubRegion {
                     family: 0,
                     index: j,
                     count: n,
@@ -414,7 +414,7 @@ mod tests {
             for (cell, (x0, x1)) in [(0.0, 10.0), (10.0, 20.0)].into_iter().enumerate() {
                 let cell = if j % 2 == 0 { cell } else { 1 - cell };
                 let f = j as f64 / 2.0;
-                regions.push(Region {
+                regions.push(SubRegion {
                     family: 0,
                     index: j,
                     count: 3,
@@ -457,7 +457,7 @@ mod tests {
             for c in 0..n {
                 let (x0, x1) = (20.0 * c as f64 / n as f64, 20.0 * (c + 1) as f64 / n as f64);
                 let f = (x0 + x1) / 40.0;
-                regions.push(Region {
+                regions.push(SubRegion {
                     family: 0,
                     index: j,
                     count: 10,

@@ -10,7 +10,7 @@
 //! changes in place, and a tool changer gets each piece to the tool of its dominant
 //! material.
 
-use lamina_core::{BBox2, Composition, Point2, Region, Vector2};
+use lamina_core::{BBox2, Composition, Point2, SubRegion, Vector2};
 
 use crate::bead::Bead;
 
@@ -41,7 +41,7 @@ struct Sample {
 /// from the piece's first step), read from the sub-regions `members` of `regions`;
 /// steps are at most `step` long. A bead over sub-regions without compositions comes
 /// back whole, without a composition.
-pub fn split(bead: Bead, members: &[usize], regions: &[Region], step: f64, tolerance: f64) -> Vec<Piece> {
+pub fn split(bead: Bead, members: &[usize], regions: &[SubRegion], step: f64, tolerance: f64) -> Vec<Piece> {
     let graded: Vec<usize> = members
         .iter()
         .copied()
@@ -109,7 +109,7 @@ fn sample(
     bead: &Bead,
     graded: &[usize],
     boxes: &[BBox2],
-    regions: &[Region],
+    regions: &[SubRegion],
     step: f64,
     n: usize,
 ) -> Vec<Sample> {
@@ -168,7 +168,7 @@ fn sample(
 }
 
 /// The composition of the sub-region nearest `p` (by reference point).
-fn nearest(graded: &[usize], regions: &[Region], p: Point2, n: usize) -> Under {
+fn nearest(graded: &[usize], regions: &[SubRegion], p: Point2, n: usize) -> Under {
     let best = (0..graded.len()).min_by(|&a, &b| {
         let da = (regions[graded[a]].reference - p).norm_squared();
         let db = (regions[graded[b]].reference - p).norm_squared();
@@ -187,7 +187,7 @@ fn nearest(graded: &[usize], regions: &[Region], p: Point2, n: usize) -> Under {
 }
 
 /// Length of the segment `p0`-`p1` inside `region` (even-odd over its contours).
-fn inside_length(region: &Region, p0: Point2, p1: Point2) -> f64 {
+fn inside_length(region: &SubRegion, p0: Point2, p1: Point2) -> f64 {
     let d = p1 - p0;
     let len = d.norm();
     if len <= 0.0 {
@@ -314,8 +314,8 @@ mod tests {
     use super::*;
     use lamina_core::{Contour, Polygon};
 
-    fn cell(x0: f64, x1: f64, y0: f64, y1: f64, f: f64, index: usize) -> Region {
-        Region {
+    fn cell(x0: f64, x1: f64, y0: f64, y1: f64, f: f64, index: usize) -> SubRegion {
+        SubRegion {
             family: 0,
             index: 0,
             count: 1,

@@ -52,7 +52,7 @@ pub struct Move {
     pub widths: Vec<f64>,
     pub composition: Option<Composition>,
     pub part: Option<usize>,
-    pub region: Option<usize>,
+    pub sub_region: Option<usize>,
     /// The way back from a side-step: under the `clearing` and `returning` priorities
     /// it gives way to every tool it meets, returning once the way is free instead of
     /// pushing in by its speed along X.
@@ -69,7 +69,7 @@ impl Move {
             widths: Vec::new(),
             composition: None,
             part: None,
-            region: None,
+            sub_region: None,
             yields: false,
         }
     }
@@ -94,7 +94,7 @@ pub struct Job {
     pub pass: Bead,
     pub composition: Option<Composition>,
     pub part: usize,
-    pub region: usize,
+    pub sub_region: usize,
     /// Lower bound of the distance from a point to the loop, by its bounding box.
     pub bbox: BBox2,
 }
@@ -171,7 +171,7 @@ pub fn distribute(
                     pass,
                     composition: g.composition.clone(),
                     part: part.part,
-                    region: g.members[0],
+                    sub_region: g.members[0],
                     bbox,
                 });
             }
@@ -276,7 +276,7 @@ pub fn route(tool: &ToolSpec, jobs: Vec<Job>, parks: &Parks, seam: Seam) -> Vec<
             speed: tool.speed,
             composition: job.composition,
             part: Some(job.part),
-            region: Some(job.region),
+            sub_region: Some(job.sub_region),
             yields: false,
         });
         travel.push(at);
@@ -333,7 +333,7 @@ pub fn toolpath(tool: usize, m: &Move, points: Vec<TimedPoint>) -> Toolpath {
         width: m.width,
         composition: m.composition.clone(),
         part: m.part,
-        region: m.region,
+        sub_region: m.sub_region,
     }
 }
 
@@ -347,6 +347,6 @@ pub fn pause(tool: usize, p: Point2, t0: f64, t1: f64) -> Toolpath {
         widths: Vec::new(),
         composition: None,
         part: None,
-        region: None,
+        sub_region: None,
     }
 }

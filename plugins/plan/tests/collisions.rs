@@ -9,7 +9,7 @@ use std::path::PathBuf;
 use lamina_core::stage::{AnyStage, Planner};
 use lamina_core::{
     BBox2, Composition, Contour, ContourTree, LayerPlan, Material, PartInfo, PartLayer, PathKind, Point2,
-    Polygon, Region, Registry, RunInfo, StageKind, Toolpath,
+    Polygon, Registry, RunInfo, StageKind, SubRegion, Toolpath,
 };
 use lamina_plan::route::{Move, ToolSpec};
 use lamina_plan::sim::{self, Priority, Settings};
@@ -94,7 +94,7 @@ fn layout(rng: &mut Rng, tools: usize) -> (RunInfo, LayerPlan) {
             };
             // Each region an island of its own (random shapes may overlap, which
             // sub-regions of one family never do).
-            regions.push(Region {
+            regions.push(SubRegion {
                 family: index,
                 index: 0,
                 count: 1,
@@ -126,7 +126,7 @@ fn layout(rng: &mut Rng, tools: usize) -> (RunInfo, LayerPlan) {
         index: 0,
         z: 0.2,
         thickness: 0.2,
-        region: None,
+        material_region: None,
         parts: layers,
         toolpaths: Vec::new(),
         build_time: None,

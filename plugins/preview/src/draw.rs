@@ -6,10 +6,10 @@ use std::io::Write;
 use std::path::{Path, PathBuf};
 
 use lamina_core::stage::{LayerSink, OutputFiles};
-use lamina_core::{Contour, Error, LayerPlan, Region, Result, RunInfo};
+use lamina_core::{Contour, Error, LayerPlan, Result, RunInfo, SubRegion};
 
 /// `#rrggbb` of a region's property colour (grey when ungraded).
-pub fn hex(info: &RunInfo, part: usize, r: &Region) -> String {
+pub fn hex(info: &RunInfo, part: usize, r: &SubRegion) -> String {
     let [red, green, blue] = r
         .composition
         .as_ref()
@@ -18,7 +18,7 @@ pub fn hex(info: &RunInfo, part: usize, r: &Region) -> String {
 }
 
 /// "ceramic 0.75, metal 0.25".
-pub fn composition_text(info: &RunInfo, part: usize, r: &Region) -> String {
+pub fn composition_text(info: &RunInfo, part: usize, r: &SubRegion) -> String {
     let Some(c) = &r.composition else {
         return "ungraded".into();
     };

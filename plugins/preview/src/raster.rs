@@ -22,7 +22,7 @@ struct Shape {
     rgb: [u8; 3],
 }
 
-fn colour_of(info: &RunInfo, part: usize, r: &lamina_core::Region) -> [u8; 3] {
+fn colour_of(info: &RunInfo, part: usize, r: &lamina_core::SubRegion) -> [u8; 3] {
     r.composition
         .as_ref()
         .map_or([128; 3], |c| c.colour(&info.part_materials(part)))

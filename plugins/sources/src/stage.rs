@@ -3,7 +3,7 @@
 
 use lamina_core::stage::{AnyStage, Discretiser, FamilyContext, StageConfig, StageInfo, StageKind};
 use lamina_core::steps::Truncation;
-use lamina_core::{Composition, Error, Region, Result, StageFactory};
+use lamina_core::{Composition, Error, Result, StageFactory, SubRegion};
 use serde::Deserialize;
 
 use lamina_geom::ring::{polygons_of, shape_of};
@@ -151,7 +151,7 @@ impl Sources {
 }
 
 impl Discretiser for Sources {
-    fn discretise(&self, ctx: &FamilyContext<'_>) -> Result<Vec<Region>> {
+    fn discretise(&self, ctx: &FamilyContext<'_>) -> Result<Vec<SubRegion>> {
         let family = ctx.tree.family_polygon(&ctx.layer.contours, ctx.family);
         let family_area = family.area();
         let z = ctx.layer.z - ctx.layer.thickness / 2.0;
@@ -271,7 +271,7 @@ impl Discretiser for Sources {
         for (index, (polygons, fractions, level)) in pieces.into_iter().enumerate() {
             let composition = Composition::new(fractions)?;
             for polygon in polygons {
-                regions.push(Region {
+                regions.push(SubRegion {
                     family: ctx.family,
                     index,
                     count,

@@ -110,7 +110,7 @@ impl Planner for ZigZag {
                             widths: Vec::new(),
                             composition: None,
                             part: None,
-                            region: None,
+                            sub_region: None,
                         });
                         t += dt;
                     }
@@ -123,7 +123,7 @@ impl Planner for ZigZag {
                         widths: Vec::new(),
                         composition: region.composition.clone(),
                         part: Some(part.part),
-                        region: Some(ri),
+                        sub_region: Some(ri),
                     });
                     t += dt;
                     at = Some(b);

@@ -253,7 +253,7 @@ impl Sorter for Remote {
 }
 
 impl Discretiser for Remote {
-    fn discretise(&self, ctx: &FamilyContext<'_>) -> Result<Vec<Region>> {
+    fn discretise(&self, ctx: &FamilyContext<'_>) -> Result<Vec<SubRegion>> {
         let (family, sent) = self.family(ctx);
         match self.request(&Request::Discretise {
             handle: self.handle,
@@ -273,7 +273,7 @@ impl Discretiser for Remote {
 }
 
 impl Grader for Remote {
-    fn grade(&self, ctx: &FamilyContext<'_>, regions: &mut [Region]) -> Result<()> {
+    fn grade(&self, ctx: &FamilyContext<'_>, regions: &mut [SubRegion]) -> Result<()> {
         let (family, sent) = self.family(ctx);
         match self.request(&Request::Grade {
             handle: self.handle,

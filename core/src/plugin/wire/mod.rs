@@ -75,7 +75,7 @@ pub enum Request<'a> {
     Grade {
         handle: u64,
         family: WireFamily<'a>,
-        regions: Cow<'a, [Region]>,
+        regions: Cow<'a, [SubRegion]>,
     },
     Sequence {
         handle: u64,
@@ -113,7 +113,7 @@ pub enum Response {
     Slots(Vec<LayerSlot>),
     Layer(Layer),
     Tree(ContourTree),
-    Regions(Vec<Region>),
+    Regions(Vec<SubRegion>),
     Bool(bool),
     Sequence(Sequence),
     Plan(LayerPlan),
@@ -434,7 +434,7 @@ mod tests {
             contours: vec![square.clone()],
             warnings: Vec::new(),
         };
-        let region = Region {
+        let region = SubRegion {
             family: 0,
             index: 0,
             count: 1,

@@ -5,7 +5,8 @@
 
 use lamina_core::stage::{Discretiser, FamilyContext};
 use lamina_core::{
-    AnyStage, Contour, ContourNode, ContourTree, Family, Layer, Polygon, Region, Registry, RunInfo, StageKind,
+    AnyStage, Contour, ContourNode, ContourTree, Family, Layer, Polygon, Registry, RunInfo, StageKind,
+    SubRegion,
 };
 use lamina_discretise::check::tiling;
 
@@ -96,12 +97,12 @@ impl OneFamily {
         self.tree.family_polygon(&self.layer.contours, 0)
     }
 
-    pub fn run(&self, d: &dyn Discretiser) -> Vec<Region> {
+    pub fn run(&self, d: &dyn Discretiser) -> Vec<SubRegion> {
         self.try_run(d).expect("discretises")
     }
 
     #[allow(dead_code)]
-    pub fn try_run(&self, d: &dyn Discretiser) -> lamina_core::Result<Vec<Region>> {
+    pub fn try_run(&self, d: &dyn Discretiser) -> lamina_core::Result<Vec<SubRegion>> {
         let ctx = FamilyContext {
             info: &self.info,
             layer: &self.layer,
@@ -116,7 +117,7 @@ impl OneFamily {
 
 /// Asserts the regions tile the family (1e-3 of its area, no overlap, valid polygons)
 /// and that every reference point lies inside its region.
-pub fn assert_tiles(family: &Polygon, regions: &[Region]) {
+pub fn assert_tiles(family: &Polygon, regions: &[SubRegion]) {
     assert!(!regions.is_empty());
     let t = tiling(family, regions);
     assert!(t.is_ok(1e-3), "{t:?}");
@@ -134,7 +135,7 @@ pub fn assert_tiles(family: &Polygon, regions: &[Region]) {
 }
 
 /// Distinct indices, in order.
-pub fn indices(regions: &[Region]) -> Vec<usize> {
+pub fn indices(regions: &[SubRegion]) -> Vec<usize> {
     let mut v: Vec<usize> = regions.iter().map(|r| r.index).collect();
     v.dedup();
     v

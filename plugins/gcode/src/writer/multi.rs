@@ -782,7 +782,7 @@ mod tests {
             widths: vec![0.4, 0.5],
             composition: None,
             part: Some(0),
-            region: None,
+            sub_region: None,
         };
         let p = clip(&path, 0.5, 1.5).expect("a piece");
         let xs: Vec<f64> = p.points.iter().map(|q| q.x).collect();

@@ -8,7 +8,7 @@ use lamina_core::script::{ScriptArgs, ScriptFn};
 use lamina_core::stage::{
     AnyStage, FamilyContext, Grader, ModelSource, OptionSpec, StageConfig, StageInfo, StageKind,
 };
-use lamina_core::{Composition, Region, Result, StageFactory};
+use lamina_core::{Composition, SubRegion, Result, StageFactory};
 use serde::Deserialize;
 
 lamina_core::export_plugin!("skewed");
@@ -80,7 +80,7 @@ struct GradeOptions {
 struct SkewedGrade(ScriptFn);
 
 impl Grader for SkewedGrade {
-    fn grade(&self, ctx: &FamilyContext<'_>, regions: &mut [Region]) -> Result<()> {
+    fn grade(&self, ctx: &FamilyContext<'_>, regions: &mut [SubRegion]) -> Result<()> {
         let n = ctx.info.parts[ctx.part].materials.len();
         for region in regions.iter_mut() {
             let args = ScriptArgs {
