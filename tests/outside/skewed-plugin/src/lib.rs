@@ -8,7 +8,7 @@ use lamina_core::script::{ScriptArgs, ScriptFn};
 use lamina_core::stage::{
     AnyStage, FamilyContext, Grader, ModelSource, OptionSpec, StageConfig, StageInfo, StageKind,
 };
-use lamina_core::{Composition, SubRegion, Result, StageFactory};
+use lamina_core::{Composition, Result, StageFactory, SubRegion};
 use serde::Deserialize;
 
 lamina_core::export_plugin!("skewed");
