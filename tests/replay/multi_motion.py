@@ -375,34 +375,17 @@ class MultiReplay:
     # -- main loop ---------------------------------------------------------------
 
     def run(self, text: str) -> None:
-        for lineno, raw in enumerate(text.splitlines(), 1):
+        for lineno, kind, cmd, params in gr.statements(text):
             self.line = lineno
-            c = raw.find(";")
-            if c >= 0:
-                code = raw[:c].strip()
-                if not code:
-                    st = self.enter(self.cur)
-                    st.comment(raw[c + 1:].strip())
-                    continue
+            if kind is gr.MOVE:
+                self.move(self.cur, cmd, params)
+            elif kind is gr.COMMENT:
+                st = self.enter(self.cur)
+                st.comment(params)
             else:
-                code = raw.strip()
-                if not code:
-                    continue
-            if (code[0] == "G" or code[0] == "g") and len(code) > 2 and code[1] in "01" and code[2] == " ":
-                params = {}
-                try:
-                    for w in code[3:].split():
-                        if not w[0].isalpha():
-                            raise ValueError(w)
-                        params[w[0].upper()] = float(w[1:]) if len(w) > 1 else None
-                except ValueError:
-                    cmd, raw_params = gr.tokenize(code, lineno)
-                    self.command(cmd, raw_params)
-                    continue
-                self.move(self.cur, "G" + code[1], params)
-                continue
-            cmd, raw_params = gr.tokenize(code, lineno)
-            self.command(cmd, raw_params)
+                # COMMAND, and MOVE_WORDS: a move whose words need the tokenizer
+                # goes through the command dispatch.
+                self.command(cmd, params)
         self.barrier("end", release=True)
         for st in self.streams:
             st.finish()
