@@ -1730,15 +1730,20 @@ def build_report(r: Replay, o: Options, name: str) -> dict:
         "extents": {"moves": bbox(r.extents["moves"]), "extrusion": bbox(r.extents["extrusion"])},
         "unknown_commands": dict(sorted(r.unknown.items())),
         "warnings": r.warnings[:MAX_EXAMPLES],
-        "options": {
-            "mesh": o.mesh, "place": o.place, "bed": o.bed_rect, "bed_circle": o.bed_circle,
-            "filament": o.filament, "min_extrude_temp": o.min_extrude_temp,
-            "volume_tol": o.volume_tol, "coverage_min": o.coverage_min, "overlap_max": o.overlap_max,
-            "coverage_every": o.coverage_every, "bead_ends": o.bead_ends, "time_tol": time_tol,
-            "accel": list(o.accel), "junction_deviation": o.junction_deviation,
-        },
+        "options": options_report(o, time_tol),
     }
     return report
+
+
+def options_report(o: Options, time_tol: float) -> dict:
+    """The options every report states, with the time tolerance applied."""
+    return {
+        "mesh": o.mesh, "place": o.place, "bed": o.bed_rect, "bed_circle": o.bed_circle,
+        "filament": o.filament, "min_extrude_temp": o.min_extrude_temp,
+        "volume_tol": o.volume_tol, "coverage_min": o.coverage_min, "overlap_max": o.overlap_max,
+        "coverage_every": o.coverage_every, "bead_ends": o.bead_ends, "time_tol": time_tol,
+        "accel": list(o.accel), "junction_deviation": o.junction_deviation,
+    }
 
 
 def placement_target(o: Options, mesh_centre: tuple[float, float] = (0.0, 0.0)) -> tuple[float, float]:

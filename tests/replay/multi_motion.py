@@ -1226,11 +1226,7 @@ def build_report_multi(mm: MultiReplay, o: gr.Options, name: str) -> dict:
         "unknown_commands": dict(sorted(unknown.items())),
         "warnings": warnings[:gr.MAX_EXAMPLES],
         "options": {
-            "mesh": o.mesh, "place": o.place, "bed": o.bed_rect, "bed_circle": o.bed_circle,
-            "filament": o.filament, "min_extrude_temp": o.min_extrude_temp,
-            "volume_tol": o.volume_tol, "coverage_min": o.coverage_min, "overlap_max": o.overlap_max,
-            "coverage_every": o.coverage_every, "bead_ends": o.bead_ends, "time_tol": tol,
-            "accel": list(o.accel), "junction_deviation": o.junction_deviation,
+            **gr.options_report(o, tol),
             "head_radius": o.head_radius, "envelopes": {str(k): v for k, v in o.envelopes.items()},
             "axis_maps": {str(k): v for k, v in o.axis_maps.items()},
             "homes": {str(k): list(v) for k, v in o.homes.items()},
