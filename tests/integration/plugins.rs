@@ -50,6 +50,27 @@ fn lamina(args: &[&str]) -> std::process::Output {
     Command::new(host()).args(args).output().expect("lamina runs")
 }
 
+/// `lamina run <pipeline> --plugin <lib> --out <out_dir>`.
+fn run_with_plugin(pipeline: &Path, lib: &Path, out_dir: &Path) -> std::process::Output {
+    lamina(&[
+        "run",
+        pipeline.to_str().expect("utf-8"),
+        "--plugin",
+        lib.to_str().expect("utf-8"),
+        "--out",
+        out_dir.to_str().expect("utf-8"),
+    ])
+}
+
+/// The layers of the JSON plan (`plan.json` in `out_dir`) of a run that must have
+/// succeeded.
+fn plan_layers(out: &std::process::Output, out_dir: &Path) -> Vec<serde_json::Value> {
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let plan: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(out_dir.join("plan.json")).expect("written")).expect("json");
+    plan["layers"].as_array().expect("layers").clone()
+}
+
 fn write_pipeline(dir: &Path, extra: &str) -> PathBuf {
     let path = dir.join("p.toml");
     std::fs::write(
@@ -78,12 +99,9 @@ fn example_plugin_is_loaded_and_plans_toolpaths() {
         "--out",
         out_dir.to_str().expect("utf-8"),
     ]);
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
-    let plan: serde_json::Value =
-        serde_json::from_slice(&std::fs::read(out_dir.join("plan.json")).expect("written")).expect("json");
-    let layers = plan["layers"].as_array().expect("layers");
+    let layers = plan_layers(&out, &out_dir);
     assert_eq!(layers.len(), 4);
-    for layer in layers {
+    for layer in &layers {
         let paths = layer["toolpaths"].as_array().expect("toolpaths planned");
         let extruded: f64 = paths
             .iter()
@@ -155,14 +173,7 @@ fn panicking_plugin_is_an_error_not_an_abort() {
     let dir = tempfile::tempdir().expect("tempdir");
     let pipeline = write_pipeline(dir.path(), "[grade]\nuse = \"panics\"\n");
     let out_dir = dir.path().join("out");
-    let out = lamina(&[
-        "run",
-        pipeline.to_str().expect("utf-8"),
-        "--plugin",
-        lib.to_str().expect("utf-8"),
-        "--out",
-        out_dir.to_str().expect("utf-8"),
-    ]);
+    let out = run_with_plugin(&pipeline, &lib, &out_dir);
     assert_eq!(out.status.code(), Some(1));
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(
@@ -272,14 +283,7 @@ fn graded_run(dir: &Path, grade: &str) -> (Option<i32>, String, Option<String>, 
     let _ = std::fs::remove_dir_all(&out_dir);
     let lib = library("lamina-fixture-script");
     let start = std::time::Instant::now();
-    let out = lamina(&[
-        "run",
-        path.to_str().expect("utf-8"),
-        "--plugin",
-        lib.to_str().expect("utf-8"),
-        "--out",
-        out_dir.to_str().expect("utf-8"),
-    ]);
+    let out = run_with_plugin(&path, &lib, &out_dir);
     let took = start.elapsed();
     let plan = std::fs::read_to_string(out_dir.join("plan.json")).ok();
     (
@@ -425,20 +429,10 @@ fn a_plugin_resolving_other_releases_of_the_boundarys_dependencies_runs_correctl
     )
     .expect("pipeline");
     let out_dir = dir.path().join("out");
-    let out = lamina(&[
-        "run",
-        path.to_str().expect("utf-8"),
-        "--plugin",
-        lib.to_str().expect("utf-8"),
-        "--out",
-        out_dir.to_str().expect("utf-8"),
-    ]);
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
-    let plan: serde_json::Value =
-        serde_json::from_slice(&std::fs::read(out_dir.join("plan.json")).expect("written")).expect("json");
-    let layers = plan["layers"].as_array().expect("layers");
+    let out = run_with_plugin(&path, &lib, &out_dir);
+    let layers = plan_layers(&out, &out_dir);
     assert_eq!(layers.len(), 4);
-    for layer in layers {
+    for layer in &layers {
         let z = layer["z"].as_f64().expect("z");
         let regions = layer["parts"][0]["families"][0]["regions"]
             .as_array()
