@@ -1,7 +1,7 @@
 //! The `lamina` command line as users and scripts rely on it: exit codes, error
 //! positions, listings, and outputs that do not depend on the thread count.
 
-use crate::support::{lamina, pipelines, text};
+use crate::support::{lamina, pipelines, text, write};
 use std::path::{Path, PathBuf};
 use std::process::Output;
 
@@ -143,12 +143,6 @@ fn refused(path: &Path) -> String {
     let out = lamina(&["check", path.to_str().expect("utf-8")]);
     assert_eq!(out.status.code(), Some(2));
     text(&out.stderr)
-}
-
-fn write(dir: &Path, name: &str, text: &str) -> PathBuf {
-    let p = dir.join(name);
-    std::fs::write(&p, text).expect("write");
-    p
 }
 
 const SCRIPTED: &str = "[model]\nuse = \"tube\"\nheight = 1.0\n[materials.a]\ncolour = [255, 0, 0]\n[materials.b]\ncolour = [0, 255, 0]\n[slice]\nuse = \"uniform\"\nthickness = 0.5\n[grade]\nuse = \"script\"\nf = \"g.rhai#f\"\n[[output]]\nuse = \"json\"\n";

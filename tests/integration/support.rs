@@ -60,20 +60,20 @@ pub fn run_plan(pipeline: &Path, out: &Path, extra: &[&str], json: &str) -> serd
 /// Writes `text` as `dir/p.toml` and runs it into `dir/out` (which must succeed);
 /// returns the JSON plan the pipeline writes as `json`.
 pub fn run_text(dir: &Path, text: &str, json: &str) -> serde_json::Value {
-    let path = write_pipeline(dir, text);
+    let path = write(dir, "p.toml", text);
     run_plan(&path, &dir.join("out"), &[], json)
 }
 
 /// Writes `text` as `dir/p.toml` and runs it into `dir/out`, whatever the outcome.
 pub fn try_run_text(dir: &Path, text: &str) -> Output {
-    let path = write_pipeline(dir, text);
+    let path = write(dir, "p.toml", text);
     try_run(&path, &dir.join("out"), &[])
 }
 
-/// Writes `text` as `dir/p.toml`; returns its path.
-fn write_pipeline(dir: &Path, text: &str) -> PathBuf {
-    let path = dir.join("p.toml");
-    std::fs::write(&path, text).expect("pipeline written");
+/// Writes `text` as `dir/name`; returns its path.
+pub fn write(dir: &Path, name: &str, text: &str) -> PathBuf {
+    let path = dir.join(name);
+    std::fs::write(&path, text).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
     path
 }
 
