@@ -4,7 +4,7 @@
 //! `LAMINA_PLUGIN_HOST` names another `lamina` binary to load them with (continuous
 //! integration uses the release build).
 
-use crate::support::root;
+use crate::support::{root, write};
 use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::sync::OnceLock;
@@ -72,15 +72,13 @@ fn plan_layers(out: &std::process::Output, out_dir: &Path) -> Vec<serde_json::Va
 }
 
 fn write_pipeline(dir: &Path, extra: &str) -> PathBuf {
-    let path = dir.join("p.toml");
-    std::fs::write(
-        &path,
-        format!(
+    write(
+        dir,
+        "p.toml",
+        &format!(
             "[model]\nuse = \"tube\"\nheight = 2.0\n\n[materials.a]\ncolour = [255, 0, 0]\n\n[slice]\nuse = \"uniform\"\nthickness = 0.5\n\n[[output]]\nuse = \"json\"\npath = \"plan.json\"\n\n{extra}"
         ),
     )
-    .expect("write pipeline");
-    path
 }
 
 #[test]
@@ -271,14 +269,13 @@ fn graded_run(dir: &Path, grade: &str) -> (Option<i32>, String, Option<String>, 
          fn too_much(z) { 2.0 }\n",
     )
     .expect("script");
-    let path = dir.join("g.toml");
-    std::fs::write(
-        &path,
-        format!(
+    let path = write(
+        dir,
+        "g.toml",
+        &format!(
             "[model]\nuse = \"tube\"\nheight = 2.0\n\n[materials.a]\ncolour = [255, 0, 0]\n[materials.b]\ncolour = [0, 0, 255]\n\n[slice]\nuse = \"uniform\"\nthickness = 0.5\n\n[discretise]\nuse = \"offset\"\ncount = 3\n\n[grade]\n{grade}\n\n[[output]]\nuse = \"json\"\npath = \"plan.json\"\n"
         ),
-    )
-    .expect("pipeline");
+    );
     let out_dir = dir.join("out");
     let _ = std::fs::remove_dir_all(&out_dir);
     let lib = library("lamina-fixture-script");

@@ -48,11 +48,13 @@ fn every_feature_tiles() {
 
 #[test]
 fn bad_field_options_are_refused() {
-    assert!(build_error("use = \"distance-field\"\nfeature = \"point\"").contains("point"));
-    assert!(build_error("use = \"distance-field\"\ncells = 2").contains("cells"));
-    assert!(build_error("use = \"distance-field\"\nstep = 1.5").contains("step"));
-    assert!(build_error("use = \"distance-field\"\nspacing = -1.0").contains("spacing"));
-    assert!(build_error("use = \"distance-field\"\nspacing = 1.0\nstep = 0.5").contains("spacing"));
+    assert_refused(&[
+        ("use = \"distance-field\"\nfeature = \"point\"", "point"),
+        ("use = \"distance-field\"\ncells = 2", "cells"),
+        ("use = \"distance-field\"\nstep = 1.5", "step"),
+        ("use = \"distance-field\"\nspacing = -1.0", "spacing"),
+        ("use = \"distance-field\"\nspacing = 1.0\nstep = 0.5", "spacing"),
+    ]);
 }
 
 /// Fig. 7 of the distance-field paper: a section whose largest distance from its

@@ -156,10 +156,12 @@ fn degenerate_families_fall_back_without_panicking() {
 
 #[test]
 fn bad_options_are_refused() {
-    assert!(build_error("use = \"offset\"\nnozzle = -1.0").contains("nozzle"));
-    assert!(build_error("use = \"offset\"\ncount = 0").contains("count"));
+    assert_refused(&[
+        ("use = \"offset\"\nnozzle = -1.0", "nozzle"),
+        ("use = \"offset\"\ncount = 0", "count"),
+        ("use = \"offset\"\nspacing = 0.0", "spacing"),
+    ]);
     assert!(!build_error("use = \"offset\"\nfrom = \"inner\"").is_empty());
-    assert!(build_error("use = \"offset\"\nspacing = 0.0").contains("spacing"));
 }
 
 /// A circle as an STL slice delivers it: the side of a triangulated cylinder cut at a

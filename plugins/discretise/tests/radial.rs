@@ -171,11 +171,16 @@ fn cells_have_equal_arc_lengths_along_their_own_contour() {
 
 #[test]
 fn bad_radial_and_cell_options_are_refused() {
-    assert!(build_error("use = \"radial\"\ncount = 0").contains("count"));
-    assert!(build_error("use = \"radial\"\nnozzle = 0.0").contains("nozzle"));
-    assert!(build_error("use = \"offset\"\ncells_around = 0").contains("cells_around"));
-    assert!(build_error("use = \"offset\"\ncell_length = -1.0").contains("cell_length"));
-    assert!(build_error("use = \"radial\"\ncells_around = 4\ncell_length = 1.0").contains("not both"));
+    assert_refused(&[
+        ("use = \"radial\"\ncount = 0", "count"),
+        ("use = \"radial\"\nnozzle = 0.0", "nozzle"),
+        ("use = \"offset\"\ncells_around = 0", "cells_around"),
+        ("use = \"offset\"\ncell_length = -1.0", "cell_length"),
+        (
+            "use = \"radial\"\ncells_around = 4\ncell_length = 1.0",
+            "not both",
+        ),
+    ]);
 }
 
 #[test]

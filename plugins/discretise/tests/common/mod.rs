@@ -38,6 +38,14 @@ pub fn build_error(text: &str) -> String {
     }
 }
 
+/// Asserts that each `(table, key)` is refused when built, with an error naming `key`.
+pub fn assert_refused(cases: &[(&str, &str)]) {
+    for (text, key) in cases {
+        let err = build_error(text);
+        assert!(err.contains(key), "{text:?}: {err}");
+    }
+}
+
 /// One layer holding one family: `outer` and its holes.
 pub struct OneFamily {
     pub info: RunInfo,
