@@ -62,6 +62,16 @@ fn run_with_plugin(pipeline: &Path, lib: &Path, out_dir: &Path) -> std::process:
     ])
 }
 
+/// `lamina check <pipeline> --plugin <lib>`.
+fn check_with_plugin(pipeline: &Path, lib: &Path) -> std::process::Output {
+    lamina(&[
+        "check",
+        pipeline.to_str().expect("utf-8"),
+        "--plugin",
+        lib.to_str().expect("utf-8"),
+    ])
+}
+
 /// The layers of the JSON plan (`plan.json` in `out_dir`) of a run that must have
 /// succeeded.
 fn plan_layers(out: &std::process::Output, out_dir: &Path) -> Vec<serde_json::Value> {
@@ -188,12 +198,7 @@ fn a_file_that_is_not_a_plugin_is_refused() {
     let fake = dir.path().join("fake.so");
     std::fs::write(&fake, b"not a library").expect("write");
     let pipeline = write_pipeline(dir.path(), "");
-    let out = lamina(&[
-        "check",
-        pipeline.to_str().expect("utf-8"),
-        "--plugin",
-        fake.to_str().expect("utf-8"),
-    ]);
+    let out = check_with_plugin(&pipeline, &fake);
     assert_eq!(out.status.code(), Some(2));
     assert!(String::from_utf8_lossy(&out.stderr).contains("fake.so"));
 }
@@ -212,12 +217,7 @@ fn truncated_and_foreign_files_are_refused_with_the_reason_before_loading() {
     for (name, bytes, expected) in cases {
         let path = dir.path().join(name);
         std::fs::write(&path, bytes).expect("write");
-        let out = lamina(&[
-            "check",
-            pipeline.to_str().expect("utf-8"),
-            "--plugin",
-            path.to_str().expect("utf-8"),
-        ]);
+        let out = check_with_plugin(&pipeline, &path);
         let err = String::from_utf8_lossy(&out.stderr);
         assert_eq!(out.status.code(), Some(2), "{name}: {err}");
         assert!(err.contains(expected) && err.contains(name), "{name}: {err}");
@@ -235,12 +235,7 @@ fn truncated_and_foreign_files_are_refused_with_the_reason_before_loading() {
         plain[at] = b'X';
     }
     std::fs::write(&other, &plain).expect("write");
-    let out = lamina(&[
-        "check",
-        pipeline.to_str().expect("utf-8"),
-        "--plugin",
-        other.to_str().expect("utf-8"),
-    ]);
+    let out = check_with_plugin(&pipeline, &other);
     let err = String::from_utf8_lossy(&out.stderr);
     assert_eq!(out.status.code(), Some(2), "{err}");
     assert!(err.contains("exports no `lamina_plugin_<name>`"), "{err}");
@@ -448,12 +443,7 @@ fn a_plugin_resolving_other_releases_of_the_boundarys_dependencies_runs_correctl
         text.replace("size = [10.0, 8.0, 2.0]", "size = [10.0, 8.0]"),
     )
     .expect("write");
-    let out = lamina(&[
-        "check",
-        path.to_str().expect("utf-8"),
-        "--plugin",
-        lib.to_str().expect("utf-8"),
-    ]);
+    let out = check_with_plugin(&path, &lib);
     let err = String::from_utf8_lossy(&out.stderr);
     assert_eq!(out.status.code(), Some(2), "{err}");
     assert!(err.contains("s.toml:3:") && err.contains("size"), "{err}");
