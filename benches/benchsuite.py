@@ -45,15 +45,23 @@ SLICE_MODELS = [
     ("openfoam_buildings_400k.stl", 1.0, "buildings 400k"),
 ]
 
-PEER_SLICE_TRIMESH = r"""
+
+def peer_slice(modules):
+    """The start of a slicing peer's script: imports numpy, trimesh and ``modules``
+    (", name, ..."), then loads the mesh argv[1] scaled by argv[2] into ``m``, timed
+    from ``t0`` to ``t1``; argv[3] is the layer height ``step``."""
+    return r"""
 import sys, time, json
-import numpy as np, trimesh
+import numpy as np, trimesh""" + modules + r"""
 path, scale, step = sys.argv[1], float(sys.argv[2]), float(sys.argv[3])
 t0 = time.perf_counter()
 m = trimesh.load(path, force="mesh")
 m.apply_scale(scale)
 t1 = time.perf_counter()
-z0, z1 = m.bounds[0][2], m.bounds[1][2]
+"""
+
+
+PEER_SLICE_TRIMESH = peer_slice("") + r"""z0, z1 = m.bounds[0][2], m.bounds[1][2]
 heights = np.arange(step / 2, z1 - z0, step)
 sections = m.section_multiplane(plane_origin=[0, 0, z0], plane_normal=[0, 0, 1], heights=heights)
 loops = sum(len(s.polygons_full) for s in sections if s is not None)
@@ -61,15 +69,7 @@ t2 = time.perf_counter()
 print(json.dumps({"work": t2 - t0, "load": t1 - t0, "slice": t2 - t1, "layers": len(heights), "loops": loops}))
 """
 
-PEER_SLICE_MANIFOLD = r"""
-import sys, time, json
-import numpy as np, trimesh, manifold3d
-path, scale, step = sys.argv[1], float(sys.argv[2]), float(sys.argv[3])
-t0 = time.perf_counter()
-m = trimesh.load(path, force="mesh")
-m.apply_scale(scale)
-t1 = time.perf_counter()
-mesh = manifold3d.Mesh(vert_properties=np.asarray(m.vertices, dtype=np.float32),
+PEER_SLICE_MANIFOLD = peer_slice(", manifold3d") + r"""mesh = manifold3d.Mesh(vert_properties=np.asarray(m.vertices, dtype=np.float32),
                        tri_verts=np.asarray(m.faces, dtype=np.uint32))
 man = manifold3d.Manifold(mesh)
 z0, z1 = m.bounds[0][2], m.bounds[1][2]

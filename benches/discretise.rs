@@ -12,34 +12,20 @@ use std::time::{Duration, Instant};
 use lamina_core::Contour;
 use lamina_core::stage::{Discretiser, FamilyContext, MeshSlicer};
 use lamina_core::{AnyStage, ContourTree, Layer, RunInfo, StageKind};
-use lamina_discretise::distance_field::{DistanceField, Feature, Levels};
+use lamina_discretise::distance_field::Levels;
 use lamina_discretise::field::Field;
 use lamina_discretise::iso::iso_levels;
 use rayon::prelude::*;
 
 #[path = "common/mod.rs"]
 mod common;
-use common::{load, median, stage};
+use common::{load, median, slicer_and_sorter, stage};
 
 /// Every layer of the model at 0.2 mm with its contour tree.
 fn layers(dir: &Path, file: &str) -> (RunInfo, Vec<(Layer, ContourTree)>) {
     let mesh = Arc::new(load(dir, file));
-    let AnyStage::Slice(slicer) = stage(StageKind::Slice, "use = \"uniform\"\nthickness = 0.2", dir) else {
-        unreachable!()
-    };
-    let AnyStage::Sort(sorter) = stage(StageKind::Sort, "use = \"hierarchy\"", dir) else {
-        unreachable!()
-    };
-    let bb = mesh.bbox();
-    let info = RunInfo {
-        base_dir: dir.to_path_buf(),
-        materials: Vec::new(),
-        parts: Vec::new(),
-        z_min: bb.min.z,
-        z_max: bb.max.z,
-        xy_bounds: lamina_core::BBox2::EMPTY,
-        machine: None,
-    };
+    let (slicer, sorter) = slicer_and_sorter(dir, 0.2);
+    let info = lamina_test_support::mesh_info(dir, &mesh);
     let slots = slicer
         .layers(std::slice::from_ref(&mesh), &info, None)
         .expect("slots");
@@ -211,19 +197,7 @@ fn field_part(layers: &[(Layer, ContourTree)], runs: usize) {
     );
 
     // The discretiser itself: a field per family, clipped into bands.
-    let df = DistanceField {
-        feature: Feature::Boundary,
-        point: None,
-        points: Vec::new(),
-        faces: Default::default(),
-        surfaces: Default::default(),
-        width: None,
-        levels: Levels::Equal(11),
-        cells: 512,
-        cell_size: None,
-        around: Default::default(),
-        limits: Default::default(),
-    };
+    let df = lamina_test_support::boundary_field(Levels::Equal(11), 512);
     let start = Instant::now();
     let mut loops = 0;
     for (layer, tree) in layers {

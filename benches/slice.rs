@@ -12,12 +12,12 @@ use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use lamina_core::stage::{MeshSlicer, Slicer, Sorter};
-use lamina_core::{AnyStage, Mesh, Point3, RunInfo, StageKind};
+use lamina_core::{Mesh, Point3};
 use rayon::prelude::*;
 
 #[path = "common/mod.rs"]
 mod common;
-use common::{load, median, stage};
+use common::{load, median, slicer_and_sorter};
 
 /// Splits every triangle into four (midpoints shared through an edge map).
 fn subdivide(mesh: &Mesh) -> Mesh {
@@ -55,26 +55,8 @@ fn run(dir: &Path, file: &str, thickness: f64) -> Times {
     let mesh = Arc::new(load(dir, file));
     let load_time = start.elapsed();
     let start = Instant::now();
-    let AnyStage::Slice(slicer) = stage(
-        StageKind::Slice,
-        &format!("use = \"uniform\"\nthickness = {thickness}"),
-        dir,
-    ) else {
-        unreachable!()
-    };
-    let AnyStage::Sort(sorter) = stage(StageKind::Sort, "use = \"hierarchy\"", dir) else {
-        unreachable!()
-    };
-    let bb = mesh.bbox();
-    let info = RunInfo {
-        base_dir: dir.to_path_buf(),
-        materials: Vec::new(),
-        parts: Vec::new(),
-        z_min: bb.min.z,
-        z_max: bb.max.z,
-        xy_bounds: lamina_core::BBox2::EMPTY,
-        machine: None,
-    };
+    let (slicer, sorter) = slicer_and_sorter(dir, thickness);
+    let info = lamina_test_support::mesh_info(dir, &mesh);
     let slots = slicer
         .layers(std::slice::from_ref(&mesh), &info, None)
         .expect("slots");

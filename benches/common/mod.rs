@@ -1,11 +1,13 @@
 //! Helpers the benchmark binaries share (each includes this file with `#[path]`): where
 //! the real models are, the registry of every linked plugin, single stages built from
-//! a snippet, an STL model loaded as a pipeline would load it, and medians.
+//! a snippet, an STL model loaded as a pipeline would load it, the slicer and sorter
+//! of the slicing runs, and medians.
 #![allow(dead_code)]
 
 use std::path::{Path, PathBuf};
 use std::time::Duration;
 
+use lamina_core::stage::{Slicer, Sorter};
 use lamina_core::{AnyStage, Mesh, Registry, StageKind};
 
 /// `$LAMINA_MODELS`, else ../shared/models beside the repository; it may not exist.
@@ -55,6 +57,18 @@ pub fn load(dir: &Path, file: &str) -> Mesh {
     let mut meshes = source.load(dir).expect("loads");
     lamina_core::runtime::place(&mut meshes, 1.0, lamina_core::pipeline::Placement::Bed);
     meshes.remove(0)
+}
+
+/// The uniform slicer at `thickness` and the hierarchy sorter, paths relative to `dir`.
+pub fn slicer_and_sorter(dir: &Path, thickness: f64) -> (Box<dyn Slicer>, Box<dyn Sorter>) {
+    let slice = format!("use = \"uniform\"\nthickness = {thickness}");
+    match (
+        stage(StageKind::Slice, &slice, dir),
+        stage(StageKind::Sort, "use = \"hierarchy\"", dir),
+    ) {
+        (AnyStage::Slice(slicer), AnyStage::Sort(sorter)) => (slicer, sorter),
+        _ => unreachable!(),
+    }
 }
 
 pub fn median(mut v: Vec<Duration>) -> Duration {

@@ -1,6 +1,8 @@
 //! Test support for Lamina stages, built-in or third-party: runs every stage's declared
 //! example in a small pipeline on a generated model, and runs whole pipelines
-//! in-process, with every built-in stage linked.
+//! in-process, with every built-in stage linked. It also holds what the workspace's own
+//! tests and benchmarks share: a seeded generator ([`Rng`]), the run of one mesh
+//! ([`mesh_info`]) and the boundary distance field ([`boundary_field`]).
 //!
 //! A plugin crate's tests link the crate itself (`use my_plugin as _;`), so its stages
 //! register with the same registry as the built-in ones:
@@ -272,4 +274,61 @@ pub fn try_run_pipeline(text: &str) -> Result<Run, lamina_core::Error> {
     let out = dir.path().join("out");
     let report = engine.run(&out, &Silent)?;
     Ok(Run { dir, report, out })
+}
+
+/// A small deterministic generator (xorshift64*), so that random layouts repeat and a
+/// failure can be replayed from its seed.
+#[derive(Debug, Clone)]
+pub struct Rng(pub u64);
+
+impl Rng {
+    /// The next number, uniform in [0, 1).
+    #[allow(clippy::should_implement_trait)]
+    pub fn next(&mut self) -> f64 {
+        self.0 ^= self.0 >> 12;
+        self.0 ^= self.0 << 25;
+        self.0 ^= self.0 >> 27;
+        (self.0.wrapping_mul(0x2545_F491_4F6C_DD1D) >> 11) as f64 / (1u64 << 53) as f64
+    }
+
+    /// The next number, uniform in [a, b).
+    pub fn range(&mut self, a: f64, b: f64) -> f64 {
+        a + (b - a) * self.next()
+    }
+}
+
+/// The run of one mesh alone (no materials, no parts): its heights, and files relative
+/// to `dir`.
+pub fn mesh_info(dir: &Path, mesh: &lamina_core::Mesh) -> lamina_core::RunInfo {
+    let bb = mesh.bbox();
+    lamina_core::RunInfo {
+        base_dir: dir.to_path_buf(),
+        materials: Vec::new(),
+        parts: Vec::new(),
+        z_min: bb.min.z,
+        z_max: bb.max.z,
+        xy_bounds: lamina_core::BBox2::EMPTY,
+        machine: None,
+    }
+}
+
+/// The `distance-field` discretiser from the family's boundary (the paper's field), at
+/// `levels`, on `cells` samples along the longer side; every other option its default.
+pub fn boundary_field(
+    levels: lamina_discretise::distance_field::Levels,
+    cells: usize,
+) -> lamina_discretise::distance_field::DistanceField {
+    lamina_discretise::distance_field::DistanceField {
+        feature: lamina_discretise::distance_field::Feature::Boundary,
+        point: None,
+        points: Vec::new(),
+        faces: Default::default(),
+        surfaces: Default::default(),
+        width: None,
+        levels,
+        cells,
+        cell_size: None,
+        around: Default::default(),
+        limits: Default::default(),
+    }
 }

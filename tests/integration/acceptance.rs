@@ -3,13 +3,14 @@
 //! are `#[ignore]`d in the ordinary suite and run by .ci/run in release mode; they skip
 //! with a printed note when the models are absent.
 
+use std::path::Path;
 use std::sync::Arc;
 
 use crate::support::{models_dir, skip};
 use lamina_core::stage::{MeshSlicer, Slicer};
 use lamina_core::{Contour, Mesh, Point2, RunInfo};
 
-fn load(dir: &std::path::Path, file: &str, scale: f64) -> Mesh {
+fn load(dir: &Path, file: &str, scale: f64) -> Mesh {
     let mut meshes = lamina_test_support::meshes(&format!("use = \"stl\"\nfile = \"{file}\""), dir);
     lamina_core::runtime::place(&mut meshes, scale, lamina_core::pipeline::Placement::Bed);
     assert_eq!(meshes.len(), 1);
@@ -82,67 +83,47 @@ struct Expect {
     max_level: Option<usize>,
 }
 
+/// A model's expectations, in [`MODELS`]' order of fields.
+const fn model(
+    file: &'static str,
+    scale: f64,
+    loops: Option<[usize; 5]>,
+    max_level: Option<usize>,
+) -> Expect {
+    Expect {
+        file,
+        scale,
+        loops,
+        max_level,
+    }
+}
+
+/// The models of [`MODELS`] that are in `dir`; each one missing skips with a note (or
+/// fails under `LAMINA_REQUIRE`).
+fn present(dir: &Path) -> impl Iterator<Item = &'static Expect> + '_ {
+    MODELS.iter().filter(move |m| {
+        let path = dir.join(m.file);
+        let there = path.exists();
+        if !there {
+            skip(&format!("{} not found", path.display()));
+        }
+        there
+    })
+}
+
+// One model a line: file, scale to mm, loops, deepest nesting.
+#[rustfmt::skip]
 const MODELS: &[Expect] = &[
-    Expect {
-        file: "xyz_calibration_cube_20mm.stl",
-        scale: 1.0,
-        loops: Some([1, 1, 1, 1, 1]),
-        max_level: Some(0),
-    },
-    Expect {
-        file: "tube_round.stl",
-        scale: 1.0,
-        loops: Some([2, 2, 2, 2, 2]),
-        max_level: Some(1),
-    },
-    Expect {
-        file: "gearwheel_40t_keyed_bore.ascii.stl",
-        scale: 1.0,
-        loops: Some([2, 2, 2, 2, 2]),
-        max_level: Some(1),
-    },
-    Expect {
-        file: "planetary_gear_bearing.ascii.stl",
-        scale: 1.0,
-        loops: Some([9, 9, 9, 9, 9]),
-        max_level: Some(3),
-    },
-    Expect {
-        file: "turbine_blade_vtk.stl",
-        scale: 1.0,
-        loops: Some([1, 1, 1, 1, 1]),
-        max_level: Some(0),
-    },
-    Expect {
-        file: "3DBenchy.stl",
-        scale: 1.0,
-        loops: None,
-        max_level: None,
-    },
-    Expect {
-        file: "stanford_bunny.stl",
-        scale: 1000.0,
-        loops: None,
-        max_level: None,
-    },
-    Expect {
-        file: "octagonal_pocket_plate.stl",
-        scale: 1000.0,
-        loops: None,
-        max_level: None,
-    },
-    Expect {
-        file: "openfoam_buildings_400k.stl",
-        scale: 1.0,
-        loops: None,
-        max_level: None,
-    },
-    Expect {
-        file: "broken_extra_surface.ascii.stl",
-        scale: 1.0,
-        loops: None,
-        max_level: None,
-    },
+    model("xyz_calibration_cube_20mm.stl",      1.0,    Some([1, 1, 1, 1, 1]), Some(0)),
+    model("tube_round.stl",                     1.0,    Some([2, 2, 2, 2, 2]), Some(1)),
+    model("gearwheel_40t_keyed_bore.ascii.stl", 1.0,    Some([2, 2, 2, 2, 2]), Some(1)),
+    model("planetary_gear_bearing.ascii.stl",   1.0,    Some([9, 9, 9, 9, 9]), Some(3)),
+    model("turbine_blade_vtk.stl",              1.0,    Some([1, 1, 1, 1, 1]), Some(0)),
+    model("3DBenchy.stl",                       1.0,    None,                  None),
+    model("stanford_bunny.stl",                 1000.0, None,                  None),
+    model("octagonal_pocket_plate.stl",         1000.0, None,                  None),
+    model("openfoam_buildings_400k.stl",        1.0,    None,                  None),
+    model("broken_extra_surface.ascii.stl",     1.0,    None,                  None),
 ];
 
 #[test]
@@ -150,27 +131,14 @@ const MODELS: &[Expect] = &[
 fn real_models_slice_into_closed_simple_nested_contours() {
     let Some(dir) = models_dir() else { return };
     let sorter = sorter();
-    for m in MODELS {
-        let path = dir.join(m.file);
-        if !path.exists() {
-            skip(&format!("{} not found", path.display()));
-            continue;
-        }
+    for m in present(&dir) {
         let start = std::time::Instant::now();
         let mesh = Arc::new(load(&dir, m.file, m.scale));
         let bb = mesh.bbox();
         let height = bb.max.z - bb.min.z;
         let slicer = slicer(height / 100.0);
         let prepared: Box<dyn MeshSlicer> = slicer.prepare(mesh.clone()).expect("prepare");
-        let info = RunInfo {
-            base_dir: dir.clone(),
-            materials: Vec::new(),
-            parts: Vec::new(),
-            z_min: bb.min.z,
-            z_max: bb.max.z,
-            xy_bounds: lamina_core::BBox2::EMPTY,
-            machine: None,
-        };
+        let info = lamina_test_support::mesh_info(&dir, &mesh);
         let slots = slicer
             .layers(std::slice::from_ref(&mesh), &info, None)
             .expect("slots");
@@ -277,12 +245,7 @@ fn real_models_discretise_into_tiling_sub_regions() {
         .iter()
         .map(|&text| (text, discretiser(text)))
         .collect();
-    for m in MODELS {
-        let path = dir.join(m.file);
-        if !path.exists() {
-            skip(&format!("{} not found", path.display()));
-            continue;
-        }
+    for m in present(&dir) {
         let start = std::time::Instant::now();
         let mesh = Arc::new(load(&dir, m.file, m.scale));
         let bb = mesh.bbox();
@@ -294,7 +257,6 @@ fn real_models_discretise_into_tiling_sub_regions() {
             layer_thickness: None,
         };
         let info = RunInfo {
-            base_dir: dir.clone(),
             materials: vec![material("a"), material("b")],
             parts: vec![lamina_core::PartInfo {
                 name: m.file.into(),
@@ -303,10 +265,7 @@ fn real_models_discretise_into_tiling_sub_regions() {
                 z_min: bb.min.z,
                 z_max: bb.max.z,
             }],
-            z_min: bb.min.z,
-            z_max: bb.max.z,
-            xy_bounds: lamina_core::BBox2::EMPTY,
-            machine: None,
+            ..lamina_test_support::mesh_info(&dir, &mesh)
         };
         let slots = slicer
             .layers(std::slice::from_ref(&mesh), &info, None)

@@ -6,9 +6,8 @@
 //! tests are `#[ignore]`d in the ordinary suite and run by .ci/run; they skip with a
 //! printed note when the models are absent.
 
-use crate::support::{models_dir, skip};
+use crate::support::{models_dir, skip, try_run};
 use std::path::Path;
-use std::process::Command;
 
 /// (file, scale to mm, layer thickness): a few dozen layers each.
 const MODELS: [(&str, f64, f64); 10] = [
@@ -43,12 +42,7 @@ fn run(dir: &Path, models: &Path, file: &str, scale: f64, thickness: f64, stages
     std::fs::write(&path, pipeline).expect("write pipeline");
     let out_dir = dir.join("out");
     let _ = std::fs::remove_dir_all(&out_dir);
-    let out = Command::new(env!("CARGO_BIN_EXE_lamina"))
-        .args(["run", "--quiet", "--out"])
-        .arg(&out_dir)
-        .arg(&path)
-        .output()
-        .expect("lamina runs");
+    let out = try_run(&path, &out_dir, &[]);
     assert!(
         out.status.success(),
         "{file}: {}",

@@ -55,20 +55,14 @@ fn every_built_in_stage_gives_the_same_output_through_the_boundary() {
         let info = entry.info();
         let text = lamina_test_support::pipeline_for(info.kind, info.example);
         let label = entry.label().replace(':', "-");
-        let direct = run(
-            &linked,
-            &text,
-            dir.path(),
-            &dir.path().join("linked").join(&label),
-        )
-        .unwrap_or_else(|e| panic!("{label}: {e}"));
-        let through = run(
-            &remote,
-            &text,
-            dir.path(),
-            &dir.path().join("remote").join(&label),
-        )
-        .unwrap_or_else(|e| panic!("{label} through the boundary: {e}"));
+        let [direct, through] = [
+            (&linked, "linked", ""),
+            (&remote, "remote", " through the boundary"),
+        ]
+        .map(|(registry, folder, how)| {
+            run(registry, &text, dir.path(), &dir.path().join(folder).join(&label))
+                .unwrap_or_else(|e| panic!("{label}{how}: {e}"))
+        });
         assert_eq!(
             direct.iter().map(|f| &f.0).collect::<Vec<_>>(),
             through.iter().map(|f| &f.0).collect::<Vec<_>>(),

@@ -1,7 +1,7 @@
 //! The `lamina` command line as users and scripts rely on it: exit codes, error
 //! positions, listings, and outputs that do not depend on the thread count.
 
-use crate::support::{lamina, pipelines, text};
+use crate::support::{lamina, pipelines, text, write};
 use std::path::{Path, PathBuf};
 use std::process::Output;
 
@@ -70,15 +70,12 @@ fn plugins_lists_the_built_in_stages_of_every_kind() {
 #[test]
 fn misspelled_key_is_located_and_exits_2() {
     let dir = tempfile::tempdir().expect("tempdir");
-    let path = dir.path().join("bad.toml");
-    std::fs::write(
-        &path,
+    let path = write(
+        dir.path(),
+        "bad.toml",
         "[model]\nuse = \"box\"\n\n[materials.a]\ncolour = [1, 2, 3]\n\n[slice]\nuse = \"uniform\"\nthicknes = 0.3\n",
-    )
-    .expect("write");
-    let out = lamina(&["check", path.to_str().expect("utf-8")]);
-    assert_eq!(out.status.code(), Some(2));
-    let err = text(&out.stderr);
+    );
+    let err = refused(&path);
     assert!(err.contains("bad.toml:9:1"), "{err}");
     assert!(err.contains("thicknes"), "{err}");
 }
@@ -86,15 +83,12 @@ fn misspelled_key_is_located_and_exits_2() {
 #[test]
 fn unknown_stage_lists_the_available_ones() {
     let dir = tempfile::tempdir().expect("tempdir");
-    let path = dir.path().join("p.toml");
-    std::fs::write(
-        &path,
+    let path = write(
+        dir.path(),
+        "p.toml",
         "[model]\nuse = \"box\"\n[materials.a]\ncolour = [1, 2, 3]\n[slice]\nuse = \"unifrom\"\n",
-    )
-    .expect("write");
-    let out = lamina(&["check", path.to_str().expect("utf-8")]);
-    assert_eq!(out.status.code(), Some(2));
-    let err = text(&out.stderr);
+    );
+    let err = refused(&path);
     assert!(err.contains("p.toml:6:1"), "{err}");
     assert!(err.contains("uniform"), "{err}");
 }
@@ -102,12 +96,11 @@ fn unknown_stage_lists_the_available_ones() {
 #[test]
 fn missing_model_file_fails_with_exit_1_and_leaves_nothing() {
     let dir = tempfile::tempdir().expect("tempdir");
-    let path = dir.path().join("p.toml");
-    std::fs::write(
-        &path,
+    let path = write(
+        dir.path(),
+        "p.toml",
         "[model]\nfile = \"nothing.stl\"\n[materials.a]\ncolour = [1, 2, 3]\n[[output]]\nuse = \"json\"\n",
-    )
-    .expect("write");
+    );
     let out_dir = dir.path().join("out");
     let out = lamina(&[
         "run",
@@ -145,10 +138,11 @@ fn thread_count_does_not_change_the_output() {
     assert!(outputs[0] == outputs[1], "outputs differ between 1 and 2 threads");
 }
 
-fn write(dir: &Path, name: &str, text: &str) -> PathBuf {
-    let p = dir.join(name);
-    std::fs::write(&p, text).expect("write");
-    p
+/// `lamina check <path>`, which must exit 2 (a usage error); its error output.
+fn refused(path: &Path) -> String {
+    let out = lamina(&["check", path.to_str().expect("utf-8")]);
+    assert_eq!(out.status.code(), Some(2));
+    text(&out.stderr)
 }
 
 const SCRIPTED: &str = "[model]\nuse = \"tube\"\nheight = 1.0\n[materials.a]\ncolour = [255, 0, 0]\n[materials.b]\ncolour = [0, 255, 0]\n[slice]\nuse = \"uniform\"\nthickness = 0.5\n[grade]\nuse = \"script\"\nf = \"g.rhai#f\"\n[[output]]\nuse = \"json\"\n";

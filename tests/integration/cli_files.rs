@@ -3,9 +3,8 @@
 //! ASCII commands or binary commands: a little-endian u16 command index followed by
 //! its parameters). The contours it reads must give the plan's areas.
 
-use crate::support::run_text;
+use crate::support::{run_text, try_run_text};
 use std::path::Path;
-use std::process::Command;
 
 #[derive(Debug, Default)]
 struct CliFile {
@@ -124,26 +123,28 @@ fn read_binary(mut b: &[u8], file: &mut CliFile) {
                 z: f64::from(u16_(&mut b)),
                 polylines: Vec::new(),
             }),
-            129 => {
-                let (id, dir, n) = (u16_(&mut b), u16_(&mut b), u16_(&mut b));
-                let points = (0..n)
-                    .map(|_| [f64::from(u16_(&mut b)), f64::from(u16_(&mut b))])
-                    .collect();
+            // A polyline: 129 of 16-bit integers, 130 of 32-bit integers and floats.
+            command @ (129 | 130) => {
+                let long = command == 130;
+                let int = |b: &mut &[u8]| {
+                    if long {
+                        i64::from(i32_(b))
+                    } else {
+                        i64::from(u16_(b))
+                    }
+                };
+                let coord = |b: &mut &[u8]| {
+                    if long {
+                        f64::from(f32_(b))
+                    } else {
+                        f64::from(u16_(b))
+                    }
+                };
+                let (id, dir, n) = (int(&mut b), int(&mut b), int(&mut b));
+                let points = (0..n).map(|_| [coord(&mut b), coord(&mut b)]).collect();
                 file.layers.last_mut().expect("layer").polylines.push(Polyline {
-                    id: id.into(),
-                    dir: dir.into(),
-                    points,
-                    material: None,
-                });
-            }
-            130 => {
-                let (id, dir, n) = (i32_(&mut b), i32_(&mut b), i32_(&mut b));
-                let points = (0..n)
-                    .map(|_| [f64::from(f32_(&mut b)), f64::from(f32_(&mut b))])
-                    .collect();
-                file.layers.last_mut().expect("layer").polylines.push(Polyline {
-                    id: id.into(),
-                    dir: dir.into(),
+                    id,
+                    dir,
                     points,
                     material: None,
                 });
@@ -562,19 +563,11 @@ fn modified_cli_with_cells_and_islands() {
 fn an_output_path_leaving_the_output_folder_is_refused() {
     // A path that leaves the output folder is refused before anything is written.
     let dir = tempfile::tempdir().expect("tempdir");
-    let path = dir.path().join("p.toml");
-    std::fs::write(
-        &path,
+    let out = try_run_text(
+        dir.path(),
         "[model]\nuse = \"tube\"\nheight = 1.0\n[materials.a]\ncolour = [1, 2, 3]\n\
          [[output]]\nuse = \"cli\"\npath = \"../escape.cli\"\n",
-    )
-    .expect("write");
-    let out = Command::new(env!("CARGO_BIN_EXE_lamina"))
-        .args(["run", "--quiet", "--out"])
-        .arg(dir.path().join("out"))
-        .arg(&path)
-        .output()
-        .expect("lamina runs");
+    );
     assert!(!out.status.success());
     assert!(!dir.path().join("escape.cli").exists());
     assert!(!Path::new(&dir.path().join("out")).join("escape.cli").exists());

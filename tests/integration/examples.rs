@@ -1,12 +1,11 @@
 //! Every example pipeline in pipelines/ runs with one command on a fresh checkout.
 //! Pipelines that read the real meshes of ../shared/models are left to the benchmarks.
 
-use std::path::Path;
-use std::process::Command;
+use crate::support::{pipelines, try_run};
 
 #[test]
 fn every_example_pipeline_runs() {
-    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("pipelines");
+    let dir = pipelines();
     let out = tempfile::tempdir().expect("tempdir");
     let mut ran = 0;
     let mut entries: Vec<_> = std::fs::read_dir(&dir)
@@ -25,12 +24,7 @@ fn every_example_pipeline_runs() {
             continue;
         }
         let name = path.file_stem().expect("stem").to_string_lossy().into_owned();
-        let result = Command::new(env!("CARGO_BIN_EXE_lamina"))
-            .args(["run", "--quiet", "--out"])
-            .arg(out.path().join(&name))
-            .arg(&path)
-            .output()
-            .expect("lamina runs");
+        let result = try_run(&path, &out.path().join(&name), &[]);
         assert!(
             result.status.success(),
             "{}: {}",

@@ -3,25 +3,13 @@
 //! refused with its name and the bed's size; a model in metres is refused with the fix;
 //! an inline machine extends a built-in one.
 
-use crate::support::{lamina, text};
-use std::path::{Path, PathBuf};
+use crate::support::{lamina, text, try_run, write};
+use std::path::Path;
 use std::process::Output;
 
 /// `lamina run --quiet` of `pipeline` into `out`.
 fn run(pipeline: &Path, out: &Path) -> Output {
-    lamina(&[
-        "run",
-        "--quiet",
-        "--out",
-        &out.to_string_lossy(),
-        &pipeline.to_string_lossy(),
-    ])
-}
-
-fn write(dir: &Path, name: &str, text: &str) -> PathBuf {
-    let p = dir.join(name);
-    std::fs::write(&p, text).expect("write");
-    p
+    try_run(pipeline, out, &[])
 }
 
 /// A graded box printed by a machine; `model` and `machine` are TOML lines.

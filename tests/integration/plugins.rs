@@ -4,7 +4,7 @@
 //! `LAMINA_PLUGIN_HOST` names another `lamina` binary to load them with (continuous
 //! integration uses the release build).
 
-use crate::support::root;
+use crate::support::{root, write};
 use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::sync::OnceLock;
@@ -50,16 +50,45 @@ fn lamina(args: &[&str]) -> std::process::Output {
     Command::new(host()).args(args).output().expect("lamina runs")
 }
 
+/// `lamina run <pipeline> --plugin <lib> --out <out_dir>`.
+fn run_with_plugin(pipeline: &Path, lib: &Path, out_dir: &Path) -> std::process::Output {
+    lamina(&[
+        "run",
+        pipeline.to_str().expect("utf-8"),
+        "--plugin",
+        lib.to_str().expect("utf-8"),
+        "--out",
+        out_dir.to_str().expect("utf-8"),
+    ])
+}
+
+/// `lamina check <pipeline> --plugin <lib>`.
+fn check_with_plugin(pipeline: &Path, lib: &Path) -> std::process::Output {
+    lamina(&[
+        "check",
+        pipeline.to_str().expect("utf-8"),
+        "--plugin",
+        lib.to_str().expect("utf-8"),
+    ])
+}
+
+/// The layers of the JSON plan (`plan.json` in `out_dir`) of a run that must have
+/// succeeded.
+fn plan_layers(out: &std::process::Output, out_dir: &Path) -> Vec<serde_json::Value> {
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let plan: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(out_dir.join("plan.json")).expect("written")).expect("json");
+    plan["layers"].as_array().expect("layers").clone()
+}
+
 fn write_pipeline(dir: &Path, extra: &str) -> PathBuf {
-    let path = dir.join("p.toml");
-    std::fs::write(
-        &path,
-        format!(
+    write(
+        dir,
+        "p.toml",
+        &format!(
             "[model]\nuse = \"tube\"\nheight = 2.0\n\n[materials.a]\ncolour = [255, 0, 0]\n\n[slice]\nuse = \"uniform\"\nthickness = 0.5\n\n[[output]]\nuse = \"json\"\npath = \"plan.json\"\n\n{extra}"
         ),
     )
-    .expect("write pipeline");
-    path
 }
 
 #[test]
@@ -78,12 +107,9 @@ fn example_plugin_is_loaded_and_plans_toolpaths() {
         "--out",
         out_dir.to_str().expect("utf-8"),
     ]);
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
-    let plan: serde_json::Value =
-        serde_json::from_slice(&std::fs::read(out_dir.join("plan.json")).expect("written")).expect("json");
-    let layers = plan["layers"].as_array().expect("layers");
+    let layers = plan_layers(&out, &out_dir);
     assert_eq!(layers.len(), 4);
-    for layer in layers {
+    for layer in &layers {
         let paths = layer["toolpaths"].as_array().expect("toolpaths planned");
         let extruded: f64 = paths
             .iter()
@@ -155,14 +181,7 @@ fn panicking_plugin_is_an_error_not_an_abort() {
     let dir = tempfile::tempdir().expect("tempdir");
     let pipeline = write_pipeline(dir.path(), "[grade]\nuse = \"panics\"\n");
     let out_dir = dir.path().join("out");
-    let out = lamina(&[
-        "run",
-        pipeline.to_str().expect("utf-8"),
-        "--plugin",
-        lib.to_str().expect("utf-8"),
-        "--out",
-        out_dir.to_str().expect("utf-8"),
-    ]);
+    let out = run_with_plugin(&pipeline, &lib, &out_dir);
     assert_eq!(out.status.code(), Some(1));
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(
@@ -179,12 +198,7 @@ fn a_file_that_is_not_a_plugin_is_refused() {
     let fake = dir.path().join("fake.so");
     std::fs::write(&fake, b"not a library").expect("write");
     let pipeline = write_pipeline(dir.path(), "");
-    let out = lamina(&[
-        "check",
-        pipeline.to_str().expect("utf-8"),
-        "--plugin",
-        fake.to_str().expect("utf-8"),
-    ]);
+    let out = check_with_plugin(&pipeline, &fake);
     assert_eq!(out.status.code(), Some(2));
     assert!(String::from_utf8_lossy(&out.stderr).contains("fake.so"));
 }
@@ -203,12 +217,7 @@ fn truncated_and_foreign_files_are_refused_with_the_reason_before_loading() {
     for (name, bytes, expected) in cases {
         let path = dir.path().join(name);
         std::fs::write(&path, bytes).expect("write");
-        let out = lamina(&[
-            "check",
-            pipeline.to_str().expect("utf-8"),
-            "--plugin",
-            path.to_str().expect("utf-8"),
-        ]);
+        let out = check_with_plugin(&pipeline, &path);
         let err = String::from_utf8_lossy(&out.stderr);
         assert_eq!(out.status.code(), Some(2), "{name}: {err}");
         assert!(err.contains(expected) && err.contains(name), "{name}: {err}");
@@ -226,12 +235,7 @@ fn truncated_and_foreign_files_are_refused_with_the_reason_before_loading() {
         plain[at] = b'X';
     }
     std::fs::write(&other, &plain).expect("write");
-    let out = lamina(&[
-        "check",
-        pipeline.to_str().expect("utf-8"),
-        "--plugin",
-        other.to_str().expect("utf-8"),
-    ]);
+    let out = check_with_plugin(&pipeline, &other);
     let err = String::from_utf8_lossy(&out.stderr);
     assert_eq!(out.status.code(), Some(2), "{err}");
     assert!(err.contains("exports no `lamina_plugin_<name>`"), "{err}");
@@ -260,26 +264,18 @@ fn graded_run(dir: &Path, grade: &str) -> (Option<i32>, String, Option<String>, 
          fn too_much(z) { 2.0 }\n",
     )
     .expect("script");
-    let path = dir.join("g.toml");
-    std::fs::write(
-        &path,
-        format!(
+    let path = write(
+        dir,
+        "g.toml",
+        &format!(
             "[model]\nuse = \"tube\"\nheight = 2.0\n\n[materials.a]\ncolour = [255, 0, 0]\n[materials.b]\ncolour = [0, 0, 255]\n\n[slice]\nuse = \"uniform\"\nthickness = 0.5\n\n[discretise]\nuse = \"offset\"\ncount = 3\n\n[grade]\n{grade}\n\n[[output]]\nuse = \"json\"\npath = \"plan.json\"\n"
         ),
-    )
-    .expect("pipeline");
+    );
     let out_dir = dir.join("out");
     let _ = std::fs::remove_dir_all(&out_dir);
     let lib = library("lamina-fixture-script");
     let start = std::time::Instant::now();
-    let out = lamina(&[
-        "run",
-        path.to_str().expect("utf-8"),
-        "--plugin",
-        lib.to_str().expect("utf-8"),
-        "--out",
-        out_dir.to_str().expect("utf-8"),
-    ]);
+    let out = run_with_plugin(&path, &lib, &out_dir);
     let took = start.elapsed();
     let plan = std::fs::read_to_string(out_dir.join("plan.json")).ok();
     (
@@ -425,20 +421,10 @@ fn a_plugin_resolving_other_releases_of_the_boundarys_dependencies_runs_correctl
     )
     .expect("pipeline");
     let out_dir = dir.path().join("out");
-    let out = lamina(&[
-        "run",
-        path.to_str().expect("utf-8"),
-        "--plugin",
-        lib.to_str().expect("utf-8"),
-        "--out",
-        out_dir.to_str().expect("utf-8"),
-    ]);
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
-    let plan: serde_json::Value =
-        serde_json::from_slice(&std::fs::read(out_dir.join("plan.json")).expect("written")).expect("json");
-    let layers = plan["layers"].as_array().expect("layers");
+    let out = run_with_plugin(&path, &lib, &out_dir);
+    let layers = plan_layers(&out, &out_dir);
     assert_eq!(layers.len(), 4);
-    for layer in layers {
+    for layer in &layers {
         let z = layer["z"].as_f64().expect("z");
         let regions = layer["parts"][0]["families"][0]["regions"]
             .as_array()
@@ -457,12 +443,7 @@ fn a_plugin_resolving_other_releases_of_the_boundarys_dependencies_runs_correctl
         text.replace("size = [10.0, 8.0, 2.0]", "size = [10.0, 8.0]"),
     )
     .expect("write");
-    let out = lamina(&[
-        "check",
-        path.to_str().expect("utf-8"),
-        "--plugin",
-        lib.to_str().expect("utf-8"),
-    ]);
+    let out = check_with_plugin(&path, &lib);
     let err = String::from_utf8_lossy(&out.stderr);
     assert_eq!(out.status.code(), Some(2), "{err}");
     assert!(err.contains("s.toml:3:") && err.contains("size"), "{err}");

@@ -313,39 +313,51 @@ fn tilt() -> impl Strategy<Value = f64> {
 /// A discretiser with random options, as a `[discretise]` table for a given family.
 #[derive(Debug, Clone)]
 enum Spec {
-    Offset {
-        nozzle: f64,
-        count: Option<usize>,
-        spacing: Option<f64>,
-        from: &'static str,
-        join: &'static str,
-        cells: CellSpec,
-    },
+    Offset(OffsetSpec),
     Radial {
         nozzle: f64,
         count: Option<usize>,
         cells: CellSpec,
     },
-    StepWidth {
-        step: f64,
-        power: f64,
-        width: Option<f64>,
-        from: &'static str,
-        join: &'static str,
-        cells: CellSpec,
-    },
-    DistanceField {
-        feature: &'static str,
-        points: Vec<(f64, f64)>,
-        levels: Levels,
-        samples: usize,
-        width: Option<f64>,
-        cells: CellSpec,
-    },
+    StepWidth(StepWidthSpec),
+    DistanceField(DistanceFieldSpec),
     Sources {
         sources: Vec<SourceSpec>,
         combine: &'static str,
     },
+}
+
+/// `offset`'s options (lengths in units of the family's size).
+#[derive(Debug, Clone)]
+struct OffsetSpec {
+    nozzle: f64,
+    count: Option<usize>,
+    spacing: Option<f64>,
+    from: &'static str,
+    join: &'static str,
+    cells: CellSpec,
+}
+
+/// `step-width`'s options.
+#[derive(Debug, Clone)]
+struct StepWidthSpec {
+    step: f64,
+    power: f64,
+    width: Option<f64>,
+    from: &'static str,
+    join: &'static str,
+    cells: CellSpec,
+}
+
+/// `distance-field`'s options; `points` about the family's centre, in its size.
+#[derive(Debug, Clone)]
+struct DistanceFieldSpec {
+    feature: &'static str,
+    points: Vec<(f64, f64)>,
+    levels: Levels,
+    samples: usize,
+    width: Option<f64>,
+    cells: CellSpec,
 }
 
 #[derive(Debug, Clone)]
@@ -372,13 +384,15 @@ fn offset_spec() -> impl Strategy<Value = Spec> {
         join(),
         cells(),
     )
-        .prop_map(|(nozzle, count, spacing, from, join, cells)| Spec::Offset {
-            nozzle,
-            count,
-            spacing,
-            from,
-            join,
-            cells,
+        .prop_map(|(nozzle, count, spacing, from, join, cells)| {
+            Spec::Offset(OffsetSpec {
+                nozzle,
+                count,
+                spacing,
+                from,
+                join,
+                cells,
+            })
         })
 }
 
@@ -399,13 +413,15 @@ fn step_width_spec() -> impl Strategy<Value = Spec> {
         join(),
         cells(),
     )
-        .prop_map(|(step, power, width, from, join, cells)| Spec::StepWidth {
-            step,
-            power,
-            width,
-            from,
-            join,
-            cells,
+        .prop_map(|(step, power, width, from, join, cells)| {
+            Spec::StepWidth(StepWidthSpec {
+                step,
+                power,
+                width,
+                from,
+                join,
+                cells,
+            })
         })
 }
 
@@ -425,16 +441,16 @@ fn distance_field_spec() -> impl Strategy<Value = Spec> {
         prop::option::of(0.1f64..1.5),
         cells(),
     )
-        .prop_map(
-            |(feature, points, levels, samples, width, cells)| Spec::DistanceField {
+        .prop_map(|(feature, points, levels, samples, width, cells)| {
+            Spec::DistanceField(DistanceFieldSpec {
                 feature,
                 points,
                 levels,
                 samples,
                 width,
                 cells,
-            },
-        )
+            })
+        })
 }
 
 fn sources_spec() -> impl Strategy<Value = Spec> {
@@ -451,25 +467,20 @@ impl Spec {
         let s = f.size;
         let at = |(u, v): (f64, f64)| format!("[{:?}, {:?}]", f.centre.x + u * s, f.centre.y + v * s);
         match self {
-            Spec::Offset {
-                nozzle,
-                count,
-                spacing,
-                from,
-                join,
-                cells,
-            } => {
+            Spec::Offset(o) => {
                 let mut t = format!(
-                    "use = \"offset\"\nnozzle = {:?}\nfrom = \"{from}\"\njoin = \"{join}\"\n",
-                    nozzle * s
+                    "use = \"offset\"\nnozzle = {:?}\nfrom = \"{}\"\njoin = \"{}\"\n",
+                    o.nozzle * s,
+                    o.from,
+                    o.join
                 );
-                if let Some(n) = count {
+                if let Some(n) = o.count {
                     t += &format!("count = {n}\n");
                 }
-                if let Some(d) = spacing {
+                if let Some(d) = o.spacing {
                     t += &format!("spacing = {:?}\n", d * s);
                 }
-                t + cells_text(cells, s).as_str()
+                t + cells_text(&o.cells, s).as_str()
             }
             Spec::Radial { nozzle, count, cells } => {
                 let mut t = format!("use = \"radial\"\nnozzle = {:?}\n", nozzle * s);
@@ -478,32 +489,24 @@ impl Spec {
                 }
                 t + cells_text(cells, s).as_str()
             }
-            Spec::StepWidth {
-                step,
-                power,
-                width,
-                from,
-                join,
-                cells,
-            } => {
+            Spec::StepWidth(w) => {
                 let mut t = format!(
-                    "use = \"step-width\"\nstep = {step:?}\npower = {power:?}\nfrom = \"{from}\"\njoin = \"{join}\"\n"
+                    "use = \"step-width\"\nstep = {:?}\npower = {:?}\nfrom = \"{}\"\njoin = \"{}\"\n",
+                    w.step, w.power, w.from, w.join
                 );
-                if let Some(w) = width {
+                if let Some(w) = w.width {
                     t += &format!("width = {:?}\n", w * s);
                 }
-                t + cells_text(cells, s).as_str()
+                t + cells_text(&w.cells, s).as_str()
             }
-            Spec::DistanceField {
-                feature,
-                points,
-                levels,
-                samples,
-                width,
-                cells,
-            } => {
-                let mut t = format!("use = \"distance-field\"\nfeature = \"{feature}\"\ncells = {samples}\n");
-                match *feature {
+            Spec::DistanceField(d) => {
+                let (feature, points, levels, width, cells) =
+                    (d.feature, &d.points, &d.levels, d.width, &d.cells);
+                let mut t = format!(
+                    "use = \"distance-field\"\nfeature = \"{feature}\"\ncells = {}\n",
+                    d.samples
+                );
+                match feature {
                     "point" => t += &format!("point = {}\n", at(points[0])),
                     "line" => t += &format!("points = [{}, {}]\n", at(points[0]), at(points[1])),
                     "polyline" => {
@@ -694,38 +697,33 @@ fn tiles(f: &RandomFamily, spec: &Spec) -> Result<(), TestCaseError> {
     discretise_and_check(f, &text).map_err(|e| TestCaseError::fail(format!("{text}\n{e}")))
 }
 
-// One property per discretiser, so that a failure in one does not hide the others.
-proptest! {
-    #![proptest_config(config(256))]
+/// One property per discretiser, so that a failure in one does not hide the others:
+/// each named test runs [`tiles`] on random families and its strategy's specs.
+macro_rules! tiling_properties {
+    ($($(#[$doc:meta])* $name:ident: $spec:ident;)*) => {
+        proptest! {
+            #![proptest_config(config(256))]
+            $(
+                $(#[$doc])*
+                #[test]
+                fn $name(f in family(), spec in $spec()) {
+                    tiles(&f, &spec)?;
+                }
+            )*
+        }
+    };
+}
 
+tiling_properties! {
     /// `offset`, from the outer contour or from all, by nozzle, count or spacing, with
     /// any join and cells.
-    #[test]
-    fn offset_tiles_random_families(f in family(), spec in offset_spec()) {
-        tiles(&f, &spec)?;
-    }
-
-    #[test]
-    fn radial_tiles_random_families(f in family(), spec in radial_spec()) {
-        tiles(&f, &spec)?;
-    }
-
-    #[test]
-    fn step_width_tiles_random_families(f in family(), spec in step_width_spec()) {
-        tiles(&f, &spec)?;
-    }
-
+    offset_tiles_random_families: offset_spec;
+    radial_tiles_random_families: radial_spec;
+    step_width_tiles_random_families: step_width_spec;
     /// `distance-field` to every planar feature, by count, step or spacing.
-    #[test]
-    fn distance_field_tiles_random_families(f in family(), spec in distance_field_spec()) {
-        tiles(&f, &spec)?;
-    }
-
+    distance_field_tiles_random_families: distance_field_spec;
     /// `sources` of every kind, one to three of them, combined either way.
-    #[test]
-    fn sources_tile_random_families(f in family(), spec in sources_spec()) {
-        tiles(&f, &spec)?;
-    }
+    sources_tile_random_families: sources_spec;
 }
 
 // ---------------------------------------------------------- random solids
@@ -1412,6 +1410,16 @@ fn um(mm: f64) -> u64 {
     (mm * 1000.0).round() as u64
 }
 
+/// The thicknesses (µm) of region `r`'s layers among `steps`, in order.
+fn region_layers(steps: &[lamina_core::model::CycleStep], r: usize) -> Vec<u64> {
+    steps
+        .iter()
+        .flat_map(|s| &s.deposits)
+        .filter(|d| d.region == r)
+        .map(|d| d.thickness_um)
+        .collect()
+}
+
 fn check_cycles(case: &CycleCase) -> Result<(), TestCaseError> {
     let text = case.stage_text();
     let AnyStage::Sequence(stage) =
@@ -1481,13 +1489,7 @@ fn check_cycles(case: &CycleCase) -> Result<(), TestCaseError> {
             }
         }
         for &r in present {
-            let layers: Vec<u64> = cycle
-                .steps
-                .iter()
-                .flat_map(|s| &s.deposits)
-                .filter(|d| d.region == r)
-                .map(|d| d.thickness_um)
-                .collect();
+            let layers = region_layers(&cycle.steps, r);
             prop_assert_eq!(layers.len() as u64, c / thickness[r]);
             prop_assert_eq!(
                 layers.iter().sum::<u64>(),
@@ -1517,13 +1519,7 @@ fn check_cycles(case: &CycleCase) -> Result<(), TestCaseError> {
             prop_assert_eq!(shifted, once, "cycle {} of block {}", k, b);
         }
         for &r in present {
-            let layers: Vec<u64> = block
-                .steps
-                .iter()
-                .flat_map(|s| &s.deposits)
-                .filter(|d| d.region == r)
-                .map(|d| d.thickness_um)
-                .collect();
+            let layers = region_layers(&block.steps, r);
             prop_assert_eq!(layers.iter().sum::<u64>(), height, "region {} in block {}", r, b);
             prop_assert_eq!(layers.len() as u64, height.div_ceil(thickness[r]));
             let (last, whole) = layers.split_last().expect("a layer");

@@ -2,24 +2,16 @@
 //! paper (Fig. 11) is deposited in 3.0 mm work cycles of 18 steps, each region cut at
 //! its own heights and thickness.
 
+use crate::support::{pipelines, run_plan, try_run_text};
 use std::path::Path;
-use std::process::Command;
 
 fn run_pipe(out: &Path) -> serde_json::Value {
-    let pipeline = Path::new(env!("CARGO_MANIFEST_DIR")).join("pipelines/pipe-work-cycles.toml");
-    let status = Command::new(env!("CARGO_BIN_EXE_lamina"))
-        .args(["run", "--quiet", "--out"])
-        .arg(out)
-        .arg(&pipeline)
-        .output()
-        .expect("lamina runs");
-    assert!(
-        status.status.success(),
-        "{}",
-        String::from_utf8_lossy(&status.stderr)
-    );
-    let text = std::fs::read_to_string(out.join("pipe-work-cycles.json")).expect("json written");
-    serde_json::from_str(&text).expect("valid json")
+    run_plan(
+        &pipelines().join("pipe-work-cycles.toml"),
+        out,
+        &[],
+        "pipe-work-cycles.json",
+    )
 }
 
 #[test]
@@ -94,19 +86,11 @@ fn three_region_pipe_follows_the_work_cycles() {
 #[test]
 fn material_mode_without_a_sequence_is_an_error() {
     let dir = tempfile::tempdir().expect("tempdir");
-    let path = dir.path().join("p.toml");
-    std::fs::write(
-        &path,
+    let out = try_run_text(
+        dir.path(),
         "[model]\nuse = \"tube\"\nheight = 2.0\n[materials.a]\ncolour = [1, 2, 3]\n\
          [slice]\nuse = \"adaptive\"\nmode = \"material\"\n",
-    )
-    .expect("write");
-    let out = Command::new(env!("CARGO_BIN_EXE_lamina"))
-        .args(["run", "--quiet", "--out"])
-        .arg(dir.path().join("out"))
-        .arg(&path)
-        .output()
-        .expect("lamina runs");
+    );
     assert!(!out.status.success());
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(err.contains("[sequence]"), "{err}");
@@ -116,19 +100,11 @@ fn material_mode_without_a_sequence_is_an_error() {
 #[test]
 fn a_part_without_thickness_is_named() {
     let dir = tempfile::tempdir().expect("tempdir");
-    let path = dir.path().join("p.toml");
-    std::fs::write(
-        &path,
+    let out = try_run_text(
+        dir.path(),
         "[model]\nuse = \"tube\"\nheight = 2.0\n[materials.a]\ncolour = [1, 2, 3]\n\
          [[parts]]\nname = \"pipe\"\n[sequence]\nuse = \"work-cycles\"\n[slice]\nuse = \"adaptive\"\n",
-    )
-    .expect("write");
-    let out = Command::new(env!("CARGO_BIN_EXE_lamina"))
-        .args(["run", "--quiet", "--out"])
-        .arg(dir.path().join("out"))
-        .arg(&path)
-        .output()
-        .expect("lamina runs");
+    );
     assert_eq!(out.status.code(), Some(2), "a configuration error");
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(err.contains("part `pipe` has no layer thickness"), "{err}");

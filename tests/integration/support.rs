@@ -34,15 +34,20 @@ pub fn text(out: &[u8]) -> String {
     String::from_utf8_lossy(out).into_owned()
 }
 
-/// `lamina run --quiet --out <out> <pipeline> [extra]`, which must succeed, and the
-/// JSON plan it wrote as `json` (a path under `out`).
-pub fn run_plan(pipeline: &Path, out: &Path, extra: &[&str], json: &str) -> serde_json::Value {
+/// `lamina run --quiet --out <out> <pipeline> [extra]`, whatever its outcome.
+pub fn try_run(pipeline: &Path, out: &Path, extra: &[&str]) -> Output {
     let mut args = vec!["run", "--quiet", "--out"];
     let out_str = out.to_str().expect("utf-8 path");
     let pipeline_str = pipeline.to_str().expect("utf-8 path");
     args.extend([out_str, pipeline_str]);
     args.extend(extra);
-    let o = lamina(&args);
+    lamina(&args)
+}
+
+/// [`try_run`], which must succeed, and the JSON plan it wrote as `json` (a path under
+/// `out`).
+pub fn run_plan(pipeline: &Path, out: &Path, extra: &[&str], json: &str) -> serde_json::Value {
+    let o = try_run(pipeline, out, extra);
     assert!(
         o.status.success(),
         "lamina run {}: {}",
@@ -55,9 +60,21 @@ pub fn run_plan(pipeline: &Path, out: &Path, extra: &[&str], json: &str) -> serd
 /// Writes `text` as `dir/p.toml` and runs it into `dir/out` (which must succeed);
 /// returns the JSON plan the pipeline writes as `json`.
 pub fn run_text(dir: &Path, text: &str, json: &str) -> serde_json::Value {
-    let path = dir.join("p.toml");
-    std::fs::write(&path, text).expect("pipeline written");
+    let path = write(dir, "p.toml", text);
     run_plan(&path, &dir.join("out"), &[], json)
+}
+
+/// Writes `text` as `dir/p.toml` and runs it into `dir/out`, whatever the outcome.
+pub fn try_run_text(dir: &Path, text: &str) -> Output {
+    let path = write(dir, "p.toml", text);
+    try_run(&path, &dir.join("out"), &[])
+}
+
+/// Writes `text` as `dir/name`; returns its path.
+pub fn write(dir: &Path, name: &str, text: &str) -> PathBuf {
+    let path = dir.join(name);
+    std::fs::write(&path, text).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+    path
 }
 
 /// A JSON file, parsed.

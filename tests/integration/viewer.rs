@@ -173,18 +173,7 @@ fn pngs_show_the_regions_from_the_bore_outward() {
         + "[[output]]\nuse = \"png\"\nsize = 400\n\
            [[output]]\nuse = \"contact-sheet\"\ncount = 4\ncolumns = 2\ntile = 128\n\
            [[output]]\nuse = \"stack\"\nsize = 300\n";
-    let path = dir.path().join("p.toml");
-    std::fs::write(&path, text).expect("write");
-    let out = Command::new(env!("CARGO_BIN_EXE_lamina"))
-        .args(["run", "--quiet", "--out"])
-        .arg(dir.path().join("out"))
-        .arg(&path)
-        .output()
-        .expect("lamina runs");
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
-    let plan: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(dir.path().join("out/plan.json")).expect("json"))
-            .expect("valid");
+    let plan = run_text(dir.path(), &text, "plan.json");
     for layer in plan["layers"].as_array().expect("layers") {
         let i = layer["index"].as_u64().expect("index");
         let png = std::fs::read(dir.path().join(format!("out/png/layer-{i}.png"))).expect("png");

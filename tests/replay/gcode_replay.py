@@ -204,6 +204,53 @@ def tokenize(code: str, line: int) -> tuple[str, dict[str, str | None]]:
     return cmd, {k: v for k, v in found[1:]}
 
 
+#: Kinds of statement ``statements`` yields.
+COMMENT = "comment"
+MOVE = "move"
+MOVE_WORDS = "move words"
+COMMAND = "command"
+
+
+def statements(text: str) -> Iterable[tuple[int, str, str | None, object]]:
+    """The lines of ``text`` that say something, as ``(line, kind, command,
+    params)``: a comment-only line is ``(line, COMMENT, None, "<comment text>")``
+    (the text after ``;``, stripped); a plain ``G0``/``G1`` (space after the
+    command, letters and numbers only) is ``(line, MOVE, "G0"|"G1", {letter:
+    float | None})`` without the tokenizer (the fast path); a ``G0``/``G1`` of
+    that form whose words are not plain numbers is ``(line, MOVE_WORDS, cmd,
+    raw words)``; every other command ``(line, COMMAND, cmd, raw words)`` as
+    ``tokenize`` returns them. Comments after code are dropped; blank lines are
+    skipped. A malformed word raises ParseError.
+    """
+    for lineno, raw in enumerate(text.splitlines(), 1):
+        c = raw.find(";")
+        if c >= 0:
+            code = raw[:c].strip()
+            if not code:
+                yield lineno, COMMENT, None, raw[c + 1:].strip()
+                continue
+        else:
+            code = raw.strip()
+            if not code:
+                continue
+        # Fast path for plain moves.
+        if (code[0] == "G" or code[0] == "g") and len(code) > 2 and code[1] in "01" and code[2] == " ":
+            params = {}
+            try:
+                for w in code[3:].split():
+                    if not w[0].isalpha():
+                        raise ValueError(w)
+                    params[w[0].upper()] = float(w[1:]) if len(w) > 1 else None
+            except ValueError:
+                cmd, raw_params = tokenize(code, lineno)
+                yield lineno, MOVE_WORDS, cmd, raw_params
+                continue
+            yield lineno, MOVE, "G" + code[1], params
+            continue
+        cmd, raw_params = tokenize(code, lineno)
+        yield lineno, COMMAND, cmd, raw_params
+
+
 # ---------------------------------------------------------------------------
 # Machine state
 # ---------------------------------------------------------------------------
@@ -495,34 +542,16 @@ class Replay:
     def run(self, text: str) -> None:
         self.prescan(text)
         move = self.do_move
-        for lineno, raw in enumerate(text.splitlines(), 1):
+        for lineno, kind, cmd, params in statements(text):
             self.line = lineno
-            c = raw.find(";")
-            if c >= 0:
-                code = raw[:c].strip()
-                if not code:
-                    self.comment(raw[c + 1:].strip())
-                    continue
+            if kind is MOVE:
+                move(cmd, params)
+            elif kind is COMMAND:
+                self.command(cmd, params)
+            elif kind is COMMENT:
+                self.comment(params)
             else:
-                code = raw.strip()
-                if not code:
-                    continue
-            # Fast path for plain moves.
-            if (code[0] == "G" or code[0] == "g") and len(code) > 2 and code[1] in "01" and code[2] == " ":
-                params = {}
-                try:
-                    for w in code[3:].split():
-                        if not w[0].isalpha():
-                            raise ValueError(w)
-                        params[w[0].upper()] = float(w[1:]) if len(w) > 1 else None
-                except ValueError:
-                    cmd, raw_params = tokenize(code, lineno)
-                    move(cmd, self.floats(raw_params))
-                    continue
-                move("G" + code[1], params)
-                continue
-            cmd, raw_params = tokenize(code, lineno)
-            self.command(cmd, raw_params)
+                move(cmd, self.floats(params))
         self.finish()
 
     def floats(self, raw: dict[str, str | None]) -> dict[str, float | None]:
@@ -1701,15 +1730,20 @@ def build_report(r: Replay, o: Options, name: str) -> dict:
         "extents": {"moves": bbox(r.extents["moves"]), "extrusion": bbox(r.extents["extrusion"])},
         "unknown_commands": dict(sorted(r.unknown.items())),
         "warnings": r.warnings[:MAX_EXAMPLES],
-        "options": {
-            "mesh": o.mesh, "place": o.place, "bed": o.bed_rect, "bed_circle": o.bed_circle,
-            "filament": o.filament, "min_extrude_temp": o.min_extrude_temp,
-            "volume_tol": o.volume_tol, "coverage_min": o.coverage_min, "overlap_max": o.overlap_max,
-            "coverage_every": o.coverage_every, "bead_ends": o.bead_ends, "time_tol": time_tol,
-            "accel": list(o.accel), "junction_deviation": o.junction_deviation,
-        },
+        "options": options_report(o, time_tol),
     }
     return report
+
+
+def options_report(o: Options, time_tol: float) -> dict:
+    """The options every report states, with the time tolerance applied."""
+    return {
+        "mesh": o.mesh, "place": o.place, "bed": o.bed_rect, "bed_circle": o.bed_circle,
+        "filament": o.filament, "min_extrude_temp": o.min_extrude_temp,
+        "volume_tol": o.volume_tol, "coverage_min": o.coverage_min, "overlap_max": o.overlap_max,
+        "coverage_every": o.coverage_every, "bead_ends": o.bead_ends, "time_tol": time_tol,
+        "accel": list(o.accel), "junction_deviation": o.junction_deviation,
+    }
 
 
 def placement_target(o: Options, mesh_centre: tuple[float, float] = (0.0, 0.0)) -> tuple[float, float]:

@@ -375,34 +375,17 @@ class MultiReplay:
     # -- main loop ---------------------------------------------------------------
 
     def run(self, text: str) -> None:
-        for lineno, raw in enumerate(text.splitlines(), 1):
+        for lineno, kind, cmd, params in gr.statements(text):
             self.line = lineno
-            c = raw.find(";")
-            if c >= 0:
-                code = raw[:c].strip()
-                if not code:
-                    st = self.enter(self.cur)
-                    st.comment(raw[c + 1:].strip())
-                    continue
+            if kind is gr.MOVE:
+                self.move(self.cur, cmd, params)
+            elif kind is gr.COMMENT:
+                st = self.enter(self.cur)
+                st.comment(params)
             else:
-                code = raw.strip()
-                if not code:
-                    continue
-            if (code[0] == "G" or code[0] == "g") and len(code) > 2 and code[1] in "01" and code[2] == " ":
-                params = {}
-                try:
-                    for w in code[3:].split():
-                        if not w[0].isalpha():
-                            raise ValueError(w)
-                        params[w[0].upper()] = float(w[1:]) if len(w) > 1 else None
-                except ValueError:
-                    cmd, raw_params = gr.tokenize(code, lineno)
-                    self.command(cmd, raw_params)
-                    continue
-                self.move(self.cur, "G" + code[1], params)
-                continue
-            cmd, raw_params = gr.tokenize(code, lineno)
-            self.command(cmd, raw_params)
+                # COMMAND, and MOVE_WORDS: a move whose words need the tokenizer
+                # goes through the command dispatch.
+                self.command(cmd, params)
         self.barrier("end", release=True)
         for st in self.streams:
             st.finish()
@@ -1243,11 +1226,7 @@ def build_report_multi(mm: MultiReplay, o: gr.Options, name: str) -> dict:
         "unknown_commands": dict(sorted(unknown.items())),
         "warnings": warnings[:gr.MAX_EXAMPLES],
         "options": {
-            "mesh": o.mesh, "place": o.place, "bed": o.bed_rect, "bed_circle": o.bed_circle,
-            "filament": o.filament, "min_extrude_temp": o.min_extrude_temp,
-            "volume_tol": o.volume_tol, "coverage_min": o.coverage_min, "overlap_max": o.overlap_max,
-            "coverage_every": o.coverage_every, "bead_ends": o.bead_ends, "time_tol": tol,
-            "accel": list(o.accel), "junction_deviation": o.junction_deviation,
+            **gr.options_report(o, tol),
             "head_radius": o.head_radius, "envelopes": {str(k): v for k, v in o.envelopes.items()},
             "axis_maps": {str(k): v for k, v in o.axis_maps.items()},
             "homes": {str(k): list(v) for k, v in o.homes.items()},

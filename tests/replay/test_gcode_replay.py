@@ -112,12 +112,18 @@ def box_gcode(*, layers=5, h=0.2, size=10.0, centre=(100.0, 100.0), w=0.4, e_sca
             lines.append(f"G1 E{e - 1:.5f} F2100")
             e -= 1
     lines += ["M104 S0", "M140 S0", "M84"]
-    text = "\n".join(lines) + "\n"
-    if footer_time is None:
+    return with_estimate("\n".join(lines) + "\n", footer_time, time_factor)
+
+
+def with_estimate(text, estimate=None, factor=1.0, digits=3):
+    """``text`` and its footer ``; estimated printing time: <estimate> s`` (with
+    ``digits`` decimals): the checker's own replayed time x ``factor`` when
+    ``estimate`` is None, and no footer when it is False."""
+    if estimate is None:
         rep = gr.analyse(text, gr.Options())
-        footer_time = rep["time"]["replayed_s"] * time_factor
-    if footer_time is not False:
-        text += f"; estimated printing time: {footer_time:.3f} s\n"
+        estimate = rep["time"]["replayed_s"] * factor
+    if estimate is not False:
+        text += f"; estimated printing time: {estimate:.{digits}f} s\n"
     return text
 
 
@@ -142,18 +148,27 @@ HOT = "; flavor: marlin\nG90\nM82\nM109 S210\nG92 E0\n;LAYER:0\n;TYPE:PART\nG0 X
 # Tests
 # ---------------------------------------------------------------------------
 
-class WellFormed(unittest.TestCase):
+class BoxStl:
+    """A test class's box mesh (``write_box_stl``'s default box) at ``cls.stl``, in a
+    temporary folder removed after the class's tests."""
+
     @classmethod
     def setUpClass(cls):
         cls.tmp = tempfile.TemporaryDirectory()
         cls.stl = os.path.join(cls.tmp.name, "box.stl")
         write_box_stl(cls.stl)
-        cls.text = box_gcode()
-        cls.rep = run_checks(cls.text, mesh=cls.stl, bed_rect=BED, coverage_every=1)
 
     @classmethod
     def tearDownClass(cls):
         cls.tmp.cleanup()
+
+
+class WellFormed(BoxStl, unittest.TestCase):
+    @classmethod
+    def setUpClass(cls):
+        super().setUpClass()
+        cls.text = box_gcode()
+        cls.rep = run_checks(cls.text, mesh=cls.stl, bed_rect=BED, coverage_every=1)
 
     def test_every_check_passes(self):
         for name, c in self.rep["checks"].items():
@@ -363,17 +378,7 @@ class Mixes(unittest.TestCase):
         self.assertEqual(status(rep, "mixes"), "pass")
 
 
-class Volume(unittest.TestCase):
-    @classmethod
-    def setUpClass(cls):
-        cls.tmp = tempfile.TemporaryDirectory()
-        cls.stl = os.path.join(cls.tmp.name, "box.stl")
-        write_box_stl(cls.stl)
-
-    @classmethod
-    def tearDownClass(cls):
-        cls.tmp.cleanup()
-
+class Volume(BoxStl, unittest.TestCase):
     def test_under_fill_fails_volume_and_coverage(self):
         rep = run_checks(box_gcode(e_scale=0.8, footer_time=False), mesh=self.stl, bed_rect=BED)
         self.assertEqual(status(rep, "volume"), "fail")

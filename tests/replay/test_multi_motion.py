@@ -23,6 +23,7 @@ sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 
 import gcode_replay as gr  # noqa: E402
 import multi_motion as mmod  # noqa: E402
+import test_gcode_replay as tg  # noqa: E402
 
 FIL_AREA = math.pi * (1.75 / 2) ** 2
 
@@ -57,12 +58,7 @@ def job(body: str, *, r0=5.0, r1=5.0, t0=210, t1=210, estimate=None, factor=1.0,
     if not text.endswith("\n"):
         text += "\n"
     text += "M598\n" + extra_footer
-    if estimate is None:
-        rep = gr.analyse(text, gr.Options())
-        estimate = rep["time"]["replayed_s"] * factor
-    if estimate is not False:
-        text += f"; estimated printing time: {estimate:.4f} s\n"
-    return text
+    return tg.with_estimate(text, estimate, factor, digits=4)
 
 
 def clean_layers(layers=3, h=0.2) -> tuple[str, dict]:
@@ -454,8 +450,6 @@ class PlannedExtrusion(unittest.TestCase):
 
 class MeshChecks(unittest.TestCase):
     def test_volume_and_coverage_merge_the_streams(self):
-        import test_gcode_replay as tg
-
         w, h, size = 0.4, 0.2, 10.0
         n = int(size / w)
         body = []

@@ -8,21 +8,11 @@ use common::*;
 #[test]
 fn tube_field_from_outer_gives_rings_close_to_the_exact_ones() {
     let fam = OneFamily::new(circle(0.0, 0.0, 10.0, 512), vec![circle(0.0, 0.0, 5.0, 512)]);
-    let regions = fam.run(&*stage(
-        "use = \"distance-field\"\nfeature = \"outer\"\ncount = 5\ncells = 256",
-    ));
-    assert_tiles(&fam.polygon(), &regions);
+    let regions = fam.tiles("use = \"distance-field\"\nfeature = \"outer\"\ncount = 5\ncells = 256");
     assert_eq!(indices(&regions), vec![0, 1, 2, 3, 4]);
     // r = d / 5 from the outer: band j is the ring 10 - j .. 9 - j.
+    assert_ring_areas(&regions, 10.0, 1.0, 1e-2);
     for r in &regions {
-        let a = 10.0 - r.index as f64;
-        let want = std::f64::consts::PI * (a * a - (a - 1.0) * (a - 1.0));
-        assert!(
-            (r.area() - want).abs() / want < 1e-2,
-            "band {}: {} vs {want}",
-            r.index,
-            r.area()
-        );
         assert!((r.level - r.index as f64 / 4.0).abs() < 1e-12);
     }
 }
@@ -30,8 +20,7 @@ fn tube_field_from_outer_gives_rings_close_to_the_exact_ones() {
 #[test]
 fn step_width_levels_on_the_field() {
     let fam = OneFamily::new(rect(0.0, 0.0, 30.0, 20.0), vec![circle(20.0, 10.0, 4.0, 128)]);
-    let regions = fam.run(&*stage("use = \"distance-field\"\nstep = 0.25"));
-    assert_tiles(&fam.polygon(), &regions);
+    let regions = fam.tiles("use = \"distance-field\"\nstep = 0.25");
     let mut levels: Vec<f64> = regions.iter().map(|r| r.level).collect();
     levels.dedup();
     assert_eq!(levels, vec![0.0, 0.25, 0.5, 0.75, 1.0]);
@@ -49,22 +38,23 @@ fn every_feature_tiles() {
         "use = \"distance-field\"\nfeature = \"centre\"\ncount = 4",
         "use = \"distance-field\"\nfeature = \"point\"\npoint = [0.0, 20.0]\ncell_size = 0.1",
     ] {
-        let regions = fam.run(&*stage(text));
-        assert_tiles(&fam.polygon(), &regions);
+        let regions = fam.tiles(text);
         assert!(regions.len() >= 4, "{text}: {}", regions.len());
     }
     // Thin wall: still tiles, with whatever bands the grid resolves.
     let thin = OneFamily::new(circle(0.0, 0.0, 2.54, 256), vec![circle(0.0, 0.0, 2.235, 256)]);
-    assert_tiles(&thin.polygon(), &thin.run(&*stage("use = \"distance-field\"")));
+    thin.tiles("use = \"distance-field\"");
 }
 
 #[test]
 fn bad_field_options_are_refused() {
-    assert!(build_error("use = \"distance-field\"\nfeature = \"point\"").contains("point"));
-    assert!(build_error("use = \"distance-field\"\ncells = 2").contains("cells"));
-    assert!(build_error("use = \"distance-field\"\nstep = 1.5").contains("step"));
-    assert!(build_error("use = \"distance-field\"\nspacing = -1.0").contains("spacing"));
-    assert!(build_error("use = \"distance-field\"\nspacing = 1.0\nstep = 0.5").contains("spacing"));
+    assert_refused(&[
+        ("use = \"distance-field\"\nfeature = \"point\"", "point"),
+        ("use = \"distance-field\"\ncells = 2", "cells"),
+        ("use = \"distance-field\"\nstep = 1.5", "step"),
+        ("use = \"distance-field\"\nspacing = -1.0", "spacing"),
+        ("use = \"distance-field\"\nspacing = 1.0\nstep = 0.5", "spacing"),
+    ]);
 }
 
 /// Fig. 7 of the distance-field paper: a section whose largest distance from its
@@ -73,22 +63,10 @@ fn bad_field_options_are_refused() {
 /// Eq. 2's composition f1 = d / max(d).
 #[test]
 fn fig_7_iso_contours_every_one_and_a_half_over_a_maximum_of_11_76() {
-    use lamina_discretise::distance_field::{DistanceField, Feature, Levels};
+    use lamina_discretise::distance_field::Levels;
     let a = 11.76;
     let fam = OneFamily::new(rect(-a, -a, 2.0 * a, 2.0 * a), vec![]);
-    let df = DistanceField {
-        feature: Feature::Boundary,
-        point: None,
-        points: Vec::new(),
-        faces: Default::default(),
-        surfaces: Default::default(),
-        width: None,
-        levels: Levels::Spacing(1.5),
-        cells: 256,
-        cell_size: None,
-        around: Default::default(),
-        limits: Default::default(),
-    };
+    let df = lamina_test_support::boundary_field(Levels::Spacing(1.5), 256);
     let iso = df.iso_sets(&fam.polygon(), None).expect("a field");
     assert!((iso.max - 11.76).abs() < 0.05, "max(d) = {}", iso.max);
     // C2-C8 (C1 is the boundary, d = 0).
@@ -96,8 +74,7 @@ fn fig_7_iso_contours_every_one_and_a_half_over_a_maximum_of_11_76() {
     for (k, t) in iso.cut.thresholds.iter().enumerate() {
         assert!((t * iso.max - 1.5 * (k + 1) as f64).abs() < 1e-9);
     }
-    let regions = fam.run(&*stage("use = \"distance-field\"\nspacing = 1.5\ncells = 256"));
-    assert_tiles(&fam.polygon(), &regions);
+    let regions = fam.tiles("use = \"distance-field\"\nspacing = 1.5\ncells = 256");
     assert_eq!(indices(&regions), (0..8).collect::<Vec<_>>());
     for r in &regions {
         let j = r.index as f64;

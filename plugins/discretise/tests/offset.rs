@@ -16,8 +16,7 @@ fn tube(r_out: f64, r_in: f64) -> OneFamily {
 #[test]
 fn default_offsets_the_outer_contour_by_the_nozzle_with_int_ls_over_dn_rings() {
     let fam = tube(10.0, 5.0);
-    let regions = fam.run(&*stage("use = \"offset\"\nnozzle = 0.4"));
-    assert_tiles(&fam.polygon(), &regions);
+    let regions = fam.tiles("use = \"offset\"\nnozzle = 0.4");
     // L_s = 5 (inscribed 512-gons: 4.9998), N_R = int(4.9998 / 0.4) = 12; offsets at
     // 0.4, 0.8, ..., 4.4 mm, the last ring from 5.6 mm down to the bore.
     assert_eq!(regions.len(), 12);
@@ -55,8 +54,7 @@ fn default_offsets_the_outer_contour_by_the_nozzle_with_int_ls_over_dn_rings() {
 #[test]
 fn from_all_moves_the_holes_too_and_meets_halfway() {
     let fam = tube(10.0, 5.0);
-    let regions = fam.run(&*stage("use = \"offset\"\nnozzle = 0.4\nfrom = \"all\""));
-    assert_tiles(&fam.polygon(), &regions);
+    let regions = fam.tiles("use = \"offset\"\nnozzle = 0.4\nfrom = \"all\"");
     // Reach L_s / 2 = 2.4999: int(2.4999 / 0.4) = 6.
     assert_eq!(indices(&regions), (0..6).collect::<Vec<_>>());
     // Ring 0 touches both boundaries: two annuli (outer band and hole band), each
@@ -71,10 +69,7 @@ fn from_all_moves_the_holes_too_and_meets_halfway() {
 #[test]
 fn given_count_and_spacing_are_used() {
     let fam = tube(10.0, 5.0);
-    let regions = fam.run(&*stage(
-        "use = \"offset\"\ncount = 4\nspacing = 0.5\nfrom = \"outer\"",
-    ));
-    assert_tiles(&fam.polygon(), &regions);
+    let regions = fam.tiles("use = \"offset\"\ncount = 4\nspacing = 0.5\nfrom = \"outer\"");
     assert_eq!(indices(&regions), vec![0, 1, 2, 3]);
     // The core takes everything beyond 1.5 mm.
     let core = regions.iter().find(|r| r.index == 3).expect("core");
@@ -97,8 +92,7 @@ fn square_with_holes_tiles() {
         "use = \"offset\"\ncount = 10\nspacing = 0.4\njoin = \"miter\"",
         "use = \"offset\"\ncount = 7\nfrom = \"outer\"\njoin = \"bevel\"",
     ] {
-        let regions = fam.run(&*stage(text));
-        assert_tiles(&fam.polygon(), &regions);
+        let regions = fam.tiles(text);
         assert!(regions.len() > 3, "{text}");
     }
 }
@@ -107,66 +101,38 @@ fn square_with_holes_tiles() {
 fn thin_wall_vanishes_into_one_region() {
     // tube_round.stl: OD 5.08 mm, ID 4.47 mm, a 0.305 mm wall.
     let fam = tube(2.54, 2.235);
-    let default = fam.run(&*stage("use = \"offset\"\nnozzle = 0.4"));
-    assert_tiles(&fam.polygon(), &default);
+    let default = fam.tiles("use = \"offset\"\nnozzle = 0.4");
     assert_eq!(default.len(), 1);
     assert_eq!(default[0].count, 1);
-    let ten = fam.run(&*stage("use = \"offset\"\ncount = 10\nspacing = 0.4"));
-    assert_tiles(&fam.polygon(), &ten);
+    let ten = fam.tiles("use = \"offset\"\ncount = 10\nspacing = 0.4");
     assert_eq!(indices(&ten), vec![0]);
     assert_eq!(ten[0].level, 0.0);
     // With a small step the wall holds a few rings before the offsets reach the bore
     // (0.305 / 0.05: six rings and the remainder), or meet halfway from both sides.
-    let fine = fam.run(&*stage("use = \"offset\"\ncount = 10\nspacing = 0.05"));
-    assert_tiles(&fam.polygon(), &fine);
+    let fine = fam.tiles("use = \"offset\"\ncount = 10\nspacing = 0.05");
     assert_eq!(indices(&fine), (0..7).collect::<Vec<_>>());
-    let both = fam.run(&*stage(
-        "use = \"offset\"\ncount = 10\nspacing = 0.05\nfrom = \"all\"",
-    ));
-    assert_tiles(&fam.polygon(), &both);
+    let both = fam.tiles("use = \"offset\"\ncount = 10\nspacing = 0.05\nfrom = \"all\"");
     assert_eq!(indices(&both), vec![0, 1, 2, 3]);
 }
 
 #[test]
 fn dumbbell_splits_into_islands() {
-    let outer = Contour::new(vec![
-        Point2::new(0.0, 0.0),
-        Point2::new(10.0, 0.0),
-        Point2::new(10.0, 4.5),
-        Point2::new(20.0, 4.5),
-        Point2::new(20.0, 0.0),
-        Point2::new(30.0, 0.0),
-        Point2::new(30.0, 10.0),
-        Point2::new(20.0, 10.0),
-        Point2::new(20.0, 5.5),
-        Point2::new(10.0, 5.5),
-        Point2::new(10.0, 10.0),
-        Point2::new(0.0, 10.0),
-    ]);
+    let outer = dumbbell();
     let fam = OneFamily::new(outer, vec![]);
-    let regions = fam.run(&*stage("use = \"offset\"\ncount = 6\nspacing = 0.75"));
-    assert_tiles(&fam.polygon(), &regions);
+    let regions = fam.tiles("use = \"offset\"\ncount = 6\nspacing = 0.75");
     // The 1 mm bridge is gone after the first ring: every later ring and the core are
     // two islands.
     for j in 1..6 {
         assert_eq!(regions.iter().filter(|r| r.index == j).count(), 2, "ring {j}");
     }
     // Default: reach = inradius 5, N_R = int(5 / 0.4) = 12.
-    let regions = fam.run(&*stage("use = \"offset\""));
-    assert_tiles(&fam.polygon(), &regions);
+    let regions = fam.tiles("use = \"offset\"");
     assert_eq!(regions[0].count, 12);
 }
 
 #[test]
 fn degenerate_families_fall_back_without_panicking() {
-    let flat = OneFamily::new(
-        Contour::new(vec![
-            Point2::new(0.0, 0.0),
-            Point2::new(1.0, 0.0),
-            Point2::new(2.0, 0.0),
-        ]),
-        vec![],
-    );
+    let flat = flat_family();
     let regions = flat.run(&*stage("use = \"offset\""));
     assert_eq!(regions.len(), 1);
     // Two squares touching at a corner, as one self-touching contour.
@@ -183,18 +149,19 @@ fn degenerate_families_fall_back_without_panicking() {
         ]),
         vec![],
     );
-    let regions = touching.run(&*stage("use = \"offset\"\ncount = 3\nspacing = 0.1"));
-    assert_tiles(&touching.polygon(), &regions);
+    touching.tiles("use = \"offset\"\ncount = 3\nspacing = 0.1");
     let tiny = OneFamily::new(rect(0.0, 0.0, 1e-9, 1e-9), vec![]);
     assert!(!tiny.run(&*stage("use = \"offset\"")).is_empty());
 }
 
 #[test]
 fn bad_options_are_refused() {
-    assert!(build_error("use = \"offset\"\nnozzle = -1.0").contains("nozzle"));
-    assert!(build_error("use = \"offset\"\ncount = 0").contains("count"));
+    assert_refused(&[
+        ("use = \"offset\"\nnozzle = -1.0", "nozzle"),
+        ("use = \"offset\"\ncount = 0", "count"),
+        ("use = \"offset\"\nspacing = 0.0", "spacing"),
+    ]);
     assert!(!build_error("use = \"offset\"\nfrom = \"inner\"").is_empty());
-    assert!(build_error("use = \"offset\"\nspacing = 0.0").contains("spacing"));
 }
 
 /// A circle as an STL slice delivers it: the side of a triangulated cylinder cut at a
@@ -223,8 +190,7 @@ fn tube_ring_split_into_pieces() {
             ("use = \"offset\"\nnozzle = 0.4", 12),
             ("use = \"step-width\"\nstep = 0.125", 9),
         ] {
-            let regions = fam.run(&*stage(text));
-            assert_tiles(&fam.polygon(), &regions);
+            let regions = fam.tiles(text);
             assert_eq!(indices(&regions), (0..rings).collect::<Vec<_>>(), "{text}");
             for j in 0..rings {
                 let ring: Vec<_> = regions.iter().filter(|r| r.index == j).collect();

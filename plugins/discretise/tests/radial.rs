@@ -29,31 +29,21 @@ fn one_ring_each(regions: &[lamina_core::SubRegion], n: usize, holes: usize) {
 #[test]
 fn concentric_tube_divides_each_radial_line_equally() {
     let fam = OneFamily::new(circle(0.0, 0.0, 10.0, 360), vec![circle(0.0, 0.0, 5.0, 360)]);
-    let regions = fam.run(&*stage("use = \"radial\"\ncount = 10"));
-    assert_tiles(&fam.polygon(), &regions);
+    let regions = fam.tiles("use = \"radial\"\ncount = 10");
     one_ring_each(&regions, 10, 1);
+    assert_ring_areas(&regions, 10.0, 0.5, 2e-3);
     for r in &regions {
-        let (a, b) = (10.0 - 0.5 * r.index as f64, 9.5 - 0.5 * r.index as f64);
-        let want = PI * (a * a - b * b);
-        assert!(
-            (r.area() - want).abs() / want < 2e-3,
-            "ring {}: {} vs {want}",
-            r.index,
-            r.area()
-        );
         assert!((r.level - r.index as f64 / 9.0).abs() < 1e-12);
     }
     // Default N_R = int(L_s / D_N) = int(5 / 0.4) = 12.
-    let regions = fam.run(&*stage("use = \"radial\""));
-    assert_tiles(&fam.polygon(), &regions);
+    let regions = fam.tiles("use = \"radial\"");
     assert_eq!(regions[0].count, 12);
 }
 
 #[test]
 fn eccentric_hole_gives_rings_thin_on_the_near_side() {
     let fam = OneFamily::new(circle(0.0, 0.0, 10.0, 360), vec![circle(4.0, 0.0, 3.0, 180)]);
-    let regions = fam.run(&*stage("use = \"radial\"\ncount = 8"));
-    assert_tiles(&fam.polygon(), &regions);
+    let regions = fam.tiles("use = \"radial\"\ncount = 8");
     one_ring_each(&regions, 8, 1);
     // Along +x the wall is 3 mm, along -x 11 mm: ring 0 spans 3/8 and 11/8 mm there.
     let ring0 = &regions[0].polygon;
@@ -77,24 +67,13 @@ fn several_holes_and_no_holes_tile() {
         "use = \"radial\"",
         "use = \"radial\"\ncount = 3\ncells_around = 6",
     ] {
-        let regions = fam.run(&*stage(text));
-        assert_tiles(&fam.polygon(), &regions);
+        let regions = fam.tiles(text);
         assert!(regions.len() >= 3, "{text}");
     }
     // A disc without holes grades toward its centre: scaled copies of the outline.
     let disc = OneFamily::new(circle(0.0, 0.0, 10.0, 360), vec![]);
-    let regions = disc.run(&*stage("use = \"radial\"\ncount = 5"));
-    assert_tiles(&disc.polygon(), &regions);
-    for r in &regions {
-        let (a, b) = (10.0 - 2.0 * r.index as f64, 8.0 - 2.0 * r.index as f64);
-        let want = PI * (a * a - b * b);
-        assert!(
-            (r.area() - want).abs() / want < 5e-3,
-            "ring {}: {} vs {want}",
-            r.index,
-            r.area()
-        );
-    }
+    let regions = disc.tiles("use = \"radial\"\ncount = 5");
+    assert_ring_areas(&regions, 10.0, 2.0, 5e-3);
     assert!(
         regions
             .iter()
@@ -102,22 +81,9 @@ fn several_holes_and_no_holes_tile() {
             .is_some_and(|r| r.polygon.holes.is_empty())
     );
     // A dumbbell (not star-shaped about its centre) still tiles.
-    let outer = Contour::new(vec![
-        Point2::new(0.0, 0.0),
-        Point2::new(10.0, 0.0),
-        Point2::new(10.0, 4.5),
-        Point2::new(20.0, 4.5),
-        Point2::new(20.0, 0.0),
-        Point2::new(30.0, 0.0),
-        Point2::new(30.0, 10.0),
-        Point2::new(20.0, 10.0),
-        Point2::new(20.0, 5.5),
-        Point2::new(10.0, 5.5),
-        Point2::new(10.0, 10.0),
-        Point2::new(0.0, 10.0),
-    ]);
+    let outer = dumbbell();
     let bell = OneFamily::new(outer, vec![]);
-    assert_tiles(&bell.polygon(), &bell.run(&*stage("use = \"radial\"\ncount = 6")));
+    bell.tiles("use = \"radial\"\ncount = 6");
 }
 
 /// Without holes the radial lines end on the medial axis, not on one pole. In a
@@ -130,8 +96,7 @@ fn several_holes_and_no_holes_tile() {
 #[test]
 fn without_holes_lines_end_on_the_medial_axis() {
     let fam = OneFamily::new(rect(0.0, 0.0, 40.0, 10.0), vec![]);
-    let regions = fam.run(&*stage("use = \"radial\"\ncount = 5"));
-    assert_tiles(&fam.polygon(), &regions);
+    let regions = fam.tiles("use = \"radial\"\ncount = 5");
     assert_eq!(indices(&regions), vec![0, 1, 2, 3, 4]);
     for j in 0..5 {
         let got: f64 = regions.iter().filter(|r| r.index == j).map(|r| r.area()).sum();
@@ -150,8 +115,7 @@ fn cells_split_every_ring_around_and_still_tile() {
         "use = \"offset\"\ncount = 4\ncells_around = 8\ncell_cuts = \"arc\"",
         "use = \"distance-field\"\nfeature = \"outer\"\ncount = 4\ncells_around = 8\ncell_cuts = \"arc\"",
     ] {
-        let regions = fam.run(&*stage(text));
-        assert_tiles(&fam.polygon(), &regions);
+        let regions = fam.tiles(text);
         for j in 0..4 {
             let ring: Vec<_> = regions.iter().filter(|r| r.index == j).collect();
             let cells: Vec<_> = ring.iter().map(|r| r.cell).collect();
@@ -165,10 +129,7 @@ fn cells_split_every_ring_around_and_still_tile() {
         }
     }
     // About 2 mm long along the middle of each 1.25 mm ring.
-    let regions = fam.run(&*stage(
-        "use = \"offset\"\ncount = 4\nfrom = \"outer\"\ncell_length = 2.0",
-    ));
-    assert_tiles(&fam.polygon(), &regions);
+    let regions = fam.tiles("use = \"offset\"\ncount = 4\nfrom = \"outer\"\ncell_length = 2.0");
     let ring0 = regions.iter().filter(|r| r.index == 0).count();
     let want = (PI * (10.0 + 8.75) / 2.0).round() as usize;
     assert!(ring0.abs_diff(want) <= 1, "{ring0} cells vs {want}");
@@ -182,10 +143,7 @@ fn cells_split_every_ring_around_and_still_tile() {
 fn cells_have_equal_arc_lengths_along_their_own_contour() {
     let fam = OneFamily::new(circle(0.0, 0.0, 10.0, 720), vec![circle(4.0, 0.0, 3.0, 360)]);
     // L_s = 3: rings 10..9 and 9..8 are annuli about the origin, the last reaches the hole.
-    let regions = fam.run(&*stage(
-        "use = \"offset\"\nnozzle = 1.0\ncells_around = 8\ncell_cuts = \"arc\"",
-    ));
-    assert_tiles(&fam.polygon(), &regions);
+    let regions = fam.tiles("use = \"offset\"\nnozzle = 1.0\ncells_around = 8\ncell_cuts = \"arc\"");
     for (j, radius) in [(0, 10.0), (1, 9.0)] {
         let ring: Vec<_> = regions.iter().filter(|r| r.index == j).collect();
         assert_eq!(ring.len(), 8, "ring {j}");
@@ -208,19 +166,21 @@ fn cells_have_equal_arc_lengths_along_their_own_contour() {
         }
     }
     // With a cell length instead of a count, the cells still tile.
-    let regions = fam.run(&*stage(
-        "use = \"offset\"\nnozzle = 1.0\ncell_length = 3.0\ncell_cuts = \"arc\"",
-    ));
-    assert_tiles(&fam.polygon(), &regions);
+    fam.tiles("use = \"offset\"\nnozzle = 1.0\ncell_length = 3.0\ncell_cuts = \"arc\"");
 }
 
 #[test]
 fn bad_radial_and_cell_options_are_refused() {
-    assert!(build_error("use = \"radial\"\ncount = 0").contains("count"));
-    assert!(build_error("use = \"radial\"\nnozzle = 0.0").contains("nozzle"));
-    assert!(build_error("use = \"offset\"\ncells_around = 0").contains("cells_around"));
-    assert!(build_error("use = \"offset\"\ncell_length = -1.0").contains("cell_length"));
-    assert!(build_error("use = \"radial\"\ncells_around = 4\ncell_length = 1.0").contains("not both"));
+    assert_refused(&[
+        ("use = \"radial\"\ncount = 0", "count"),
+        ("use = \"radial\"\nnozzle = 0.0", "nozzle"),
+        ("use = \"offset\"\ncells_around = 0", "cells_around"),
+        ("use = \"offset\"\ncell_length = -1.0", "cell_length"),
+        (
+            "use = \"radial\"\ncells_around = 4\ncell_length = 1.0",
+            "not both",
+        ),
+    ]);
 }
 
 #[test]
@@ -233,18 +193,10 @@ fn tiny_and_degenerate_families_do_not_panic() {
     ] {
         let tiny = OneFamily::new(circle(0.0, 0.0, 1e-6, 64), vec![circle(0.0, 0.0, 5e-7, 64)]);
         assert!(!tiny.run(&*stage(text)).is_empty(), "{text}");
-        let flat = OneFamily::new(
-            Contour::new(vec![
-                Point2::new(0.0, 0.0),
-                Point2::new(1.0, 0.0),
-                Point2::new(2.0, 0.0),
-            ]),
-            vec![],
-        );
+        let flat = flat_family();
         assert_eq!(flat.run(&*stage(text)).len(), 1, "{text}");
         // A hole touching the outer contour at a point.
         let touching = OneFamily::new(rect(0.0, 0.0, 10.0, 10.0), vec![rect(0.0, 4.0, 2.0, 2.0)]);
-        let regions = touching.run(&*stage(text));
-        assert_tiles(&touching.polygon(), &regions);
+        touching.tiles(text);
     }
 }

@@ -8,8 +8,7 @@ use common::*;
 #[test]
 fn quarter_step_on_a_tube_gives_five_bands_at_half_steps() {
     let fam = OneFamily::new(circle(0.0, 0.0, 10.0, 512), vec![circle(0.0, 0.0, 2.0, 512)]);
-    let regions = fam.run(&*stage("use = \"step-width\"\nstep = 0.25\nfrom = \"outer\""));
-    assert_tiles(&fam.polygon(), &regions);
+    let regions = fam.tiles("use = \"step-width\"\nstep = 0.25\nfrom = \"outer\"");
     assert_eq!(indices(&regions), vec![0, 1, 2, 3, 4]);
     let levels: Vec<f64> = regions.iter().map(|r| r.level).collect();
     assert_eq!(levels, vec![0.0, 0.25, 0.5, 0.75, 1.0]);
@@ -37,10 +36,7 @@ fn quarter_step_on_a_tube_gives_five_bands_at_half_steps() {
 fn grading_width_and_power_move_the_boundaries() {
     let fam = OneFamily::new(rect(0.0, 0.0, 40.0, 40.0), vec![]);
     // f = (d / 4)^2: thresholds 0.25, 0.75 on f are d = 2 mm and d = 3.46 mm.
-    let regions = fam.run(&*stage(
-        "use = \"step-width\"\nstep = 0.5\nwidth = 4.0\npower = 2.0",
-    ));
-    assert_tiles(&fam.polygon(), &regions);
+    let regions = fam.tiles("use = \"step-width\"\nstep = 0.5\nwidth = 4.0\npower = 2.0");
     assert_eq!(indices(&regions), vec![0, 1, 2]);
     let d1: f64 = 2.0;
     let d2 = 4.0 * 0.75f64.sqrt();
@@ -69,8 +65,7 @@ fn step_width_tiles_awkward_families() {
         "use = \"step-width\"\nstep = 0.1\nfrom = \"outer\"",
         "use = \"step-width\"\nstep = 1.0",
     ] {
-        let regions = fam.run(&*stage(text));
-        assert_tiles(&fam.polygon(), &regions);
+        fam.tiles(text);
     }
 }
 
@@ -79,8 +74,7 @@ fn step_width_tiles_awkward_families() {
 #[test]
 fn step_that_does_not_divide_one_ends_at_one() {
     let fam = OneFamily::new(rect(0.0, 0.0, 40.0, 40.0), vec![]);
-    let regions = fam.run(&*stage("use = \"step-width\"\nstep = 0.3\nwidth = 10.0"));
-    assert_tiles(&fam.polygon(), &regions);
+    let regions = fam.tiles("use = \"step-width\"\nstep = 0.3\nwidth = 10.0");
     assert_eq!(indices(&regions), vec![0, 1, 2, 3]);
     let levels: Vec<f64> = regions.iter().map(|r| r.level).collect();
     assert_eq!(levels, vec![0.0, 0.3, 0.6, 1.0]);

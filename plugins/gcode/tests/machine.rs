@@ -6,17 +6,17 @@
 //! of the moves.
 
 use std::collections::BTreeMap;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 mod support;
 
-use support::export;
+use lamina_test_support::Rng;
+use support::{export, layer_plan, run_info};
 
 use lamina_core::machine::load::MachineSpec;
 use lamina_core::machine::{BedPlacement, Machine};
 use lamina_core::{
-    BBox2, Composition, LayerPlan, Material, PartInfo, PathKind, Point2, Registry, RunInfo, StageKind,
-    TimedPoint, Toolpath,
+    BBox2, Composition, LayerPlan, PathKind, Point2, Registry, RunInfo, StageKind, TimedPoint, Toolpath,
 };
 
 fn machine(name: &str) -> Machine {
@@ -36,37 +36,12 @@ const PROFILES: [&str; 3] = ["marlin-mixing-2in1", "marlin-toolchanger-2", "rrf-
 const HALF: f64 = 20.0;
 
 fn info(machine: Option<Machine>, names: [&str; 2]) -> RunInfo {
-    let mat = |name: &str, colour| Material {
-        name: name.into(),
-        colour,
-        layer_thickness: None,
-    };
-    RunInfo {
-        base_dir: PathBuf::from("."),
-        materials: vec![mat(names[0], [255, 0, 0]), mat(names[1], [0, 255, 0])],
-        parts: vec![PartInfo {
-            name: names[0].to_string() + " part",
-            materials: vec![0, 1],
-            mesh: 0,
-            z_min: 0.0,
-            z_max: 1.0,
-        }],
-        z_min: 0.0,
-        z_max: 1.0,
-        xy_bounds: BBox2::from_points([Point2::new(-HALF, -HALF), Point2::new(HALF, HALF)]),
+    run_info(
+        names,
+        names[0].to_string() + " part",
+        BBox2::from_points([Point2::new(-HALF, -HALF), Point2::new(HALF, HALF)]),
         machine,
-    }
-}
-
-/// Small deterministic generator (xorshift64*).
-struct Rng(u64);
-impl Rng {
-    fn next(&mut self) -> f64 {
-        self.0 ^= self.0 >> 12;
-        self.0 ^= self.0 << 25;
-        self.0 ^= self.0 >> 27;
-        (self.0.wrapping_mul(0x2545_F491_4F6C_DD1D) >> 11) as f64 / (1u64 << 53) as f64
-    }
+    )
 }
 
 /// Five layers of graded paths inside the square, each path's tool the material it is
@@ -103,18 +78,7 @@ fn layers(seed: u64) -> Vec<LayerPlan> {
                     }
                 })
                 .collect();
-            LayerPlan {
-                index,
-                z: 0.2 * (index + 1) as f64,
-                thickness: 0.2,
-                material_region: None,
-                parts: Vec::new(),
-                toolpaths,
-                build_time: Some(t),
-                sequential_time: None,
-                fill: None,
-                diagnostics: Vec::new(),
-            }
+            layer_plan(index, toolpaths, t)
         })
         .collect()
 }

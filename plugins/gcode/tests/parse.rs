@@ -4,45 +4,14 @@
 
 mod support;
 
-use std::path::PathBuf;
+use lamina_test_support::Rng;
 
 use lamina_core::{
-    Composition, LayerPlan, Material, PartInfo, PathKind, Point2, Registry, RunInfo, StageKind, TimedPoint,
-    Toolpath,
+    Composition, LayerPlan, PathKind, Point2, Registry, RunInfo, StageKind, TimedPoint, Toolpath,
 };
 
 fn info() -> RunInfo {
-    let mat = |name: &str, colour| Material {
-        name: name.into(),
-        colour,
-        layer_thickness: None,
-    };
-    RunInfo {
-        base_dir: PathBuf::from("."),
-        materials: vec![mat("red", [255, 0, 0]), mat("green", [0, 255, 0])],
-        parts: vec![PartInfo {
-            name: "p".into(),
-            materials: vec![0, 1],
-            mesh: 0,
-            z_min: 0.0,
-            z_max: 1.0,
-        }],
-        z_min: 0.0,
-        z_max: 1.0,
-        xy_bounds: lamina_core::BBox2::EMPTY,
-        machine: None,
-    }
-}
-
-/// Small deterministic generator (xorshift64*), so the layouts repeat.
-struct Rng(u64);
-impl Rng {
-    fn next(&mut self) -> f64 {
-        self.0 ^= self.0 >> 12;
-        self.0 ^= self.0 << 25;
-        self.0 ^= self.0 >> 27;
-        (self.0.wrapping_mul(0x2545_F491_4F6C_DD1D) >> 11) as f64 / (1u64 << 53) as f64
-    }
+    support::run_info(["red", "green"], "p".into(), lamina_core::BBox2::EMPTY, None)
 }
 
 /// Layers of random extrusions (two tools, graded compositions), travels and pauses.
@@ -96,18 +65,7 @@ fn layers(seed: u64) -> Vec<LayerPlan> {
                     });
                 }
             }
-            LayerPlan {
-                index,
-                z: 0.2 * (index + 1) as f64,
-                thickness: 0.2,
-                material_region: None,
-                parts: Vec::new(),
-                toolpaths,
-                build_time: Some(t),
-                sequential_time: None,
-                fill: None,
-                diagnostics: Vec::new(),
-            }
+            support::layer_plan(index, toolpaths, t)
         })
         .collect()
 }

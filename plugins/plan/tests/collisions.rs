@@ -13,19 +13,7 @@ use lamina_core::{
 };
 use lamina_plan::route::{Move, ToolSpec};
 use lamina_plan::sim::{self, Priority, Settings};
-
-struct Rng(u64);
-impl Rng {
-    fn next(&mut self) -> f64 {
-        self.0 ^= self.0 >> 12;
-        self.0 ^= self.0 << 25;
-        self.0 ^= self.0 >> 27;
-        (self.0.wrapping_mul(0x2545_F491_4F6C_DD1D) >> 11) as f64 / (1u64 << 53) as f64
-    }
-    fn range(&mut self, a: f64, b: f64) -> f64 {
-        a + (b - a) * self.next()
-    }
-}
+use lamina_test_support::Rng;
 
 fn build(table: &str) -> lamina_core::Result<AnyStage> {
     use lamina_plan as _;

@@ -39,6 +39,14 @@ pub fn build_error(text: &str) -> String {
     }
 }
 
+/// Asserts that each `(table, key)` is refused when built, with an error naming `key`.
+pub fn assert_refused(cases: &[(&str, &str)]) {
+    for (text, key) in cases {
+        let err = build_error(text);
+        assert!(err.contains(key), "{text:?}: {err}");
+    }
+}
+
 /// One layer holding one family: `outer` and its holes.
 pub struct OneFamily {
     pub info: RunInfo,
@@ -101,6 +109,14 @@ impl OneFamily {
         self.try_run(d).expect("discretises")
     }
 
+    /// The regions of the discretiser `text` builds, asserted to tile the family
+    /// ([`assert_tiles`]).
+    pub fn tiles(&self, text: &str) -> Vec<SubRegion> {
+        let regions = self.run(&*stage(text));
+        assert_tiles(&self.polygon(), &regions);
+        regions
+    }
+
     #[allow(dead_code)]
     pub fn try_run(&self, d: &dyn Discretiser) -> lamina_core::Result<Vec<SubRegion>> {
         let ctx = FamilyContext {
@@ -139,4 +155,55 @@ pub fn indices(regions: &[SubRegion]) -> Vec<usize> {
     let mut v: Vec<usize> = regions.iter().map(|r| r.index).collect();
     v.dedup();
     v
+}
+
+/// Asserts that each region is the ring of width `width` whose outer radius is
+/// `outer - width * index` (concentric about the origin), within `tol` of its area.
+pub fn assert_ring_areas(regions: &[SubRegion], outer: f64, width: f64, tol: f64) {
+    for r in regions {
+        let a = outer - width * r.index as f64;
+        let b = a - width;
+        let want = std::f64::consts::PI * (a * a - b * b);
+        assert!(
+            (r.area() - want).abs() / want < tol,
+            "ring {}: {} vs {want}",
+            r.index,
+            r.area()
+        );
+    }
+}
+
+/// Two 10 x 10 squares joined by a bridge 10 long and 1 wide: not star-shaped, and
+/// split into two islands by the first ring thicker than half a millimetre.
+pub fn dumbbell() -> Contour {
+    Contour::new(
+        [
+            (0.0, 0.0),
+            (10.0, 0.0),
+            (10.0, 4.5),
+            (20.0, 4.5),
+            (20.0, 0.0),
+            (30.0, 0.0),
+            (30.0, 10.0),
+            (20.0, 10.0),
+            (20.0, 5.5),
+            (10.0, 5.5),
+            (10.0, 10.0),
+            (0.0, 10.0),
+        ]
+        .map(|(x, y)| lamina_core::Point2::new(x, y))
+        .to_vec(),
+    )
+}
+
+/// A family of no area: three points on a line.
+pub fn flat_family() -> OneFamily {
+    OneFamily::new(
+        Contour::new(vec![
+            lamina_core::Point2::new(0.0, 0.0),
+            lamina_core::Point2::new(1.0, 0.0),
+            lamina_core::Point2::new(2.0, 0.0),
+        ]),
+        vec![],
+    )
 }

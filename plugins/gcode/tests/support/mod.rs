@@ -1,11 +1,13 @@
-//! What the G-code tests share: the exporter run in memory on given layer plans.
+//! What the G-code tests share: the exporter run in memory on given layer plans, the
+//! run of one part of two materials, and a layer plan of given toolpaths.
 
 use std::io::Write;
 use std::path::Path;
 use std::sync::{Arc, Mutex};
 
+use lamina_core::machine::Machine;
 use lamina_core::stage::{AnyStage, ExportContext, OutputFiles};
-use lamina_core::{LayerPlan, Registry, RunInfo, StageKind};
+use lamina_core::{BBox2, LayerPlan, Material, PartInfo, Registry, RunInfo, StageKind, Toolpath};
 
 /// One in-memory file every output of the exporter writes into.
 #[derive(Clone, Default)]
@@ -72,4 +74,46 @@ pub fn export(
     sink.finish(info, &mut files)?;
     let bytes = buffer.0.lock().expect("lock").clone();
     Ok(String::from_utf8(bytes).expect("utf-8"))
+}
+
+/// A run of one part (`part`, 1 mm high) of two materials named `names` (red and green),
+/// within `xy_bounds`, on `machine`.
+pub fn run_info(names: [&str; 2], part: String, xy_bounds: BBox2, machine: Option<Machine>) -> RunInfo {
+    let mat = |name: &str, colour| Material {
+        name: name.into(),
+        colour,
+        layer_thickness: None,
+    };
+    RunInfo {
+        base_dir: std::path::PathBuf::from("."),
+        materials: vec![mat(names[0], [255, 0, 0]), mat(names[1], [0, 255, 0])],
+        parts: vec![PartInfo {
+            name: part,
+            materials: vec![0, 1],
+            mesh: 0,
+            z_min: 0.0,
+            z_max: 1.0,
+        }],
+        z_min: 0.0,
+        z_max: 1.0,
+        xy_bounds,
+        machine,
+    }
+}
+
+/// Layer `index` of 0.2 mm layers (its top at 0.2 (index + 1)), of `toolpaths` that
+/// take `build_time` seconds.
+pub fn layer_plan(index: usize, toolpaths: Vec<Toolpath>, build_time: f64) -> LayerPlan {
+    LayerPlan {
+        index,
+        z: 0.2 * (index + 1) as f64,
+        thickness: 0.2,
+        material_region: None,
+        parts: Vec::new(),
+        toolpaths,
+        build_time: Some(build_time),
+        sequential_time: None,
+        fill: None,
+        diagnostics: Vec::new(),
+    }
 }
