@@ -155,7 +155,8 @@ wall = time.perf_counter() - start
 import resource
 # The only child of this process: its peak RSS.
 usage = resource.getrusage(resource.RUSAGE_CHILDREN)
-sys.stdout.write(json.dumps({"wall": wall, "rss_kib": usage.ru_maxrss, "code": proc.returncode,
+sys.stdout.write(json.dumps({"wall": wall, "rss_kib": usage.ru_maxrss, "cpu": usage.ru_utime + usage.ru_stime,
+                             "code": proc.returncode,
                              "out": out.decode(errors="replace"), "err": err.decode(errors="replace")}))
 """
 
@@ -163,6 +164,13 @@ sys.stdout.write(json.dumps({"wall": wall, "rss_kib": usage.ru_maxrss, "code": p
 def measure(cmd, cwd=None):
     """Runs `cmd` in a fresh measuring process: whole-process wall time, peak RSS (MiB),
     stdout; raises on failure."""
+    r = measure_all(cmd, cwd)
+    return r["wall"], r["rss"], r["out"]
+
+
+def measure_all(cmd, cwd=None):
+    """`measure` with the process's CPU time (user + system, all threads) as well: a
+    dict of wall, cpu, rss (MiB) and out."""
     wall, out, err, code = run_process([sys.executable, "-c", MEASURE] + [str(c) for c in cmd], cwd=cwd)
     if code != 0:
         raise RuntimeError(f"measuring {Path(str(cmd[0])).name} failed: {err.strip()[-300:]}")
@@ -171,19 +179,22 @@ def measure(cmd, cwd=None):
         lines = [l.strip() for l in r["err"].splitlines() if l.strip()]
         first = next((l for l in lines if l.startswith("error")), lines[-1] if lines else "no message")
         raise RuntimeError(f"{Path(str(cmd[0])).name} exited {r['code']}: {first}")
-    return r["wall"], r["rss_kib"] / 1024.0, r["out"]
+    return {"wall": r["wall"], "cpu": r["cpu"], "rss": r["rss_kib"] / 1024.0, "out": r["out"]}
 
 
 def repeat(cmd, runs, cwd=None):
     """Median wall, median peak RSS and the stdout of each run, after one warm-up."""
-    measure(cmd, cwd)
-    walls, rss, outs = [], [], []
-    for _ in range(runs):
-        w, m, o = measure(cmd, cwd)
-        walls.append(w)
-        rss.append(m)
-        outs.append(o)
-    return statistics.median(walls), statistics.median(rss), outs
+    r = repeat_all(cmd, runs, cwd)
+    return r["wall"], r["rss"], r["outs"]
+
+
+def repeat_all(cmd, runs, cwd=None):
+    """Medians of wall, CPU and peak RSS over `runs` runs after one warm-up, and the
+    stdout of each run."""
+    measure_all(cmd, cwd)
+    got = [measure_all(cmd, cwd) for _ in range(runs)]
+    return {"wall": statistics.median(g["wall"] for g in got), "cpu": statistics.median(g["cpu"] for g in got),
+            "rss": statistics.median(g["rss"] for g in got), "outs": [g["out"] for g in got]}
 
 
 def lamina_timings(out):
@@ -383,12 +394,38 @@ def main():
             else:
                 base = None
                 notes.append("lamina has no gcode exporter yet: G-code comparison skipped")
-            if has["prusa-slicer"] and base:
+            # The graded two-tool job a user runs (pipelines/benchy-two-tools.toml: offset
+            # sub-regions, Z and X-Y grading, concurrent plan, G-code), whole process, at
+            # one thread and at every core.
+            graded = None
+            if has_gcode:
+                print("graded two-tool 3DBenchy job (pipelines/benchy-two-tools.toml)", flush=True)
+                job = [lamina, "run", "--quiet", "--out", work / "graded", ROOT / "pipelines" / "benchy-two-tools.toml",
+                       "--set", f'model.file="{benchy}"']
+                try:
+                    one = repeat_all(job[:2] + ["--threads", "1"] + job[2:], runs)
+                    every = repeat_all(job, runs)
+                    graded = every["wall"]
+                    cores = os.cpu_count() or 1
+                    row("graded two-tool 3DBenchy", "lamina 1 thread", one["wall"], one["rss"], one["wall"],
+                        detail=f"whole process, CPU {one['cpu']:.2f} s")
+                    row("graded two-tool 3DBenchy", f"lamina {cores} threads", every["wall"], every["rss"],
+                        every["wall"], detail=f"whole process, CPU {every['cpu']:.2f} s, "
+                                              f"{one['wall'] / every['wall']:.2f}x the 1-thread speed")
+                except RuntimeError as e:
+                    notes.append(f"lamina graded job: {e}")
+            if has["prusa-slicer"] and (base or graded):
                 cmd = ["prusa-slicer", "--export-gcode", "--layer-height", "0.2", "--perimeters", "3",
                        "--fill-density", "20%", "--output", work / "prusa.gcode", benchy]
                 try:
-                    w, m, _ = repeat(cmd, runs)
-                    row("G-code 3DBenchy", "prusa-slicer", w, m, w, base, detail="whole process")
+                    r = repeat_all(cmd, runs)
+                    w, m = r["wall"], r["rss"]
+                    if base:
+                        row("G-code 3DBenchy", "prusa-slicer", w, m, w, base, detail="whole process")
+                    if graded:
+                        row("graded two-tool 3DBenchy", "prusa-slicer", w, m, w, graded,
+                            detail=f"its plain job, whole process, CPU {r['cpu']:.2f} s; "
+                                   f"target: lamina <= 0.2x, a ratio >= 5x")
                 except RuntimeError as e:
                     notes.append(f"prusa-slicer: {e}")
     else:
