@@ -62,24 +62,21 @@ impl Engine {
                 continue;
             }
             let mi = part_mesh[pi];
-            if cut[mi].is_none()
-                && let Some((layer, tree)) = selections.take_cut(mi, slot.index)
-            {
-                diagnostics.extend(layer.warnings.iter().map(|w| {
-                    Diagnostic::warning(StageKind::Slice, w.as_str())
-                        .at_layer(slot.index, slot.z)
-                        .in_part(&p.name)
-                }));
-                cut[mi] = Some((layer, tree));
-            }
             if cut[mi].is_none() {
-                let layer = timings
-                    .time(StageKind::Slice, || prepared[mi].slice(slot))
-                    .map_err(|e| e.in_part(&p.name))?;
-                let tree = timings
-                    .time(StageKind::Sort, || self.sorter.sort(&layer))
-                    .map_err(|e| e.in_part(&p.name))?;
-                check_tree(&layer, &tree).map_err(|e| e.in_part(&p.name))?;
+                // The cut the `family_at` pre-pass made, else a new one.
+                let (layer, tree) = match selections.take_cut(mi, slot.index) {
+                    Some(made) => made,
+                    None => {
+                        let layer = timings
+                            .time(StageKind::Slice, || prepared[mi].slice(slot))
+                            .map_err(|e| e.in_part(&p.name))?;
+                        let tree = timings
+                            .time(StageKind::Sort, || self.sorter.sort(&layer))
+                            .map_err(|e| e.in_part(&p.name))?;
+                        check_tree(&layer, &tree).map_err(|e| e.in_part(&p.name))?;
+                        (layer, tree)
+                    }
+                };
                 diagnostics.extend(layer.warnings.iter().map(|w| {
                     Diagnostic::warning(StageKind::Slice, w.as_str())
                         .at_layer(slot.index, slot.z)

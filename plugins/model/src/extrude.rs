@@ -85,14 +85,15 @@ pub fn edge_defect(mesh: &Mesh) -> Option<String> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::profile::{circle, polygon};
+    use crate::profile::polygon;
+    use lamina_core::Contour;
     use lamina_core::Point2;
 
     #[test]
     fn extruded_tube_is_watertight_with_the_right_volume() {
         let p = polygon(
-            circle(Point2::origin(), 10.0, 64),
-            vec![circle(Point2::origin(), 6.0, 64)],
+            Contour::circle(Point2::origin(), 10.0, 64),
+            vec![Contour::circle(Point2::origin(), 6.0, 64)],
         );
         let m = extrude("tube", &p, 0.0, 5.0).expect("extrudes");
         assert_eq!(edge_defect(&m), None);
@@ -102,7 +103,7 @@ mod tests {
 
     #[test]
     fn edge_defects_are_found() {
-        let p = polygon(circle(Point2::origin(), 1.0, 8), vec![]);
+        let p = polygon(Contour::circle(Point2::origin(), 1.0, 8), vec![]);
         let mut m = extrude("rod", &p, 0.0, 1.0).expect("extrudes");
         let last = m.triangles.len() - 1;
         m.triangles[last].swap(0, 1);

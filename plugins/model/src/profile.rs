@@ -5,16 +5,6 @@ use std::f64::consts::TAU;
 
 use lamina_core::{Contour, Point2, Polygon};
 
-/// A circle of `segments` vertices, counter-clockwise.
-pub fn circle(centre: Point2, radius: f64, segments: usize) -> Contour {
-    Contour::circle(centre, radius, segments)
-}
-
-/// An axis-aligned rectangle, counter-clockwise.
-pub fn rectangle(min: Point2, max: Point2) -> Contour {
-    Contour::rectangle(min, max)
-}
-
 /// Parameters of a spur gear profile.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct GearProfile {

@@ -4,12 +4,12 @@ use std::path::{Path, PathBuf};
 
 use lamina_core::options::SharedOption;
 use lamina_core::stage::{AnyStage, ModelSource, StageConfig, StageInfo, StageKind};
-use lamina_core::{Error, Limit, Limits, Mesh, Point2, Result, StageFactory};
+use lamina_core::{Contour, Error, Limit, Limits, Mesh, Point2, Result, StageFactory};
 use serde::Deserialize;
 
 use crate::blade::{Blade, Naca};
 use crate::extrude::extrude;
-use crate::profile::{GearProfile, circle, polygon, rectangle};
+use crate::profile::{GearProfile, polygon};
 use crate::weld::{Soup, weld};
 
 const WELD: SharedOption = SharedOption::new("1e-5", "vertices closer than this (mm) are merged");
@@ -239,7 +239,7 @@ fn build_gear(config: &StageConfig<'_>) -> Result<AnyStage> {
     }
     let g = gear_profile(config, &o)?;
     let holes = if o.bore > 0.0 {
-        vec![circle(Point2::origin(), o.bore, bore_segments(&o))]
+        vec![Contour::circle(Point2::origin(), o.bore, bore_segments(&o))]
     } else {
         vec![]
     };
@@ -261,13 +261,16 @@ fn build_gear_shaft(config: &StageConfig<'_>) -> Result<AnyStage> {
     let seg = bore_segments(&o);
     let gear = extrude(
         "gear",
-        &polygon(g.outline(), vec![circle(Point2::origin(), o.bore, seg)]),
+        &polygon(g.outline(), vec![Contour::circle(Point2::origin(), o.bore, seg)]),
         0.0,
         o.height,
     )?;
     let shaft = extrude(
         "shaft",
-        &polygon(circle(Point2::origin(), o.bore - o.clearance, seg), vec![]),
+        &polygon(
+            Contour::circle(Point2::origin(), o.bore - o.clearance, seg),
+            vec![],
+        ),
         0.0,
         length,
     )?;
@@ -319,11 +322,11 @@ fn build_tube(config: &StageConfig<'_>) -> Result<AnyStage> {
         return Err(config.error("inner_radius", "must lie in [0, outer_radius)"));
     }
     let holes = if o.inner_radius > 0.0 {
-        vec![circle(Point2::origin(), o.inner_radius, o.segments)]
+        vec![Contour::circle(Point2::origin(), o.inner_radius, o.segments)]
     } else {
         vec![]
     };
-    let outer = circle(Point2::origin(), o.outer_radius, o.segments);
+    let outer = Contour::circle(Point2::origin(), o.outer_radius, o.segments);
     let mesh = extrude("tube", &polygon(outer, holes), 0.0, o.height)?;
     Ok(AnyStage::Model(Box::new(Generated(vec![mesh]))))
 }
@@ -351,7 +354,7 @@ lamina_core::stage_options! {
 fn build_cube(config: &StageConfig<'_>) -> Result<AnyStage> {
     let o: CubeOptions = config.parse()?;
     positive(config, "size", o.size)?;
-    let r = rectangle(Point2::new(0.0, 0.0), Point2::new(o.size, o.size));
+    let r = Contour::rectangle(Point2::new(0.0, 0.0), Point2::new(o.size, o.size));
     let mesh = extrude("cube", &polygon(r, vec![]), 0.0, o.size)?;
     Ok(AnyStage::Model(Box::new(Generated(vec![mesh]))))
 }
@@ -478,7 +481,7 @@ fn build_box(config: &StageConfig<'_>) -> Result<AnyStage> {
     for v in o.size {
         positive(config, "size", v)?;
     }
-    let r = rectangle(Point2::new(0.0, 0.0), Point2::new(o.size[0], o.size[1]));
+    let r = Contour::rectangle(Point2::new(0.0, 0.0), Point2::new(o.size[0], o.size[1]));
     let mesh = extrude("box", &polygon(r, vec![]), 0.0, o.size[2])?;
     Ok(AnyStage::Model(Box::new(Generated(vec![mesh]))))
 }
