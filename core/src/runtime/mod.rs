@@ -2,10 +2,11 @@
 //! layers through slice → sort → discretise → grade → plan in parallel, handing the
 //! finished layers to the exporters in build order.
 //!
-//! Layers are independent, so they are processed in windows of a few layers per thread
-//! on a rayon pool; each window is collected in order and streamed to the exporters
-//! before the next one starts. Memory therefore stays bounded by a window plus the
-//! meshes, and the output does not depend on the number of threads.
+//! Layers are independent, so every thread of a rayon pool takes the next layer as soon
+//! as it is free, at most a few layers per thread ahead of the exporters, which take
+//! the finished layers in build order on the calling thread ([`stream`]). Memory
+//! therefore stays bounded by those few layers plus the meshes, and the output does not
+//! depend on the number of threads.
 //!
 //! One module a step of a run, in the order a run takes them:
 //! - [`engine`]: building every stage a pipeline names (with the defaults for the
@@ -15,7 +16,8 @@
 //! - [`families`]: which families of a layer belong to a part that picks its solid
 //!   with `family_at`, followed from layer to layer;
 //! - [`layer`]: one layer through slice, sort, discretise, grade and plan;
-//! - [`run`]: the whole run: the pool, the windows of layers, the exporters;
+//! - [`run`]: the whole run: the pool, the layers, the exporters;
+//! - [`stream`]: layers computed on the pool and consumed in order, with a bounded lead;
 //! - [`report`]: what a run tells its observer and returns.
 
 use std::path::{Path, PathBuf};
@@ -31,6 +33,7 @@ mod layer;
 mod meshes;
 mod report;
 mod run;
+mod stream;
 
 pub use engine::Engine;
 pub use meshes::place;

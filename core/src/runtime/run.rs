@@ -1,5 +1,5 @@
-//! A whole run: meshes, sequence and layer slots, then windows of layers on the worker
-//! pool, each window streamed to the exporters in build order.
+//! A whole run: meshes, sequence and layer slots, then the layers on the worker pool,
+//! each finished layer streamed to the exporters in build order.
 
 use std::path::Path;
 use std::sync::Arc;
@@ -16,7 +16,7 @@ use crate::diagnostic::Diagnostic;
 use crate::error::{Error, Result};
 use crate::geom::Point2;
 use crate::mesh::{BBox3, Mesh};
-use crate::model::{LayerPlan, LayerSlot, PartInfo};
+use crate::model::PartInfo;
 use crate::output::AtomicOutputs;
 use crate::stage::*;
 
@@ -183,66 +183,52 @@ impl Engine {
             timings: &timings,
         };
         observer.started(slots.len());
-        let window = pool.current_num_threads().max(1) * 4;
+        // Layers computed ahead of the exporters: a few per thread keeps every worker
+        // busy while bounding what memory holds.
+        let ahead = pool.current_num_threads().max(1) * 4;
         let mut regions = 0;
         let mut build_time: Option<f64> = None;
         let mut sequential_time: Option<f64> = None;
         let mut fill: Option<(f64, f64)> = None;
         let mut min_fill = 0.0f64;
-        // One window of layers on the pool.
-        let compute = |chunk: &[LayerSlot]| -> Vec<Result<LayerPlan>> {
-            pool.install(|| {
-                chunk
-                    .par_iter()
-                    .map(|slot| {
-                        // A stage that panics on some input ends the run with an
-                        // error naming the layer, not with an abort.
-                        crate::plugin::guard_call("a layer's stages", || self.process_layer(slot, &shared))
-                            .map_err(|e| e.in_layer(slot.index, slot.z))
-                    })
-                    .collect()
-            })
-        };
-        let compute = &compute;
-        let chunks: Vec<&[LayerSlot]> = slots.chunks(window).collect();
-        // The exporters take window k on this thread while the pool computes window
-        // k + 1: exporting never leaves the workers idle, and at most two windows are
-        // held. Layers still reach the exporters in build order.
-        std::thread::scope(|scope| -> Result<()> {
-            let mut next = chunks.first().map(|&c| scope.spawn(move || compute(c)));
-            let mut k = 0;
-            while let Some(handle) = next.take() {
-                let plans = handle
-                    .join()
-                    .map_err(|_| Error::stage("runtime", "a window of layers stopped with a panic"))?;
-                k += 1;
-                next = chunks.get(k).map(|&c| scope.spawn(move || compute(c)));
-                for plan in plans {
-                    let plan = plan?;
-                    for d in &plan.diagnostics {
-                        say(d.clone());
-                    }
-                    regions += plan.parts.iter().map(|p| p.regions.len()).sum::<usize>();
-                    if let Some(t) = plan.build_time {
-                        *build_time.get_or_insert(0.0) += t;
-                    }
-                    if let Some(t) = plan.sequential_time {
-                        *sequential_time.get_or_insert(0.0) += t;
-                    }
-                    if let Some(f) = plan.fill {
-                        let sum = fill.get_or_insert((0.0, 0.0));
-                        sum.0 += f.deposited * plan.thickness;
-                        sum.1 += f.area * plan.thickness;
-                        min_fill = min_fill.max(f.min_ratio);
-                    }
-                    for sink in &mut sinks {
-                        timings.time(StageKind::Export, || sink.layer(&info, &plan, &mut outputs))?;
-                    }
-                    observer.layer_done(plan.index);
+        // The pool computes the layers while this thread hands each finished one, in
+        // build order, to the exporters.
+        super::stream::ordered(
+            &pool,
+            slots.len(),
+            ahead,
+            |i| {
+                let slot = &slots[i];
+                // A stage that panics on some input ends the run with an error naming
+                // the layer, not with an abort.
+                crate::plugin::guard_call("a layer's stages", || self.process_layer(slot, &shared))
+                    .map_err(|e| e.in_layer(slot.index, slot.z))
+            },
+            |_, plan| {
+                let plan = plan?;
+                for d in &plan.diagnostics {
+                    say(d.clone());
                 }
-            }
-            Ok(())
-        })?;
+                regions += plan.parts.iter().map(|p| p.regions.len()).sum::<usize>();
+                if let Some(t) = plan.build_time {
+                    *build_time.get_or_insert(0.0) += t;
+                }
+                if let Some(t) = plan.sequential_time {
+                    *sequential_time.get_or_insert(0.0) += t;
+                }
+                if let Some(f) = plan.fill {
+                    let sum = fill.get_or_insert((0.0, 0.0));
+                    sum.0 += f.deposited * plan.thickness;
+                    sum.1 += f.area * plan.thickness;
+                    min_fill = min_fill.max(f.min_ratio);
+                }
+                for sink in &mut sinks {
+                    timings.time(StageKind::Export, || sink.layer(&info, &plan, &mut outputs))?;
+                }
+                observer.layer_done(plan.index);
+                Ok(())
+            },
+        )?;
         if let Some((deposited, volume)) = fill
             && volume > 0.0
             && deposited < min_fill * volume
