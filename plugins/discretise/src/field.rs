@@ -83,12 +83,30 @@ impl Field {
 
     /// Fills `values` with the distance of every sample to the nearest of `contours`.
     pub fn distance_to(&mut self, contours: &[&Contour]) {
+        SCRATCH.with(|scratch| {
+            let mut scratch = scratch.borrow_mut();
+            self.distance_with(contours, &mut scratch);
+            // A field far beyond the usual is not kept for the rest of the run.
+            if self.nx * self.ny > KEEP_SAMPLES {
+                *scratch = Scratch::default();
+            }
+        });
+    }
+
+    fn distance_with(&mut self, contours: &[&Contour], scratch: &mut Scratch) {
         let n = self.nx * self.ny;
         let (nx, ny) = (self.nx, self.ny);
-        // Boundary points of the seeds, as plain arrays so the allocation is zeroed by
-        // the allocator and only the pages of seeds are ever touched.
-        let mut near = vec![[0.0f64; 2]; n];
-        let mut seed_d2 = vec![f64::INFINITY; n];
+        let Scratch {
+            near,
+            seed_d2,
+            from_row,
+            seed_of,
+        } = scratch;
+        // Boundary points of the seeds: read only where a seed was measured in this
+        // call, so what an earlier call left there needs no clearing.
+        near.resize(n, [0.0; 2]);
+        seed_d2.clear();
+        seed_d2.resize(n, f64::INFINITY);
         // Seeds are the samples within a cell of the boundary: a thin band keeps the
         // nearest seed's boundary point close to the true nearest boundary point. Each
         // segment visits, column by column, the samples of its cell-wide neighbourhood
@@ -131,7 +149,8 @@ impl Field {
         // Column pass: the row of the nearest seed in each sample's column, by a sweep
         // up and a sweep down over whole rows (the seeds are all at 0, so the nearest
         // in a column is the nearest below or above).
-        let mut from_row = vec![u32::MAX; n];
+        // Every entry is written by the upward sweep.
+        from_row.resize(n, u32::MAX);
         let mut last = vec![u32::MAX; nx];
         for j in 0..ny {
             let row = j * nx..(j + 1) * nx;
@@ -162,7 +181,8 @@ impl Field {
         let mut scratch = Envelope::new(nx.max(ny));
         let mut arg = vec![0u32; nx];
         let mut g = vec![NONE; nx];
-        let mut seed_of = vec![u32::MAX; n];
+        seed_of.clear();
+        seed_of.resize(n, u32::MAX);
         for j in 0..ny {
             let from = &from_row[j * nx..(j + 1) * nx];
             for (g, &r) in g.iter_mut().zip(from) {
@@ -238,6 +258,25 @@ impl Field {
             *v = v.sqrt();
         }
     }
+}
+
+/// The per-sample work arrays of [`Field::distance_to`], kept per thread: a family's
+/// field is several megabytes of them, and fresh allocations of that size are fresh
+/// pages from the system on every family, faulted in one by one.
+#[derive(Default)]
+struct Scratch {
+    near: Vec<[f64; 2]>,
+    seed_d2: Vec<f64>,
+    from_row: Vec<u32>,
+    seed_of: Vec<u32>,
+}
+
+/// Largest field (samples) whose work arrays a thread keeps for the next family: a
+/// 1024 x 1024 field, 24 MiB.
+const KEEP_SAMPLES: usize = 1 << 20;
+
+thread_local! {
+    static SCRATCH: std::cell::RefCell<Scratch> = std::cell::RefCell::default();
 }
 
 /// No seed in the column: the column pass leaves this for the row pass to skip.
