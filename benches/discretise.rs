@@ -13,8 +13,8 @@ use lamina_core::Contour;
 use lamina_core::stage::{Discretiser, FamilyContext, MeshSlicer};
 use lamina_core::{AnyStage, ContourTree, Layer, RunInfo, StageKind};
 use lamina_discretise::distance_field::Levels;
-use lamina_discretise::field::Field;
-use lamina_discretise::iso::iso_levels;
+use lamina_geom::field::Field;
+use lamina_geom::iso::iso_levels;
 use rayon::prelude::*;
 
 #[path = "common/mod.rs"]

@@ -3,6 +3,8 @@
 //! distance-field paper; the outer-surface grading source of Fig. 1d, grading-step-width
 //! paper), shared here so that every stage selects and measures alike.
 
+use std::sync::{Arc, Mutex};
+
 use serde::Deserialize;
 
 use crate::mesh::{Mesh, Point3, Vector3};
@@ -193,6 +195,36 @@ impl Surface {
             }
         }
         best
+    }
+}
+
+/// The chosen faces of each mesh a stage has met, keyed by the mesh's address: built
+/// once per run, shared by the layers' threads.
+#[derive(Debug, Default)]
+pub struct Surfaces(Mutex<Vec<(usize, Option<Arc<Surface>>)>>);
+
+impl Clone for Surfaces {
+    fn clone(&self) -> Self {
+        Surfaces::default()
+    }
+}
+
+impl Surfaces {
+    /// The surface of `faces` on `mesh`, built on first use.
+    pub fn of(
+        &self,
+        mesh: &Mesh,
+        faces: &FaceSelection,
+    ) -> std::result::Result<Option<Arc<Surface>>, String> {
+        let key = mesh as *const Mesh as usize;
+        let mut known = self.0.lock().unwrap_or_else(|e| e.into_inner());
+        if let Some((_, s)) = known.iter().find(|(k, _)| *k == key) {
+            return Ok(s.clone());
+        }
+        let chosen = faces.select(mesh)?;
+        let surface = Surface::new(mesh, &chosen).map(Arc::new);
+        known.push((key, surface.clone()));
+        Ok(surface)
     }
 }
 

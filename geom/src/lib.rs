@@ -9,8 +9,12 @@
 //! - [`ring`]: the `[x, y]` rings and shapes the boolean engine takes, and conversions.
 //! - [`simplify`]: the one ring simplifier.
 //! - [`follow`]: one solid area followed from layer to layer.
+//! - [`field`]: a sampled distance field of contours on a square grid;
+//! - [`iso`]: its iso-loops (marching squares), the sets {v >= t} as contours.
 
+pub mod field;
 pub mod follow;
+pub mod iso;
 pub mod ring;
 pub mod segment;
 pub mod shape;

@@ -7,21 +7,20 @@
 use lamina_core::mesh::Point3;
 use lamina_core::stage::{AnyStage, Discretiser, FamilyContext, StageConfig, StageInfo, StageKind};
 use lamina_core::steps::Truncation;
-use lamina_core::surface::{FaceSelection, Surface};
-use lamina_core::{Contour, Error, Mesh, Point2, Polygon, Result, StageFactory, SubRegion};
+use lamina_core::surface::{FaceSelection, Surface, Surfaces};
+use lamina_core::{Contour, Error, Point2, Polygon, Result, StageFactory, SubRegion};
 use serde::Deserialize;
-use std::sync::{Arc, Mutex};
 
 use i_overlay::core::fill_rule::FillRule;
 use i_overlay::core::overlay::ShapeType;
 
 use crate::bands::{clean, nested_bands};
 use crate::cells::Cells;
-use crate::field::Field;
 use crate::grid::Grid;
-use crate::iso::iso_levels;
 use crate::measure::pole;
 use crate::regions::{from_bands, uniform_level, whole};
+use lamina_geom::field::Field;
+use lamina_geom::iso::iso_levels;
 
 const STAGE: &str = "discretise:distance-field";
 
@@ -126,36 +125,6 @@ impl Levels {
                 }
             }
         }
-    }
-}
-
-/// The chosen faces of each mesh a stage has met, keyed by the mesh's address: built
-/// once per run, shared by the layers' threads.
-#[derive(Debug, Default)]
-pub struct Surfaces(Mutex<Vec<(usize, Option<Arc<Surface>>)>>);
-
-impl Clone for Surfaces {
-    fn clone(&self) -> Self {
-        Surfaces::default()
-    }
-}
-
-impl Surfaces {
-    /// The surface of `faces` on `mesh`, built on first use.
-    pub fn of(
-        &self,
-        mesh: &Mesh,
-        faces: &FaceSelection,
-    ) -> std::result::Result<Option<Arc<Surface>>, String> {
-        let key = mesh as *const Mesh as usize;
-        let mut known = self.0.lock().unwrap_or_else(|e| e.into_inner());
-        if let Some((_, s)) = known.iter().find(|(k, _)| *k == key) {
-            return Ok(s.clone());
-        }
-        let chosen = faces.select(mesh)?;
-        let surface = Surface::new(mesh, &chosen).map(Arc::new);
-        known.push((key, surface.clone()));
-        Ok(surface)
     }
 }
 

@@ -6,8 +6,8 @@
 //! interior found by scanning each row. The grid is padded so that its border samples
 //! lie outside the family.
 
-use lamina_core::{BBox2, Contour, Point2};
-use lamina_geom::closest_on_segment;
+use crate::segment::closest_on_segment;
+use crate::shape::{BBox2, Contour, Point2};
 
 /// Samples of a field over a padded bounding box.
 #[derive(Debug, Clone)]
@@ -354,7 +354,15 @@ impl Envelope {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::shapes::{circle, rect};
+    use crate::shape::Point2;
+
+    fn circle(cx: f64, cy: f64, r: f64, n: usize) -> Contour {
+        Contour::circle(Point2::new(cx, cy), r, n)
+    }
+
+    fn rect(x0: f64, y0: f64, w: f64, h: f64) -> Contour {
+        Contour::rectangle(Point2::new(x0, y0), Point2::new(x0 + w, y0 + h))
+    }
 
     #[test]
     fn distances_match_the_exact_distance() {

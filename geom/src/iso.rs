@@ -2,9 +2,8 @@
 //! samples are below every level. Loops keep the set on their left (outer loops
 //! counter-clockwise, holes clockwise); saddles are resolved by the cell's mean.
 
-use lamina_core::{Contour, Point2};
-
 use crate::field::Field;
+use crate::shape::{Contour, Point2};
 
 /// The loops of `{v >= t}` over `values` (laid out as `field`'s samples).
 pub fn iso_loops(field: &Field, values: &[f64], t: f64) -> Vec<Contour> {
@@ -156,7 +155,10 @@ fn cell(v: &[f64; 4], t: f64, ids: [usize; 4], links: &mut Vec<(u32, u32)>) {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::shapes::circle;
+
+    fn circle(cx: f64, cy: f64, r: f64, n: usize) -> Contour {
+        Contour::circle(Point2::new(cx, cy), r, n)
+    }
 
     /// The field over the first contour's box at 100 cells: distance inside the
     /// contours, its negative outside.
