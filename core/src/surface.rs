@@ -154,6 +154,13 @@ impl Surface {
     /// The distance from `p` to the nearest chosen triangle: cells searched in shells
     /// about the cell nearest to `p` until no farther shell can hold a nearer one.
     pub fn distance(&self, p: Point3) -> f64 {
+        self.distance_within(p, f64::INFINITY)
+    }
+
+    /// [`Self::distance`] where it is below `cap`, else some value at least `cap`: the
+    /// search stops at the shells beyond `cap`, so points far from the surface cost a
+    /// few empty cells instead of a walk to the nearest triangle.
+    pub fn distance_within(&self, p: Point3, cap: f64) -> f64 {
         let c = self.index(&p);
         // How far p lies outside the grid's box: shells start counting from there.
         let outside = {
@@ -165,7 +172,7 @@ impl Surface {
             );
             d.norm()
         };
-        let mut best = f64::INFINITY;
+        let mut best = if cap.is_nan() { f64::INFINITY } else { cap };
         let max_shell = self.dims.iter().copied().max().unwrap_or(1);
         for r in 0..=max_shell {
             // Every cell of shell r is at least (r - 1) cells from p, and no nearer than
@@ -185,6 +192,19 @@ impl Surface {
                             continue;
                         }
                         let k = (q[2] as usize * self.dims[1] + q[1] as usize) * self.dims[0] + q[0] as usize;
+                        if self.cells[k].is_empty() {
+                            continue;
+                        }
+                        // A triangle's nearest point to p lies in one of the cells it is
+                        // listed in, no nearer than that cell's box: a cell whose box is
+                        // beyond the best so far holds nothing nearer.
+                        let gap = Vector3::from([0, 1, 2].map(|a| {
+                            let lo = self.min[a] + q[a] as f64 * self.cell;
+                            (lo - p[a]).max(p[a] - (lo + self.cell)).max(0.0)
+                        }));
+                        if gap.norm_squared() >= best * best {
+                            continue;
+                        }
                         // A triangle in several cells is measured again: cheaper than
                         // remembering which were.
                         for &t in &self.cells[k] {

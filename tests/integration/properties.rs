@@ -612,11 +612,15 @@ fn discretise_and_check(f: &RandomFamily, text: &str) -> Result<(), TestCaseErro
         panic!("not a discretiser")
     };
     let info = run_info();
+    // The family extruded into a prism about the layer, reaching past its top less far
+    // than past its bottom, for the stages that measure in space from the mesh.
+    let mid = layer.z - layer.thickness / 2.0;
+    let prism = lamina_model::extrude("prism", &family, mid - 2.0 * f.size, mid + 0.5 * f.size).ok();
     let ctx = FamilyContext {
         info: &info,
         layer: &layer,
         tree: &tree,
-        mesh: None,
+        mesh: prism.as_ref(),
         part: 0,
         family: 0,
     };

@@ -174,3 +174,85 @@ fn a_surface_feature_measures_from_the_mesh_in_space() {
         .collect();
     assert_eq!(got, [[3], [2], [1], [0]]);
 }
+
+/// A 20 x 20 x 10 mm box in 1 mm layers graded from its outer surface by `source`:
+/// per layer (mid-plane z), the regions' (level, area) in level order.
+fn box_graded_from_its_surface(source: &str) -> Vec<(f64, Vec<(f64, f64)>)> {
+    let text = format!(
+        "[model]\nuse = \"box\"\nsize = [20.0, 20.0, 10.0]\nplace = \"centre\"\n\
+         [materials.a]\ncolour = [255, 0, 0]\n[materials.b]\ncolour = [0, 0, 255]\n\
+         [discretise]\nuse = \"sources\"\nsources = [{source}]\n\
+         [slice]\nuse = \"uniform\"\nthickness = 1.0\n\
+         [[output]]\nuse = \"json\"\npath = \"plan.json\"\n"
+    );
+    let plan = run(&text);
+    plan["layers"]
+        .as_array()
+        .expect("layers")
+        .iter()
+        .map(|layer| {
+            let z = layer["z"].as_f64().expect("z") - 0.5;
+            let mut rs: Vec<(f64, f64)> = regions(layer)
+                .iter()
+                .map(|r| {
+                    (
+                        r["level"].as_f64().expect("level"),
+                        r["area"].as_f64().expect("area"),
+                    )
+                })
+                .collect();
+            rs.sort_by(|a, b| a.0.total_cmp(&b.0));
+            (z, rs)
+        })
+        .collect()
+}
+
+/// Fig. 1d, d = the minimum distance from the *selected* outer surfaces: the bottom
+/// face alone grades the box along Z, each layer whole at the step of its height
+/// (f = z / 8 in steps of 0.25, thresholds at z = 1, 3, 5, 7).
+#[test]
+fn a_surface_source_from_the_bottom_face_grades_along_z() {
+    let layers = box_graded_from_its_surface(
+        "{ kind = \"surface\", faces = { normal = [0.0, 0.0, -1.0] }, width = 8.0, start = \"a\", end = \"b\", step = 0.25 }",
+    );
+    assert_eq!(layers.len(), 10);
+    for (z, rs) in &layers {
+        let want = truncated(*z, 8.0, 0.25);
+        assert_eq!(rs.len(), 1, "z = {z}: {rs:?}");
+        assert_eq!(rs[0].0, want, "z = {z}");
+        assert!((rs[0].1 - 400.0).abs() < 1e-6, "z = {z}: {rs:?}");
+    }
+}
+
+/// With every face, d is the distance in space to the whole outer surface: the bottom
+/// layer lies within 1 mm of the bottom face and is one region of the first step,
+/// while a middle layer is cut into the bands of the side walls (d < 1, 1 <= d < 3, the
+/// core). Measured within the layer (`measure = "layer"`), every layer has the bands.
+#[test]
+fn a_surface_source_measures_in_space_from_every_face() {
+    let source = "{ kind = \"surface\", width = 4.0, start = \"a\", end = \"b\", step = 0.5 }";
+    let bands = [(0.0, 400.0 - 324.0), (0.5, 324.0 - 196.0), (1.0, 196.0)];
+    let close = |got: &[(f64, f64)], want: &[(f64, f64)]| {
+        got.len() == want.len()
+            && got
+                .iter()
+                .zip(want)
+                .all(|(g, w)| g.0 == w.0 && (g.1 - w.1).abs() < 0.02 * w.1)
+    };
+    let space = box_graded_from_its_surface(source);
+    let (z, bottom) = &space[0];
+    assert_eq!(*z, 0.5);
+    assert_eq!(bottom.len(), 1, "{bottom:?}");
+    assert_eq!(bottom[0].0, 0.0);
+    // The second layer (z = 1.5): the walls' bands, and the bottom face 1.5 mm below
+    // the core puts it in the middle step.
+    let (_, second) = &space[1];
+    assert!(close(second, &[(0.0, 76.0), (0.5, 324.0)]), "{second:?}");
+    let (z, middle) = &space[4];
+    assert_eq!(*z, 4.5);
+    assert!(close(middle, &bands), "{middle:?}");
+    let layer = box_graded_from_its_surface(&source.replace(" }", ", measure = \"layer\" }"));
+    for (z, rs) in &layer {
+        assert!(close(rs, &bands), "in the layer, z = {z}: {rs:?}");
+    }
+}

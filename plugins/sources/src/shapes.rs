@@ -9,7 +9,12 @@ use i_overlay::float::overlay::{FloatOverlay, OverlayOptions};
 use i_overlay::float::simplify::SimplifyShape;
 use i_overlay::mesh::float::outline::offset::OutlineOffset;
 use i_overlay::mesh::float::style::{LineJoin, OutlineStyle};
+use lamina_core::mesh::Point3;
+use lamina_core::surface::Surface;
 use lamina_core::{BBox2, Point2, Polygon};
+use lamina_geom::field::Field;
+use lamina_geom::iso::iso_loops;
+use lamina_geom::ring::ring_of;
 use lamina_geom::simplify_ring;
 
 use crate::source::Datum;
@@ -211,11 +216,13 @@ fn half_plane(b: &BBox2, n: [f64; 2], c: f64) -> Set {
 }
 
 /// The points of the plane at height `z` (inside `bbox`) whose distance to the datum
-/// is below `d`; for the outer surface, the points of `family` within `d` of its
-/// boundary.
+/// is below `d`; for the outer surface measured in the layer, the points of `family`
+/// within `d` of its boundary. The outer surface in space is sampled
+/// ([`SurfaceField`]), not drawn here: `Set::Empty`.
 pub fn closer_than(datum: &Datum, d: f64, z: f64, bbox: &BBox2, tolerance: f64, family: &Shapes) -> Set {
     match *datum {
-        Datum::Surface => {
+        Datum::Surface => Set::Empty,
+        Datum::LayerBoundary => {
             // Round joins whose chords stray at most `tolerance` at radius d. The
             // outline runs on the family with its nearly collinear vertices removed:
             // sliced curves and meshed walls carry thousands of them, and the raw
@@ -279,6 +286,78 @@ pub fn closer_than(datum: &Datum, d: f64, z: f64, bbox: &BBox2, tolerance: f64, 
                 return if c > 0.0 { Set::Whole } else { Set::Empty };
             }
             half_plane(bbox, [n[0], n[1]], c + n[0] * at[0] + n[1] * at[1])
+        }
+    }
+}
+
+/// The distance in space from chosen faces of the part, sampled over a family in its
+/// layer's mid-plane: the sets {d <= D} of the outer-surface source are its iso-loops.
+///
+/// Only the samples near a level D are measured one by one. The distance is
+/// 1-Lipschitz, so a block of samples whose middle is farther than the block's reach
+/// (plus one sample) from every level lies on the same side of every level as its
+/// middle, and so do its neighbours: no iso-line crosses an edge that touches it, and
+/// the middle's value stands for the block. Distances are measured up to a cap beyond
+/// the deepest level, where a sample only needs to know it is farther.
+pub struct SurfaceField {
+    field: Field,
+    /// Minus the distance, so that {d <= D} is the iso-set {v >= -D}; the border
+    /// samples are below every level.
+    values: Vec<f64>,
+}
+
+/// Samples a side of the blocks that one measured sample may stand for.
+const BLOCK: usize = 4;
+
+impl SurfaceField {
+    /// Samples `surface` at `cells` samples along the longer side of `family`'s box,
+    /// at height `z`, for the sets at the distances `levels`.
+    pub fn new(surface: &Surface, family: &BBox2, z: f64, cells: usize, levels: &[f64]) -> Self {
+        let field = Field::over(family, cells);
+        let (nx, ny, h) = (field.nx, field.ny, field.h);
+        let half = (BLOCK / 2) as f64;
+        // How far a block's samples and their neighbours lie from its middle.
+        let reach = half * std::f64::consts::SQRT_2 * h + h;
+        let deepest = levels.iter().copied().fold(0.0f64, f64::max);
+        // Capped samples stand clear of the deepest level (by more than a block's
+        // reach), and the border below them all (finite, so that the iso-lines
+        // interpolate).
+        let cap = deepest + reach + 2.0 * h;
+        let mut values = vec![-2.0 * cap; nx * ny];
+        let at = |i: usize, j: usize| {
+            let p = field.point(i, j);
+            surface.distance_within(Point3::new(p.x, p.y, z), cap)
+        };
+        for bj in (1..ny - 1).step_by(BLOCK) {
+            let j1 = (bj + BLOCK).min(ny - 1);
+            for bi in (1..nx - 1).step_by(BLOCK) {
+                let i1 = (bi + BLOCK).min(nx - 1);
+                let (ic, jc) = ((bi + i1 - 1) / 2, (bj + j1 - 1) / 2);
+                let dc = at(ic, jc);
+                let near = levels.iter().any(|&d| (dc - d).abs() <= reach);
+                for j in bj..j1 {
+                    for i in bi..i1 {
+                        let d = if near && (i, j) != (ic, jc) { at(i, j) } else { dc };
+                        values[j * nx + i] = -d;
+                    }
+                }
+            }
+        }
+        Self { field, values }
+    }
+
+    /// The points of `family` whose distance is at most `d`.
+    pub fn closer_than(&self, d: f64, family: &Shapes) -> Set {
+        let loops = iso_loops(&self.field, &self.values, -d);
+        if loops.is_empty() {
+            return Set::Empty;
+        }
+        let rings: Vec<Vec<[f64; 2]>> = loops.iter().map(ring_of).collect();
+        let within = intersect(family, &vec![rings]);
+        if within.is_empty() {
+            Set::Empty
+        } else {
+            Set::Shapes(within)
         }
     }
 }
@@ -395,12 +474,12 @@ mod tests {
     #[test]
     fn the_outer_surface_cuts_a_band_along_the_boundary() {
         let square: Shapes = vec![vec![vec![[0.0, 0.0], [20.0, 0.0], [20.0, 20.0], [0.0, 20.0]]]];
-        let Set::Shapes(band) = closer_than(&Datum::Surface, 2.0, 0.0, &bbox(), 1e-4, &square) else {
+        let Set::Shapes(band) = closer_than(&Datum::LayerBoundary, 2.0, 0.0, &bbox(), 1e-4, &square) else {
             panic!("a band")
         };
         assert!((area(&band) - (400.0 - 256.0)).abs() < 1e-6, "{}", area(&band));
         assert!(matches!(
-            closer_than(&Datum::Surface, 11.0, 0.0, &bbox(), 1e-4, &square),
+            closer_than(&Datum::LayerBoundary, 11.0, 0.0, &bbox(), 1e-4, &square),
             Set::Whole
         ));
     }

@@ -15,9 +15,14 @@ pub enum Datum {
     /// d = signed distance along the unit normal from the plane through `at`; points
     /// behind the plane have f < 0 (the -ve complementary region).
     Plane { at: [f64; 3], normal: [f64; 3] },
-    /// d = distance to the outer surface, measured in the layer: the shortest distance
-    /// to the family's boundary (its outer contour and its holes).
+    /// d = the minimum distance in space from the selected outer surfaces of the part
+    /// (grading-step-width Fig. 1d): chosen faces of the part's mesh, measured from the
+    /// layer's mid-plane.
     Surface,
+    /// d = distance to the outer surface measured within the layer: the shortest
+    /// distance to the family's boundary (its outer contour and its holes). The
+    /// surface seen by each layer on its own, blind to the faces above and below.
+    LayerBoundary,
 }
 
 /// A grading source.
@@ -80,8 +85,8 @@ impl Source {
             .collect()
     }
 
-    /// Distance of a point of the layer plane at height `z`; NaN for `Surface`, whose
-    /// distance depends on the layer's contours.
+    /// Distance of a point of the layer plane at height `z`; NaN for the surfaces,
+    /// whose distance depends on the part's mesh or the layer's contours.
     pub fn distance(&self, p: Point2, z: f64) -> f64 {
         match self.datum {
             Datum::Point(c) => ((p.x - c[0]).powi(2) + (p.y - c[1]).powi(2) + (z - c[2]).powi(2)).sqrt(),
@@ -95,7 +100,7 @@ impl Source {
             Datum::Plane { at, normal: n } => {
                 (p.x - at[0]) * n[0] + (p.y - at[1]) * n[1] + (z - at[2]) * n[2]
             }
-            Datum::Surface => f64::NAN,
+            Datum::Surface | Datum::LayerBoundary => f64::NAN,
         }
     }
 }

@@ -3,13 +3,17 @@
 
 use lamina_core::stage::{AnyStage, Discretiser, FamilyContext, StageConfig, StageInfo, StageKind};
 use lamina_core::steps::Truncation;
+use lamina_core::surface::{FaceSelection, Surfaces};
 use lamina_core::{Composition, Error, Result, StageFactory, SubRegion};
 use serde::Deserialize;
 
 use lamina_geom::ring::{polygons_of, shape_of};
 
-use crate::shapes::{Set, Shapes, clean, closer_than, inside_point, union};
+use crate::shapes::{Set, Shapes, SurfaceField, clean, closer_than, inside_point, union};
 use crate::source::{Datum, Source, combine};
+
+/// The stage's name in errors.
+const STAGE: &str = "discretise:sources";
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize)]
 #[serde(rename_all = "lowercase")]
@@ -46,6 +50,22 @@ struct SourceSpec {
     step: f64,
     #[serde(default = "one")]
     weight: f64,
+    /// `kind = "surface"`: which faces of the part's mesh are the outer surface (all
+    /// when absent).
+    faces: Option<FaceSelection>,
+    /// `kind = "surface"`: `space` (the paper's: the distance in space to the chosen
+    /// faces) or `layer` (the distance within the layer to the family's boundary).
+    #[serde(default)]
+    measure: Measure,
+}
+
+/// Where the distance to an outer surface is measured.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Deserialize)]
+#[serde(rename_all = "lowercase")]
+enum Measure {
+    #[default]
+    Space,
+    Layer,
 }
 
 fn one() -> f64 {
@@ -74,8 +94,10 @@ enum Combine {
 lamina_core::stage_options! {
     #[derive(Debug)]
     struct Options {
-        /// each `{ kind = "point" | "axis" | "plane" | "surface" (the layer's boundary), at = [x, y, z], direction = [x, y, z] (axis direction or plane normal), width (or alpha), k = 1, start, end (material name or fractions), step = 0.25, weight = 1 }`
+        /// each `{ kind = "point" | "axis" | "plane" | "surface", at = [x, y, z], direction = [x, y, z] (axis direction or plane normal), width (or alpha), k = 1, start, end (material name or fractions), step = 0.25, weight = 1 }`; a `surface` source measures d in space from chosen faces of the part's mesh (Fig. 1d): `faces = { normal = [x, y, z], within = 30.0, groups = ["name"] }` (all faces when absent), or within the layer to the family's boundary with `measure = "layer"`
         sources: Vec<SourceSpec>,
+        /// samples along a family's longer side where the distance in space to a `surface` source's faces is sampled
+        surface_cells: usize = "256",
         /// largest chord error of curved step boundaries (mm)
         tolerance: f64 = "0.001",
         /// where Eq. 8 blends: `intersection` (the paper's regularised booleans: only where effective grading regions 0 <= f <= 1 overlap; a source alone keeps its own composition) or `everywhere` (every source at every point)
@@ -94,6 +116,10 @@ struct Sources {
     sources: Vec<Pending>,
     tolerance: f64,
     combine: Combine,
+    /// Per source, the faces of a `surface` source measured in space, and their
+    /// surface per mesh, built once per run.
+    faces: Vec<Option<(FaceSelection, Surfaces)>>,
+    surface_cells: usize,
 }
 
 /// A piece of the family with, per source, its step and whether it lies in that
@@ -174,17 +200,55 @@ impl Discretiser for Sources {
             steps: Vec::new(),
             effective: Vec::new(),
         }];
-        let closer = |s: &Source, d: f64| closer_than(&s.datum, d, z, &bbox, self.tolerance, &family_shapes);
-        for s in &sources {
-            let sets: Vec<_> = s.thresholds().iter().map(|&d| closer(s, d)).collect();
+        // The outer surfaces in space, sampled once per source over the family.
+        let mut fields = Vec::with_capacity(sources.len());
+        for (i, s) in sources.iter().enumerate() {
+            fields.push(match &self.faces[i] {
+                Some((faces, surfaces)) => {
+                    let mesh = ctx.mesh.ok_or_else(|| {
+                        Error::stage(
+                            STAGE,
+                            format!("source {i}: a `surface` source needs the part's mesh"),
+                        )
+                    })?;
+                    let surface = surfaces
+                        .of(mesh, faces)
+                        .map_err(|e| Error::stage(STAGE, format!("source {i}: {e}")))?
+                        .ok_or_else(|| {
+                            Error::stage(
+                                STAGE,
+                                format!("source {i}: `faces` selects no face of the part's mesh"),
+                            )
+                        })?;
+                    // Every distance the source's sets are cut at: its steps and the
+                    // end of its effective region.
+                    let mut levels = s.thresholds();
+                    levels.push(s.d_at(1.0));
+                    Some(SurfaceField::new(
+                        &surface,
+                        &family.bbox(),
+                        z,
+                        self.surface_cells,
+                        &levels,
+                    ))
+                }
+                None => None,
+            });
+        }
+        let closer = |i: usize, d: f64| match &fields[i] {
+            Some(field) => field.closer_than(d, &family_shapes),
+            None => closer_than(&sources[i].datum, d, z, &bbox, self.tolerance, &family_shapes),
+        };
+        for (i, s) in sources.iter().enumerate() {
+            let sets: Vec<_> = s.thresholds().iter().map(|&d| closer(i, d)).collect();
             // The effective region 0 <= f <= 1: within the grading width, and in front
             // of a plane.
             let (within, behind) = match self.combine {
                 Combine::Everywhere => (Set::Whole, Set::Empty),
                 Combine::Intersection => (
-                    closer(s, s.d_at(1.0)),
+                    closer(i, s.d_at(1.0)),
                     match s.datum {
-                        Datum::Plane { .. } => closer(s, 0.0),
+                        Datum::Plane { .. } => closer(i, 0.0),
                         _ => Set::Empty,
                     },
                 ),
@@ -304,7 +368,11 @@ fn build(config: &StageConfig<'_>) -> Result<AnyStage> {
     if !(o.tolerance.is_finite() && o.tolerance > 0.0) {
         return Err(config.error("tolerance", "must be a positive number of mm"));
     }
+    if !(8..=4096).contains(&o.surface_cells) {
+        return Err(config.error("surface_cells", "must be between 8 and 4096"));
+    }
     let mut sources = Vec::new();
+    let mut faces = Vec::new();
     for (i, s) in o.sources.into_iter().enumerate() {
         let bad = |m: &str| config.error("sources", format!("source {i}: {m}"));
         if !s.at.iter().all(|&v| lamina_core::limits::is_coordinate(v)) {
@@ -320,6 +388,14 @@ fn build(config: &StageConfig<'_>) -> Result<AnyStage> {
                 direction: unit(s.direction.unwrap_or([0.0, 0.0, 1.0]))
                     .ok_or_else(|| bad("`direction` must be a non-zero vector"))?,
             },
+            Kind::Surface if s.measure == Measure::Layer => {
+                if s.faces.is_some() {
+                    return Err(bad(
+                        "`faces` are chosen on the mesh; `measure = \"layer\"` measures to the layer's boundary",
+                    ));
+                }
+                Datum::LayerBoundary
+            }
             Kind::Surface => Datum::Surface,
             Kind::Plane => Datum::Plane {
                 at: s.at,
@@ -351,6 +427,17 @@ fn build(config: &StageConfig<'_>) -> Result<AnyStage> {
                 Composition::check(f).map_err(|e| bad(&e.to_string()))?;
             }
         }
+        if s.kind != Kind::Surface && (s.faces.is_some() || s.measure != Measure::Space) {
+            return Err(bad("`faces` and `measure` belong to `kind = \"surface\"`"));
+        }
+        faces.push(match datum {
+            Datum::Surface => {
+                let f = s.faces.clone().unwrap_or_default();
+                f.check().map_err(|e| bad(&format!("`faces`: {e}")))?;
+                Some((f, Surfaces::default()))
+            }
+            _ => None,
+        });
         sources.push(Pending {
             source: Source {
                 datum,
@@ -369,6 +456,8 @@ fn build(config: &StageConfig<'_>) -> Result<AnyStage> {
         sources,
         tolerance: o.tolerance,
         combine: o.combine,
+        faces,
+        surface_cells: o.surface_cells,
     })))
 }
 
@@ -376,7 +465,7 @@ lamina_core::register_stage!(StageFactory {
     info: StageInfo {
         kind: StageKind::Discretise,
         name: "sources",
-        doc: "Grading sources (point, axis, plane, outer surface): f(d) = (alpha d)^k truncated in steps of t_g, regions cut along the steps and overlaid, compositions by Eq. 2 and 8.",
+        doc: "Grading sources (point, axis, plane, outer surface in space): f(d) = (alpha d)^k truncated in steps of t_g, regions cut along the steps and overlaid, compositions by Eq. 2 and 8.",
         options: Options::SPECS,
         example: "use = \"sources\"\nsources = [{ kind = \"axis\", at = [0.0, 0.0, 0.0], width = 10.0, start = \"red\", end = \"green\" }]",
     },
