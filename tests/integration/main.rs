@@ -26,6 +26,7 @@ mod machine;
 mod orient;
 mod plugins;
 mod properties;
+mod readme;
 mod scaffold;
 mod sequence;
 mod slicing;
