@@ -44,6 +44,13 @@ impl Diagnostic for Located {
 /// Prints `e` to stderr. The first line always reads `error: FILE:LINE:COL: message`
 /// when the error has a place, so scripts and tests can rely on it.
 pub fn print(e: &Error) {
+    if let Error::Several(all) = e {
+        for one in all {
+            print(one);
+        }
+        eprintln!("error: {} errors in all", all.len());
+        return;
+    }
     let mut message = e.to_string();
     let mut cause = e.source();
     while let Some(c) = cause {

@@ -84,6 +84,11 @@ pub enum Error {
         #[source]
         source: Box<Error>,
     },
+
+    /// Several independent errors found in one pass (every wrong stage of a
+    /// pipeline, as `lamina check` reports them), in the order they were found.
+    #[error("{} errors; the first: {}", .0.len(), .0.first().map(ToString::to_string).unwrap_or_default())]
+    Several(Vec<Error>),
 }
 
 fn location_prefix(location: &Option<Location>) -> String {
@@ -98,6 +103,23 @@ fn context_suffix(context: &Option<String>) -> String {
 }
 
 impl Error {
+    /// `errors` as one error: the error itself when there is one, [`Error::Several`]
+    /// when there are more; `None` when there are none.
+    /// Errors with a place come first, in the order of their places in the files.
+    pub fn gathered(mut errors: Vec<Error>) -> Option<Error> {
+        errors.sort_by(|a, b| match (a.location(), b.location()) {
+            (Some(x), Some(y)) => (&x.file.path, x.span.start).cmp(&(&y.file.path, y.span.start)),
+            (Some(_), None) => std::cmp::Ordering::Less,
+            (None, Some(_)) => std::cmp::Ordering::Greater,
+            (None, None) => std::cmp::Ordering::Equal,
+        });
+        match errors.len() {
+            0 => None,
+            1 => errors.pop(),
+            _ => Some(Error::Several(errors)),
+        }
+    }
+
     /// A configuration error without a known place (the caller may add one).
     pub fn config(message: impl Into<String>) -> Self {
         Error::Config {
@@ -162,6 +184,7 @@ impl Error {
     pub fn is_usage(&self) -> bool {
         match self {
             Error::Config { .. } | Error::Plugin { .. } => true,
+            Error::Several(all) => all.iter().all(Error::is_usage),
             Error::Layer { source, .. } | Error::Part { source, .. } => source.is_usage(),
             _ => false,
         }
@@ -172,6 +195,7 @@ impl Error {
         match self {
             Error::Config { location, .. } | Error::Script { location, .. } => location.as_ref(),
             Error::Layer { source, .. } | Error::Part { source, .. } => source.location(),
+            Error::Several(all) => all.first().and_then(Error::location),
             _ => None,
         }
     }
@@ -181,6 +205,7 @@ impl Error {
         match self {
             Error::Config { help, .. } => help.as_deref(),
             Error::Layer { source, .. } | Error::Part { source, .. } => source.help(),
+            Error::Several(all) => all.first().and_then(Error::help),
             _ => None,
         }
     }

@@ -482,3 +482,30 @@ fn overridden_values_are_reported_at_their_key_in_plain_words() {
     );
     assert!(!err.contains("f64"), "{err}");
 }
+
+/// `lamina check` reports every wrong stage of a pipeline at once, each at its own
+/// line, as a compiler does: here a bad slice thickness, an unknown discretiser option,
+/// a script that does not compile and an output of no known kind.
+#[test]
+fn check_reports_every_error_at_once() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let text_of = "[model]\nuse = \"tube\"\nheight = 1.0\n\
+        [materials.a]\ncolour = [255, 0, 0]\n[materials.b]\ncolour = [0, 255, 0]\n\
+        [slice]\nuse = \"uniform\"\nthickness = -1.0\n\
+        [discretise]\nuse = \"offset\"\nrings = 3\n\
+        [grade]\nuse = \"script\"\nf = \"sin(r * PI\"\n\
+        [[output]]\nuse = \"nonesuch\"\npath = \"x\"\n";
+    let p = write(dir.path(), "p.toml", text_of);
+    let err = refused(&p);
+    // In the order of the file.
+    let mut at = 0;
+    for line in [10, 13, 16, 18] {
+        let found = err[at..].find(&format!("p.toml:{line}:"));
+        assert!(
+            found.is_some(),
+            "no error at line {line} after the one before:\n{err}"
+        );
+        at += found.unwrap_or_default() + 1;
+    }
+    assert!(err.contains("4 errors in all"), "{err}");
+}

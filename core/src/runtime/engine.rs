@@ -161,6 +161,11 @@ fn replace_model_file(spec: &ModelSpec, path: &Path) -> Result<ModelSpec> {
     })
 }
 
+/// The value of `r`, or `None` with its error added to `errors`.
+fn kept<T>(errors: &mut Vec<Error>, r: Result<T>) -> Option<T> {
+    r.map_err(|e| errors.push(e)).ok()
+}
+
 impl Engine {
     /// Loads plugins and builds every stage of `pipeline`. Scripts are compiled here, so
     /// a pipeline that builds is a pipeline whose configuration is valid.
@@ -180,6 +185,10 @@ impl Engine {
             )));
         }
 
+        // Every stage is built even when an earlier one failed, so that one pass
+        // reports every wrong table (`lamina check` prints them all, as a compiler does).
+        let mut errors = Vec::new();
+        let gather = |errors: &mut Vec<Error>, e: Error| errors.push(e);
         let mut models = Vec::new();
         // A model table (the pipeline's or a part's) built, with `--model` applied.
         let mut add_model = |spec: &ModelSpec| -> Result<usize> {
@@ -194,31 +203,59 @@ impl Engine {
             });
             Ok(models.len() - 1)
         };
-        let global_model = pipeline.model.as_ref().map(&mut add_model).transpose()?;
+        let mut global_failed = false;
+        let global_model = match pipeline.model.as_ref().map(&mut add_model).transpose() {
+            Ok(m) => m,
+            Err(e) => {
+                global_failed = true;
+                gather(&mut errors, e);
+                None
+            }
+        };
 
         let mut parts = Vec::new();
         for part in &pipeline.parts {
             let model = match &part.model {
-                Some(spec) => add_model(spec)?,
-                None => {
-                    global_model.ok_or_else(|| Error::config(format!("part `{}` has no model", part.name)))?
+                Some(spec) => add_model(spec).map(Some),
+                None if global_failed => Ok(None),
+                None => global_model
+                    .map(Some)
+                    .ok_or_else(|| Error::config(format!("part `{}` has no model", part.name))),
+            };
+            let model = model.unwrap_or_else(|e| {
+                gather(&mut errors, e);
+                None
+            });
+            let discretise_table = part
+                .discretise
+                .as_ref()
+                .or(pipeline.stages.get(&StageKind::Discretise));
+            let discretiser = (|| -> Result<_> {
+                build_optional(
+                    &registry,
+                    StageKind::Discretise,
+                    discretise_table,
+                    &scripts,
+                    &pipeline,
+                )?
+                .map(|s| -> Result<_> { Ok(expect_kind!(s, Discretise)) })
+                .transpose()
+            })();
+            let grade_table = part.grade.as_ref().or(pipeline.stages.get(&StageKind::Grade));
+            let grader = (|| -> Result<_> {
+                build_optional(&registry, StageKind::Grade, grade_table, &scripts, &pipeline)?
+                    .map(|s| -> Result<_> { Ok(expect_kind!(s, Grade)) })
+                    .transpose()
+            })();
+            let (discretiser, grader) = match (discretiser, grader) {
+                (Ok(d), Ok(g)) => (d, g),
+                (d, g) => {
+                    for e in [d.err(), g.err()].into_iter().flatten() {
+                        gather(&mut errors, e);
+                    }
+                    continue;
                 }
             };
-            let discretiser = build_optional(
-                &registry,
-                StageKind::Discretise,
-                part.discretise
-                    .as_ref()
-                    .or(pipeline.stages.get(&StageKind::Discretise)),
-                &scripts,
-                &pipeline,
-            )?
-            .map(|s| -> Result<_> { Ok(expect_kind!(s, Discretise)) })
-            .transpose()?;
-            let grade_table = part.grade.as_ref().or(pipeline.stages.get(&StageKind::Grade));
-            let grader = build_optional(&registry, StageKind::Grade, grade_table, &scripts, &pipeline)?
-                .map(|s| -> Result<_> { Ok(expect_kind!(s, Grade)) })
-                .transpose()?;
             let discretiser_grades = discretiser.as_ref().is_some_and(|d| d.grades());
             if grader.is_none() && !discretiser_grades && part.materials.len() > 1 {
                 let names: Vec<_> = part
@@ -235,7 +272,8 @@ impl Engine {
                 .with_help(
                     "add a [grade] table, or give the part a single material with `materials = [\"...\"]`",
                 );
-                return Err(
+                gather(
+                    &mut errors,
                     match part.table.as_ref().and_then(|t| t.location_of(Some("materials"))) {
                         Some(loc) => Error::Config {
                             location: Some(loc),
@@ -245,7 +283,9 @@ impl Engine {
                         None => err,
                     },
                 );
+                continue;
             }
+            let Some(model) = model else { continue };
             parts.push(PartStages {
                 name: part.name.clone(),
                 family_at: part.family_at,
@@ -258,26 +298,32 @@ impl Engine {
             });
         }
 
-        let slicer = expect_kind!(
-            build_default(&registry, StageKind::Slice, &pipeline, &scripts)?,
-            Slice
-        );
-        let sorter = expect_kind!(
-            build_default(&registry, StageKind::Sort, &pipeline, &scripts)?,
-            Sort
-        );
+        let slicer = (|| -> Result<_> {
+            Ok(expect_kind!(
+                build_default(&registry, StageKind::Slice, &pipeline, &scripts)?,
+                Slice
+            ))
+        })();
+        let sorter = (|| -> Result<_> {
+            Ok(expect_kind!(
+                build_default(&registry, StageKind::Sort, &pipeline, &scripts)?,
+                Sort
+            ))
+        })();
         // The kinds a pipeline may leave out, each from its top-level table.
         macro_rules! optional {
             ($kind:ident) => {
-                build_optional(
-                    &registry,
-                    StageKind::$kind,
-                    pipeline.stages.get(&StageKind::$kind),
-                    &scripts,
-                    &pipeline,
-                )?
-                .map(|s| -> Result<_> { Ok(expect_kind!(s, $kind)) })
-                .transpose()?
+                (|| -> Result<_> {
+                    build_optional(
+                        &registry,
+                        StageKind::$kind,
+                        pipeline.stages.get(&StageKind::$kind),
+                        &scripts,
+                        &pipeline,
+                    )?
+                    .map(|s| -> Result<_> { Ok(expect_kind!(s, $kind)) })
+                    .transpose()
+                })()
             };
         }
         let orienter = optional!(Orient);
@@ -285,11 +331,34 @@ impl Engine {
         let planner = optional!(Plan);
         let mut exporters = Vec::new();
         for t in &pipeline.outputs {
-            exporters.push(expect_kind!(
-                registry.build_for(StageKind::Export, t, &scripts, &base, pipeline.context())?,
-                Export
-            ));
+            let exporter = (|| -> Result<_> {
+                Ok(expect_kind!(
+                    registry.build_for(StageKind::Export, t, &scripts, &base, pipeline.context())?,
+                    Export
+                ))
+            })();
+            match exporter {
+                Ok(e) => exporters.push(e),
+                Err(e) => gather(&mut errors, e),
+            }
         }
+        let (slicer, sorter) = (kept(&mut errors, slicer), kept(&mut errors, sorter));
+        let (orienter, sequencer, planner) = (
+            kept(&mut errors, orienter),
+            kept(&mut errors, sequencer),
+            kept(&mut errors, planner),
+        );
+        if let Some(e) = Error::gathered(errors) {
+            return Err(e);
+        }
+        // Every stage above built when nothing was gathered.
+        let built = || Error::stage("runtime", "a stage was not built");
+        let (slicer, sorter) = (slicer.ok_or_else(built)?, sorter.ok_or_else(built)?);
+        let (orienter, sequencer, planner) = (
+            orienter.ok_or_else(built)?,
+            sequencer.ok_or_else(built)?,
+            planner.ok_or_else(built)?,
+        );
 
         Ok(Engine {
             threads: options.threads,

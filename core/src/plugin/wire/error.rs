@@ -160,6 +160,15 @@ impl From<&Error> for WireError {
                 part: part.clone(),
                 source: Box::new(WireError::from(&**source)),
             },
+            // Only a whole pipeline's build gathers several; one stage call answers
+            // with one, so the first stands for them on the wire.
+            Error::Several(all) => match all.first() {
+                Some(first) => WireError::from(first),
+                None => WireError::Stage {
+                    stage: "runtime".into(),
+                    message: e.to_string(),
+                },
+            },
         }
     }
 }
