@@ -3,7 +3,7 @@
 //! and a region's composition, taking a screenshot). The Chromium test is skipped with
 //! a printed reason when no Chromium is installed.
 
-use crate::support::{run_text, skip};
+use crate::support::{pipelines, run_text, skip};
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
@@ -204,4 +204,58 @@ fn pngs_show_the_regions_from_the_bore_outward() {
     )
     .expect("png");
     assert_eq!((sheet.width(), sheet.height()), (256, 256), "2 x 2 tiles of 128");
+}
+
+/// The contact sheet of the gear on its shaft: every tile at the scale of the whole
+/// model (the shaft's tiles show a small disc, not one blown up to the tile), each
+/// captioned with its layer and z under the picture.
+#[test]
+fn contact_sheet_tiles_share_one_scale_and_carry_captions() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let text = std::fs::read_to_string(pipelines().join("gear-z-gradient.toml")).expect("example")
+        + "[[output]]\nuse = \"json\"\npath = \"sheet-plan.json\"\n\
+           [[output]]\nuse = \"contact-sheet\"\npath = \"sheet.png\"\ncount = 4\ncolumns = 4\ntile = 128\n";
+    let plan = run_text(dir.path(), &text, "sheet-plan.json");
+    let layers = plan["layers"].as_array().expect("layers");
+    let n = layers.len();
+    let chosen: Vec<usize> = (0..4).map(|i| i * (n - 1) / 3).collect();
+    let sheet =
+        tiny_skia::Pixmap::decode_png(&std::fs::read(dir.path().join("out/sheet.png")).expect("sheet"))
+            .expect("png");
+    let t = 128u32;
+    let caption = 10u32;
+    // Drawn pixels over the layer's area: the same for every tile at one scale.
+    let mut per_mm2 = Vec::new();
+    for (slot, &l) in chosen.iter().enumerate() {
+        let x0 = slot as u32 * t;
+        let drawn = (2..t - caption - 2)
+            .flat_map(|y| (x0 + 2..x0 + t - 2).map(move |x| (x, y)))
+            .filter(|&(x, y)| {
+                let p = sheet.pixel(x, y).expect("pixel");
+                (p.red(), p.green(), p.blue()) != (255, 255, 255)
+            })
+            .count() as f64;
+        let area: f64 = layers[l]["parts"]
+            .as_array()
+            .expect("parts")
+            .iter()
+            .flat_map(|p| p["families"].as_array().expect("families"))
+            .flat_map(|f| f["regions"].as_array().expect("regions"))
+            .map(|r| r["area"].as_f64().expect("area"))
+            .sum();
+        per_mm2.push(drawn / area);
+        // The caption strip carries ink (black text on white).
+        let ink = (t - caption..t)
+            .flat_map(|y| (x0..x0 + t).map(move |x| (x, y)))
+            .filter(|&(x, y)| sheet.pixel(x, y).expect("pixel").red() < 80)
+            .count();
+        assert!(ink > 20, "tile {slot} (layer {l}) has no caption");
+    }
+    let (lo, hi) = per_mm2
+        .iter()
+        .fold((f64::INFINITY, 0.0f64), |(a, b), &v| (a.min(v), b.max(v)));
+    assert!(
+        hi / lo < 1.25,
+        "tiles at different scales: pixels per mm² {per_mm2:?}"
+    );
 }

@@ -9,5 +9,6 @@
 
 mod draw;
 mod html;
+mod label;
 mod raster;
 mod svg;

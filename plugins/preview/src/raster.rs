@@ -65,11 +65,31 @@ fn paint(rgb: [u8; 3]) -> Paint<'static> {
     p
 }
 
-/// Paints one layer into `pixmap` inside the box (x, y, w, h) in pixels, the layer's
-/// bounds `b` fitted with a margin, y up.
-fn paint_layer(pixmap: &mut Pixmap, cell: [f32; 4], plan: &LayerPlan, info: &RunInfo, toolpaths: bool) {
-    let Some(b) = layer_bounds(plan) else { return };
+/// Paints one layer into `pixmap` inside the box (x, y, w, h) in pixels, the bounds `b`
+/// (min x, min y, max x, max y: the layer's own, or the whole part's so that tiles share
+/// one scale) fitted with a margin, y up. What lies beyond the box is not drawn.
+fn paint_layer(
+    pixmap: &mut Pixmap,
+    cell: [f32; 4],
+    b: [f64; 4],
+    plan: &LayerPlan,
+    info: &RunInfo,
+    toolpaths: bool,
+) {
     let [cx, cy, cw, ch] = cell;
+    let (Some(rect), Some(mut mask)) = (
+        tiny_skia::Rect::from_xywh(cx, cy, cw, ch),
+        tiny_skia::Mask::new(pixmap.width(), pixmap.height()),
+    ) else {
+        return;
+    };
+    mask.fill_path(
+        &PathBuilder::from_rect(rect),
+        FillRule::Winding,
+        false,
+        Transform::identity(),
+    );
+    let mask = Some(&mask);
     let (bw, bh) = ((b[2] - b[0]).max(1e-6) as f32, (b[3] - b[1]).max(1e-6) as f32);
     let s = 0.94 * (cw / bw).min(ch / bh);
     let ox = cx + (cw - s * bw) / 2.0 - s * b[0] as f32;
@@ -82,7 +102,7 @@ fn paint_layer(pixmap: &mut Pixmap, cell: [f32; 4], plan: &LayerPlan, info: &Run
                 &paint(shape.rgb),
                 FillRule::EvenOdd,
                 Transform::identity(),
-                None,
+                mask,
             );
         }
     }
@@ -93,7 +113,7 @@ fn paint_layer(pixmap: &mut Pixmap, cell: [f32; 4], plan: &LayerPlan, info: &Run
     for pl in &plan.parts {
         let rings: Vec<Vec<[f32; 2]>> = pl.contours.iter().map(ring).collect();
         if let Some(path) = path_of(&rings, map) {
-            pixmap.stroke_path(&path, &paint([0, 0, 0]), &stroke, Transform::identity(), None);
+            pixmap.stroke_path(&path, &paint([0, 0, 0]), &stroke, Transform::identity(), mask);
         }
     }
     if toolpaths {
@@ -116,7 +136,7 @@ fn paint_layer(pixmap: &mut Pixmap, cell: [f32; 4], plan: &LayerPlan, info: &Run
                     &paint(hue),
                     &Stroke::default(),
                     Transform::identity(),
-                    None,
+                    mask,
                 );
             }
         }
@@ -181,6 +201,7 @@ impl Exporter for Png {
                 paint_layer(
                     &mut pixmap,
                     [0.0, 0.0, w as f32, h as f32],
+                    b,
                     plan,
                     info,
                     o.toolpaths,
@@ -281,8 +302,30 @@ impl LayerSink for SheetSink {
         if let Some(slot) = self.chosen.iter().position(|&l| l == plan.index) {
             let t = self.options.tile as f32;
             let (col, row) = (slot % self.options.columns, slot / self.options.columns);
-            let cell = [col as f32 * t + 2.0, row as f32 * t + 2.0, t - 4.0, t - 4.0];
-            paint_layer(&mut self.pixmap, cell, plan, info, false);
+            // Every tile at the scale of the whole model, so that sizes compare across
+            // tiles; below it, the layer's caption.
+            let scale = (t / 128.0).floor().max(1.0);
+            let caption_h = 9.0 * scale;
+            let cell = [
+                col as f32 * t + 2.0,
+                row as f32 * t + 2.0,
+                t - 4.0,
+                t - 4.0 - caption_h,
+            ];
+            let b = &info.xy_bounds;
+            let bounds = if b.is_empty() {
+                layer_bounds(plan)
+            } else {
+                Some([b.min.x, b.min.y, b.max.x, b.max.y])
+            };
+            if let Some(bounds) = bounds {
+                paint_layer(&mut self.pixmap, cell, bounds, plan, info, false);
+            }
+            let caption = crate::label::layer_caption(plan.index, plan.z);
+            let (w, _) = crate::label::size(&caption, scale);
+            let x = col as f32 * t + ((t - w) / 2.0).max(2.0);
+            let y = row as f32 * t + t - caption_h - 1.0;
+            crate::label::draw(&mut self.pixmap, &caption, x, y, scale);
         }
         Ok(())
     }
@@ -308,7 +351,7 @@ lamina_core::register_stage!(StageFactory {
     info: StageInfo {
         kind: StageKind::Export,
         name: "contact-sheet",
-        doc: "Chosen layers side by side in one PNG, left to right and top to bottom in build order.",
+        doc: "Chosen layers side by side in one PNG, left to right and top to bottom in build order, all at the scale of the whole model, each captioned with its layer and z.",
         options: SheetOptions::SPECS,
         example: "use = \"contact-sheet\"\ncount = 4\ncolumns = 2\ntile = 128",
     },

@@ -51,14 +51,14 @@ pub fn layer_svg(info: &RunInfo, plan: &LayerPlan, toolpaths: bool, size: f64) -
     );
     let _ = writeln!(
         s,
-        "<title>layer {} at z = {} mm ({} mm thick)</title>\n<rect x=\"{}\" y=\"{}\" width=\"{}\" height=\"{}\" fill=\"#ffffff\"/>\n<g transform=\"scale(1,-1)\">",
+        "<title>layer {} at z = {} mm ({} mm thick)</title>\n<clipPath id=\"view\"><rect x=\"{vx}\" y=\"{vy}\" width=\"{vw}\" height=\"{vh}\"/></clipPath>\n<rect x=\"{vx}\" y=\"{vy}\" width=\"{vw}\" height=\"{vh}\" fill=\"#ffffff\"/>\n<g clip-path=\"url(#view)\">\n<g transform=\"scale(1,-1)\">",
         plan.index,
         round(plan.z, 4),
         round(plan.thickness, 4),
-        round(x0 - margin, 4),
-        round(-(y1 + margin), 4),
-        round(w, 4),
-        round(h, 4)
+        vx = round(x0 - margin, 4),
+        vy = round(-(y1 + margin), 4),
+        vw = round(w, 4),
+        vh = round(h, 4)
     );
     for pl in &plan.parts {
         let part = &info.parts[pl.part];
@@ -119,7 +119,9 @@ pub fn layer_svg(info: &RunInfo, plan: &LayerPlan, toolpaths: bool, size: f64) -
             );
         }
     }
-    s.push_str("</g>\n</svg>\n");
+    // Travel to a park or a wipe tower leaves the part's bounds: the view stays on the
+    // part (and its margin), wherever the SVG is shown.
+    s.push_str("</g>\n</g>\n</svg>\n");
     s
 }
 
