@@ -509,3 +509,36 @@ fn check_reports_every_error_at_once() {
     }
     assert!(err.contains("4 errors in all"), "{err}");
 }
+
+/// A value from `--set` is reported at the override, shown as its own line, not at the
+/// file's value it replaced; a placement of the wrong kind says what placements are.
+#[test]
+fn set_values_are_reported_at_the_override() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    write(dir.path(), "g.rhai", "fn f(r) {\n    r\n}\n");
+    let p = write(dir.path(), "p.toml", &SCRIPTED);
+    let run = |set: &str| {
+        let out = lamina(&["check", p.to_str().expect("utf-8"), "--set", set]);
+        assert_eq!(out.status.code(), Some(2), "{set}: {}", text(&out.stderr));
+        text(&out.stderr)
+    };
+    let err = run("grade.f=\"g.rhai#nope\"");
+    assert!(
+        err.contains("--set:1:1: ") && err.contains("has no function `nope`"),
+        "{err}"
+    );
+    assert!(
+        err.contains("grade.f = 'g.rhai#nope'"),
+        "the override is shown: {err}"
+    );
+    // An expression's position is its position in the override.
+    let err = run("grade.f=\"r * (1 +\"");
+    assert!(err.contains("--set:1:"), "{err}");
+    assert!(!err.contains("p.toml:13"), "{err}");
+    let err = run("model.place=[100, 100]");
+    assert!(
+        err.contains("is not a placement") && err.contains("\"keep\""),
+        "{err}"
+    );
+    assert!(!err.contains("variant"), "no serde words: {err}");
+}

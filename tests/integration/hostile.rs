@@ -244,8 +244,8 @@ fn scripts_that_hang_or_hoard_are_stopped_with_their_location() {
         let s = Scratch::new();
         let o = s.run(&p, &[set]);
         refused(&s, label, &o, expected);
-        // Located in the expression the override gave, not in the file's text.
-        assert!(o.stderr.contains("<expression>"), "{label}: {}", o.stderr);
+        // Located in the override, not in the file's text.
+        assert!(o.stderr.contains("--set:1:"), "{label}: {}", o.stderr);
         assert!(
             !o.stderr.contains("tube-gradient.toml:2"),
             "{label}: {}",

@@ -429,10 +429,11 @@ pub fn model_spec(table: TableRef) -> Result<ModelSpec> {
     };
     let place = match table.get("place") {
         None => Placement::default(),
-        Some(v) => v
-            .clone()
-            .try_into::<Placement>()
-            .map_err(|e: toml::de::Error| table.error_at("place", e.message().trim()))?,
+        Some(v) => v.clone().try_into::<Placement>().map_err(|_| {
+            table
+                .error_at("place", format!("{v} is not a placement"))
+                .with_help("place = \"bed\" (drop to z = 0), \"centre\" (and centre on the origin) or \"keep\" (the file's coordinates); a machine's `placement` sets where on its bed")
+        })?,
     };
     Ok(ModelSpec {
         table,

@@ -200,14 +200,28 @@ impl TableRef {
     /// Where the string value of `key` is written in the file, when the file still
     /// holds the value the table has: `None` when a `--set` override replaced it, so
     /// that positions inside the string (a script's) are not read off another text.
+    /// A value a `--set` override gave is located in a text of its own, the override
+    /// as a TOML line (`grade.f = "..."`), so that its errors point at the override.
     pub fn string_location(&self, key: &str) -> Option<Location> {
         let current = self.table.get(key)?.as_str()?;
         let mut path = self.path.clone();
         path.push(PathElem::Key(key.to_string()));
-        let written = navigate_de(self.file.toml()?, &path)?;
-        match written.get_ref() {
-            DeValue::String(s) if s.as_ref() == current => self.location_of(Some(key)),
-            _ => None,
+        let file = self.file.toml()?;
+        match navigate_de(file, &path).as_ref().map(Spanned::get_ref) {
+            Some(DeValue::String(s)) if s.as_ref() == current => self.location_of(Some(key)),
+            _ => {
+                let name = path.iter().map(ToString::to_string).collect::<Vec<_>>().join(".");
+                // A literal string when it can be one: no escapes, so that positions
+                // in the value are positions in the line.
+                let value = if current.contains(['\'', '\n', '\r']) {
+                    toml::Value::String(current.to_string()).to_string()
+                } else {
+                    format!("'{current}'")
+                };
+                let line = format!("{name} = {value}");
+                let len = line.len();
+                Some(Location::new(SourceFile::new("--set", line), 0..len))
+            }
         }
     }
 
