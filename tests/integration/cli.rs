@@ -516,7 +516,7 @@ fn check_reports_every_error_at_once() {
 fn set_values_are_reported_at_the_override() {
     let dir = tempfile::tempdir().expect("tempdir");
     write(dir.path(), "g.rhai", "fn f(r) {\n    r\n}\n");
-    let p = write(dir.path(), "p.toml", &SCRIPTED);
+    let p = write(dir.path(), "p.toml", SCRIPTED);
     let run = |set: &str| {
         let out = lamina(&["check", p.to_str().expect("utf-8"), "--set", set]);
         assert_eq!(out.status.code(), Some(2), "{set}: {}", text(&out.stderr));
