@@ -290,7 +290,8 @@ fn real_models_discretise_into_tiling_sub_regions() {
                     info: &info,
                     layer: &layer,
                     tree: &tree,
-                    mesh: None,
+                    // The stages that measure in space (the outer-surface source) read it.
+                    mesh: Some(&mesh),
                     part: 0,
                     family: f,
                 };
