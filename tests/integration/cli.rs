@@ -1,7 +1,7 @@
 //! The `lamina` command line as users and scripts rely on it: exit codes, error
 //! positions, listings, and outputs that do not depend on the thread count.
 
-use crate::support::{lamina, pipelines, text, write};
+use crate::support::{box_stl, lamina, pipelines, text, write};
 use std::path::{Path, PathBuf};
 use std::process::Output;
 
@@ -216,32 +216,7 @@ fn example_pipelines_check() {
 fn model_option_replaces_the_model_of_a_single_part_pipeline() {
     let dir = tempfile::tempdir().expect("tempdir");
     // An ASCII STL cube of 2 mm, placed away from the origin: `place = "bed"` drops it.
-    let mut stl = String::from("solid cube\n");
-    let v = |i: usize| {
-        [
-            if i & 1 != 0 { 12.0 } else { 10.0 },
-            if i & 2 != 0 { 2.0 } else { 0.0 },
-            if i & 4 != 0 { 7.0 } else { 5.0 },
-        ]
-    };
-    for q in [
-        [0, 2, 3, 1],
-        [4, 5, 7, 6],
-        [0, 1, 5, 4],
-        [2, 6, 7, 3],
-        [0, 4, 6, 2],
-        [1, 3, 7, 5],
-    ] {
-        for t in [[q[0], q[1], q[2]], [q[0], q[2], q[3]]] {
-            stl.push_str("facet normal 0 0 0\nouter loop\n");
-            for i in t {
-                let p = v(i);
-                stl.push_str(&format!("vertex {} {} {}\n", p[0], p[1], p[2]));
-            }
-            stl.push_str("endloop\nendfacet\n");
-        }
-    }
-    stl.push_str("endsolid cube\n");
+    let stl = box_stl([10.0, 0.0, 5.0], [12.0, 2.0, 7.0]);
     let model = write(dir.path(), "cube.stl", &stl);
     let out_dir = dir.path().join("out");
     let out = lamina(&[

@@ -2,7 +2,7 @@
 //! paper (Fig. 11) is deposited in 3.0 mm work cycles of 18 steps, each region cut at
 //! its own heights and thickness.
 
-use crate::support::{pipelines, run_plan, run_text, try_run_text, write};
+use crate::support::{box_stl, pipelines, run_plan, run_text, try_run_text, write};
 use std::path::Path;
 
 fn run_pipe(out: &Path) -> serde_json::Value {
@@ -187,39 +187,6 @@ fn the_pipes_microstructure_is_written_as_bitmap_layers() {
     }
 }
 
-/// An ASCII STL of the box `[x0, x0 + 10] x [0, 10] x [z0, z1]`, outward winding.
-fn box_stl(x0: f64, z0: f64, z1: f64) -> String {
-    let (x1, y0, y1) = (x0 + 10.0, 0.0, 10.0);
-    let v = |i: usize| {
-        [
-            if i & 1 == 0 { x0 } else { x1 },
-            if i & 2 == 0 { y0 } else { y1 },
-            if i & 4 == 0 { z0 } else { z1 },
-        ]
-    };
-    // Two triangles a face, each face's corners counter-clockwise seen from outside.
-    let faces = [
-        [0, 2, 3, 1],
-        [4, 5, 7, 6],
-        [0, 1, 5, 4],
-        [2, 6, 7, 3],
-        [0, 4, 6, 2],
-        [1, 3, 7, 5],
-    ];
-    let mut s = String::from("solid box\n");
-    for f in faces {
-        for tri in [[f[0], f[1], f[2]], [f[0], f[2], f[3]]] {
-            s += "facet normal 0 0 0\nouter loop\n";
-            for i in tri {
-                let [x, y, z] = v(i);
-                s += &format!("vertex {x} {y} {z}\n");
-            }
-            s += "endloop\nendfacet\n";
-        }
-    }
-    s + "endsolid box\n"
-}
-
 /// The CMPM paper's Fig. 3 divides an object of five material regions into four
 /// blocks at the regions' heights, each block holding whole (parts of) regions. Here
 /// five regions of their own thicknesses span 0-10, 0-4, 4-10, 2-8 and 0-10 mm: the
@@ -239,7 +206,11 @@ fn five_material_regions_make_four_blocks() {
     let mut text =
         String::from("name = \"fig3\"\n[sequence]\nuse = \"work-cycles\"\n[slice]\nuse = \"adaptive\"\n");
     for (name, x0, z0, z1, t) in regions {
-        write(dir.path(), &format!("{name}.stl"), &box_stl(x0, z0, z1));
+        write(
+            dir.path(),
+            &format!("{name}.stl"),
+            &box_stl([x0, 0.0, z0], [x0 + 10.0, 10.0, z1]),
+        );
         text += &format!(
             "[materials.{name}]\ncolour = [100, 100, 100]\nlayer_thickness = {t}\n\
              [[parts]]\nname = \"{name}\"\nmaterials = [\"{name}\"]\n\

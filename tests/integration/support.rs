@@ -118,3 +118,29 @@ pub fn model(name: &str) -> Option<PathBuf> {
         None
     }
 }
+
+/// An ASCII STL of the axis-aligned box from `min` to `max`, outward winding: two
+/// triangles a face, each face's corners counter-clockwise seen from outside.
+pub fn box_stl(min: [f64; 3], max: [f64; 3]) -> String {
+    let v = |i: usize| [0, 1, 2].map(|a| if i & (1 << a) != 0 { max[a] } else { min[a] });
+    let faces = [
+        [0, 2, 3, 1],
+        [4, 5, 7, 6],
+        [0, 1, 5, 4],
+        [2, 6, 7, 3],
+        [0, 4, 6, 2],
+        [1, 3, 7, 5],
+    ];
+    let mut stl = String::from("solid box\n");
+    for q in faces {
+        for t in [[q[0], q[1], q[2]], [q[0], q[2], q[3]]] {
+            stl.push_str("facet normal 0 0 0\nouter loop\n");
+            for i in t {
+                let [x, y, z] = v(i);
+                stl.push_str(&format!("vertex {x} {y} {z}\n"));
+            }
+            stl.push_str("endloop\nendfacet\n");
+        }
+    }
+    stl + "endsolid box\n"
+}
