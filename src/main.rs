@@ -87,7 +87,7 @@ enum Command {
         #[arg(long)]
         no_open: bool,
     },
-    /// Validates a pipeline (stages, options, scripts, plugins) without running it.
+    /// Validates a pipeline (stages, options, scripts, plugins) without running it; every wrong stage is reported, in file order, and the exit code is 2.
     Check {
         #[command(flatten)]
         args: PipelineArgs,
