@@ -64,12 +64,27 @@ impl LocalHost {
         let max_operations = limits.max_operations;
         let max_memory = isize::try_from(limits.max_memory).unwrap_or(isize::MAX);
         engine.on_progress(move |ops| {
+            // Once stopped, at every operation: a callback whose error Rhai swallows (a
+            // sort comparator) must not run on until the next time check, or a
+            // comparator that sorts again makes a tree of calls that only the
+            // operation count ends, after many seconds.
+            if STOPPED.with(Cell::get) {
+                return stop(STOP_REASON.with(Cell::get));
+            }
             // Memory at every operation: one operation may copy megabytes.
             if HELD.with(Cell::get).wrapping_sub(HELD_AT_START.with(Cell::get)) > max_memory {
                 return stop("memory limit exceeded");
             }
             let over = ops >= max_operations;
-            if ops % 1024 != 0 && !over {
+            // The clock every 1024 operations of this thread, counted here: Rhai's own
+            // count starts again in callbacks that native functions make (a sort's
+            // comparator), which may never reach 1024 operations each.
+            let tick = TICKS.with(|t| {
+                let n = t.get().wrapping_add(1);
+                t.set(n);
+                n
+            });
+            if tick % 1024 != 0 && !over {
                 return None;
             }
             if over || DEADLINE.with(|d| d.get().is_some_and(|t| Instant::now() > t)) {

@@ -229,6 +229,27 @@ mod tests {
     }
 
     #[test]
+    fn a_comparator_that_sorts_again_is_stopped_quickly() {
+        // Found by the `script` fuzz target: each comparison calls `f`, which sorts
+        // again, so the calls make a tree that grows with every level.
+        let dir = tempfile::tempdir().expect("tempdir");
+        let path = dir.path().join("g.rhai");
+        std::fs::write(
+            &path,
+            "fn f(r, z) {\n  let a = [3, 1, 2];\n  a.sort(f);\n  r\n}\n",
+        )
+        .expect("write");
+        let f = host().function(&path, "f", None).expect("compiles");
+        let t = Instant::now();
+        let e = f.number(&ScriptArgs::default(), "layer 1").expect_err("stopped");
+        assert!(t.elapsed() < Duration::from_secs(3), "took {:?}", t.elapsed());
+        assert!(
+            e.to_string().contains("stopped") || e.to_string().contains("limit"),
+            "{e}"
+        );
+    }
+
+    #[test]
     fn fractions_not_summing_to_one_are_refused_with_position() {
         let dir = tempfile::tempdir().expect("tempdir");
         let path = dir.path().join("g.rhai");

@@ -17,6 +17,8 @@ thread_local! {
     pub(super) static STOP_REASON: Cell<&'static str> = const { Cell::new("time limit exceeded") };
     /// Bytes this thread holds, as [`CountingAllocator`] counts them.
     pub(super) static HELD: Cell<isize> = const { Cell::new(0) };
+    /// Operations this thread's script calls have made, for the clock checks.
+    pub(super) static TICKS: Cell<u32> = const { Cell::new(0) };
     /// What this thread held when its script call started.
     pub(super) static HELD_AT_START: Cell<isize> = const { Cell::new(0) };
 }
