@@ -84,7 +84,7 @@ impl LocalHost {
                 t.set(n);
                 n
             });
-            if tick % 1024 != 0 && !over {
+            if !tick.is_multiple_of(1024) && !over {
                 return None;
             }
             if over || DEADLINE.with(|d| d.get().is_some_and(|t| Instant::now() > t)) {
