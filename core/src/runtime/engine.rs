@@ -188,7 +188,6 @@ impl Engine {
         // Every stage is built even when an earlier one failed, so that one pass
         // reports every wrong table (`lamina check` prints them all, as a compiler does).
         let mut errors = Vec::new();
-        let gather = |errors: &mut Vec<Error>, e: Error| errors.push(e);
         let mut models = Vec::new();
         // A model table (the pipeline's or a part's) built, with `--model` applied.
         let mut add_model = |spec: &ModelSpec| -> Result<usize> {
@@ -208,7 +207,7 @@ impl Engine {
             Ok(m) => m,
             Err(e) => {
                 global_failed = true;
-                gather(&mut errors, e);
+                errors.push(e);
                 None
             }
         };
@@ -223,7 +222,7 @@ impl Engine {
                     .ok_or_else(|| Error::config(format!("part `{}` has no model", part.name))),
             };
             let model = model.unwrap_or_else(|e| {
-                gather(&mut errors, e);
+                errors.push(e);
                 None
             });
             let discretise_table = part
@@ -251,7 +250,7 @@ impl Engine {
                 (Ok(d), Ok(g)) => (d, g),
                 (d, g) => {
                     for e in [d.err(), g.err()].into_iter().flatten() {
-                        gather(&mut errors, e);
+                        errors.push(e);
                     }
                     continue;
                 }
@@ -272,8 +271,7 @@ impl Engine {
                 .with_help(
                     "add a [grade] table, or give the part a single material with `materials = [\"...\"]`",
                 );
-                gather(
-                    &mut errors,
+                errors.push(
                     match part.table.as_ref().and_then(|t| t.location_of(Some("materials"))) {
                         Some(loc) => Error::Config {
                             location: Some(loc),
@@ -339,7 +337,7 @@ impl Engine {
             })();
             match exporter {
                 Ok(e) => exporters.push(e),
-                Err(e) => gather(&mut errors, e),
+                Err(e) => errors.push(e),
             }
         }
         let (slicer, sorter) = (kept(&mut errors, slicer), kept(&mut errors, sorter));
