@@ -3,7 +3,7 @@
 //! and a region's composition, taking a screenshot). The Chromium test is skipped with
 //! a printed reason when no Chromium is installed.
 
-use crate::support::{pipelines, run_text, skip};
+use crate::support::{lamina, model, pipelines, run_text, skip, text, try_run_text};
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
@@ -75,6 +75,22 @@ fn headless(browser: &Path, profile: &Path) -> Command {
     c
 }
 
+/// Opens `url` in headless Chromium and reads what the viewer's test hook reports.
+fn page_report(browser: &Path, profile: &Path, url: &str) -> serde_json::Value {
+    let out = headless(browser, profile)
+        .arg("--dump-dom")
+        .arg(url)
+        .output()
+        .expect("chromium runs");
+    let dom = String::from_utf8_lossy(&out.stdout);
+    let start = dom
+        .find("<pre id=\"test-result\">")
+        .expect("the page reports what it shows")
+        + 22;
+    let end = start + dom[start..].find("</pre>").expect("end of the report");
+    serde_json::from_str(&dom[start..end].replace("&quot;", "\"").replace("&amp;", "&")).expect("json")
+}
+
 #[test]
 fn the_viewer_shows_the_chosen_layer_and_a_regions_composition_in_chromium() {
     let Some(browser) = chromium() else {
@@ -96,19 +112,7 @@ fn the_viewer_shows_the_chosen_layer_and_a_regions_composition_in_chromium() {
     let (x, y) = (at[0].as_f64().expect("x"), at[1].as_f64().expect("y"));
     let composition = region["composition"].as_object().expect("composition");
     let url = format!("file://{}#test:layer=2;at={x},{y}", page.display());
-    let out = headless(&browser, &dir.path().join("profile-dom"))
-        .arg("--dump-dom")
-        .arg(&url)
-        .output()
-        .expect("chromium runs");
-    let dom = String::from_utf8_lossy(&out.stdout);
-    let start = dom
-        .find("<pre id=\"test-result\">")
-        .expect("the page reports what it shows")
-        + 22;
-    let end = start + dom[start..].find("</pre>").expect("end of the report");
-    let shown: serde_json::Value =
-        serde_json::from_str(&dom[start..end].replace("&quot;", "\"")).expect("json");
+    let shown = page_report(&browser, &dir.path().join("profile-dom"), &url);
     assert_eq!(shown["layer"], 2, "{shown}");
     assert_eq!(shown["layers"], plan["layers"].as_array().expect("layers").len());
     assert!(
@@ -258,4 +262,66 @@ fn contact_sheet_tiles_share_one_scale_and_carry_captions() {
         hi / lo < 1.25,
         "tiles at different scales: pixels per mm² {per_mm2:?}"
     );
+}
+
+/// The viewer of a real plan stays small and opens fast: 3DBenchy graded in ten rings
+/// per solid area with both tools' paths (39 MB as JSON numbers before the geometry
+/// was packed) at most 8 MB, the buildings mesh at most 25 MB, and each interactive in
+/// headless Chromium within 1.5 s of navigation (the layer drawn, the page answering).
+#[test]
+#[ignore = "needs ../shared/models; run by .ci/run"]
+fn viewers_of_real_plans_stay_small_and_open_fast() {
+    let (Some(benchy), Some(buildings)) = (model("3DBenchy.stl"), model("openfoam_buildings_400k.stl"))
+    else {
+        return;
+    };
+    let dir = tempfile::tempdir().expect("tempdir");
+    let out = dir.path().join("benchy");
+    let o = lamina(&[
+        "view",
+        "--no-open",
+        "--out",
+        out.to_str().expect("utf-8"),
+        "--model",
+        benchy.to_str().expect("utf-8"),
+        pipelines().join("benchy-two-tools.toml").to_str().expect("utf-8"),
+    ]);
+    assert!(o.status.success(), "{}", text(&o.stderr));
+    let benchy_page = out.join("benchy-two-tools.html");
+    let city = dir.path().join("city");
+    std::fs::create_dir_all(&city).expect("dir");
+    let pipeline = format!(
+        "name = \"buildings\"\n[model]\nuse = \"stl\"\nfile = {:?}\n\
+         [materials.a]\ncolour = [200, 60, 40]\n[materials.b]\ncolour = [40, 60, 200]\n\
+         [slice]\nuse = \"uniform\"\nthickness = 0.2\n\
+         [discretise]\nuse = \"offset\"\ncount = 10\nfrom = \"all\"\n\
+         [grade]\nuse = \"xy\"\n\
+         [[output]]\nuse = \"html\"\npath = \"viewer.html\"\n",
+        buildings.display()
+    );
+    let o = try_run_text(&city, &pipeline);
+    assert!(o.status.success(), "{}", text(&o.stderr));
+    let city_page = city.join("out/viewer.html");
+    let browser = chromium();
+    for (page, limit) in [(benchy_page, 8e6), (city_page, 25e6)] {
+        let bytes = std::fs::metadata(&page).expect("viewer written").len() as f64;
+        println!("{}: {:.2} MB", page.display(), bytes / 1e6);
+        assert!(bytes <= limit, "{}: {bytes} bytes", page.display());
+        let Some(browser) = &browser else {
+            skip("no Chromium is installed (Debian: apt-get install chromium)");
+            continue;
+        };
+        let profile = tempfile::tempdir().expect("profile");
+        let url = format!("file://{}#test:layer=40;walk=1", page.display());
+        let shown = page_report(browser, profile.path(), &url);
+        let ready = shown["ready_ms"].as_f64().expect("ready_ms");
+        let walk = shown["walk_ms_per_layer"].as_f64().expect("walk");
+        println!("  interactive after {ready:.0} ms; {walk:.1} ms to decode and draw a layer");
+        assert_eq!(shown["layer"], 40, "{shown}");
+        assert!(
+            ready <= 1500.0,
+            "{}: interactive after {ready} ms",
+            page.display()
+        );
+    }
 }

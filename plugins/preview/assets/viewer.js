@@ -1,6 +1,11 @@
 // Lamina's layer viewer: draws the layers pushed into LAYERS by the page, with a
 // slider, zoom (wheel) and pan (drag), the composition of the region under the pointer,
-// and toggles for toolpaths and tools. No network access: everything is in the page.
+// the cursor's coordinates, a scale bar, and toggles for toolpaths and tools. No network
+// access: everything is in the page.
+//
+// A layer's geometry arrives packed (see `pack.rs`): base64 of zigzag varints, steps on
+// a grid of 10^-digits mm. It is decoded only when the layer is shown, and a few decoded
+// layers are kept, so a page of hundreds of layers opens as fast as one of a few.
 (function () {
   "use strict";
   const canvas = document.getElementById("view");
@@ -8,28 +13,134 @@
   const slider = document.getElementById("layer");
   const label = document.getElementById("label");
   const tip = document.getElementById("tip");
+  const cursor = document.getElementById("cursor");
   const showPaths = document.getElementById("paths");
   const toolsBox = document.getElementById("tools");
   let current = 0;
   const view = { scale: 1, ox: 0, oy: 0 };
+  const unit = Math.pow(10, -LAMINA.digits);
 
-  const bounds = [Infinity, Infinity, -Infinity, -Infinity];
-  const tools = new Set();
-  for (const L of LAYERS) {
-    for (const p of L.parts) {
-      for (const c of p.contours) {
-        for (let i = 0; i < c.length; i += 2) {
-          bounds[0] = Math.min(bounds[0], c[i]);
-          bounds[1] = Math.min(bounds[1], c[i + 1]);
-          bounds[2] = Math.max(bounds[2], c[i]);
-          bounds[3] = Math.max(bounds[3], c[i + 1]);
+  // ---- decoding ------------------------------------------------------------------
+
+  /** Reads the varints of one base64 block. */
+  function reader(text) {
+    const raw = atob(text);
+    const bytes = new Uint8Array(raw.length);
+    for (let i = 0; i < raw.length; i++) bytes[i] = raw.charCodeAt(i);
+    let at = 0;
+    let x = 0, y = 0;
+    const r = {
+      more: () => at < bytes.length,
+      uint() {
+        // Arithmetic, not bit operations: a value may exceed 32 bits.
+        let v = 0, mul = 1, b;
+        do {
+          b = bytes[at++];
+          v += (b & 0x7f) * mul;
+          mul *= 128;
+        } while (b >= 0x80 && at < bytes.length);
+        return v;
+      },
+      int() {
+        const v = r.uint();
+        return v % 2 ? -(v + 1) / 2 : v / 2;
+      },
+      /** A run of points, as a flat array of millimetres. */
+      points() {
+        const n = r.uint();
+        const out = new Float64Array(2 * n);
+        for (let i = 0; i < n; i++) {
+          x += r.int();
+          y += r.int();
+          out[2 * i] = x * unit;
+          out[2 * i + 1] = y * unit;
         }
+        return out;
+      },
+    };
+    return r;
+  }
+
+  function ringBox(rings) {
+    const b = [Infinity, Infinity, -Infinity, -Infinity];
+    for (const c of rings) {
+      for (let i = 0; i < c.length; i += 2) {
+        if (c[i] < b[0]) b[0] = c[i];
+        if (c[i + 1] < b[1]) b[1] = c[i + 1];
+        if (c[i] > b[2]) b[2] = c[i];
+        if (c[i + 1] > b[3]) b[3] = c[i + 1];
       }
     }
-    for (const t of L.paths) tools.add(t.tool);
+    return b;
   }
+
+  function ringsPath(rings, closed) {
+    const p = new Path2D();
+    for (const c of rings) {
+      if (c.length < 2) continue;
+      p.moveTo(c[0], c[1]);
+      for (let i = 2; i < c.length; i += 2) p.lineTo(c[i], c[i + 1]);
+      if (closed) p.closePath();
+    }
+    return p;
+  }
+
+  const KINDS = ["e", "t", "p"];
+  const cache = new Map();
+  const CACHED = 12;
+
+  /** The shown form of layer `i`: rings as arrays, and Path2D objects to draw. */
+  function decoded(i) {
+    let d = cache.get(i);
+    if (d) {
+      cache.delete(i);
+      cache.set(i, d);
+      return d;
+    }
+    const L = LAYERS[i];
+    d = { parts: [], paths: [] };
+    for (const p of L.parts) {
+      const r = reader(p.g);
+      const contours = [];
+      for (let k = 0; k < p.nc; k++) contours.push(r.points());
+      const regions = p.regions.map((meta) => {
+        const rings = [];
+        for (let k = 0; k < meta.n; k++) rings.push(r.points());
+        return { meta, rings, box: ringBox(rings), path: ringsPath(rings, true) };
+      });
+      d.parts.push({ part: p.part, outline: ringsPath(contours, true), regions });
+    }
+    if (L.p) {
+      const r = reader(L.p);
+      while (r.more()) {
+        const head = r.uint();
+        const pts = r.points();
+        d.paths.push({ tool: Math.floor(head / 3), kind: KINDS[head % 3], pts });
+      }
+    }
+    // One Path2D per tool and kind: a layer of thousands of beads draws in a few calls.
+    const groups = new Map();
+    for (const t of d.paths) {
+      if (t.pts.length < 4) continue;
+      const key = t.tool + t.kind;
+      if (!groups.has(key)) groups.set(key, { tool: t.tool, kind: t.kind, rings: [] });
+      groups.get(key).rings.push(t.pts);
+    }
+    d.pathGroups = [...groups.values()].map((g) => ({ tool: g.tool, kind: g.kind, path: ringsPath(g.rings, false) }));
+    cache.set(i, d);
+    if (cache.size > CACHED) cache.delete(cache.keys().next().value);
+    return d;
+  }
+
+  // ---- tools and legend ----------------------------------------------------------
+
+  function toolColour(t) { return "hsl(" + (t * 97 % 360) + ",70%,35%)"; }
+
+  const tools = new Map();
+  for (const t of LAMINA.tools) tools.set(t.index, t.name);
+  for (const L of LAYERS) for (const t of L.tools) if (!tools.has(t)) tools.set(t, "T" + t);
   const hiddenTools = new Set();
-  for (const t of [...tools].sort((a, b) => a - b)) {
+  for (const t of [...tools.keys()].sort((a, b) => a - b)) {
     const l = document.createElement("label");
     const box = document.createElement("input");
     box.type = "checkbox";
@@ -39,10 +150,15 @@
       if (box.checked) hiddenTools.delete(t); else hiddenTools.add(t);
       draw();
     });
-    l.append(box, " tool " + t);
+    const swatch = document.createElement("i");
+    swatch.className = "swatch";
+    swatch.style.background = toolColour(t);
+    l.append(box, swatch, " " + tools.get(t));
     toolsBox.append(l);
   }
   if (tools.size === 0) showPaths.parentElement.style.display = "none";
+
+  // ---- view ----------------------------------------------------------------------
 
   function resize() {
     const dpr = window.devicePixelRatio || 1;
@@ -53,19 +169,36 @@
   function fit() {
     const bar = document.getElementById("bar").offsetHeight + 10;
     const w = canvas.clientWidth, h = canvas.clientHeight - bar;
-    if (!(bounds[0] <= bounds[2])) { view.scale = 1; view.ox = w / 2; view.oy = h / 2; return; }
-    const bw = Math.max(bounds[2] - bounds[0], 1e-6), bh = Math.max(bounds[3] - bounds[1], 1e-6);
+    const b = LAMINA.bounds;
+    if (!b) { view.scale = 1; view.ox = w / 2; view.oy = h / 2; return; }
+    const bw = Math.max(b[2] - b[0], 1e-6), bh = Math.max(b[3] - b[1], 1e-6);
     view.scale = 0.9 * Math.min(w / bw, h / bh);
-    view.ox = w / 2 - view.scale * (bounds[0] + bounds[2]) / 2;
-    view.oy = bar + h / 2 + view.scale * (bounds[1] + bounds[3]) / 2;
+    view.ox = w / 2 - view.scale * (b[0] + b[2]) / 2;
+    view.oy = bar + h / 2 + view.scale * (b[1] + b[3]) / 2;
   }
 
   function toModel(sx, sy) { return [(sx - view.ox) / view.scale, (view.oy - sy) / view.scale]; }
 
-  function ringPath(c) {
-    ctx.moveTo(view.ox + c[0] * view.scale, view.oy - c[1] * view.scale);
-    for (let i = 2; i < c.length; i += 2) ctx.lineTo(view.ox + c[i] * view.scale, view.oy - c[i + 1] * view.scale);
-    ctx.closePath();
+  /** A round length near `target` mm: 1, 2 or 5 times a power of ten. */
+  function niceLength(target) {
+    const p = Math.pow(10, Math.floor(Math.log10(target)));
+    for (const m of [1, 2, 5]) if (m * p >= target) return m * p;
+    return 10 * p;
+  }
+
+  function scaleBar(dpr) {
+    const mm = niceLength(100 / view.scale);
+    const px = mm * view.scale;
+    const x = 16, y = canvas.clientHeight - 20;
+    ctx.setTransform(dpr, 0, 0, dpr, 0, 0);
+    ctx.strokeStyle = "#222";
+    ctx.lineWidth = 2;
+    ctx.beginPath();
+    ctx.moveTo(x, y - 5); ctx.lineTo(x, y); ctx.lineTo(x + px, y); ctx.lineTo(x + px, y - 5);
+    ctx.stroke();
+    ctx.fillStyle = "#222";
+    ctx.font = "12px system-ui, sans-serif";
+    ctx.fillText((mm >= 1 ? mm : mm.toPrecision(1)) + " mm", x + 4, y - 6);
   }
 
   function draw() {
@@ -73,34 +206,31 @@
     ctx.setTransform(dpr, 0, 0, dpr, 0, 0);
     ctx.fillStyle = "#f4f4f2";
     ctx.fillRect(0, 0, canvas.clientWidth, canvas.clientHeight);
-    const L = LAYERS[current];
-    if (!L) return;
-    for (const p of L.parts) {
+    if (!LAYERS[current]) return;
+    const d = decoded(current);
+    // Model coordinates (mm, y up) straight onto the canvas.
+    ctx.setTransform(dpr * view.scale, 0, 0, -dpr * view.scale, dpr * view.ox, dpr * view.oy);
+    const hair = 1 / view.scale;
+    for (const p of d.parts) {
       for (const r of p.regions) {
-        ctx.beginPath();
-        for (const c of r.rings) ringPath(c);
-        ctx.fillStyle = r.c;
-        ctx.fill("evenodd");
+        ctx.fillStyle = r.meta.c;
+        ctx.fill(r.path, "evenodd");
       }
-      ctx.beginPath();
-      for (const c of p.contours) ringPath(c);
       ctx.strokeStyle = "#000";
-      ctx.lineWidth = 1;
-      ctx.stroke();
+      ctx.lineWidth = hair;
+      ctx.stroke(p.outline);
     }
     if (showPaths.checked) {
-      for (const t of L.paths) {
-        if (hiddenTools.has(t.tool) || t.pts.length < 4) continue;
-        ctx.beginPath();
-        ctx.moveTo(view.ox + t.pts[0] * view.scale, view.oy - t.pts[1] * view.scale);
-        for (let i = 2; i < t.pts.length; i += 2) ctx.lineTo(view.ox + t.pts[i] * view.scale, view.oy - t.pts[i + 1] * view.scale);
-        ctx.setLineDash(t.kind === "t" ? [4, 4] : []);
-        ctx.strokeStyle = t.kind === "t" ? "#888" : "hsl(" + (t.tool * 97 % 360) + ",70%,35%)";
-        ctx.lineWidth = 1;
-        ctx.stroke();
+      for (const g of d.pathGroups) {
+        if (hiddenTools.has(g.tool)) continue;
+        ctx.setLineDash(g.kind === "t" ? [4 * hair, 4 * hair] : []);
+        ctx.strokeStyle = g.kind === "t" ? "#888" : toolColour(g.tool);
+        ctx.lineWidth = hair;
+        ctx.stroke(g.path);
       }
       ctx.setLineDash([]);
     }
+    scaleBar(dpr);
   }
 
   function inside(rings, x, y) {
@@ -117,11 +247,14 @@
 
   /** The region of the shown layer at model point (x, y), with its part's name. */
   function regionAt(x, y) {
-    const L = LAYERS[current];
-    if (!L) return null;
-    for (const p of L.parts) {
+    if (!LAYERS[current]) return null;
+    for (const p of decoded(current).parts) {
       for (const r of p.regions) {
-        if (inside(r.rings, x, y)) return { part: LAMINA.parts[p.part].name, index: r.k, level: r.l, composition: r.m };
+        const b = r.box;
+        if (x < b[0] || x > b[2] || y < b[1] || y > b[3]) continue;
+        if (inside(r.rings, x, y)) {
+          return { part: LAMINA.parts[p.part].name, index: r.meta.k, level: r.meta.l, composition: r.meta.m };
+        }
       }
     }
     return null;
@@ -159,6 +292,7 @@
       draw();
     }
     const [x, y] = toModel(e.offsetX, e.offsetY);
+    cursor.textContent = "x " + x.toFixed(2) + "  y " + y.toFixed(2) + " mm";
     const r = regionAt(x, y);
     if (r) {
       tip.style.display = "block";
@@ -169,7 +303,7 @@
       tip.style.display = "none";
     }
   });
-  canvas.addEventListener("mouseleave", () => { tip.style.display = "none"; });
+  canvas.addEventListener("mouseleave", () => { tip.style.display = "none"; cursor.textContent = ""; });
   window.addEventListener("resize", () => { resize(); fit(); draw(); });
   document.addEventListener("keydown", (e) => {
     if (e.key === "ArrowUp" || e.key === "PageUp") show(current + 1);
@@ -179,16 +313,24 @@
   resize();
   fit();
   show(0);
+  const ready = performance.now();
 
   window.lamina = { show, regionAt, layer: () => current, label: () => label.textContent };
 
-  // Scripted checks for tests: #test:layer=3;at=1.5,2.0 moves the slider, then looks up
-  // the region at a model point, and writes what the page shows into #test-result.
+  // Scripted checks for tests: #test:layer=3;at=1.5,2.0;walk=1 moves the slider, looks up
+  // the region at a model point, optionally shows every layer once (to time it), and
+  // writes what the page shows into #test-result.
   if (location.hash.startsWith("#test:")) {
     const args = {};
     for (const kv of location.hash.slice(6).split(";")) {
       const [k, v] = kv.split("=");
       args[k] = v;
+    }
+    let walk = null;
+    if (args.walk) {
+      const t0 = performance.now();
+      for (let i = 0; i < LAYERS.length; i++) show(i);
+      walk = (performance.now() - t0) / Math.max(1, LAYERS.length);
     }
     if (args.layer !== undefined) {
       slider.value = args.layer;
@@ -200,7 +342,15 @@
       region = regionAt(x, y);
     }
     const out = document.getElementById("test-result");
-    out.textContent = JSON.stringify({ layer: current, label: label.textContent, region, layers: LAYERS.length });
+    out.textContent = JSON.stringify({
+      layer: current,
+      label: label.textContent,
+      region,
+      layers: LAYERS.length,
+      tools: [...tools.values()],
+      ready_ms: ready,
+      walk_ms_per_layer: walk,
+    });
     out.hidden = false;
   }
 })();

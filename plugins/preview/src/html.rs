@@ -13,6 +13,7 @@ use lamina_core::{Contour, Error, LayerPlan, PathKind, Result, RunInfo, StageFac
 use serde::Serialize;
 
 use crate::draw::{composition_text, escape, hex, round};
+use crate::pack::Packer;
 
 const VIEWER_JS: &str = include_str!("../assets/viewer.js");
 const VIEWER_CSS: &str = include_str!("../assets/viewer.css");
@@ -24,8 +25,8 @@ lamina_core::stage_options! {
         path: PathBuf = r#""viewer.html""#,
         /// keep every n-th layer (large models)
         every: usize = "1",
-        /// decimals kept of the coordinates (mm)
-        digits: i32 = "3",
+        /// decimals kept of the coordinates (mm): the grid the geometry is packed on
+        digits: i32 = "2",
         /// include the planned toolpaths
         toolpaths: bool = "true",
     }
@@ -47,6 +48,19 @@ struct Header<'a> {
     layer_count: usize,
     materials: Vec<MaterialOut<'a>>,
     parts: Vec<PartOut<'a>>,
+    /// The model's extent in X-Y (min x, min y, max x, max y), so the page can frame
+    /// the view without reading every layer; `None` for an empty run.
+    bounds: Option<[f64; 4]>,
+    /// Decimals of the geometry grid (`pack`).
+    digits: i32,
+    /// The machine's tools, for the legend (empty without a machine).
+    tools: Vec<ToolOut>,
+}
+
+#[derive(Serialize)]
+struct ToolOut {
+    index: usize,
+    name: String,
 }
 
 #[derive(Serialize)]
@@ -61,20 +75,28 @@ struct PartOut<'a> {
     materials: Vec<&'a str>,
 }
 
+/// One layer: small data as JSON, geometry packed (`pack`), decoded by the page only
+/// when the layer is shown.
 #[derive(Serialize)]
 struct LayerOut {
     i: usize,
     z: f64,
     t: f64,
     parts: Vec<PartLayerOut>,
-    paths: Vec<PathOut>,
+    /// Tools with paths in this layer.
+    tools: Vec<usize>,
+    /// The toolpaths, packed.
+    p: String,
 }
 
 #[derive(Serialize)]
 struct PartLayerOut {
     part: usize,
-    contours: Vec<Vec<f64>>,
+    /// How many of the packed rings are the part's contours (they come first).
+    nc: usize,
     regions: Vec<RegionOut>,
+    /// The contours, then each region's rings, packed.
+    g: String,
 }
 
 #[derive(Serialize)]
@@ -87,21 +109,37 @@ struct RegionOut {
     l: f64,
     /// Index.
     k: usize,
-    rings: Vec<Vec<f64>>,
+    /// Number of packed rings.
+    n: usize,
 }
 
-#[derive(Serialize)]
-struct PathOut {
-    tool: usize,
-    /// `e`xtrude, `t`ravel or `p`ause.
-    kind: &'static str,
-    pts: Vec<f64>,
+fn xy(c: &Contour) -> Vec<[f64; 2]> {
+    c.points.iter().map(|p| [p.x, p.y]).collect()
 }
 
-fn flat(c: &Contour, digits: i32) -> Vec<f64> {
-    c.points
+/// The legend's names of the machine's tools: "T0 left (pla)".
+fn tools(info: &RunInfo) -> Vec<ToolOut> {
+    let Some(machine) = &info.machine else {
+        return Vec::new();
+    };
+    machine
+        .tools
         .iter()
-        .flat_map(|p| [round(p.x, digits), round(p.y, digits)])
+        .enumerate()
+        .map(|(index, slot)| {
+            let material = slot
+                .material
+                .clone()
+                .or_else(|| info.materials.get(index).map(|m| m.name.clone()));
+            let mut name = format!("T{index}");
+            if let Some(head) = &slot.name {
+                name = format!("{name} {head}");
+            }
+            if let Some(m) = material {
+                name = format!("{name} ({m})");
+            }
+            ToolOut { index, name }
+        })
         .collect()
 }
 
@@ -149,6 +187,12 @@ impl Exporter for Html {
                         .collect(),
                 })
                 .collect(),
+            bounds: (!ctx.info.xy_bounds.is_empty()).then(|| {
+                let b = &ctx.info.xy_bounds;
+                [b.min.x, b.min.y, b.max.x, b.max.y].map(|v| round(v, 3))
+            }),
+            digits: self.options.digits,
+            tools: tools(ctx.info),
         };
         let header = script_json(&header).map_err(|e| Error::io(&path, std::io::Error::other(e)))?;
         let legend: String = ctx
@@ -166,7 +210,7 @@ impl Exporter for Html {
             .join(" ");
         write!(
             out,
-            "<!doctype html>\n<html lang=\"en\">\n<head>\n<meta charset=\"utf-8\">\n<title>{name} - Lamina</title>\n<style>\n{VIEWER_CSS}</style>\n</head>\n<body>\n<div id=\"bar\"><strong>{name}</strong><input id=\"layer\" type=\"range\" min=\"0\" max=\"0\" value=\"0\" aria-label=\"layer\"><span id=\"label\"></span><label><input id=\"paths\" type=\"checkbox\" checked> toolpaths</label><span id=\"tools\"></span>{legend}</div>\n<canvas id=\"view\"></canvas>\n<div id=\"tip\"></div>\n<pre id=\"test-result\" hidden></pre>\n<script>const LAMINA = {header}; const LAYERS = [];</script>\n",
+            "<!doctype html>\n<html lang=\"en\">\n<head>\n<meta charset=\"utf-8\">\n<title>{name} - Lamina</title>\n<style>\n{VIEWER_CSS}</style>\n</head>\n<body>\n<div id=\"bar\"><strong>{name}</strong><input id=\"layer\" type=\"range\" min=\"0\" max=\"0\" value=\"0\" aria-label=\"layer\"><span id=\"label\"></span><label><input id=\"paths\" type=\"checkbox\" checked> toolpaths</label><span id=\"tools\"></span>{legend}<span id=\"cursor\"></span></div>\n<canvas id=\"view\"></canvas>\n<div id=\"tip\"></div>\n<pre id=\"test-result\" hidden></pre>\n<script>const LAMINA = {header}; const LAYERS = [];</script>\n",
             name = escape(ctx.pipeline_name),
         )
         .map_err(io(&path))?;
@@ -183,60 +227,67 @@ impl LayerSink for Sink {
         if !plan.index.is_multiple_of(self.options.every) {
             return Ok(());
         }
-        let d = self.options.digits;
+        let mut pack = Packer::new(self.options.digits);
         let parts = plan
             .parts
             .iter()
-            .map(|pl| PartLayerOut {
-                part: pl.part,
-                contours: pl
-                    .families
-                    .iter()
-                    .flat_map(|&f| {
-                        let fam = &pl.tree.families[f];
-                        std::iter::once(fam.outer).chain(fam.holes.iter().copied())
-                    })
-                    .map(|c| flat(&pl.contours[c], d))
-                    .collect(),
-                regions: pl
+            .map(|pl| {
+                let mut nc = 0;
+                for &f in &pl.families {
+                    let fam = &pl.tree.families[f];
+                    for c in std::iter::once(fam.outer).chain(fam.holes.iter().copied()) {
+                        pack.ring(&xy(&pl.contours[c]));
+                        nc += 1;
+                    }
+                }
+                let regions = pl
                     .regions
                     .iter()
-                    .map(|r| RegionOut {
-                        c: hex(info, pl.part, r),
-                        m: composition_text(info, pl.part, r),
-                        l: round(r.level, 4),
-                        k: r.index,
-                        rings: r.polygon.contours().map(|c| flat(c, d)).collect(),
+                    .map(|r| {
+                        let mut n = 0;
+                        for c in r.polygon.contours() {
+                            pack.ring(&xy(c));
+                            n += 1;
+                        }
+                        RegionOut {
+                            c: hex(info, pl.part, r),
+                            m: composition_text(info, pl.part, r),
+                            l: round(r.level, 4),
+                            k: r.index,
+                            n,
+                        }
                     })
-                    .collect(),
+                    .collect();
+                PartLayerOut {
+                    part: pl.part,
+                    nc,
+                    regions,
+                    g: pack.take_base64(),
+                }
             })
             .collect();
-        let paths = if self.options.toolpaths {
-            plan.toolpaths
-                .iter()
-                .map(|t| PathOut {
-                    tool: t.tool,
-                    kind: match t.kind {
-                        PathKind::Extrude => "e",
-                        PathKind::Travel => "t",
-                        PathKind::Pause => "p",
-                    },
-                    pts: t
-                        .points
-                        .iter()
-                        .flat_map(|p| [round(p.p.x, d), round(p.p.y, d)])
-                        .collect(),
-                })
-                .collect()
-        } else {
-            Vec::new()
-        };
+        let mut tools = Vec::new();
+        if self.options.toolpaths {
+            for t in &plan.toolpaths {
+                let kind = match t.kind {
+                    PathKind::Extrude => 0,
+                    PathKind::Travel => 1,
+                    PathKind::Pause => 2,
+                };
+                pack.path(t.tool, kind, t.points.iter().map(|p| [p.p.x, p.p.y]));
+                if !tools.contains(&t.tool) {
+                    tools.push(t.tool);
+                }
+            }
+            tools.sort_unstable();
+        }
         let layer = LayerOut {
             i: plan.index,
             z: round(plan.z, 4),
             t: round(plan.thickness, 4),
             parts,
-            paths,
+            tools,
+            p: pack.take_base64(),
         };
         let json = script_json(&layer).map_err(|e| Error::io(&self.path, std::io::Error::other(e)))?;
         let path = self.path.clone();

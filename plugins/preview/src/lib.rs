@@ -10,5 +10,6 @@
 mod draw;
 mod html;
 mod label;
+mod pack;
 mod raster;
 mod svg;
