@@ -137,6 +137,16 @@ impl OutputFiles for AtomicOutputs {
         self.pending.push((path, dest));
         Ok(Box::new(BufWriter::with_capacity(1 << 16, file)))
     }
+
+    fn written(&self) -> Vec<(PathBuf, PathBuf)> {
+        self.pending
+            .iter()
+            .filter_map(|(temp, dest)| {
+                let name = dest.strip_prefix(&self.dir).ok()?;
+                Some((name.to_path_buf(), temp.to_path_buf()))
+            })
+            .collect()
+    }
 }
 
 /// A name as one line of text for a file a machine reads: control characters and

@@ -300,6 +300,14 @@ pub struct ExportContext<'a> {
 /// Creates output files for an exporter. The names are relative to the output folder.
 pub trait OutputFiles {
     fn create(&mut self, name: &Path) -> Result<Box<dyn Write + Send>>;
+    /// The files of this run created so far: each name as given to [`Self::create`],
+    /// and a path its content can be read from. Sinks finish in the pipeline's order of
+    /// outputs, so at `finish` every earlier output is complete: a viewer can read back
+    /// the G-code the run wrote. Empty where the files cannot be read back (a plugin
+    /// loaded as a library writes through the host).
+    fn written(&self) -> Vec<(PathBuf, PathBuf)> {
+        Vec::new()
+    }
 }
 
 /// Writes one kind of output.

@@ -303,7 +303,8 @@ fn viewers_of_real_plans_stay_small_and_open_fast() {
     assert!(o.status.success(), "{}", text(&o.stderr));
     let city_page = city.join("out/viewer.html");
     let browser = chromium();
-    for (page, limit) in [(benchy_page, 8e6), (city_page, 25e6)] {
+    // Benchy's pipeline writes G-code: its page carries the machine's moves too.
+    for (page, limit, moves) in [(benchy_page, 8e6, true), (city_page, 25e6, false)] {
         let bytes = std::fs::metadata(&page).expect("viewer written").len() as f64;
         println!("{}: {:.2} MB", page.display(), bytes / 1e6);
         assert!(bytes <= limit, "{}: {bytes} bytes", page.display());
@@ -318,10 +319,82 @@ fn viewers_of_real_plans_stay_small_and_open_fast() {
         let walk = shown["walk_ms_per_layer"].as_f64().expect("walk");
         println!("  interactive after {ready:.0} ms; {walk:.1} ms to decode and draw a layer");
         assert_eq!(shown["layer"], 40, "{shown}");
+        assert_eq!(shown["moves"].is_object(), moves, "{}", page.display());
         assert!(
             ready <= 1500.0,
             "{}: interactive after {ready} ms",
             page.display()
         );
     }
+}
+
+/// The machine's moves in the viewer, read back from the G-code of a machine with two
+/// motion systems (RepRapFirmware 3.5): per tool, the extruded length the page draws
+/// for a layer matches the plan's beads of that tool, both heads are shown, and they
+/// move at the same time for most of the layer.
+#[test]
+fn the_viewer_plays_both_motion_systems_of_the_written_gcode() {
+    let Some(browser) = chromium() else {
+        skip("no Chromium is installed (Debian: apt-get install chromium)");
+        return;
+    };
+    let dir = tempfile::tempdir().expect("tempdir");
+    let text = std::fs::read_to_string(pipelines().join("assembly-two-tools.toml"))
+        .expect("example")
+        .replace("machine = \"rrf-idex-2\"", "machine = \"rrf-two-systems-2\"")
+        .replace("height = 5.0", "height = 1.5")
+        .replace("shaft_length = 9.0", "shaft_length = 3.0")
+        + "[[output]]\nuse = \"gcode\"\npath = \"two.gcode\"\n\
+           [[output]]\nuse = \"html\"\npath = \"viewer.html\"\n";
+    let plan = run_text(dir.path(), &text, "assembly-two-tools.json");
+    let page = dir.path().join("out/viewer.html");
+    let layer = 2;
+    let url = format!("file://{}#test:layer={layer};t=0.5", page.display());
+    let shown = page_report(&browser, &dir.path().join("profile"), &url);
+    let moves = &shown["moves"];
+    assert_eq!(moves["systems"], 2, "{shown}");
+    let heads = moves["heads"].as_array().expect("heads");
+    assert_eq!(heads.len(), 2, "{shown}");
+    assert_eq!(
+        (heads[0]["tool"].as_u64(), heads[1]["tool"].as_u64()),
+        (Some(0), Some(1))
+    );
+    let together = moves["together"].as_f64().expect("together");
+    assert!(
+        together > 0.5,
+        "both heads move at once only {together} of the layer"
+    );
+    // The plan's bead length per tool on that layer.
+    let mut planned = [0.0f64; 2];
+    for t in plan["layers"][layer]["toolpaths"].as_array().expect("toolpaths") {
+        if t["kind"] != "extrude" {
+            continue;
+        }
+        let pts = t["points"].as_array().expect("points");
+        let len: f64 = pts
+            .windows(2)
+            .map(|w| {
+                let a = &w[0]["p"];
+                let b = &w[1]["p"];
+                (a[0].as_f64().expect("x") - b[0].as_f64().expect("x"))
+                    .hypot(a[1].as_f64().expect("y") - b[1].as_f64().expect("y"))
+            })
+            .sum();
+        planned[t["tool"].as_u64().expect("tool") as usize] += len;
+    }
+    for (tool, want) in planned.iter().enumerate() {
+        let drawn = moves["extruded_mm"][tool.to_string()].as_f64().expect("extruded");
+        println!("tool {tool}: {drawn:.1} mm drawn, {want:.1} mm planned; together {together}");
+        assert!(
+            (drawn - want).abs() <= 0.02 * want,
+            "tool {tool}: the page draws {drawn:.1} mm of beads, the plan has {want:.1}"
+        );
+    }
+    // Half way through the layer the clock says so.
+    let clock = moves["clock"].as_str().expect("clock");
+    let duration = moves["duration_s"].as_f64().expect("duration");
+    assert!(
+        clock.starts_with(&format!("t = {:.1} of", duration / 2.0)),
+        "{clock}"
+    );
 }

@@ -1,7 +1,9 @@
 // Lamina's layer viewer: draws the layers pushed into LAYERS by the page, with a
 // slider, zoom (wheel) and pan (drag), the composition of the region under the pointer,
-// the cursor's coordinates, a scale bar, and toggles for toolpaths and tools. No network
-// access: everything is in the page.
+// the cursor's coordinates, a scale bar, and toggles for toolpaths and tools; with the
+// machine's moves read back from the run's G-code (MOVES), a player that shows every
+// head moving in time, both at once on machines with several motion systems. No
+// network access: everything is in the page.
 //
 // A layer's geometry arrives packed (see `pack.rs`): base64 of zigzag varints, steps on
 // a grid of 10^-digits mm. It is decoded only when the layer is shown, and a few decoded
@@ -28,7 +30,7 @@
     const bytes = new Uint8Array(raw.length);
     for (let i = 0; i < raw.length; i++) bytes[i] = raw.charCodeAt(i);
     let at = 0;
-    let x = 0, y = 0;
+    let x = 0, y = 0, t = 0;
     const r = {
       more: () => at < bytes.length,
       uint() {
@@ -44,6 +46,20 @@
       int() {
         const v = r.uint();
         return v % 2 ? -(v + 1) / 2 : v / 2;
+      },
+      /** A run of timed points: positions (mm) and times (ms). */
+      timed() {
+        const n = r.uint();
+        const pts = new Float64Array(2 * n), ts = new Float64Array(n);
+        for (let i = 0; i < n; i++) {
+          x += r.int();
+          y += r.int();
+          t += r.int();
+          pts[2 * i] = x * unit;
+          pts[2 * i + 1] = y * unit;
+          ts[i] = t;
+        }
+        return { pts, ts };
       },
       /** A run of points, as a flat array of millimetres. */
       points() {
@@ -131,6 +147,158 @@
     if (cache.size > CACHED) cache.delete(cache.keys().next().value);
     return d;
   }
+
+  // ---- the machine's moves (read back from the G-code by the exporter) ----------
+
+  const movesCache = new Map();
+
+  /** The moves of layer `i` (runs of one system, tool and kind, timed), or null. */
+  function movesOf(i) {
+    const L = LAYERS[i];
+    if (!L || !MOVES.has(L.i)) return null;
+    let m = movesCache.get(i);
+    if (m) return m;
+    const r = reader(MOVES.get(L.i));
+    const runs = [];
+    let duration = 0;
+    while (r.more()) {
+      const system = r.uint();
+      const head = r.uint();
+      const { pts, ts } = r.timed();
+      if (ts.length) duration = Math.max(duration, ts[ts.length - 1]);
+      runs.push({ system, tool: Math.floor(head / 3), kind: KINDS[head % 3], pts, ts });
+    }
+    const systems = new Map();
+    for (const run of runs) {
+      if (!systems.has(run.system)) systems.set(run.system, []);
+      systems.get(run.system).push(run);
+    }
+    m = { runs, duration, systems };
+    movesCache.set(i, m);
+    if (movesCache.size > CACHED) movesCache.delete(movesCache.keys().next().value);
+    return m;
+  }
+
+  /** Where each motion system's head is at time t (ms), and whether it is moving. */
+  function heads(m, t) {
+    const out = [];
+    for (const [system, runs] of [...m.systems.entries()].sort((a, b) => a[0] - b[0])) {
+      let at = null, moving = false, tool = runs[0].tool;
+      for (const run of runs) {
+        const ts = run.ts, n = ts.length;
+        if (!n || ts[0] > t) { if (at === null) at = [run.pts[0], run.pts[1]]; break; }
+        tool = run.tool;
+        if (ts[n - 1] <= t) { at = [run.pts[2 * n - 2], run.pts[2 * n - 1]]; continue; }
+        let lo = 0, hi = n - 1;
+        while (hi - lo > 1) { const mid = (lo + hi) >> 1; if (ts[mid] <= t) lo = mid; else hi = mid; }
+        const f = ts[hi] > ts[lo] ? (t - ts[lo]) / (ts[hi] - ts[lo]) : 1;
+        at = [run.pts[2 * lo] + f * (run.pts[2 * hi] - run.pts[2 * lo]), run.pts[2 * lo + 1] + f * (run.pts[2 * hi + 1] - run.pts[2 * lo + 1])];
+        moving = true;
+        break;
+      }
+      out.push({ system, tool, at, moving });
+    }
+    return out;
+  }
+
+  /** The run drawn up to time t: its points until t, the last one interpolated. */
+  function runUntil(path, run, t) {
+    const ts = run.ts, p = run.pts;
+    if (!ts.length || ts[0] > t) return;
+    path.moveTo(p[0], p[1]);
+    for (let i = 1; i < ts.length; i++) {
+      if (ts[i] <= t) { path.lineTo(p[2 * i], p[2 * i + 1]); continue; }
+      const f = ts[i] > ts[i - 1] ? (t - ts[i - 1]) / (ts[i] - ts[i - 1]) : 0;
+      path.lineTo(p[2 * i - 2] + f * (p[2 * i] - p[2 * i - 2]), p[2 * i - 1] + f * (p[2 * i + 1] - p[2 * i - 1]));
+      return;
+    }
+  }
+
+  const player = document.getElementById("player");
+  const showMoves = document.getElementById("moves");
+  const playButton = document.getElementById("play");
+  const timeSlider = document.getElementById("time");
+  const speed = document.getElementById("speed");
+  const clock = document.getElementById("clock");
+  let playT = Infinity;
+  let playing = null;
+
+  function drawMoves(m, hair) {
+    const t = Math.min(playT, m.duration);
+    const done = new Map();
+    for (const run of m.runs) {
+      if (hiddenTools.has(run.tool)) continue;
+      const key = run.tool + run.kind;
+      if (!done.has(key)) done.set(key, { run, path: new Path2D() });
+      runUntil(done.get(key).path, run, t);
+    }
+    if (t < m.duration) {
+      // What is still to come, faint.
+      ctx.globalAlpha = 0.18;
+      for (const run of m.runs) {
+        if (hiddenTools.has(run.tool) || run.kind === "t") continue;
+        ctx.strokeStyle = toolColour(run.tool);
+        ctx.lineWidth = hair;
+        ctx.stroke(ringsPath([run.pts], false));
+      }
+      ctx.globalAlpha = 1;
+    }
+    for (const { run, path } of done.values()) {
+      ctx.setLineDash(run.kind === "t" ? [4 * hair, 4 * hair] : []);
+      ctx.strokeStyle = run.kind === "t" ? "#888" : toolColour(run.tool);
+      ctx.lineWidth = run.kind === "t" ? hair : 2 * hair;
+      ctx.stroke(path);
+    }
+    ctx.setLineDash([]);
+    for (const h of heads(m, t)) {
+      if (!h.at) continue;
+      ctx.beginPath();
+      ctx.arc(h.at[0], h.at[1], 5 * hair, 0, 2 * Math.PI);
+      ctx.fillStyle = h.moving ? toolColour(h.tool) : "#fff";
+      ctx.fill();
+      ctx.strokeStyle = "#000";
+      ctx.lineWidth = 1.5 * hair;
+      ctx.stroke();
+    }
+    clock.textContent = "t = " + (t / 1000).toFixed(1) + " of " + (m.duration / 1000).toFixed(1) + " s";
+  }
+
+  function stop() {
+    if (playing !== null) cancelAnimationFrame(playing);
+    playing = null;
+    playButton.textContent = "play";
+  }
+
+  function play() {
+    const m = movesOf(current);
+    if (!m) return;
+    if (playing !== null) { stop(); return; }
+    if (!(playT < m.duration)) playT = 0;
+    playButton.textContent = "pause";
+    let last = performance.now();
+    const step = (now) => {
+      playT += (now - last) * +speed.value;
+      last = now;
+      if (playT >= m.duration) { playT = m.duration; stop(); }
+      timeSlider.value = Math.round(1000 * playT / Math.max(1, m.duration));
+      draw();
+      if (playing !== null) playing = requestAnimationFrame(step);
+    };
+    playing = requestAnimationFrame(step);
+  }
+
+  if (MOVES.size > 0) {
+    player.hidden = false;
+    player.title = "moves read back from " + GCODE.file + (GCODE.systems > 1 ? " (" + GCODE.systems + " motion systems)" : "");
+  }
+  showMoves.addEventListener("change", () => { stop(); draw(); });
+  playButton.addEventListener("click", play);
+  timeSlider.addEventListener("input", () => {
+    stop();
+    const m = movesOf(current);
+    playT = m ? m.duration * timeSlider.value / 1000 : Infinity;
+    draw();
+  });
 
   // ---- tools and legend ----------------------------------------------------------
 
@@ -220,7 +388,11 @@
       ctx.lineWidth = hair;
       ctx.stroke(p.outline);
     }
-    if (showPaths.checked) {
+    const m = MOVES.size > 0 && showMoves.checked ? movesOf(current) : null;
+    if (m) {
+      drawMoves(m, hair);
+    } else if (showPaths.checked) {
+      clock.textContent = "";
       for (const g of d.pathGroups) {
         if (hiddenTools.has(g.tool)) continue;
         ctx.setLineDash(g.kind === "t" ? [4 * hair, 4 * hair] : []);
@@ -261,7 +433,9 @@
   }
 
   function show(i) {
-    current = Math.max(0, Math.min(LAYERS.length - 1, i | 0));
+    const next = Math.max(0, Math.min(LAYERS.length - 1, i | 0));
+    if (next !== current) { stop(); playT = Infinity; timeSlider.value = 1000; }
+    current = next;
     slider.value = current;
     const L = LAYERS[current];
     label.textContent = L
@@ -341,6 +515,38 @@
       const [x, y] = args.at.split(",").map(Number);
       region = regionAt(x, y);
     }
+    let moves = null;
+    const m = movesOf(current);
+    if (m) {
+      if (args.t !== undefined) {
+        playT = m.duration * +args.t;
+        timeSlider.value = Math.round(1000 * +args.t);
+        draw();
+      }
+      const extruded = {};
+      for (const run of m.runs) {
+        if (run.kind !== "e") continue;
+        let len = 0;
+        for (let i = 2; i < run.pts.length; i += 2) len += Math.hypot(run.pts[i] - run.pts[i - 2], run.pts[i + 1] - run.pts[i - 1]);
+        extruded[run.tool] = (extruded[run.tool] || 0) + len;
+      }
+      // Time during which every motion system is moving at once, sampled.
+      let together = 0;
+      const samples = 400;
+      for (let k = 0; k < samples; k++) {
+        const hs = heads(m, (k + 0.5) * m.duration / samples);
+        if (hs.length > 1 && hs.every((h) => h.moving)) together++;
+      }
+      moves = {
+        runs: m.runs.length,
+        systems: m.systems.size,
+        duration_s: m.duration / 1000,
+        extruded_mm: extruded,
+        heads: heads(m, Math.min(playT, m.duration)),
+        together: together / samples,
+        clock: clock.textContent,
+      };
+    }
     const out = document.getElementById("test-result");
     out.textContent = JSON.stringify({
       layer: current,
@@ -350,6 +556,7 @@
       tools: [...tools.values()],
       ready_ms: ready,
       walk_ms_per_layer: walk,
+      moves,
     });
     out.hidden = false;
   }

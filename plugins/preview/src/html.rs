@@ -29,6 +29,12 @@ lamina_core::stage_options! {
         digits: i32 = "2",
         /// include the planned toolpaths
         toolpaths: bool = "true",
+        /// read back the G-code this run wrote and show the machine's moves, with a
+        /// player (list this output after the `gcode` output)
+        moves: bool = "true",
+        /// the G-code output to read back (a path as given to its exporter); unset:
+        /// the first `.gcode`, `.gco`, `.g` or `.nc` output written before this one
+        gcode: Option<PathBuf>,
     }
 }
 
@@ -210,7 +216,7 @@ impl Exporter for Html {
             .join(" ");
         write!(
             out,
-            "<!doctype html>\n<html lang=\"en\">\n<head>\n<meta charset=\"utf-8\">\n<title>{name} - Lamina</title>\n<style>\n{VIEWER_CSS}</style>\n</head>\n<body>\n<div id=\"bar\"><strong>{name}</strong><input id=\"layer\" type=\"range\" min=\"0\" max=\"0\" value=\"0\" aria-label=\"layer\"><span id=\"label\"></span><label><input id=\"paths\" type=\"checkbox\" checked> toolpaths</label><span id=\"tools\"></span>{legend}<span id=\"cursor\"></span></div>\n<canvas id=\"view\"></canvas>\n<div id=\"tip\"></div>\n<pre id=\"test-result\" hidden></pre>\n<script>const LAMINA = {header}; const LAYERS = [];</script>\n",
+            "<!doctype html>\n<html lang=\"en\">\n<head>\n<meta charset=\"utf-8\">\n<title>{name} - Lamina</title>\n<style>\n{VIEWER_CSS}</style>\n</head>\n<body>\n<div id=\"bar\"><strong>{name}</strong><input id=\"layer\" type=\"range\" min=\"0\" max=\"0\" value=\"0\" aria-label=\"layer\"><span id=\"label\"></span><label><input id=\"paths\" type=\"checkbox\" checked> toolpaths</label><span id=\"tools\"></span>{legend}<span id=\"player\" hidden><label><input id=\"moves\" type=\"checkbox\" checked> machine moves</label> <button id=\"play\" type=\"button\">play</button> <input id=\"time\" type=\"range\" min=\"0\" max=\"1000\" value=\"1000\" aria-label=\"time in the layer\"> <select id=\"speed\" aria-label=\"speed\"><option value=\"1\">1x</option><option value=\"10\" selected>10x</option><option value=\"100\">100x</option></select> <span id=\"clock\"></span></span><span id=\"cursor\"></span></div>\n<canvas id=\"view\"></canvas>\n<div id=\"tip\"></div>\n<pre id=\"test-result\" hidden></pre>\n<script>const LAMINA = {header}; const LAYERS = []; const MOVES = new Map(); let GCODE = null;</script>\n",
             name = escape(ctx.pipeline_name),
         )
         .map_err(io(&path))?;
@@ -294,10 +300,85 @@ impl LayerSink for Sink {
         writeln!(self.out, "<script>LAYERS.push({json});</script>").map_err(io(&path))
     }
 
-    fn finish(mut self: Box<Self>, _info: &RunInfo, _files: &mut dyn OutputFiles) -> Result<()> {
+    fn finish(mut self: Box<Self>, _info: &RunInfo, files: &mut dyn OutputFiles) -> Result<()> {
         let path = self.path.clone();
+        if self.options.moves {
+            self.write_moves(files)?;
+        }
         write!(self.out, "<script>\n{VIEWER_JS}</script>\n</body>\n</html>\n").map_err(io(&path))?;
         self.out.flush().map_err(io(&path))
+    }
+}
+
+impl Sink {
+    /// The G-code output to read back: the one `gcode` names, or the first written.
+    fn gcode_file(&self, files: &dyn OutputFiles) -> Result<Option<(PathBuf, PathBuf)>> {
+        let written = files.written();
+        if let Some(name) = &self.options.gcode {
+            return match written.into_iter().find(|(n, _)| n == name) {
+                Some(found) => Ok(Some(found)),
+                None => Err(Error::config(format!(
+                    "[[output]] html: `gcode = \"{}\"` names no output written before the viewer (list the `html` output after that `gcode` output)",
+                    name.display()
+                ))),
+            };
+        }
+        Ok(written.into_iter().find(|(n, _)| {
+            n.extension()
+                .and_then(|e| e.to_str())
+                .is_some_and(|e| ["gcode", "gco", "g", "nc"].contains(&e.to_ascii_lowercase().as_str()))
+        }))
+    }
+
+    /// Appends the machine's moves, read back from the G-code, one block per layer.
+    fn write_moves(&mut self, files: &dyn OutputFiles) -> Result<()> {
+        let Some((name, file)) = self.gcode_file(files)? else {
+            return Ok(());
+        };
+        let bytes = std::fs::read(&file).map_err(|e| Error::io(&name, e))?;
+        let moves = crate::moves::read(&String::from_utf8_lossy(&bytes));
+        let [ox, oy] = moves.offset;
+        let mut pack = Packer::new(self.options.digits);
+        let path = self.path.clone();
+        for (&layer, list) in &moves.layers {
+            if !layer.is_multiple_of(self.options.every) {
+                continue;
+            }
+            let start = list.iter().map(|m| m.t0).fold(f64::INFINITY, f64::min);
+            let mut run: Vec<([f64; 2], f64)> = Vec::new();
+            let mut key = None;
+            for m in list {
+                let k = (m.system, m.tool, if m.extrude { 0u8 } else { 1 });
+                let from = [m.from[0] - ox, m.from[1] - oy];
+                let to = [m.to[0] - ox, m.to[1] - oy];
+                let joined = key == Some(k) && run.last().is_some_and(|(p, _)| *p == from);
+                if !joined {
+                    if let Some((s, t, kind)) = key {
+                        pack.timed(s, t, kind, &run);
+                    }
+                    run.clear();
+                    run.push((from, m.t0 - start));
+                    key = Some(k);
+                }
+                run.push((to, m.t1 - start));
+            }
+            if let Some((s, t, kind)) = key {
+                pack.timed(s, t, kind, &run);
+            }
+            writeln!(
+                self.out,
+                "<script>MOVES.set({layer}, \"{}\");</script>",
+                pack.take_base64()
+            )
+            .map_err(io(&path))?;
+        }
+        let about = script_json(&serde_json::json!({
+            "file": name.display().to_string(),
+            "systems": moves.systems,
+            "offset": moves.offset,
+        }))
+        .map_err(|e| Error::io(&path, std::io::Error::other(e)))?;
+        writeln!(self.out, "<script>GCODE = {about};</script>").map_err(io(&path))
     }
 }
 

@@ -10,6 +10,7 @@
 mod draw;
 mod html;
 mod label;
+mod moves;
 mod pack;
 mod raster;
 mod svg;

@@ -11,7 +11,9 @@
 //!   written (the cursor runs on across rings, so a ring's first point is a short step
 //!   too);
 //! - a path: `tool * 3 + kind` (0 extrude, 1 travel, 2 pause), its point count, then its
-//!   points as for a ring.
+//!   points as for a ring;
+//! - a run of machine moves read from G-code (`moves`): its motion system, `tool * 3 +
+//!   kind`, its point count, then each point as (dx, dy, dt), dt in milliseconds.
 
 use base64::Engine as _;
 use lamina_geom::simplify::simplify_ring;
@@ -25,6 +27,8 @@ pub struct Packer {
     /// dropped could not be seen after quantisation anyway.
     eps: f64,
     last: (i64, i64),
+    /// Time of the last timed point (ms).
+    last_ms: i64,
     /// Reused buffer of quantised points.
     points: Vec<(i64, i64)>,
 }
@@ -38,6 +42,7 @@ impl Packer {
             scale,
             eps: 0.5 / scale,
             last: (0, 0),
+            last_ms: 0,
             points: Vec::new(),
         }
     }
@@ -102,12 +107,31 @@ impl Packer {
         self.points();
     }
 
+    /// A run of machine moves: its motion system, `tool * 3 + kind`, then each point
+    /// with its time (ms from the layer's start, as a signed step from the previous
+    /// point's time: runs of different systems overlap in time).
+    pub fn timed(&mut self, system: usize, tool: usize, kind: u8, pts: &[([f64; 2], f64)]) {
+        self.uint(system as u64);
+        self.uint(tool as u64 * 3 + kind as u64);
+        self.uint(pts.len() as u64);
+        for &([x, y], t) in pts {
+            let (qx, qy) = (self.grid(x), self.grid(y));
+            let ms = (t * 1000.0).round() as i64;
+            self.int(qx - self.last.0);
+            self.int(qy - self.last.1);
+            self.int(ms - self.last_ms);
+            self.last = (qx, qy);
+            self.last_ms = ms;
+        }
+    }
+
     /// The bytes as base64 text (standard alphabet, padded: what `atob` reads), and the
     /// packer emptied for the next block.
     pub fn take_base64(&mut self) -> String {
         let text = base64::engine::general_purpose::STANDARD.encode(&self.bytes);
         self.bytes.clear();
         self.last = (0, 0);
+        self.last_ms = 0;
         text
     }
 }

@@ -1,0 +1,391 @@
+//! The machine's moves, read back from a written G-code file for the viewer: what the
+//! firmware will do with the file, not what the planner meant, so a user sees the
+//! moves, tool changes and waits the printer gets.
+//!
+//! The reading follows the firmware's documented semantics, not Lamina's exporter:
+//!
+//! - `G0`/`G1` move linearly to the given axes (`G2`/`G3` are taken as straight moves to
+//!   their end points); `G90`/`G91` set absolute/relative axes and `M82`/`M83` the
+//!   extruder's mode (Marlin's and RepRapFirmware's rule: `G90`/`G91` set both, `M82`/
+//!   `M83` then the extruder alone); `G92` sets positions; `F` is modal, in mm/min.
+//! - `T<n>` selects the tool of the current motion system; `G4 P<ms>`/`S<s>` dwell.
+//! - RepRapFirmware 3.5's multiple motion systems: `M596 P<n>` sends what follows to
+//!   motion system `n`; each system keeps its own modes, feed rate, positions and tool.
+//!   `M598`, `M400`, `G4` without a time and `M0`-`M2` are read by every system and are
+//!   synchronisation points: every system there waits for the last to arrive (a `G4`
+//!   with a time is a dwell of its own system). A system whose moves name `U`/`V` is
+//!   drawn at (U, V), otherwise at (X, Y).
+//! - Layers are the `;LAYER:<n>` comments (the convention most G-code viewers read);
+//!   moves before the first one (homing, priming) are not layers.
+//!
+//! Time is distance over the feed rate, without acceleration: the viewer plays the moves
+//! in their order and proportions, and the waits at synchronisation points; it is not a
+//! build-time estimate.
+
+use std::collections::BTreeMap;
+
+/// One straight move of one head.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Move {
+    pub system: usize,
+    pub tool: usize,
+    /// Extruding (the extruder advanced while the head moved in X-Y).
+    pub extrude: bool,
+    pub from: [f64; 2],
+    pub to: [f64; 2],
+    /// Start and end, seconds from the start of the job.
+    pub t0: f64,
+    pub t1: f64,
+}
+
+/// The moves of a file by layer (`;LAYER:` number), each system's in its order.
+#[derive(Debug, Default)]
+pub struct Moves {
+    pub layers: BTreeMap<usize, Vec<Move>>,
+    /// Motion systems the file uses.
+    pub systems: usize,
+    /// The offset the exporter placed the plan by on the bed (its `; coordinates:`
+    /// comment), so the moves can be drawn over the plan; zero when not given.
+    pub offset: [f64; 2],
+}
+
+/// What one motion system does, before the systems are put on one clock.
+#[derive(Debug, Clone)]
+enum Step {
+    Move {
+        m: Move,
+        seconds: f64,
+        layer: Option<usize>,
+    },
+    Wait(f64),
+    /// The n-th synchronisation point of the file.
+    Sync(usize),
+}
+
+/// One motion system's reader state.
+#[derive(Debug, Clone)]
+struct System {
+    axes: BTreeMap<char, f64>,
+    relative: bool,
+    relative_e: bool,
+    /// mm/min; RepRapFirmware's default for a new reader.
+    feed: f64,
+    tool: usize,
+    uses_uv: bool,
+    layer: Option<usize>,
+    steps: Vec<Step>,
+}
+
+impl System {
+    fn new() -> Self {
+        System {
+            axes: BTreeMap::new(),
+            relative: false,
+            relative_e: false,
+            feed: 3000.0,
+            tool: 0,
+            uses_uv: false,
+            layer: None,
+            steps: Vec::new(),
+        }
+    }
+
+    fn head(&self) -> [f64; 2] {
+        let (x, y) = if self.uses_uv { ('U', 'V') } else { ('X', 'Y') };
+        [
+            self.axes.get(&x).copied().unwrap_or(0.0),
+            self.axes.get(&y).copied().unwrap_or(0.0),
+        ]
+    }
+
+    fn linear(&mut self, words: &[(char, f64)]) {
+        if let Some(&(_, f)) = words.iter().find(|(c, _)| *c == 'F')
+            && f > 0.0
+        {
+            self.feed = f;
+        }
+        if words.iter().any(|(c, _)| matches!(c, 'U' | 'V')) {
+            self.uses_uv = true;
+        }
+        let from = self.head();
+        let mut travelled = 0.0;
+        let mut e = 0.0;
+        for &(c, v) in words {
+            if !matches!(c, 'X' | 'Y' | 'Z' | 'U' | 'V' | 'E') {
+                continue;
+            }
+            let old = self.axes.get(&c).copied().unwrap_or(0.0);
+            let relative = if c == 'E' { self.relative_e } else { self.relative };
+            let new = if relative { old + v } else { v };
+            self.axes.insert(c, new);
+            if c == 'E' {
+                e = new - old;
+            } else {
+                travelled += (new - old) * (new - old);
+            }
+        }
+        let to = self.head();
+        let length = travelled.sqrt();
+        let seconds = if length > 0.0 { length } else { e.abs() } / (self.feed / 60.0);
+        let moved = (to[0] - from[0]).hypot(to[1] - from[1]) > 0.0;
+        let m = Move {
+            system: 0,
+            tool: self.tool,
+            extrude: moved && e > 0.0,
+            from,
+            to,
+            t0: 0.0,
+            t1: 0.0,
+        };
+        self.steps.push(Step::Move {
+            m,
+            seconds: if seconds.is_finite() { seconds } else { 0.0 },
+            layer: self.layer,
+        });
+    }
+}
+
+/// The words of a line without its comment, line number and checksum: `G1 X1 Y2` →
+/// `[('G', 1), ('X', 1), ('Y', 2)]`. Words that are not a letter and a number are
+/// skipped (a firmware would refuse the line; the viewer shows what it can).
+fn words(line: &str) -> Vec<(char, f64)> {
+    let code = line.split(';').next().unwrap_or("");
+    let code = code.split('*').next().unwrap_or("");
+    let mut out = Vec::new();
+    let mut chars = code.char_indices().peekable();
+    while let Some((i, c)) = chars.next() {
+        if !c.is_ascii_alphabetic() {
+            continue;
+        }
+        let start = i + 1;
+        let mut end = start;
+        while let Some(&(j, d)) = chars.peek() {
+            if d.is_ascii_digit() || matches!(d, '.' | '-' | '+') {
+                end = j + 1;
+                chars.next();
+            } else {
+                break;
+            }
+        }
+        if let Ok(v) = code[start..end].parse::<f64>()
+            && v.is_finite()
+        {
+            out.push((c.to_ascii_uppercase(), v));
+        }
+    }
+    out
+}
+
+/// `; coordinates: ... by X+150.000 Y+150.000` → the offset.
+fn offset(line: &str) -> Option<[f64; 2]> {
+    let rest = line.strip_prefix("; coordinates:")?;
+    let by = rest.rsplit(" by ").next()?;
+    let mut it = by.split_whitespace();
+    let x = it.next()?.strip_prefix('X')?.parse().ok()?;
+    let y = it.next()?.strip_prefix('Y')?.parse().ok()?;
+    Some([x, y])
+}
+
+/// Reads a G-code file's moves. Unknown commands are skipped.
+pub fn read(text: &str) -> Moves {
+    let mut systems = vec![System::new()];
+    let mut current = 0;
+    let mut barriers = 0;
+    let mut placed = [0.0, 0.0];
+    for line in text.lines() {
+        let line = line.trim();
+        if let Some(rest) = line.strip_prefix(";LAYER:") {
+            let n = rest.split_whitespace().next().and_then(|n| n.parse().ok());
+            systems[current].layer = n;
+            continue;
+        }
+        if let Some(o) = offset(line) {
+            placed = o;
+            continue;
+        }
+        let w = words(line);
+        let Some(&(letter, number)) = w.first() else {
+            continue;
+        };
+        // Commands with a fraction (`G29.1`) are none the viewer needs.
+        if number.fract() != 0.0 || !(-1.0..1e6).contains(&number) {
+            continue;
+        }
+        let number = number as i64;
+        let rest = &w[1..];
+        let arg = |c: char| rest.iter().find(|(l, _)| *l == c).map(|&(_, v)| v);
+        let s = &mut systems[current];
+        match (letter, number) {
+            ('G', 0..=3) => s.linear(rest),
+            ('G', 4) => {
+                let seconds = arg('P').map(|p| p / 1000.0).or(arg('S')).unwrap_or(0.0);
+                if seconds > 0.0 {
+                    s.steps.push(Step::Wait(seconds));
+                } else {
+                    sync(&mut systems, &mut barriers);
+                }
+            }
+            ('G', 90) => (s.relative, s.relative_e) = (false, false),
+            ('G', 91) => (s.relative, s.relative_e) = (true, true),
+            ('G', 92) => {
+                for &(c, v) in rest {
+                    s.axes.insert(c, v);
+                }
+            }
+            ('M', 82) => s.relative_e = false,
+            ('M', 83) => s.relative_e = true,
+            ('M', 400 | 598) => sync(&mut systems, &mut barriers),
+            ('M', 0..=2) => {
+                sync(&mut systems, &mut barriers);
+                current = 0;
+            }
+            ('M', 596) => {
+                let p = arg('P').unwrap_or(0.0);
+                // RepRapFirmware 3.5 has two motion systems; more are taken as given,
+                // within reason.
+                if (0.0..8.0).contains(&p) {
+                    current = p as usize;
+                    while systems.len() <= current {
+                        // A new system starts with the modes of the one that forked it.
+                        let mut fork = systems[0].clone();
+                        fork.steps.clear();
+                        fork.layer = None;
+                        fork.uses_uv = false;
+                        systems.push(fork);
+                    }
+                }
+            }
+            ('T', n) if n >= 0 => s.tool = n as usize,
+            _ => {}
+        }
+    }
+    let mut moves = Moves {
+        systems: systems.len(),
+        offset: placed,
+        ..Moves::default()
+    };
+    clock(&mut systems, &mut moves);
+    moves
+}
+
+/// A synchronisation point for every system.
+fn sync(systems: &mut [System], barriers: &mut usize) {
+    for s in systems.iter_mut() {
+        s.steps.push(Step::Sync(*barriers));
+    }
+    *barriers += 1;
+}
+
+/// Puts every system's steps on one clock: each system runs on until its next
+/// synchronisation point; when every system that has one left is at it, all go on
+/// from the latest arrival.
+fn clock(systems: &mut [System], moves: &mut Moves) {
+    let mut at = vec![0usize; systems.len()];
+    let mut time = vec![0.0f64; systems.len()];
+    loop {
+        // Every system runs on to its next synchronisation point (or its end).
+        let mut next = vec![None; systems.len()];
+        for (k, s) in systems.iter().enumerate() {
+            while let Some(step) = s.steps.get(at[k]) {
+                match step {
+                    Step::Move { m, seconds, layer } => {
+                        let t0 = time[k];
+                        time[k] += seconds;
+                        if let Some(layer) = *layer
+                            && m.from != m.to
+                        {
+                            moves.layers.entry(layer).or_default().push(Move {
+                                system: k,
+                                t0,
+                                t1: time[k],
+                                ..m.clone()
+                            });
+                        }
+                    }
+                    Step::Wait(seconds) => time[k] += seconds,
+                    Step::Sync(n) => {
+                        next[k] = Some(*n);
+                        break;
+                    }
+                }
+                at[k] += 1;
+            }
+        }
+        // The earliest point in the file any system waits at: the systems there meet
+        // (a system started after it never had it).
+        let Some(first) = next.iter().flatten().min().copied() else {
+            break;
+        };
+        let meet = (0..systems.len())
+            .filter(|&k| next[k] == Some(first))
+            .map(|k| time[k])
+            .fold(0.0, f64::max);
+        for k in 0..systems.len() {
+            if next[k] == Some(first) {
+                time[k] = meet;
+                at[k] += 1;
+            }
+        }
+    }
+    for layer in moves.layers.values_mut() {
+        // Each system's moves stay in order; systems follow one another.
+        layer.sort_by_key(|m| m.system);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn words_skip_comments_line_numbers_and_checksums() {
+        assert_eq!(
+            words("N12 G1 X1.5 Y-2 E.3*57 ; move"),
+            vec![('N', 12.0), ('G', 1.0), ('X', 1.5), ('Y', -2.0), ('E', 0.3)]
+        );
+        assert_eq!(words("; only a comment"), vec![]);
+    }
+
+    #[test]
+    fn extrusion_follows_the_extruder_modes_and_g92() {
+        let text = "; coordinates: placed on the bed of machine `m` by X+10.000 Y-5.500\n\
+                    G90\nM82\nG92 E0\nG1 X0 Y0 F6000\n;LAYER:0 Z0.2\n\
+                    G1 X10 Y0 E1 F600\nG1 X10 Y10 E1\nG92 E0\nG1 X0 Y10 E0.5\n\
+                    M83\nG1 X0 Y0 E0.5\nG1 E-0.8\nG1 X5 Y5\nG91\nG1 X1 Y1 E0.1\n";
+        let m = read(text);
+        assert_eq!(m.offset, [10.0, -5.5]);
+        let l = &m.layers[&0];
+        let kinds: Vec<bool> = l.iter().map(|m| m.extrude).collect();
+        // extrude, travel (E unchanged), extrude after G92, extrude (relative),
+        // travel, extrude (all relative).
+        assert_eq!(kinds, vec![true, false, true, true, false, true]);
+        assert_eq!(l[5].to, [6.0, 6.0]);
+        // 10 mm at 600 mm/min.
+        assert!((l[0].t1 - l[0].t0 - 1.0).abs() < 1e-9);
+    }
+
+    #[test]
+    fn motion_systems_run_at_once_and_meet_at_m598() {
+        // System 0 reaches its barrier after 4 s, system 1 after 1 s; then both go on.
+        let text = "G90\nM83\nM606 S1\nM596 P1\nG90\nM83\nM596 P0\n\
+                    ;LAYER:0\nT0\nG1 X20 Y0 F600\nG1 X40 Y0 E1\n\
+                    M596 P1\n;LAYER:0\nT1\nG1 U10 V0 F600\n\
+                    M598\n\
+                    M596 P0\nG1 X60 Y0 E1\nM596 P1\nG1 U10 V10 E1\n";
+        let m = read(text);
+        assert_eq!(m.systems, 2);
+        let l = &m.layers[&0];
+        let s1: Vec<&Move> = l.iter().filter(|m| m.system == 1).collect();
+        assert_eq!(s1.len(), 2);
+        assert_eq!((s1[0].tool, s1[0].from, s1[0].to), (1, [0.0, 0.0], [10.0, 0.0]));
+        assert!((s1[0].t0, s1[0].t1) == (0.0, 1.0));
+        // System 1 waited 1 s at the barrier for system 0.
+        assert!(
+            (s1[1].t0 - 4.0).abs() < 1e-9 && (s1[1].t1 - 5.0).abs() < 1e-9,
+            "{s1:?}"
+        );
+        let s0: Vec<&Move> = l.iter().filter(|m| m.system == 0).collect();
+        assert!((s0[2].t0 - 4.0).abs() < 1e-9, "{s0:?}");
+        assert!(s0.iter().all(|m| m.tool == 0));
+    }
+}
