@@ -70,6 +70,8 @@ fn headless(browser: &Path, profile: &Path) -> Command {
         "--disable-component-update",
         "--disable-sync",
         "--window-size=900,700",
+        // WebGL on the software rasteriser when there is no GPU (the 3D view).
+        "--enable-unsafe-swiftshader",
     ])
     .arg(format!("--user-data-dir={}", profile.display()));
     c
@@ -325,6 +327,15 @@ fn viewers_of_real_plans_stay_small_and_open_fast() {
             "{}: interactive after {ready} ms",
             page.display()
         );
+        let profile = tempfile::tempdir().expect("profile");
+        let url = format!("file://{}#test:layer=120;view=3d", page.display());
+        let shown = page_report(browser, profile.path(), &url);
+        let stats = &shown["view3d"]["stats"];
+        println!("  3D view: {stats}");
+        assert!(
+            stats["wall_triangles"].as_f64().expect("triangles") > 1000.0,
+            "{shown}"
+        );
     }
 }
 
@@ -397,4 +408,55 @@ fn the_viewer_plays_both_motion_systems_of_the_written_gcode() {
         clock.starts_with(&format!("t = {:.1} of", duration / 2.0)),
         "{clock}"
     );
+}
+
+/// The 3D view in headless Chromium (WebGL): seen from the top with layer 2 as the
+/// highest shown, each region's reference point shows that region's colour on the top
+/// face; with the cut plane half-way across X, a point beyond it shows the background
+/// and its mirror point still the outer region.
+#[test]
+fn the_3d_view_shows_each_regions_colour_where_it_lies_and_cuts_across_x() {
+    let Some(browser) = chromium() else {
+        skip("no Chromium is installed (Debian: apt-get install chromium)");
+        return;
+    };
+    let dir = tempfile::tempdir().expect("tempdir");
+    let plan = run(dir.path());
+    let page = dir.path().join("out/viewer.html");
+    let close = |got: &serde_json::Value, want: [u64; 3]| {
+        (0..3).all(|k| got[k].as_u64().expect("channel").abs_diff(want[k]) <= 8)
+    };
+    let layer = &plan["layers"][2];
+    for (k, region) in regions(layer).iter().enumerate() {
+        let at = region["reference"].as_array().expect("reference");
+        let (x, y) = (at[0].as_f64().expect("x"), at[1].as_f64().expect("y"));
+        let url = format!(
+            "file://{}#test:layer=2;view=3d;camera=top;probe={x},{y}",
+            page.display()
+        );
+        let shown = page_report(&browser, &dir.path().join(format!("profile-{k}")), &url);
+        let v = &shown["view3d"];
+        assert!(v["error"].is_null(), "{shown}");
+        let want = [0, 1, 2].map(|c| region["colour"][c].as_u64().expect("channel"));
+        assert!(
+            close(&v["probe"]["rgb"], want),
+            "region {k} at ({x:.2}, {y:.2}): drew {} at pixel {}, the region is {want:?}",
+            v["probe"]["rgb"],
+            v["probe"]["px"]
+        );
+    }
+    let outer = &regions(layer)[0];
+    let want = [0, 1, 2].map(|c| outer["colour"][c].as_u64().expect("channel"));
+    let url = format!(
+        "file://{}#test:layer=2;view=3d;camera=top;cut=0.5;probe=9.5,0;probe2=-9.5,0",
+        page.display()
+    );
+    let shown = page_report(&browser, &dir.path().join("profile-cut"), &url);
+    let v = &shown["view3d"];
+    // The page's background, #f4f4f2.
+    assert!(
+        close(&v["probe"]["rgb"], [244, 244, 242]),
+        "beyond the cut: {shown}"
+    );
+    assert!(close(&v["probe2"]["rgb"], want), "before the cut: {shown}");
 }

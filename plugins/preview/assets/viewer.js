@@ -106,6 +106,23 @@
   const CACHED = 12;
 
   /** The shown form of layer `i`: rings as arrays, and Path2D objects to draw. */
+  /** Layer `i`'s parts as arrays: contours and each region's rings (mm). */
+  function ringsOf(i) {
+    const out = [];
+    for (const p of LAYERS[i].parts) {
+      const r = reader(p.g);
+      const contours = [];
+      for (let k = 0; k < p.nc; k++) contours.push(r.points());
+      const regions = p.regions.map((meta) => {
+        const rings = [];
+        for (let k = 0; k < meta.n; k++) rings.push(r.points());
+        return { meta, rings };
+      });
+      out.push({ part: p.part, contours, regions });
+    }
+    return out;
+  }
+
   function decoded(i) {
     let d = cache.get(i);
     if (d) {
@@ -115,16 +132,9 @@
     }
     const L = LAYERS[i];
     d = { parts: [], paths: [] };
-    for (const p of L.parts) {
-      const r = reader(p.g);
-      const contours = [];
-      for (let k = 0; k < p.nc; k++) contours.push(r.points());
-      const regions = p.regions.map((meta) => {
-        const rings = [];
-        for (let k = 0; k < meta.n; k++) rings.push(r.points());
-        return { meta, rings, box: ringBox(rings), path: ringsPath(rings, true) };
-      });
-      d.parts.push({ part: p.part, outline: ringsPath(contours, true), regions });
+    for (const p of ringsOf(i)) {
+      const regions = p.regions.map((r) => ({ meta: r.meta, rings: r.rings, box: ringBox(r.rings), path: ringsPath(r.rings, true) }));
+      d.parts.push({ part: p.part, outline: ringsPath(p.contours, true), regions });
     }
     if (L.p) {
       const r = reader(L.p);
@@ -441,8 +451,32 @@
     label.textContent = L
       ? "layer " + L.i + " of " + LAMINA.layer_count + ", z = " + L.z + " mm (" + L.t + " mm thick)"
       : "no layers";
-    draw();
+    if (in3d) v3.draw(); else draw();
   }
+
+  // ---- the 3D view (view3d.js) -------------------------------------------------
+
+  const v3dBox = document.getElementById("v3d");
+  const cutBox = document.getElementById("cutbox");
+  const cutOn = document.getElementById("cut");
+  const cutAt = document.getElementById("cutat");
+  const v3 = window.Lamina3D
+    ? window.Lamina3D({ layers: LAYERS, rings: ringsOf, bounds: LAMINA.bounds, current: () => current })
+    : null;
+  let in3d = false;
+  function set3d(on) {
+    in3d = on && !!v3 && v3.open();
+    if (!in3d && v3) v3.close();
+    v3dBox.checked = in3d;
+    canvas.hidden = in3d;
+    cutBox.hidden = !in3d;
+    if (!in3d) draw();
+  }
+  function redraw() { if (in3d) v3.draw(); else draw(); }
+  v3dBox.addEventListener("change", () => set3d(v3dBox.checked));
+  const cutChanged = () => { if (v3) v3.setCut(cutOn.checked, +cutAt.value / 1000); };
+  cutOn.addEventListener("change", cutChanged);
+  cutAt.addEventListener("input", cutChanged);
 
   slider.max = Math.max(0, LAYERS.length - 1);
   slider.addEventListener("input", () => show(+slider.value));
@@ -478,7 +512,7 @@
     }
   });
   canvas.addEventListener("mouseleave", () => { tip.style.display = "none"; cursor.textContent = ""; });
-  window.addEventListener("resize", () => { resize(); fit(); draw(); });
+  window.addEventListener("resize", () => { resize(); fit(); redraw(); });
   document.addEventListener("keydown", (e) => {
     if (e.key === "ArrowUp" || e.key === "PageUp") show(current + 1);
     if (e.key === "ArrowDown" || e.key === "PageDown") show(current - 1);
@@ -514,6 +548,30 @@
     if (args.at) {
       const [x, y] = args.at.split(",").map(Number);
       region = regionAt(x, y);
+    }
+    let view3d = null;
+    if (args.view === "3d") {
+      set3d(true);
+      if (in3d) {
+        if (args.camera) v3.camera(args.camera);
+        if (args.cut !== undefined) {
+          cutOn.checked = true;
+          cutAt.value = Math.round(1000 * +args.cut);
+          cutChanged();
+        }
+        view3d = { stats: v3.stats() };
+        if (args.probe) {
+          const [x, y] = args.probe.split(",").map(Number);
+          view3d.probe = v3.pixelAt(x, y, LAYERS[current].z);
+          // A second point, e.g. across the cut plane.
+          if (args.probe2) {
+            const [x2, y2] = args.probe2.split(",").map(Number);
+            view3d.probe2 = v3.pixelAt(x2, y2, LAYERS[current].z);
+          }
+        }
+      } else {
+        view3d = { error: "no WebGL" };
+      }
     }
     let moves = null;
     const m = movesOf(current);
@@ -557,6 +615,7 @@
       ready_ms: ready,
       walk_ms_per_layer: walk,
       moves,
+      view3d,
     });
     out.hidden = false;
   }

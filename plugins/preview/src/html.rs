@@ -1,7 +1,9 @@
 //! `html`: one self-contained HTML file that shows the plan layer by layer: a slider, zoom
 //! and pan, the composition of the region under the pointer, toggles for toolpaths and
-//! tools. The page needs no network: the viewer's script and style are inside, and the
-//! layers are streamed into it as `<script>` blocks as they come, so memory stays flat.
+//! tools, the machine's moves read back from the run's G-code (`moves`), and a 3D view
+//! (`assets/view3d.js`). The page needs no network: the viewer's script and style are
+//! inside, and the layers are streamed into it as packed `<script>` blocks as they come
+//! (`pack`), so memory stays flat and the page decodes only the layer it shows.
 
 use std::io::Write;
 use std::path::PathBuf;
@@ -16,6 +18,7 @@ use crate::draw::{composition_text, escape, hex, round};
 use crate::pack::Packer;
 
 const VIEWER_JS: &str = include_str!("../assets/viewer.js");
+const VIEW3D_JS: &str = include_str!("../assets/view3d.js");
 const VIEWER_CSS: &str = include_str!("../assets/viewer.css");
 
 lamina_core::stage_options! {
@@ -216,7 +219,7 @@ impl Exporter for Html {
             .join(" ");
         write!(
             out,
-            "<!doctype html>\n<html lang=\"en\">\n<head>\n<meta charset=\"utf-8\">\n<title>{name} - Lamina</title>\n<style>\n{VIEWER_CSS}</style>\n</head>\n<body>\n<div id=\"bar\"><strong>{name}</strong><input id=\"layer\" type=\"range\" min=\"0\" max=\"0\" value=\"0\" aria-label=\"layer\"><span id=\"label\"></span><label><input id=\"paths\" type=\"checkbox\" checked> toolpaths</label><span id=\"tools\"></span>{legend}<span id=\"player\" hidden><label><input id=\"moves\" type=\"checkbox\" checked> machine moves</label> <button id=\"play\" type=\"button\">play</button> <input id=\"time\" type=\"range\" min=\"0\" max=\"1000\" value=\"1000\" aria-label=\"time in the layer\"> <select id=\"speed\" aria-label=\"speed\"><option value=\"1\">1x</option><option value=\"10\" selected>10x</option><option value=\"100\">100x</option></select> <span id=\"clock\"></span></span><span id=\"cursor\"></span></div>\n<canvas id=\"view\"></canvas>\n<div id=\"tip\"></div>\n<pre id=\"test-result\" hidden></pre>\n<script>const LAMINA = {header}; const LAYERS = []; const MOVES = new Map(); let GCODE = null;</script>\n",
+            "<!doctype html>\n<html lang=\"en\">\n<head>\n<meta charset=\"utf-8\">\n<title>{name} - Lamina</title>\n<style>\n{VIEWER_CSS}</style>\n</head>\n<body>\n<div id=\"bar\"><strong>{name}</strong><input id=\"layer\" type=\"range\" min=\"0\" max=\"0\" value=\"0\" aria-label=\"layer\"><span id=\"label\"></span><label><input id=\"paths\" type=\"checkbox\" checked> toolpaths</label><span id=\"tools\"></span>{legend}<span id=\"player\" hidden><label><input id=\"moves\" type=\"checkbox\" checked> machine moves</label> <button id=\"play\" type=\"button\">play</button> <input id=\"time\" type=\"range\" min=\"0\" max=\"1000\" value=\"1000\" aria-label=\"time in the layer\"> <select id=\"speed\" aria-label=\"speed\"><option value=\"1\">1x</option><option value=\"10\" selected>10x</option><option value=\"100\">100x</option></select> <span id=\"clock\"></span></span><label><input id=\"v3d\" type=\"checkbox\"> 3D</label><span id=\"cutbox\" hidden><label><input id=\"cut\" type=\"checkbox\"> cut</label> <input id=\"cutat\" type=\"range\" min=\"0\" max=\"1000\" value=\"500\" aria-label=\"cut plane across x\"></span><span id=\"cursor\"></span></div>\n<canvas id=\"view\"></canvas>\n<canvas id=\"view3d\" hidden></canvas>\n<div id=\"tip\"></div>\n<pre id=\"test-result\" hidden></pre>\n<script>const LAMINA = {header}; const LAYERS = []; const MOVES = new Map(); let GCODE = null;</script>\n",
             name = escape(ctx.pipeline_name),
         )
         .map_err(io(&path))?;
@@ -305,7 +308,11 @@ impl LayerSink for Sink {
         if self.options.moves {
             self.write_moves(files)?;
         }
-        write!(self.out, "<script>\n{VIEWER_JS}</script>\n</body>\n</html>\n").map_err(io(&path))?;
+        write!(
+            self.out,
+            "<script>\n{VIEW3D_JS}</script>\n<script>\n{VIEWER_JS}</script>\n</body>\n</html>\n"
+        )
+        .map_err(io(&path))?;
         self.out.flush().map_err(io(&path))
     }
 }
@@ -397,7 +404,7 @@ lamina_core::register_stage!(StageFactory {
     info: StageInfo {
         kind: StageKind::Export,
         name: "html",
-        doc: "A self-contained HTML layer viewer: slider, zoom and pan, composition on hover, toolpath and tool toggles; no network needed.",
+        doc: "A self-contained HTML layer viewer: slider, zoom and pan, composition on hover, cursor coordinates and a scale bar, toolpath and tool toggles, the machine's moves read back from the run's G-code with a player, and a 3D view of the graded layer stack (WebGL: orbit, zoom, cut plane); no network needed.",
         options: Options::SPECS,
         example: "use = \"html\"\npath = \"viewer.html\"",
     },
