@@ -31,7 +31,20 @@ use lamina_sort as _;
 use lamina_sources as _;
 
 #[derive(Debug, Parser)]
-#[command(name = "lamina", version = lamina_core::VERSION, about = "Plans the layered manufacturing of functionally graded multi-material objects")]
+#[command(
+    name = "lamina",
+    version = lamina_core::VERSION,
+    about = "Plans the layered manufacturing of functionally graded multi-material objects",
+    after_help = concat!(
+        "A pipeline file (TOML) names the stages: model, slice, discretise, grade, plan and ",
+        "outputs; `pipelines/` holds examples and `lamina plugins` lists every stage with its options.\n\n",
+        "  lamina check pipelines/gear-z-gradient.toml    find every mistake, run nothing\n",
+        "  lamina run pipelines/gear-z-gradient.toml      write the outputs into ./out\n",
+        "  lamina view pipelines/gear-z-gradient.toml     the same, and open the layer viewer\n\n",
+        "Exit codes: 0 done; 1 the run failed (nothing is left under an output's name); ",
+        "2 the command line or the pipeline is wrong (nothing was run)."
+    )
+)]
 struct Cli {
     #[command(subcommand)]
     command: Command,
@@ -55,13 +68,21 @@ struct PipelineArgs {
 #[derive(Debug, Subcommand)]
 enum Command {
     /// Runs a pipeline and writes its outputs.
+    ///
+    /// Loads the model, slices it into layers, discretises and grades each layer, plans
+    /// the toolpaths and writes every `[[output]]` of the pipeline into the output
+    /// folder, layers running in parallel. The files appear under their names only
+    /// when the whole run succeeds: a failed or interrupted run leaves none behind.
+    /// Warnings are gathered and printed once per kind at the end, with the layers
+    /// they hit.
     Run {
         #[command(flatten)]
         args: PipelineArgs,
-        /// Output folder (default: `out` in the current directory).
+        /// Output folder, created if missing; outputs' paths are relative to it.
         #[arg(long, value_name = "DIR", default_value = "out")]
         out: PathBuf,
-        /// Worker threads (default: all cores).
+        /// Worker threads (default: all cores); the outputs are the same whatever the
+        /// count.
         #[arg(long, value_name = "N")]
         threads: Option<usize>,
         /// No progress bar and no summary; warnings and errors are still printed.
@@ -77,10 +98,16 @@ enum Command {
     },
     /// Runs a pipeline and opens its layers in the HTML viewer (an `html` output is added
     /// when the pipeline has none).
+    ///
+    /// The viewer is one self-contained page (it needs no network): each layer's
+    /// sub-regions in their colours with their compositions on hover, the planned
+    /// toolpaths, the machine's moves read back from the G-code the run wrote (with a
+    /// player), and a 3D view of the layer stack. It is opened with the desktop's
+    /// default browser (`xdg-open`); its path is printed either way.
     View {
         #[command(flatten)]
         args: PipelineArgs,
-        /// Output folder (default: `out` in the current directory).
+        /// Output folder, created if missing.
         #[arg(long, value_name = "DIR", default_value = "out")]
         out: PathBuf,
         /// Only write the viewer and print its path.

@@ -5,6 +5,7 @@
 
 use std::path::{Path, PathBuf};
 use std::sync::OnceLock;
+use std::time::{Duration, Instant};
 
 use lamina_core::script::{ScriptArgs, ScriptHost, ScriptLimits};
 use libfuzzer_sys::fuzz_target;
@@ -14,10 +15,25 @@ fn dir() -> &'static Path {
     DIR.get_or_init(|| tempfile::tempdir().expect("tempdir").keep())
 }
 
+/// The sandbox with tighter limits than a run's (50 ms and 500,000 operations a call):
+/// what is fuzzed is that every limit stops every call, which a smaller budget shows as
+/// well, at a tenth of the cost of an input that runs into it.
 fn host() -> &'static ScriptHost {
     static HOST: OnceLock<ScriptHost> = OnceLock::new();
-    HOST.get_or_init(|| ScriptHost::new(dir(), ScriptLimits::default()))
+    HOST.get_or_init(|| {
+        let limits = ScriptLimits {
+            time_limit: LIMIT,
+            max_operations: 500_000,
+            ..ScriptLimits::default()
+        };
+        ScriptHost::new(dir(), limits)
+    })
 }
+
+const LIMIT: Duration = Duration::from_millis(50);
+
+/// A call must end soon after its time limit: one that runs on has escaped it.
+const ESCAPED: Duration = Duration::from_secs(2);
 
 fn check(f: &lamina_core::script::ScriptFn) {
     let args = ScriptArgs {
@@ -29,7 +45,11 @@ fn check(f: &lamina_core::script::ScriptFn) {
         layer: 4,
         part: "fuzz",
     };
-    if let Ok(fractions) = f.fractions(&args, 2, "fuzz") {
+    let start = Instant::now();
+    let result = f.fractions(&args, 2, "fuzz");
+    let took = start.elapsed();
+    assert!(took < ESCAPED, "a call ran {took:?} against a limit of {LIMIT:?}");
+    if let Ok(fractions) = result {
         assert_eq!(fractions.len(), 2);
         assert!(fractions.iter().all(|v| (0.0..=1.0).contains(v)), "{fractions:?}");
         assert!(

@@ -517,3 +517,32 @@ fn set_values_are_reported_at_the_override() {
     );
     assert!(!err.contains("variant"), "no serde words: {err}");
 }
+
+/// The help says what each command does, beyond its name: the exit codes the tests
+/// above check, that a run commits its outputs only when it succeeds (checked by
+/// `missing_model_file_fails_with_exit_1_and_leaves_nothing`), and what the viewer
+/// holds.
+#[test]
+fn help_says_what_happens_and_the_exit_codes() {
+    let top = text(&lamina(&["--help"]).stdout);
+    for want in [
+        "Exit codes: 0 done; 1 the run failed",
+        "2 the command line or the pipeline is wrong",
+        "lamina check",
+    ] {
+        assert!(top.contains(want), "`lamina --help` lacks {want:?}:\n{top}");
+    }
+    let run = text(&lamina(&["run", "--help"]).stdout);
+    assert!(run.contains("only when the whole run succeeds"), "{run}");
+    assert!(
+        !run.contains("(default: `out`"),
+        "the default is said once: {run}"
+    );
+    let view = text(&lamina(&["view", "--help"]).stdout);
+    for want in ["G-code", "3D view", "no network"] {
+        assert!(
+            view.contains(want),
+            "`lamina view --help` lacks {want:?}:\n{view}"
+        );
+    }
+}
