@@ -86,6 +86,47 @@ fn several_holes_and_no_holes_tile() {
     bell.tiles("use = \"radial\"\ncount = 6");
 }
 
+/// Fig. 12: one outer contour C1 and three inner contours C2-C4, divided by Method 2
+/// into ten sub-regions. Each radial line runs from a vertex of C1 toward the centre of
+/// the nearest inner contour and ends on it; along it the ten sub-regions follow one
+/// another, each a tenth of the line (Eq. 17): region 0 along C1, region 9 along the
+/// inner contour. Checked on the lines toward each hole and 15 degrees to either side;
+/// the closed loops where neighbouring lines end on different holes are gone (every
+/// region a valid polygon, the family tiled).
+#[test]
+fn fig12_three_inner_contours_ten_sub_regions_in_order_along_each_line() {
+    let centre = |deg: f64| {
+        let (s, c) = deg.to_radians().sin_cos();
+        Point2::new(15.0 * c, 15.0 * s)
+    };
+    let holes: Vec<Contour> = [90.0, 210.0, 330.0]
+        .iter()
+        .map(|&a| moved(circle(0.0, 0.0, 4.0, 120), centre(a).x, centre(a).y))
+        .collect();
+    let fam = OneFamily::new(circle(0.0, 0.0, 30.0, 360), holes);
+    let regions = fam.tiles("use = \"radial\"\ncount = 10");
+    assert_eq!(indices(&regions), (0..10).collect::<Vec<_>>());
+    let index_at = |p: Point2| regions.iter().find(|r| r.polygon.contains(p)).map(|r| r.index);
+    for hole in [90.0f64, 210.0, 330.0] {
+        for turn in [-15.0, 0.0, 15.0] {
+            let (s, c) = (hole + turn).to_radians().sin_cos();
+            let v = Point2::new(30.0 * c, 30.0 * s);
+            let to = centre(hole);
+            let end = to - (to - v).normalize() * 4.0;
+            for j in 0..10 {
+                let p = v + (end - v) * ((j as f64 + 0.5) / 10.0);
+                assert_eq!(
+                    index_at(p),
+                    Some(j),
+                    "the line from C1 at {}° toward the hole at {hole}°, {}/20 along",
+                    hole + turn,
+                    2 * j + 1
+                );
+            }
+        }
+    }
+}
+
 /// Without holes the radial lines end on the medial axis, not on one pole. In a
 /// 40 x 10 rectangle the lines from the long sides end on the mid-line 5 mm in, and
 /// those near a corner on the corner's bisector, as long as their distance from the
