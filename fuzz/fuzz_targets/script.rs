@@ -15,7 +15,7 @@ fn dir() -> &'static Path {
     DIR.get_or_init(|| tempfile::tempdir().expect("tempdir").keep())
 }
 
-/// The sandbox with tighter limits than a run's (50 ms and 500,000 operations a call):
+/// The sandbox with tighter limits than a run's (20 ms and 50,000 operations a call):
 /// what is fuzzed is that every limit stops every call, which a smaller budget shows as
 /// well, at a tenth of the cost of an input that runs into it.
 fn host() -> &'static ScriptHost {
@@ -23,14 +23,14 @@ fn host() -> &'static ScriptHost {
     HOST.get_or_init(|| {
         let limits = ScriptLimits {
             time_limit: LIMIT,
-            max_operations: 500_000,
+            max_operations: 50_000,
             ..ScriptLimits::default()
         };
         ScriptHost::new(dir(), limits)
     })
 }
 
-const LIMIT: Duration = Duration::from_millis(50);
+const LIMIT: Duration = Duration::from_millis(20);
 
 /// A call must end soon after its time limit: one that runs on has escaped it.
 const ESCAPED: Duration = Duration::from_secs(2);

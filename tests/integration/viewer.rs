@@ -58,6 +58,15 @@ fn chromium() -> Option<PathBuf> {
     None
 }
 
+/// Chromium, or a printed note (a failure under `LAMINA_REQUIRE`) when there is none.
+fn browser() -> Option<PathBuf> {
+    let found = chromium();
+    if found.is_none() {
+        skip("no Chromium is installed (Debian: apt-get install chromium)");
+    }
+    found
+}
+
 fn headless(browser: &Path, profile: &Path) -> Command {
     let mut c = Command::new(browser);
     c.args([
@@ -95,10 +104,7 @@ fn page_report(browser: &Path, profile: &Path, url: &str) -> serde_json::Value {
 
 #[test]
 fn the_viewer_shows_the_chosen_layer_and_a_regions_composition_in_chromium() {
-    let Some(browser) = chromium() else {
-        skip("no Chromium is installed (Debian: apt-get install chromium)");
-        return;
-    };
+    let Some(browser) = browser() else { return };
     let dir = tempfile::tempdir().expect("tempdir");
     let plan = run(dir.path());
     let page = dir.path().join("out/viewer.html");
@@ -304,16 +310,13 @@ fn viewers_of_real_plans_stay_small_and_open_fast() {
     let o = try_run_text(&city, &pipeline);
     assert!(o.status.success(), "{}", text(&o.stderr));
     let city_page = city.join("out/viewer.html");
-    let browser = chromium();
+    let browser = browser();
     // Benchy's pipeline writes G-code: its page carries the machine's moves too.
     for (page, limit, moves) in [(benchy_page, 8e6, true), (city_page, 25e6, false)] {
         let bytes = std::fs::metadata(&page).expect("viewer written").len() as f64;
         println!("{}: {:.2} MB", page.display(), bytes / 1e6);
         assert!(bytes <= limit, "{}: {bytes} bytes", page.display());
-        let Some(browser) = &browser else {
-            skip("no Chromium is installed (Debian: apt-get install chromium)");
-            continue;
-        };
+        let Some(browser) = &browser else { continue };
         let profile = tempfile::tempdir().expect("profile");
         let url = format!("file://{}#test:layer=40;walk=1", page.display());
         let shown = page_report(browser, profile.path(), &url);
@@ -345,10 +348,7 @@ fn viewers_of_real_plans_stay_small_and_open_fast() {
 /// move at the same time for most of the layer.
 #[test]
 fn the_viewer_plays_both_motion_systems_of_the_written_gcode() {
-    let Some(browser) = chromium() else {
-        skip("no Chromium is installed (Debian: apt-get install chromium)");
-        return;
-    };
+    let Some(browser) = browser() else { return };
     let dir = tempfile::tempdir().expect("tempdir");
     let text = std::fs::read_to_string(pipelines().join("assembly-two-tools.toml"))
         .expect("example")
@@ -416,10 +416,7 @@ fn the_viewer_plays_both_motion_systems_of_the_written_gcode() {
 /// and its mirror point still the outer region.
 #[test]
 fn the_3d_view_shows_each_regions_colour_where_it_lies_and_cuts_across_x() {
-    let Some(browser) = chromium() else {
-        skip("no Chromium is installed (Debian: apt-get install chromium)");
-        return;
-    };
+    let Some(browser) = browser() else { return };
     let dir = tempfile::tempdir().expect("tempdir");
     let plan = run(dir.path());
     let page = dir.path().join("out/viewer.html");
