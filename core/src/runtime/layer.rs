@@ -214,6 +214,7 @@ fn whole_family(tree: &crate::model::ContourTree, layer: &Layer, f: usize) -> Su
         cell: None,
         reference,
         composition: None,
+        samples: Vec::new(),
     }
 }
 

@@ -239,6 +239,7 @@ mod tests {
             cell: None,
             reference: Point2::new(x, 0.5),
             composition: None,
+            samples: Vec::new(),
         };
         let t = tiling(&family, &[region(0.0), region(0.5)]);
         assert!((t.overlap - 0.5).abs() < 1e-9, "{t:?}");

@@ -41,6 +41,7 @@ pub fn region(family: usize, index: usize, count: usize, level: f64, polygon: Po
         cell: None,
         reference,
         composition: None,
+        samples: Vec::new(),
     }
 }
 

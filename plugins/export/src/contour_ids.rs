@@ -184,6 +184,7 @@ mod tests {
             cell: None,
             reference: Point2::new(0.0, 0.0),
             composition: None,
+            samples: Vec::new(),
         }
     }
 

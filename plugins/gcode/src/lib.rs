@@ -87,6 +87,8 @@ lamina_core::stage_options! {
         retract_speed: f64 = "35.0",
         /// without a machine, mixing flavours: material of each channel, in channel order; unset: the pipeline's materials
         channels: Option<Vec<String>>,
+        /// mixing heads: change the mix along a bead to the composition graded nearest each segment (regions graded at points, grade `xy` with `r = "points"`; Eq. 18 at the bead), not one mix per sub-region
+        mix_along: bool = "false",
     }
 }
 
@@ -116,10 +118,11 @@ impl Exporter for Gcode {
     fn open(&self, ctx: &mut ExportContext<'_>) -> Result<Box<dyn LayerSink>> {
         let o = &self.0;
         let info = ctx.info;
-        let setup = match &info.machine {
+        let mut setup = match &info.machine {
             Some(m) => Setup::from_machine(m, info, o.relative_e, o.direct_mixing, o.virtual_tool)?,
             None => Setup::from_options(&o.own(), info, o.relative_e, o.direct_mixing, o.virtual_tool)?,
         };
+        setup.mix_along = o.mix_along && setup.flavor.is_mixing();
         if setup.flavor == Flavor::MarlinMixing
             && setup.direct_mixing
             && setup.channel_names.len() > M165_AXES.len()

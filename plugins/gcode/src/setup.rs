@@ -100,6 +100,8 @@ pub struct Setup {
     pub transition_volume: f64,
     /// Changes of mix smaller than this share are blended in place, not purged.
     pub blend_below: f64,
+    /// A mixing head follows the compositions graded at points along each bead.
+    pub mix_along: bool,
     /// The motion systems when the machine runs two at once; `None`: one head at a time.
     pub systems: Option<Vec<System>>,
     pub templates: Templates,
@@ -247,6 +249,7 @@ impl Setup {
             wipe_tower: m.wipe_tower,
             transition_volume: m.mixer.map_or(0.0, |x| x.transition_volume),
             blend_below: m.mixer.map_or(0.0, |x| x.blend_below),
+            mix_along: false,
             systems: (m.motion_systems > 1).then(|| {
                 m.tools
                     .iter()
@@ -365,6 +368,7 @@ impl Setup {
             wipe_tower: None,
             transition_volume: 0.0,
             blend_below: 0.0,
+            mix_along: false,
             systems: None,
             templates: Templates::default(),
             placed: false,

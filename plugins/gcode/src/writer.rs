@@ -13,7 +13,7 @@ use std::io::Write;
 use std::path::PathBuf;
 
 use lamina_core::machine::{Firmware as Dialect, FirstLayerSpeed, Flavor, Machine};
-use lamina_core::{Error, LayerPlan, PathKind, Point2, Result, RunInfo, Toolpath};
+use lamina_core::{Composition, Error, LayerPlan, PathKind, Point2, Result, RunInfo, Toolpath};
 
 use crate::firmware::{EXTRUDE_MIN_TEMPERATURE, Firmware};
 use crate::layout::Layout;
@@ -36,6 +36,10 @@ const DEFAULT_PRINT_SPEED: f64 = 30.0;
 const DEFAULT_Z_SPEED: f64 = 10.0;
 /// Clearance above the print when parking (mm).
 const PARK_CLEARANCE: f64 = 10.0;
+
+/// Along a bead (`mix_along`) the mix changes only once some channel would move by
+/// this many percent.
+const MIX_DEAD_BAND: u32 = 2;
 
 /// The axis letters of `M165`, one per mixing channel, in Marlin's order.
 pub const M165_AXES: [char; 6] = ['A', 'B', 'C', 'D', 'H', 'I'];
@@ -670,6 +674,22 @@ impl Writer {
         speed: f64,
         feature: Feature,
     ) -> Result<()> {
+        self.extrude_mixed(h, points, width, height, speed, feature, &[])
+    }
+
+    /// [`Self::extrude`] with a mix for each segment (a mixing head following the
+    /// gradient along the bead); the mix is set only where it changes.
+    #[allow(clippy::too_many_arguments)]
+    fn extrude_mixed(
+        &mut self,
+        h: usize,
+        points: &[Point2],
+        width: &dyn Fn(usize) -> f64,
+        height: f64,
+        speed: f64,
+        feature: Feature,
+        mixes: &[Vec<u32>],
+    ) -> Result<()> {
         let Some(&first) = points.first() else {
             return Ok(());
         };
@@ -684,6 +704,9 @@ impl Writer {
             let d = (w[1] - w[0]).norm();
             if d <= 1e-9 {
                 continue;
+            }
+            if let Some(m) = mixes.get(i) {
+                self.set_mix(m.clone());
             }
             let de = d * width(i) * height / area;
             self.account(h, de);
@@ -728,9 +751,15 @@ impl Writer {
 
     /// The mix of a path over the head's channels, in percent summing to 100.
     fn mix_of(&self, info: &RunInfo, path: &Toolpath) -> Vec<u32> {
+        self.mix_for(info, path.part, path.composition.as_ref())
+    }
+
+    /// The mix for a composition of a part's materials (its first material alone
+    /// without one).
+    fn mix_for(&self, info: &RunInfo, part: Option<usize>, composition: Option<&Composition>) -> Vec<u32> {
         let channels = self.s.channel_names.len();
         let mut f = vec![0.0; channels];
-        match (&path.composition, path.part.and_then(|p| info.parts.get(p))) {
+        match (composition, part.and_then(|p| info.parts.get(p))) {
             (Some(c), Some(part)) => {
                 for (x, m) in c.fractions.iter().zip(&part.materials) {
                     if let Some(Some(ch)) = self.s.slot_of.get(*m) {
@@ -746,6 +775,41 @@ impl Writer {
             _ => {}
         }
         percentages(&f)
+    }
+
+    /// With `mix_along`, the mix of each segment of a bead: the composition graded
+    /// nearest the segment's middle in the sub-region the bead fills. Empty (one mix for
+    /// the bead) otherwise, or when the region was graded as a whole.
+    fn mixes_along(&self, info: &RunInfo, plan: &LayerPlan, path: &Toolpath) -> Vec<Vec<u32>> {
+        if !self.s.mix_along {
+            return Vec::new();
+        }
+        let region = path.part.zip(path.sub_region).and_then(|(part, r)| {
+            plan.parts
+                .iter()
+                .find(|pl| pl.part == part)
+                .and_then(|pl| pl.regions.get(r))
+        });
+        let Some(region) = region.filter(|r| !r.samples.is_empty()) else {
+            return Vec::new();
+        };
+        let mut current: Option<Vec<u32>> = None;
+        path.points
+            .windows(2)
+            .map(|w| {
+                let mid = Point2::from((w[0].p.coords + w[1].p.coords) / 2.0);
+                let mix = self.mix_for(info, path.part, region.composition_at(mid).as_ref());
+                // A dead band: the samples' own scatter would make a mix of 95 % flicker
+                // to 94 and 96 every few segments.
+                let keep = current
+                    .as_ref()
+                    .is_some_and(|c| c.iter().zip(&mix).all(|(a, b)| a.abs_diff(*b) < MIX_DEAD_BAND));
+                if !keep {
+                    current = Some(mix);
+                }
+                current.clone().unwrap_or_default()
+            })
+            .collect()
     }
 
     /// Whether a change of mix from `a` to `b` between two beads is purged: it is a
@@ -1066,7 +1130,9 @@ impl Writer {
         for j in &jobs {
             let changed_head = self.head.is_some() && self.head != Some(j.head);
             let changed_mix = !j.continues && self.purged_change(self.mix.as_deref(), j.mix.as_deref());
-            if let Some(m) = &j.mix {
+            // Following the gradient along the bead, it starts with its first segment's.
+            let mixes = self.mixes_along(info, plan, j.path);
+            if let Some(m) = mixes.first().or(j.mix.as_ref()) {
                 self.set_mix(m.clone());
             }
             self.ready(j.head)?;
@@ -1094,13 +1160,14 @@ impl Writer {
                 _ => DEFAULT_PRINT_SPEED,
             };
             let path = j.path;
-            self.extrude(
+            self.extrude_mixed(
                 j.head,
                 &points,
                 &|i| path.segment_width(i),
                 plan.thickness,
                 speed,
                 Feature::Part,
+                &mixes,
             )?;
         }
         if tower_here && self.tower.as_ref().is_some_and(Tower::open) {

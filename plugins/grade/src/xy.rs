@@ -6,7 +6,7 @@
 //! far end, as the paper's green-to-black example does.
 
 use lamina_core::stage::{AnyStage, FamilyContext, Grader, StageConfig, StageInfo, StageKind};
-use lamina_core::{Composition, Point2, Polygon, Result, StageFactory, SubRegion};
+use lamina_core::{Composition, Point2, Polygon, Result, Sample, StageFactory, SubRegion};
 use serde::Deserialize;
 
 use crate::control::{Control, ControlOptions, region_args};
@@ -39,7 +39,7 @@ lamina_core::stage_options! {
         lambda: Option<f64>,
         alpha: Option<f64> = use crate::control::ALPHA,
         k: Option<f64> = use crate::control::K,
-        /// "index" (j / (N_R - 1), Eq. 21), "level" (the discretiser's distance ratio) or "points" (Eq. 18 at the points of a grid in each region, x and y given to the function, the mean composition)
+        /// "index" (j / (N_R - 1), Eq. 21), "level" (the discretiser's distance ratio) or "points" (Eq. 18 at the points of a grid in each region, x and y given to the function, the mean composition; the points are kept, so that a mixing head with the gcode exporter's `mix_along` follows Eq. 18 along its beads)
         r: LevelSource = r#""index""#,
         /// spacing (mm) of the points of `r = "points"`
         grid: f64 = "0.5",
@@ -136,6 +136,7 @@ impl Grader for InPlane {
             for region in regions.iter_mut() {
                 let points = grid_points(&region.polygon, region.reference, self.grid);
                 let mut sum = vec![0.0; n];
+                let mut samples = Vec::with_capacity(points.len());
                 for &p in &points {
                     let r = point_level(&family, pole, p);
                     let mut args = region_args(ctx, region, r);
@@ -146,10 +147,16 @@ impl Grader for InPlane {
                     );
                     let c = self.control.composition(&args, n, &context)?;
                     sum.iter_mut().zip(&c.fractions).for_each(|(s, f)| *s += f);
+                    samples.push(Sample {
+                        at: p,
+                        composition: c,
+                    });
                 }
                 let total: f64 = sum.iter().sum();
                 let mean: Vec<f64> = sum.iter().map(|s| s / total).collect();
                 region.composition = Some(Composition::new(mean)?);
+                // Kept, so that a mixing head can follow the gradient along a bead.
+                region.samples = samples;
             }
             return Ok(());
         }
@@ -252,6 +259,7 @@ mod tests {
                 cell: None,
                 reference: Point2::new(0.5, 0.5),
                 composition: None,
+                samples: Vec::new(),
             })
             .collect()
     }
@@ -385,6 +393,7 @@ mod tests {
             cell: None,
             reference: Point2::new(-(a + b) / 2.0, 0.0),
             composition: None,
+            samples: Vec::new(),
         };
         let mut rs = vec![ring(10.0, 5.0, 0), ring(10.0, 9.9, 1), ring(5.1, 5.0, 2)];
         grader.grade(&ctx, &mut rs).expect("grades");

@@ -357,6 +357,7 @@ mod tests {
                     cell: None,
                     reference: Point2::new(10.0, (y0 + y1) / 2.0),
                     composition: Some(Composition::binary(1.0 - f).expect("valid")),
+                    samples: Vec::new(),
                 }
             })
             .collect()
@@ -423,6 +424,7 @@ mod tests {
                     cell: Some(cell),
                     reference: Point2::new((x0 + x1) / 2.0, (y0 + y1) / 2.0),
                     composition: Some(Composition::binary(1.0 - f).expect("valid")),
+                    samples: Vec::new(),
                 });
             }
         }
@@ -466,6 +468,7 @@ mod tests {
                     cell: Some(c),
                     reference: Point2::new((x0 + x1) / 2.0, (y0 + y1) / 2.0),
                     composition: Some(Composition::binary(f).expect("valid")),
+                    samples: Vec::new(),
                 });
             }
         }

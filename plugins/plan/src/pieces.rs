@@ -332,6 +332,7 @@ mod tests {
             cell: Some(index),
             reference: Point2::new((x0 + x1) / 2.0, (y0 + y1) / 2.0),
             composition: Some(Composition::binary(f).expect("valid")),
+            samples: Vec::new(),
         }
     }
 

@@ -91,6 +91,7 @@ fn layout(rng: &mut Rng, tools: usize) -> (RunInfo, LayerPlan) {
                 cell: None,
                 reference: c,
                 composition: Some(Composition::pure(0, 1)),
+                samples: Vec::new(),
             });
         }
         layers.push(PartLayer {

@@ -344,6 +344,7 @@ impl Discretiser for Sources {
                     polygon,
                     cell: None,
                     composition: Some(composition.clone()),
+                    samples: Vec::new(),
                 });
             }
         }

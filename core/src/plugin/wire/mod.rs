@@ -443,6 +443,7 @@ mod tests {
             cell: None,
             reference: Point2::new(0.5, 0.5),
             composition: Some(Composition::binary(0.25).expect("fractions")),
+            samples: Vec::new(),
         };
         let file = SourceFile::new("p.toml", "[grade]\nf = \"x\"\n");
         let samples: Vec<(&str, Vec<u8>)> = vec![
