@@ -39,8 +39,8 @@ pub const AROUND_OPTION: SharedOption = SharedOption::without_default(
 );
 
 pub const CUTS_OPTION: SharedOption = SharedOption::new(
-    "\"sectors\"",
-    "how cells are cut: `sectors` (equal angles about the family's centre) or `arc` (equal arc lengths along each sub-region's own outer contour, Fig. 13)",
+    "\"arc\"",
+    "how cells are cut: `arc` (the paper's, Fig. 13: equal arc lengths along each sub-region's own outer contour) or `sectors` (equal angles about the family's centre: cells of very unequal lengths where the family is not round)",
 );
 
 pub const LENGTH_OPTION: SharedOption = SharedOption::without_default(
@@ -65,9 +65,9 @@ lamina_core::option_type!(Cuts = "string");
 #[serde(rename_all = "lowercase")]
 pub enum Cuts {
     /// Equal angles about the family's centre.
-    #[default]
     Sectors,
-    /// Equal arc lengths along each sub-region's own outer contour.
+    /// Equal arc lengths along each sub-region's own outer contour (Fig. 13).
+    #[default]
     Arc,
 }
 
