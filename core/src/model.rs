@@ -172,7 +172,11 @@ impl SubRegion {
             let v = nalgebra::Vector3::new(1.0, s.at.x - p.x, s.at.y - p.y);
             m += v * v.transpose();
         }
-        let Some(inverse) = m.try_inverse().filter(|_| near.len() >= 3) else {
+        // Samples on (or nearly on) one line leave the plane's slope across it to
+        // rounding: then the nearest sample's composition stands.
+        let singular = m.singular_values();
+        let well_posed = near.len() >= 3 && singular.min() > 1e-9 * singular.max();
+        let Some(inverse) = m.try_inverse().filter(|_| well_posed) else {
             return Some(first.composition.clone());
         };
         let n = first.composition.fractions.len();

@@ -1,16 +1,12 @@
 //! Circumferential cells (Fig. 13): each sub-region split along its length into cells,
 //! so that a grader can vary the material around the contours too. Two ways to cut:
 //!
-//! - `sectors` (the default for now): equal angles about the family's centre (the
-//!   centre of its largest hole, or its pole without holes), cut by sectors;
-//! - `arc` (Fig. 13 as the paper states it): equal arc lengths along each sub-region's
-//!   own outer contour, cut straight across a ring along the contour's normal (toward
-//!   one centre in thick regions, where normals would cross).
-//!
-//! `arc` is not yet the default: on the two-cavity blade its cells (equal lengths on
-//! the cavities' rings too, where sectors about one centre leave the far cavity a few
-//! long cells) leave the planner's fill of a mixing head at 98.5 % coverage and 6.3 %
-//! overlap, outside the replay's targets (99 %, 5 %), where sectors reach them.
+//! - `arc` (the default, Fig. 13 as the paper states it): equal arc lengths along each
+//!   sub-region's own outer contour, cut straight across a ring along the contour's
+//!   normal (toward one centre in thick regions, where normals would cross);
+//! - `sectors`: equal angles about the family's centre (the centre of its largest hole,
+//!   or its pole without holes), cut by sectors; on a family that is not round the
+//!   cells of one ring differ much in length.
 //!
 //! Both are built on the family's grid, so the cells of a region tile it exactly.
 

@@ -1095,15 +1095,24 @@ impl Writer {
             }
         }
         // Where the head or mix changes.
+        // Each bead's mixes along it (`mix_along`; empty: one mix), and the mixes it
+        // starts and ends with: a purge is decided between one bead's last mix and the
+        // next one's first, both when counting the changes and when writing them.
+        let along: Vec<Vec<Vec<u32>>> = jobs
+            .iter()
+            .map(|j| self.mixes_along(info, plan, j.path))
+            .collect();
+        let first_mix = |k: usize| along[k].first().or(jobs[k].mix.as_ref()).cloned();
+        let last_mix = |k: usize| along[k].last().or(jobs[k].mix.as_ref()).cloned();
         let mut state = (self.head, self.mix.clone());
         let mut changes = 0usize;
-        for j in &jobs {
-            let next = (Some(j.head), j.mix.clone().or(state.1.clone()));
-            let purged_mix = !j.continues && self.purged_change(state.1.as_deref(), next.1.as_deref());
-            if state.0.is_some() && (next.0 != state.0 || purged_mix) {
+        for (k, j) in jobs.iter().enumerate() {
+            let start = first_mix(k).or(state.1.clone());
+            let purged_mix = !j.continues && self.purged_change(state.1.as_deref(), start.as_deref());
+            if state.0.is_some() && (Some(j.head) != state.0 || purged_mix) {
                 changes += 1;
             }
-            state = next;
+            state = (Some(j.head), last_mix(k).or(start));
         }
         let tower_here =
             self.tower.is_some() && (plan.z <= self.tower_end + 1e-6 || (changes > 0 && self.tower_alive));
@@ -1127,13 +1136,13 @@ impl Writer {
             self.s.wipe_tower.map_or(0.0, |w| w.purge_volume)
         };
         let mut left = changes;
-        for j in &jobs {
+        for (k, j) in jobs.iter().enumerate() {
             let changed_head = self.head.is_some() && self.head != Some(j.head);
-            let changed_mix = !j.continues && self.purged_change(self.mix.as_deref(), j.mix.as_deref());
             // Following the gradient along the bead, it starts with its first segment's.
-            let mixes = self.mixes_along(info, plan, j.path);
-            if let Some(m) = mixes.first().or(j.mix.as_ref()) {
-                self.set_mix(m.clone());
+            let start = first_mix(k);
+            let changed_mix = !j.continues && self.purged_change(self.mix.as_deref(), start.as_deref());
+            if let Some(m) = start {
+                self.set_mix(m);
             }
             self.ready(j.head)?;
             if changed_head || changed_mix {
@@ -1167,7 +1176,7 @@ impl Writer {
                 plan.thickness,
                 speed,
                 Feature::Part,
-                &mixes,
+                &along[k],
             )?;
         }
         if tower_here && self.tower.as_ref().is_some_and(Tower::open) {

@@ -291,7 +291,7 @@
       last = now;
       if (playT >= m.duration) { playT = m.duration; stop(); }
       timeSlider.value = Math.round(1000 * playT / Math.max(1, m.duration));
-      draw();
+      redraw();
       if (playing !== null) playing = requestAnimationFrame(step);
     };
     playing = requestAnimationFrame(step);
@@ -470,7 +470,12 @@
     v3dBox.checked = in3d;
     canvas.hidden = in3d;
     cutBox.hidden = !in3d;
-    if (!in3d) draw();
+    if (!in3d) {
+      // A window resized while the layer view was hidden left it without a size.
+      resize();
+      if (!(view.scale > 0)) fit();
+      draw();
+    }
   }
   function redraw() { if (in3d) v3.draw(); else draw(); }
   v3dBox.addEventListener("change", () => set3d(v3dBox.checked));
@@ -512,7 +517,10 @@
     }
   });
   canvas.addEventListener("mouseleave", () => { tip.style.display = "none"; cursor.textContent = ""; });
-  window.addEventListener("resize", () => { resize(); fit(); redraw(); });
+  window.addEventListener("resize", () => {
+    if (!in3d) { resize(); fit(); }
+    redraw();
+  });
   document.addEventListener("keydown", (e) => {
     if (e.key === "ArrowUp" || e.key === "PageUp") show(current + 1);
     if (e.key === "ArrowDown" || e.key === "PageDown") show(current - 1);

@@ -49,6 +49,9 @@ struct Sink {
     out: Box<dyn Write + Send>,
     path: PathBuf,
     options: Options,
+    /// The outputs opened before this one: the only ones complete when it finishes
+    /// (sinks finish in the order they were opened).
+    earlier: Vec<PathBuf>,
 }
 
 #[derive(Serialize)]
@@ -170,6 +173,7 @@ fn io(path: &std::path::Path) -> impl Fn(std::io::Error) -> Error + '_ {
 impl Exporter for Html {
     fn open(&self, ctx: &mut ExportContext<'_>) -> Result<Box<dyn LayerSink>> {
         let path = self.options.path.clone();
+        let earlier = ctx.files.written().into_iter().map(|(name, _)| name).collect();
         let mut out = ctx.files.create(&path)?;
         let header = Header {
             name: ctx.pipeline_name,
@@ -227,6 +231,7 @@ impl Exporter for Html {
             out,
             path,
             options: self.options.clone(),
+            earlier,
         }))
     }
 }
@@ -320,7 +325,11 @@ impl LayerSink for Sink {
 impl Sink {
     /// The G-code output to read back: the one `gcode` names, or the first written.
     fn gcode_file(&self, files: &dyn OutputFiles) -> Result<Option<(PathBuf, PathBuf)>> {
-        let written = files.written();
+        let written: Vec<(PathBuf, PathBuf)> = files
+            .written()
+            .into_iter()
+            .filter(|(name, _)| self.earlier.contains(name))
+            .collect();
         if let Some(name) = &self.options.gcode {
             return match written.into_iter().find(|(n, _)| n == name) {
                 Some(found) => Ok(Some(found)),
@@ -358,7 +367,12 @@ impl Sink {
                 let k = (m.system, m.tool, if m.extrude { 0u8 } else { 1 });
                 let from = [m.from[0] - ox, m.from[1] - oy];
                 let to = [m.to[0] - ox, m.to[1] - oy];
-                let joined = key == Some(k) && run.last().is_some_and(|(p, _)| *p == from);
+                // A run goes on only without a pause (a dwell or a wait at a barrier
+                // is shown as the head standing, not as a slow move).
+                let joined = key == Some(k)
+                    && run
+                        .last()
+                        .is_some_and(|(p, t)| *p == from && (t - (m.t0 - start)).abs() < 1e-9);
                 if !joined {
                     if let Some((s, t, kind)) = key {
                         pack.timed(s, t, kind, &run);

@@ -60,6 +60,8 @@ enum Step {
     Wait(f64),
     /// The n-th synchronisation point of the file.
     Sync(usize),
+    /// A forked system starts when system 0 has done this many steps (`M606`).
+    Start(usize),
 }
 
 /// One motion system's reader state.
@@ -173,6 +175,10 @@ fn words(line: &str) -> Vec<(char, f64)> {
             out.push((c.to_ascii_uppercase(), v));
         }
     }
+    // A line number is not the command.
+    if out.first().is_some_and(|(c, _)| *c == 'N') {
+        out.remove(0);
+    }
     out
 }
 
@@ -214,6 +220,15 @@ pub fn read(text: &str) -> Moves {
         let number = number as i64;
         let rest = &w[1..];
         let arg = |c: char| rest.iter().find(|(l, _)| *l == c).map(|&(_, v)| v);
+        // The fork: RepRapFirmware 3.5 has two motion systems, and the second starts
+        // reading here, with the first's modes, while the first goes on.
+        if (letter, number) == ('M', 606) {
+            if systems.len() < 2 {
+                let second = fork(&systems[0]);
+                systems.push(second);
+            }
+            continue;
+        }
         let s = &mut systems[current];
         match (letter, number) {
             ('G', 0..=3) => s.linear(rest),
@@ -241,17 +256,13 @@ pub fn read(text: &str) -> Moves {
             }
             ('M', 596) => {
                 let p = arg('P').unwrap_or(0.0);
-                // RepRapFirmware 3.5 has two motion systems; more are taken as given,
-                // within reason.
+                // More systems than RepRapFirmware's two are taken as given, within
+                // reason; one named before any fork starts where the file is.
                 if (0.0..8.0).contains(&p) {
                     current = p as usize;
                     while systems.len() <= current {
-                        // A new system starts with the modes of the one that forked it.
-                        let mut fork = systems[0].clone();
-                        fork.steps.clear();
-                        fork.layer = None;
-                        fork.uses_uv = false;
-                        systems.push(fork);
+                        let new = fork(&systems[0]);
+                        systems.push(new);
                     }
                 }
             }
@@ -268,6 +279,16 @@ pub fn read(text: &str) -> Moves {
     moves
 }
 
+/// A new motion system forked from system 0 where system 0's reading now is: its
+/// modes, positions and tool, and a clock that starts when system 0 gets here.
+fn fork(first: &System) -> System {
+    let mut s = first.clone();
+    s.steps = vec![Step::Start(first.steps.len())];
+    s.layer = None;
+    s.uses_uv = false;
+    s
+}
+
 /// A synchronisation point for every system.
 fn sync(systems: &mut [System], barriers: &mut usize) {
     for s in systems.iter_mut() {
@@ -282,6 +303,8 @@ fn sync(systems: &mut [System], barriers: &mut usize) {
 fn clock(systems: &mut [System], moves: &mut Moves) {
     let mut at = vec![0usize; systems.len()];
     let mut time = vec![0.0f64; systems.len()];
+    // System 0's clock after each of its steps, for the systems forked from it.
+    let mut first_after = vec![0.0f64];
     loop {
         // Every system runs on to its next synchronisation point (or its end).
         let mut next = vec![None; systems.len()];
@@ -307,8 +330,16 @@ fn clock(systems: &mut [System], moves: &mut Moves) {
                         next[k] = Some(*n);
                         break;
                     }
+                    Step::Start(n) => match first_after.get(*n) {
+                        Some(&t) => time[k] = time[k].max(t),
+                        // System 0 is held at a point before the fork.
+                        None => break,
+                    },
                 }
                 at[k] += 1;
+                if k == 0 {
+                    first_after.push(time[0]);
+                }
             }
         }
         // The earliest point in the file any system waits at: the systems there meet
@@ -324,6 +355,9 @@ fn clock(systems: &mut [System], moves: &mut Moves) {
             if next[k] == Some(first) {
                 time[k] = meet;
                 at[k] += 1;
+                if k == 0 {
+                    first_after.push(time[0]);
+                }
             }
         }
     }
@@ -337,11 +371,25 @@ fn clock(systems: &mut [System], moves: &mut Moves) {
 mod tests {
     use super::*;
 
+    /// The second system starts where the job forks, not at the job's start: system
+    /// 0 moves 2 s before `M606`, so system 1's first move starts at 2 s.
+    #[test]
+    fn a_forked_system_starts_at_the_fork() {
+        let text = "G90\nM83\nG1 X20 Y0 F600\nM606 S1\nM596 P1\n;LAYER:0\nG1 U10 V0 F600\n";
+        let m = read(text);
+        let l = &m.layers[&0];
+        assert_eq!(l.len(), 1);
+        assert!(
+            (l[0].t0 - 2.0).abs() < 1e-9 && (l[0].t1 - 3.0).abs() < 1e-9,
+            "{l:?}"
+        );
+    }
+
     #[test]
     fn words_skip_comments_line_numbers_and_checksums() {
         assert_eq!(
             words("N12 G1 X1.5 Y-2 E.3*57 ; move"),
-            vec![('N', 12.0), ('G', 1.0), ('X', 1.5), ('Y', -2.0), ('E', 0.3)]
+            vec![('G', 1.0), ('X', 1.5), ('Y', -2.0), ('E', 0.3)]
         );
         assert_eq!(words("; only a comment"), vec![]);
     }

@@ -4,7 +4,7 @@
 //! Why: a layer of offset rings and toolpaths holds tens of thousands of points. As JSON
 //! numbers they cost 14 bytes each and the browser must parse every one before showing
 //! anything; as steps on a 0.01 mm grid most coordinates fit in one byte, and the page
-//! decodes a layer only when it is shown. The layout is read by `decode` in
+//! decodes a layer only when it is shown. The layout is read by `reader` in
 //! `assets/viewer.js`:
 //!
 //! - a ring: its point count, then each point as (dx, dy) from the previous point
@@ -60,9 +60,10 @@ impl Packer {
     }
 
     fn grid(&self, v: f64) -> i64 {
-        // Saturating: coordinates are bounded by the run's checks, and a point off the
-        // grid's range is drawn at its edge rather than wrapping round.
-        (v * self.scale).round() as i64
+        // Clamped to what the page's numbers hold exactly (2^52 steps, 4,500 km at the
+        // finest grid), so that no step overflows and none is decoded inexactly.
+        const MOST: f64 = 4_503_599_627_370_496.0;
+        (v * self.scale).round().clamp(-MOST, MOST) as i64
     }
 
     /// Quantises points into the buffer, dropping repeats (which the grid makes of
