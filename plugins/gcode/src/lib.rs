@@ -29,6 +29,7 @@
 pub mod commands;
 pub mod firmware;
 pub mod layout;
+mod mix_along;
 pub mod motion;
 pub mod setup;
 pub mod text;

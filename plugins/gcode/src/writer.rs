@@ -798,7 +798,11 @@ impl Writer {
             .windows(2)
             .map(|w| {
                 let mid = Point2::from((w[0].p.coords + w[1].p.coords) / 2.0);
-                let mix = self.mix_for(info, path.part, region.composition_at(mid).as_ref());
+                let mix = self.mix_for(
+                    info,
+                    path.part,
+                    crate::mix_along::composition_at(region, mid).as_ref(),
+                );
                 // A dead band: the samples' own scatter would make a mix of 95 % flicker
                 // to 94 and 96 every few segments.
                 let keep = current
