@@ -151,6 +151,7 @@ pub fn markdown(registry: &Registry, kind: Option<StageKind>) -> String {
         }
         let header = match info.kind {
             StageKind::Export => "[[output]]".to_string(),
+            StageKind::Process => "[[process]]".to_string(),
             k => format!("[{k}]"),
         };
         let _ = write!(out, "\n```toml\n{header}\n{}\n```\n", info.example.trim_end());

@@ -487,6 +487,10 @@ pub struct LayerPlan {
     /// How much of the layer's sub-regions the planned beads fill, when planned.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub fill: Option<Fill>,
+    /// The operations of a hybrid process on this layer, in the machine's order
+    /// (`[[process]]` stages).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub operations: Vec<crate::process::Operation>,
     /// What the layer's stages repaired, dropped or want said, each with its place.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub diagnostics: Vec<Diagnostic>,

@@ -30,11 +30,13 @@ pub enum StageKind {
     Grade,
     Sequence,
     Plan,
+    /// Operations of a hybrid process on each layer (spray, mill, grind, engrave, ...).
+    Process,
     Export,
 }
 
 impl StageKind {
-    pub const ALL: [StageKind; 9] = [
+    pub const ALL: [StageKind; 10] = [
         StageKind::Model,
         StageKind::Orient,
         StageKind::Slice,
@@ -43,6 +45,7 @@ impl StageKind {
         StageKind::Grade,
         StageKind::Sequence,
         StageKind::Plan,
+        StageKind::Process,
         StageKind::Export,
     ];
 
@@ -57,6 +60,7 @@ impl StageKind {
             StageKind::Grade => "grade",
             StageKind::Sequence => "sequence",
             StageKind::Plan => "plan",
+            StageKind::Process => "process",
             StageKind::Export => "export",
         }
     }
@@ -145,6 +149,7 @@ pub enum AnyStage {
     Grade(Box<dyn Grader>),
     Sequence(Box<dyn Sequencer>),
     Plan(Box<dyn Planner>),
+    Process(Box<dyn Process>),
     Export(Box<dyn Exporter>),
 }
 
@@ -159,6 +164,7 @@ impl AnyStage {
             AnyStage::Grade(_) => StageKind::Grade,
             AnyStage::Sequence(_) => StageKind::Sequence,
             AnyStage::Plan(_) => StageKind::Plan,
+            AnyStage::Process(_) => StageKind::Process,
             AnyStage::Export(_) => StageKind::Export,
         }
     }
@@ -282,6 +288,18 @@ pub trait Sequencer: Send + Sync {
 pub trait Planner: Send + Sync {
     /// Fills `plan.toolpaths` (and `plan.build_time`).
     fn plan(&self, info: &RunInfo, plan: &mut LayerPlan) -> Result<()>;
+}
+
+/// Plans one kind of operation of a hybrid process on each layer (`[[process]]`
+/// tables, run in their order after the planner): appends to `plan.operations`.
+pub trait Process: Send + Sync {
+    fn process(&self, ctx: &crate::process::ProcessContext<'_>, plan: &mut LayerPlan) -> Result<()>;
+
+    /// True when the stage needs the outlines of the higher regions around the layer
+    /// (`ProcessContext::higher`), which costs a cut of their meshes.
+    fn needs_higher(&self) -> bool {
+        false
+    }
 }
 
 /// What an exporter knows when it opens its output.

@@ -97,6 +97,10 @@ typed_stage!(
     /// The planner a `[plan]` table names.
     planner, Plan, Planner
 );
+typed_stage!(
+    /// The process stage a `[[process]]` table names.
+    process, Process, Process
+);
 
 /// The meshes of the model a `[model]` table names, read relative to `dir`.
 pub fn meshes(table: &str, dir: &Path) -> Vec<lamina_core::Mesh> {
@@ -149,8 +153,10 @@ pub fn pipeline_for(kind: StageKind, table: &str) -> String {
         ("slice", "use = \"uniform\"\nthickness = 0.5".to_string()),
     ];
     let mut outputs = vec!["use = \"json\"\npath = \"plan.json\"".to_string()];
+    let mut process = Vec::new();
     match kind {
         StageKind::Export => outputs = vec![table.to_string()],
+        StageKind::Process => process.push(table.to_string()),
         k => {
             if let Some(t) = tables.iter_mut().find(|(n, _)| *n == k.name()) {
                 t.1 = table.to_string();
@@ -168,6 +174,9 @@ pub fn pipeline_for(kind: StageKind, table: &str) -> String {
     }
     for (name, body) in tables {
         text.push_str(&format!("[{name}]\n{body}\n\n"));
+    }
+    for p in process {
+        text.push_str(&format!("[[process]]\n{p}\n\n"));
     }
     for o in outputs {
         text.push_str(&format!("[[output]]\n{o}\n\n"));

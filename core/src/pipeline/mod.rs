@@ -66,6 +66,8 @@ struct RawPipeline {
     sequence: Option<toml::Table>,
     plan: Option<toml::Table>,
     #[serde(default)]
+    process: Vec<toml::Table>,
+    #[serde(default)]
     output: Vec<toml::Table>,
     limits: Option<toml::Table>,
 }
@@ -184,6 +186,8 @@ pub struct Pipeline {
     pub parts: Vec<PartSpec>,
     /// Stage tables by kind (slice, sort, discretise, grade, sequence, plan).
     pub stages: BTreeMap<StageKind, TableRef>,
+    /// `[[process]]` tables, one operation stage each, in the order they run.
+    pub process: Vec<TableRef>,
     /// `[[output]]` tables, one exporter each.
     pub outputs: Vec<TableRef>,
     /// The machine the `machine` key names, resolved and validated.
@@ -374,6 +378,12 @@ impl Pipeline {
                 stages.insert(kind, table_ref(vec![key(kind.name())], t));
             }
         }
+        let process = raw
+            .process
+            .into_iter()
+            .enumerate()
+            .map(|(i, t)| table_ref(vec![key("process"), PathElem::Index(i)], t))
+            .collect();
         let outputs = raw
             .output
             .into_iter()
@@ -402,6 +412,7 @@ impl Pipeline {
             materials,
             parts,
             stages,
+            process,
             outputs,
             machine,
             limits,

@@ -515,6 +515,31 @@ fn handle(request: Request<'static>) -> Result<Response> {
             }
             _ => None,
         }),
+        Request::NeedsHigher { handle } => {
+            on_stage(handle, "say whether it needs the higher regions", |_, stage, label| match stage {
+                AnyStage::Process(s) => Some(guard_call(label, || Ok(s.needs_higher())).map(Response::Bool)),
+                _ => None,
+            })
+        }
+        Request::Process {
+            handle,
+            info,
+            context,
+            plan,
+        } => on_stage(handle, "plan its operations", |_, stage, label| match stage {
+            AnyStage::Process(s) => {
+                let mut plan = plan.into_owned();
+                let ctx = crate::process::ProcessContext {
+                    info: &info,
+                    sequence: context.sequence.as_deref(),
+                    surfaces: &context.surfaces,
+                    higher: &context.higher,
+                    last: context.last,
+                };
+                Some(guard_call(label, || s.process(&ctx, &mut plan)).map(|()| Response::Plan(plan)))
+            }
+            _ => None,
+        }),
         Request::Open { handle, export } => {
             on_stage(handle, "open an output", |_, stage, label| match stage {
                 AnyStage::Export(s) => {

@@ -42,6 +42,8 @@ pub struct Engine {
     pub(super) orienter: Option<Box<dyn Orienter>>,
     pub(super) sequencer: Option<Box<dyn Sequencer>>,
     pub(super) planner: Option<Box<dyn Planner>>,
+    /// `[[process]]` stages, in their order.
+    pub(super) process: Vec<Box<dyn Process>>,
     pub(super) exporters: Vec<Box<dyn Exporter>>,
 }
 
@@ -327,6 +329,19 @@ impl Engine {
         let orienter = optional!(Orient);
         let sequencer = optional!(Sequence);
         let planner = optional!(Plan);
+        let mut process = Vec::new();
+        for t in &pipeline.process {
+            let stage = (|| -> Result<_> {
+                Ok(expect_kind!(
+                    registry.build_for(StageKind::Process, t, &scripts, &base, pipeline.context())?,
+                    Process
+                ))
+            })();
+            match stage {
+                Ok(s) => process.push(s),
+                Err(e) => errors.push(e),
+            }
+        }
         let mut exporters = Vec::new();
         for t in &pipeline.outputs {
             let exporter = (|| -> Result<_> {
@@ -368,6 +383,7 @@ impl Engine {
             orienter,
             sequencer,
             planner,
+            process,
             exporters,
         })
     }
@@ -413,6 +429,9 @@ impl Engine {
                 m.bed.describe(),
                 m.tools.len()
             ));
+        }
+        if !self.process.is_empty() {
+            lines.push(format!("process stages: {}", self.process.len()));
         }
         lines.push(format!("outputs: {}", self.exporters.len()));
         lines

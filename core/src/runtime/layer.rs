@@ -23,6 +23,8 @@ impl Engine {
             selections,
             timings,
             meshes: _,
+            surfaces: _,
+            layer_count: _,
         } = *shared;
         // Each distinct mesh is cut and sorted once per layer.
         let mut cut: Vec<Option<(Layer, crate::model::ContourTree)>> =
@@ -115,12 +117,78 @@ impl Engine {
             build_time: None,
             sequential_time: None,
             fill: None,
+            operations: Vec::new(),
             diagnostics,
         };
         if let Some(planner) = &self.planner {
             timings.time(StageKind::Plan, || planner.plan(info, &mut plan))?;
         }
+        if !self.process.is_empty() {
+            self.process_operations(slot, shared, &mut plan)?;
+        }
         Ok(plan)
+    }
+
+    /// Runs the `[[process]]` stages on a planned layer, in their order.
+    fn process_operations(&self, slot: &LayerSlot, shared: &LayerShared<'_>, plan: &mut LayerPlan) -> Result<()> {
+        let none = Vec::new();
+        let surfaces = shared.surfaces.get(slot.index).unwrap_or(&none);
+        let higher = if self.process.iter().any(|p| p.needs_higher()) {
+            self.higher_regions(slot, surfaces, shared)?
+        } else {
+            Vec::new()
+        };
+        let ctx = crate::process::ProcessContext {
+            info: shared.info,
+            sequence: shared.sequence,
+            surfaces,
+            higher: &higher,
+            last: slot.index + 1 == shared.layer_count,
+        };
+        for stage in &self.process {
+            shared
+                .timings
+                .time(StageKind::Process, || stage.process(&ctx, plan))?;
+        }
+        Ok(())
+    }
+
+    /// The other material regions standing higher than the base of `slot`'s layer,
+    /// cut at its height: where their spray may have landed on this layer's area.
+    fn higher_regions(
+        &self,
+        slot: &LayerSlot,
+        surfaces: &[Option<f64>],
+        shared: &LayerShared<'_>,
+    ) -> Result<Vec<crate::process::RegionOutline>> {
+        let (Some(own), Some(sequence)) = (slot.material_region, shared.sequence) else {
+            return Ok(Vec::new());
+        };
+        let base = slot.z - slot.thickness;
+        let mut out = Vec::new();
+        for (q, region) in sequence.regions.iter().enumerate() {
+            let Some(surface) = surfaces.get(q).copied().flatten() else { continue };
+            if q == own || surface <= base + 1e-6 || slot.cut_z < region.z_start || slot.cut_z > region.z_end {
+                continue;
+            }
+            let mut polygons = Vec::new();
+            let mut meshes: Vec<usize> = region.parts.iter().map(|&p| shared.part_mesh[p]).collect();
+            meshes.sort_unstable();
+            meshes.dedup();
+            for mi in meshes {
+                let layer = shared
+                    .timings
+                    .time(StageKind::Slice, || shared.prepared[mi].slice(slot))?;
+                let tree = shared.timings.time(StageKind::Sort, || self.sorter.sort(&layer))?;
+                polygons.extend((0..tree.families.len()).map(|f| tree.family_polygon(&layer.contours, f)));
+            }
+            out.push(crate::process::RegionOutline {
+                region: q,
+                surface,
+                polygons,
+            });
+        }
+        Ok(out)
     }
 
     fn process_part(
@@ -196,6 +264,10 @@ pub(super) struct LayerShared<'a> {
     pub(super) part_mesh: &'a [usize],
     pub(super) selections: &'a Selections,
     pub(super) timings: &'a Timings,
+    /// The material regions' surfaces before each layer (empty without process stages).
+    pub(super) surfaces: &'a [Vec<Option<f64>>],
+    /// Number of layers of the run: the last one takes what ends the job.
+    pub(super) layer_count: usize,
 }
 
 /// The single region of a family that is not discretised.

@@ -88,6 +88,8 @@ pub struct RunReport {
     pub fill: Option<(f64, f64)>,
     /// The build direction chosen by an `[orient]` stage and the alternatives weighed.
     pub orientation: Option<Orientation>,
+    /// How many operations of each kind the `[[process]]` stages planned.
+    pub operations: std::collections::BTreeMap<String, usize>,
 }
 
 impl RunReport {

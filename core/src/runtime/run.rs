@@ -173,7 +173,15 @@ impl Engine {
             sinks.push(timings.time(StageKind::Export, || e.open(&mut ctx))?);
         }
 
+        let surfaces = match (&sequence, self.process.is_empty()) {
+            (Some(seq), false) => crate::process::surfaces_before(&slots, seq.regions.len()),
+            _ => Vec::new(),
+        };
+        let mut surface_check = crate::process::SurfaceCheck::new(sequence.as_ref());
+        let mut operations = std::collections::BTreeMap::<String, usize>::new();
         let shared = LayerShared {
+            surfaces: &surfaces,
+            layer_count: slots.len(),
             info: &info,
             meshes: &meshes,
             sequence: sequence.as_ref(),
@@ -210,6 +218,14 @@ impl Engine {
                     say(d.clone());
                 }
                 regions += plan.parts.iter().map(|p| p.regions.len()).sum::<usize>();
+                if !plan.operations.is_empty() {
+                    surface_check
+                        .layer(&plan)
+                        .map_err(|m| Error::stage("process", m).in_layer(plan.index, plan.z))?;
+                    for op in &plan.operations {
+                        *operations.entry(op.kind.clone()).or_default() += 1;
+                    }
+                }
                 if let Some(t) = plan.build_time {
                     *build_time.get_or_insert(0.0) += t;
                 }
@@ -260,6 +276,7 @@ impl Engine {
             sequential_time,
             fill,
             orientation,
+            operations,
         })
     }
 }

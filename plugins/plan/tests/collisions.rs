@@ -121,6 +121,7 @@ fn layout(rng: &mut Rng, tools: usize) -> (RunInfo, LayerPlan) {
         build_time: None,
         sequential_time: None,
         fill: None,
+        operations: Vec::new(),
         diagnostics: Vec::new(),
     };
     (info, plan)

@@ -24,6 +24,8 @@ struct Remote {
     files: Arc<FileTable>,
     /// For a discretiser: whether its regions come graded (asked once, when built).
     grades: bool,
+    /// For a process stage: whether it needs the higher regions (asked once, when built).
+    needs_higher: bool,
     /// Meshes the plugin has been sent, by address: a run's meshes stay where they are
     /// for as long as its stages live.
     meshes_sent: Mutex<HashSet<usize>>,
@@ -63,6 +65,7 @@ impl Remote {
             scripts: self.scripts.clone(),
             files: self.files.clone(),
             grades: false,
+            needs_higher: false,
             meshes_sent: Mutex::new(HashSet::new()),
         }
     }
@@ -147,10 +150,17 @@ pub(crate) fn build(
         scripts,
         files,
         grades: false,
+        needs_higher: false,
         meshes_sent: Mutex::new(HashSet::new()),
     };
     if kind == StageKind::Discretise {
         stage.grades = match stage.request(&Request::Grades { handle })? {
+            Response::Bool(b) => b,
+            other => return Err(stage.unexpected(&other)),
+        };
+    }
+    if kind == StageKind::Process {
+        stage.needs_higher = match stage.request(&Request::NeedsHigher { handle })? {
             Response::Bool(b) => b,
             other => return Err(stage.unexpected(&other)),
         };
@@ -165,6 +175,7 @@ pub(crate) fn build(
         StageKind::Grade => AnyStage::Grade(b),
         StageKind::Sequence => AnyStage::Sequence(b),
         StageKind::Plan => AnyStage::Plan(b),
+        StageKind::Process => AnyStage::Process(b),
         StageKind::Export => AnyStage::Export(b),
     })
 }
@@ -319,6 +330,32 @@ impl Planner for Remote {
             }
             other => Err(self.unexpected(&other)),
         }
+    }
+}
+
+impl Process for Remote {
+    fn process(&self, ctx: &crate::process::ProcessContext<'_>, plan: &mut LayerPlan) -> Result<()> {
+        match self.request(&Request::Process {
+            handle: self.handle,
+            info: Cow::Borrowed(ctx.info),
+            context: WireProcess {
+                sequence: ctx.sequence.map(Cow::Borrowed),
+                surfaces: Cow::Borrowed(ctx.surfaces),
+                higher: Cow::Borrowed(ctx.higher),
+                last: ctx.last,
+            },
+            plan: Cow::Borrowed(plan),
+        })? {
+            Response::Plan(p) => {
+                *plan = p;
+                Ok(())
+            }
+            other => Err(self.unexpected(&other)),
+        }
+    }
+
+    fn needs_higher(&self) -> bool {
+        self.needs_higher
     }
 }
 

@@ -86,6 +86,17 @@ pub enum Request<'a> {
         info: Cow<'a, RunInfo>,
         plan: Cow<'a, LayerPlan>,
     },
+    /// Asks a process stage whether it needs the higher regions' outlines.
+    NeedsHigher {
+        handle: u64,
+    },
+    /// Plans a process stage's operations on a layer; replies with the plan.
+    Process {
+        handle: u64,
+        info: Cow<'a, RunInfo>,
+        context: WireProcess<'a>,
+        plan: Cow<'a, LayerPlan>,
+    },
     /// Opens an exporter's output; replies with the handle of its layer sink.
     Open {
         handle: u64,
@@ -254,6 +265,15 @@ pub struct WireFamily<'a> {
 pub struct MeshRef<'a> {
     pub id: u64,
     pub mesh: Option<Cow<'a, Mesh>>,
+}
+
+/// What a process stage knows about its layer, besides the run.
+#[derive(Debug, Serialize, Deserialize)]
+pub struct WireProcess<'a> {
+    pub sequence: Option<Cow<'a, Sequence>>,
+    pub surfaces: Cow<'a, [Option<f64>]>,
+    pub higher: Cow<'a, [crate::process::RegionOutline]>,
+    pub last: bool,
 }
 
 /// What an exporter knows when it opens its output.

@@ -1,0 +1,240 @@
+//! The operations of a hybrid process: what a layer takes besides deposition beads.
+//!
+//! The CMPM process (cmpm-process-planning §2) works each layer of a material region in
+//! steps: end-mill away what overhangs where higher regions adjoin, spray the layer with
+//! grinding allowances (and inclusions), grind it back, engrave the voids of a periodic
+//! microstructure, fill them, grind again. Each step is an [`Operation`] on the layer's
+//! plan, planned by a `[[process]]` stage (a plugin, so a third party adds its own, a
+//! curing step say). Core knows the data and one rule that spans layers: a surface is
+//! levelled only where nothing around it stands higher, and every layer ends at its
+//! design height. The runtime checks both as the layers pass in build order.
+
+use std::collections::BTreeMap;
+
+use serde::{Deserialize, Serialize};
+
+use crate::geom::{Point2, Polygon};
+use crate::model::Sequence;
+use crate::stage::RunInfo;
+
+/// One operation of a layer, in the order the machine does them.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Operation {
+    /// What is done: `spray`, `end-mill`, `grind`, `engrave`, `fill`, `remove-filler`,
+    /// or the name a plugin gives its own.
+    pub kind: String,
+    /// Which pass of its kind, e.g. `rough` or `finish`; empty when there is one.
+    #[serde(default, skip_serializing_if = "String::is_empty")]
+    pub pass: String,
+    /// The material region worked on (index into the sequence's regions), if any.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub region: Option<usize>,
+    /// The tool and how it runs.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub tool: Option<OperationTool>,
+    /// Height of the region's surface once the operation is done (mm), when the
+    /// operation sets it: a spray raises it, a grind takes it down.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub surface: Option<f64>,
+    /// True when the tool levels the surface beyond the region's own area (the face of
+    /// a cup wheel): every other region must then stand no higher than `surface`.
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub levels: bool,
+    /// Where the tool works, in order. Each path is at its own height.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub paths: Vec<OperationPath>,
+    /// Numbers the operation was planned with that a reader may want (allowances,
+    /// inclusion fractions, depths), by name.
+    #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
+    pub values: BTreeMap<String, f64>,
+}
+
+impl Operation {
+    /// An operation of `kind` on `region`, with nothing else set.
+    pub fn new(kind: impl Into<String>, region: Option<usize>) -> Self {
+        Self {
+            kind: kind.into(),
+            pass: String::new(),
+            region,
+            tool: None,
+            surface: None,
+            levels: false,
+            paths: Vec::new(),
+            values: BTreeMap::new(),
+        }
+    }
+
+    /// Length of all paths (mm).
+    pub fn path_length(&self) -> f64 {
+        self.paths.iter().map(OperationPath::length).sum()
+    }
+}
+
+/// The tool of an operation and its settings.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct OperationTool {
+    /// The tool's name, which an NC exporter maps to a tool number.
+    pub name: String,
+    /// What kind of tool it is: `spray`, `end-mill`, `grinding-wheel`, `laser`,
+    /// `dispenser`, or a plugin's own.
+    pub kind: String,
+    /// Diameter of what touches the work (mm): cutter, wheel, laser spot or spray spot.
+    pub diameter: f64,
+    /// Feed along the paths (mm/s).
+    pub feed: f64,
+    /// Spindle speed (rev/min) of a rotating tool.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub spindle: Option<f64>,
+    /// Power (W) of a laser or a spray torch.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub power: Option<f64>,
+}
+
+/// One continuous pass of a tool at one height.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct OperationPath {
+    /// Height of the tool's working end (mm).
+    pub z: f64,
+    pub points: Vec<Point2>,
+    /// True when the path returns from its last point to its first.
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub closed: bool,
+}
+
+impl OperationPath {
+    /// Length of the path (mm), the closing segment included.
+    pub fn length(&self) -> f64 {
+        let open: f64 = self.points.windows(2).map(|w| (w[1] - w[0]).norm()).sum();
+        match (self.closed, self.points.first(), self.points.last()) {
+            (true, Some(a), Some(b)) if self.points.len() > 2 => open + (*a - *b).norm(),
+            _ => open,
+        }
+    }
+}
+
+/// The outline of another material region at a layer's cut height.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct RegionOutline {
+    /// Index into the sequence's regions.
+    pub region: usize,
+    /// Its surface height when the layer begins (mm).
+    pub surface: f64,
+    pub polygons: Vec<Polygon>,
+}
+
+/// What a process stage knows about the layer it plans.
+#[derive(Debug, Clone, Copy)]
+pub struct ProcessContext<'a> {
+    pub info: &'a RunInfo,
+    /// The fabrication sequence, when the layers follow one.
+    pub sequence: Option<&'a Sequence>,
+    /// The surface height of every material region when this layer begins (finished
+    /// layers end at their design height); `None` for a region not begun yet.
+    pub surfaces: &'a [Option<f64>],
+    /// The other regions that stand higher than this layer's base, cut at the layer's
+    /// height; filled only when some process stage asks for them.
+    pub higher: &'a [RegionOutline],
+    /// True for the job's last layer, where what ends the job goes.
+    pub last: bool,
+}
+
+/// The surface heights of the material regions before each layer of `slots`, from
+/// their design heights: a layer of region `r` ends with `r`'s surface at its top.
+pub fn surfaces_before(slots: &[crate::model::LayerSlot], regions: usize) -> Vec<Vec<Option<f64>>> {
+    let mut now = vec![None; regions];
+    let mut out = Vec::with_capacity(slots.len());
+    for s in slots {
+        out.push(now.clone());
+        if let Some(r) = s.material_region
+            && r < regions
+        {
+            now[r] = Some(s.z);
+        }
+    }
+    out
+}
+
+/// Follows every region's surface through the operations of the layers, in build
+/// order, and refuses a plan that levels a surface next to a higher one or leaves a
+/// layer off its design height.
+#[derive(Debug, Clone, Default)]
+pub struct SurfaceCheck {
+    surfaces: Vec<Option<f64>>,
+    names: Vec<String>,
+}
+
+/// Heights closer than this are equal (mm): a micrometre, the sequence's unit.
+const HEIGHT_TOLERANCE: f64 = 5e-4;
+
+impl SurfaceCheck {
+    pub fn new(sequence: Option<&Sequence>) -> Self {
+        let names: Vec<String> = sequence
+            .map(|s| s.regions.iter().map(|r| r.name.clone()).collect())
+            .unwrap_or_default();
+        Self {
+            surfaces: vec![None; names.len()],
+            names,
+        }
+    }
+
+    /// The current surface of every region.
+    pub fn surfaces(&self) -> &[Option<f64>] {
+        &self.surfaces
+    }
+
+    fn name(&self, r: usize) -> String {
+        self.names.get(r).cloned().unwrap_or_else(|| format!("#{r}"))
+    }
+
+    /// Takes one layer's operations; an error names the operation and the regions.
+    pub fn layer(&mut self, plan: &crate::model::LayerPlan) -> Result<(), String> {
+        let mut touched = None;
+        for (i, op) in plan.operations.iter().enumerate() {
+            let (Some(r), Some(s)) = (op.region, op.surface) else {
+                continue;
+            };
+            if r >= self.surfaces.len() {
+                return Err(format!(
+                    "operation {} (`{}`) names material region {r}, the sequence has {}",
+                    i + 1,
+                    op.kind,
+                    self.surfaces.len()
+                ));
+            }
+            if op.levels {
+                for (q, other) in self.surfaces.iter().enumerate() {
+                    if q != r
+                        && let Some(h) = other
+                        && *h > s + HEIGHT_TOLERANCE
+                    {
+                        return Err(format!(
+                            "operation {} (`{}`{}) levels region `{}` to {s:.3} mm while region `{}` \
+                             stands at {h:.3} mm: the surface to be levelled must stand higher than \
+                             the others",
+                            i + 1,
+                            op.kind,
+                            if op.pass.is_empty() { String::new() } else { format!(" {}", op.pass) },
+                            self.name(r),
+                            self.name(q),
+                        ));
+                    }
+                }
+            }
+            self.surfaces[r] = Some(s);
+            touched = Some(r);
+        }
+        if let (Some(r), Some(own)) = (touched, plan.material_region)
+            && r == own
+            && let Some(s) = self.surfaces[r]
+            && (s - plan.z).abs() > HEIGHT_TOLERANCE
+        {
+            return Err(format!(
+                "region `{}` ends the layer at {s:.3} mm, its design height is {:.3} mm: an \
+                 operation that brings it down (a finishing grind) is missing",
+                self.name(r),
+                plan.z
+            ));
+        }
+        Ok(())
+    }
+}
