@@ -10,11 +10,13 @@
 //! - [`simplify`]: the one ring simplifier.
 //! - [`follow`]: one solid area followed from layer to layer.
 //! - [`field`]: a sampled distance field of contours on a square grid;
-//! - [`iso`]: its iso-loops (marching squares), the sets {v >= t} as contours.
+//! - [`iso`]: its iso-loops (marching squares), the sets {v >= t} as contours;
+//! - [`lattice`]: a lattice of spherical voids and the circles it cuts in a plane.
 
 pub mod field;
 pub mod follow;
 pub mod iso;
+pub mod lattice;
 pub mod ring;
 pub mod segment;
 pub mod shape;

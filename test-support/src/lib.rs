@@ -41,6 +41,7 @@ use lamina_grade as _;
 use lamina_orient as _;
 use lamina_plan as _;
 use lamina_preview as _;
+use lamina_process as _;
 use lamina_sequence as _;
 use lamina_slice as _;
 use lamina_sort as _;

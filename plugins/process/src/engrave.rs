@@ -1,0 +1,218 @@
+//! `engrave`: step 4 of the process. A periodic microstructure is a lattice of
+//! spherical voids (cmpm-process-planning 4.3); the voids the layer's plane cuts (at
+//! mid-layer, where the contours are cut) are engraved by a laser from the surface
+//! down through the layer: rings inside each void's outline, the first half a spot in,
+//! the next ones a spot less the overlap further, until the void is cleared.
+
+use i_overlay::core::fill_rule::FillRule;
+use i_overlay::core::overlay_rule::OverlayRule;
+use i_overlay::float::single::SingleFloatOverlay;
+use lamina_core::pipeline::TableRef;
+use lamina_core::stage::{AnyStage, Process, StageConfig, StageInfo, StageKind};
+use lamina_core::{
+    Contour, LayerPlan, Operation, OperationPath, OperationTool, Point2, Polygon, ProcessContext, Result,
+    StageFactory,
+};
+use lamina_geom::lattice::Lattice;
+use lamina_geom::ring::{polygons_of, ring_of, shape_of};
+use lamina_geom::Shapes;
+
+use crate::area::{distance_to_area, layer_area, offset};
+use crate::regions::selected;
+use crate::tool::{ToolSpec, checked};
+
+lamina_core::stage_options! {
+    #[derive(Debug)]
+    struct Options {
+        /// the material regions with the microstructure; default: every layer
+        regions: Vec<String> = "[]",
+        /// lattice spacing in x, y, z (mm)
+        period: [f64; 3] = "[1.0, 1.0, 1.0]",
+        /// one inserting point of the lattice (mm)
+        origin: [f64; 3] = "[0.0, 0.0, 0.0]",
+        /// radius of the spherical void at each inserting point (mm)
+        void_radius: f64 = "0.3",
+        /// the laser's name
+        tool: String = r#""laser""#,
+        /// spot diameter (mm)
+        diameter: f64 = "0.05",
+        /// share of a ring the next one covers again
+        overlap: f64 = "0.2",
+        /// scan speed (mm/s)
+        feed: f64 = "50.0",
+        /// laser power (W)
+        power: f64 = "20.0",
+    }
+}
+
+/// Points per void outline.
+const CIRCLE_POINTS: usize = 32;
+
+struct Engrave {
+    options: Options,
+    lattice: Lattice,
+    tool: OperationTool,
+    table: TableRef,
+}
+
+/// A void the plane cuts: a whole circle, or the part of one inside the area.
+enum Void {
+    Circle(Point2, f64),
+    Cut(Polygon),
+}
+
+impl Void {
+    fn area(&self) -> f64 {
+        match self {
+            Void::Circle(_, r) => std::f64::consts::PI * r * r,
+            Void::Cut(p) => p.area(),
+        }
+    }
+
+    /// The laser's rings: the outline `first` in, then every `step` further, while
+    /// anything is left.
+    fn rings(&self, first: f64, step: f64) -> Vec<Contour> {
+        let mut out = Vec::new();
+        let mut inset = first;
+        loop {
+            let before = out.len();
+            match self {
+                Void::Circle(c, r) if *r - inset > 1e-6 => {
+                    out.push(Contour::circle(*c, r - inset, CIRCLE_POINTS));
+                }
+                Void::Circle(..) => {}
+                Void::Cut(p) => {
+                    out.extend(offset(std::slice::from_ref(p), -inset).iter().flat_map(|q| q.contours().cloned().collect::<Vec<_>>()));
+                }
+            }
+            if out.len() == before {
+                return out;
+            }
+            inset += step;
+        }
+    }
+}
+
+impl Engrave {
+    /// The voids of the plane at `z` within `area`: whole circles, and the circles the
+    /// area's boundary cuts, clipped all at once.
+    fn voids(&self, area: &[Polygon], z: f64) -> Vec<Void> {
+        let Some(bbox) = area.iter().map(Polygon::bbox).reduce(|a, b| a.union(&b)) else {
+            return Vec::new();
+        };
+        let mut out = Vec::new();
+        let mut cut: Shapes = Vec::new();
+        for (x, y, r) in self.lattice.circles(z, &bbox) {
+            let c = Point2::new(x, y);
+            let inside = area.iter().any(|p| p.contains(c));
+            let clear = area.iter().map(|p| p.boundary_distance(c)).fold(f64::INFINITY, f64::min);
+            if inside && clear >= r {
+                out.push(Void::Circle(c, r));
+            } else if distance_to_area(c, area) < r {
+                cut.push(vec![ring_of(&Contour::circle(c, r, CIRCLE_POINTS))]);
+            }
+        }
+        if !cut.is_empty() {
+            let clip: Shapes = area.iter().map(shape_of).collect();
+            let clipped: Shapes = cut.overlay(&clip, OverlayRule::Intersect, FillRule::EvenOdd);
+            out.extend(polygons_of(&clipped).into_iter().filter(|p| p.area() > 1e-9).map(Void::Cut));
+        }
+        out
+    }
+}
+
+impl Process for Engrave {
+    fn process(&self, ctx: &ProcessContext<'_>, plan: &mut LayerPlan) -> Result<()> {
+        if !selected(ctx, &self.table, plan, &self.options.regions)? {
+            return Ok(());
+        }
+        let area = layer_area(plan);
+        let voids = self.voids(&area, plan.z - plan.thickness / 2.0);
+        if voids.is_empty() {
+            return Ok(());
+        }
+        let bottom = plan.z - plan.thickness;
+        // The laser focuses on the surface and burns down to the layer's bottom.
+        let surface = plan
+            .operations
+            .iter()
+            .rev()
+            .find(|op| op.region == plan.material_region && op.surface.is_some())
+            .and_then(|op| op.surface)
+            .unwrap_or(plan.z);
+        let spot = self.tool.diameter;
+        let step = spot * (1.0 - self.options.overlap);
+        let mut paths = Vec::new();
+        for v in &voids {
+            paths.extend(v.rings(spot / 2.0, step).into_iter().map(|c| OperationPath {
+                z: surface,
+                points: c.points,
+                closed: true,
+            }));
+        }
+        let mut op = Operation::new("engrave", plan.material_region);
+        op.tool = Some(self.tool.clone());
+        op.paths = paths;
+        op.values.insert("voids".into(), voids.len() as f64);
+        op.values.insert("void_area".into(), voids.iter().map(Void::area).sum());
+        op.values.insert("depth".into(), surface - bottom);
+        plan.operations.push(op);
+        Ok(())
+    }
+}
+
+fn build(config: &StageConfig<'_>) -> Result<AnyStage> {
+    let options: Options = config.parse()?;
+    if options.period.iter().any(|p| !(p.is_finite() && *p > 0.0)) {
+        return Err(config.error("period", "every spacing must be a positive number of mm"));
+    }
+    if !(options.void_radius.is_finite() && options.void_radius > 0.0) {
+        return Err(config.error("void_radius", "must be a positive number of mm"));
+    }
+    let smallest = options.period.iter().copied().fold(f64::INFINITY, f64::min);
+    if options.void_radius > smallest / 2.0 {
+        return Err(config.error(
+            "void_radius",
+            format!("must be at most half the smallest period ({} mm): voids that large would meet", smallest / 2.0),
+        ));
+    }
+    if !(options.overlap.is_finite() && (0.0..0.9).contains(&options.overlap)) {
+        return Err(config.error("overlap", "must be at least 0 and below 0.9"));
+    }
+    let tool = checked(
+        config,
+        ToolSpec {
+            name: &options.tool,
+            kind: "laser",
+            diameter: options.diameter,
+            feed: options.feed,
+            spindle: None,
+            power: Some(options.power),
+        },
+    )?;
+    if tool.diameter > options.void_radius {
+        return Err(config.error("diameter", "the laser spot must be smaller than the void's radius"));
+    }
+    let lattice = Lattice {
+        period: options.period,
+        origin: options.origin,
+        radius: options.void_radius,
+    };
+    Ok(AnyStage::Process(Box::new(Engrave {
+        options,
+        lattice,
+        tool,
+        table: config.table.clone(),
+    })))
+}
+
+lamina_core::register_stage!(StageFactory {
+    info: StageInfo {
+        kind: StageKind::Process,
+        name: "engrave",
+        doc: "Engraves the voids of a periodic microstructure (a lattice of spherical voids) with a laser, ring by ring (CMPM step 4).",
+        options: Options::SPECS,
+        example: "use = \"engrave\"\nperiod = [1.0, 1.0, 1.0]\nvoid_radius = 0.3",
+    },
+    build,
+});

@@ -1,0 +1,149 @@
+//! `fill` and `remove-filler`: steps 5 and 7 of the process. Where a layer's voids were
+//! engraved, a low-strength, high-melting filler is laid over the area in passes so
+//! the next spray cannot fill them; the finish grind then takes the surplus off. At
+//! the end of the job the filler is removed.
+
+use lamina_core::pipeline::TableRef;
+use lamina_core::stage::{AnyStage, Process, StageConfig, StageInfo, StageKind};
+use lamina_core::{LayerPlan, Operation, OperationTool, ProcessContext, Result, StageFactory};
+
+use crate::area::{layer_area, raster};
+use crate::regions::selected;
+use crate::tool::{ToolSpec, checked};
+
+lamina_core::stage_options! {
+    #[derive(Debug)]
+    struct Options {
+        /// the material regions filled; default: every layer that was engraved
+        regions: Vec<String> = "[]",
+        /// the filler nozzle's name
+        tool: String = r#""filler""#,
+        /// width of the filler's track (mm)
+        diameter: f64 = "1.0",
+        /// travel speed while filling (mm/s)
+        feed: f64 = "30.0",
+    }
+}
+
+struct Fill {
+    options: Options,
+    tool: OperationTool,
+    table: TableRef,
+}
+
+impl Process for Fill {
+    fn process(&self, ctx: &ProcessContext<'_>, plan: &mut LayerPlan) -> Result<()> {
+        if !selected(ctx, &self.table, plan, &self.options.regions)? {
+            return Ok(());
+        }
+        let region = plan.material_region;
+        let Some(engraved) = plan
+            .operations
+            .iter()
+            .rfind(|op| op.kind == "engrave" && op.region == region)
+        else {
+            return Ok(());
+        };
+        let (voids, void_area, depth) = (
+            engraved.values.get("voids").copied().unwrap_or(0.0),
+            engraved.values.get("void_area").copied().unwrap_or(0.0),
+            engraved.values.get("depth").copied().unwrap_or(0.0),
+        );
+        let surface = plan
+            .operations
+            .iter()
+            .rev()
+            .find(|op| op.region == region && op.surface.is_some())
+            .and_then(|op| op.surface)
+            .unwrap_or(plan.z);
+        let mut op = Operation::new("fill", region);
+        op.tool = Some(self.tool.clone());
+        op.paths = raster(&layer_area(plan), self.tool.diameter, surface);
+        op.values.insert("voids".into(), voids);
+        op.values.insert("void_volume".into(), void_area * depth);
+        plan.operations.push(op);
+        Ok(())
+    }
+}
+
+fn build(config: &StageConfig<'_>) -> Result<AnyStage> {
+    let options: Options = config.parse()?;
+    let tool = checked(
+        config,
+        ToolSpec {
+            name: &options.tool,
+            kind: "dispenser",
+            diameter: options.diameter,
+            feed: options.feed,
+            spindle: None,
+            power: None,
+        },
+    )?;
+    Ok(AnyStage::Process(Box::new(Fill {
+        options,
+        tool,
+        table: config.table.clone(),
+    })))
+}
+
+lamina_core::register_stage!(StageFactory {
+    info: StageInfo {
+        kind: StageKind::Process,
+        name: "fill",
+        doc: "Lays a low-strength, high-melting filler over the layers whose voids were engraved, so the next spray leaves them open (CMPM step 5).",
+        options: Options::SPECS,
+        example: "use = \"engrave\"\n\n[[process]]\nuse = \"fill\"\ndiameter = 1.0",
+    },
+    build,
+});
+
+lamina_core::stage_options! {
+    #[derive(Debug)]
+    struct RemoveOptions {
+        /// how the filler leaves: `melt-out` (heated above its melting point) or `leach` (dissolved)
+        method: String = r#""melt-out""#,
+        /// temperature of a melt-out (°C)
+        temperature: f64 = "350.0",
+    }
+}
+
+struct RemoveFiller {
+    options: RemoveOptions,
+}
+
+impl Process for RemoveFiller {
+    fn process(&self, ctx: &ProcessContext<'_>, plan: &mut LayerPlan) -> Result<()> {
+        if !ctx.last {
+            return Ok(());
+        }
+        let mut op = Operation::new("remove-filler", None);
+        op.pass = self.options.method.clone();
+        if self.options.method == "melt-out" {
+            op.values.insert("temperature".into(), self.options.temperature);
+        }
+        plan.operations.push(op);
+        Ok(())
+    }
+}
+
+fn build_remove(config: &StageConfig<'_>) -> Result<AnyStage> {
+    let options: RemoveOptions = config.parse()?;
+    if !matches!(options.method.as_str(), "melt-out" | "leach") {
+        return Err(config.error("method", "must be `melt-out` or `leach`"));
+    }
+    if !(options.temperature.is_finite() && options.temperature > 0.0) {
+        return Err(config.error("temperature", "must be a positive number of °C"));
+    }
+    Ok(AnyStage::Process(Box::new(RemoveFiller { options })))
+}
+
+lamina_core::register_stage!(StageFactory {
+    info: StageInfo {
+        kind: StageKind::Process,
+        name: "remove-filler",
+        doc: "Removes the voids' filler once the last layer is done (CMPM step 7), by melting it out or leaching it.",
+        options: RemoveOptions::SPECS,
+        example: "use = \"remove-filler\"\nmethod = \"melt-out\"",
+    },
+    build: build_remove,
+});

@@ -1,0 +1,138 @@
+//! `grind`: steps 3 and 6 of the process. The annular face of a cup wheel takes the
+//! sprayed surface down: the rough pass to the layer's height plus the finish allowance
+//! (to the height itself where there is none), the finish pass, after the voids are
+//! engraved and filled, to the design height. The wheel levels everything under its
+//! face, so the surface it grinds must stand higher than every other region's; the run
+//! checks that as the layers pass.
+//!
+//! The wheel's centre runs along x in lines `stepover` apart over the area grown by
+//! half a stepover: every point of the area then lies within half a stepover, less than
+//! the wheel's radius, of the centre's path, so the face passes over all of it.
+
+use lamina_core::pipeline::TableRef;
+use lamina_core::stage::{AnyStage, Process, StageConfig, StageInfo, StageKind};
+use lamina_core::{LayerPlan, Operation, OperationTool, ProcessContext, Result, StageFactory};
+use serde::Deserialize;
+
+use crate::area::{layer_area, offset, raster};
+use crate::regions::selected;
+use crate::tool::{ToolSpec, checked};
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize)]
+#[serde(rename_all = "lowercase")]
+enum Pass {
+    Rough,
+    Finish,
+}
+
+lamina_core::option_type!(Pass = "string");
+
+lamina_core::stage_options! {
+    #[derive(Debug)]
+    struct Options {
+        /// `rough`: down to the height plus the finish allowance, after spraying; `finish`: down to the design height, where a finish allowance was sprayed
+        pass: Pass = r#""rough""#,
+        /// the material regions ground; default: every layer
+        regions: Vec<String> = "[]",
+        /// the wheel's name
+        tool: String = r#""cup-wheel""#,
+        /// outer diameter of the wheel's grinding face (mm)
+        diameter: f64 = "20.0",
+        /// distance between the wheel's passes, as a share of its diameter
+        stepover: f64 = "0.5",
+        /// table feed (mm/s)
+        feed: f64 = "20.0",
+        /// wheel speed (rev/min)
+        spindle: f64 = "3000.0",
+    }
+}
+
+struct Grind {
+    options: Options,
+    tool: OperationTool,
+    table: TableRef,
+}
+
+impl Process for Grind {
+    fn process(&self, ctx: &ProcessContext<'_>, plan: &mut LayerPlan) -> Result<()> {
+        let o = &self.options;
+        if !selected(ctx, &self.table, plan, &o.regions)? {
+            return Ok(());
+        }
+        // What this layer sprayed, and how high the surface stands now.
+        let region = plan.material_region;
+        let Some(spray) = plan
+            .operations
+            .iter()
+            .rfind(|op| op.kind == "spray" && op.region == region)
+        else {
+            return Ok(());
+        };
+        let finish = spray.values.get("finish_allowance").copied().unwrap_or(0.0);
+        let now = plan
+            .operations
+            .iter()
+            .rev()
+            .find(|op| op.region == region && op.surface.is_some())
+            .and_then(|op| op.surface)
+            .unwrap_or(plan.z);
+        let target = match o.pass {
+            Pass::Rough => plan.z + finish,
+            Pass::Finish if finish > 0.0 => plan.z,
+            Pass::Finish => return Ok(()),
+        };
+        if now <= target + 1e-9 {
+            return Ok(());
+        }
+        let area = layer_area(plan);
+        let step = self.tool.diameter * o.stepover;
+        let mut op = Operation::new("grind", region);
+        op.pass = match o.pass {
+            Pass::Rough => "rough",
+            Pass::Finish => "finish",
+        }
+        .into();
+        op.tool = Some(self.tool.clone());
+        op.surface = Some(target);
+        op.levels = true;
+        op.paths = raster(&offset(&area, step / 2.0 + 0.01), step, target);
+        op.values.insert("from".into(), now);
+        op.values.insert("removed".into(), now - target);
+        plan.operations.push(op);
+        Ok(())
+    }
+}
+
+fn build(config: &StageConfig<'_>) -> Result<AnyStage> {
+    let options: Options = config.parse()?;
+    if !(options.stepover.is_finite() && options.stepover > 0.0 && options.stepover <= 1.0) {
+        return Err(config.error("stepover", "must be above 0 and at most 1 (a whole diameter)"));
+    }
+    let tool = checked(
+        config,
+        ToolSpec {
+            name: &options.tool,
+            kind: "grinding-wheel",
+            diameter: options.diameter,
+            feed: options.feed,
+            spindle: Some(options.spindle),
+            power: None,
+        },
+    )?;
+    Ok(AnyStage::Process(Box::new(Grind {
+        options,
+        tool,
+        table: config.table.clone(),
+    })))
+}
+
+lamina_core::register_stage!(StageFactory {
+    info: StageInfo {
+        kind: StageKind::Process,
+        name: "grind",
+        doc: "Grinds the sprayed surface flat with a cup wheel: `rough` to the height plus the finish allowance, `finish` to the design height (CMPM steps 3 and 6).",
+        options: Options::SPECS,
+        example: "use = \"spray\"\n\n[[process]]\nuse = \"grind\"\npass = \"rough\"\ndiameter = 10.0",
+    },
+    build,
+});

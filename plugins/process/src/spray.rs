@@ -1,0 +1,122 @@
+//! `spray`: step 2 of the process. The layer's area is sprayed in passes along x, the
+//! layer thicker by the grinding allowances (the rough allowance on every region, the
+//! finish allowance on the regions whose voids are engraved and filled before the last
+//! grind), with the inclusions of a composite region.
+
+use std::collections::BTreeMap;
+
+use lamina_core::pipeline::TableRef;
+use lamina_core::stage::{AnyStage, Process, StageConfig, StageInfo, StageKind};
+use lamina_core::{LayerPlan, Operation, OperationTool, ProcessContext, Result, StageFactory};
+
+use crate::area::{layer_area, raster};
+use crate::regions::{check_names, selected, value_for};
+use crate::tool::{ToolSpec, checked, non_negative};
+
+lamina_core::stage_options! {
+    #[derive(Debug)]
+    struct Options {
+        /// the material regions sprayed; default: every layer
+        regions: Vec<String> = "[]",
+        /// thickness added for the rough grind (mm), on every region
+        rough_allowance: f64 = "0.1",
+        /// thickness added for the finish grind (mm), by region name (the microstructure regions)
+        finish_allowance: BTreeMap<String, f64> = "{}",
+        /// inclusions sprayed into composite regions: `{ region = { inclusion = volume fraction } }`
+        inclusions: BTreeMap<String, BTreeMap<String, f64>> = "{}",
+        /// the spray gun's name
+        tool: String = r#""spray-gun""#,
+        /// width of the sprayed track (mm)
+        diameter: f64 = "3.0",
+        /// share of a track the next one covers again
+        overlap: f64 = "0.25",
+        /// travel speed of the gun while spraying (mm/s)
+        feed: f64 = "100.0",
+        /// torch power (W), if the gun takes one
+        power: Option<f64>,
+    }
+}
+
+struct Spray {
+    options: Options,
+    tool: OperationTool,
+    table: TableRef,
+}
+
+impl Process for Spray {
+    fn process(&self, ctx: &ProcessContext<'_>, plan: &mut LayerPlan) -> Result<()> {
+        let o = &self.options;
+        check_names(ctx, &self.table, "finish_allowance", o.finish_allowance.keys())?;
+        check_names(ctx, &self.table, "inclusions", o.inclusions.keys())?;
+        if !selected(ctx, &self.table, plan, &o.regions)? {
+            return Ok(());
+        }
+        let area = layer_area(plan);
+        if area.is_empty() {
+            return Ok(());
+        }
+        let finish = value_for(ctx, plan, &o.finish_allowance).copied().unwrap_or(0.0);
+        let surface = plan.z + o.rough_allowance + finish;
+        let mut op = Operation::new("spray", plan.material_region);
+        op.tool = Some(self.tool.clone());
+        op.surface = Some(surface);
+        op.paths = raster(&area, self.tool.diameter * (1.0 - o.overlap), surface);
+        op.values.insert("thickness".into(), plan.thickness);
+        op.values.insert("rough_allowance".into(), o.rough_allowance);
+        op.values.insert("finish_allowance".into(), finish);
+        if let Some(inclusions) = value_for(ctx, plan, &o.inclusions) {
+            for (name, fraction) in inclusions {
+                op.values.insert(format!("inclusion:{name}"), *fraction);
+            }
+        }
+        plan.operations.push(op);
+        Ok(())
+    }
+}
+
+fn build(config: &StageConfig<'_>) -> Result<AnyStage> {
+    let options: Options = config.parse()?;
+    non_negative(config, "rough_allowance", options.rough_allowance)?;
+    for v in options.finish_allowance.values() {
+        non_negative(config, "finish_allowance", *v)?;
+    }
+    for inclusions in options.inclusions.values() {
+        let sum: f64 = inclusions.values().sum();
+        if inclusions.values().any(|f| !(f.is_finite() && (0.0..=1.0).contains(f))) || sum > 1.0 {
+            return Err(config.error(
+                "inclusions",
+                "volume fractions must lie in [0, 1] and sum to at most 1 per region",
+            ));
+        }
+    }
+    if !(options.overlap.is_finite() && (0.0..0.9).contains(&options.overlap)) {
+        return Err(config.error("overlap", "must be at least 0 and below 0.9"));
+    }
+    let tool = checked(
+        config,
+        ToolSpec {
+            name: &options.tool,
+            kind: "spray",
+            diameter: options.diameter,
+            feed: options.feed,
+            spindle: None,
+            power: options.power,
+        },
+    )?;
+    Ok(AnyStage::Process(Box::new(Spray {
+        options,
+        tool,
+        table: config.table.clone(),
+    })))
+}
+
+lamina_core::register_stage!(StageFactory {
+    info: StageInfo {
+        kind: StageKind::Process,
+        name: "spray",
+        doc: "Sprays each layer's area in passes, thicker by the grinding allowances, with a composite's inclusions (CMPM step 2).",
+        options: Options::SPECS,
+        example: "use = \"spray\"\nrough_allowance = 0.1\ndiameter = 2.0",
+    },
+    build,
+});
