@@ -217,6 +217,10 @@ pub fn summary(report: &RunReport, timings: bool) {
             100.0 * deposited / volume
         );
     }
+    if !report.operations.is_empty() {
+        let ops: Vec<String> = report.operations.iter().map(|(k, n)| format!("{n} {k}")).collect();
+        eprintln!("process operations: {}", ops.join(", "));
+    }
     if let Some(o) = &report.orientation {
         let [x, y, z] = o.direction;
         eprintln!(

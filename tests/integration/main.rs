@@ -19,6 +19,7 @@ mod examples;
 mod gcode_replay;
 mod generate;
 mod grading;
+mod hybrid;
 mod hostile;
 mod layering;
 mod linked_plugins;

@@ -77,6 +77,8 @@ struct LayerOut<'a> {
     sequential_time: Option<f64>,
     #[serde(skip_serializing_if = "Option::is_none")]
     fill: Option<lamina_core::Fill>,
+    #[serde(skip_serializing_if = "<[lamina_core::Operation]>::is_empty")]
+    operations: &'a [lamina_core::Operation],
     #[serde(skip_serializing_if = "<[lamina_core::Diagnostic]>::is_empty")]
     diagnostics: &'a [lamina_core::Diagnostic],
 }
@@ -177,6 +179,7 @@ fn layer_out<'a>(info: &'a RunInfo, plan: &'a LayerPlan, toolpaths: bool) -> Lay
         build_time: plan.build_time,
         sequential_time: plan.sequential_time,
         fill: plan.fill,
+        operations: &plan.operations,
         diagnostics: &plan.diagnostics,
     }
 }

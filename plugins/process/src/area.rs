@@ -10,6 +10,12 @@ use lamina_geom::{Shapes, simplify_ring};
 /// Chord tolerance of offsets (mm).
 const TOLERANCE: f64 = 0.005;
 
+/// A height rounded to whole micrometres, the sequence's unit, so that heights built
+/// by adding allowances read as they were meant (0.32, not 0.32000000000000006).
+pub fn micrometres(mm: f64) -> f64 {
+    (mm * 1000.0).round() / 1000.0
+}
+
 /// The solid area of a planned layer: every family of every part.
 pub fn layer_area(plan: &LayerPlan) -> Vec<Polygon> {
     plan.parts

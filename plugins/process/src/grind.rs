@@ -77,7 +77,7 @@ impl Process for Grind {
             .and_then(|op| op.surface)
             .unwrap_or(plan.z);
         let target = match o.pass {
-            Pass::Rough => plan.z + finish,
+            Pass::Rough => crate::area::micrometres(plan.z + finish),
             Pass::Finish if finish > 0.0 => plan.z,
             Pass::Finish => return Ok(()),
         };

@@ -68,6 +68,22 @@ impl Process for EndMill {
             }
         }
         if paths.is_empty() {
+            // Where a higher region adjoins but the cutter fits nowhere along it, the
+            // overhang stays: say so.
+            let adjoins = area
+                .iter()
+                .flat_map(|p| p.contours())
+                .any(|c| !adjoining_runs(&c.points, &higher, o.gap, 0.25).is_empty());
+            if adjoins {
+                plan.warn(
+                    StageKind::Process,
+                    format!(
+                        "end-mill: a higher region adjoins the layer's area, but the {} mm cutter fits \
+                         nowhere along it; what was sprayed over the boundary stays",
+                        self.tool.diameter
+                    ),
+                );
+            }
             return Ok(());
         }
         let mut op = Operation::new("end-mill", plan.material_region);

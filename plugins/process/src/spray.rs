@@ -56,7 +56,7 @@ impl Process for Spray {
             return Ok(());
         }
         let finish = value_for(ctx, plan, &o.finish_allowance).copied().unwrap_or(0.0);
-        let surface = plan.z + o.rough_allowance + finish;
+        let surface = crate::area::micrometres(plan.z + o.rough_allowance + finish);
         let mut op = Operation::new("spray", plan.material_region);
         op.tool = Some(self.tool.clone());
         op.surface = Some(surface);

@@ -1,0 +1,369 @@
+//! The CMPM hybrid process end to end on the pipe of Fig. 11 (cmpm-process-planning
+//! §2 and 4.1): every layer of every work cycle is end-milled where a higher region
+//! adjoins, sprayed with allowances, ground, engraved and filled where it is a
+//! microstructure, and ground to height; the NC file it writes is read back by a
+//! third-party G-code parser (pygcode) in `tests/replay/nc_replay.py`.
+//!
+//! The pipe is three concentric tubes: the microstructure `inner` (radii 5 to 7), the
+//! FGM `middle` (7 to 9) and the composite `outer` (9 to 10), so where each machining
+//! path must lie is known in closed form.
+
+use std::collections::BTreeMap;
+use std::path::Path;
+use std::process::Command;
+
+use serde_json::Value;
+
+use crate::support::{pipelines, root, run_plan, skip, text, try_run_text};
+
+fn run_pipe(out: &Path) -> Value {
+    run_plan(
+        &pipelines().join("pipe-work-cycles.toml"),
+        out,
+        &[],
+        "pipe-work-cycles.json",
+    )
+}
+
+/// Radii of each region (inner, middle, outer).
+const RADII: [(f64, f64); 3] = [(5.0, 7.0), (7.0, 9.0), (9.0, 10.0)];
+
+fn ops(layer: &Value) -> Vec<&Value> {
+    layer["operations"]
+        .as_array()
+        .map(|a| a.iter().collect())
+        .unwrap_or_default()
+}
+
+fn label(op: &Value) -> String {
+    match op["pass"].as_str() {
+        Some(p) if op["kind"] == "grind" => format!("grind/{p}"),
+        _ => op["kind"].as_str().expect("kind").to_string(),
+    }
+}
+
+fn f(v: &Value) -> f64 {
+    v.as_f64().unwrap_or_else(|| panic!("not a number: {v}"))
+}
+
+fn points(path: &Value) -> Vec<[f64; 2]> {
+    path["points"]
+        .as_array()
+        .expect("points")
+        .iter()
+        .map(|p| [f(&p[0]), f(&p[1])])
+        .collect()
+}
+
+fn radius(p: [f64; 2]) -> f64 {
+    p[0].hypot(p[1])
+}
+
+/// The design surface of every region before each layer: the top of its last layer.
+fn design_surfaces(layers: &[Value], regions: usize) -> Vec<Vec<Option<f64>>> {
+    let mut now = vec![None; regions];
+    let mut out = Vec::new();
+    for l in layers {
+        out.push(now.clone());
+        now[l["region"].as_u64().expect("region") as usize] = Some(f(&l["z"]));
+    }
+    out
+}
+
+#[test]
+fn each_step_of_the_18_step_cycle_runs_the_operations_of_section_2_in_order() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let plan = run_pipe(dir.path());
+    let block = &plan["sequence"]["blocks"][0];
+    let cycle: Vec<u64> = block["cycle"]["steps"]
+        .as_array()
+        .expect("steps")
+        .iter()
+        .map(|s| s["height_um"].as_u64().expect("height"))
+        .collect();
+    assert_eq!(
+        cycle,
+        [200, 400, 500, 600, 800, 1000, 1200, 1400, 1500, 1600, 1800, 2000, 2200, 2400, 2500, 2600, 2800, 3000]
+    );
+    let layers = plan["layers"].as_array().expect("layers");
+    let surfaces = design_surfaces(layers, 3);
+    let adjoining = |a: usize, b: usize| a.abs_diff(b) == 1;
+    let mut milled = 0;
+    for (i, l) in layers.iter().enumerate() {
+        let r = l["region"].as_u64().expect("region") as usize;
+        let (z, t) = (f(&l["z"]), f(&l["thickness"]));
+        let labels: Vec<String> = ops(l).iter().map(|o| label(o)).collect();
+        // Step 1 exactly where an adjoining region stands above this layer's base.
+        let higher = (0..3).any(|q| adjoining(q, r) && surfaces[i][q].is_some_and(|s| s > z - t + 1e-9));
+        let mut want: Vec<&str> = Vec::new();
+        if higher {
+            want.push("end-mill");
+            milled += 1;
+        }
+        want.extend(["spray", "grind/rough"]);
+        if r == 0 {
+            // The microstructure: voids engraved and filled where the lattice meets the
+            // layer's plane (spheres of 0.25 mm every 0.6 mm in z), then the finish grind.
+            let cut = z - t / 2.0;
+            let k = (cut / 0.6).round();
+            if (cut - 0.6 * k).abs() < 0.25 {
+                want.extend(["engrave", "fill"]);
+            }
+            want.push("grind/finish");
+        }
+        if i + 1 == layers.len() {
+            want.push("remove-filler");
+        }
+        assert_eq!(labels, want, "layer {i} (region {r}, z {z})");
+        for o in ops(l) {
+            if o["kind"] != "remove-filler" {
+                assert_eq!(o["region"].as_u64(), Some(r as u64), "layer {i}: {o}");
+            }
+        }
+    }
+    assert!(milled >= 10, "only {milled} layers were milled");
+}
+
+#[test]
+fn every_regions_surface_is_sprayed_high_ground_back_and_ends_at_its_design_height() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let plan = run_pipe(dir.path());
+    let layers = plan["layers"].as_array().expect("layers");
+    let rough = 0.1;
+    let finish = [0.02, 0.0, 0.0];
+    let mut top: [Option<f64>; 3] = [None; 3];
+    let mut trace: Vec<Vec<f64>> = vec![Vec::new(); 3];
+    for (i, l) in layers.iter().enumerate() {
+        let r = l["region"].as_u64().expect("region") as usize;
+        let z = f(&l["z"]);
+        let mut heights = Vec::new();
+        for o in ops(l) {
+            let Some(s) = o["surface"].as_f64() else { continue };
+            if o["levels"] == true {
+                // The paper's rule: the surface to be ground stands higher than the others.
+                for q in (0..3).filter(|&q| q != r) {
+                    if let Some(h) = top[q] {
+                        assert!(h <= s + 1e-9, "layer {i}: {} to {s} beside region {q} at {h}", label(o));
+                    }
+                }
+            }
+            heights.push((label(o), s));
+            top[r] = Some(s);
+            trace[r].push(s);
+        }
+        let want: Vec<(String, f64)> = match r {
+            0 => vec![
+                ("spray".into(), z + rough + finish[0]),
+                ("grind/rough".into(), z + finish[0]),
+                ("grind/finish".into(), z),
+            ],
+            _ => vec![("spray".into(), z + rough), ("grind/rough".into(), z)],
+        };
+        assert_eq!(heights.len(), want.len(), "layer {i}: {heights:?}");
+        for ((l1, h1), (l2, h2)) in heights.iter().zip(&want) {
+            assert_eq!(l1, l2, "layer {i}");
+            assert!((h1 - h2).abs() < 1e-9, "layer {i} {l1}: {h1} vs {h2}");
+        }
+        assert!((top[r].expect("set") - z).abs() < 1e-9, "layer {i} ends at its height");
+    }
+    // Through the whole block (6 mm, two cycles) each region ends at the design height.
+    for (r, t) in top.iter().enumerate() {
+        assert!((t.expect("every region deposited") - 6.0).abs() < 1e-9, "region {r}: {t:?}");
+        assert!(trace[r].len() >= 4, "region {r}: {:?}", trace[r]);
+    }
+}
+
+#[test]
+fn machining_paths_keep_their_tools_radius_from_the_boundaries() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let plan = run_pipe(dir.path());
+    let layers = plan["layers"].as_array().expect("layers");
+    let surfaces = design_surfaces(layers, 3);
+    let (mut milled, mut ground, mut engraved) = (0, 0, 0);
+    for (i, l) in layers.iter().enumerate() {
+        let r = l["region"].as_u64().expect("region") as usize;
+        let (z, t) = (f(&l["z"]), f(&l["thickness"]));
+        let (ri, ro) = RADII[r];
+        for o in ops(l) {
+            let tool = &o["tool"];
+            let paths = o["paths"].as_array().cloned().unwrap_or_default();
+            match o["kind"].as_str().expect("kind") {
+                "end-mill" => {
+                    // Along the inner boundary only if the region inside stands higher,
+                    // along the outer only if the one outside does; a cutter radius in.
+                    let rad = f(&tool["diameter"]) / 2.0;
+                    let inside_higher = r > 0 && surfaces[i][r - 1].is_some_and(|s| s > z - t + 1e-9);
+                    let outside_higher = r < 2 && surfaces[i][r + 1].is_some_and(|s| s > z - t + 1e-9);
+                    let (mut inner_side, mut outer_side) = (0.0, 0.0);
+                    for p in &paths {
+                        assert!((f(&p["z"]) - (z - t)).abs() < 1e-9, "layer {i}: mills down to the base");
+                        let pts = points(p);
+                        for w in pts.windows(2) {
+                            let d = (w[1][0] - w[0][0]).hypot(w[1][1] - w[0][1]);
+                            let rho = radius(w[0]);
+                            if (rho - (ri + rad)).abs() < 0.01 {
+                                inner_side += d;
+                            } else if (rho - (ro - rad)).abs() < 0.01 {
+                                outer_side += d;
+                            } else {
+                                panic!("layer {i}: end-mill at radius {rho}, not {} or {}", ri + rad, ro - rad);
+                            }
+                        }
+                    }
+                    let full = |radius: f64| 2.0 * std::f64::consts::PI * radius;
+                    if inside_higher {
+                        assert!(inner_side > 0.97 * full(ri + rad), "layer {i}: {inner_side}");
+                    } else {
+                        assert_eq!(inner_side, 0.0, "layer {i}: nothing higher inside");
+                    }
+                    if outside_higher {
+                        assert!(outer_side > 0.97 * full(ro - rad), "layer {i}: {outer_side}");
+                    } else {
+                        assert_eq!(outer_side, 0.0, "layer {i}: nothing higher outside");
+                    }
+                    milled += 1;
+                }
+                "grind" => {
+                    // The wheel's face passes over every point of the sprayed area.
+                    let wheel = f(&tool["diameter"]) / 2.0;
+                    let segments: Vec<([f64; 2], [f64; 2])> = paths
+                        .iter()
+                        .flat_map(|p| {
+                            let pts = points(p);
+                            pts.windows(2).map(|w| (w[0], w[1])).collect::<Vec<_>>()
+                        })
+                        .collect();
+                    for k in 0..=20 {
+                        let rho = ri + (ro - ri) * k as f64 / 20.0;
+                        for a in 0..72 {
+                            let phi = a as f64 * std::f64::consts::PI / 36.0;
+                            let p = [rho * phi.cos(), rho * phi.sin()];
+                            let near = segments.iter().any(|&(a, b)| segment_distance(p, a, b) <= wheel);
+                            assert!(near, "layer {i}: {p:?} is not under the wheel");
+                        }
+                    }
+                    ground += 1;
+                }
+                "engrave" => {
+                    // Every ring inside a void of the lattice (period 1 x 1 x 0.6, radius
+                    // 0.25) cut at mid-layer, half a spot in, and inside the region.
+                    let spot = f(&tool["diameter"]);
+                    let cut = z - t / 2.0;
+                    let k = (cut / 0.6).round();
+                    let rc = (0.25f64.powi(2) - (cut - 0.6 * k).powi(2)).sqrt();
+                    for p in &paths {
+                        for q in points(p) {
+                            let (cx, cy) = (q[0].round(), q[1].round());
+                            let d = (q[0] - cx).hypot(q[1] - cy);
+                            assert!(d <= rc - spot / 2.0 + 1e-6, "layer {i}: {q:?} outside its void");
+                            let rho = radius(q);
+                            assert!(rho >= ri - 1e-6 && rho <= ro + 1e-6, "layer {i}: {q:?} outside the region");
+                        }
+                    }
+                    // As many voids as lattice points whose circle meets the ring.
+                    let mut want = 0;
+                    for x in -8i32..=8 {
+                        for y in -8i32..=8 {
+                            let rho = f64::from(x).hypot(f64::from(y));
+                            if rho + rc > ri && rho - rc < ro {
+                                want += 1;
+                            }
+                        }
+                    }
+                    assert_eq!(f(&o["values"]["voids"]) as i32, want, "layer {i}");
+                    engraved += 1;
+                }
+                _ => {}
+            }
+        }
+    }
+    assert!(milled >= 10 && ground >= 46 && engraved >= 10, "{milled} {ground} {engraved}");
+}
+
+fn segment_distance(p: [f64; 2], a: [f64; 2], b: [f64; 2]) -> f64 {
+    let (dx, dy) = (b[0] - a[0], b[1] - a[1]);
+    let len2 = dx * dx + dy * dy;
+    let s = if len2 > 0.0 {
+        (((p[0] - a[0]) * dx + (p[1] - a[1]) * dy) / len2).clamp(0.0, 1.0)
+    } else {
+        0.0
+    };
+    (p[0] - a[0] - s * dx).hypot(p[1] - a[1] - s * dy)
+}
+
+#[test]
+fn a_third_party_parser_reads_the_nc_file_and_finds_every_planned_pass() {
+    let probe = Command::new("python3").args(["-c", "import pygcode"]).output();
+    if !probe.is_ok_and(|o| o.status.success()) {
+        skip("the pygcode Python package is not installed (pip install pygcode)");
+        return;
+    }
+    let dir = tempfile::tempdir().expect("tempdir");
+    let plan = run_pipe(dir.path());
+    let numbers = [
+        ("end-mill", 1, "end-mill"),
+        ("spray-gun", 2, "spray"),
+        ("cup-wheel", 3, "grinding-wheel"),
+        ("laser", 4, "laser"),
+        ("filler", 5, "dispenser"),
+    ];
+    let mut planned: BTreeMap<String, f64> = BTreeMap::new();
+    for l in plan["layers"].as_array().expect("layers") {
+        for o in ops(l) {
+            let Some(name) = o["tool"]["name"].as_str() else { continue };
+            let n = numbers.iter().find(|t| t.0 == name).expect("a numbered tool").1;
+            for p in o["paths"].as_array().expect("paths") {
+                let pts = points(p);
+                let mut length: f64 = pts.windows(2).map(|w| (w[1][0] - w[0][0]).hypot(w[1][1] - w[0][1])).sum();
+                if p["closed"] == true && pts.len() > 2 {
+                    let (a, b) = (pts[0], pts[pts.len() - 1]);
+                    length += (a[0] - b[0]).hypot(a[1] - b[1]);
+                }
+                *planned.entry(n.to_string()).or_default() += length;
+            }
+        }
+    }
+    let mut cmd = Command::new("python3");
+    cmd.arg(root().join("tests/replay/nc_replay.py"))
+        .arg(dir.path().join("pipe-work-cycles.nc"));
+    for (_, n, kind) in numbers {
+        cmd.arg("--tool").arg(format!("{n}={kind}"));
+    }
+    let out = cmd.output().expect("python3 runs");
+    let report: Value = serde_json::from_slice(&out.stdout)
+        .unwrap_or_else(|e| panic!("{e}: {}{}", text(&out.stdout), text(&out.stderr)));
+    assert!(out.status.success(), "violations: {}", report["violations"]);
+    assert_eq!(planned.len(), 5, "{planned:?}");
+    for (n, want) in &planned {
+        let got = f(&report["lengths"][n]);
+        assert!((got - want).abs() <= 1e-3 * want, "tool {n}: {got} mm worked, {want} mm planned");
+    }
+    assert!(f(&report["tool_changes"]) >= 46.0, "{report}");
+    assert_eq!(report["pauses"], 1, "the operator removes the filler at the end");
+}
+
+#[test]
+fn a_missing_finish_grind_or_a_misnamed_region_is_refused_and_writes_nothing() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let pipe = std::fs::read_to_string(pipelines().join("pipe-work-cycles.toml")).expect("pipe");
+    // Without the finish grind the microstructure ends each layer 0.02 mm high.
+    let without = pipe.replace("[[process]]\nuse = \"grind\"\npass = \"finish\"\n", "");
+    assert_ne!(without, pipe);
+    let o = try_run_text(dir.path(), &without);
+    let err = text(&o.stderr);
+    assert!(!o.status.success());
+    assert!(
+        err.contains("region `inner` ends the layer at 0.220 mm, its design height is 0.200 mm"),
+        "{err}"
+    );
+    assert!(!dir.path().join("out/pipe-work-cycles.nc").exists(), "no partial output");
+    // A region the sequence does not have is named with the key that named it.
+    let misnamed = pipe.replace("finish_allowance = { inner = 0.02 }", "finish_allowance = { core = 0.02 }");
+    let o = try_run_text(dir.path(), &misnamed);
+    let err = text(&o.stderr);
+    assert!(!o.status.success());
+    assert!(
+        err.contains("finish_allowance") && err.contains("no material region named `core`"),
+        "{err}"
+    );
+}
