@@ -218,7 +218,11 @@ pub fn summary(report: &RunReport, timings: bool) {
         );
     }
     if !report.operations.is_empty() {
-        let ops: Vec<String> = report.operations.iter().map(|(k, n)| format!("{n} {k}")).collect();
+        let ops: Vec<String> = report
+            .operations
+            .iter()
+            .map(|(k, n)| format!("{n} {k}"))
+            .collect();
         eprintln!("process operations: {}", ops.join(", "));
     }
     if let Some(o) = &report.orientation {

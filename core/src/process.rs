@@ -213,7 +213,11 @@ impl SurfaceCheck {
                              the others",
                             i + 1,
                             op.kind,
-                            if op.pass.is_empty() { String::new() } else { format!(" {}", op.pass) },
+                            if op.pass.is_empty() {
+                                String::new()
+                            } else {
+                                format!(" {}", op.pass)
+                            },
                             self.name(r),
                             self.name(q),
                         ));
@@ -236,5 +240,106 @@ impl SurfaceCheck {
             ));
         }
         Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::model::{LayerPlan, MaterialRegion};
+
+    fn sequence() -> Sequence {
+        let region = |name: &str| MaterialRegion {
+            name: name.into(),
+            parts: vec![0],
+            thickness_um: 200,
+            z_start: 0.0,
+            z_end: 1.0,
+        };
+        Sequence {
+            regions: vec![region("m"), region("f")],
+            blocks: Vec::new(),
+        }
+    }
+
+    fn layer(region: usize, z: f64, ops: &[(&str, f64, bool)]) -> LayerPlan {
+        LayerPlan {
+            index: 0,
+            z,
+            thickness: 0.2,
+            material_region: Some(region),
+            parts: Vec::new(),
+            toolpaths: Vec::new(),
+            build_time: None,
+            sequential_time: None,
+            fill: None,
+            operations: ops
+                .iter()
+                .map(|&(kind, surface, levels)| {
+                    let mut op = Operation::new(kind, Some(region));
+                    op.surface = Some(surface);
+                    op.levels = levels;
+                    op
+                })
+                .collect(),
+            diagnostics: Vec::new(),
+        }
+    }
+
+    #[test]
+    fn a_levelled_surface_may_not_lie_below_another_region() {
+        let seq = sequence();
+        let mut check = SurfaceCheck::new(Some(&seq));
+        check
+            .layer(&layer(0, 0.2, &[("spray", 0.32, false), ("grind", 0.2, true)]))
+            .expect("m ground to its height");
+        assert_eq!(check.surfaces(), &[Some(0.2), None]);
+        // f, at 0.2 as well, is ground to 0.2: level with m, allowed.
+        check
+            .layer(&layer(1, 0.2, &[("spray", 0.3, false), ("grind", 0.2, true)]))
+            .expect("level with m");
+        // m sprayed to 0.52 and ground to 0.4, then f ground only to 0.3 would cut m.
+        check
+            .layer(&layer(0, 0.4, &[("spray", 0.52, false), ("grind", 0.4, true)]))
+            .expect("m higher");
+        let err = check
+            .layer(&layer(1, 0.3, &[("spray", 0.4, false), ("grind", 0.3, true)]))
+            .expect_err("f's wheel would cut m");
+        assert!(
+            err.contains("levels region `f` to 0.300 mm while region `m` stands at 0.400 mm"),
+            "{err}"
+        );
+    }
+
+    #[test]
+    fn a_layer_must_end_at_its_design_height() {
+        let seq = sequence();
+        let mut check = SurfaceCheck::new(Some(&seq));
+        let err = check
+            .layer(&layer(0, 0.2, &[("spray", 0.32, false), ("grind", 0.22, true)]))
+            .expect_err("0.02 mm high");
+        assert!(
+            err.contains("region `m` ends the layer at 0.220 mm, its design height is 0.200 mm"),
+            "{err}"
+        );
+    }
+
+    #[test]
+    fn surfaces_before_each_layer_follow_the_design_heights() {
+        let mut a = crate::model::LayerSlot::new(0, 0.2, 0.2, 0.1);
+        a.material_region = Some(0);
+        let mut b = crate::model::LayerSlot::new(1, 0.5, 0.5, 0.25);
+        b.material_region = Some(1);
+        let mut c = crate::model::LayerSlot::new(2, 0.4, 0.2, 0.3);
+        c.material_region = Some(0);
+        let s = surfaces_before(&[a, b, c], 2);
+        assert_eq!(
+            s,
+            vec![
+                vec![None, None],
+                vec![Some(0.2), None],
+                vec![Some(0.2), Some(0.5)]
+            ]
+        );
     }
 }

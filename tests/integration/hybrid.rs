@@ -83,7 +83,10 @@ fn each_step_of_the_18_step_cycle_runs_the_operations_of_section_2_in_order() {
         .collect();
     assert_eq!(
         cycle,
-        [200, 400, 500, 600, 800, 1000, 1200, 1400, 1500, 1600, 1800, 2000, 2200, 2400, 2500, 2600, 2800, 3000]
+        [
+            200, 400, 500, 600, 800, 1000, 1200, 1400, 1500, 1600, 1800, 2000, 2200, 2400, 2500, 2600, 2800,
+            3000
+        ]
     );
     let layers = plan["layers"].as_array().expect("layers");
     let surfaces = design_surfaces(layers, 3);
@@ -143,7 +146,11 @@ fn every_regions_surface_is_sprayed_high_ground_back_and_ends_at_its_design_heig
                 // The paper's rule: the surface to be ground stands higher than the others.
                 for q in (0..3).filter(|&q| q != r) {
                     if let Some(h) = top[q] {
-                        assert!(h <= s + 1e-9, "layer {i}: {} to {s} beside region {q} at {h}", label(o));
+                        assert!(
+                            h <= s + 1e-9,
+                            "layer {i}: {} to {s} beside region {q} at {h}",
+                            label(o)
+                        );
                     }
                 }
             }
@@ -164,11 +171,17 @@ fn every_regions_surface_is_sprayed_high_ground_back_and_ends_at_its_design_heig
             assert_eq!(l1, l2, "layer {i}");
             assert!((h1 - h2).abs() < 1e-9, "layer {i} {l1}: {h1} vs {h2}");
         }
-        assert!((top[r].expect("set") - z).abs() < 1e-9, "layer {i} ends at its height");
+        assert!(
+            (top[r].expect("set") - z).abs() < 1e-9,
+            "layer {i} ends at its height"
+        );
     }
     // Through the whole block (6 mm, two cycles) each region ends at the design height.
     for (r, t) in top.iter().enumerate() {
-        assert!((t.expect("every region deposited") - 6.0).abs() < 1e-9, "region {r}: {t:?}");
+        assert!(
+            (t.expect("every region deposited") - 6.0).abs() < 1e-9,
+            "region {r}: {t:?}"
+        );
         assert!(trace[r].len() >= 4, "region {r}: {:?}", trace[r]);
     }
 }
@@ -196,7 +209,10 @@ fn machining_paths_keep_their_tools_radius_from_the_boundaries() {
                     let outside_higher = r < 2 && surfaces[i][r + 1].is_some_and(|s| s > z - t + 1e-9);
                     let (mut inner_side, mut outer_side) = (0.0, 0.0);
                     for p in &paths {
-                        assert!((f(&p["z"]) - (z - t)).abs() < 1e-9, "layer {i}: mills down to the base");
+                        assert!(
+                            (f(&p["z"]) - (z - t)).abs() < 1e-9,
+                            "layer {i}: mills down to the base"
+                        );
                         let pts = points(p);
                         for w in pts.windows(2) {
                             let d = (w[1][0] - w[0][0]).hypot(w[1][1] - w[0][1]);
@@ -206,7 +222,11 @@ fn machining_paths_keep_their_tools_radius_from_the_boundaries() {
                             } else if (rho - (ro - rad)).abs() < 0.01 {
                                 outer_side += d;
                             } else {
-                                panic!("layer {i}: end-mill at radius {rho}, not {} or {}", ri + rad, ro - rad);
+                                panic!(
+                                    "layer {i}: end-mill at radius {rho}, not {} or {}",
+                                    ri + rad,
+                                    ro - rad
+                                );
                             }
                         }
                     }
@@ -257,7 +277,10 @@ fn machining_paths_keep_their_tools_radius_from_the_boundaries() {
                             let d = (q[0] - cx).hypot(q[1] - cy);
                             assert!(d <= rc - spot / 2.0 + 1e-6, "layer {i}: {q:?} outside its void");
                             let rho = radius(q);
-                            assert!(rho >= ri - 1e-6 && rho <= ro + 1e-6, "layer {i}: {q:?} outside the region");
+                            assert!(
+                                rho >= ri - 1e-6 && rho <= ro + 1e-6,
+                                "layer {i}: {q:?} outside the region"
+                            );
                         }
                     }
                     // As many voids as lattice points whose circle meets the ring.
@@ -277,7 +300,10 @@ fn machining_paths_keep_their_tools_radius_from_the_boundaries() {
             }
         }
     }
-    assert!(milled >= 10 && ground >= 46 && engraved >= 10, "{milled} {ground} {engraved}");
+    assert!(
+        milled >= 10 && ground >= 46 && engraved >= 10,
+        "{milled} {ground} {engraved}"
+    );
 }
 
 fn segment_distance(p: [f64; 2], a: [f64; 2], b: [f64; 2]) -> f64 {
@@ -310,11 +336,16 @@ fn a_third_party_parser_reads_the_nc_file_and_finds_every_planned_pass() {
     let mut planned: BTreeMap<String, f64> = BTreeMap::new();
     for l in plan["layers"].as_array().expect("layers") {
         for o in ops(l) {
-            let Some(name) = o["tool"]["name"].as_str() else { continue };
+            let Some(name) = o["tool"]["name"].as_str() else {
+                continue;
+            };
             let n = numbers.iter().find(|t| t.0 == name).expect("a numbered tool").1;
             for p in o["paths"].as_array().expect("paths") {
                 let pts = points(p);
-                let mut length: f64 = pts.windows(2).map(|w| (w[1][0] - w[0][0]).hypot(w[1][1] - w[0][1])).sum();
+                let mut length: f64 = pts
+                    .windows(2)
+                    .map(|w| (w[1][0] - w[0][0]).hypot(w[1][1] - w[0][1]))
+                    .sum();
                 if p["closed"] == true && pts.len() > 2 {
                     let (a, b) = (pts[0], pts[pts.len() - 1]);
                     length += (a[0] - b[0]).hypot(a[1] - b[1]);
@@ -336,7 +367,10 @@ fn a_third_party_parser_reads_the_nc_file_and_finds_every_planned_pass() {
     assert_eq!(planned.len(), 5, "{planned:?}");
     for (n, want) in &planned {
         let got = f(&report["lengths"][n]);
-        assert!((got - want).abs() <= 1e-3 * want, "tool {n}: {got} mm worked, {want} mm planned");
+        assert!(
+            (got - want).abs() <= 1e-3 * want,
+            "tool {n}: {got} mm worked, {want} mm planned"
+        );
     }
     assert!(f(&report["tool_changes"]) >= 46.0, "{report}");
     assert_eq!(report["pauses"], 1, "the operator removes the filler at the end");
@@ -356,9 +390,15 @@ fn a_missing_finish_grind_or_a_misnamed_region_is_refused_and_writes_nothing() {
         err.contains("region `inner` ends the layer at 0.220 mm, its design height is 0.200 mm"),
         "{err}"
     );
-    assert!(!dir.path().join("out/pipe-work-cycles.nc").exists(), "no partial output");
+    assert!(
+        !dir.path().join("out/pipe-work-cycles.nc").exists(),
+        "no partial output"
+    );
     // A region the sequence does not have is named with the key that named it.
-    let misnamed = pipe.replace("finish_allowance = { inner = 0.02 }", "finish_allowance = { core = 0.02 }");
+    let misnamed = pipe.replace(
+        "finish_allowance = { inner = 0.02 }",
+        "finish_allowance = { core = 0.02 }",
+    );
     let o = try_run_text(dir.path(), &misnamed);
     let err = text(&o.stderr);
     assert!(!o.status.success());

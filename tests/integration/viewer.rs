@@ -457,3 +457,60 @@ fn the_3d_view_shows_each_regions_colour_where_it_lies_and_cuts_across_x() {
     );
     assert!(close(&v["probe2"]["rgb"], want), "before the cut: {shown}");
 }
+
+#[test]
+fn the_viewer_lists_each_layers_process_operations_and_draws_the_chosen_ones_paths() {
+    let Some(browser) = browser() else { return };
+    let dir = tempfile::tempdir().expect("tempdir");
+    let plan = crate::support::run_plan(
+        &pipelines().join("pipe-work-cycles.toml"),
+        &dir.path().join("out"),
+        &[],
+        "pipe-work-cycles.json",
+    );
+    // Layer 3: the microstructure at 0.6 mm, milled along the FGM standing at 0.5 mm.
+    let layer = &plan["layers"][3];
+    let ops = layer["operations"].as_array().expect("operations");
+    let labels: Vec<String> = ops
+        .iter()
+        .map(|o| match o["pass"].as_str() {
+            Some(p) => format!("{}/{p}", o["kind"].as_str().expect("kind")),
+            None => o["kind"].as_str().expect("kind").to_string(),
+        })
+        .collect();
+    assert_eq!(
+        labels,
+        [
+            "end-mill",
+            "spray",
+            "grind/rough",
+            "engrave",
+            "fill",
+            "grind/finish"
+        ]
+    );
+    let page = dir.path().join("out/pipe-work-cycles.html");
+    for (op, want) in [
+        ("0".to_string(), ops[0]["paths"].as_array().expect("paths").len()),
+        (
+            "all".into(),
+            ops.iter()
+                .map(|o| o["paths"].as_array().map_or(0, Vec::len))
+                .sum(),
+        ),
+    ] {
+        let url = format!("file://{}#test:layer=3;op={op}", page.display());
+        let shown = page_report(&browser, &dir.path().join(format!("profile-{op}")), &url);
+        assert_eq!(shown["operations"], serde_json::json!(labels), "{shown}");
+        assert_eq!(shown["op_paths_drawn"], want, "{shown}");
+        let list = shown["op_list"].as_array().expect("list");
+        assert_eq!(list.len(), 6);
+        assert!(
+            list[0]
+                .as_str()
+                .expect("text")
+                .starts_with("end-mill: end-mill (0.8 mm)"),
+            "{shown}"
+        );
+    }
+}

@@ -515,12 +515,14 @@ fn handle(request: Request<'static>) -> Result<Response> {
             }
             _ => None,
         }),
-        Request::NeedsHigher { handle } => {
-            on_stage(handle, "say whether it needs the higher regions", |_, stage, label| match stage {
+        Request::NeedsHigher { handle } => on_stage(
+            handle,
+            "say whether it needs the higher regions",
+            |_, stage, label| match stage {
                 AnyStage::Process(s) => Some(guard_call(label, || Ok(s.needs_higher())).map(Response::Bool)),
                 _ => None,
-            })
-        }
+            },
+        ),
         Request::Process {
             handle,
             info,

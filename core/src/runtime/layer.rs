@@ -130,7 +130,12 @@ impl Engine {
     }
 
     /// Runs the `[[process]]` stages on a planned layer, in their order.
-    fn process_operations(&self, slot: &LayerSlot, shared: &LayerShared<'_>, plan: &mut LayerPlan) -> Result<()> {
+    fn process_operations(
+        &self,
+        slot: &LayerSlot,
+        shared: &LayerShared<'_>,
+        plan: &mut LayerPlan,
+    ) -> Result<()> {
         let none = Vec::new();
         let surfaces = shared.surfaces.get(slot.index).unwrap_or(&none);
         let higher = if self.process.iter().any(|p| p.needs_higher()) {
@@ -167,8 +172,11 @@ impl Engine {
         let base = slot.z - slot.thickness;
         let mut out = Vec::new();
         for (q, region) in sequence.regions.iter().enumerate() {
-            let Some(surface) = surfaces.get(q).copied().flatten() else { continue };
-            if q == own || surface <= base + 1e-6 || slot.cut_z < region.z_start || slot.cut_z > region.z_end {
+            let Some(surface) = surfaces.get(q).copied().flatten() else {
+                continue;
+            };
+            if q == own || surface <= base + 1e-6 || slot.cut_z < region.z_start || slot.cut_z > region.z_end
+            {
                 continue;
             }
             let mut polygons = Vec::new();
@@ -179,7 +187,9 @@ impl Engine {
                 let layer = shared
                     .timings
                     .time(StageKind::Slice, || shared.prepared[mi].slice(slot))?;
-                let tree = shared.timings.time(StageKind::Sort, || self.sorter.sort(&layer))?;
+                let tree = shared
+                    .timings
+                    .time(StageKind::Sort, || self.sorter.sort(&layer))?;
                 polygons.extend((0..tree.families.len()).map(|f| tree.family_polygon(&layer.contours, f)));
             }
             out.push(crate::process::RegionOutline {

@@ -18,6 +18,10 @@
   const cursor = document.getElementById("cursor");
   const showPaths = document.getElementById("paths");
   const toolsBox = document.getElementById("tools");
+  const opsBox = document.getElementById("opsbox");
+  const showOps = document.getElementById("ops");
+  const opSelect = document.getElementById("op");
+  const opList = document.getElementById("oplist");
   let current = 0;
   const view = { scale: 1, ox: 0, oy: 0 };
   const unit = Math.pow(10, -LAMINA.digits);
@@ -153,6 +157,17 @@
       groups.get(key).rings.push(t.pts);
     }
     d.pathGroups = [...groups.values()].map((g) => ({ tool: g.tool, kind: g.kind, path: ringsPath(g.rings, false) }));
+    // The process operations' paths, one Path2D per operation.
+    d.ops = (L.ops || []).map((o) => ({ meta: o, rings: [] }));
+    if (L.q) {
+      const r = reader(L.q);
+      while (r.more()) {
+        const k = Math.floor(r.uint() / 3);
+        const pts = r.points();
+        if (d.ops[k]) d.ops[k].rings.push(pts);
+      }
+    }
+    for (const o of d.ops) o.path = ringsPath(o.rings, false);
     cache.set(i, d);
     if (cache.size > CACHED) cache.delete(cache.keys().next().value);
     return d;
@@ -336,6 +351,54 @@
   }
   if (tools.size === 0) showPaths.parentElement.style.display = "none";
 
+  // ---- process operations ------------------------------------------------------
+
+  const OP_COLOURS = { "end-mill": "#c0392b", spray: "#e67e22", grind: "#2c3e50", engrave: "#8e44ad", fill: "#16a085" };
+  function opColour(label) { return OP_COLOURS[label.split("/")[0]] || "#555"; }
+  if (LAYERS.some((L) => L.ops && L.ops.length)) opsBox.hidden = false;
+  showOps.addEventListener("change", () => { opList.hidden = !showOps.checked || !opSelect.options.length; draw(); });
+  opSelect.addEventListener("change", () => { listOps(); draw(); });
+
+  /** The shown layer's operations in the list and the choice of the one drawn. */
+  function listOps() {
+    const L = LAYERS[current];
+    const ops = (L && L.ops) || [];
+    const chosen = opSelect.value;
+    if (opSelect.dataset.layer !== String(current)) {
+      opSelect.dataset.layer = String(current);
+      opSelect.replaceChildren();
+      if (ops.length) opSelect.append(new Option("all operations", "all"));
+      ops.forEach((o, k) => opSelect.append(new Option((k + 1) + ". " + o.k, String(k))));
+      if ([...opSelect.options].some((o) => o.value === chosen)) opSelect.value = chosen;
+    }
+    opList.replaceChildren();
+    ops.forEach((o, k) => {
+      const li = document.createElement("li");
+      li.textContent = o.k + ": " + o.s;
+      li.style.color = opColour(o.k);
+      if (opSelect.value === "all" || opSelect.value === String(k)) li.className = "on";
+      opList.append(li);
+    });
+    opList.hidden = !ops.length || !showOps.checked;
+  }
+
+  /** The operations drawn: all, or the one chosen; returns how many paths. */
+  function drawOps(d, hair) {
+    if (!showOps.checked || !d.ops.length) return 0;
+    let n = 0;
+    d.ops.forEach((o, k) => {
+      if (opSelect.value !== "all" && opSelect.value !== String(k)) return;
+      ctx.strokeStyle = opColour(o.meta.k);
+      ctx.lineWidth = 1.5 * hair;
+      ctx.setLineDash(o.meta.k.startsWith("spray") || o.meta.k.startsWith("fill") ? [3 * hair, 2 * hair] : []);
+      ctx.stroke(o.path);
+      n += o.rings.length;
+    });
+    ctx.setLineDash([]);
+    return n;
+  }
+  let opPathsDrawn = 0;
+
   // ---- view ----------------------------------------------------------------------
 
   function resize() {
@@ -412,6 +475,7 @@
       }
       ctx.setLineDash([]);
     }
+    opPathsDrawn = drawOps(d, hair);
     scaleBar(dpr);
   }
 
@@ -451,6 +515,7 @@
     label.textContent = L
       ? "layer " + L.i + " of " + LAMINA.layer_count + ", z = " + L.z + " mm (" + L.t + " mm thick)"
       : "no layers";
+    listOps();
     if (in3d) v3.draw(); else draw();
   }
 
@@ -581,6 +646,11 @@
         view3d = { error: "no WebGL" };
       }
     }
+    if (args.op !== undefined) {
+      opSelect.value = args.op;
+      opSelect.dispatchEvent(new Event("change"));
+    }
+    const operations = (LAYERS[current] && LAYERS[current].ops || []).map((o) => o.k);
     let moves = null;
     const m = movesOf(current);
     if (m) {
@@ -624,6 +694,9 @@
       walk_ms_per_layer: walk,
       moves,
       view3d,
+      operations,
+      op_paths_drawn: opPathsDrawn,
+      op_list: [...opList.children].map((li) => li.textContent),
     });
     out.hidden = false;
   }

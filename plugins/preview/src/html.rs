@@ -1,6 +1,7 @@
 //! `html`: one self-contained HTML file that shows the plan layer by layer: a slider, zoom
 //! and pan, the composition of the region under the pointer, toggles for toolpaths and
-//! tools, the machine's moves read back from the run's G-code (`moves`), and a 3D view
+//! tools, the machine's moves read back from the run's G-code (`moves`), the process
+//! operations of each layer (listed, and their paths drawn), and a 3D view
 //! (`assets/view3d.js`). The page needs no network: the viewer's script and style are
 //! inside, and the layers are streamed into it as packed `<script>` blocks as they come
 //! (`pack`), so memory stays flat and the page decodes only the layer it shows.
@@ -99,6 +100,52 @@ struct LayerOut {
     tools: Vec<usize>,
     /// The toolpaths, packed.
     p: String,
+    /// The process operations, in order, when `[[process]]` stages ran.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    ops: Vec<OpOut>,
+    /// The operations' paths, packed: each path's head is its operation's index.
+    #[serde(skip_serializing_if = "String::is_empty")]
+    q: String,
+}
+
+/// One process operation of a layer.
+#[derive(Serialize)]
+struct OpOut {
+    /// Kind, and pass when there is one (`grind/rough`).
+    k: String,
+    /// What it was planned with, as text.
+    s: String,
+    /// Number of packed paths.
+    n: usize,
+}
+
+/// An operation's kind and pass as the viewer lists them.
+fn op_label(op: &lamina_core::Operation) -> String {
+    if op.pass.is_empty() {
+        op.kind.clone()
+    } else {
+        format!("{}/{}", op.kind, op.pass)
+    }
+}
+
+/// What an operation was planned with, in a line.
+fn op_summary(op: &lamina_core::Operation) -> String {
+    let mut s = Vec::new();
+    if let Some(t) = &op.tool {
+        s.push(format!("{} ({} mm)", t.name, round(t.diameter, 3)));
+    }
+    if let Some(h) = op.surface {
+        s.push(format!("surface to {} mm", round(h, 4)));
+    }
+    for (k, v) in &op.values {
+        s.push(format!("{k} {}", round(*v, 4)));
+    }
+    s.push(format!(
+        "{} paths, {} mm",
+        op.paths.len(),
+        round(op.path_length(), 1)
+    ));
+    s.join(", ")
 }
 
 #[derive(Serialize)]
@@ -223,7 +270,7 @@ impl Exporter for Html {
             .join(" ");
         write!(
             out,
-            "<!doctype html>\n<html lang=\"en\">\n<head>\n<meta charset=\"utf-8\">\n<title>{name} - Lamina</title>\n<style>\n{VIEWER_CSS}</style>\n</head>\n<body>\n<div id=\"bar\"><strong>{name}</strong><input id=\"layer\" type=\"range\" min=\"0\" max=\"0\" value=\"0\" aria-label=\"layer\"><span id=\"label\"></span><label><input id=\"paths\" type=\"checkbox\" checked> toolpaths</label><span id=\"tools\"></span>{legend}<span id=\"player\" hidden><label><input id=\"moves\" type=\"checkbox\" checked> machine moves</label> <button id=\"play\" type=\"button\">play</button> <input id=\"time\" type=\"range\" min=\"0\" max=\"1000\" value=\"1000\" aria-label=\"time in the layer\"> <select id=\"speed\" aria-label=\"speed\"><option value=\"1\">1x</option><option value=\"10\" selected>10x</option><option value=\"100\">100x</option></select> <span id=\"clock\"></span></span><label><input id=\"v3d\" type=\"checkbox\"> 3D</label><span id=\"cutbox\" hidden><label><input id=\"cut\" type=\"checkbox\"> cut</label> <input id=\"cutat\" type=\"range\" min=\"0\" max=\"1000\" value=\"500\" aria-label=\"cut plane across x\"></span><span id=\"cursor\"></span></div>\n<canvas id=\"view\"></canvas>\n<canvas id=\"view3d\" hidden></canvas>\n<div id=\"tip\"></div>\n<pre id=\"test-result\" hidden></pre>\n<script>const LAMINA = {header}; const LAYERS = []; const MOVES = new Map(); let GCODE = null;</script>\n",
+            "<!doctype html>\n<html lang=\"en\">\n<head>\n<meta charset=\"utf-8\">\n<title>{name} - Lamina</title>\n<style>\n{VIEWER_CSS}</style>\n</head>\n<body>\n<div id=\"bar\"><strong>{name}</strong><input id=\"layer\" type=\"range\" min=\"0\" max=\"0\" value=\"0\" aria-label=\"layer\"><span id=\"label\"></span><label><input id=\"paths\" type=\"checkbox\" checked> toolpaths</label><span id=\"tools\"></span>{legend}<span id=\"player\" hidden><label><input id=\"moves\" type=\"checkbox\" checked> machine moves</label> <button id=\"play\" type=\"button\">play</button> <input id=\"time\" type=\"range\" min=\"0\" max=\"1000\" value=\"1000\" aria-label=\"time in the layer\"> <select id=\"speed\" aria-label=\"speed\"><option value=\"1\">1x</option><option value=\"10\" selected>10x</option><option value=\"100\">100x</option></select> <span id=\"clock\"></span></span><label><input id=\"v3d\" type=\"checkbox\"> 3D</label><span id=\"cutbox\" hidden><label><input id=\"cut\" type=\"checkbox\"> cut</label> <input id=\"cutat\" type=\"range\" min=\"0\" max=\"1000\" value=\"500\" aria-label=\"cut plane across x\"></span><span id=\"opsbox\" hidden><label><input id=\"ops\" type=\"checkbox\" checked> operations</label> <select id=\"op\" aria-label=\"operation shown\"></select></span><span id=\"cursor\"></span></div>\n<ol id=\"oplist\" hidden></ol>\n<canvas id=\"view\"></canvas>\n<canvas id=\"view3d\" hidden></canvas>\n<div id=\"tip\"></div>\n<pre id=\"test-result\" hidden></pre>\n<script>const LAMINA = {header}; const LAYERS = []; const MOVES = new Map(); let GCODE = null;</script>\n",
             name = escape(ctx.pipeline_name),
         )
         .map_err(io(&path))?;
@@ -295,13 +342,28 @@ impl LayerSink for Sink {
             }
             tools.sort_unstable();
         }
+        let p = pack.take_base64();
+        let mut ops = Vec::new();
+        for (k, op) in plan.operations.iter().enumerate() {
+            for path in &op.paths {
+                let closing = (path.closed && path.points.len() > 2).then(|| path.points[0]);
+                pack.path(k, 0, path.points.iter().chain(closing.iter()).map(|q| [q.x, q.y]));
+            }
+            ops.push(OpOut {
+                k: op_label(op),
+                s: op_summary(op),
+                n: op.paths.len(),
+            });
+        }
         let layer = LayerOut {
             i: plan.index,
             z: round(plan.z, 4),
             t: round(plan.thickness, 4),
             parts,
             tools,
-            p: pack.take_base64(),
+            p,
+            ops,
+            q: pack.take_base64(),
         };
         let json = script_json(&layer).map_err(|e| Error::io(&self.path, std::io::Error::other(e)))?;
         let path = self.path.clone();

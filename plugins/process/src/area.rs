@@ -68,11 +68,7 @@ pub fn offset(polygons: &[Polygon], d: f64) -> Vec<Polygon> {
 /// the lines at the middle of each band of `spacing`, cut where they cross a boundary,
 /// every other line reversed so the tool zig-zags.
 pub fn raster(polygons: &[Polygon], spacing: f64, z: f64) -> Vec<OperationPath> {
-    let Some(bbox) = polygons
-        .iter()
-        .map(Polygon::bbox)
-        .reduce(|a, b| a.union(&b))
-    else {
+    let Some(bbox) = polygons.iter().map(Polygon::bbox).reduce(|a, b| a.union(&b)) else {
         return Vec::new();
     };
     if !(spacing > 0.0) || bbox.is_empty() {
@@ -148,7 +144,9 @@ pub fn adjoining_runs(ring: &[Point2], other: &[Polygon], reach: f64, step: f64)
         return vec![(pts, true)];
     }
     // Start just after a point that is not near, so no run wraps around the start.
-    let Some(start) = near.iter().position(|&b| !b) else { return Vec::new() };
+    let Some(start) = near.iter().position(|&b| !b) else {
+        return Vec::new();
+    };
     let m = pts.len();
     let mut runs = Vec::new();
     let mut run: Vec<Point2> = Vec::new();
@@ -211,7 +209,11 @@ mod tests {
         assert!(closed.len() == 1 && closed[0].holes.is_empty());
         let open = offset(&[ring(9.0)], 2.0);
         assert_eq!(open[0].holes.len(), 1);
-        assert!((open[0].holes[0].area() - std::f64::consts::PI * 49.0).abs() < 0.2, "{}", open[0].holes[0].area());
+        assert!(
+            (open[0].holes[0].area() - std::f64::consts::PI * 49.0).abs() < 0.2,
+            "{}",
+            open[0].holes[0].area()
+        );
     }
 
     #[test]
@@ -226,7 +228,12 @@ mod tests {
         let length: f64 = run.windows(2).map(|w| (w[1] - w[0]).norm()).sum();
         assert!((length - 10.0).abs() < 1e-9, "{length}");
         // A ring inside the other region runs along it all round.
-        let all = adjoining_runs(&square(12.0, 2.0, 2.0).outer.points, &[square(10.0, 0.0, 10.0)], 0.0, 0.5);
+        let all = adjoining_runs(
+            &square(12.0, 2.0, 2.0).outer.points,
+            &[square(10.0, 0.0, 10.0)],
+            0.0,
+            0.5,
+        );
         assert!(all.len() == 1 && all[0].1);
     }
 }

@@ -13,9 +13,9 @@ use lamina_core::{
     Contour, LayerPlan, Operation, OperationPath, OperationTool, Point2, Polygon, ProcessContext, Result,
     StageFactory,
 };
+use lamina_geom::Shapes;
 use lamina_geom::lattice::Lattice;
 use lamina_geom::ring::{polygons_of, ring_of, shape_of};
-use lamina_geom::Shapes;
 
 use crate::area::{distance_to_area, layer_area, offset};
 use crate::regions::selected;
@@ -82,7 +82,11 @@ impl Void {
                 }
                 Void::Circle(..) => {}
                 Void::Cut(p) => {
-                    out.extend(offset(std::slice::from_ref(p), -inset).iter().flat_map(|q| q.contours().cloned().collect::<Vec<_>>()));
+                    out.extend(
+                        offset(std::slice::from_ref(p), -inset)
+                            .iter()
+                            .flat_map(|q| q.contours().cloned().collect::<Vec<_>>()),
+                    );
                 }
             }
             if out.len() == before {
@@ -105,7 +109,10 @@ impl Engrave {
         for (x, y, r) in self.lattice.circles(z, &bbox) {
             let c = Point2::new(x, y);
             let inside = area.iter().any(|p| p.contains(c));
-            let clear = area.iter().map(|p| p.boundary_distance(c)).fold(f64::INFINITY, f64::min);
+            let clear = area
+                .iter()
+                .map(|p| p.boundary_distance(c))
+                .fold(f64::INFINITY, f64::min);
             if inside && clear >= r {
                 out.push(Void::Circle(c, r));
             } else if distance_to_area(c, area) < r {
@@ -115,7 +122,12 @@ impl Engrave {
         if !cut.is_empty() {
             let clip: Shapes = area.iter().map(shape_of).collect();
             let clipped: Shapes = cut.overlay(&clip, OverlayRule::Intersect, FillRule::EvenOdd);
-            out.extend(polygons_of(&clipped).into_iter().filter(|p| p.area() > 1e-9).map(Void::Cut));
+            out.extend(
+                polygons_of(&clipped)
+                    .into_iter()
+                    .filter(|p| p.area() > 1e-9)
+                    .map(Void::Cut),
+            );
         }
         out
     }
@@ -154,7 +166,8 @@ impl Process for Engrave {
         op.tool = Some(self.tool.clone());
         op.paths = paths;
         op.values.insert("voids".into(), voids.len() as f64);
-        op.values.insert("void_area".into(), voids.iter().map(Void::area).sum());
+        op.values
+            .insert("void_area".into(), voids.iter().map(Void::area).sum());
         op.values.insert("depth".into(), surface - bottom);
         plan.operations.push(op);
         Ok(())
@@ -173,7 +186,10 @@ fn build(config: &StageConfig<'_>) -> Result<AnyStage> {
     if options.void_radius > smallest / 2.0 {
         return Err(config.error(
             "void_radius",
-            format!("must be at most half the smallest period ({} mm): voids that large would meet", smallest / 2.0),
+            format!(
+                "must be at most half the smallest period ({} mm): voids that large would meet",
+                smallest / 2.0
+            ),
         ));
     }
     if !(options.overlap.is_finite() && (0.0..0.9).contains(&options.overlap)) {
@@ -191,7 +207,10 @@ fn build(config: &StageConfig<'_>) -> Result<AnyStage> {
         },
     )?;
     if tool.diameter > options.void_radius {
-        return Err(config.error("diameter", "the laser spot must be smaller than the void's radius"));
+        return Err(config.error(
+            "diameter",
+            "the laser spot must be smaller than the void's radius",
+        ));
     }
     let lattice = Lattice {
         period: options.period,

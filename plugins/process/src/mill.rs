@@ -6,7 +6,9 @@
 
 use lamina_core::pipeline::TableRef;
 use lamina_core::stage::{AnyStage, Process, StageConfig, StageInfo, StageKind};
-use lamina_core::{LayerPlan, Operation, OperationPath, OperationTool, Polygon, ProcessContext, Result, StageFactory};
+use lamina_core::{
+    LayerPlan, Operation, OperationPath, OperationTool, Polygon, ProcessContext, Result, StageFactory,
+};
 
 use crate::area::{adjoining_runs, layer_area, offset};
 use crate::regions::selected;
@@ -51,8 +53,16 @@ impl Process for EndMill {
             return Ok(());
         }
         let area = layer_area(plan);
-        let higher: Vec<Polygon> = ctx.higher.iter().flat_map(|h| h.polygons.iter().cloned()).collect();
-        let top = ctx.higher.iter().map(|h| h.surface).fold(f64::NEG_INFINITY, f64::max);
+        let higher: Vec<Polygon> = ctx
+            .higher
+            .iter()
+            .flat_map(|h| h.polygons.iter().cloned())
+            .collect();
+        let top = ctx
+            .higher
+            .iter()
+            .map(|h| h.surface)
+            .fold(f64::NEG_INFINITY, f64::max);
         let base = plan
             .material_region
             .and_then(|r| ctx.surfaces.get(r).copied().flatten())
@@ -63,7 +73,11 @@ impl Process for EndMill {
             let inset = radius + k as f64 * o.stepover * self.tool.diameter;
             for ring in offset(&area, -inset).iter().flat_map(|p| p.contours()) {
                 for (points, closed) in adjoining_runs(&ring.points, &higher, inset + o.gap, 0.25) {
-                    paths.push(OperationPath { z: base, points, closed });
+                    paths.push(OperationPath {
+                        z: base,
+                        points,
+                        closed,
+                    });
                 }
             }
         }

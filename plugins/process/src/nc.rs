@@ -91,7 +91,11 @@ impl Exporter for Nc {
             .map(|s: &Sequence| s.regions.iter().map(|r| r.name.clone()).collect())
             .unwrap_or_default();
         let mut head = String::from("%\n");
-        head.push_str(&format!("(lamina nc: {}, {} layers)\n", comment(ctx.pipeline_name), ctx.layer_count));
+        head.push_str(&format!(
+            "(lamina nc: {}, {} layers)\n",
+            comment(ctx.pipeline_name),
+            ctx.layer_count
+        ));
         head.push_str(&format!(
             "(outputs: P{SPRAY_OUTPUT} spray gun, P{FILL_OUTPUT} filler nozzle, P{VACUUM_OUTPUT} chip vacuum; laser power in W as the S word of M3)\n"
         ));
@@ -159,7 +163,15 @@ impl Sink {
             .region
             .map(|r| self.regions.get(r).cloned().unwrap_or_else(|| format!("#{r}")))
             .unwrap_or_else(|| "-".into());
-        let mut about = format!("{}{}", op.kind, if op.pass.is_empty() { String::new() } else { format!(" {}", op.pass) });
+        let mut about = format!(
+            "{}{}",
+            op.kind,
+            if op.pass.is_empty() {
+                String::new()
+            } else {
+                format!(" {}", op.pass)
+            }
+        );
         about.push_str(&format!(", region {region}"));
         if let Some(s) = op.surface {
             about.push_str(&format!(", surface to {}", num(s)));
@@ -212,7 +224,9 @@ impl Sink {
         for p in &op.paths {
             self.path(p, standoff, feed, plunge, &on, &off);
         }
-        self.top = self.top.max(op.paths.iter().map(|p| p.z).fold(f64::NEG_INFINITY, f64::max));
+        self.top = self
+            .top
+            .max(op.paths.iter().map(|p| p.z).fold(f64::NEG_INFINITY, f64::max));
         if let Some(s) = op.surface {
             self.top = self.top.max(s);
         }

@@ -39,7 +39,12 @@ pub fn check_names<'n>(
 }
 
 /// True when a stage restricted to `only` (empty: every layer) works on this layer.
-pub fn selected(ctx: &ProcessContext<'_>, table: &TableRef, plan: &LayerPlan, only: &[String]) -> Result<bool> {
+pub fn selected(
+    ctx: &ProcessContext<'_>,
+    table: &TableRef,
+    plan: &LayerPlan,
+    only: &[String],
+) -> Result<bool> {
     if only.is_empty() {
         return Ok(true);
     }
@@ -48,6 +53,10 @@ pub fn selected(ctx: &ProcessContext<'_>, table: &TableRef, plan: &LayerPlan, on
 }
 
 /// The value a by-region table gives this layer's region.
-pub fn value_for<'m, V>(ctx: &ProcessContext<'_>, plan: &LayerPlan, map: &'m BTreeMap<String, V>) -> Option<&'m V> {
+pub fn value_for<'m, V>(
+    ctx: &ProcessContext<'_>,
+    plan: &LayerPlan,
+    map: &'m BTreeMap<String, V>,
+) -> Option<&'m V> {
     name_of(ctx, plan).and_then(|n| map.get(n))
 }

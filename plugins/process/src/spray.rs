@@ -82,7 +82,11 @@ fn build(config: &StageConfig<'_>) -> Result<AnyStage> {
     }
     for inclusions in options.inclusions.values() {
         let sum: f64 = inclusions.values().sum();
-        if inclusions.values().any(|f| !(f.is_finite() && (0.0..=1.0).contains(f))) || sum > 1.0 {
+        if inclusions
+            .values()
+            .any(|f| !(f.is_finite() && (0.0..=1.0).contains(f)))
+            || sum > 1.0
+        {
             return Err(config.error(
                 "inclusions",
                 "volume fractions must lie in [0, 1] and sum to at most 1 per region",
