@@ -71,7 +71,7 @@ pub fn raster(polygons: &[Polygon], spacing: f64, z: f64) -> Vec<OperationPath> 
     let Some(bbox) = polygons.iter().map(Polygon::bbox).reduce(|a, b| a.union(&b)) else {
         return Vec::new();
     };
-    if !(spacing > 0.0) || bbox.is_empty() {
+    if !spacing.is_finite() || spacing <= 0.0 || bbox.is_empty() {
         return Vec::new();
     }
     let lines = (bbox.height() / spacing).ceil().max(1.0) as usize;
