@@ -92,7 +92,7 @@ lamina_core::register_stage!(StageFactory {
         name: "fill",
         doc: "Lays a low-strength, high-melting filler over the layers whose voids were engraved, so the next spray leaves them open (CMPM step 5).",
         options: Options::SPECS,
-        example: "use = \"engrave\"\n\n[[process]]\nuse = \"fill\"\ndiameter = 1.0",
+        example: "use = \"fill\"\ndiameter = 1.0",
     },
     build,
 });

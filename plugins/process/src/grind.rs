@@ -132,7 +132,7 @@ lamina_core::register_stage!(StageFactory {
         name: "grind",
         doc: "Grinds the sprayed surface flat with a cup wheel: `rough` to the height plus the finish allowance, `finish` to the design height (CMPM steps 3 and 6).",
         options: Options::SPECS,
-        example: "use = \"spray\"\n\n[[process]]\nuse = \"grind\"\npass = \"rough\"\ndiameter = 10.0",
+        example: "use = \"grind\"\npass = \"rough\"\ndiameter = 10.0",
     },
     build,
 });
