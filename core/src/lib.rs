@@ -11,6 +11,7 @@ pub mod geom;
 pub mod limits;
 pub mod machine;
 pub mod mesh;
+pub mod microstructure;
 pub mod model;
 pub mod options;
 pub mod output;

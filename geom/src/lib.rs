@@ -11,8 +11,11 @@
 //! - [`follow`]: one solid area followed from layer to layer.
 //! - [`field`]: a sampled distance field of contours on a square grid;
 //! - [`iso`]: its iso-loops (marching squares), the sets {v >= t} as contours;
-//! - [`lattice`]: a lattice of spherical voids and the circles it cuts in a plane.
+//! - [`lattice`]: a lattice of spherical voids and the circles it cuts in a plane;
+//! - [`cell`]: base cells (sphere, box, cylinder) on a lattice that may be tilted, and
+//!   the sections a layer's plane cuts from them (the search band of Fig. 5).
 
+pub mod cell;
 pub mod field;
 pub mod follow;
 pub mod iso;

@@ -407,3 +407,255 @@ fn a_missing_finish_grind_or_a_misnamed_region_is_refused_and_writes_nothing() {
         "{err}"
     );
 }
+
+/// The largest closed ring around each void centre of the `engrave` operations of a
+/// layer: (centre, ring).
+fn first_rings(layer: &Value) -> Vec<([f64; 2], Vec<[f64; 2]>)> {
+    let mut by_centre: BTreeMap<(i64, i64), Vec<[f64; 2]>> = BTreeMap::new();
+    for o in ops(layer).into_iter().filter(|o| o["kind"] == "engrave") {
+        for p in o["paths"].as_array().expect("paths") {
+            let pts = points(p);
+            let n = pts.len() as f64;
+            let c = [
+                pts.iter().map(|q| q[0]).sum::<f64>() / n,
+                pts.iter().map(|q| q[1]).sum::<f64>() / n,
+            ];
+            let key = ((c[0] * 20.0).round() as i64, (c[1] * 20.0).round() as i64);
+            let keep = by_centre.entry(key).or_default();
+            if ring_area(&pts) > ring_area(keep) {
+                *keep = pts;
+            }
+        }
+    }
+    by_centre
+        .into_values()
+        .map(|pts| {
+            let n = pts.len() as f64;
+            (
+                [
+                    pts.iter().map(|q| q[0]).sum::<f64>() / n,
+                    pts.iter().map(|q| q[1]).sum::<f64>() / n,
+                ],
+                pts,
+            )
+        })
+        .collect()
+}
+
+fn ring_area(pts: &[[f64; 2]]) -> f64 {
+    let n = pts.len();
+    (0..n)
+        .map(|i| {
+            let (a, b) = (pts[i], pts[(i + 1) % n]);
+            a[0] * b[1] - b[0] * a[1]
+        })
+        .sum::<f64>()
+        .abs()
+        / 2.0
+}
+
+const CELLS: &str = r#"
+[materials.m]
+colour = [70, 130, 180]
+
+[model]
+use = "box"
+size = [20.0, 10.0, 2.0]
+
+[slice]
+use = "uniform"
+thickness = 0.5
+
+[[process]]
+use = "engrave"
+diameter = 0.02
+cell = CELL
+
+[[output]]
+use = "json"
+path = "plan.json"
+
+[[output]]
+use = "bitmap"
+path = "cells"
+pixel = 0.01
+cell = CELL
+"#;
+
+#[test]
+fn base_cells_take_their_size_turn_and_inserting_point_from_rhai_functions() {
+    // Boxes of half-edges 1.5 s x s x s, s = 0.1 + 0.01 x, turned 3 x degrees about the
+    // vertical, inserted only where x > 2; one row of the lattice every 1 mm at
+    // z = 0.25 and 1.25, which the layers cut through the middle (at 0.25 and 1.25).
+    let cell = r#"{ shape = "box", size = "0.1 + 0.01 * x", aspect = [1.5, 1.0, 1.0], turn = "3.0 * x", insert = "x - 2.0", period = [1.0, 1.0, 1.0], origin = [0.5, 0.5, 0.25] }"#;
+    let dir = tempfile::tempdir().expect("tempdir");
+    let plan = crate::support::run_text(dir.path(), &CELLS.replace("CELL", cell), "plan.json");
+    let layers = plan["layers"].as_array().expect("layers");
+    let spot = 0.02;
+    let mut checked = 0;
+    for (i, l) in layers.iter().enumerate() {
+        let rings = first_rings(l);
+        let cut = f(&l["z"]) - f(&l["thickness"]) / 2.0;
+        let through = (cut - 0.25).rem_euclid(1.0) < 1e-9;
+        if !through {
+            assert!(rings.is_empty(), "layer {i}: the plane at {cut} misses every box");
+            continue;
+        }
+        // Every inserting point with x > 2 and its box inside the part, and no other.
+        let mut want = 0;
+        for (c, ring) in &rings {
+            assert!(
+                c[0] > 2.0,
+                "layer {i}: a cell at x = {} where the inserting function is negative",
+                c[0]
+            );
+            if c[0] < 1.0 || c[0] > 19.0 || c[1] < 1.0 || c[1] > 9.0 {
+                continue;
+            }
+            // On the lattice.
+            let off = |v: f64| (v - 0.5 - (v - 0.5).round()).abs();
+            assert!(off(c[0]) < 1e-6 && off(c[1]) < 1e-6, "{c:?}");
+            let s = 0.1 + 0.01 * c[0];
+            let (w, h) = (3.0 * s - spot, 2.0 * s - spot);
+            assert!(
+                (ring_area(ring) - w * h).abs() < 1e-6,
+                "layer {i} at {c:?}: {} vs {}",
+                ring_area(ring),
+                w * h
+            );
+            // The long side runs at the turn, 3 x degrees.
+            let n = ring.len();
+            let (a, b) = (0..n)
+                .map(|k| (ring[k], ring[(k + 1) % n]))
+                .max_by(|p, q| {
+                    let d = |e: &([f64; 2], [f64; 2])| (e.1[0] - e.0[0]).hypot(e.1[1] - e.0[1]);
+                    d(p).total_cmp(&d(q))
+                })
+                .expect("edges");
+            let angle = (b[1] - a[1]).atan2(b[0] - a[0]).to_degrees().rem_euclid(180.0);
+            let turn = (3.0 * c[0]).rem_euclid(180.0);
+            let diff = (angle - turn).abs();
+            assert!(
+                diff.min(180.0 - diff) < 1e-6,
+                "layer {i} at {c:?}: {angle} vs {turn}"
+            );
+            want += 1;
+        }
+        // x = 2.5 .. 18.5 by 1 (17 columns) over y = 1.5 .. 8.5 (8 rows).
+        assert_eq!(want, 17 * 8, "layer {i}");
+        checked += 1;
+    }
+    assert_eq!(checked, 2);
+    // The bitmap leaves out the same boxes: its zeros add up to their sections.
+    let header = std::fs::read_to_string(dir.path().join("out/cells.hdr")).expect("header");
+    assert!(
+        header.contains("box cells of size `0.1 + 0.01 * x` mm"),
+        "{header}"
+    );
+    let data = std::fs::read_to_string(dir.path().join("out/cells.dat")).expect("data");
+    let rows: Vec<&str> = header.lines().filter(|l| !l.starts_with('#')).collect();
+    let first = rows[0].split_whitespace().collect::<Vec<_>>();
+    let (width, height) = (
+        first[7].parse::<usize>().expect("w"),
+        first[8].parse::<usize>().expect("h"),
+    );
+    let zeros = data
+        .lines()
+        .take(height)
+        .map(|row| row.bytes().filter(|&b| b == b'0').count())
+        .sum::<usize>() as f64
+        * 1e-4;
+    let mut want = 0.0;
+    for i in 0..20 {
+        let x = 0.5 + f64::from(i);
+        if x > 2.0 {
+            want += 10.0 * 6.0 * (0.1 + 0.01 * x) * (0.1 + 0.01 * x);
+        }
+    }
+    assert!(
+        width > 1900 && (zeros - want).abs() < 0.02 * want,
+        "{zeros} mm² of voids, {want} mm² of boxes"
+    );
+}
+
+#[test]
+fn a_tilted_lattice_is_cut_where_the_layer_plane_meets_each_sphere() {
+    // Spheres of 0.3 mm on a 1 mm lattice whose z axis leans 30 degrees from the
+    // vertical (Fig. 5): the plane meets spheres of several lattice rows, each in a
+    // circle of radius sqrt(0.3² - dz²), dz the height of its centre over the plane.
+    let cell = r#"{ size = 0.3, period = [1.0, 1.0, 1.0], tilt = 30.0 }"#;
+    let dir = tempfile::tempdir().expect("tempdir");
+    let plan = crate::support::run_text(dir.path(), &CELLS.replace("CELL", cell), "plan.json");
+    let phi = 30f64.to_radians();
+    let spot = 0.02;
+    let apothem = (std::f64::consts::PI / 32.0).cos();
+    let mut rows = std::collections::BTreeSet::new();
+    let mut seen = 0;
+    for l in plan["layers"].as_array().expect("layers") {
+        let cut = f(&l["z"]) - f(&l["thickness"]) / 2.0;
+        let rings = first_rings(l);
+        // Every sphere the plane cuts through, away from the part's sides, is there.
+        let mut want = 0;
+        for k in -5i32..=5 {
+            for j in -5i32..=15 {
+                for i in 0i32..=20 {
+                    let (x, yl, zl) = (f64::from(i), f64::from(j), f64::from(k));
+                    let (y, z) = (yl * phi.cos() - zl * phi.sin(), yl * phi.sin() + zl * phi.cos());
+                    let dz = z - cut;
+                    let rc2 = 0.09 - dz * dz;
+                    // Sections wide enough for a ring, clear of the box's sides.
+                    if rc2 <= (0.012f64).powi(2) || !(0.5..=19.5).contains(&x) || !(0.5..=9.5).contains(&y) {
+                        continue;
+                    }
+                    want += 1;
+                    let (c, ring) = rings
+                        .iter()
+                        .find(|(c, _)| (c[0] - x).abs() < 1e-6 && (c[1] - y).abs() < 1e-6)
+                        .unwrap_or_else(|| panic!("layer at {cut}: no void at ({x}, {y}) of row k = {k}"));
+                    // The section is a 32-gon in the circle; its first ring half a spot in.
+                    let rc = rc2.sqrt();
+                    let r = ((rc * apothem - spot / 2.0) / apothem).max(0.0);
+                    let area = 16.0 * r * r * (std::f64::consts::TAU / 32.0).sin();
+                    assert!(
+                        (ring_area(ring) - area).abs() < 1e-6,
+                        "({x}, {y}) row {k}: {} vs {area} {c:?}",
+                        ring_area(ring)
+                    );
+                    rows.insert(k);
+                }
+            }
+        }
+        seen += want;
+    }
+    assert!(seen > 100 && rows.len() > 1, "{seen} voids from rows {rows:?}");
+}
+
+#[test]
+fn cells_that_outgrow_their_lattice_or_conflicting_void_options_are_refused() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let big =
+        r#"{ shape = "box", size = "0.2 + 0.1 * x", period = [1.0, 1.0, 1.0], origin = [0.5, 0.5, 0.25] }"#;
+    let o = try_run_text(dir.path(), &CELLS.replace("CELL", big));
+    let err = text(&o.stderr);
+    assert!(!o.status.success());
+    assert!(err.contains("more than half the lattice's diagonal"), "{err}");
+    assert!(!dir.path().join("out/plan.json").exists(), "no partial output");
+    let shape = r#"{ shape = "cone", size = 0.2, period = [1.0, 1.0, 1.0] }"#;
+    let err = text(&try_run_text(dir.path(), &CELLS.replace("CELL", shape)).stderr);
+    assert!(err.contains("cell") && err.contains("`shape` is `cone`"), "{err}");
+    let both = CELLS.replace(
+        "diameter = 0.02\ncell = CELL",
+        "diameter = 0.02\nvoid_radius = 0.2\ncell = { size = 0.2, period = [1.0, 1.0, 1.0] }",
+    );
+    let err = text(
+        &try_run_text(
+            dir.path(),
+            &both.replace("CELL", "{ size = 0.2, period = [1.0, 1.0, 1.0] }"),
+        )
+        .stderr,
+    );
+    assert!(
+        err.contains("void_radius") && err.contains("give either `cell`"),
+        "{err}"
+    );
+}

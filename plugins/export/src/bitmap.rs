@@ -16,11 +16,13 @@
 use std::io::Write;
 use std::path::PathBuf;
 
+use lamina_core::microstructure::{CellSpec, Microstructure};
 use lamina_core::stage::{
     AnyStage, ExportContext, Exporter, LayerSink, OutputFiles, StageConfig, StageInfo, StageKind,
 };
 use lamina_core::{BBox2, Contour, Error, LayerPlan, Limit, Limits, Result, RunInfo, StageFactory};
 use lamina_geom::lattice::Lattice;
+use std::sync::Arc;
 
 lamina_core::stage_options! {
     #[derive(Debug)]
@@ -37,6 +39,8 @@ lamina_core::stage_options! {
         origin: [f64; 3] = "[0.0, 0.0, 0.0]",
         /// radius of the spherical void at each inserting point (mm)
         void_radius: f64 = "0.3",
+        /// the base cell instead of spheres: `{ shape = "sphere" | "box" | "cylinder", size, aspect, turn, lean, insert, period, origin, tilt }`, sizes and angles numbers or Rhai expressions of x, y, z
+        cell: Option<CellSpec>,
     }
 }
 
@@ -111,6 +115,31 @@ impl Raster {
         (((x - self.origin[0]) / self.pixel - 0.5).ceil().max(0.0) as usize).min(self.width)
     }
 
+    /// Clears the pixels whose centres lie inside the contour (even-odd).
+    pub fn clear(&mut self, contour: &Contour) {
+        let row_of = |y: f64| (y - self.origin[1]) / self.pixel - 0.5;
+        let b = contour.bbox();
+        let first = row_of(b.min.y).ceil().max(0.0) as usize;
+        let last = (row_of(b.max.y).floor() + 1.0).max(0.0) as usize;
+        let mut xs = Vec::new();
+        for row in first..last.min(self.height) {
+            let y = self.origin[1] + (row as f64 + 0.5) * self.pixel;
+            xs.clear();
+            for (a, b) in contour.edges() {
+                if (a.y <= y) != (b.y <= y) {
+                    xs.push(a.x + (y - a.y) * (b.x - a.x) / (b.y - a.y));
+                }
+            }
+            xs.sort_by(f64::total_cmp);
+            for pair in xs.chunks_exact(2) {
+                let (a, b) = (self.column(pair[0]), self.column(pair[1]));
+                for bit in &mut self.bits[row * self.width + a..row * self.width + b.max(a)] {
+                    *bit = false;
+                }
+            }
+        }
+    }
+
     /// Clears the pixels whose centres lie in the circle.
     pub fn clear_circle(&mut self, cx: f64, cy: f64, r: f64) {
         let row_of = |y: f64| (y - self.origin[1]) / self.pixel - 0.5;
@@ -131,9 +160,16 @@ impl Raster {
     }
 }
 
+/// The voids: the spheres of the shorthand, exact circles, or base cells.
+#[derive(Clone)]
+enum Voids {
+    Spheres(Lattice),
+    Cells(Arc<Microstructure>),
+}
+
 struct Bitmap {
     options: Options,
-    lattice: Lattice,
+    voids: Voids,
     limits: Limits,
 }
 
@@ -144,7 +180,7 @@ struct Sink {
     data_path: PathBuf,
     parts: Vec<usize>,
     pixel: f64,
-    lattice: Lattice,
+    voids: Voids,
     limits: Limits,
     offset: u64,
 }
@@ -180,21 +216,21 @@ impl Exporter for Bitmap {
         let mut header = ctx.files.create(&header_path)?;
         let data = ctx.files.create(&data_path)?;
         let names: Vec<&str> = parts.iter().map(|&p| ctx.info.parts[p].name.as_str()).collect();
-        let l = &self.lattice;
+        let voids = match &self.voids {
+            Voids::Spheres(l) => format!(
+                "spheres of radius {} mm at origin [{}, {}, {}] + lattice period [{}, {}, {}] mm",
+                l.radius, l.origin[0], l.origin[1], l.origin[2], l.period[0], l.period[1], l.period[2]
+            ),
+            Voids::Cells(m) => m.describe(),
+        };
         writeln!(
             header,
             "# lamina bitmap layers 1: 1 = material, 0 = void or outside; data rows from the origin upward\n\
              # parts: {}\n\
-             # voids: spheres of radius {} mm at origin [{}, {}, {}] + lattice period [{}, {}, {}] mm\n\
+             # voids: {}\n\
              # layer z thickness cut_z pixel origin_x origin_y width height offset",
             names.join(", "),
-            l.radius,
-            l.origin[0],
-            l.origin[1],
-            l.origin[2],
-            l.period[0],
-            l.period[1],
-            l.period[2]
+            lamina_core::output::one_line(&voids),
         )
         .map_err(io(&header_path))?;
         Ok(Box::new(Sink {
@@ -204,7 +240,7 @@ impl Exporter for Bitmap {
             data_path,
             parts,
             pixel: self.options.pixel,
-            lattice: self.lattice,
+            voids: self.voids.clone(),
             limits: self.limits,
             offset: 0,
         }))
@@ -229,8 +265,17 @@ impl LayerSink for Sink {
         raster.fill(&contours);
         // The voids are cut at the layer's mid-height, as the contours are.
         let cut_z = plan.z - plan.thickness / 2.0;
-        for (cx, cy, r) in self.lattice.circles(cut_z, &bbox) {
-            raster.clear_circle(cx, cy, r);
+        match &self.voids {
+            Voids::Spheres(l) => {
+                for (cx, cy, r) in l.circles(cut_z, &bbox) {
+                    raster.clear_circle(cx, cy, r);
+                }
+            }
+            Voids::Cells(m) => {
+                for c in m.voids(cut_z, &bbox)? {
+                    raster.clear(&c);
+                }
+            }
         }
         writeln!(
             self.header,
@@ -273,6 +318,36 @@ fn build(config: &StageConfig<'_>) -> Result<AnyStage> {
     if !(options.pixel.is_finite() && options.pixel > 0.0) {
         return Err(config.error("pixel", "must be a positive number of mm"));
     }
+    let voids = match &options.cell {
+        Some(spec) => {
+            if let Some(k) = ["period", "origin", "void_radius"]
+                .into_iter()
+                .find(|k| config.has(k))
+            {
+                return Err(config.error(
+                    k,
+                    "give either `cell` or the spheres' `period`, `origin` and `void_radius`",
+                ));
+            }
+            if spec.period.iter().any(|&p| p < options.pixel) {
+                return Err(config.error(
+                    "cell",
+                    format!("every period must be at least the pixel ({} mm)", options.pixel),
+                ));
+            }
+            Voids::Cells(Arc::new(Microstructure::new(spec, config, "cell")?))
+        }
+        None => spheres(config, &options)?,
+    };
+    Ok(AnyStage::Export(Box::new(Bitmap {
+        options,
+        voids,
+        limits: config.limits,
+    })))
+}
+
+/// The shorthand's spheres, each option checked.
+fn spheres(config: &StageConfig<'_>, options: &Options) -> Result<Voids> {
     if !options.period.iter().all(|p| p.is_finite() && *p > 0.0) {
         return Err(config.error("period", "must be three positive numbers of mm"));
     }
@@ -300,23 +375,18 @@ fn build(config: &StageConfig<'_>) -> Result<AnyStage> {
             ),
         ));
     }
-    let lattice = Lattice {
+    Ok(Voids::Spheres(Lattice {
         period: options.period,
         origin: options.origin,
         radius: options.void_radius,
-    };
-    Ok(AnyStage::Export(Box::new(Bitmap {
-        options,
-        lattice,
-        limits: config.limits,
-    })))
+    }))
 }
 
 lamina_core::register_stage!(StageFactory {
     info: StageInfo {
         kind: StageKind::Export,
         name: "bitmap",
-        doc: "Bitmap layers of periodic-microstructure parts: 1 for material, 0 for the lattice's spherical voids; one header and one data file.",
+        doc: "Bitmap layers of periodic-microstructure parts: 1 for material, 0 for the voids of the lattice's base cells (spheres, or shapes sized and turned by Rhai functions); one header and one data file.",
         options: Options::SPECS,
         example: "use = \"bitmap\"\npixel = 0.1\nperiod = [2.0, 2.0, 1.0]\nvoid_radius = 0.4",
     },

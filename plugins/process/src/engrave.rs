@@ -1,12 +1,15 @@
-//! `engrave`: step 4 of the process. A periodic microstructure is a lattice of
-//! spherical voids (cmpm-process-planning 4.3); the voids the layer's plane cuts (at
-//! mid-layer, where the contours are cut) are engraved by a laser from the surface
-//! down through the layer: rings inside each void's outline, the first half a spot in,
-//! the next ones a spot less the overlap further, until the void is cleared.
+//! `engrave`: step 4 of the process. A periodic microstructure is an array of base
+//! cells, voids on a lattice (cmpm-process-planning 4.3, `lamina_core::microstructure`):
+//! spheres by default, or the `cell` table's shape, size, orientation and inserting
+//! function. The voids the layer's plane cuts (at mid-layer, where the contours are
+//! cut) are engraved by a laser from the surface down through the layer: rings inside
+//! each void's outline, the first half a spot in, the next ones a spot less the overlap
+//! further, until the void is cleared.
 
 use i_overlay::core::fill_rule::FillRule;
 use i_overlay::core::overlay_rule::OverlayRule;
 use i_overlay::float::single::SingleFloatOverlay;
+use lamina_core::microstructure::{CellSpec, Microstructure};
 use lamina_core::pipeline::TableRef;
 use lamina_core::stage::{AnyStage, Process, StageConfig, StageInfo, StageKind};
 use lamina_core::{
@@ -14,7 +17,7 @@ use lamina_core::{
     StageFactory,
 };
 use lamina_geom::Shapes;
-use lamina_geom::lattice::Lattice;
+use lamina_geom::cell::inset_convex;
 use lamina_geom::ring::{polygons_of, ring_of, shape_of};
 
 use crate::area::{distance_to_area, layer_area, offset};
@@ -32,6 +35,8 @@ lamina_core::stage_options! {
         origin: [f64; 3] = "[0.0, 0.0, 0.0]",
         /// radius of the spherical void at each inserting point (mm)
         void_radius: f64 = "0.3",
+        /// the base cell instead of spheres: `{ shape = "sphere" | "box" | "cylinder", size, aspect, turn, lean, insert, period, origin, tilt }`, sizes and angles numbers or Rhai expressions of x, y, z
+        cell: Option<CellSpec>,
         /// the laser's name
         tool: String = r#""laser""#,
         /// spot diameter (mm)
@@ -45,26 +50,17 @@ lamina_core::stage_options! {
     }
 }
 
-/// Points per void outline.
-const CIRCLE_POINTS: usize = 32;
-
-struct Engrave {
-    options: Options,
-    lattice: Lattice,
-    tool: OperationTool,
-    table: TableRef,
-}
-
-/// A void the plane cuts: a whole circle, or the part of one inside the area.
+/// A void the plane cuts: a whole cell section, or the part of one inside the area.
 enum Void {
-    Circle(Point2, f64),
+    /// Convex, inside the area.
+    Whole(Contour),
     Cut(Polygon),
 }
 
 impl Void {
     fn area(&self) -> f64 {
         match self {
-            Void::Circle(_, r) => std::f64::consts::PI * r * r,
+            Void::Whole(c) => c.area(),
             Void::Cut(p) => p.area(),
         }
     }
@@ -77,16 +73,11 @@ impl Void {
         loop {
             let before = out.len();
             match self {
-                Void::Circle(c, r) if *r - inset > 1e-6 => {
-                    out.push(Contour::circle(*c, r - inset, CIRCLE_POINTS));
-                }
-                Void::Circle(..) => {}
+                Void::Whole(c) => out.extend(inset_convex(c, inset)),
                 Void::Cut(p) => {
-                    out.extend(
-                        offset(std::slice::from_ref(p), -inset)
-                            .iter()
-                            .flat_map(|q| q.contours().cloned().collect::<Vec<_>>()),
-                    );
+                    for q in offset(std::slice::from_ref(p), -inset) {
+                        out.extend(q.contours().cloned());
+                    }
                 }
             }
             if out.len() == before {
@@ -97,26 +88,37 @@ impl Void {
     }
 }
 
+struct Engrave {
+    options: Options,
+    cells: Microstructure,
+    tool: OperationTool,
+    table: TableRef,
+}
+
 impl Engrave {
-    /// The voids of the plane at `z` within `area`: whole circles, and the circles the
-    /// area's boundary cuts, clipped all at once.
-    fn voids(&self, area: &[Polygon], z: f64) -> Vec<Void> {
+    /// The voids of the plane at `z` within `area`: whole sections, and the sections
+    /// the area's boundary cuts, clipped all at once.
+    fn voids(&self, area: &[Polygon], z: f64) -> Result<Vec<Void>> {
         let Some(bbox) = area.iter().map(Polygon::bbox).reduce(|a, b| a.union(&b)) else {
-            return Vec::new();
+            return Ok(Vec::new());
         };
         let mut out = Vec::new();
         let mut cut: Shapes = Vec::new();
-        for (x, y, r) in self.lattice.circles(z, &bbox) {
-            let c = Point2::new(x, y);
+        for section in self.cells.voids(z, &bbox)? {
+            let n = section.len() as f64;
+            let c = section.points.iter().fold(Point2::new(0.0, 0.0), |s, p| {
+                Point2::new(s.x + p.x / n, s.y + p.y / n)
+            });
+            let reach = section.points.iter().map(|p| (p - c).norm()).fold(0.0, f64::max);
             let inside = area.iter().any(|p| p.contains(c));
             let clear = area
                 .iter()
                 .map(|p| p.boundary_distance(c))
                 .fold(f64::INFINITY, f64::min);
-            if inside && clear >= r {
-                out.push(Void::Circle(c, r));
-            } else if distance_to_area(c, area) < r {
-                cut.push(vec![ring_of(&Contour::circle(c, r, CIRCLE_POINTS))]);
+            if inside && clear >= reach {
+                out.push(Void::Whole(section));
+            } else if distance_to_area(c, area) < reach {
+                cut.push(vec![ring_of(&section)]);
             }
         }
         if !cut.is_empty() {
@@ -129,7 +131,7 @@ impl Engrave {
                     .map(Void::Cut),
             );
         }
-        out
+        Ok(out)
     }
 }
 
@@ -139,7 +141,7 @@ impl Process for Engrave {
             return Ok(());
         }
         let area = layer_area(plan);
-        let voids = self.voids(&area, plan.z - plan.thickness / 2.0);
+        let voids = self.voids(&area, plan.z - plan.thickness / 2.0)?;
         if voids.is_empty() {
             return Ok(());
         }
@@ -176,22 +178,45 @@ impl Process for Engrave {
 
 fn build(config: &StageConfig<'_>) -> Result<AnyStage> {
     let options: Options = config.parse()?;
-    if options.period.iter().any(|p| !(p.is_finite() && *p > 0.0)) {
-        return Err(config.error("period", "every spacing must be a positive number of mm"));
-    }
-    if !(options.void_radius.is_finite() && options.void_radius > 0.0) {
-        return Err(config.error("void_radius", "must be a positive number of mm"));
-    }
-    let smallest = options.period.iter().copied().fold(f64::INFINITY, f64::min);
-    if options.void_radius > smallest / 2.0 {
-        return Err(config.error(
-            "void_radius",
-            format!(
-                "must be at most half the smallest period ({} mm): voids that large would meet",
-                smallest / 2.0
-            ),
-        ));
-    }
+    let cells = match &options.cell {
+        Some(spec) => {
+            if let Some(k) = ["period", "origin", "void_radius"]
+                .into_iter()
+                .find(|k| config.has(k))
+            {
+                return Err(config.error(
+                    k,
+                    "give either `cell` or the spheres' `period`, `origin` and `void_radius`",
+                ));
+            }
+            Microstructure::new(spec, config, "cell")?
+        }
+        None => {
+            if options.period.iter().any(|p| !(p.is_finite() && *p > 0.0)) {
+                return Err(config.error("period", "every spacing must be a positive number of mm"));
+            }
+            if !(options.void_radius.is_finite() && options.void_radius > 0.0) {
+                return Err(config.error("void_radius", "must be a positive number of mm"));
+            }
+            let smallest = options.period.iter().copied().fold(f64::INFINITY, f64::min);
+            if options.void_radius > smallest / 2.0 {
+                return Err(config.error(
+                    "void_radius",
+                    format!(
+                        "must be at most half the smallest period ({} mm): voids that large would meet",
+                        smallest / 2.0
+                    ),
+                ));
+            }
+            if options.diameter > options.void_radius {
+                return Err(config.error(
+                    "diameter",
+                    "the laser spot must be smaller than the void's radius",
+                ));
+            }
+            Microstructure::spheres(options.period, options.origin, options.void_radius)
+        }
+    };
     if !(options.overlap.is_finite() && (0.0..0.9).contains(&options.overlap)) {
         return Err(config.error("overlap", "must be at least 0 and below 0.9"));
     }
@@ -206,20 +231,9 @@ fn build(config: &StageConfig<'_>) -> Result<AnyStage> {
             power: Some(options.power),
         },
     )?;
-    if tool.diameter > options.void_radius {
-        return Err(config.error(
-            "diameter",
-            "the laser spot must be smaller than the void's radius",
-        ));
-    }
-    let lattice = Lattice {
-        period: options.period,
-        origin: options.origin,
-        radius: options.void_radius,
-    };
     Ok(AnyStage::Process(Box::new(Engrave {
         options,
-        lattice,
+        cells,
         tool,
         table: config.table.clone(),
     })))
@@ -229,7 +243,7 @@ lamina_core::register_stage!(StageFactory {
     info: StageInfo {
         kind: StageKind::Process,
         name: "engrave",
-        doc: "Engraves the voids of a periodic microstructure (a lattice of spherical voids) with a laser, ring by ring (CMPM step 4).",
+        doc: "Engraves the voids of a periodic microstructure (spheres, or base cells whose size and orientation follow Rhai functions, on a lattice that may be tilted) with a laser, ring by ring (CMPM step 4).",
         options: Options::SPECS,
         example: "use = \"engrave\"\nperiod = [1.0, 1.0, 1.0]\nvoid_radius = 0.3",
     },

@@ -1,0 +1,300 @@
+//! The base cell of a periodic microstructure as the CAD model describes it
+//! (cmpm-process-planning 4.3): an inserting function that says where cells go, and a
+//! size and an orientation that may change with position, each a number or a Rhai
+//! expression of `x`, `y`, `z`; cells on a lattice that may stand tilted against the
+//! layers (Fig. 5). Every stage that needs a layer's voids (the `bitmap` exporter, the
+//! `engrave` operation) reads the same `cell` table into a [`Microstructure`] and asks
+//! it for the voids the layer's plane cuts.
+
+use nalgebra::{Matrix3, Rotation3, Vector3};
+use serde::Deserialize;
+
+use crate::error::{Error, Result};
+use crate::geom::{BBox2, Contour};
+use crate::script::{ScriptArgs, ScriptFn};
+use crate::stage::StageConfig;
+use lamina_geom::cell::{CellArray, CellShape, PlacedCell};
+
+/// A number, or a Rhai expression of `x`, `y` and `z` (mm) evaluated at each
+/// inserting point.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(untagged)]
+pub enum NumberOrScript {
+    Number(f64),
+    Script(String),
+}
+
+/// The `cell` table of a stage.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct CellSpec {
+    /// `sphere`, `box` or `cylinder`.
+    #[serde(default = "sphere")]
+    pub shape: String,
+    /// The cell's size (mm): a sphere's or cylinder's radius, a box's half-edge, times
+    /// `aspect` along each of the cell's axes.
+    pub size: NumberOrScript,
+    /// Multipliers of `size` along the cell's x, y and z (a cylinder's half-height is
+    /// `size * aspect[2]`).
+    #[serde(default = "ones")]
+    pub aspect: [f64; 3],
+    /// Turn of the cell about the vertical (degrees).
+    #[serde(default)]
+    pub turn: Option<NumberOrScript>,
+    /// Lean of the cell's z axis toward -y, about x (degrees), applied before the turn.
+    #[serde(default)]
+    pub lean: Option<NumberOrScript>,
+    /// The inserting function: a cell goes where it is above zero; every lattice point
+    /// holds one when absent.
+    #[serde(default)]
+    pub insert: Option<String>,
+    /// Lattice spacing along the lattice's x, y and z (mm).
+    pub period: [f64; 3],
+    /// One inserting point (mm).
+    #[serde(default)]
+    pub origin: [f64; 3],
+    /// Angle of the lattice's z axis from the vertical, about x (degrees): the
+    /// spraying plane at an angle Φ to the lattice (Fig. 5).
+    #[serde(default)]
+    pub tilt: f64,
+}
+
+fn sphere() -> String {
+    "sphere".into()
+}
+
+fn ones() -> [f64; 3] {
+    [1.0; 3]
+}
+
+crate::option_type!(CellSpec = "table");
+
+enum Value {
+    Number(f64),
+    Script(ScriptFn, String),
+}
+
+impl Value {
+    fn new(v: &NumberOrScript, config: &StageConfig<'_>, key: &str) -> Result<Value> {
+        Ok(match v {
+            NumberOrScript::Number(x) => {
+                if !x.is_finite() {
+                    return Err(config.error(key, format!("`cell.{key}` must be a finite number")));
+                }
+                Value::Number(*x)
+            }
+            NumberOrScript::Script(s) => {
+                Value::Script(config.scripts.compile(s, config.string_location(key))?, s.clone())
+            }
+        })
+    }
+
+    fn text(&self) -> String {
+        match self {
+            Value::Number(x) => x.to_string(),
+            Value::Script(_, s) => format!("`{s}`"),
+        }
+    }
+
+    fn at(&self, p: &Vector3<f64>, what: &str) -> Result<f64> {
+        match self {
+            Value::Number(x) => Ok(*x),
+            Value::Script(f, _) => {
+                let args = ScriptArgs {
+                    x: p.x,
+                    y: p.y,
+                    z: p.z,
+                    ..ScriptArgs::default()
+                };
+                let v = f.number(&args, what)?;
+                if v.is_finite() {
+                    Ok(v)
+                } else {
+                    Err(Error::stage(
+                        "cell",
+                        format!("`cell.{what}` is {v} at ({:.3}, {:.3}, {:.3})", p.x, p.y, p.z),
+                    ))
+                }
+            }
+        }
+    }
+}
+
+/// A microstructure ready to give each layer its voids.
+pub struct Microstructure {
+    shape: CellShape,
+    size: Value,
+    aspect: [f64; 3],
+    turn: Option<Value>,
+    lean: Option<Value>,
+    insert: Option<Value>,
+    lattice: CellArray,
+    /// How far a cell may reach from its inserting point: half the lattice's diagonal,
+    /// the search band's half-width `L_max`.
+    reach: f64,
+    /// The lattice's tilt (degrees), for the description.
+    tilt: f64,
+}
+
+impl Microstructure {
+    /// The microstructure of `spec`, read from the option `key` of `config`.
+    pub fn new(spec: &CellSpec, config: &StageConfig<'_>, key: &str) -> Result<Self> {
+        let shape = match spec.shape.as_str() {
+            "sphere" => CellShape::Sphere,
+            "box" => CellShape::Box,
+            "cylinder" => CellShape::Cylinder,
+            other => {
+                return Err(config.error(
+                    key,
+                    format!("`shape` is `{other}`: use `sphere`, `box` or `cylinder`"),
+                ));
+            }
+        };
+        if spec.period.iter().any(|p| !(p.is_finite() && *p > 0.0)) {
+            return Err(config.error(key, "`period`: every spacing must be a positive number of mm"));
+        }
+        if spec.aspect.iter().any(|a| !(a.is_finite() && *a > 0.0)) {
+            return Err(config.error(key, "`aspect`: every multiplier must be positive"));
+        }
+        if spec.origin.iter().any(|o| !o.is_finite()) || !(spec.tilt.is_finite() && spec.tilt.abs() < 90.0) {
+            return Err(config.error(key, "`origin` must be finite and `tilt` within (-90, 90) degrees"));
+        }
+        let script = |v: &Option<String>| -> Result<Option<Value>> {
+            v.as_ref()
+                .map(|s| Value::new(&NumberOrScript::Script(s.clone()), config, key))
+                .transpose()
+        };
+        Ok(Self {
+            shape,
+            size: Value::new(&spec.size, config, key)?,
+            aspect: spec.aspect,
+            turn: spec
+                .turn
+                .as_ref()
+                .map(|v| Value::new(v, config, key))
+                .transpose()?,
+            lean: spec
+                .lean
+                .as_ref()
+                .map(|v| Value::new(v, config, key))
+                .transpose()?,
+            insert: script(&spec.insert)?,
+            lattice: CellArray::tilted_about_x(spec.period, spec.origin, spec.tilt.to_radians()),
+            reach: 0.5 * Vector3::from(spec.period).norm(),
+            tilt: spec.tilt,
+        })
+    }
+
+    /// Spherical voids of `radius` on an upright lattice: the shorthand of stages that
+    /// take `period`, `origin` and `void_radius`.
+    pub fn spheres(period: [f64; 3], origin: [f64; 3], radius: f64) -> Self {
+        Self {
+            shape: CellShape::Sphere,
+            size: Value::Number(radius),
+            aspect: [1.0; 3],
+            turn: None,
+            lean: None,
+            insert: None,
+            lattice: CellArray::upright(period, origin),
+            reach: 0.5 * Vector3::from(period).norm(),
+            tilt: 0.0,
+        }
+    }
+
+    /// The microstructure in a line, for file headers.
+    pub fn describe(&self) -> String {
+        let shape = match self.shape {
+            CellShape::Sphere => "sphere",
+            CellShape::Box => "box",
+            CellShape::Cylinder => "cylinder",
+        };
+        let mut s = format!(
+            "{shape} cells of size {} mm x [{}, {}, {}]",
+            self.size.text(),
+            self.aspect[0],
+            self.aspect[1],
+            self.aspect[2]
+        );
+        if let Some(t) = &self.turn {
+            s.push_str(&format!(", turned {} deg", t.text()));
+        }
+        if let Some(l) = &self.lean {
+            s.push_str(&format!(", leaning {} deg", l.text()));
+        }
+        if let Some(i) = &self.insert {
+            s.push_str(&format!(", inserted where {} > 0", i.text()));
+        }
+        let l = &self.lattice;
+        s.push_str(&format!(
+            " on a lattice of period [{}, {}, {}] mm from [{}, {}, {}], tilted {} deg about x",
+            l.period[0], l.period[1], l.period[2], l.origin[0], l.origin[1], l.origin[2], self.tilt
+        ));
+        s
+    }
+
+    /// The cell at an inserting point, or `None` where the inserting function leaves
+    /// it out.
+    fn cell(&self, p: Vector3<f64>) -> Result<Option<PlacedCell>> {
+        if let Some(f) = &self.insert
+            && f.at(&p, "insert")? <= 0.0
+        {
+            return Ok(None);
+        }
+        let size = self.size.at(&p, "size")?;
+        if size <= 0.0 {
+            return Ok(None);
+        }
+        let half = [
+            size * self.aspect[0],
+            size * self.aspect[1],
+            size * self.aspect[2],
+        ];
+        let lean = match &self.lean {
+            Some(v) => v.at(&p, "lean")?.to_radians(),
+            None => 0.0,
+        };
+        let turn = match &self.turn {
+            Some(v) => v.at(&p, "turn")?.to_radians(),
+            None => 0.0,
+        };
+        let own: Matrix3<f64> = *(Rotation3::from_axis_angle(&Vector3::z_axis(), turn)
+            * Rotation3::from_axis_angle(&Vector3::x_axis(), lean))
+        .matrix();
+        let cell = PlacedCell {
+            shape: self.shape,
+            centre: p,
+            half,
+            // The cell turns with the lattice it sits on.
+            rotation: self.lattice.rotation * own,
+        };
+        if cell.reach() > self.reach + 1e-9 {
+            return Err(Error::stage(
+                "cell",
+                format!(
+                    "the cell at ({:.3}, {:.3}, {:.3}) reaches {:.4} mm from its inserting point, more than \
+                     half the lattice's diagonal ({:.4} mm): make it smaller or the period larger",
+                    p.x,
+                    p.y,
+                    p.z,
+                    cell.reach(),
+                    self.reach
+                ),
+            ));
+        }
+        Ok(Some(cell))
+    }
+
+    /// The voids the horizontal plane at `z` cuts over the box `bbox`, counter-clockwise,
+    /// in the order of their inserting points.
+    pub fn voids(&self, z: f64, bbox: &BBox2) -> Result<Vec<Contour>> {
+        let mut out = Vec::new();
+        for (_, p) in self.lattice.near_plane(z, self.reach, bbox) {
+            if let Some(cell) = self.cell(p)?
+                && let Some(section) = cell.section(z)
+            {
+                out.push(section);
+            }
+        }
+        Ok(out)
+    }
+}

@@ -1,0 +1,363 @@
+//! Base cells of a periodic microstructure and the voids they leave in a layer
+//! (cmpm-process-planning 4.3 and Fig. 5).
+//!
+//! A microstructure region is an array of base cells: one at each inserting point of a
+//! lattice, each a void of some shape (a sphere, a box, a cylinder) with a size and an
+//! orientation that may vary with position. A layer's voids are the sections of the
+//! cells its plane cuts.
+//!
+//! The lattice may stand tilted against the layers (the spraying plane at an angle Φ
+//! to the lattice's z axis, Fig. 5). Only the inserting points within `L_max` of the
+//! plane are visited, where `L_max` bounds how far a cell reaches from its inserting
+//! point: the lattice indices come from the box of the layer's area thickened by
+//! `L_max` above and below, mapped into the lattice's frame, and each candidate is kept
+//! when its distance to the plane is at most `L_max` (the paper's two auxiliary planes).
+
+use nalgebra::{Matrix3, Vector3};
+
+use crate::shape::{BBox2, Contour, Point2};
+
+/// The shape of a base cell's void, in the cell's own frame.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum CellShape {
+    /// Radius `half[0]`.
+    Sphere,
+    /// Half-edges `half[0..3]` along the cell's x, y and z.
+    Box,
+    /// Radius `half[0]` about the cell's z axis, half-height `half[2]`.
+    Cylinder,
+}
+
+/// Sides of the prism a cylinder is cut as, and points of a sphere's section.
+const ROUND: usize = 32;
+
+/// One base cell placed in the machine's frame.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PlacedCell {
+    pub shape: CellShape,
+    pub centre: Vector3<f64>,
+    pub half: [f64; 3],
+    /// Cell frame to machine frame.
+    pub rotation: Matrix3<f64>,
+}
+
+impl PlacedCell {
+    /// How far the cell reaches from its centre.
+    pub fn reach(&self) -> f64 {
+        match self.shape {
+            CellShape::Sphere => self.half[0],
+            CellShape::Box => Vector3::from(self.half).norm(),
+            CellShape::Cylinder => self.half[0].hypot(self.half[2]),
+        }
+    }
+
+    /// The section of the cell by the horizontal plane at `z`, counter-clockwise, or
+    /// `None` where the plane misses it.
+    pub fn section(&self, z: f64) -> Option<Contour> {
+        let dz = z - self.centre.z;
+        if dz.abs() >= self.reach() {
+            return None;
+        }
+        match self.shape {
+            CellShape::Sphere => {
+                let r = (self.half[0] * self.half[0] - dz * dz).sqrt();
+                Some(Contour::circle(
+                    Point2::new(self.centre.x, self.centre.y),
+                    r,
+                    ROUND,
+                ))
+            }
+            CellShape::Box => {
+                let [a, b, c] = self.half;
+                let corners: Vec<Vector3<f64>> = (0..8)
+                    .map(|i| {
+                        Vector3::new(
+                            if i & 1 == 0 { -a } else { a },
+                            if i & 2 == 0 { -b } else { b },
+                            if i & 4 == 0 { -c } else { c },
+                        )
+                    })
+                    .collect();
+                let mut edges = Vec::new();
+                for i in 0..8usize {
+                    for bit in [1, 2, 4] {
+                        if i & bit == 0 {
+                            edges.push((i, i | bit));
+                        }
+                    }
+                }
+                self.cut(&corners, &edges, z)
+            }
+            CellShape::Cylinder => {
+                let (r, h) = (self.half[0], self.half[2]);
+                let mut corners = Vec::with_capacity(2 * ROUND);
+                for k in 0..ROUND {
+                    let a = std::f64::consts::TAU * k as f64 / ROUND as f64;
+                    corners.push(Vector3::new(r * a.cos(), r * a.sin(), -h));
+                    corners.push(Vector3::new(r * a.cos(), r * a.sin(), h));
+                }
+                let mut edges = Vec::new();
+                for k in 0..ROUND {
+                    let next = (k + 1) % ROUND;
+                    edges.push((2 * k, 2 * k + 1));
+                    edges.push((2 * k, 2 * next));
+                    edges.push((2 * k + 1, 2 * next + 1));
+                }
+                self.cut(&corners, &edges, z)
+            }
+        }
+    }
+
+    /// The section of the convex polyhedron with `corners` (cell frame) and `edges` by
+    /// the plane at `z`: where the edges cross it, in angular order.
+    fn cut(&self, corners: &[Vector3<f64>], edges: &[(usize, usize)], z: f64) -> Option<Contour> {
+        let placed: Vec<Vector3<f64>> = corners.iter().map(|c| self.centre + self.rotation * c).collect();
+        let mut pts: Vec<Point2> = Vec::new();
+        for &(i, j) in edges {
+            let (p, q) = (placed[i], placed[j]);
+            let (dp, dq) = (p.z - z, q.z - z);
+            if (dp < 0.0) != (dq < 0.0) {
+                let t = dp / (dp - dq);
+                let x = p + (q - p) * t;
+                pts.push(Point2::new(x.x, x.y));
+            }
+        }
+        if pts.len() < 3 {
+            return None;
+        }
+        let n = pts.len() as f64;
+        let c = pts.iter().fold(Point2::new(0.0, 0.0), |s, p| {
+            Point2::new(s.x + p.x / n, s.y + p.y / n)
+        });
+        pts.sort_by(|a, b| {
+            (a.y - c.y)
+                .atan2(a.x - c.x)
+                .total_cmp(&(b.y - c.y).atan2(b.x - c.x))
+        });
+        pts.dedup_by(|a, b| (*a - *b).norm() < 1e-12);
+        let contour = Contour::new(pts);
+        (contour.len() >= 3 && contour.area() > 1e-12).then_some(contour)
+    }
+}
+
+/// The convex polygon `c` moved in by `d` (every edge `d` further in, corners kept
+/// sharp, as an inward offset of a convex shape is), or `None` once nothing is left:
+/// `c` clipped by each of its edges' half-planes shifted by `d`.
+pub fn inset_convex(c: &Contour, d: f64) -> Option<Contour> {
+    let ring = c.clone().oriented(true);
+    let n = ring.len();
+    if n < 3 {
+        return None;
+    }
+    let mut poly: Vec<Point2> = ring.points.clone();
+    for i in 0..n {
+        let (a, b) = (ring.points[i], ring.points[(i + 1) % n]);
+        let e = b - a;
+        let len = e.norm();
+        if len < 1e-15 {
+            continue;
+        }
+        // Inward normal of a counter-clockwise edge, and the shifted line's offset.
+        let nrm = crate::shape::Vector2::new(-e.y / len, e.x / len);
+        let keep = |p: &Point2| (p - a).dot(&nrm) - d;
+        let mut next = Vec::with_capacity(poly.len() + 1);
+        for k in 0..poly.len() {
+            let (p, q) = (poly[k], poly[(k + 1) % poly.len()]);
+            let (sp, sq) = (keep(&p), keep(&q));
+            if sp >= 0.0 {
+                next.push(p);
+            }
+            if (sp >= 0.0) != (sq >= 0.0) {
+                next.push(p + (q - p) * (sp / (sp - sq)));
+            }
+        }
+        poly = next;
+        if poly.len() < 3 {
+            return None;
+        }
+    }
+    let out = Contour::new(poly);
+    (out.area() > 1e-12).then_some(out)
+}
+
+/// The lattice of inserting points: `origin + i a + j b + k c` in the lattice's frame,
+/// turned into the machine's frame by `rotation` (the tilt of Fig. 5).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct CellArray {
+    pub period: [f64; 3],
+    pub origin: [f64; 3],
+    /// Lattice frame to machine frame.
+    pub rotation: Matrix3<f64>,
+}
+
+impl CellArray {
+    /// An upright lattice.
+    pub fn upright(period: [f64; 3], origin: [f64; 3]) -> Self {
+        Self {
+            period,
+            origin,
+            rotation: Matrix3::identity(),
+        }
+    }
+
+    /// A lattice tilted by `phi` radians about the machine's x axis: its z axis leans
+    /// from the machine's z toward -y.
+    pub fn tilted_about_x(period: [f64; 3], origin: [f64; 3], phi: f64) -> Self {
+        Self {
+            period,
+            origin,
+            rotation: *nalgebra::Rotation3::from_axis_angle(&Vector3::x_axis(), phi).matrix(),
+        }
+    }
+
+    /// The inserting point of lattice indices `(i, j, k)` in the machine's frame.
+    pub fn point(&self, i: i64, j: i64, k: i64) -> Vector3<f64> {
+        let l = Vector3::new(
+            self.origin[0] + i as f64 * self.period[0],
+            self.origin[1] + j as f64 * self.period[1],
+            self.origin[2] + k as f64 * self.period[2],
+        );
+        self.rotation * l
+    }
+
+    /// The inserting points within `reach` of the horizontal plane at `z`, over the
+    /// XY box `bbox` grown by `reach`: the search band of Fig. 5. Each comes with its
+    /// lattice indices, in a fixed order.
+    pub fn near_plane(&self, z: f64, reach: f64, bbox: &BBox2) -> Vec<([i64; 3], Vector3<f64>)> {
+        let inverse = self.rotation.transpose();
+        let (x0, x1) = (bbox.min.x - reach, bbox.max.x + reach);
+        let (y0, y1) = (bbox.min.y - reach, bbox.max.y + reach);
+        let mut lo = [f64::INFINITY; 3];
+        let mut hi = [f64::NEG_INFINITY; 3];
+        for corner in 0..8 {
+            let p = Vector3::new(
+                if corner & 1 == 0 { x0 } else { x1 },
+                if corner & 2 == 0 { y0 } else { y1 },
+                if corner & 4 == 0 { z - reach } else { z + reach },
+            );
+            let l = inverse * p;
+            for a in 0..3 {
+                let t = (l[a] - self.origin[a]) / self.period[a];
+                lo[a] = lo[a].min(t);
+                hi[a] = hi[a].max(t);
+            }
+        }
+        let range = |a: usize| (lo[a].ceil() as i64)..=(hi[a].floor() as i64);
+        let mut out = Vec::new();
+        for k in range(2) {
+            for j in range(1) {
+                for i in range(0) {
+                    let p = self.point(i, j, k);
+                    if (p.z - z).abs() <= reach && p.x >= x0 && p.x <= x1 && p.y >= y0 && p.y <= y1 {
+                        out.push(([i, j, k], p));
+                    }
+                }
+            }
+        }
+        out
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn placed(shape: CellShape, half: [f64; 3], rotation: Matrix3<f64>) -> PlacedCell {
+        PlacedCell {
+            shape,
+            centre: Vector3::new(1.0, 2.0, 3.0),
+            half,
+            rotation,
+        }
+    }
+
+    #[test]
+    fn a_sphere_cuts_a_circle_of_the_chord_radius() {
+        let s = placed(CellShape::Sphere, [0.5, 0.0, 0.0], Matrix3::identity());
+        let c = s.section(3.3).expect("cut");
+        let r = (0.25f64 - 0.09).sqrt();
+        assert!((c.area() - std::f64::consts::PI * r * r).abs() < 0.01 * c.area());
+        assert!(s.section(3.5).is_none());
+    }
+
+    #[test]
+    fn a_box_turned_about_x_cuts_a_rectangle_as_wide_as_its_slant() {
+        // Half-edges 0.4 x 0.2 x 0.1, turned 30 degrees about x: the plane through its
+        // centre meets a rectangle 0.8 long in x and 2 * 0.1 / sin 30 = 0.4 wide in y
+        // (where the thin z half-edge limits it), or 2 * 0.2 / cos 30 where y does.
+        let rot = *nalgebra::Rotation3::from_axis_angle(&Vector3::x_axis(), 30f64.to_radians()).matrix();
+        let b = placed(CellShape::Box, [0.4, 0.2, 0.1], rot);
+        let c = b.section(3.0).expect("cut");
+        let width = (2.0f64 * 0.1 / 30f64.to_radians().sin()).min(2.0 * 0.2 / 30f64.to_radians().cos());
+        assert!(
+            (c.area() - 0.8 * width).abs() < 1e-9,
+            "{} vs {}",
+            c.area(),
+            0.8 * width
+        );
+        assert!(c.is_ccw());
+        // Upright, a plane above its top misses it.
+        let up = placed(CellShape::Box, [0.4, 0.2, 0.1], Matrix3::identity());
+        assert!(up.section(3.11).is_none());
+        assert!((up.section(3.05).expect("cut").area() - 0.8 * 0.4).abs() < 1e-9);
+    }
+
+    #[test]
+    fn a_cylinder_lying_on_its_side_cuts_a_rectangle() {
+        // Radius 0.2, half-height 0.5, its axis along x: a plane 0.1 above the axis
+        // cuts a rectangle 1.0 long and 2 sqrt(0.2^2 - 0.1^2) wide (the prism's chord).
+        let rot = *nalgebra::Rotation3::from_axis_angle(&Vector3::y_axis(), 90f64.to_radians()).matrix();
+        let c = placed(CellShape::Cylinder, [0.2, 0.2, 0.5], rot)
+            .section(3.1)
+            .expect("cut");
+        let want = 1.0 * 2.0 * (0.04f64 - 0.01).sqrt();
+        assert!((c.area() - want).abs() < 0.02 * want, "{} vs {want}", c.area());
+    }
+
+    #[test]
+    fn an_inset_convex_polygon_moves_every_edge_in() {
+        let sq = Contour::rectangle(Point2::new(0.0, 0.0), Point2::new(4.0, 2.0));
+        let i = inset_convex(&sq, 0.5).expect("left");
+        assert!((i.area() - 3.0 * 1.0).abs() < 1e-12, "{}", i.area());
+        assert!(inset_convex(&sq, 1.0).is_none());
+        let circle = Contour::circle(Point2::new(0.0, 0.0), 1.0, 64);
+        let r = inset_convex(&circle, 0.25).expect("left");
+        // A regular polygon moves in by its apothem: the same shape, scaled.
+        let apothem = (std::f64::consts::PI / 64.0).cos();
+        let want = circle.area() * ((apothem - 0.25) / apothem).powi(2);
+        assert!((r.area() - want).abs() < 1e-9, "{} vs {want}", r.area());
+    }
+
+    #[test]
+    fn the_band_visits_only_points_near_the_plane_even_when_tilted() {
+        let bbox = BBox2::from_points([Point2::new(0.0, 0.0), Point2::new(4.0, 4.0)]);
+        let up = CellArray::upright([1.0, 1.0, 1.0], [0.0; 3]);
+        let near = up.near_plane(2.2, 0.3, &bbox);
+        // Only the row k = 2, over the 5 x 5 points of the box (grown by 0.3: still 5 x 5).
+        assert_eq!(near.len(), 25);
+        assert!(near.iter().all(|(ijk, _)| ijk[2] == 2));
+        let tilted = CellArray::tilted_about_x([1.0, 1.0, 1.0], [0.0; 3], 20f64.to_radians());
+        let near = tilted.near_plane(2.2, 0.3, &bbox);
+        assert!(!near.is_empty());
+        // Every point within the band, and none of the lattice's points near the plane
+        // missed: a brute-force scan agrees.
+        let mut brute = Vec::new();
+        for k in -10..20 {
+            for j in -10..20 {
+                for i in -10..20 {
+                    let p = tilted.point(i, j, k);
+                    if (p.z - 2.2).abs() <= 0.3 && p.x >= -0.3 && p.x <= 4.3 && p.y >= -0.3 && p.y <= 4.3 {
+                        brute.push([i, j, k]);
+                    }
+                }
+            }
+        }
+        let mut got: Vec<[i64; 3]> = near.iter().map(|(ijk, _)| *ijk).collect();
+        got.sort();
+        brute.sort();
+        assert_eq!(got, brute);
+        // The rows visited lean with the tilt: several k for one plane.
+        let ks: std::collections::BTreeSet<i64> = got.iter().map(|ijk| ijk[2]).collect();
+        assert!(ks.len() > 1, "{ks:?}");
+    }
+}
