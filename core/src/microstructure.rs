@@ -284,6 +284,19 @@ impl Microstructure {
         Ok(Some(cell))
     }
 
+    /// The cells whose inserting points lie in the box `lo..hi`, at most about `limit`
+    /// of them (every n-th, in lattice order, when there are more): what the build
+    /// direction is weighed over.
+    pub fn cells_in(&self, lo: [f64; 3], hi: [f64; 3], limit: usize) -> Result<Vec<PlacedCell>> {
+        let points = self.lattice.in_box(Vector3::from(lo), Vector3::from(hi));
+        let stride = points.len().div_ceil(limit.max(1)).max(1);
+        let mut out = Vec::new();
+        for (_, p) in points.into_iter().step_by(stride) {
+            out.extend(self.cell(p)?);
+        }
+        Ok(out)
+    }
+
     /// The voids the horizontal plane at `z` cuts over the box `bbox`, counter-clockwise,
     /// in the order of their inserting points.
     pub fn voids(&self, z: f64, bbox: &BBox2) -> Result<Vec<Contour>> {

@@ -51,6 +51,38 @@ impl PlacedCell {
         }
     }
 
+    /// The cell's surface as flat pieces: (area, outward unit normal) in the machine's
+    /// frame; its main surfaces, for choosing a build direction. A sphere has none
+    /// that matter: every direction weighs it the same, so it gives none.
+    pub fn facets(&self) -> Vec<(f64, Vector3<f64>)> {
+        let axis = |k: usize| self.rotation.column(k).into_owned();
+        let [a, b, c] = self.half;
+        match self.shape {
+            CellShape::Sphere => Vec::new(),
+            CellShape::Box => {
+                let mut out = Vec::with_capacity(6);
+                for (k, area) in [(0, 4.0 * b * c), (1, 4.0 * a * c), (2, 4.0 * a * b)] {
+                    out.push((area, axis(k)));
+                    out.push((area, -axis(k)));
+                }
+                out
+            }
+            CellShape::Cylinder => {
+                let (r, h) = (a, c);
+                let mut out = vec![
+                    (std::f64::consts::PI * r * r, axis(2)),
+                    (std::f64::consts::PI * r * r, -axis(2)),
+                ];
+                let side = 2.0 * std::f64::consts::PI * r * 2.0 * h / ROUND as f64;
+                for k in 0..ROUND {
+                    let t = std::f64::consts::TAU * (k as f64 + 0.5) / ROUND as f64;
+                    out.push((side, axis(0) * t.cos() + axis(1) * t.sin()));
+                }
+                out
+            }
+        }
+    }
+
     /// The section of the cell by the horizontal plane at `z`, counter-clockwise, or
     /// `None` where the plane misses it.
     pub fn section(&self, z: f64) -> Option<Contour> {
@@ -220,6 +252,39 @@ impl CellArray {
         self.rotation * l
     }
 
+    /// The inserting points inside the box `lo..hi` (machine frame), in a fixed order.
+    pub fn in_box(&self, lo: Vector3<f64>, hi: Vector3<f64>) -> Vec<([i64; 3], Vector3<f64>)> {
+        let inverse = self.rotation.transpose();
+        let mut l0 = [f64::INFINITY; 3];
+        let mut l1 = [f64::NEG_INFINITY; 3];
+        for corner in 0..8 {
+            let p = Vector3::new(
+                if corner & 1 == 0 { lo.x } else { hi.x },
+                if corner & 2 == 0 { lo.y } else { hi.y },
+                if corner & 4 == 0 { lo.z } else { hi.z },
+            );
+            let l = inverse * p;
+            for a in 0..3 {
+                let t = (l[a] - self.origin[a]) / self.period[a];
+                l0[a] = l0[a].min(t);
+                l1[a] = l1[a].max(t);
+            }
+        }
+        let range = |a: usize| (l0[a].ceil() as i64)..=(l1[a].floor() as i64);
+        let mut out = Vec::new();
+        for k in range(2) {
+            for j in range(1) {
+                for i in range(0) {
+                    let p = self.point(i, j, k);
+                    if (0..3).all(|a| p[a] >= lo[a] && p[a] <= hi[a]) {
+                        out.push(([i, j, k], p));
+                    }
+                }
+            }
+        }
+        out
+    }
+
     /// The inserting points within `reach` of the horizontal plane at `z`, over the
     /// XY box `bbox` grown by `reach`: the search band of Fig. 5. Each comes with its
     /// lattice indices, in a fixed order.
@@ -312,6 +377,18 @@ mod tests {
             .expect("cut");
         let want = 1.0 * 2.0 * (0.04f64 - 0.01).sqrt();
         assert!((c.area() - want).abs() < 0.02 * want, "{} vs {want}", c.area());
+    }
+
+    #[test]
+    fn a_boxs_facets_are_its_six_faces_turned_with_it() {
+        let rot = *nalgebra::Rotation3::from_axis_angle(&Vector3::x_axis(), 90f64.to_radians()).matrix();
+        let f = placed(CellShape::Box, [0.3, 0.1, 0.02], rot).facets();
+        assert_eq!(f.len(), 6);
+        let total: f64 = f.iter().map(|x| x.0).sum();
+        assert!((total - 8.0 * (0.1 * 0.02 + 0.3 * 0.02 + 0.3 * 0.1)).abs() < 1e-12);
+        // The largest faces (normal the cell's z) now face along -y and +y.
+        let big = f.iter().max_by(|a, b| a.0.total_cmp(&b.0)).expect("faces");
+        assert!((big.1.y.abs() - 1.0).abs() < 1e-12, "{:?}", big.1);
     }
 
     #[test]

@@ -65,3 +65,56 @@ fn least_height_keeps_the_plate_flat() {
     assert_eq!(plan["orientation"]["candidates"][0]["label"], "+z");
     assert_eq!(plan["layer_count"], 2);
 }
+
+#[test]
+fn the_base_cells_main_surfaces_choose_the_direction_not_the_objects() {
+    // Plate-like cells, half-edges s x 3s x 0.2s: their largest faces face z and the
+    // next face x, so sum A_i alpha_i over the cells is least building along y (both
+    // large faces then stand parallel to the build direction). Over the plate's own
+    // surfaces the least is along x, its length.
+    let dir = tempfile::tempdir().expect("tempdir");
+    let cell = "cell = { shape = \"box\", size = 0.1, aspect = [1.0, 3.0, 0.2], period = [1.0, 1.0, 1.0], origin = [0.5, 0.5, 0.5] }";
+    let (plan, _) = run(
+        dir.path(),
+        &format!("use = \"candidates\"\ncriterion = \"base-cell\"\n{cell}"),
+    );
+    let o = &plan["orientation"];
+    assert_eq!(o["criterion"], "base-cell");
+    assert!(o["direction"][1].as_f64().expect("y").abs() > 1.0 - 1e-9, "{o}");
+    // 2 mm tall now: 4 layers.
+    assert_eq!(plan["layer_count"], 4);
+    // The cost along x is three times that along y (faces of 2.4 s² against 0.8 s²).
+    let cost = |label: &str| {
+        o["candidates"]
+            .as_array()
+            .expect("candidates")
+            .iter()
+            .find(|c| c["label"] == label)
+            .map(|c| c["cost"].as_f64().expect("cost"))
+            .expect("candidate")
+    };
+    assert!(
+        (cost("+x") / cost("+y") - 3.0).abs() < 1e-9,
+        "{} {}",
+        cost("+x"),
+        cost("+y")
+    );
+    // A sphere has no main surfaces to weigh.
+    let path = dir.path().join("q.toml");
+    std::fs::write(
+        &path,
+        "[model]\nuse = \"box\"\n[materials.a]\ncolour = [1, 2, 3]\n[orient]\nuse = \"candidates\"\n\
+         criterion = \"base-cell\"\ncell = { size = 0.1, period = [1.0, 1.0, 1.0] }\n",
+    )
+    .expect("write");
+    let out = Command::new(env!("CARGO_BIN_EXE_lamina"))
+        .args(["check"])
+        .arg(&path)
+        .output()
+        .expect("lamina runs");
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        !out.status.success() && err.contains("a sphere weighs every build direction the same"),
+        "{err}"
+    );
+}

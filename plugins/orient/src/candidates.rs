@@ -1,7 +1,9 @@
 //! `candidates`: weighs build directions and picks the one that minimises the chosen
 //! criterion: the summed area x angle of the surfaces with the build direction (the
 //! CMPM paper's sum A_i alpha_i: walls parallel to the build direction take thick layers
-//! without stair steps), or the build height (fewer layers).
+//! without stair steps), the same sum over the main surfaces of a microstructure's base
+//! cells (`base-cell`: the paper's Σ∫ A_i α_i, the cells' faces parallel to the build
+//! direction let its layers be thicker), or the build height (fewer layers).
 //!
 //! Candidates are the six axis directions, the normals of the largest flat faces (both
 //! ways), an even Fibonacci sampling of the sphere, and any the pipeline lists. Ties
@@ -14,6 +16,7 @@ use nalgebra::{Rotation3, Unit, Vector3};
 use serde::Deserialize;
 
 use crate::surfaces::{Facet, bed_contact, facets, flat_faces, height, surface_angle};
+use lamina_core::microstructure::{CellSpec, Microstructure};
 
 lamina_core::option_type!(Criterion = "string");
 
@@ -21,6 +24,7 @@ lamina_core::option_type!(Criterion = "string");
 #[serde(rename_all = "kebab-case")]
 enum Criterion {
     SurfaceAngle,
+    BaseCell,
     Height,
 }
 
@@ -28,6 +32,7 @@ impl Criterion {
     fn name(self) -> &'static str {
         match self {
             Criterion::SurfaceAngle => "surface-angle",
+            Criterion::BaseCell => "base-cell",
             Criterion::Height => "height",
         }
     }
@@ -36,8 +41,12 @@ impl Criterion {
 lamina_core::stage_options! {
     #[derive(Debug)]
     struct Options {
-        /// what to minimise: "surface-angle" (sum A_i alpha_i) or "height"
+        /// what to minimise: "surface-angle" (sum A_i alpha_i over the object's surfaces), "base-cell" (the same over the faces of the microstructure's base cells) or "height"
         criterion: Criterion = r#""surface-angle""#,
+        /// the base cell for "base-cell", in the model's own coordinates: `{ shape = "box" | "cylinder", size, aspect, turn, lean, insert, period, origin, tilt }`
+        cell: Option<CellSpec>,
+        /// most cells weighed for "base-cell" (every n-th inserting point in the model's box beyond that)
+        cells: usize = "2000",
         /// directions sampled evenly over the sphere
         samples: usize = "64",
         /// the largest flat faces whose normals are candidates (both ways)
@@ -51,6 +60,7 @@ lamina_core::stage_options! {
 
 struct Candidates {
     criterion: Criterion,
+    cells: Option<(Microstructure, usize)>,
     samples: usize,
     faces: usize,
     main_surfaces: f64,
@@ -133,7 +143,27 @@ impl Orienter for Candidates {
                 "the model has no facet with an area",
             ));
         }
-        let faces = flat_faces(&all);
+        // The base cells' faces, over the cells inserted in the model's box.
+        let cell_faces: Vec<Facet> = match &self.cells {
+            Some((m, limit)) => {
+                let b = meshes
+                    .iter()
+                    .fold(lamina_core::BBox3::EMPTY, |b, m| b.union(&m.bbox()));
+                let (lo, hi) = (b.min.coords, b.max.coords);
+                let cells = m.cells_in([lo.x, lo.y, lo.z], [hi.x, hi.y, hi.z], *limit)?;
+                cells
+                    .iter()
+                    .flat_map(|c| c.facets())
+                    .map(|(area, normal)| Facet { area, normal })
+                    .collect()
+            }
+            None => Vec::new(),
+        };
+        let mut faces = flat_faces(&all);
+        if self.criterion == Criterion::BaseCell {
+            // The cells' main faces are the natural directions.
+            faces = flat_faces(&cell_faces);
+        }
         // The main surfaces: all facets, or the largest flat faces that make up the
         // asked share of the area.
         let surfaces: Vec<Facet> = if self.main_surfaces >= 1.0 {
@@ -169,6 +199,7 @@ impl Orienter for Candidates {
                 let h = height(meshes, &d);
                 let cost = match self.criterion {
                     Criterion::SurfaceAngle => sa,
+                    Criterion::BaseCell => surface_angle(&cell_faces, &d),
                     Criterion::Height => h,
                 };
                 Scored {
@@ -201,7 +232,7 @@ impl Orienter for Candidates {
                 return ca.cost.total_cmp(&cb.cost);
             }
             let (sa, sb) = match criterion {
-                Criterion::SurfaceAngle => (ca.height, cb.height),
+                Criterion::SurfaceAngle | Criterion::BaseCell => (ca.height, cb.height),
                 Criterion::Height => (ca.surface_angle, cb.surface_angle),
             };
             if !close(sa, sb) {
@@ -243,8 +274,30 @@ fn build(config: &StageConfig<'_>) -> Result<AnyStage> {
         }
         directions.push(v / len);
     }
+    let cells = match (&o.cell, o.criterion) {
+        (Some(spec), Criterion::BaseCell) => {
+            if spec.shape == "sphere" {
+                return Err(config.error(
+                    "cell",
+                    "a sphere weighs every build direction the same: the base-cell criterion needs a box or a cylinder",
+                ));
+            }
+            if o.cells == 0 {
+                return Err(config.error("cells", "must be at least 1"));
+            }
+            Some((Microstructure::new(spec, config, "cell")?, o.cells))
+        }
+        (None, Criterion::BaseCell) => {
+            return Err(config.error("cell", "the base-cell criterion needs the `cell` it weighs"));
+        }
+        (Some(_), _) => {
+            return Err(config.error("cell", "only the base-cell criterion reads a `cell`"));
+        }
+        (None, _) => None,
+    };
     Ok(AnyStage::Orient(Box::new(Candidates {
         criterion: o.criterion,
+        cells,
         samples: o.samples,
         faces: o.faces,
         main_surfaces: o.main_surfaces,
@@ -256,7 +309,7 @@ lamina_core::register_stage!(StageFactory {
     info: StageInfo {
         kind: StageKind::Orient,
         name: "candidates",
-        doc: "Turns the object to the candidate build direction with the least surface angle (sum of area x angle to the build direction) or build height, and reports the alternatives weighed.",
+        doc: "Turns the object to the candidate build direction with the least surface angle (sum of area x angle to the build direction, over the object's surfaces or its microstructure's base cells) or build height, and reports the alternatives weighed.",
         options: Options::SPECS,
         example: "use = \"candidates\"\ncriterion = \"height\"\nsamples = 16",
     },
@@ -271,6 +324,7 @@ mod tests {
     fn orienter(criterion: Criterion) -> Candidates {
         Candidates {
             criterion,
+            cells: None,
             samples: 64,
             faces: 8,
             main_surfaces: 1.0,
