@@ -253,6 +253,10 @@ pub struct PartInfo {
     /// Height range of the part's mesh (mm).
     pub z_min: f64,
     pub z_max: f64,
+    /// The largest change of a material's fraction per mm of height, sampled from the
+    /// part's grading, when a sequencer asked for it (`Sequencer::needs_gradients`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub z_gradient: Option<f64>,
 }
 
 /// A region of the object that wants its own layer thickness (a periodic
@@ -268,6 +272,9 @@ pub struct MaterialRegion {
     /// Height range of the region (mm, rounded to whole micrometres).
     pub z_start: f64,
     pub z_end: f64,
+    /// How the thickness was chosen, when the sequencer derived it (`auto`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub rule: Option<String>,
 }
 
 /// A slab of the object between two cutting planes, holding whole material regions.

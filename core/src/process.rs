@@ -255,6 +255,7 @@ mod tests {
             thickness_um: 200,
             z_start: 0.0,
             z_end: 1.0,
+            rule: None,
         };
         Sequence {
             regions: vec![region("m"), region("f")],

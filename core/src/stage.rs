@@ -282,6 +282,13 @@ pub trait Grader: Send + Sync {
 /// Plans the fabrication sequence of the whole object, before slicing.
 pub trait Sequencer: Send + Sync {
     fn sequence(&self, info: &RunInfo) -> Result<Sequence>;
+
+    /// True when the sequence needs each part's composition gradient along z
+    /// (`PartInfo::z_gradient`), which the runtime samples from the part's grading
+    /// before it asks for the sequence.
+    fn needs_gradients(&self) -> bool {
+        false
+    }
 }
 
 /// Plans toolpaths for one layer.

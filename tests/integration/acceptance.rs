@@ -264,6 +264,7 @@ fn real_models_discretise_into_tiling_sub_regions() {
                 mesh: 0,
                 z_min: bb.min.z,
                 z_max: bb.max.z,
+                z_gradient: None,
             }],
             ..lamina_test_support::mesh_info(&dir, &mesh)
         };

@@ -576,6 +576,7 @@ fn run_info() -> RunInfo {
             mesh: 0,
             z_min: 0.0,
             z_max: 2.0,
+            z_gradient: None,
         }],
         z_min: 0.0,
         z_max: 2.0,
@@ -1307,6 +1308,7 @@ impl CycleCase {
                 mesh: 0,
                 z_min: mm(p.z.0),
                 z_max: mm(p.z.1),
+                z_gradient: None,
             });
         }
         RunInfo {

@@ -260,3 +260,36 @@ fn five_material_regions_make_four_blocks() {
         }
     }
 }
+
+#[test]
+fn auto_thicknesses_follow_the_base_cell_and_the_sampled_gradient() {
+    // cmpm 4.1: the microstructure a tenth of its 1 mm base cell; the FGM, graded
+    // z / 6 (a sixth per mm), thick enough for a change of 0.1 per layer: 0.6 mm; the
+    // composite, one material, the thickest: 2 mm. A steeper FGM (z / 2) stops at 0.5.
+    let dir = tempfile::tempdir().expect("tempdir");
+    let pipe = std::fs::read_to_string(pipelines().join("pipe-work-cycles.toml")).expect("pipe");
+    let auto = "[sequence]\nuse = \"work-cycles\"\nthickness = { inner = \"auto\", middle = \"auto\", outer = \"auto\" }\ncell = { inner = 1.0 }\nstep = 0.1\n";
+    let text = pipe.replace("[sequence]\nuse = \"work-cycles\"\n", auto);
+    assert_ne!(text, pipe);
+    let plan = run_text(dir.path(), &text, "pipe-work-cycles.json");
+    let regions = plan["sequence"]["regions"].as_array().expect("regions");
+    let got: Vec<u64> = regions
+        .iter()
+        .map(|r| r["thickness_um"].as_u64().expect("um"))
+        .collect();
+    assert_eq!(got, [100, 600, 2000]);
+    let rule = |i: usize| regions[i]["rule"].as_str().expect("rule").to_string();
+    assert!(rule(0).contains("1/10 of the 1 mm base cell"), "{}", rule(0));
+    assert!(rule(1).contains("0.1667 per mm"), "{}", rule(1));
+    assert!(rule(2).contains("constant composition"), "{}", rule(2));
+    // One 6 mm cycle: 60 + 10 + 3 layers.
+    assert_eq!(plan["sequence"]["blocks"][0]["cycle"]["height_um"], 6000);
+    assert_eq!(plan["layer_count"], 73);
+    let steep = text.replace("f = \"z / 6.0\"", "f = \"clamp01(z / 2.0)\"");
+    let plan = run_text(dir.path(), &steep, "pipe-work-cycles.json");
+    assert_eq!(plan["sequence"]["regions"][1]["thickness_um"], 500);
+    // A base cell for a name that is neither a part nor a region is named.
+    let wrong = text.replace("cell = { inner = 1.0 }", "cell = { core = 1.0 }");
+    let err = crate::support::text(&try_run_text(dir.path(), &wrong).stderr);
+    assert!(err.contains("no part or region named `core`"), "{err}");
+}

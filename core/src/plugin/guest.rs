@@ -515,6 +515,16 @@ fn handle(request: Request<'static>) -> Result<Response> {
             }
             _ => None,
         }),
+        Request::NeedsGradients { handle } => on_stage(
+            handle,
+            "say whether it needs the gradients",
+            |_, stage, label| match stage {
+                AnyStage::Sequence(s) => {
+                    Some(guard_call(label, || Ok(s.needs_gradients())).map(Response::Bool))
+                }
+                _ => None,
+            },
+        ),
         Request::NeedsHigher { handle } => on_stage(
             handle,
             "say whether it needs the higher regions",

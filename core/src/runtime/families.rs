@@ -30,6 +30,14 @@ pub(super) struct Selections {
 pub(super) type Cut = (Layer, ContourTree);
 
 impl Selections {
+    /// No part selects its families: every part has them all.
+    pub(super) fn none(parts: usize) -> Self {
+        Self {
+            samples: vec![None; parts],
+            cuts: Vec::new(),
+        }
+    }
+
     /// The cut of mesh `mesh` at layer `layer_index` made while following the
     /// selections, if it was made and not taken yet.
     pub(super) fn take_cut(&self, mesh: usize, layer_index: usize) -> Option<Cut> {

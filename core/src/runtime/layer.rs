@@ -201,7 +201,7 @@ impl Engine {
         Ok(out)
     }
 
-    fn process_part(
+    pub(super) fn process_part(
         &self,
         pi: usize,
         layer: &Layer,

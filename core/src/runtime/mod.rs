@@ -29,6 +29,7 @@ use crate::script::ScriptLimits;
 
 mod engine;
 mod families;
+mod gradient;
 mod layer;
 mod meshes;
 mod report;

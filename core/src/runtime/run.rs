@@ -103,6 +103,7 @@ impl Engine {
                 mesh: idx,
                 z_min: bb.min.z,
                 z_max: bb.max.z,
+                z_gradient: None,
             });
         }
         let bbox = meshes.iter().fold(BBox3::EMPTY, |b, m| b.union(&m.bbox()));
@@ -129,10 +130,27 @@ impl Engine {
             machine: self.pipeline.machine.clone(),
         };
 
+        let prepared: Vec<Box<dyn MeshSlicer>> = pool.install(|| {
+            meshes
+                .par_iter()
+                .map(|m| timings.time(StageKind::Slice, || self.slicer.prepare(m.clone())))
+                .collect::<Result<Vec<_>>>()
+        })?;
+        let mut info = info;
         let sequence = match &self.sequencer {
-            Some(s) => Some(timings.time(StageKind::Sequence, || s.sequence(&info))?),
+            Some(s) => {
+                if s.needs_gradients() {
+                    let gradients =
+                        pool.install(|| self.z_gradients(&info, &meshes, &prepared, &part_mesh, &timings))?;
+                    for (p, g) in info.parts.iter_mut().zip(gradients) {
+                        p.z_gradient = g;
+                    }
+                }
+                Some(timings.time(StageKind::Sequence, || s.sequence(&info))?)
+            }
             None => None,
         };
+        let info = info;
         let slots = timings.time(StageKind::Slice, || {
             self.slicer.layers(&meshes, &info, sequence.as_ref())
         })?;
@@ -150,12 +168,6 @@ impl Engine {
                 say(Diagnostic::warning(StageKind::Slice, message).in_part(&p.name));
             }
         }
-        let prepared: Vec<Box<dyn MeshSlicer>> = pool.install(|| {
-            meshes
-                .par_iter()
-                .map(|m| timings.time(StageKind::Slice, || self.slicer.prepare(m.clone())))
-                .collect::<Result<Vec<_>>>()
-        })?;
 
         let selections = self.select_families(&slots, &prepared, &part_mesh, &pool, &timings)?;
 

@@ -234,6 +234,7 @@ mod tests {
                 mesh: 0,
                 z_min: 0.0,
                 z_max: 1.0,
+                z_gradient: None,
             }],
             z_min: 0.0,
             z_max: 1.0,

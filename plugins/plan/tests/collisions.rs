@@ -68,6 +68,7 @@ fn layout(rng: &mut Rng, tools: usize) -> (RunInfo, LayerPlan) {
             mesh: i,
             z_min: 0.0,
             z_max: 1.0,
+            z_gradient: None,
         })
         .collect();
     let mut layers = Vec::new();

@@ -139,6 +139,7 @@ mod tests {
             thickness_um: t,
             z_start: z.0,
             z_end: z.1,
+            rule: None,
         }
     }
 

@@ -16,16 +16,35 @@ use crate::cycle::{blocks, mm_to_um};
 lamina_core::stage_options! {
     #[derive(Debug)]
     struct Options {
-        /// layer thickness by part name (mm); default: the thinnest `layer_thickness` of the part's materials
-        thickness: BTreeMap<String, f64> = "{}",
-        /// regions grouping parts: `{ name, parts = [...], thickness }`; default: one region per part
+        /// layer thickness by part name (mm), or "auto" (from the material: see `cell` and `step`); default: the thinnest `layer_thickness` of the part's materials
+        thickness: BTreeMap<String, Thickness> = "{}",
+        /// regions grouping parts: `{ name, parts = [...], thickness }` (mm or "auto"); default: one region per part
         regions: Vec<RegionSpec> = "[]",
+        /// base-cell dimension (mm) by part or region name: an "auto" thickness there is a microstructure's, 1/10 to 1/20 of the cell
+        cell: BTreeMap<String, f64> = "{}",
+        /// largest change of a material's fraction one layer may hold: an "auto" thickness elsewhere is this over the composition's gradient along z (sampled from the grading), within 0.5 to 2 mm
+        step: f64 = "0.1",
         /// thickness (mm) of parts that neither `thickness` nor their materials give one
         default_thickness: Option<f64>,
     }
 }
 
 lamina_core::option_type!(RegionSpec = "table", array "array of table");
+lamina_core::option_type!(Thickness = "float or \"auto\"");
+
+/// A thickness in mm, or `"auto"`.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(untagged)]
+enum Thickness {
+    Mm(f64),
+    Auto(String),
+}
+
+impl Thickness {
+    fn is_auto(&self) -> bool {
+        matches!(self, Thickness::Auto(_))
+    }
+}
 
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -33,7 +52,7 @@ struct RegionSpec {
     name: String,
     parts: Vec<String>,
     #[serde(default)]
-    thickness: Option<f64>,
+    thickness: Option<Thickness>,
 }
 
 /// The longest work cycle accepted (1 m): thicknesses like 0.201 and 0.199 mm have a
@@ -61,13 +80,44 @@ fn thickness_um(mm: f64) -> std::result::Result<u64, String> {
 }
 
 impl WorkCycles {
+    /// An `auto` thickness for the region or part `name` of `parts`: a microstructure's
+    /// where `cell` gives its base cell, else a graded region's from the parts'
+    /// sampled gradients.
+    fn auto(&self, info: &RunInfo, name: &str, parts: &[usize]) -> (u64, String) {
+        match self.options.cell.get(name) {
+            Some(&cell) => crate::auto::microstructure_um(cell),
+            None => {
+                let g = parts
+                    .iter()
+                    .filter_map(|&p| info.parts[p].z_gradient)
+                    .fold(None, |acc: Option<f64>, g| Some(acc.map_or(g, |a| a.max(g))));
+                crate::auto::graded_um(g, self.options.step)
+            }
+        }
+    }
+
+    /// The thickness of a part: the `thickness` table, else the thinnest preferred
+    /// thickness among its materials; with how it was chosen when derived.
+    fn part_thickness_rule(&self, info: &RunInfo, part: usize) -> Result<(u64, Option<String>)> {
+        let p = &info.parts[part];
+        if let Some(Thickness::Auto(_)) = self.options.thickness.get(&p.name) {
+            let (um, rule) = self.auto(info, &p.name, &[part]);
+            return Ok((um, Some(rule)));
+        }
+        self.part_thickness(info, part).map(|t| (t, None))
+    }
+
     /// The thickness of a part: the `thickness` table, else the thinnest preferred
     /// thickness among its materials.
     fn part_thickness(&self, info: &RunInfo, part: usize) -> Result<u64> {
         let p = &info.parts[part];
-        if let Some(&t) = self.options.thickness.get(&p.name) {
-            return thickness_um(t)
-                .map_err(|m| self.table.error_at("thickness", format!("`{}`: {m}", p.name)));
+        match self.options.thickness.get(&p.name) {
+            Some(Thickness::Mm(t)) => {
+                return thickness_um(*t)
+                    .map_err(|m| self.table.error_at("thickness", format!("`{}`: {m}", p.name)));
+            }
+            Some(Thickness::Auto(_)) => return Ok(self.auto(info, &p.name, &[part]).0),
+            None => {}
         }
         let preferred = p
             .materials
@@ -125,12 +175,14 @@ impl WorkCycles {
             return (0..info.parts.len())
                 .map(|p| {
                     let (z_start, z_end) = span(&[p]);
+                    let (thickness_um, rule) = self.part_thickness_rule(info, p)?;
                     Ok(MaterialRegion {
                         name: info.parts[p].name.clone(),
                         parts: vec![p],
-                        thickness_um: self.part_thickness(info, p)?,
+                        thickness_um,
                         z_start,
                         z_end,
+                        rule,
                     })
                 })
                 .collect();
@@ -158,18 +210,25 @@ impl WorkCycles {
                 owner[p] = Some(&r.name);
                 parts.push(p);
             }
-            let thickness = match r.thickness {
-                Some(t) => thickness_um(t).map_err(|m| {
-                    self.table
-                        .error_at("regions", format!("region `{}`: {m}", r.name))
-                })?,
+            let (thickness, rule) = match &r.thickness {
+                Some(Thickness::Mm(t)) => (
+                    thickness_um(*t).map_err(|m| {
+                        self.table
+                            .error_at("regions", format!("region `{}`: {m}", r.name))
+                    })?,
+                    None,
+                ),
+                Some(Thickness::Auto(_)) => {
+                    let (um, rule) = self.auto(info, &r.name, &parts);
+                    (um, Some(rule))
+                }
                 None => {
                     // The thinnest of its parts' thicknesses.
                     let mut t = u64::MAX;
                     for &p in &parts {
                         t = t.min(self.part_thickness(info, p)?);
                     }
-                    t
+                    (t, None)
                 }
             };
             let (z_start, z_end) = span(&parts);
@@ -179,6 +238,7 @@ impl WorkCycles {
                 thickness_um: thickness,
                 z_start,
                 z_end,
+                rule,
             });
         }
         if let Some(p) = owner.iter().position(Option::is_none) {
@@ -199,7 +259,27 @@ fn round_um(mm: f64) -> f64 {
 }
 
 impl Sequencer for WorkCycles {
+    fn needs_gradients(&self) -> bool {
+        // An `auto` thickness without a base cell follows the grading.
+        let graded = |name: &str, t: &Thickness| t.is_auto() && !self.options.cell.contains_key(name);
+        self.options.thickness.iter().any(|(n, t)| graded(n, t))
+            || self
+                .options
+                .regions
+                .iter()
+                .any(|r| r.thickness.as_ref().is_some_and(|t| graded(&r.name, t)))
+    }
+
     fn sequence(&self, info: &RunInfo) -> Result<Sequence> {
+        for name in self.options.cell.keys() {
+            let known = info.parts.iter().any(|p| &p.name == name)
+                || self.options.regions.iter().any(|r| &r.name == name);
+            if !known {
+                return Err(self
+                    .table
+                    .error_at("cell", format!("no part or region named `{name}`")));
+            }
+        }
         let regions = self.regions(info)?;
         let blocks = blocks(&regions, MAX_CYCLE_UM).ok_or_else(|| {
             let t: Vec<String> = regions
@@ -225,13 +305,36 @@ fn build(config: &StageConfig<'_>) -> Result<AnyStage> {
     if let Some(t) = options.default_thickness {
         thickness_um(t).map_err(|m| config.error("default_thickness", m))?;
     }
-    for (name, &t) in &options.thickness {
-        thickness_um(t).map_err(|m| config.error("thickness", format!("`{name}`: {m}")))?;
+    let check = |key: &str, what: String, t: &Thickness| -> Result<()> {
+        match t {
+            Thickness::Mm(t) => thickness_um(*t)
+                .map(|_| ())
+                .map_err(|m| config.error(key, format!("{what}: {m}"))),
+            Thickness::Auto(s) if s == "auto" => Ok(()),
+            Thickness::Auto(s) => Err(config.error(
+                key,
+                format!("{what}: `{s}` is neither a number of mm nor \"auto\""),
+            )),
+        }
+    };
+    for (name, t) in &options.thickness {
+        check("thickness", format!("`{name}`"), t)?;
     }
     for r in &options.regions {
-        if let Some(t) = r.thickness {
-            thickness_um(t).map_err(|m| config.error("regions", format!("region `{}`: {m}", r.name)))?;
+        if let Some(t) = &r.thickness {
+            check("regions", format!("region `{}`", r.name), t)?;
         }
+    }
+    for (name, &d) in &options.cell {
+        if !(d.is_finite() && d > 0.0 && d <= 1000.0) {
+            return Err(config.error(
+                "cell",
+                format!("`{name}`: the base cell must be a positive number of mm"),
+            ));
+        }
+    }
+    if !(options.step.is_finite() && options.step > 0.0 && options.step <= 1.0) {
+        return Err(config.error("step", "must be a share of a fraction in (0, 1]"));
     }
     Ok(AnyStage::Sequence(Box::new(WorkCycles {
         options,

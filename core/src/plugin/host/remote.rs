@@ -24,7 +24,8 @@ struct Remote {
     files: Arc<FileTable>,
     /// For a discretiser: whether its regions come graded (asked once, when built).
     grades: bool,
-    /// For a process stage: whether it needs the higher regions (asked once, when built).
+    /// For a process stage: whether it needs the higher regions (asked once, when built);
+    /// for a sequencer, whether it needs the parts' gradients.
     needs_higher: bool,
     /// Meshes the plugin has been sent, by address: a run's meshes stay where they are
     /// for as long as its stages live.
@@ -155,6 +156,12 @@ pub(crate) fn build(
     };
     if kind == StageKind::Discretise {
         stage.grades = match stage.request(&Request::Grades { handle })? {
+            Response::Bool(b) => b,
+            other => return Err(stage.unexpected(&other)),
+        };
+    }
+    if kind == StageKind::Sequence {
+        stage.needs_higher = match stage.request(&Request::NeedsGradients { handle })? {
             Response::Bool(b) => b,
             other => return Err(stage.unexpected(&other)),
         };
@@ -314,6 +321,10 @@ impl Sequencer for Remote {
             Response::Sequence(s) => Ok(s),
             other => Err(self.unexpected(&other)),
         }
+    }
+
+    fn needs_gradients(&self) -> bool {
+        self.needs_higher
     }
 }
 

@@ -86,6 +86,10 @@ pub enum Request<'a> {
         info: Cow<'a, RunInfo>,
         plan: Cow<'a, LayerPlan>,
     },
+    /// Asks a sequencer whether it needs the parts' gradients along z.
+    NeedsGradients {
+        handle: u64,
+    },
     /// Asks a process stage whether it needs the higher regions' outlines.
     NeedsHigher {
         handle: u64,

@@ -93,6 +93,7 @@ pub fn run_info(names: [&str; 2], part: String, xy_bounds: BBox2, machine: Optio
             mesh: 0,
             z_min: 0.0,
             z_max: 1.0,
+            z_gradient: None,
         }],
         z_min: 0.0,
         z_max: 1.0,

@@ -1,0 +1,67 @@
+//! Layer thicknesses from the material (cmpm-process-planning 4.1): a periodic
+//! microstructure is sprayed in layers of 1/10 to 1/20 of its base cell, usually under
+//! 0.1 mm; an FGM or a composite in layers of 0.5 to 2 mm, thinner where its
+//! composition changes faster along the build direction.
+
+/// Thinnest and thickest layers of a graded or composite region (mm).
+pub const GRADED_RANGE: (f64, f64) = (0.5, 2.0);
+
+/// The layer of a microstructure whose base cell measures `cell` mm, in micrometres,
+/// with the rule in words: a tenth of the cell where that is at most 0.1 mm, else a
+/// twentieth (but no less than 0.1 mm); whole tens of micrometres (whole micrometres
+/// below ten), so that work cycles stay short.
+pub fn microstructure_um(cell: f64) -> (u64, String) {
+    let tenth = cell / 10.0;
+    let (t, why) = if tenth <= 0.1 {
+        (tenth, "1/10")
+    } else {
+        ((cell / 20.0).max(0.1), "1/20")
+    };
+    let um = (t * 1000.0 + 1e-9).floor() as u64;
+    let um = if um >= 10 { um / 10 * 10 } else { um.max(1) };
+    (um, format!("auto: {why} of the {cell} mm base cell"))
+}
+
+/// The layer of a graded region whose fractions change by at most `gradient` per mm
+/// (`None`: not sampled, as for one material) when a layer may hold a change of
+/// `step`: `step / gradient` within 0.5 to 2 mm, in whole tenths of a millimetre.
+pub fn graded_um(gradient: Option<f64>, step: f64) -> (u64, String) {
+    let g = gradient.unwrap_or(0.0);
+    let (lo, hi) = GRADED_RANGE;
+    let t = if g > 0.0 { (step / g).clamp(lo, hi) } else { hi };
+    let um = ((t * 1000.0 + 1e-9).floor() as u64) / 100 * 100;
+    let why = if g > 0.0 {
+        format!("auto: fractions change by up to {g:.4} per mm, {step} per layer")
+    } else {
+        "auto: constant composition".to_string()
+    };
+    (um, why)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn microstructure_layers_are_a_tenth_or_a_twentieth_of_the_cell() {
+        assert_eq!(microstructure_um(1.0).0, 100);
+        assert_eq!(microstructure_um(0.6).0, 60);
+        // A tenth of 3 mm is over 0.1 mm: a twentieth, 0.15 mm.
+        assert_eq!(microstructure_um(3.0).0, 150);
+        // A twentieth of 1.5 mm is under 0.1 mm: 0.1 mm.
+        assert_eq!(microstructure_um(1.5).0, 100);
+        assert_eq!(microstructure_um(0.05).0, 5);
+    }
+
+    #[test]
+    fn graded_layers_thin_where_the_composition_changes_faster() {
+        // z / 6: a sixth per mm, 0.1 per layer: 0.6 mm.
+        assert_eq!(graded_um(Some(1.0 / 6.0), 0.1).0, 600);
+        // Faster: clamped at 0.5 mm; constant: 2 mm.
+        assert_eq!(graded_um(Some(0.5), 0.1).0, 500);
+        assert_eq!(graded_um(Some(0.0), 0.1).0, 2000);
+        assert_eq!(graded_um(None, 0.1).0, 2000);
+        // Slower: 1/16 per mm gives 1.6 mm.
+        assert_eq!(graded_um(Some(1.0 / 16.0), 0.1).0, 1600);
+    }
+}
