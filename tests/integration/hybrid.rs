@@ -659,3 +659,40 @@ fn cells_that_outgrow_their_lattice_or_conflicting_void_options_are_refused() {
         "{err}"
     );
 }
+
+#[test]
+fn the_nc_file_is_refused_where_the_cell_could_not_run_the_plan() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let pipe = std::fs::read_to_string(pipelines().join("pipe-work-cycles.toml")).expect("pipe");
+    // A 1 mm cutter in the plan, 0.8 mm in the cell.
+    let wider = pipe.replace(
+        "use = \"end-mill\"\ndiameter = 0.8",
+        "use = \"end-mill\"\ndiameter = 1.0",
+    );
+    assert_ne!(wider, pipe);
+    let o = try_run_text(dir.path(), &wider);
+    let err = text(&o.stderr);
+    assert!(!o.status.success());
+    assert!(
+        err.contains("`end-mill` measures 0.8 mm in the cell, the plan was made for 1 mm"),
+        "{err}"
+    );
+    assert!(
+        !dir.path().join("out/pipe-work-cycles.nc").exists(),
+        "no partial output"
+    );
+    // A cell whose table is too small for the pipe (radius 10).
+    let cell = include_str!("../../plugins/process/cells/cmpm-hybrid.toml")
+        .replace("x = [-150.0, 150.0]", "x = [-5.0, 5.0]");
+    std::fs::write(dir.path().join("small.toml"), cell).expect("cell");
+    let small = pipe.replace("cell = \"cmpm-hybrid\"", "cell = \"small.toml\"");
+    let err = text(&try_run_text(dir.path(), &small).stderr);
+    assert!(err.contains("outside the cell's travel x [-5.0, 5.0]"), "{err}");
+    // Numbers come from the cell or from `tools`, not both.
+    let both = pipe.replace(
+        "cell = \"cmpm-hybrid\"",
+        "cell = \"cmpm-hybrid\"\ntools = { laser = 9 }",
+    );
+    let err = text(&try_run_text(dir.path(), &both).stderr);
+    assert!(err.contains("give `cell` or `tools`, not both"), "{err}");
+}

@@ -20,6 +20,7 @@
 //! The `nc` exporter writes the operations as G-code for a hybrid cell.
 
 mod area;
+mod cell;
 mod engrave;
 mod fill;
 mod grind;

@@ -2,8 +2,9 @@
 //!
 //! - `G21 G90 G94 G17`: millimetres, absolute, feed per minute, the XY plane;
 //! - a tool change is `M5` (anything spinning stops), `T<n> M6`, `G43 H<n>` (its
-//!   length offset); tools are numbered by the `tools` table, the rest in the order
-//!   they first come;
+//!   length offset); tools are numbered by the cell (`cell`, see `cell.rs`: every
+//!   operation is checked against its tools and travel first), or without one by the
+//!   `tools` table, the rest in the order they first come;
 //! - end mills and cup wheels turn with `S<rev/min> M3` while they cut, and the chip
 //!   vacuum runs (`M64 P2`, off with `M65 P2`);
 //! - the laser is a tool whose `S` word is its power in watts: `M3 S<W>` at the start
@@ -25,12 +26,16 @@ use lamina_core::stage::{
 };
 use lamina_core::{Error, LayerPlan, Operation, OperationPath, Result, RunInfo, Sequence, StageFactory};
 
+use crate::cell::{Cell, Outputs};
+
 lamina_core::stage_options! {
     #[derive(Debug, Clone)]
     struct Options {
         /// the NC file
         path: PathBuf = r#""job.nc""#,
-        /// tool numbers by tool name; tools not listed get the next free number
+        /// the hybrid cell: a built-in profile (`cmpm-hybrid`) or a TOML file; its tools give the numbers, and every operation is checked against it; empty: no cell
+        cell: String = "\"\"",
+        /// tool numbers by tool name, without a cell; tools not listed get the next free number
         tools: BTreeMap<String, u32> = "{}",
         /// height above the highest surface so far at which the tool travels (mm)
         clearance: f64 = "5.0",
@@ -43,13 +48,16 @@ lamina_core::stage_options! {
     }
 }
 
-/// Digital outputs of the cell.
-const SPRAY_OUTPUT: u32 = 0;
-const FILL_OUTPUT: u32 = 1;
-const VACUUM_OUTPUT: u32 = 2;
+/// Digital outputs of a cell that names none.
+const OUTPUTS: Outputs = Outputs {
+    spray: 0,
+    filler: 1,
+    vacuum: 2,
+};
 
 struct Nc {
     options: Options,
+    cell: Option<Cell>,
 }
 
 struct Sink {
@@ -58,6 +66,8 @@ struct Sink {
     options: Options,
     regions: Vec<String>,
     numbers: BTreeMap<String, u32>,
+    cell: Option<Cell>,
+    outputs: Outputs,
     /// Tool in the spindle, by name.
     tool: Option<String>,
     spinning: bool,
@@ -71,9 +81,11 @@ fn io(path: &std::path::Path) -> impl Fn(std::io::Error) -> Error + '_ {
     move |e| Error::io(path, e)
 }
 
-/// A comment's text: one line, no parentheses.
+/// A comment's text: one line, no parentheses (they would end it) and no semicolons (they start a comment of their own).
 fn comment(s: &str) -> String {
-    lamina_core::output::one_line(s).replace(['(', ')'], "")
+    lamina_core::output::one_line(s)
+        .replace(['(', ')'], "")
+        .replace(';', ",")
 }
 
 fn num(v: f64) -> String {
@@ -96,10 +108,25 @@ impl Exporter for Nc {
             comment(ctx.pipeline_name),
             ctx.layer_count
         ));
+        let outputs = self.cell.as_ref().map_or(OUTPUTS, |c| c.outputs);
+        let numbers: BTreeMap<String, u32> = match &self.cell {
+            Some(c) => c.tools.iter().map(|t| (t.name.clone(), t.number)).collect(),
+            None => self.options.tools.clone(),
+        };
+        if let Some(c) = &self.cell {
+            head.push_str(&format!(
+                "(cell: {} - {})\n",
+                comment(&c.name),
+                comment(&c.description)
+            ));
+        }
         head.push_str(&format!(
-            "(outputs: P{SPRAY_OUTPUT} spray gun, P{FILL_OUTPUT} filler nozzle, P{VACUUM_OUTPUT} chip vacuum; laser power in W as the S word of M3)\n"
+            "(outputs: P{} spray gun, P{} filler nozzle, P{} chip vacuum; laser power in W as the S word of M3)\n",
+            outputs.spray, outputs.filler, outputs.vacuum
         ));
-        for (name, n) in &self.options.tools {
+        let mut listed: Vec<(&String, &u32)> = numbers.iter().collect();
+        listed.sort_by_key(|(_, n)| **n);
+        for (name, n) in listed {
             head.push_str(&format!("(T{n} {})\n", comment(name)));
         }
         head.push_str("G21 G90 G94 G17\n");
@@ -109,7 +136,9 @@ impl Exporter for Nc {
             path,
             options: self.options.clone(),
             regions,
-            numbers: self.options.tools.clone(),
+            numbers,
+            cell: self.cell.clone(),
+            outputs,
             tool: None,
             spinning: false,
             vacuum: false,
@@ -138,7 +167,11 @@ impl Sink {
 
     fn vacuum(&mut self, on: bool) {
         if on != self.vacuum {
-            self.line(format!("{} P{VACUUM_OUTPUT}", if on { "M64" } else { "M65" }));
+            self.line(format!(
+                "{} P{}",
+                if on { "M64" } else { "M65" },
+                self.outputs.vacuum
+            ));
             self.vacuum = on;
         }
     }
@@ -196,13 +229,13 @@ impl Sink {
         let (standoff, on, off): (f64, String, String) = match tool.kind.as_str() {
             "spray" => (
                 self.options.spray_standoff,
-                format!("M64 P{SPRAY_OUTPUT}"),
-                format!("M65 P{SPRAY_OUTPUT}"),
+                format!("M64 P{}", self.outputs.spray),
+                format!("M65 P{}", self.outputs.spray),
             ),
             "dispenser" => (
                 self.options.fill_standoff,
-                format!("M64 P{FILL_OUTPUT}"),
-                format!("M65 P{FILL_OUTPUT}"),
+                format!("M64 P{}", self.outputs.filler),
+                format!("M65 P{}", self.outputs.filler),
             ),
             "laser" => (
                 0.0,
@@ -276,6 +309,17 @@ impl LayerSink for Sink {
             num(plan.z),
             num(plan.thickness)
         ));
+        if let Some(cell) = &self.cell {
+            for op in &plan.operations {
+                let standoff = match op.tool.as_ref().map(|t| t.kind.as_str()) {
+                    Some("spray") => self.options.spray_standoff,
+                    Some("dispenser") => self.options.fill_standoff,
+                    _ => 0.0,
+                };
+                cell.admits(op, standoff)
+                    .map_err(|e| e.in_layer(plan.index, plan.z))?;
+            }
+        }
         for op in &plan.operations {
             self.operation(op);
         }
@@ -317,7 +361,18 @@ fn build(config: &StageConfig<'_>) -> Result<AnyStage> {
             return Err(config.error("tools", format!("`{other}` and `{name}` both have number {n}")));
         }
     }
-    Ok(AnyStage::Export(Box::new(Nc { options })))
+    let cell = if options.cell.is_empty() {
+        None
+    } else {
+        if !options.tools.is_empty() {
+            return Err(config.error(
+                "tools",
+                "the cell numbers its tools: give `cell` or `tools`, not both",
+            ));
+        }
+        Some(Cell::load(&options.cell, config.base_dir).map_err(|m| config.error("cell", m))?)
+    };
+    Ok(AnyStage::Export(Box::new(Nc { options, cell })))
 }
 
 lamina_core::register_stage!(StageFactory {
@@ -326,7 +381,7 @@ lamina_core::register_stage!(StageFactory {
         name: "nc",
         doc: "NC code (RS-274/NGC) for a hybrid cell from the process operations: tool changes, spindle and laser, spray and filler outputs, feeds per operation.",
         options: Options::SPECS,
-        example: "use = \"nc\"\npath = \"job.nc\"\ntools = { end-mill = 1, cup-wheel = 2 }",
+        example: "use = \"nc\"\npath = \"job.nc\"\ncell = \"cmpm-hybrid\"",
     },
     build,
 });
