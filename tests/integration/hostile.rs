@@ -763,9 +763,11 @@ fn long_run(s: &Scratch) -> Child {
         .args([
             "-q",
             "--set",
-            "slice.thickness=0.01",
+            // About 3 s here: long enough that a loaded machine still signals it
+            // while it runs.
+            "slice.thickness=0.004",
             "--set",
-            "model.segments=512",
+            "model.segments=2048",
         ])
         .stdout(Stdio::null())
         .stderr(Stdio::null())

@@ -448,3 +448,36 @@ fn a_plugin_resolving_other_releases_of_the_boundarys_dependencies_runs_correctl
     assert_eq!(out.status.code(), Some(2), "{err}");
     assert!(err.contains("s.toml:3:") && err.contains("size"), "{err}");
 }
+
+#[test]
+fn a_plugins_own_process_operation_runs_across_the_boundary() {
+    // The example plugin's `cure` step: a UV lamp over each layer's outline, the last
+    // layer's pass marked `final` from what the host told it (ProcessContext::last).
+    let lib = library("lamina-zigzag");
+    let dir = tempfile::tempdir().expect("tempdir");
+    let pipeline = write_pipeline(dir.path(), "[[process]]\nuse = \"cure\"\npower = 80.0\n");
+    let out_dir = dir.path().join("out");
+    let out = run_with_plugin(&pipeline, &lib, &out_dir);
+    let layers = plan_layers(&out, &out_dir);
+    assert_eq!(layers.len(), 4);
+    for (i, layer) in layers.iter().enumerate() {
+        let ops = layer["operations"].as_array().expect("operations");
+        assert_eq!(ops.len(), 1);
+        let op = &ops[0];
+        assert_eq!(op["kind"], "cure");
+        assert_eq!(
+            op["pass"].as_str().unwrap_or(""),
+            if i == 3 { "final" } else { "" }
+        );
+        assert_eq!(op["values"]["dose"], 4.0);
+        // The tube's outer contour, radius 10, a closed pass 5 mm above the layer.
+        let path = &op["paths"][0];
+        assert_eq!(path["closed"], true);
+        let z = layer["z"].as_f64().expect("z");
+        assert!((path["z"].as_f64().expect("z") - z - 5.0).abs() < 1e-9);
+        for p in path["points"].as_array().expect("points") {
+            let r = p[0].as_f64().expect("x").hypot(p[1].as_f64().expect("y"));
+            assert!((r - 10.0).abs() < 1e-6, "{r}");
+        }
+    }
+}

@@ -2,12 +2,17 @@
 //! the `zigzag` planner fills every sub-region with parallel extrusion lines joined
 //! boustrophedon-style, one timed toolpath per line, with travel moves between them.
 //!
-//! It depends on lamina-core alone, registers its stage with `register_stage!`, and
+//! It also adds a process operation of its own, `cure`: a UV lamp passes over the
+//! outline of each layer's solid areas (a step the CMPM process does not have, as a
+//! third party would add one).
+//!
+//! It depends on lamina-core alone, registers its stages with `register_stage!`, and
 //! exports the entry point with `export_plugin!`; that is all a plugin needs.
 
-use lamina_core::stage::{AnyStage, Planner, StageConfig, StageInfo, StageKind};
+use lamina_core::stage::{AnyStage, Planner, Process, StageConfig, StageInfo, StageKind};
 use lamina_core::{
-    Contour, LayerPlan, PathKind, Point2, Polygon, Result, RunInfo, StageFactory, TimedPoint, Toolpath,
+    Contour, LayerPlan, Operation, OperationPath, OperationTool, PathKind, Point2, Polygon, ProcessContext,
+    Result, RunInfo, StageFactory, TimedPoint, Toolpath,
 };
 
 lamina_core::export_plugin!("zigzag");
@@ -162,6 +167,74 @@ lamina_core::register_stage!(StageFactory {
         example: "use = \"zigzag\"\nwidth = 0.5",
     },
     build,
+});
+
+lamina_core::stage_options! {
+    #[derive(Debug, Clone)]
+    struct CureOptions {
+        /// lamp power (W)
+        power: f64 = "100.0",
+        /// speed of the lamp over the outline (mm/s)
+        feed: f64 = "20.0",
+        /// height of the lamp above the layer (mm)
+        height: f64 = "5.0",
+    }
+}
+
+/// `cure`: a UV lamp over the outline of each layer's solid areas, once more (the
+/// `final` pass) on the last layer.
+struct Cure(CureOptions);
+
+impl Process for Cure {
+    fn process(&self, ctx: &ProcessContext<'_>, plan: &mut LayerPlan) -> Result<()> {
+        let mut op = Operation::new("cure", plan.material_region);
+        op.tool = Some(OperationTool {
+            name: "uv-lamp".into(),
+            kind: "lamp".into(),
+            diameter: 10.0,
+            feed: self.0.feed,
+            spindle: None,
+            power: Some(self.0.power),
+        });
+        for part in &plan.parts {
+            for &f in &part.families {
+                let outer = &part.contours[part.tree.families[f].outer];
+                op.paths.push(OperationPath {
+                    z: plan.z + self.0.height,
+                    points: outer.points.clone(),
+                    closed: true,
+                });
+            }
+        }
+        // Energy per mm of outline (J/mm).
+        op.values.insert("dose".into(), self.0.power / self.0.feed);
+        if ctx.last {
+            op.pass = "final".into();
+        }
+        plan.operations.push(op);
+        Ok(())
+    }
+}
+
+fn build_cure(config: &StageConfig<'_>) -> Result<AnyStage> {
+    let o: CureOptions = config.parse()?;
+    for (k, v) in [("power", o.power), ("feed", o.feed), ("height", o.height)] {
+        if !(v.is_finite() && v > 0.0) {
+            return Err(config.error(k, "must be a positive number"));
+        }
+    }
+    Ok(AnyStage::Process(Box::new(Cure(o))))
+}
+
+lamina_core::register_stage!(StageFactory {
+    info: StageInfo {
+        kind: StageKind::Process,
+        name: "cure",
+        doc: "Passes a UV lamp over the outline of each layer's solid areas (example process operation of a dynamic plugin).",
+        options: CureOptions::SPECS,
+        example: "use = \"cure\"\npower = 80.0",
+    },
+    build: build_cure,
 });
 
 #[cfg(test)]
