@@ -187,27 +187,23 @@ fn the_pipes_microstructure_is_written_as_bitmap_layers() {
     }
 }
 
-/// The CMPM paper's Fig. 3 divides an object of five material regions into four
-/// blocks at the regions' heights, each block holding whole (parts of) regions. Here
-/// five regions of their own thicknesses span 0-10, 0-4, 4-10, 2-8 and 0-10 mm: the
-/// blocks are 0-2, 2-4, 4-8 and 8-10 mm with the regions present in each, and every
-/// region's deposits in a block add up to the block's height.
-#[test]
-fn five_material_regions_make_four_blocks() {
-    let dir = tempfile::tempdir().expect("tempdir");
-    // (name, x0, z0, z1, thickness)
-    let regions = [
-        ("matrix", 0.0, 0.0, 10.0, 0.5),
-        ("lower", 10.0, 0.0, 4.0, 0.2),
-        ("upper", 10.0, 4.0, 10.0, 1.5),
-        ("band", 20.0, 2.0, 8.0, 0.5),
-        ("shell", 30.0, 0.0, 10.0, 1.0),
-    ];
+/// Fig. 3 of the CMPM paper as five boxes side by side along x: (name, x0, z0, z1,
+/// thickness).
+const FIG3: [(&str, f64, f64, f64, f64); 5] = [
+    ("matrix", 0.0, 0.0, 10.0, 0.5),
+    ("lower", 10.0, 0.0, 4.0, 0.2),
+    ("upper", 10.0, 4.0, 10.0, 1.5),
+    ("band", 20.0, 2.0, 8.0, 0.5),
+    ("shell", 30.0, 0.0, 10.0, 1.0),
+];
+
+/// Fig. 3's pipeline in `dir`, its boxes written there, with `extra` tables.
+fn fig3(dir: &Path, extra: &str) -> String {
     let mut text =
         String::from("name = \"fig3\"\n[sequence]\nuse = \"work-cycles\"\n[slice]\nuse = \"adaptive\"\n");
-    for (name, x0, z0, z1, t) in regions {
+    for (name, x0, z0, z1, t) in FIG3 {
         write(
-            dir.path(),
+            dir,
             &format!("{name}.stl"),
             &box_stl([x0, 0.0, z0], [x0 + 10.0, 10.0, z1]),
         );
@@ -218,7 +214,18 @@ fn five_material_regions_make_four_blocks() {
         );
     }
     text += "[[output]]\nuse = \"json\"\npath = \"plan.json\"\n";
-    let plan = run_text(dir.path(), &text, "plan.json");
+    text + extra
+}
+
+/// The CMPM paper's Fig. 3 divides an object of five material regions into four
+/// blocks at the regions' heights, each block holding whole (parts of) regions. Here
+/// five regions of their own thicknesses span 0-10, 0-4, 4-10, 2-8 and 0-10 mm: the
+/// blocks are 0-2, 2-4, 4-8 and 8-10 mm with the regions present in each, and every
+/// region's deposits in a block add up to the block's height.
+#[test]
+fn five_material_regions_make_four_blocks() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let plan = run_text(dir.path(), &fig3(dir.path(), ""), "plan.json");
     let blocks = plan["sequence"]["blocks"].as_array().expect("blocks");
     let got: Vec<(f64, f64, Vec<u64>)> = blocks
         .iter()
@@ -292,4 +299,79 @@ fn auto_thicknesses_follow_the_base_cell_and_the_sampled_gradient() {
     let wrong = text.replace("cell = { inner = 1.0 }", "cell = { core = 1.0 }");
     let err = crate::support::text(&try_run_text(dir.path(), &wrong).stderr);
     assert!(err.contains("no part or region named `core`"), "{err}");
+}
+
+#[test]
+fn fig3_runs_the_hybrid_process_through_its_four_blocks() {
+    // Every layer of every block milled where a neighbouring box stands higher, sprayed
+    // with allowances (a finish allowance on the thin `lower` region), ground back; the
+    // run's check that no wheel levels a surface below another holds across the blocks,
+    // and every region ends at the top of its box.
+    let dir = tempfile::tempdir().expect("tempdir");
+    let process = "[[process]]\nuse = \"end-mill\"\ndiameter = 1.0\n\
+                   [[process]]\nuse = \"spray\"\nrough_allowance = 0.1\nfinish_allowance = { lower = 0.02 }\n\
+                   [[process]]\nuse = \"grind\"\npass = \"rough\"\n\
+                   [[process]]\nuse = \"grind\"\npass = \"finish\"\n";
+    let plan = run_text(dir.path(), &fig3(dir.path(), process), "plan.json");
+    let layers = plan["layers"].as_array().expect("layers");
+    let mut top = [None::<f64>; 5];
+    let mut milled = 0;
+    for (i, l) in layers.iter().enumerate() {
+        let r = l["region"].as_u64().expect("region") as usize;
+        let (z, t) = (l["z"].as_f64().expect("z"), l["thickness"].as_f64().expect("t"));
+        let ops = l["operations"].as_array().expect("operations");
+        // Boxes meet at x = 10, 20 and 30: `matrix` touches `lower`/`upper`, they touch
+        // `band`, `band` touches `shell`.
+        let x0 = FIG3[r].1;
+        let neighbours: Vec<usize> = (0..5)
+            .filter(|&q| q != r && (FIG3[q].1 - x0).abs() == 10.0)
+            .filter(|&q| FIG3[q].2 <= z - t / 2.0 && z - t / 2.0 <= FIG3[q].3)
+            .collect();
+        let higher: Vec<usize> = neighbours
+            .iter()
+            .copied()
+            .filter(|&q| top[q].is_some_and(|s| s > z - t + 1e-9))
+            .collect();
+        let mill = ops.iter().find(|o| o["kind"] == "end-mill");
+        assert_eq!(
+            mill.is_some(),
+            !higher.is_empty(),
+            "layer {i} ({}), higher {higher:?}",
+            FIG3[r].0
+        );
+        if let Some(m) = mill {
+            // Along the shared faces only, half a cutter inside this box.
+            let xs: Vec<f64> = higher
+                .iter()
+                .map(|&q| if FIG3[q].1 > x0 { x0 + 10.0 - 0.5 } else { x0 + 0.5 })
+                .collect();
+            for p in m["paths"].as_array().expect("paths") {
+                for q in p["points"].as_array().expect("points") {
+                    let x = q[0].as_f64().expect("x");
+                    assert!(
+                        xs.iter().any(|w| (x - w).abs() < 1e-6),
+                        "layer {i}: end-mill at x = {x}, not {xs:?}"
+                    );
+                }
+            }
+            milled += 1;
+        }
+        for o in ops {
+            if let Some(s) = o["surface"].as_f64() {
+                top[r] = Some(s);
+            }
+        }
+        assert!(
+            (top[r].expect("sprayed") - z).abs() < 1e-9,
+            "layer {i} ends at its height"
+        );
+    }
+    for (r, (name, _, _, z1, _)) in FIG3.iter().enumerate() {
+        assert!(
+            (top[r].expect("deposited") - z1).abs() < 1e-9,
+            "{name}: {:?}",
+            top[r]
+        );
+    }
+    assert!(milled > 20, "{milled}");
 }
