@@ -37,7 +37,7 @@ lamina_core::stage_options! {
         /// player (list this output after the `gcode` output)
         moves: bool = "true",
         /// the G-code output to read back (a path as given to its exporter); unset:
-        /// the first `.gcode`, `.gco`, `.g` or `.nc` output written before this one
+        /// the first `.gcode`, `.gco` or `.g` output written before this one (an `nc` file of a hybrid cell is not read unless named)
         gcode: Option<PathBuf>,
     }
 }
@@ -404,7 +404,7 @@ impl Sink {
         Ok(written.into_iter().find(|(n, _)| {
             n.extension()
                 .and_then(|e| e.to_str())
-                .is_some_and(|e| ["gcode", "gco", "g", "nc"].contains(&e.to_ascii_lowercase().as_str()))
+                .is_some_and(|e| ["gcode", "gco", "g"].contains(&e.to_ascii_lowercase().as_str()))
         }))
     }
 
