@@ -11,6 +11,7 @@ use serde::Deserialize;
 
 use crate::error::{Error, Result};
 use crate::geom::{BBox2, Contour};
+use crate::limits::{Limit, Limits};
 use crate::script::{ScriptArgs, ScriptFn};
 use crate::stage::StageConfig;
 use lamina_geom::cell::{CellArray, CellShape, PlacedCell};
@@ -134,6 +135,8 @@ pub struct Microstructure {
     reach: f64,
     /// The lattice's tilt (degrees), for the description.
     tilt: f64,
+    /// The run's limits: the lattice points a layer or a box visits are counted first.
+    limits: Limits,
 }
 
 impl Microstructure {
@@ -182,12 +185,13 @@ impl Microstructure {
             lattice: CellArray::tilted_about_x(spec.period, spec.origin, spec.tilt.to_radians()),
             reach: 0.5 * Vector3::from(spec.period).norm(),
             tilt: spec.tilt,
+            limits: config.limits,
         })
     }
 
     /// Spherical voids of `radius` on an upright lattice: the shorthand of stages that
     /// take `period`, `origin` and `void_radius`.
-    pub fn spheres(period: [f64; 3], origin: [f64; 3], radius: f64) -> Self {
+    pub fn spheres(period: [f64; 3], origin: [f64; 3], radius: f64, limits: Limits) -> Self {
         Self {
             shape: CellShape::Sphere,
             size: Value::Number(radius),
@@ -198,6 +202,7 @@ impl Microstructure {
             lattice: CellArray::upright(period, origin),
             reach: 0.5 * Vector3::from(period).norm(),
             tilt: 0.0,
+            limits,
         }
     }
 
@@ -288,18 +293,41 @@ impl Microstructure {
     /// of them (every n-th, in lattice order, when there are more): what the build
     /// direction is weighed over.
     pub fn cells_in(&self, lo: [f64; 3], hi: [f64; 3], limit: usize) -> Result<Vec<PlacedCell>> {
-        let points = self.lattice.in_box(Vector3::from(lo), Vector3::from(hi));
-        let stride = points.len().div_ceil(limit.max(1)).max(1);
+        let (lo, hi) = (Vector3::from(lo), Vector3::from(hi));
+        let count = self.lattice.count_in_box(lo, hi);
+        self.limits
+            .check(Limit::GridCells, count, "the base cells' lattice over the model")?;
+        let stride = ((count / limit.max(1) as f64).ceil() as usize).max(1);
         let mut out = Vec::new();
-        for (_, p) in points.into_iter().step_by(stride) {
-            out.extend(self.cell(p)?);
+        let mut seen = 0usize;
+        let mut failed = None;
+        self.lattice.in_box(lo, hi, |_, p| {
+            seen += 1;
+            if (seen - 1).is_multiple_of(stride) {
+                match self.cell(p) {
+                    Ok(c) => out.extend(c),
+                    Err(e) => {
+                        failed = Some(e);
+                        return false;
+                    }
+                }
+            }
+            true
+        });
+        match failed {
+            Some(e) => Err(e),
+            None => Ok(out),
         }
-        Ok(out)
     }
 
     /// The voids the horizontal plane at `z` cuts over the box `bbox`, counter-clockwise,
     /// in the order of their inserting points.
     pub fn voids(&self, z: f64, bbox: &BBox2) -> Result<Vec<Contour>> {
+        self.limits.check(
+            Limit::GridCells,
+            self.lattice.count_near_plane(z, self.reach, bbox),
+            "the base cells' lattice points near a layer",
+        )?;
         let mut out = Vec::new();
         for (_, p) in self.lattice.near_plane(z, self.reach, bbox) {
             if let Some(cell) = self.cell(p)?

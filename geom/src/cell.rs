@@ -252,8 +252,10 @@ impl CellArray {
         self.rotation * l
     }
 
-    /// The inserting points inside the box `lo..hi` (machine frame), in a fixed order.
-    pub fn in_box(&self, lo: Vector3<f64>, hi: Vector3<f64>) -> Vec<([i64; 3], Vector3<f64>)> {
+    /// The lattice indices whose points may lie in the box `lo..hi` (machine frame):
+    /// the box's corners mapped into the lattice's frame. Empty where a bound is not
+    /// finite.
+    fn index_ranges(&self, lo: Vector3<f64>, hi: Vector3<f64>) -> [(i64, i64); 3] {
         let inverse = self.rotation.transpose();
         let mut l0 = [f64::INFINITY; 3];
         let mut l1 = [f64::NEG_INFINITY; 3];
@@ -270,55 +272,71 @@ impl CellArray {
                 l1[a] = l1[a].max(t);
             }
         }
-        let range = |a: usize| (l0[a].ceil() as i64)..=(l1[a].floor() as i64);
-        let mut out = Vec::new();
-        for k in range(2) {
-            for j in range(1) {
-                for i in range(0) {
+        let mut out = [(0, -1); 3];
+        for a in 0..3 {
+            if l0[a].is_finite() && l1[a].is_finite() && l0[a].abs() < 1e15 && l1[a].abs() < 1e15 {
+                out[a] = (l0[a].ceil() as i64, l1[a].floor() as i64);
+            } else {
+                return [(0, -1); 3];
+            }
+        }
+        out
+    }
+
+    /// How many lattice indices [`Self::in_box`] visits for the box `lo..hi`: what a
+    /// caller checks against its limits first.
+    pub fn count_in_box(&self, lo: Vector3<f64>, hi: Vector3<f64>) -> f64 {
+        self.index_ranges(lo, hi)
+            .iter()
+            .map(|&(a, b)| (b - a + 1).max(0) as f64)
+            .product()
+    }
+
+    /// Calls `f` with every inserting point inside the box `lo..hi` (machine frame)
+    /// and its lattice indices, in a fixed order; `f` returns false to stop.
+    pub fn in_box(
+        &self,
+        lo: Vector3<f64>,
+        hi: Vector3<f64>,
+        mut f: impl FnMut([i64; 3], Vector3<f64>) -> bool,
+    ) {
+        let [(i0, i1), (j0, j1), (k0, k1)] = self.index_ranges(lo, hi);
+        for k in k0..=k1 {
+            for j in j0..=j1 {
+                for i in i0..=i1 {
                     let p = self.point(i, j, k);
-                    if (0..3).all(|a| p[a] >= lo[a] && p[a] <= hi[a]) {
-                        out.push(([i, j, k], p));
+                    if (0..3).all(|a| p[a] >= lo[a] && p[a] <= hi[a]) && !f([i, j, k], p) {
+                        return;
                     }
                 }
             }
         }
-        out
+    }
+
+    /// The box of the search band around the horizontal plane at `z` over `bbox`.
+    fn band(z: f64, reach: f64, bbox: &BBox2) -> (Vector3<f64>, Vector3<f64>) {
+        (
+            Vector3::new(bbox.min.x - reach, bbox.min.y - reach, z - reach),
+            Vector3::new(bbox.max.x + reach, bbox.max.y + reach, z + reach),
+        )
+    }
+
+    /// How many lattice indices [`Self::near_plane`] visits.
+    pub fn count_near_plane(&self, z: f64, reach: f64, bbox: &BBox2) -> f64 {
+        let (lo, hi) = Self::band(z, reach, bbox);
+        self.count_in_box(lo, hi)
     }
 
     /// The inserting points within `reach` of the horizontal plane at `z`, over the
     /// XY box `bbox` grown by `reach`: the search band of Fig. 5. Each comes with its
     /// lattice indices, in a fixed order.
     pub fn near_plane(&self, z: f64, reach: f64, bbox: &BBox2) -> Vec<([i64; 3], Vector3<f64>)> {
-        let inverse = self.rotation.transpose();
-        let (x0, x1) = (bbox.min.x - reach, bbox.max.x + reach);
-        let (y0, y1) = (bbox.min.y - reach, bbox.max.y + reach);
-        let mut lo = [f64::INFINITY; 3];
-        let mut hi = [f64::NEG_INFINITY; 3];
-        for corner in 0..8 {
-            let p = Vector3::new(
-                if corner & 1 == 0 { x0 } else { x1 },
-                if corner & 2 == 0 { y0 } else { y1 },
-                if corner & 4 == 0 { z - reach } else { z + reach },
-            );
-            let l = inverse * p;
-            for a in 0..3 {
-                let t = (l[a] - self.origin[a]) / self.period[a];
-                lo[a] = lo[a].min(t);
-                hi[a] = hi[a].max(t);
-            }
-        }
-        let range = |a: usize| (lo[a].ceil() as i64)..=(hi[a].floor() as i64);
+        let (lo, hi) = Self::band(z, reach, bbox);
         let mut out = Vec::new();
-        for k in range(2) {
-            for j in range(1) {
-                for i in range(0) {
-                    let p = self.point(i, j, k);
-                    if (p.z - z).abs() <= reach && p.x >= x0 && p.x <= x1 && p.y >= y0 && p.y <= y1 {
-                        out.push(([i, j, k], p));
-                    }
-                }
-            }
-        }
+        self.in_box(lo, hi, |ijk, p| {
+            out.push((ijk, p));
+            true
+        });
         out
     }
 }

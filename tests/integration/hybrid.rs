@@ -696,3 +696,24 @@ fn the_nc_file_is_refused_where_the_cell_could_not_run_the_plan() {
     let err = text(&try_run_text(dir.path(), &both).stderr);
     assert!(err.contains("give `cell` or `tools`, not both"), "{err}");
 }
+
+#[test]
+fn options_that_would_exhaust_the_machine_stop_at_the_grid_limit() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let pipe = std::fs::read_to_string(pipelines().join("pipe-work-cycles.toml")).expect("pipe");
+    // Spray passes a nanometre apart.
+    let fine = pipe.replace(
+        "inclusions = { outer = { SiC = 0.2 } }",
+        "inclusions = { outer = { SiC = 0.2 } }\ndiameter = 1e-9",
+    );
+    assert_ne!(fine, pipe);
+    let err = text(&try_run_text(dir.path(), &fine).stderr);
+    assert!(err.contains("grid_cells"), "{err}");
+    // A lattice a micrometre apart over the pipe's layers.
+    // (The engraving's lattice; the bitmap keeps a coarse one.)
+    let dense = CELLS
+        .replacen("CELL", "{ size = 1e-4, period = [1e-3, 1e-3, 1e-3] }", 1)
+        .replace("CELL", "{ size = 0.3, period = [1.0, 1.0, 1.0] }");
+    let err = text(&try_run_text(dir.path(), &dense).stderr);
+    assert!(err.contains("grid_cells"), "{err}");
+}

@@ -3,7 +3,7 @@
 
 use i_overlay::mesh::float::outline::offset::OutlineOffset;
 use i_overlay::mesh::float::style::{LineJoin, OutlineStyle};
-use lamina_core::{LayerPlan, OperationPath, Point2, Polygon};
+use lamina_core::{LayerPlan, Limit, Limits, OperationPath, Point2, Polygon, Result};
 use lamina_geom::ring::{polygons_of, shape_of};
 use lamina_geom::{Shapes, simplify_ring};
 
@@ -66,15 +66,22 @@ pub fn offset(polygons: &[Polygon], d: f64) -> Vec<Polygon> {
 
 /// Passes along x, `spacing` apart, over `polygons` (even-odd inside), at height `z`:
 /// the lines at the middle of each band of `spacing`, cut where they cross a boundary,
-/// every other line reversed so the tool zig-zags.
-pub fn raster(polygons: &[Polygon], spacing: f64, z: f64) -> Vec<OperationPath> {
+/// every other line reversed so the tool zig-zags. The number of lines is checked
+/// against the run's grid limit first.
+pub fn raster(polygons: &[Polygon], spacing: f64, z: f64, limits: &Limits) -> Result<Vec<OperationPath>> {
     let Some(bbox) = polygons.iter().map(Polygon::bbox).reduce(|a, b| a.union(&b)) else {
-        return Vec::new();
+        return Ok(Vec::new());
     };
     if !spacing.is_finite() || spacing <= 0.0 || bbox.is_empty() {
-        return Vec::new();
+        return Ok(Vec::new());
     }
-    let lines = (bbox.height() / spacing).ceil().max(1.0) as usize;
+    let count = (bbox.height() / spacing).ceil().max(1.0);
+    limits.check(
+        Limit::GridCells,
+        count,
+        &format!("passes {spacing} mm apart over the layer"),
+    )?;
+    let lines = count as usize;
     // Centre the lines on the box, so both edges get the same margin.
     let y0 = bbox.center().y - (lines as f64 - 1.0) * spacing / 2.0;
     let mut out = Vec::new();
@@ -110,7 +117,7 @@ pub fn raster(polygons: &[Polygon], spacing: f64, z: f64) -> Vec<OperationPath> 
             closed: false,
         }));
     }
-    out
+    Ok(out)
 }
 
 /// Distance from `p` to the area of `polygons` (0 inside).
@@ -183,7 +190,7 @@ mod tests {
         let mut p = square(0.0, 0.0, 10.0);
         p.holes
             .push(Contour::rectangle(Point2::new(4.0, 0.25), Point2::new(6.0, 9.75)).oriented(false));
-        let paths = raster(&[p], 1.0, 2.0);
+        let paths = raster(&[p], 1.0, 2.0, &Limits::default()).expect("within limits");
         // Ten lines at y = 0.5 .. 9.5, each cut in two by the hole.
         assert_eq!(paths.len(), 20);
         let length: f64 = paths.iter().map(OperationPath::length).sum();

@@ -13,8 +13,8 @@ use lamina_core::microstructure::{CellSpec, Microstructure};
 use lamina_core::pipeline::TableRef;
 use lamina_core::stage::{AnyStage, Process, StageConfig, StageInfo, StageKind};
 use lamina_core::{
-    Contour, LayerPlan, Operation, OperationPath, OperationTool, Point2, Polygon, ProcessContext, Result,
-    StageFactory,
+    Contour, LayerPlan, Limit, Operation, OperationPath, OperationTool, Point2, Polygon, ProcessContext,
+    Result, StageFactory,
 };
 use lamina_geom::Shapes;
 use lamina_geom::cell::inset_convex;
@@ -58,6 +58,13 @@ enum Void {
 }
 
 impl Void {
+    fn bbox(&self) -> lamina_core::BBox2 {
+        match self {
+            Void::Whole(c) => c.bbox(),
+            Void::Cut(p) => p.bbox(),
+        }
+    }
+
     fn area(&self) -> f64 {
         match self {
             Void::Whole(c) => c.area(),
@@ -93,6 +100,7 @@ struct Engrave {
     cells: Microstructure,
     tool: OperationTool,
     table: TableRef,
+    limits: lamina_core::Limits,
 }
 
 impl Engrave {
@@ -156,6 +164,19 @@ impl Process for Engrave {
             .unwrap_or(plan.z);
         let spot = self.tool.diameter;
         let step = spot * (1.0 - self.options.overlap);
+        // Rings to come, at most a void's width over the step each: counted first.
+        let rings: f64 = voids
+            .iter()
+            .map(|v| {
+                let b = v.bbox();
+                (b.width().min(b.height()) / 2.0 / step).ceil() + 1.0
+            })
+            .sum();
+        self.limits.check(
+            Limit::GridCells,
+            rings,
+            &format!("laser rings {step} mm apart in the layer's voids"),
+        )?;
         let mut paths = Vec::new();
         for v in &voids {
             paths.extend(v.rings(spot / 2.0, step).into_iter().map(|c| OperationPath {
@@ -214,7 +235,7 @@ fn build(config: &StageConfig<'_>) -> Result<AnyStage> {
                     "the laser spot must be smaller than the void's radius",
                 ));
             }
-            Microstructure::spheres(options.period, options.origin, options.void_radius)
+            Microstructure::spheres(options.period, options.origin, options.void_radius, config.limits)
         }
     };
     if !(options.overlap.is_finite() && (0.0..0.9).contains(&options.overlap)) {
@@ -236,6 +257,7 @@ fn build(config: &StageConfig<'_>) -> Result<AnyStage> {
         cells,
         tool,
         table: config.table.clone(),
+        limits: config.limits,
     })))
 }
 

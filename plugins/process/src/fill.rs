@@ -29,6 +29,7 @@ struct Fill {
     options: Options,
     tool: OperationTool,
     table: TableRef,
+    limits: lamina_core::Limits,
 }
 
 impl Process for Fill {
@@ -58,7 +59,7 @@ impl Process for Fill {
             .unwrap_or(plan.z);
         let mut op = Operation::new("fill", region);
         op.tool = Some(self.tool.clone());
-        op.paths = raster(&layer_area(plan), self.tool.diameter, surface);
+        op.paths = raster(&layer_area(plan), self.tool.diameter, surface, &self.limits)?;
         op.values.insert("voids".into(), voids);
         op.values.insert("void_volume".into(), void_area * depth);
         plan.operations.push(op);
@@ -83,6 +84,7 @@ fn build(config: &StageConfig<'_>) -> Result<AnyStage> {
         options,
         tool,
         table: config.table.clone(),
+        limits: config.limits,
     })))
 }
 

@@ -51,6 +51,7 @@ struct Grind {
     options: Options,
     tool: OperationTool,
     table: TableRef,
+    limits: lamina_core::Limits,
 }
 
 impl Process for Grind {
@@ -95,7 +96,7 @@ impl Process for Grind {
         op.tool = Some(self.tool.clone());
         op.surface = Some(target);
         op.levels = true;
-        op.paths = raster(&offset(&area, step / 2.0 + 0.01), step, target);
+        op.paths = raster(&offset(&area, step / 2.0 + 0.01), step, target, &self.limits)?;
         op.values.insert("from".into(), now);
         op.values.insert("removed".into(), now - target);
         plan.operations.push(op);
@@ -123,6 +124,7 @@ fn build(config: &StageConfig<'_>) -> Result<AnyStage> {
         options,
         tool,
         table: config.table.clone(),
+        limits: config.limits,
     })))
 }
 

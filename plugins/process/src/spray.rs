@@ -41,6 +41,7 @@ struct Spray {
     options: Options,
     tool: OperationTool,
     table: TableRef,
+    limits: lamina_core::Limits,
 }
 
 impl Process for Spray {
@@ -60,7 +61,12 @@ impl Process for Spray {
         let mut op = Operation::new("spray", plan.material_region);
         op.tool = Some(self.tool.clone());
         op.surface = Some(surface);
-        op.paths = raster(&area, self.tool.diameter * (1.0 - o.overlap), surface);
+        op.paths = raster(
+            &area,
+            self.tool.diameter * (1.0 - o.overlap),
+            surface,
+            &self.limits,
+        )?;
         op.values.insert("thickness".into(), plan.thickness);
         op.values.insert("rough_allowance".into(), o.rough_allowance);
         op.values.insert("finish_allowance".into(), finish);
@@ -111,6 +117,7 @@ fn build(config: &StageConfig<'_>) -> Result<AnyStage> {
         options,
         tool,
         table: config.table.clone(),
+        limits: config.limits,
     })))
 }
 
