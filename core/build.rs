@@ -16,6 +16,7 @@ const WIRE_SOURCES: &[&str] = &[
     "src/model.rs",
     "src/plugin/wire/error.rs",
     "src/plugin/wire/mod.rs",
+    "src/process.rs",
     "src/stage.rs",
 ];
 

@@ -35,8 +35,9 @@ pub struct CellSpec {
     /// The cell's size (mm): a sphere's or cylinder's radius, a box's half-edge, times
     /// `aspect` along each of the cell's axes.
     pub size: NumberOrScript,
-    /// Multipliers of `size` along the cell's x, y and z (a cylinder's half-height is
-    /// `size * aspect[2]`).
+    /// Multipliers of `size` along the cell's x, y and z (a cylinder's radius is
+    /// `size * aspect[0]` and its half-height `size * aspect[2]`; `aspect[1]` is not
+    /// used for it).
     #[serde(default = "ones")]
     pub aspect: [f64; 3],
     /// Turn of the cell about the vertical (degrees).

@@ -163,7 +163,7 @@ pub struct SurfaceCheck {
     names: Vec<String>,
 }
 
-/// Heights closer than this are equal (mm): a micrometre, the sequence's unit.
+/// Heights closer than this are equal (mm): half a micrometre, the sequence's unit.
 const HEIGHT_TOLERANCE: f64 = 5e-4;
 
 impl SurfaceCheck {
@@ -186,9 +186,12 @@ impl SurfaceCheck {
         self.names.get(r).cloned().unwrap_or_else(|| format!("#{r}"))
     }
 
-    /// Takes one layer's operations; an error names the operation and the regions.
+    /// Takes one layer's operations; an error names the operation and the regions. A
+    /// layer whose operations leave its own region's surface alone (none of them sets
+    /// it) is taken to end at its design height.
     pub fn layer(&mut self, plan: &crate::model::LayerPlan) -> Result<(), String> {
-        let mut touched = None;
+        let own = plan.material_region.filter(|&r| r < self.surfaces.len());
+        let mut touched_own = false;
         for (i, op) in plan.operations.iter().enumerate() {
             let (Some(r), Some(s)) = (op.region, op.surface) else {
                 continue;
@@ -225,11 +228,14 @@ impl SurfaceCheck {
                 }
             }
             self.surfaces[r] = Some(s);
-            touched = Some(r);
+            touched_own |= Some(r) == own;
         }
-        if let (Some(r), Some(own)) = (touched, plan.material_region)
-            && r == own
-            && let Some(s) = self.surfaces[r]
+        let Some(r) = own else { return Ok(()) };
+        if !touched_own {
+            self.surfaces[r] = Some(plan.z);
+            return Ok(());
+        }
+        if let Some(s) = self.surfaces[r]
             && (s - plan.z).abs() > HEIGHT_TOLERANCE
         {
             return Err(format!(
@@ -310,6 +316,20 @@ mod tests {
             err.contains("levels region `f` to 0.300 mm while region `m` stands at 0.400 mm"),
             "{err}"
         );
+    }
+
+    #[test]
+    fn a_layer_without_operations_on_its_region_ends_at_its_height_and_counts() {
+        let seq = sequence();
+        let mut check = SurfaceCheck::new(Some(&seq));
+        // m's layer has no operation of its own (deposited otherwise): it stands at 0.4.
+        check.layer(&layer(0, 0.4, &[])).expect("no operations");
+        assert_eq!(check.surfaces(), &[Some(0.4), None]);
+        // So grinding f to 0.3 beside it is refused.
+        let err = check
+            .layer(&layer(1, 0.3, &[("spray", 0.4, false), ("grind", 0.3, true)]))
+            .expect_err("m stands higher");
+        assert!(err.contains("region `m` stands at 0.400 mm"), "{err}");
     }
 
     #[test]

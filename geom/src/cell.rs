@@ -324,7 +324,32 @@ impl CellArray {
     /// How many lattice indices [`Self::near_plane`] visits.
     pub fn count_near_plane(&self, z: f64, reach: f64, bbox: &BBox2) -> f64 {
         let (lo, hi) = Self::band(z, reach, bbox);
-        self.count_in_box(lo, hi)
+        let [(i0, i1), (j0, j1), _] = self.index_ranges(lo, hi);
+        // Each (i, j) column crosses the band in at most this many rows.
+        let rows = (2.0 * reach / (self.period[2] * self.rotation[(2, 2)].abs())).ceil() + 1.0;
+        (i1 - i0 + 1).max(0) as f64 * (j1 - j0 + 1).max(0) as f64 * rows
+    }
+
+    /// The rows `k` of column `(i, j)` whose points lie within `reach` of the plane at
+    /// `z`: solved from the plane's equation, so a tilted lattice visits only the rows
+    /// near the plane (the two auxiliary planes of Fig. 5), not the box around them.
+    fn rows_near(&self, i: i64, j: i64, z: f64, reach: f64) -> Option<(i64, i64)> {
+        let r = self.rotation.row(2);
+        let base = r[0] * (self.origin[0] + i as f64 * self.period[0])
+            + r[1] * (self.origin[1] + j as f64 * self.period[1])
+            + r[2] * self.origin[2];
+        let step = r[2] * self.period[2];
+        // A lattice tilted less than a right angle climbs with k (`CellSpec` keeps
+        // tilts within 90 degrees).
+        if step.abs() < 1e-12 {
+            return None;
+        }
+        let (a, b) = ((z - reach - base) / step, (z + reach - base) / step);
+        let (lo, hi) = (a.min(b), a.max(b));
+        if !(lo.is_finite() && hi.is_finite() && lo.abs() < 1e15 && hi.abs() < 1e15) {
+            return None;
+        }
+        Some((lo.ceil() as i64, hi.floor() as i64))
     }
 
     /// The inserting points within `reach` of the horizontal plane at `z`, over the
@@ -332,11 +357,23 @@ impl CellArray {
     /// lattice indices, in a fixed order.
     pub fn near_plane(&self, z: f64, reach: f64, bbox: &BBox2) -> Vec<([i64; 3], Vector3<f64>)> {
         let (lo, hi) = Self::band(z, reach, bbox);
+        let [(i0, i1), (j0, j1), _] = self.index_ranges(lo, hi);
         let mut out = Vec::new();
-        self.in_box(lo, hi, |ijk, p| {
-            out.push((ijk, p));
-            true
-        });
+        for j in j0..=j1 {
+            for i in i0..=i1 {
+                let Some((k0, k1)) = self.rows_near(i, j, z, reach) else {
+                    continue;
+                };
+                for k in k0..=k1 {
+                    let p = self.point(i, j, k);
+                    if (0..3).all(|a| p[a] >= lo[a] && p[a] <= hi[a]) {
+                        out.push(([i, j, k], p));
+                    }
+                }
+            }
+        }
+        // In the lattice's order, rows first, as a box walk gives them.
+        out.sort_by_key(|(ijk, _)| (ijk[2], ijk[1], ijk[0]));
         out
     }
 }

@@ -188,8 +188,17 @@ fn every_regions_surface_is_sprayed_high_ground_back_and_ends_at_its_design_heig
 
 #[test]
 fn machining_paths_keep_their_tools_radius_from_the_boundaries() {
+    // A 4 mm wheel, so that covering the ring takes passes where they belong (the
+    // pipe's own 20 mm wheel covers it from one line through the centre); the NC file
+    // is left out, its cell has the 20 mm wheel.
     let dir = tempfile::tempdir().expect("tempdir");
-    let plan = run_pipe(dir.path());
+    let pipe = std::fs::read_to_string(pipelines().join("pipe-work-cycles.toml")).expect("pipe");
+    let small = pipe
+        .replace("pass = \"rough\"\n", "pass = \"rough\"\ndiameter = 4.0\n")
+        .replace("pass = \"finish\"\n", "pass = \"finish\"\ndiameter = 4.0\n")
+        .replace("cell = \"cmpm-hybrid\"", "tools = { cup-wheel = 3 }");
+    assert_eq!(small.matches("diameter = 4.0").count(), 2);
+    let plan = crate::support::run_text(dir.path(), &small, "pipe-work-cycles.json");
     let layers = plan["layers"].as_array().expect("layers");
     let surfaces = design_surfaces(layers, 3);
     let (mut milled, mut ground, mut engraved) = (0, 0, 0);
@@ -294,6 +303,37 @@ fn machining_paths_keep_their_tools_radius_from_the_boundaries() {
                         }
                     }
                     assert_eq!(f(&o["values"]["voids"]) as i32, want, "layer {i}");
+                    // The rings clear each whole void: every point of it lies within half
+                    // a spot of a ring (checked on the first layers, at every depth of cut).
+                    let rings: Vec<Vec<[f64; 2]>> = paths.iter().map(points).collect();
+                    for x in (-8i32..=8).filter(|_| engraved < 4) {
+                        for y in -8i32..=8 {
+                            let (cx, cy) = (f64::from(x), f64::from(y));
+                            let rho = cx.hypot(cy);
+                            if rho - rc < ri + 0.01 || rho + rc > ro - 0.01 {
+                                continue;
+                            }
+                            // The void is the inscribed 32-gon of the circle.
+                            let inner = rc * (std::f64::consts::PI / 32.0).cos();
+                            for s in 0..12 {
+                                let d = inner * f64::from(s) / 12.0;
+                                for a in 0..24 {
+                                    let phi = f64::from(a) * std::f64::consts::PI / 12.0;
+                                    let p = [cx + d * phi.cos(), cy + d * phi.sin()];
+                                    let near = rings.iter().any(|r| {
+                                        (0..r.len()).any(|k| {
+                                            segment_distance(p, r[k], r[(k + 1) % r.len()])
+                                                <= spot / 2.0 + 1e-9
+                                        })
+                                    });
+                                    assert!(
+                                        near,
+                                        "layer {i}: {p:?} in the void at ({cx}, {cy}) is not engraved"
+                                    );
+                                }
+                            }
+                        }
+                    }
                     engraved += 1;
                 }
                 _ => {}

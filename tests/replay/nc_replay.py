@@ -25,8 +25,8 @@ Checks (each violation names its line):
 - every feed move with the length offset of the loaded tool;
 - every feed move in XY works (a tool that is off does not crawl over the part);
 - no rapid move in XY while the spray, the filler or the laser is on;
-- no rapid move in XY below the highest height a rotating tool has worked at, which
-  is where the part's surface stands;
+- no rapid move (in XY or down) ending below the highest height a rotating tool has
+  worked at, which is where the part's surface stands;
 - the program ends (M2/M30) with the spindle stopped and every output off.
 
 Prints a JSON report: the working length per tool number (mm), the tool changes, the
@@ -167,11 +167,12 @@ def main():
                             state["top"] = max(state["top"], target[2])
                     else:
                         bad(n, f"feed move in XY with tool {tool} ({kind}) not working")
-            elif moves_xy:
-                if kind in ("spray", "dispenser", "laser") and working(tool):
+            else:
+                if moves_xy and kind in ("spray", "dispenser", "laser") and working(tool):
                     bad(n, f"rapid move with the {kind} on")
+                # A rapid move, across or down, ends above every surface worked so far.
                 if target[2] is not None and target[2] < state["top"] - 1e-9:
-                    bad(n, f"rapid move at Z{target[2]} below the surface at {state['top']}")
+                    bad(n, f"rapid move to Z{target[2]} below the surface at {state['top']}")
             state["pos"] = target
     if not state["ended"]:
         bad(len(text), "the program does not end with M2 or M30")

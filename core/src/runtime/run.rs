@@ -230,13 +230,13 @@ impl Engine {
                     say(d.clone());
                 }
                 regions += plan.parts.iter().map(|p| p.regions.len()).sum::<usize>();
-                if !plan.operations.is_empty() {
+                if !self.process.is_empty() {
                     surface_check
                         .layer(&plan)
                         .map_err(|m| Error::stage("process", m).in_layer(plan.index, plan.z))?;
-                    for op in &plan.operations {
-                        *operations.entry(op.kind.clone()).or_default() += 1;
-                    }
+                }
+                for op in &plan.operations {
+                    *operations.entry(op.kind.clone()).or_default() += 1;
                 }
                 if let Some(t) = plan.build_time {
                     *build_time.get_or_insert(0.0) += t;

@@ -43,7 +43,7 @@ lamina_core::stage_options! {
     struct Options {
         /// what to minimise: "surface-angle" (sum A_i alpha_i over the object's surfaces), "base-cell" (the same over the faces of the microstructure's base cells) or "height"
         criterion: Criterion = r#""surface-angle""#,
-        /// the base cell for "base-cell", in the model's own coordinates: `{ shape = "box" | "cylinder", size, aspect, turn, lean, insert, period, origin, tilt }`
+        /// the base cell for "base-cell", in the model's own coordinates (before it is turned; `engrave` and `bitmap` read theirs in the build's): `{ shape = "box" | "cylinder", size, aspect, turn, lean, insert, period, origin, tilt }`
         cell: Option<CellSpec>,
         /// most cells weighed for "base-cell" (every n-th inserting point in the model's box beyond that)
         cells: usize = "2000",
@@ -151,6 +151,13 @@ impl Orienter for Candidates {
                     .fold(lamina_core::BBox3::EMPTY, |b, m| b.union(&m.bbox()));
                 let (lo, hi) = (b.min.coords, b.max.coords);
                 let cells = m.cells_in([lo.x, lo.y, lo.z], [hi.x, hi.y, hi.z], *limit)?;
+                if cells.is_empty() {
+                    return Err(Error::stage(
+                        "orient:candidates",
+                        "the base-cell criterion found no cell in the model's box (is the lattice's \
+                         origin or the inserting function right?): nothing to weigh",
+                    ));
+                }
                 cells
                     .iter()
                     .flat_map(|c| c.facets())

@@ -52,6 +52,34 @@ pub struct CellTool {
     pub max_power: Option<f64>,
 }
 
+/// Checks that every number of `op` can be written for a controller: operations may
+/// come from a plugin, and a NaN or an infinity is refused, not written.
+pub fn readable(op: &Operation) -> Result<()> {
+    let finite = op.surface.is_none_or(f64::is_finite)
+        && op.values.values().all(|v| v.is_finite())
+        && op
+            .paths
+            .iter()
+            .all(|p| p.z.is_finite() && p.points.iter().all(|q| q.x.is_finite() && q.y.is_finite()));
+    let tool_ok = op.tool.as_ref().is_none_or(|t| {
+        t.feed.is_finite()
+            && t.feed > 0.0
+            && t.spindle.is_none_or(|s| s.is_finite() && s > 0.0)
+            && t.power.is_none_or(|p| p.is_finite() && p > 0.0)
+    });
+    if finite && tool_ok {
+        Ok(())
+    } else {
+        Err(Error::stage(
+            "export:nc",
+            format!(
+                "`{}`: a height, a point, a value or its tool's feed, speed or power is not a finite positive number",
+                op.kind
+            ),
+        ))
+    }
+}
+
 impl Cell {
     /// A built-in cell by name, or a file (relative to `base_dir`).
     pub fn load(reference: &str, base_dir: &Path) -> std::result::Result<Cell, String> {
@@ -95,6 +123,15 @@ impl Cell {
             if !(t.diameter.is_finite() && t.diameter > 0.0) {
                 return Err(format!("tools[{i}] (`{}`): diameter must be positive", t.name));
             }
+            for (key, v) in [("max_spindle", t.max_spindle), ("max_power", t.max_power)] {
+                if v.is_some_and(|v| !(v.is_finite() && v > 0.0)) {
+                    return Err(format!("tools[{i}] (`{}`): {key} must be positive", t.name));
+                }
+            }
+        }
+        let o = self.outputs;
+        if o.spray == o.filler || o.spray == o.vacuum || o.filler == o.vacuum {
+            return Err("outputs: the spray gun, the filler and the vacuum need outputs of their own".into());
         }
         Ok(())
     }
@@ -105,8 +142,9 @@ impl Cell {
 
     /// Checks that the cell can run `op`; the error says what the machine lacks.
     pub fn admits(&self, op: &Operation, standoff: f64) -> Result<()> {
-        let Some(tool) = &op.tool else { return Ok(()) };
         let fail = |m: String| Err(Error::stage("export:nc", format!("`{}`: {m}", op.kind)));
+        readable(op)?;
+        let Some(tool) = &op.tool else { return Ok(()) };
         let Some(own) = self.tool(&tool.name) else {
             let names: Vec<&str> = self.tools.iter().map(|t| t.name.as_str()).collect();
             return fail(format!(

@@ -4,7 +4,8 @@
 //! function. The voids the layer's plane cuts (at mid-layer, where the contours are
 //! cut) are engraved by a laser from the surface down through the layer: rings inside
 //! each void's outline, the first half a spot in, the next ones a spot less the overlap
-//! further, until the void is cleared.
+//! further, and one at the deepest point where a core would be left, so the void is
+//! cleared. A void narrower than the spot gets none, and the layer says so.
 
 use i_overlay::core::fill_rule::FillRule;
 use i_overlay::core::overlay_rule::OverlayRule;
@@ -72,26 +73,49 @@ impl Void {
         }
     }
 
-    /// The laser's rings: the outline `first` in, then every `step` further, while
-    /// anything is left.
-    fn rings(&self, first: f64, step: f64) -> Vec<Contour> {
+    /// The outline moved in by `d`: empty once nothing is left.
+    fn inset(&self, d: f64) -> Vec<Contour> {
+        match self {
+            Void::Whole(c) => inset_convex(c, d).into_iter().collect(),
+            Void::Cut(p) => offset(std::slice::from_ref(p), -d)
+                .iter()
+                .flat_map(|q| q.contours().cloned().collect::<Vec<_>>())
+                .collect(),
+        }
+    }
+
+    /// The laser's rings: the outline half a `spot` in, then every `step` further,
+    /// while anything is left; where a core lies deeper than the last ring reaches
+    /// (its inset plus half a spot), one more ring at the deepest inset, found by
+    /// bisection, so the void is cleared. Empty for a void narrower than the spot.
+    fn rings(&self, spot: f64, step: f64) -> Vec<Contour> {
         let mut out = Vec::new();
-        let mut inset = first;
+        let mut inset = spot / 2.0;
+        let mut last = None;
         loop {
-            let before = out.len();
-            match self {
-                Void::Whole(c) => out.extend(inset_convex(c, inset)),
-                Void::Cut(p) => {
-                    for q in offset(std::slice::from_ref(p), -inset) {
-                        out.extend(q.contours().cloned());
-                    }
-                }
+            let ring = self.inset(inset);
+            if ring.is_empty() {
+                break;
             }
-            if out.len() == before {
-                return out;
-            }
+            out.extend(ring);
+            last = Some(inset);
             inset += step;
         }
+        if let Some(d) = last
+            && !self.inset(d + spot / 2.0).is_empty()
+        {
+            let (mut lo, mut hi) = (d + spot / 2.0, inset);
+            for _ in 0..16 {
+                let mid = (lo + hi) / 2.0;
+                if self.inset(mid).is_empty() {
+                    hi = mid;
+                } else {
+                    lo = mid;
+                }
+            }
+            out.extend(self.inset(lo));
+        }
+        out
     }
 }
 
@@ -131,7 +155,7 @@ impl Engrave {
         }
         if !cut.is_empty() {
             let clip: Shapes = area.iter().map(shape_of).collect();
-            let clipped: Shapes = cut.overlay(&clip, OverlayRule::Intersect, FillRule::EvenOdd);
+            let clipped: Shapes = cut.overlay(&clip, OverlayRule::Intersect, FillRule::NonZero);
             out.extend(
                 polygons_of(&clipped)
                     .into_iter()
@@ -178,12 +202,26 @@ impl Process for Engrave {
             &format!("laser rings {step} mm apart in the layer's voids"),
         )?;
         let mut paths = Vec::new();
+        let mut narrow = 0;
         for v in &voids {
-            paths.extend(v.rings(spot / 2.0, step).into_iter().map(|c| OperationPath {
+            let rings = v.rings(spot, step);
+            if rings.is_empty() {
+                narrow += 1;
+            }
+            paths.extend(rings.into_iter().map(|c| OperationPath {
                 z: surface,
                 points: c.points,
                 closed: true,
             }));
+        }
+        if narrow > 0 {
+            plan.warn(
+                StageKind::Process,
+                format!(
+                    "engrave: {narrow} of {} voids are narrower than the {spot} mm laser spot and get no ring",
+                    voids.len()
+                ),
+            );
         }
         let mut op = Operation::new("engrave", plan.material_region);
         op.tool = Some(self.tool.clone());

@@ -6,7 +6,7 @@
 //! checks that as the layers pass.
 //!
 //! The wheel's centre runs along x in lines `stepover` apart over the area grown by
-//! half a stepover: every point of the area then lies within half a stepover, less than
+//! half a stepover: every point of the area then lies within half a stepover, at most
 //! the wheel's radius, of the centre's path, so the face passes over all of it.
 
 use lamina_core::pipeline::TableRef;

@@ -71,7 +71,12 @@ impl Process for EndMill {
         let mut paths = Vec::new();
         for k in 0..o.passes {
             let inset = radius + k as f64 * o.stepover * self.tool.diameter;
-            for ring in offset(&area, -inset).iter().flat_map(|p| p.contours()) {
+            let inner = offset(&area, -inset);
+            if inner.is_empty() {
+                // Nothing left for further passes.
+                break;
+            }
+            for ring in inner.iter().flat_map(|p| p.contours()) {
                 for (points, closed) in adjoining_runs(&ring.points, &higher, inset + o.gap, 0.25) {
                     paths.push(OperationPath {
                         z: base,
@@ -113,8 +118,8 @@ impl Process for EndMill {
 fn build(config: &StageConfig<'_>) -> Result<AnyStage> {
     let options: Options = config.parse()?;
     non_negative(config, "gap", options.gap)?;
-    if options.passes == 0 {
-        return Err(config.error("passes", "must be at least 1"));
+    if !(1..=100).contains(&options.passes) {
+        return Err(config.error("passes", "must be 1 to 100"));
     }
     if !(options.stepover.is_finite() && options.stepover > 0.0 && options.stepover <= 1.0) {
         return Err(config.error("stepover", "must be above 0 and at most 1 (a whole diameter)"));

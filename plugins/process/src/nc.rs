@@ -70,7 +70,8 @@ struct Sink {
     outputs: Outputs,
     /// Tool in the spindle, by name.
     tool: Option<String>,
-    spinning: bool,
+    /// The spindle's speed while it turns (rev/min).
+    spinning: Option<f64>,
     vacuum: bool,
     /// Highest surface so far (mm): travel goes above it.
     top: f64,
@@ -81,11 +82,17 @@ fn io(path: &std::path::Path) -> impl Fn(std::io::Error) -> Error + '_ {
     move |e| Error::io(path, e)
 }
 
-/// A comment's text: one line, no parentheses (they would end it) and no semicolons (they start a comment of their own).
+/// A comment's text: one line, no parentheses (they would end it) and no semicolons
+/// (they start a comment of their own), at most 200 characters (LinuxCNC reads lines of
+/// up to 255).
 fn comment(s: &str) -> String {
-    lamina_core::output::one_line(s)
+    let text = lamina_core::output::one_line(s)
         .replace(['(', ')'], "")
-        .replace(';', ",")
+        .replace(';', ",");
+    match text.char_indices().nth(200) {
+        Some((i, _)) => text[..i].to_string(),
+        None => text,
+    }
 }
 
 fn num(v: f64) -> String {
@@ -121,8 +128,11 @@ impl Exporter for Nc {
             ));
         }
         head.push_str(&format!(
-            "(outputs: P{} spray gun, P{} filler nozzle, P{} chip vacuum; laser power in W as the S word of M3)\n",
-            outputs.spray, outputs.filler, outputs.vacuum
+            "({})\n",
+            comment(&format!(
+                "outputs: P{} spray gun, P{} filler nozzle, P{} chip vacuum, laser power in W as the S word of M3",
+                outputs.spray, outputs.filler, outputs.vacuum
+            ))
         ));
         let mut listed: Vec<(&String, &u32)> = numbers.iter().collect();
         listed.sort_by_key(|(_, n)| **n);
@@ -140,7 +150,7 @@ impl Exporter for Nc {
             cell: self.cell.clone(),
             outputs,
             tool: None,
-            spinning: false,
+            spinning: None,
             vacuum: false,
             top: 0.0,
             text: String::new(),
@@ -159,9 +169,8 @@ impl Sink {
     }
 
     fn stop(&mut self) {
-        if self.spinning {
+        if self.spinning.take().is_some() {
             self.line("M5");
-            self.spinning = false;
         }
     }
 
@@ -247,10 +256,14 @@ impl Sink {
         let rotating = tool.spindle.is_some() && on.is_empty();
         if rotating {
             self.vacuum(true);
-            if !self.spinning {
-                self.line(format!("S{} M3", num(tool.spindle.unwrap_or(0.0))));
-                self.spinning = true;
+            // A new speed for the same tool is set as it turns.
+            let speed = tool.spindle.unwrap_or(0.0);
+            match self.spinning {
+                None => self.line(format!("S{} M3", num(speed))),
+                Some(s) if s != speed => self.line(format!("S{}", num(speed))),
+                Some(_) => {}
             }
+            self.spinning = Some(speed);
         } else if tool.kind == "laser" {
             self.vacuum(true);
         }
@@ -309,6 +322,9 @@ impl LayerSink for Sink {
             num(plan.z),
             num(plan.thickness)
         ));
+        for op in &plan.operations {
+            crate::cell::readable(op).map_err(|e| e.in_layer(plan.index, plan.z))?;
+        }
         if let Some(cell) = &self.cell {
             for op in &plan.operations {
                 let standoff = match op.tool.as_ref().map(|t| t.kind.as_str()) {

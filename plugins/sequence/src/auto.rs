@@ -8,18 +8,29 @@ pub const GRADED_RANGE: (f64, f64) = (0.5, 2.0);
 
 /// The layer of a microstructure whose base cell measures `cell` mm, in micrometres,
 /// with the rule in words: a tenth of the cell where that is at most 0.1 mm, else a
-/// twentieth (but no less than 0.1 mm); whole tens of micrometres (whole micrometres
-/// below ten), so that work cycles stay short.
-pub fn microstructure_um(cell: f64) -> (u64, String) {
-    let tenth = cell / 10.0;
-    let (t, why) = if tenth <= 0.1 {
-        (tenth, "1/10")
+/// twentieth (but no less than 0.1 mm). Whole tens of micrometres where the rule's
+/// range holds one, so that work cycles stay short (a tenth rounded down, a twentieth
+/// up, within a tenth), whole micrometres otherwise; `None` for a cell under 10 µm,
+/// where no whole micrometre is a tenth of it or less.
+pub fn microstructure_um(cell: f64) -> Option<(u64, String)> {
+    let tenth_um = cell * 100.0;
+    if tenth_um.is_nan() || tenth_um < 1.0 - 1e-9 {
+        return None;
+    }
+    let (um, why) = if tenth_um <= 100.0 + 1e-9 {
+        let um = (tenth_um + 1e-9).floor() as u64;
+        (if um >= 10 { um / 10 * 10 } else { um }, "1/10")
     } else {
-        ((cell / 20.0).max(0.1), "1/20")
+        let twentieth = (cell * 50.0).max(100.0);
+        let up = ((twentieth - 1e-9) / 10.0).ceil() as u64 * 10;
+        let um = if (up as f64) <= tenth_um + 1e-9 {
+            up
+        } else {
+            (twentieth + 1e-9).floor() as u64
+        };
+        (um, "1/20")
     };
-    let um = (t * 1000.0 + 1e-9).floor() as u64;
-    let um = if um >= 10 { um / 10 * 10 } else { um.max(1) };
-    (um, format!("auto: {why} of the {cell} mm base cell"))
+    Some((um, format!("auto: {why} of the {cell} mm base cell")))
 }
 
 /// The layer of a graded region whose fractions change by at most `gradient` per mm
@@ -44,13 +55,20 @@ mod tests {
 
     #[test]
     fn microstructure_layers_are_a_tenth_or_a_twentieth_of_the_cell() {
-        assert_eq!(microstructure_um(1.0).0, 100);
-        assert_eq!(microstructure_um(0.6).0, 60);
+        let um = |cell: f64| microstructure_um(cell).expect("a thickness").0;
+        assert_eq!(um(1.0), 100);
+        assert_eq!(um(0.6), 60);
         // A tenth of 3 mm is over 0.1 mm: a twentieth, 0.15 mm.
-        assert_eq!(microstructure_um(3.0).0, 150);
+        assert_eq!(um(3.0), 150);
         // A twentieth of 1.5 mm is under 0.1 mm: 0.1 mm.
-        assert_eq!(microstructure_um(1.5).0, 100);
-        assert_eq!(microstructure_um(0.05).0, 5);
+        assert_eq!(um(1.5), 100);
+        assert_eq!(um(0.05), 5);
+        // Within the rule's range: 2.1 mm takes 0.11 (1/19.1), not 0.10 (1/21).
+        assert_eq!(um(2.1), 110);
+        let t = um(3.9) as f64 / 1000.0;
+        assert!((3.9 / 20.0..=3.9 / 10.0).contains(&t), "{t}");
+        // A cell under 10 µm has no whole micrometre within a tenth of it.
+        assert!(microstructure_um(0.005).is_none());
     }
 
     #[test]

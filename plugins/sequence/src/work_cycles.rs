@@ -83,15 +83,20 @@ impl WorkCycles {
     /// An `auto` thickness for the region or part `name` of `parts`: a microstructure's
     /// where `cell` gives its base cell, else a graded region's from the parts'
     /// sampled gradients.
-    fn auto(&self, info: &RunInfo, name: &str, parts: &[usize]) -> (u64, String) {
+    fn auto(&self, info: &RunInfo, name: &str, parts: &[usize]) -> Result<(u64, String)> {
         match self.options.cell.get(name) {
-            Some(&cell) => crate::auto::microstructure_um(cell),
+            Some(&cell) => crate::auto::microstructure_um(cell).ok_or_else(|| {
+                self.table.error_at(
+                    "cell",
+                    format!("`{name}`: a base cell of {cell} mm is under 10 µm; its layers would be under a micrometre"),
+                )
+            }),
             None => {
                 let g = parts
                     .iter()
                     .filter_map(|&p| info.parts[p].z_gradient)
                     .fold(None, |acc: Option<f64>, g| Some(acc.map_or(g, |a| a.max(g))));
-                crate::auto::graded_um(g, self.options.step)
+                Ok(crate::auto::graded_um(g, self.options.step))
             }
         }
     }
@@ -101,7 +106,7 @@ impl WorkCycles {
     fn part_thickness_rule(&self, info: &RunInfo, part: usize) -> Result<(u64, Option<String>)> {
         let p = &info.parts[part];
         if let Some(Thickness::Auto(_)) = self.options.thickness.get(&p.name) {
-            let (um, rule) = self.auto(info, &p.name, &[part]);
+            let (um, rule) = self.auto(info, &p.name, &[part])?;
             return Ok((um, Some(rule)));
         }
         self.part_thickness(info, part).map(|t| (t, None))
@@ -116,7 +121,7 @@ impl WorkCycles {
                 return thickness_um(*t)
                     .map_err(|m| self.table.error_at("thickness", format!("`{}`: {m}", p.name)));
             }
-            Some(Thickness::Auto(_)) => return Ok(self.auto(info, &p.name, &[part]).0),
+            Some(Thickness::Auto(_)) => return Ok(self.auto(info, &p.name, &[part])?.0),
             None => {}
         }
         let preferred = p
@@ -219,7 +224,7 @@ impl WorkCycles {
                     None,
                 ),
                 Some(Thickness::Auto(_)) => {
-                    let (um, rule) = self.auto(info, &r.name, &parts);
+                    let (um, rule) = self.auto(info, &r.name, &parts)?;
                     (um, Some(rule))
                 }
                 None => {
