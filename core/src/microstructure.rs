@@ -12,6 +12,7 @@ use serde::Deserialize;
 use crate::error::{Error, Result};
 use crate::geom::{BBox2, Contour};
 use crate::limits::{Limit, Limits};
+use crate::model::ModelFrame;
 use crate::script::{ScriptArgs, ScriptFn};
 use crate::stage::StageConfig;
 use lamina_geom::cell::{CellArray, CellShape, PlacedCell};
@@ -241,6 +242,17 @@ impl Microstructure {
     /// The cell at an inserting point, or `None` where the inserting function leaves
     /// it out.
     fn cell(&self, p: Vector3<f64>) -> Result<Option<PlacedCell>> {
+        self.cell_moved(p, p, &Matrix3::identity())
+    }
+
+    /// The cell at inserting point `p` of the model's frame, placed at `at` in the
+    /// build's, turned by `turned` (the model's turn) on top of its own orientation.
+    fn cell_moved(
+        &self,
+        p: Vector3<f64>,
+        at: Vector3<f64>,
+        turned: &Matrix3<f64>,
+    ) -> Result<Option<PlacedCell>> {
         if let Some(f) = &self.insert
             && f.at(&p, "insert")? <= 0.0
         {
@@ -268,10 +280,10 @@ impl Microstructure {
         .matrix();
         let cell = PlacedCell {
             shape: self.shape,
-            centre: p,
+            centre: at,
             half,
             // The cell turns with the lattice it sits on.
-            rotation: self.lattice.rotation * own,
+            rotation: turned * self.lattice.rotation * own,
         };
         if cell.reach() > self.reach + 1e-9 {
             return Err(Error::stage(
@@ -323,15 +335,26 @@ impl Microstructure {
 
     /// The voids the horizontal plane at `z` cuts over the box `bbox`, counter-clockwise,
     /// in the order of their inserting points.
-    pub fn voids(&self, z: f64, bbox: &BBox2) -> Result<Vec<Contour>> {
+    ///
+    /// The cells are the model's: where an `[orient]` stage turned the model (`frame`),
+    /// the lattice turns and moves with it, and the functions read each inserting
+    /// point's coordinates in the model's own frame.
+    pub fn voids(&self, z: f64, bbox: &BBox2, frame: Option<&ModelFrame>) -> Result<Vec<Contour>> {
+        let (turn, offset) = match frame {
+            Some(f) => (Matrix3::from_fn(|i, j| f.rotation[i][j]), Vector3::from(f.offset)),
+            None => (Matrix3::identity(), Vector3::zeros()),
+        };
+        let lattice = self.lattice.moved(&turn, offset);
         self.limits.check(
             Limit::GridCells,
-            self.lattice.count_near_plane(z, self.reach, bbox),
+            lattice.count_near_plane(z, self.reach, bbox),
             "the base cells' lattice points near a layer",
         )?;
+        let back = turn.transpose();
         let mut out = Vec::new();
-        for (_, p) in self.lattice.near_plane(z, self.reach, bbox) {
-            if let Some(cell) = self.cell(p)?
+        for (_, at) in lattice.near_plane(z, self.reach, bbox) {
+            let p = back * (at - offset);
+            if let Some(cell) = self.cell_moved(p, at, &turn)?
                 && let Some(section) = cell.section(z)
             {
                 out.push(section);

@@ -371,6 +371,15 @@ pub struct Orientation {
     pub candidates: Vec<OrientationCandidate>,
 }
 
+/// A rigid move from the model's own coordinates to the build's: `build = rotation ·
+/// model + offset`.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct ModelFrame {
+    /// Row-major.
+    pub rotation: [[f64; 3]; 3],
+    pub offset: [f64; 3],
+}
+
 /// One build direction an orienter weighed.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct OrientationCandidate {

@@ -191,6 +191,11 @@ pub struct RunInfo {
     pub xy_bounds: BBox2,
     /// The machine the pipeline names, if any.
     pub machine: Option<Machine>,
+    /// How the model's own coordinates became the build's, when an `[orient]` stage
+    /// turned it: what the model describes in its own frame (a microstructure's base
+    /// cells) turns with it.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub model_frame: Option<ModelFrame>,
 }
 
 impl RunInfo {

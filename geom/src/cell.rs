@@ -213,13 +213,16 @@ pub fn inset_convex(c: &Contour, d: f64) -> Option<Contour> {
 }
 
 /// The lattice of inserting points: `origin + i a + j b + k c` in the lattice's frame,
-/// turned into the machine's frame by `rotation` (the tilt of Fig. 5).
+/// turned into the machine's frame by `rotation` (the tilt of Fig. 5, and the model's
+/// own turn) and moved by `offset`.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct CellArray {
     pub period: [f64; 3],
     pub origin: [f64; 3],
     /// Lattice frame to machine frame.
     pub rotation: Matrix3<f64>,
+    /// Added after the rotation (machine frame).
+    pub offset: Vector3<f64>,
 }
 
 impl CellArray {
@@ -229,6 +232,7 @@ impl CellArray {
             period,
             origin,
             rotation: Matrix3::identity(),
+            offset: Vector3::zeros(),
         }
     }
 
@@ -239,6 +243,18 @@ impl CellArray {
             period,
             origin,
             rotation: *nalgebra::Rotation3::from_axis_angle(&Vector3::x_axis(), phi).matrix(),
+            offset: Vector3::zeros(),
+        }
+    }
+
+    /// The same lattice moved as a whole: turned by `rotation`, then moved by `offset`
+    /// (a model's own frame carried into the build's).
+    pub fn moved(&self, rotation: &Matrix3<f64>, offset: Vector3<f64>) -> Self {
+        Self {
+            period: self.period,
+            origin: self.origin,
+            rotation: rotation * self.rotation,
+            offset: rotation * self.offset + offset,
         }
     }
 
@@ -249,7 +265,7 @@ impl CellArray {
             self.origin[1] + j as f64 * self.period[1],
             self.origin[2] + k as f64 * self.period[2],
         );
-        self.rotation * l
+        self.rotation * l + self.offset
     }
 
     /// The lattice indices whose points may lie in the box `lo..hi` (machine frame):
@@ -265,7 +281,7 @@ impl CellArray {
                 if corner & 2 == 0 { lo.y } else { hi.y },
                 if corner & 4 == 0 { lo.z } else { hi.z },
             );
-            let l = inverse * p;
+            let l = inverse * (p - self.offset);
             for a in 0..3 {
                 let t = (l[a] - self.origin[a]) / self.period[a];
                 l0[a] = l0[a].min(t);
@@ -321,53 +337,62 @@ impl CellArray {
         )
     }
 
+    /// The lattice axis that climbs most steeply through a horizontal plane, and the
+    /// other two: the band is walked over the other two and solved along it.
+    fn axes(&self) -> (usize, usize, usize) {
+        let r = self.rotation.row(2);
+        let s = (0..3)
+            .max_by(|&a, &b| r[a].abs().total_cmp(&r[b].abs()))
+            .unwrap_or(2);
+        let others: Vec<usize> = (0..3).filter(|&a| a != s).collect();
+        (s, others[0], others[1])
+    }
+
     /// How many lattice indices [`Self::near_plane`] visits.
     pub fn count_near_plane(&self, z: f64, reach: f64, bbox: &BBox2) -> f64 {
         let (lo, hi) = Self::band(z, reach, bbox);
-        let [(i0, i1), (j0, j1), _] = self.index_ranges(lo, hi);
-        // Each (i, j) column crosses the band in at most this many rows.
-        let rows = (2.0 * reach / (self.period[2] * self.rotation[(2, 2)].abs())).ceil() + 1.0;
-        (i1 - i0 + 1).max(0) as f64 * (j1 - j0 + 1).max(0) as f64 * rows
-    }
-
-    /// The rows `k` of column `(i, j)` whose points lie within `reach` of the plane at
-    /// `z`: solved from the plane's equation, so a tilted lattice visits only the rows
-    /// near the plane (the two auxiliary planes of Fig. 5), not the box around them.
-    fn rows_near(&self, i: i64, j: i64, z: f64, reach: f64) -> Option<(i64, i64)> {
-        let r = self.rotation.row(2);
-        let base = r[0] * (self.origin[0] + i as f64 * self.period[0])
-            + r[1] * (self.origin[1] + j as f64 * self.period[1])
-            + r[2] * self.origin[2];
-        let step = r[2] * self.period[2];
-        // A lattice tilted less than a right angle climbs with k (`CellSpec` keeps
-        // tilts within 90 degrees).
-        if step.abs() < 1e-12 {
-            return None;
-        }
-        let (a, b) = ((z - reach - base) / step, (z + reach - base) / step);
-        let (lo, hi) = (a.min(b), a.max(b));
-        if !(lo.is_finite() && hi.is_finite() && lo.abs() < 1e15 && hi.abs() < 1e15) {
-            return None;
-        }
-        Some((lo.ceil() as i64, hi.floor() as i64))
+        let ranges = self.index_ranges(lo, hi);
+        let (s, u, v) = self.axes();
+        // Each column crosses the band in at most this many steps along `s` (whose
+        // climb is at least 1/sqrt(3) of a step: the largest part of a unit vector).
+        let rows = (2.0 * reach / (self.period[s] * self.rotation[(2, s)].abs())).ceil() + 1.0;
+        let n = |a: usize| (ranges[a].1 - ranges[a].0 + 1).max(0) as f64;
+        n(u) * n(v) * rows
     }
 
     /// The inserting points within `reach` of the horizontal plane at `z`, over the
-    /// XY box `bbox` grown by `reach`: the search band of Fig. 5. Each comes with its
-    /// lattice indices, in a fixed order.
+    /// XY box `bbox` grown by `reach`: the search band of Fig. 5. The steps along the
+    /// steepest lattice axis are solved from the plane's equation for each column of
+    /// the other two, so a tilted lattice visits only the points near the plane (the
+    /// two auxiliary planes), not the box around them. Each comes with its lattice
+    /// indices, in a fixed order.
     pub fn near_plane(&self, z: f64, reach: f64, bbox: &BBox2) -> Vec<([i64; 3], Vector3<f64>)> {
         let (lo, hi) = Self::band(z, reach, bbox);
-        let [(i0, i1), (j0, j1), _] = self.index_ranges(lo, hi);
+        let ranges = self.index_ranges(lo, hi);
+        let (s, u, v) = self.axes();
+        let r = self.rotation.row(2);
+        let step = r[s] * self.period[s];
         let mut out = Vec::new();
-        for j in j0..=j1 {
-            for i in i0..=i1 {
-                let Some((k0, k1)) = self.rows_near(i, j, z, reach) else {
+        if step.abs() < 1e-12 {
+            return out;
+        }
+        for iu in ranges[u].0..=ranges[u].1 {
+            for iv in ranges[v].0..=ranges[v].1 {
+                let base = r[u] * (self.origin[u] + iu as f64 * self.period[u])
+                    + r[v] * (self.origin[v] + iv as f64 * self.period[v])
+                    + r[s] * self.origin[s]
+                    + self.offset.z;
+                let (a, b) = ((z - reach - base) / step, (z + reach - base) / step);
+                let (k0, k1) = (a.min(b), a.max(b));
+                if !(k0.is_finite() && k1.is_finite() && k0.abs() < 1e15 && k1.abs() < 1e15) {
                     continue;
-                };
-                for k in k0..=k1 {
-                    let p = self.point(i, j, k);
+                }
+                for ks in (k0.ceil() as i64)..=(k1.floor() as i64) {
+                    let mut ijk = [0i64; 3];
+                    (ijk[s], ijk[u], ijk[v]) = (ks, iu, iv);
+                    let p = self.point(ijk[0], ijk[1], ijk[2]);
                     if (0..3).all(|a| p[a] >= lo[a] && p[a] <= hi[a]) {
-                        out.push(([i, j, k], p));
+                        out.push((ijk, p));
                     }
                 }
             }
@@ -488,6 +513,29 @@ mod tests {
         got.sort();
         brute.sort();
         assert_eq!(got, brute);
+        // A lattice turned a right angle about x (its y axis now climbs) is walked
+        // along y: the same points as a brute-force scan.
+        let turned = CellArray::tilted_about_x([1.0, 1.0, 1.0], [0.0; 3], 90f64.to_radians());
+        let mut near: Vec<[i64; 3]> = turned
+            .near_plane(2.2, 0.3, &bbox)
+            .iter()
+            .map(|(ijk, _)| *ijk)
+            .collect();
+        near.sort();
+        let mut brute = Vec::new();
+        for k in -10..20 {
+            for j in -10..20 {
+                for i in -10..20 {
+                    let p = turned.point(i, j, k);
+                    if (p.z - 2.2).abs() <= 0.3 && p.x >= -0.3 && p.x <= 4.3 && p.y >= -0.3 && p.y <= 4.3 {
+                        brute.push([i, j, k]);
+                    }
+                }
+            }
+        }
+        brute.sort();
+        assert!(!near.is_empty());
+        assert_eq!(near, brute);
         // The rows visited lean with the tilt: several k for one plane.
         let ks: std::collections::BTreeSet<i64> = got.iter().map(|ijk| ijk[2]).collect();
         assert!(ks.len() > 1, "{ks:?}");

@@ -319,6 +319,7 @@ pub fn mesh_info(dir: &Path, mesh: &lamina_core::Mesh) -> lamina_core::RunInfo {
         z_max: bb.max.z,
         xy_bounds: lamina_core::BBox2::EMPTY,
         machine: None,
+        model_frame: None,
     }
 }
 

@@ -757,3 +757,35 @@ fn options_that_would_exhaust_the_machine_stop_at_the_grid_limit() {
     let err = text(&try_run_text(dir.path(), &dense).stderr);
     assert!(err.contains("grid_cells"), "{err}");
 }
+
+#[test]
+fn cells_turn_with_the_model_when_it_is_oriented_by_them() {
+    // Plate-like cells, half-edges 0.2 x 0.4 x 0.1 in the model's frame: their faces
+    // weigh least built along the model's y, so the plate is turned to stand on its
+    // side. The engraved voids are the turned cells' sections: 0.4 (cell x) by 0.2
+    // (cell z) across, not 0.4 by 0.8 as the cell table would read in the build frame.
+    let cell = r#"{ shape = "box", size = 0.2, aspect = [1.0, 2.0, 0.5], period = [1.0, 1.0, 1.0], origin = [0.5, 0.5, 0.5] }"#;
+    let text = format!(
+        "[materials.m]\ncolour = [70, 130, 180]\n[model]\nuse = \"box\"\nsize = [10.0, 2.0, 1.0]\n\
+         [orient]\nuse = \"candidates\"\ncriterion = \"base-cell\"\ncell = {cell}\n\
+         [slice]\nuse = \"uniform\"\nthickness = 0.5\n\
+         [[process]]\nuse = \"engrave\"\ndiameter = 0.02\ncell = {cell}\n\
+         [[output]]\nuse = \"json\"\npath = \"plan.json\"\n"
+    );
+    let dir = tempfile::tempdir().expect("tempdir");
+    let plan = crate::support::run_text(dir.path(), &text, "plan.json");
+    assert!(plan["orientation"]["direction"][1].as_f64().expect("y").abs() > 1.0 - 1e-9);
+    let spot = 0.02;
+    let want = (0.4 - spot) * (0.2 - spot);
+    let mut seen = 0;
+    for l in plan["layers"].as_array().expect("layers") {
+        for (c, ring) in first_rings(l) {
+            let area = ring_area(&ring);
+            assert!((area - want).abs() < 1e-6, "at {c:?}: {area} vs {want}");
+            seen += 1;
+        }
+    }
+    // The plate's 20 cells (10 along x, 2 up its turned 2 mm height, 1 across its
+    // 1 mm), each cut by the two layers through it.
+    assert_eq!(seen, 10 * 2 * 2, "{seen}");
+}

@@ -582,6 +582,7 @@ fn run_info() -> RunInfo {
         z_max: 2.0,
         xy_bounds: lamina_core::BBox2::EMPTY,
         machine: None,
+        model_frame: None,
     }
 }
 
@@ -992,6 +993,7 @@ fn info_for(mesh: &Mesh) -> RunInfo {
         z_max: b.max.z,
         xy_bounds: lamina_core::BBox2::EMPTY,
         machine: None,
+        model_frame: None,
     }
 }
 
@@ -1319,6 +1321,7 @@ impl CycleCase {
             z_max: 40.0,
             xy_bounds: lamina_core::BBox2::EMPTY,
             machine: None,
+            model_frame: None,
         }
     }
 

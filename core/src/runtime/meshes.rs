@@ -5,7 +5,7 @@
 use crate::error::{Error, Result};
 use crate::geom::{Point2, Vector2};
 use crate::mesh::{BBox3, Mesh, Vector3};
-use crate::model::Orientation;
+use crate::model::{ModelFrame, Orientation};
 use crate::pipeline::{ModelSpec, Placement};
 use crate::stage::{Orienter, StageKind};
 
@@ -100,7 +100,10 @@ pub(super) fn merge_owned(mut meshes: Vec<Mesh>, name: &str) -> Mesh {
 /// Turns every mesh of every model by the orienter's choice, rotating about the
 /// object's centre and putting the object back on the bed: the models keep their
 /// places relative to each other.
-pub(super) fn orient(orienter: &dyn Orienter, models: &mut [Vec<Mesh>]) -> Result<Orientation> {
+pub(super) fn orient(
+    orienter: &dyn Orienter,
+    models: &mut [Vec<Mesh>],
+) -> Result<(Orientation, Option<ModelFrame>)> {
     let all: Vec<&Mesh> = models.iter().flatten().collect();
     let orientation = orienter.orient(&all)?;
     let r = &orientation.rotation;
@@ -117,7 +120,7 @@ pub(super) fn orient(orienter: &dyn Orienter, models: &mut [Vec<Mesh>]) -> Resul
         .flatten()
         .fold(BBox3::EMPTY, |b, m| b.union(&m.bbox()));
     if bbox.is_empty() {
-        return Ok(orientation);
+        return Ok((orientation, None));
     }
     let centre = (bbox.min.coords + bbox.max.coords) * 0.5;
     for mesh in models.iter_mut().flatten() {
@@ -132,7 +135,13 @@ pub(super) fn orient(orienter: &dyn Orienter, models: &mut [Vec<Mesh>]) -> Resul
     for mesh in models.iter_mut().flatten() {
         mesh.transform(1.0, Vector3::new(0.0, 0.0, -after.min.z));
     }
-    Ok(orientation)
+    // build = R (model - c) + c - (0, 0, lowest) = R model + (c - R c - lowest).
+    let offset = centre - m * centre - Vector3::new(0.0, 0.0, after.min.z);
+    let frame = ModelFrame {
+        rotation: *r,
+        offset: [offset.x, offset.y, offset.z],
+    };
+    Ok((orientation, Some(frame)))
 }
 
 /// Applies a model table's `scale` and `place` to all meshes of the model together, so

@@ -39,9 +39,13 @@ impl Engine {
 
         // Meshes: one per part (a part takes one mesh of its model, or all merged).
         let mut loaded = self.load_models(&timings)?;
-        let orientation = match &self.orienter {
-            Some(o) => Some(timings.time(StageKind::Orient, || orient(o.as_ref(), &mut loaded))?),
-            None => None,
+        let (orientation, model_frame) = match &self.orienter {
+            Some(o) => {
+                let (orientation, frame) =
+                    timings.time(StageKind::Orient, || orient(o.as_ref(), &mut loaded))?;
+                (Some(orientation), frame)
+            }
+            None => (None, None),
         };
         let mut diagnostics = Vec::new();
         let mut say = |d: Diagnostic| {
@@ -128,6 +132,7 @@ impl Engine {
             z_max: bbox.max.z,
             xy_bounds,
             machine: self.pipeline.machine.clone(),
+            model_frame,
         };
 
         let prepared: Vec<Box<dyn MeshSlicer>> = pool.install(|| {

@@ -248,7 +248,7 @@ impl Exporter for Bitmap {
 }
 
 impl LayerSink for Sink {
-    fn layer(&mut self, _info: &RunInfo, plan: &LayerPlan, _files: &mut dyn OutputFiles) -> Result<()> {
+    fn layer(&mut self, info: &RunInfo, plan: &LayerPlan, _files: &mut dyn OutputFiles) -> Result<()> {
         let mut contours: Vec<&Contour> = Vec::new();
         for pl in plan.parts.iter().filter(|pl| self.parts.contains(&pl.part)) {
             for &f in &pl.families {
@@ -272,7 +272,7 @@ impl LayerSink for Sink {
                 }
             }
             Voids::Cells(m) => {
-                for c in m.voids(cut_z, &bbox)? {
+                for c in m.voids(cut_z, &bbox, info.model_frame.as_ref())? {
                     raster.clear(&c);
                 }
             }

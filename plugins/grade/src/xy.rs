@@ -240,6 +240,7 @@ mod tests {
             z_max: 1.0,
             xy_bounds: lamina_core::BBox2::EMPTY,
             machine: None,
+            model_frame: None,
         }
     }
 

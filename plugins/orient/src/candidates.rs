@@ -43,7 +43,7 @@ lamina_core::stage_options! {
     struct Options {
         /// what to minimise: "surface-angle" (sum A_i alpha_i over the object's surfaces), "base-cell" (the same over the faces of the microstructure's base cells) or "height"
         criterion: Criterion = r#""surface-angle""#,
-        /// the base cell for "base-cell", in the model's own coordinates (before it is turned; `engrave` and `bitmap` read theirs in the build's): `{ shape = "box" | "cylinder", size, aspect, turn, lean, insert, period, origin, tilt }`
+        /// the base cell for "base-cell", in the model's own coordinates (as `engrave` and `bitmap` read theirs: the cells turn with the model): `{ shape = "box" | "cylinder", size, aspect, turn, lean, insert, period, origin, tilt }`
         cell: Option<CellSpec>,
         /// most cells weighed for "base-cell" (every n-th inserting point in the model's box beyond that)
         cells: usize = "2000",

@@ -111,6 +111,7 @@ fn layout(rng: &mut Rng, tools: usize) -> (RunInfo, LayerPlan) {
         z_max: 1.0,
         xy_bounds: lamina_core::BBox2::EMPTY,
         machine: None,
+        model_frame: None,
     };
     let plan = LayerPlan {
         index: 0,

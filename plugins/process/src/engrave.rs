@@ -130,13 +130,13 @@ struct Engrave {
 impl Engrave {
     /// The voids of the plane at `z` within `area`: whole sections, and the sections
     /// the area's boundary cuts, clipped all at once.
-    fn voids(&self, area: &[Polygon], z: f64) -> Result<Vec<Void>> {
+    fn voids(&self, area: &[Polygon], z: f64, frame: Option<&lamina_core::ModelFrame>) -> Result<Vec<Void>> {
         let Some(bbox) = area.iter().map(Polygon::bbox).reduce(|a, b| a.union(&b)) else {
             return Ok(Vec::new());
         };
         let mut out = Vec::new();
         let mut cut: Shapes = Vec::new();
-        for section in self.cells.voids(z, &bbox)? {
+        for section in self.cells.voids(z, &bbox, frame)? {
             let n = section.len() as f64;
             let c = section.points.iter().fold(Point2::new(0.0, 0.0), |s, p| {
                 Point2::new(s.x + p.x / n, s.y + p.y / n)
@@ -173,7 +173,11 @@ impl Process for Engrave {
             return Ok(());
         }
         let area = layer_area(plan);
-        let voids = self.voids(&area, plan.z - plan.thickness / 2.0)?;
+        let voids = self.voids(
+            &area,
+            plan.z - plan.thickness / 2.0,
+            ctx.info.model_frame.as_ref(),
+        )?;
         if voids.is_empty() {
             return Ok(());
         }

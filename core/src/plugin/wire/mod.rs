@@ -382,6 +382,7 @@ mod tests {
                 z_max: f64::MAX,
                 xy_bounds: crate::geom::BBox2::EMPTY,
                 machine: Some(machine.clone()),
+                model_frame: None,
             };
             let bytes = encode(&info).expect("encodes");
             let back: RunInfo = decode(&bytes).expect("decodes");

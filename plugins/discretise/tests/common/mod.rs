@@ -82,6 +82,7 @@ impl OneFamily {
                 z_max: 1.0,
                 xy_bounds: lamina_core::BBox2::EMPTY,
                 machine: None,
+                model_frame: None,
             },
             layer: Layer {
                 index: 0,

@@ -99,6 +99,7 @@ pub fn run_info(names: [&str; 2], part: String, xy_bounds: BBox2, machine: Optio
         z_max: 1.0,
         xy_bounds,
         machine,
+        model_frame: None,
     }
 }
 
