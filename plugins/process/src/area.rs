@@ -16,6 +16,24 @@ pub fn micrometres(mm: f64) -> f64 {
     (mm * 1000.0).round() / 1000.0
 }
 
+/// The surface of the layer's region as its operations so far leave it: the last
+/// height one of them set, else the layer's design height.
+pub fn surface_now(plan: &LayerPlan) -> f64 {
+    plan.operations
+        .iter()
+        .rev()
+        .find(|op| op.region == plan.material_region && op.surface.is_some())
+        .and_then(|op| op.surface)
+        .unwrap_or(plan.z)
+}
+
+/// The last operation of `kind` on the layer's region so far, if any.
+pub fn last_of<'p>(plan: &'p LayerPlan, kind: &str) -> Option<&'p lamina_core::Operation> {
+    plan.operations
+        .iter()
+        .rfind(|op| op.kind == kind && op.region == plan.material_region)
+}
+
 /// The solid area of a planned layer: every family of every part.
 pub fn layer_area(plan: &LayerPlan) -> Vec<Polygon> {
     plan.parts

@@ -21,7 +21,7 @@ use lamina_geom::Shapes;
 use lamina_geom::cell::inset_convex;
 use lamina_geom::ring::{polygons_of, ring_of, shape_of};
 
-use crate::area::{distance_to_area, layer_area, offset};
+use crate::area::{distance_to_area, layer_area, offset, surface_now};
 use crate::regions::selected;
 use crate::tool::{ToolSpec, checked};
 
@@ -183,13 +183,7 @@ impl Process for Engrave {
         }
         let bottom = plan.z - plan.thickness;
         // The laser focuses on the surface and burns down to the layer's bottom.
-        let surface = plan
-            .operations
-            .iter()
-            .rev()
-            .find(|op| op.region == plan.material_region && op.surface.is_some())
-            .and_then(|op| op.surface)
-            .unwrap_or(plan.z);
+        let surface = surface_now(plan);
         let spot = self.tool.diameter;
         let step = spot * (1.0 - self.options.overlap);
         // Rings to come, at most a void's width over the step each: counted first.

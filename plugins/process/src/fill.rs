@@ -7,7 +7,7 @@ use lamina_core::pipeline::TableRef;
 use lamina_core::stage::{AnyStage, Process, StageConfig, StageInfo, StageKind};
 use lamina_core::{LayerPlan, Operation, OperationTool, ProcessContext, Result, StageFactory};
 
-use crate::area::{layer_area, raster};
+use crate::area::{last_of, layer_area, raster, surface_now};
 use crate::regions::selected;
 use crate::tool::{ToolSpec, checked};
 
@@ -38,11 +38,7 @@ impl Process for Fill {
             return Ok(());
         }
         let region = plan.material_region;
-        let Some(engraved) = plan
-            .operations
-            .iter()
-            .rfind(|op| op.kind == "engrave" && op.region == region)
-        else {
+        let Some(engraved) = last_of(plan, "engrave") else {
             return Ok(());
         };
         let (voids, void_area, depth) = (
@@ -50,13 +46,7 @@ impl Process for Fill {
             engraved.values.get("void_area").copied().unwrap_or(0.0),
             engraved.values.get("depth").copied().unwrap_or(0.0),
         );
-        let surface = plan
-            .operations
-            .iter()
-            .rev()
-            .find(|op| op.region == region && op.surface.is_some())
-            .and_then(|op| op.surface)
-            .unwrap_or(plan.z);
+        let surface = surface_now(plan);
         let mut op = Operation::new("fill", region);
         op.tool = Some(self.tool.clone());
         op.paths = raster(&layer_area(plan), self.tool.diameter, surface, &self.limits)?;

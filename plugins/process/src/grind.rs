@@ -14,7 +14,7 @@ use lamina_core::stage::{AnyStage, Process, StageConfig, StageInfo, StageKind};
 use lamina_core::{LayerPlan, Operation, OperationTool, ProcessContext, Result, StageFactory};
 use serde::Deserialize;
 
-use crate::area::{layer_area, offset, raster};
+use crate::area::{last_of, layer_area, offset, raster, surface_now};
 use crate::regions::selected;
 use crate::tool::{ToolSpec, checked};
 
@@ -62,21 +62,11 @@ impl Process for Grind {
         }
         // What this layer sprayed, and how high the surface stands now.
         let region = plan.material_region;
-        let Some(spray) = plan
-            .operations
-            .iter()
-            .rfind(|op| op.kind == "spray" && op.region == region)
-        else {
+        let Some(spray) = last_of(plan, "spray") else {
             return Ok(());
         };
         let finish = spray.values.get("finish_allowance").copied().unwrap_or(0.0);
-        let now = plan
-            .operations
-            .iter()
-            .rev()
-            .find(|op| op.region == region && op.surface.is_some())
-            .and_then(|op| op.surface)
-            .unwrap_or(plan.z);
+        let now = surface_now(plan);
         let target = match o.pass {
             Pass::Rough => crate::area::micrometres(plan.z + finish),
             Pass::Finish if finish > 0.0 => plan.z,
