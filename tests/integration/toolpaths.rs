@@ -174,3 +174,131 @@ fn concurrent_tools_never_collide_on_the_two_material_benchy() {
     assert!(checked > 200, "only {checked} layers had two tools at work");
     println!("{checked} tool pairs checked over {layers} layers; closest approach {closest_seen:.3} mm");
 }
+
+/// Bead area of a JSON toolpath (mm²): each segment's length times its width.
+fn bead_area(path: &serde_json::Value) -> f64 {
+    let points: Vec<(f64, f64)> = path["points"]
+        .as_array()
+        .expect("points")
+        .iter()
+        .map(|q| (q["p"][0].as_f64().expect("x"), q["p"][1].as_f64().expect("y")))
+        .collect();
+    let width = path["width"].as_f64().unwrap_or(0.0);
+    let widths = path.get("widths").and_then(|w| w.as_array());
+    points
+        .windows(2)
+        .enumerate()
+        .map(|(i, w)| {
+            let len = (w[1].0 - w[0].0).hypot(w[1].1 - w[0].1);
+            let wi = widths
+                .and_then(|ws| ws.get(i))
+                .and_then(serde_json::Value::as_f64)
+                .unwrap_or(width);
+            len * wi
+        })
+        .sum()
+}
+
+/// With one tool per material, a graded ring is laid by both tools, each its
+/// material's share of the ring (`assign = "fraction"`, the default): read back from
+/// the JSON plan, every bead carries the one material its tool deposits, and per layer
+/// the bronze share of the gear's beads is the bronze share of its sub-regions' design
+/// (area times fraction) within a few beads. The dominant rule lays the same gear as
+/// two bands and misses that share by far more.
+#[test]
+fn graded_rings_are_shared_between_single_material_tools_by_their_fractions() {
+    let pipeline = Path::new(env!("CARGO_MANIFEST_DIR")).join("pipelines/assembly-two-tools.toml");
+    // Bronze share of the gear per layer: (designed, deposited).
+    let shares = |assign: &str| -> Vec<(f64, f64)> {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let run = Command::new(env!("CARGO_BIN_EXE_lamina"))
+            .args(["run", "--quiet", "--out"])
+            .arg(dir.path())
+            .arg(&pipeline)
+            .args([
+                "--set",
+                &format!("plan.assign=\"{assign}\""),
+                "--set",
+                "plan.use=\"sequential\"",
+            ])
+            .output()
+            .expect("lamina runs");
+        assert!(run.status.success(), "{}", String::from_utf8_lossy(&run.stderr));
+        let plan: serde_json::Value = serde_json::from_str(
+            &std::fs::read_to_string(dir.path().join("assembly-two-tools.json")).expect("json"),
+        )
+        .expect("valid");
+        let mut out = Vec::new();
+        for layer in plan["layers"].as_array().expect("layers") {
+            let (mut design, mut design_bronze) = (0.0, 0.0);
+            for part in layer["parts"].as_array().expect("parts") {
+                if part["part"] != "gear" {
+                    continue;
+                }
+                for family in part["families"].as_array().expect("families") {
+                    for r in family["regions"].as_array().expect("regions") {
+                        let area = r["area"].as_f64().expect("area");
+                        design += area;
+                        design_bronze += area * r["composition"]["bronze"].as_f64().unwrap_or(0.0);
+                    }
+                }
+            }
+            let (mut laid, mut laid_bronze) = (0.0, 0.0);
+            for path in layer["toolpaths"].as_array().into_iter().flatten() {
+                if path["kind"] != "extrude" {
+                    continue;
+                }
+                let tool = path["tool"].as_u64().expect("tool");
+                let composition: Vec<f64> = path["composition"]
+                    .as_array()
+                    .expect("composition")
+                    .iter()
+                    .map(|f| f.as_f64().expect("fraction"))
+                    .collect();
+                // Tool 0 carries bronze, tool 1 steel; the gear's materials are
+                // [bronze, steel], the shaft's [steel].
+                let expected: Vec<f64> = match (path["part"].as_u64(), tool) {
+                    (Some(0), 0) => vec![1.0, 0.0],
+                    (Some(0), _) => vec![0.0, 1.0],
+                    _ => vec![1.0],
+                };
+                assert_eq!(
+                    composition, expected,
+                    "a bead of tool {tool} says it lays {composition:?}"
+                );
+                if path["part"].as_u64() == Some(0) {
+                    let a = bead_area(path);
+                    laid += a;
+                    if tool == 0 {
+                        laid_bronze += a;
+                    }
+                }
+            }
+            if design > 0.0 && laid > 0.0 {
+                out.push((design_bronze / design, laid_bronze / laid));
+            }
+        }
+        out
+    };
+    let fraction = shares("fraction");
+    let dominant = shares("dominant");
+    assert!(!fraction.is_empty());
+    let worst = |s: &[(f64, f64)]| s.iter().map(|(d, l)| (d - l).abs()).fold(0.0, f64::max);
+    let mean = |s: &[(f64, f64)], k: usize| {
+        s.iter().map(|p| if k == 0 { p.0 } else { p.1 }).sum::<f64>() / s.len() as f64
+    };
+    println!(
+        "bronze share of the gear: designed {:.4}, laid {:.4} by fraction (worst layer off by {:.4}), {:.4} by dominant (worst {:.4})",
+        mean(&fraction, 0),
+        mean(&fraction, 1),
+        worst(&fraction),
+        mean(&dominant, 1),
+        worst(&dominant)
+    );
+    assert!(
+        worst(&fraction) < 0.02,
+        "a layer's bronze share is off by {}",
+        worst(&fraction)
+    );
+    assert!(worst(&dominant) > 2.0 * worst(&fraction));
+}

@@ -6,12 +6,13 @@
 //! (`concurrent`, `sim`).
 //!
 //! Tools: without `mixing`, there is one tool per pipeline material (tool i deposits
-//! material i) and a sub-region goes to the tool of its dominant material, which suits
-//! discrete multi-material parts and coarse gradients on tool changers. With
+//! material i) and the beads of a graded sub-region are shared between the tools by its
+//! fractions (`assign`): each path carries the one material its tool deposits. With
 //! `mixing = true` a single mixing tool deposits everything and each path carries its
-//! sub-region's composition for the mixing head. Either way the composition is on the
-//! path, so exporters can meter mixtures.
+//! sub-region's composition for the mixing head. Either way the composition on the
+//! path is what it deposits, so exporters can meter mixtures.
 
+pub mod assign;
 pub mod axis;
 pub mod bead;
 pub mod fill;
@@ -26,6 +27,7 @@ use lamina_core::stage::{AnyStage, Planner, StageConfig, StageInfo, StageKind};
 use lamina_core::{BBox2, Error, LayerPlan, Point2, Result, RunInfo, StageFactory, Toolpath};
 use serde::Deserialize;
 
+use crate::assign::Assign;
 use crate::fill::Widths;
 use crate::group::Thin;
 use crate::route::{Move, Parks, Seam, ToolSpec, distribute, pause, route, timed};
@@ -53,8 +55,10 @@ lamina_core::stage_options! {
         min_fill: f64 = "0.98",
         /// where loops start: `nearest` (to the tool) or `aligned` (largest x)
         seam: Seam = r#""nearest""#,
-        /// one mixing tool for everything (composition on the path) instead of one tool per material, each depositing the sub-regions its material dominates
+        /// one mixing tool for everything (composition on the path) instead of one tool per material
         mixing: bool = "false",
+        /// with one tool per material, who lays a graded sub-region's beads: `fraction` (each tool its material's share of the area, in whole beads and bands, the remainder carried to the next sub-region; each bead is labelled with the material it deposits) or `dominant` (all by the tool of the largest fraction)
+        assign: Assign = r#""fraction""#,
         /// sub-regions narrower than the narrowest bead: `merge` (deposited with the next levels of their family, mean composition) or `skip` (left out); either way they are reported
         thin: Thin = r#""merge""#,
         /// deposition speed (mm/s)
@@ -82,7 +86,7 @@ lamina_core::stage_options! {
 
 /// How many of [`Options::SPECS`], from the first, every planner documents; the
 /// others are the concurrent planner's.
-const COMMON_OPTIONS: usize = 11;
+const COMMON_OPTIONS: usize = 12;
 
 /// Narrowest and widest bead (mm): from a fine nozzle to a wide laser-deposition track.
 const MIN_WIDTH: f64 = 0.01;
@@ -239,7 +243,7 @@ fn prepare(o: &Options, info: &RunInfo, plan: &mut LayerPlan, step: f64) -> Resu
         return Err(Error::stage("plan", "the pipeline has no materials, so no tools"));
     }
     let widths = o.widths();
-    let work = distribute(info, plan, tools.len(), &widths, o.mixing, o.thin);
+    let work = distribute(info, plan, tools.len(), &widths, o.mixing, o.thin, o.assign);
     if !work.thin.is_empty() {
         let list: Vec<String> = work
             .thin

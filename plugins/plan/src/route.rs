@@ -4,6 +4,7 @@
 
 use lamina_core::{BBox2, Composition, LayerPlan, PathKind, Point2, RunInfo, TimedPoint, Toolpath};
 
+use crate::assign::{Assign, Shares};
 use crate::bead::Bead;
 use crate::fill::Widths;
 use crate::group::{Thin, group};
@@ -112,32 +113,11 @@ pub struct Work {
     pub bbox: BBox2,
 }
 
-/// The tool that deposits a region: the mixing tool, or the tool of the region's
-/// dominant material (the part's first material when the region is not graded).
-pub fn tool_of(info: &RunInfo, part: usize, composition: Option<&Composition>, mixing: bool) -> usize {
-    if mixing {
-        return 0;
-    }
-    let Some(p) = info.parts.get(part) else {
-        return 0;
-    };
-    let local = composition
-        .map(|c| {
-            c.fractions
-                .iter()
-                .enumerate()
-                .fold(
-                    (0, f64::NEG_INFINITY),
-                    |a, (i, &f)| if f > a.1 { (i, f) } else { a },
-                )
-                .0
-        })
-        .unwrap_or(0);
-    p.materials.get(local).copied().unwrap_or(0)
-}
-
 /// Cuts every sub-region of the layer into passes (merging slivers with their
-/// neighbours, [`group`]) and hands each to its tool.
+/// neighbours, [`group`]) and hands each to its tool: everything to the mixing tool,
+/// which lays each group's own composition, or each bead to one single-material tool
+/// by the group's fractions ([`Shares`]), the bead then depositing that tool's
+/// material alone.
 pub fn distribute(
     info: &RunInfo,
     plan: &LayerPlan,
@@ -145,6 +125,7 @@ pub fn distribute(
     widths: &Widths,
     mixing: bool,
     thin: Thin,
+    assign: Assign,
 ) -> Work {
     let mut work = Work {
         jobs: vec![Vec::new(); tools],
@@ -162,14 +143,26 @@ pub fn distribute(
             work.thin
                 .extend(grouping.thin.iter().map(|&(r, a)| (name.clone(), r, a)));
         }
+        let mut shares = Shares::new(info, part.part, tools, assign);
         for g in grouping.groups {
-            let tool = tool_of(info, part.part, g.composition.as_ref(), mixing).min(tools - 1);
-            for pass in g.passes {
+            let owners = if mixing {
+                vec![0; g.passes.len()]
+            } else {
+                let areas: Vec<f64> = g.passes.iter().map(Bead::area).collect();
+                shares.hand_out(g.composition.as_ref(), &areas)
+            };
+            for (pass, tool) in g.passes.into_iter().zip(owners) {
+                let tool = tool.min(tools - 1);
+                let composition = if mixing {
+                    g.composition.clone()
+                } else {
+                    shares.deposited(tool).or_else(|| g.composition.clone())
+                };
                 let bbox = BBox2::from_points(pass.points.iter().copied());
                 work.bbox = work.bbox.union(&bbox);
                 work.jobs[tool].push(Job {
                     pass,
-                    composition: g.composition.clone(),
+                    composition,
                     part: part.part,
                     sub_region: g.members[0],
                     bbox,
