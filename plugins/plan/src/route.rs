@@ -173,13 +173,17 @@ pub fn distribute(
     work
 }
 
-/// Where tools wait: a row below the layer, `spacing` apart, and the row just below
-/// the layer every tool passes through on its way in and out. Everything a tool does
-/// in the layer stays above `entry_y`, at least `spacing` above every park, so a parked
-/// tool is never in anyone's way.
+/// Where tools wait: a row below the layer, at least `spacing` apart, and the row just
+/// below the layer every tool passes through on its way in and out. Everything a tool
+/// does in the layer stays above `entry_y`, at least `spacing` above every park, so a
+/// parked tool is never in anyone's way. The parks spread over the layer's width, the
+/// first tool's at its left end and the last one's at its right: each tool's
+/// nearest-next route starts from its own side, and tools working the same loops go
+/// round them apart instead of one behind the other.
 #[derive(Debug, Clone, Copy)]
 pub struct Parks {
     pub x0: f64,
+    /// Between two neighbouring parks (mm): at least the spacing asked for.
     pub spacing: f64,
     pub park_y: f64,
     pub entry_y: f64,
@@ -187,15 +191,21 @@ pub struct Parks {
 
 impl Parks {
     pub fn new(bbox: &BBox2, tools: usize, spacing: f64) -> Self {
-        let (cx, min_y) = if bbox.is_empty() {
-            (0.0, 0.0)
+        let (min_x, max_x, min_y) = if bbox.is_empty() {
+            (0.0, 0.0, 0.0)
         } else {
-            (bbox.center().x, bbox.min.y)
+            (bbox.min.x, bbox.max.x, bbox.min.y)
         };
         let entry_y = min_y - 1.0;
+        let gaps = tools.saturating_sub(1) as f64;
+        let (x0, step) = if gaps > 0.0 && (max_x - min_x) / gaps > spacing {
+            (min_x, (max_x - min_x) / gaps)
+        } else {
+            ((min_x + max_x) / 2.0 - spacing * gaps / 2.0, spacing)
+        };
         Parks {
-            x0: cx - spacing * (tools.saturating_sub(1)) as f64 / 2.0,
-            spacing,
+            x0,
+            spacing: step,
             park_y: entry_y - spacing,
             entry_y,
         }
@@ -341,5 +351,33 @@ pub fn pause(tool: usize, p: Point2, t0: f64, t1: f64) -> Toolpath {
         composition: None,
         part: None,
         sub_region: None,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn bbox(x0: f64, x1: f64) -> BBox2 {
+        BBox2::from_points([Point2::new(x0, 10.0), Point2::new(x1, 30.0)])
+    }
+
+    #[test]
+    fn parks_spread_over_the_layers_width_and_keep_their_spacing() {
+        // A 60 mm wide layer, two tools 12 mm apart at least: one park at each end.
+        let p = Parks::new(&bbox(-30.0, 30.0), 2, 12.0);
+        assert_eq!(p.park(0).x, -30.0);
+        assert_eq!(p.park(1).x, 30.0);
+        // Three tools: the middle one halfway.
+        let p = Parks::new(&bbox(-30.0, 30.0), 3, 12.0);
+        assert_eq!(p.park(1).x, 0.0);
+        // Below the layer, a spacing under the row every tool enters by.
+        assert_eq!(p.entry_y, 9.0);
+        assert_eq!(p.park_y, 9.0 - 12.0);
+        // A layer narrower than the spacing: the parks keep their spacing about its
+        // centre.
+        let p = Parks::new(&bbox(0.0, 4.0), 2, 12.0);
+        assert_eq!(p.park(0).x, -4.0);
+        assert_eq!(p.park(1).x, 8.0);
     }
 }

@@ -132,7 +132,7 @@ fn safe_times(first: Course<'_>, second: Course<'_>, fixed: &[f64], keep_out: f6
     };
     // The stretches swept since the last barrier, and their bounding boxes: a stretch
     // whose box keeps clear of the other head's box needs no closer look.
-    let (mut sa, mut sb) = (Swept::default(), Swept::default());
+    let (mut sa, mut sb) = (Swept::new(keep_out), Swept::new(keep_out));
     // Index of the event where the current stretch starts.
     let mut start = 0usize;
     let mut i = 0usize;
@@ -152,8 +152,8 @@ fn safe_times(first: Course<'_>, second: Course<'_>, fixed: &[f64], keep_out: f6
                 .find(|&k| !extruding(beads_a, events[k]) && !extruding(beads_b, events[k]))
                 .unwrap_or(i - 1);
             out.push(events[cut]);
-            sa = Swept::default();
-            sb = Swept::default();
+            sa = Swept::new(keep_out);
+            sb = Swept::new(keep_out);
             start = cut + 1;
             i = cut + 1;
             continue;
@@ -162,8 +162,8 @@ fn safe_times(first: Course<'_>, second: Course<'_>, fixed: &[f64], keep_out: f6
         sb.push(nb);
         if is_fixed(t) {
             out.push(t);
-            sa = Swept::default();
-            sb = Swept::default();
+            sa = Swept::new(keep_out);
+            sb = Swept::new(keep_out);
             start = i + 1;
         }
         i += 1;
@@ -171,17 +171,46 @@ fn safe_times(first: Course<'_>, second: Course<'_>, fixed: &[f64], keep_out: f6
     out
 }
 
-/// The stretches of path a head swept since the last barrier.
-#[derive(Default)]
+/// The stretches of path a head swept since the last barrier, filed in a grid of
+/// keep-out-sized cells so that a new stretch is checked only against those near it.
 struct Swept {
     segments: Vec<(Point2, Point2)>,
     bbox: BBox2,
+    cell: f64,
+    grid: std::collections::HashMap<(i64, i64), Vec<usize>>,
 }
 
 impl Swept {
+    fn new(keep_out: f64) -> Self {
+        Swept {
+            segments: Vec::new(),
+            bbox: BBox2::default(),
+            cell: keep_out.max(0.5),
+            grid: std::collections::HashMap::new(),
+        }
+    }
+
+    /// The cells a box grown by `margin` covers.
+    fn cells(&self, b: &BBox2, margin: f64) -> impl Iterator<Item = (i64, i64)> + use<> {
+        let c = self.cell;
+        let lo = |v: f64| ((v - margin) / c).floor() as i64;
+        let hi = |v: f64| ((v + margin) / c).floor() as i64;
+        let (x0, x1, y0, y1) = (lo(b.min.x), hi(b.max.x), lo(b.min.y), hi(b.max.y));
+        (x0..=x1).flat_map(move |x| (y0..=y1).map(move |y| (x, y)))
+    }
+
     fn push(&mut self, s: (Point2, Point2)) {
-        self.bbox = self.bbox.union(&BBox2::from_points([s.0, s.1]));
+        // A head standing still sweeps nothing new.
+        if self.segments.last() == Some(&s) {
+            return;
+        }
+        let b = BBox2::from_points([s.0, s.1]);
+        self.bbox = self.bbox.union(&b);
+        let k = self.segments.len();
         self.segments.push(s);
+        for c in self.cells(&b, 0.0).collect::<Vec<_>>() {
+            self.grid.entry(c).or_default().push(k);
+        }
     }
 
     /// Whether segment `s` stays `keep_out` from every stretch.
@@ -199,9 +228,14 @@ impl Swept {
         if dx.hypot(dy) >= keep_out {
             return true;
         }
-        self.segments
-            .iter()
-            .all(|o| segment_gap(s.0, s.1, o.0, o.1) >= keep_out)
+        self.cells(&b, keep_out).all(|c| {
+            self.grid.get(&c).is_none_or(|list| {
+                list.iter().all(|&k| {
+                    let o = self.segments[k];
+                    segment_gap(s.0, s.1, o.0, o.1) >= keep_out
+                })
+            })
+        })
     }
 }
 
@@ -320,6 +354,9 @@ struct Piece {
     points: Vec<Point2>,
     /// Width of each segment.
     widths: Vec<f64>,
+    /// Length of the planned segment each segment is part of: a travel retracts by
+    /// the planned segment's length, wherever a barrier cuts it.
+    spans: Vec<f64>,
     t0: f64,
     t1: f64,
 }
@@ -342,6 +379,7 @@ fn clip(path: &Toolpath, a: f64, b: f64) -> Option<Piece> {
     };
     let mut points = Vec::new();
     let mut widths = Vec::new();
+    let mut spans = Vec::new();
     for i in 0..pts.len() - 1 {
         let (s, e) = (pts[i].t, pts[i + 1].t);
         if e <= a || s >= b {
@@ -352,11 +390,13 @@ fn clip(path: &Toolpath, a: f64, b: f64) -> Option<Piece> {
         }
         points.push(at(i, b.min(e)));
         widths.push(path.segment_width(i));
+        spans.push((pts[i + 1].p - pts[i].p).norm());
     }
     (points.len() >= 2).then_some(Piece {
         kind: path.kind,
         points,
         widths,
+        spans,
         t0: a,
         t1: b,
     })
@@ -681,7 +721,15 @@ impl Writer {
                                 (0, Some(FirstLayerSpeed::Factor(f))) => speed * f,
                                 _ => speed,
                             };
-                            for &p in &points[1..] {
+                            for (k, &p) in points[1..].iter().enumerate() {
+                                // Pulled back where a long planned travel starts, even
+                                // when a barrier cuts it into pieces too short to
+                                // retract for on their own: the nozzle would ooze on
+                                // its way otherwise.
+                                if piece.spans.get(k).is_some_and(|&l| l > RETRACT_MIN_TRAVEL) {
+                                    self.retract(self.s.retraction.length);
+                                    self.lift();
+                                }
                                 self.travel_at(p, speed);
                             }
                         }
