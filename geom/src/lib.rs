@@ -20,6 +20,7 @@ pub mod field;
 pub mod follow;
 pub mod iso;
 pub mod lattice;
+pub mod offset;
 pub mod ring;
 pub mod segment;
 pub mod shape;

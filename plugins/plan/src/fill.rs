@@ -18,10 +18,9 @@
 use i_overlay::core::fill_rule::FillRule;
 use i_overlay::core::overlay_rule::OverlayRule;
 use i_overlay::float::single::SingleFloatOverlay;
-use i_overlay::mesh::float::outline::offset::OutlineOffset;
-use i_overlay::mesh::float::style::{LineJoin, OutlineStyle};
 use lamina_core::{Point2, Polygon};
 
+use lamina_geom::offset::{round_offset, tidy};
 use lamina_geom::ring::{ring_area, ring_of, ring_perimeter};
 use lamina_geom::{Shapes, simplify_ring};
 
@@ -101,28 +100,7 @@ fn shapes_of(p: &Polygon) -> Shapes {
 
 /// `shapes` offset by `d` (negative: inward) with round joins, simplified.
 fn offset(shapes: &Shapes, d: f64) -> Shapes {
-    if shapes.is_empty() || d == 0.0 {
-        return shapes.clone();
-    }
-    let step = 2.0 * (1.0 - (TOLERANCE / d.abs()).min(1.0)).acos();
-    let style = OutlineStyle::new(d).line_join(LineJoin::Round(step.max(0.01)));
-    let out: Shapes = shapes.outline(&style);
-    tidy(out)
-}
-
-/// Offsets of offsets would multiply the arc vertices pass after pass.
-fn tidy(shapes: Shapes) -> Shapes {
-    shapes
-        .into_iter()
-        .map(|shape| {
-            shape
-                .into_iter()
-                .map(|c| simplify_ring(&c, TOLERANCE))
-                .filter(|c| c.len() >= 3)
-                .collect::<Vec<_>>()
-        })
-        .filter(|s: &Vec<Vec<[f64; 2]>>| !s.is_empty())
-        .collect()
+    round_offset(shapes, d, TOLERANCE)
 }
 
 /// The area of a shape: its outer ring less its holes (the offsetter writes holes
@@ -184,7 +162,10 @@ pub fn fill(polygon: &Polygon, widths: &Widths) -> Vec<Bead> {
             beads.push(Bead::closed(points, w));
         }
         let band = offset(&loops, w / 2.0);
-        let rest: Shapes = tidy(level.overlay(&band, OverlayRule::Difference, FillRule::EvenOdd));
+        let rest: Shapes = tidy(
+            level.overlay(&band, OverlayRule::Difference, FillRule::EvenOdd),
+            TOLERANCE,
+        );
         residue.extend(rest);
         level = offset(&level, -w);
     }

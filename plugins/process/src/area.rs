@@ -1,11 +1,10 @@
 //! The geometry the operations share: a layer's area, offsets, raster passes over an
 //! area, and the stretches of a boundary that run along another region.
 
-use i_overlay::mesh::float::outline::offset::OutlineOffset;
-use i_overlay::mesh::float::style::{LineJoin, OutlineStyle};
 use lamina_core::{LayerPlan, Limit, Limits, OperationPath, Point2, Polygon, Result};
+use lamina_geom::Shapes;
+use lamina_geom::offset::round_offset;
 use lamina_geom::ring::{polygons_of, shape_of};
-use lamina_geom::{Shapes, simplify_ring};
 
 /// Chord tolerance of offsets (mm).
 const TOLERANCE: f64 = 0.005;
@@ -65,21 +64,7 @@ pub fn offset(polygons: &[Polygon], d: f64) -> Vec<Polygon> {
     if shapes.is_empty() || d == 0.0 {
         return polygons.to_vec();
     }
-    let step = 2.0 * (1.0 - (TOLERANCE / d.abs()).min(1.0)).acos();
-    let style = OutlineStyle::new(d).line_join(LineJoin::Round(step.max(0.01)));
-    let out: Shapes = shapes.outline(&style);
-    let tidy: Shapes = out
-        .into_iter()
-        .map(|shape| {
-            shape
-                .into_iter()
-                .map(|c| simplify_ring(&c, TOLERANCE))
-                .filter(|c| c.len() >= 3)
-                .collect::<Vec<_>>()
-        })
-        .filter(|s: &Vec<Vec<[f64; 2]>>| !s.is_empty())
-        .collect();
-    polygons_of(&tidy)
+    polygons_of(&round_offset(&shapes, d, TOLERANCE))
 }
 
 /// Passes along x, `spacing` apart, over `polygons` (even-odd inside), at height `z`:

@@ -7,13 +7,12 @@ use i_overlay::core::overlay_rule::OverlayRule;
 use i_overlay::core::solver::Solver;
 use i_overlay::float::overlay::{FloatOverlay, OverlayOptions};
 use i_overlay::float::simplify::SimplifyShape;
-use i_overlay::mesh::float::outline::offset::OutlineOffset;
-use i_overlay::mesh::float::style::{LineJoin, OutlineStyle};
 use lamina_core::mesh::Point3;
 use lamina_core::surface::Surface;
 use lamina_core::{BBox2, Point2, Polygon};
 use lamina_geom::field::Field;
 use lamina_geom::iso::iso_loops;
+use lamina_geom::offset::round_outline;
 use lamina_geom::ring::ring_of;
 use lamina_geom::simplify_ring;
 
@@ -228,13 +227,11 @@ pub fn closer_than(datum: &Datum, d: f64, z: f64, bbox: &BBox2, tolerance: f64, 
             // sliced curves and meshed walls carry thousands of them, and the raw
             // offset of such a contour crosses itself so often that the outline takes
             // seconds instead of a millisecond.
-            let step = 2.0 * (1.0 - (tolerance / d).min(1.0)).acos();
-            let style = OutlineStyle::new(-d).line_join(LineJoin::Round(step.max(0.01)));
             let simple: Shapes = family
                 .iter()
                 .map(|shape| shape.iter().map(|c| simplify_ring(c, tolerance / 2.0)).collect())
                 .collect();
-            let inset: Shapes = simple.outline(&style);
+            let inset = round_outline(&simple, -d, tolerance);
             if inset.is_empty() {
                 Set::Whole
             } else {
