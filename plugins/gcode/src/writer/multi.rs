@@ -208,7 +208,8 @@ impl Swept {
         self.bbox = self.bbox.union(&b);
         let k = self.segments.len();
         self.segments.push(s);
-        for c in self.cells(&b, 0.0).collect::<Vec<_>>() {
+        // The cells borrow nothing of `self`: filed as they come.
+        for c in self.cells(&b, 0.0) {
             self.grid.entry(c).or_default().push(k);
         }
     }
