@@ -21,8 +21,12 @@ use crate::measure::pole;
 use crate::regions::{from_bands, uniform_level, whole};
 use lamina_geom::field::Field;
 use lamina_geom::iso::iso_levels;
+use lamina_geom::simplify::simplify_into;
 
 const STAGE: &str = "discretise:distance-field";
+
+/// Iso-loops are simplified within this share of a cell before the band booleans.
+const SIMPLIFY: f64 = 0.05;
 
 /// Below every level: keeps iso-loops closed at the grid's border.
 const FLOOR: f64 = -1e300;
@@ -318,8 +322,13 @@ impl Discretiser for DistanceField {
         }
         let z = ctx.layer.z - ctx.layer.thickness / 2.0;
         let space = surface.as_deref().map(|s| (s, z));
-        let Some(IsoSets { cut, sets, max, .. }) =
-            self.iso_sets(&polygon, space).filter(|_| !base.is_empty())
+        let Some(IsoSets {
+            cut,
+            sets,
+            max,
+            field,
+            ..
+        }) = self.iso_sets(&polygon, space).filter(|_| !base.is_empty())
         else {
             return Ok(whole(ctx, polygon));
         };
@@ -333,10 +342,13 @@ impl Discretiser for DistanceField {
         let count = cut.levels.len();
         // Loops keep the set on their left: the non-zero rule in the band overlay reads
         // them as outers and holes.
+        let eps = SIMPLIFY * field.h;
+        let mut ring = Vec::new();
         let bands = nested_bands(&base, count, FillRule::NonZero, |k, _, overlay| {
             let mut any = false;
             for c in &sets[k - 1] {
-                let c = grid.contour(c);
+                simplify_into(c.len(), |i| [c.points[i].x, c.points[i].y], eps, &mut ring);
+                let c = grid.ring(&ring);
                 if c.len() >= 3 {
                     overlay.add_contour(&c, ShapeType::Clip);
                     any = true;

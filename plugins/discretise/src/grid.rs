@@ -83,6 +83,21 @@ impl Grid {
         out
     }
 
+    /// [`Grid::contour`] of a ring of coordinates.
+    pub fn ring(&self, ring: &[[f64; 2]]) -> IntContour<i32> {
+        let mut out: IntContour<i32> = Vec::with_capacity(ring.len());
+        for &[x, y] in ring {
+            let q = self.point(Point2::new(x, y));
+            if out.last() != Some(&q) {
+                out.push(q);
+            }
+        }
+        while out.len() > 1 && out.first() == out.last() {
+            out.pop();
+        }
+        out
+    }
+
     pub fn shape(&self, polygon: &Polygon) -> IntShape<i32> {
         polygon.contours().map(|c| self.contour(c)).collect()
     }
