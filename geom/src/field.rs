@@ -83,9 +83,22 @@ impl Field {
 
     /// Fills `values` with the distance of every sample to the nearest of `contours`.
     pub fn distance_to(&mut self, contours: &[&Contour]) {
+        self.distance_where(contours, None);
+    }
+
+    /// [`Field::distance_to`] measured only at the samples `wanted` flags and those
+    /// within a cell of the boundary; the others are left at infinity. A signed field
+    /// cut at positive levels never reads the outside beyond the first cell: a cell
+    /// edge that a level crosses has a sample inside, so its other end is within a
+    /// cell of the boundary.
+    pub fn distance_within(&mut self, contours: &[&Contour], wanted: &[bool]) {
+        self.distance_where(contours, Some(wanted));
+    }
+
+    fn distance_where(&mut self, contours: &[&Contour], wanted: Option<&[bool]>) {
         SCRATCH.with(|scratch| {
             let mut scratch = scratch.borrow_mut();
-            self.distance_with(contours, &mut scratch);
+            self.distance_with(contours, wanted, &mut scratch);
             // A field far beyond the usual is not kept for the rest of the run.
             if self.nx * self.ny > KEEP_SAMPLES {
                 *scratch = Scratch::default();
@@ -93,7 +106,7 @@ impl Field {
         });
     }
 
-    fn distance_with(&mut self, contours: &[&Contour], scratch: &mut Scratch) {
+    fn distance_with(&mut self, contours: &[&Contour], wanted: Option<&[bool]>, scratch: &mut Scratch) {
         let n = self.nx * self.ny;
         let (nx, ny) = (self.nx, self.ny);
         let Scratch {
@@ -209,14 +222,17 @@ impl Field {
                 (p.x - q[0]).powi(2) + (p.y - q[1]).powi(2)
             }
         };
+        let want = |k: usize| wanted.is_none_or(|w| w[k]);
         for j in 0..ny {
             let y = oy + j as f64 * h;
             for i in 0..nx {
                 let k = j * nx + i;
                 self.values[k] = if seed_d2[k].is_finite() {
                     seed_d2[k]
-                } else {
+                } else if want(k) {
                     d2(Point2::new(ox + i as f64 * h, y), seed_of[k])
+                } else {
+                    f64::INFINITY
                 };
             }
         }
@@ -236,8 +252,12 @@ impl Field {
         // pairs that are apart are measured out of line.
         let mut cross = |(i, j): (usize, usize), (ni, nj): (usize, usize), s: u32, t: u32| {
             let (k, m) = (j * nx + i, nj * nx + ni);
-            values[k] = values[k].min(d2(at(i, j), t));
-            values[m] = values[m].min(d2(at(ni, nj), s));
+            if values[k].is_finite() {
+                values[k] = values[k].min(d2(at(i, j), t));
+            }
+            if values[m].is_finite() {
+                values[m] = values[m].min(d2(at(ni, nj), s));
+            }
         };
         for j in 0..ny {
             let row = &seed_of[j * nx..(j + 1) * nx];
@@ -299,15 +319,6 @@ impl Envelope {
         }
     }
 
-    /// The first q where parabola m + 1 of the `k` of the envelope is lower than m.
-    fn switch(&self, m: usize, k: usize) -> i64 {
-        if m + 1 >= k {
-            return i64::MAX;
-        }
-        let (dv, dh) = (self.v[m + 1] - self.v[m], self.h[m + 1] - self.h[m]);
-        dh.div_euclid(2 * dv) + 1
-    }
-
     /// `arg[q]` = the p minimising `(q - p)^2 + f[p]` (Felzenszwalb and Huttenlocher).
     /// `NONE` values are skipped; `false` (and `arg` untouched) when all are.
     fn transform(&mut self, f: &[i64], arg: &mut [u32]) -> bool {
@@ -336,16 +347,16 @@ impl Envelope {
             return false;
         }
         // Parabola m + 1 takes over from m at the first q where it is strictly lower:
-        // q > (h1 - h0) / (2 (v1 - v0)), found once per parabola.
+        // (q - v1)^2 + f1 < (q - v0)^2 + f0, that is 2 q (v1 - v0) > h1 - h0. A
+        // product per step instead of a division per parabola.
+        let (v, h) = (&self.v[..k], &self.h[..k]);
         let mut m = 0usize;
-        let mut next = self.switch(m, k);
         for (q, a) in arg.iter_mut().enumerate() {
             let q = q as i64;
-            while q >= next {
+            while m + 1 < k && 2 * q * (v[m + 1] - v[m]) > h[m + 1] - h[m] {
                 m += 1;
-                next = self.switch(m, k);
             }
-            *a = self.v[m] as u32;
+            *a = v[m] as u32;
         }
         true
     }
@@ -388,6 +399,27 @@ mod tests {
             }
         }
         assert!(worst < 0.5 * f.h, "worst {worst} vs cell {}", f.h);
+    }
+
+    #[test]
+    fn a_field_within_the_inside_agrees_there_and_near_the_boundary() {
+        let c = circle(0.0, 0.0, 10.0, 300);
+        let hole = circle(-2.0, 3.0, 3.0, 90);
+        let mut all = Field::over(&c.bbox(), 96);
+        all.distance_to(&[&c, &hole]);
+        let inside = all.inside(&[&c, &hole]);
+        let mut within = Field::over(&c.bbox(), 96);
+        within.distance_within(&[&c, &hole], &inside);
+        let mut skipped = 0;
+        for (k, (&a, &w)) in all.values.iter().zip(&within.values).enumerate() {
+            if inside[k] || a <= all.h {
+                assert_eq!(a, w, "sample {k}");
+            } else {
+                assert!(w == f64::INFINITY, "sample {k}: {w}");
+                skipped += 1;
+            }
+        }
+        assert!(skipped > 0);
     }
 
     #[test]

@@ -210,7 +210,8 @@ impl DistanceField {
         let all: Vec<&Contour> = polygon.contours().collect();
         let inside = field.inside(&all);
         match self.feature {
-            Feature::Boundary => field.distance_to(&all),
+            // Outside the family only the first cell is read (negated).
+            Feature::Boundary => field.distance_within(&all, &inside),
             Feature::Outer => field.distance_to(&[&polygon.outer]),
             Feature::Holes => {
                 if polygon.holes.is_empty() {
@@ -256,18 +257,22 @@ impl DistanceField {
             return None;
         }
         let (nx, ny) = (field.nx, field.ny);
-        for j in 0..ny {
-            for i in 0..nx {
-                let k = j * nx + i;
-                let v = &mut field.values[k];
-                *v = if i == 0 || j == 0 || i == nx - 1 || j == ny - 1 {
-                    FLOOR
-                } else if self.feature == Feature::Boundary && !inside[k] {
-                    -*v / max
-                } else {
-                    *v / max
-                };
+        let signed = self.feature == Feature::Boundary;
+        for (j, (row, inside)) in field
+            .values
+            .chunks_exact_mut(nx)
+            .zip(inside.chunks_exact(nx))
+            .enumerate()
+        {
+            if j == 0 || j == ny - 1 {
+                row.fill(FLOOR);
+                continue;
             }
+            for (v, &inside) in row.iter_mut().zip(inside) {
+                *v = if signed && !inside { -*v / max } else { *v / max };
+            }
+            row[0] = FLOOR;
+            row[nx - 1] = FLOOR;
         }
         // Never more iso-levels than the limit allows (the discretiser refuses the
         // family when a spacing asks for more): the iso-lines cost per level.
