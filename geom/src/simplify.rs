@@ -38,7 +38,7 @@ pub fn simplify_into(n: usize, point: impl Fn(usize) -> [f64; 2], eps: f64, out:
     let eps2 = eps * eps;
     out.push(p(start));
     let mut anchor = 0;
-    let mut cone = Cone::OPEN;
+    let mut cone = Cone::Open;
     for k in 1..n {
         let next = p(start + k + 1);
         let a = out[out.len() - 1];
@@ -50,7 +50,7 @@ pub fn simplify_into(n: usize, point: impl Fn(usize) -> [f64; 2], eps: f64, out:
         if !fits {
             out.push(p(start + k));
             anchor = k;
-            cone = Cone::OPEN;
+            cone = Cone::Open;
         }
     }
     // The last kept vertex against the chord back to the start.
@@ -84,8 +84,6 @@ enum Cone {
 }
 
 impl Cone {
-    const OPEN: Cone = Cone::Open;
-
     /// Narrows the cone to the wedge of the skipped vertex `q` seen from `a`.
     fn add(&mut self, a: [f64; 2], q: [f64; 2], eps2: f64) {
         let u = [q[0] - a[0], q[1] - a[1]];
@@ -97,7 +95,7 @@ impl Cone {
         // The wedge's sides: u turned by +-asin(eps / r), scaled by r cos (the
         // length is irrelevant to the side tests).
         let (sin, cos) = (eps2.sqrt(), (r2 - eps2).sqrt());
-        let turn = |s: f64| [(u[0] * cos - u[1] * s), (u[0] * s + u[1] * cos)];
+        let turn = |s: f64| [u[0] * cos - u[1] * s, u[0] * s + u[1] * cos];
         let (l, r) = (turn(sin), turn(-sin));
         *self = match *self {
             Cone::Open => Cone::Between {

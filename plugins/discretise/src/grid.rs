@@ -70,24 +70,19 @@ impl Grid {
     }
 
     pub fn contour(&self, c: &Contour) -> IntContour<i32> {
-        let mut out: IntContour<i32> = Vec::with_capacity(c.len());
-        for &p in &c.points {
-            let q = self.point(p);
-            if out.last() != Some(&q) {
-                out.push(q);
-            }
-        }
-        while out.len() > 1 && out.first() == out.last() {
-            out.pop();
-        }
-        out
+        self.snapped(c.points.iter().copied())
     }
 
     /// [`Grid::contour`] of a ring of coordinates.
     pub fn ring(&self, ring: &[[f64; 2]]) -> IntContour<i32> {
-        let mut out: IntContour<i32> = Vec::with_capacity(ring.len());
-        for &[x, y] in ring {
-            let q = self.point(Point2::new(x, y));
+        self.snapped(ring.iter().map(|&[x, y]| Point2::new(x, y)))
+    }
+
+    /// A ring's points on the grid, repeats (and a closing copy of the first) dropped.
+    fn snapped(&self, points: impl ExactSizeIterator<Item = Point2>) -> IntContour<i32> {
+        let mut out: IntContour<i32> = Vec::with_capacity(points.len());
+        for p in points {
+            let q = self.point(p);
             if out.last() != Some(&q) {
                 out.push(q);
             }
