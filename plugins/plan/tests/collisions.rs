@@ -299,17 +299,26 @@ fn says_slower(plan: &LayerPlan) -> bool {
         .any(|d| d.message.contains("is slower than one tool at a time"))
 }
 
+/// Random layouts planned checking the next step only (`look_ahead = 0`, the
+/// paper's check: every two-tool encounter is then decided by speed along X) and
+/// with the default look-ahead.
 #[test]
 fn random_layouts_of_two_to_four_tools_never_collide() {
+    random_layouts(Some(0.0));
+    random_layouts(None);
+}
+
+fn random_layouts(look_ahead: Option<f64>) {
     let mut rng = Rng(0x5eed_1234_abcd_0001);
     let (mut pauses, mut faster, mut slower, mut decided) = (0, 0, 0, 0);
     for case in 0..40 {
         let tools = 2 + case % 3;
         let envelope = rng.range(1.5, 6.0);
         let table = format!(
-            "use = \"concurrent\"\nwidth = 0.5\nenvelope = {envelope}\nstep = 0.02\nspeed = {}\ntravel_speed = 100.0\n\
+            "use = \"concurrent\"\nwidth = 0.5\nenvelope = {envelope}\nstep = 0.02\nspeed = {}\ntravel_speed = 100.0\n{}\
              [tools.m0]\nspeed = {}",
             rng.range(10.0, 40.0),
+            look_ahead.map_or(String::new(), |s| format!("look_ahead = {s}\n")),
             rng.range(10.0, 40.0)
         );
         let (info, plan) = layout(&mut rng, tools);
@@ -356,7 +365,10 @@ fn random_layouts_of_two_to_four_tools_never_collide() {
             if tc < ts {
                 faster += 1;
             }
-            if tools == 2 {
+            // Looking ahead, a tool may pause because only its pausing keeps the two
+            // apart, whatever the speeds: the rule then decides only free choices,
+            // which the toolpaths do not tell apart.
+            if tools == 2 && look_ahead == Some(0.0) {
                 decided += check_priority_by_speed_along_x(&conc.toolpaths, 0.02);
             }
         }
@@ -388,9 +400,11 @@ fn random_layouts_of_two_to_four_tools_never_collide() {
         "concurrent was faster in only {faster} of 40 layouts"
     );
     assert!(pauses > 0, "no layout made a tool give way");
-    assert!(decided > 0, "no two-tool encounter was decided by priority");
+    if look_ahead == Some(0.0) {
+        assert!(decided > 0, "no two-tool encounter was decided by priority");
+    }
     println!(
-        "{faster} of 40 layouts faster concurrently, {slower} slower; {decided} two-tool encounters by speed along X"
+        "look-ahead {look_ahead:?}: {faster} of 40 layouts faster concurrently, {slower} slower; {decided} two-tool encounters by speed along X"
     );
 }
 
@@ -403,7 +417,7 @@ fn tools_crossing_head_on_give_way_by_speed_along_x() {
     plan.parts[1].regions.truncate(1);
     plan.parts[0].regions[0].polygon = Polygon::new(rect(0.0, 0.0, 40.0, 2.0), vec![]);
     plan.parts[1].regions[0].polygon = Polygon::new(rect(0.0, 3.0, 40.0, 2.0), vec![]);
-    planner("use = \"concurrent\"\nenvelope = 2.0\nstep = 0.01\n[tools.m1]\nspeed = 10.0")
+    planner("use = \"concurrent\"\nenvelope = 2.0\nstep = 0.01\nlook_ahead = 0.0\n[tools.m1]\nspeed = 10.0")
         .plan(&info, &mut plan)
         .expect("plans");
     let a = timeline(&plan.toolpaths, 0);
@@ -553,11 +567,16 @@ fn bead(a: Point2, b: Point2, speed: f64) -> Move {
 const STEP: f64 = 0.01;
 
 fn simulate(tools: &[(&ToolSpec, Vec<Move>)], priority: Priority) -> Vec<Toolpath> {
+    simulate_ahead(tools, priority, 0.0)
+}
+
+fn simulate_ahead(tools: &[(&ToolSpec, Vec<Move>)], priority: Priority, look_ahead: f64) -> Vec<Toolpath> {
     let settings = Settings {
         step: STEP,
         budget: 100.0,
         max_side_steps: 20,
         priority,
+        look_ahead,
     };
     let (paths, _) = sim::concurrent(tools, &settings, &BBox2::EMPTY).expect("no deadlock");
     let lines = [timeline(&paths, 0), timeline(&paths, 1)];
@@ -606,6 +625,62 @@ fn at_a_crossing_the_tool_faster_along_x_goes_on_and_the_other_pauses_before_it(
     let end = across_line[across_line.len() - 1].0;
     assert!((end - 3.0).abs() < 1e-9, "tool 1 ends at {end} s");
     assert_eq!(check_priority_by_speed_along_x(&paths, STEP), h.len());
+}
+
+#[test]
+fn looking_ahead_the_tool_slower_along_x_still_gives_way_at_a_crossing_only_sooner() {
+    // Either tool pausing would keep them apart: the paper's rule decides, and would
+    // fail here if the slower tool along X (tool 0) got priority.
+    let (up, across, r0, r1) = crossing();
+    let paths = simulate_ahead(&[(&up, r0), (&across, r1)], Priority::XSpeed, 0.5);
+    let h = holds(&paths);
+    assert!(!h.is_empty(), "nobody gave way");
+    assert!(h.iter().all(|h| h.tool == 0), "{h:?}");
+    // Half a second before it would reach the 4 mm line (t = 1.45 s): at most 0.5 s
+    // sooner than checking one step ahead, farther back along its path.
+    let first = h[0];
+    assert!(first.from < 1.45 - 1e-6 && first.from >= 0.95 - 1e-6, "{first:?}");
+    assert!(first.at.y < -4.1 - 1e-6, "tool 0 waits at {:?}", first.at);
+    let across_line = timeline(&paths, 1);
+    let end = across_line[across_line.len() - 1].0;
+    assert!((end - 3.0).abs() < 1e-9, "tool 1 ends at {end} s");
+    assert_eq!(check_priority_by_speed_along_x(&paths, STEP), h.len());
+}
+
+#[test]
+fn looking_ahead_a_tool_waits_before_the_way_narrows_instead_of_stepping_aside() {
+    // Checking one step ahead, tool 1 (faster along X) comes up to tool 0, which is
+    // still on its path, both are held and tool 0 steps aside, off its bead.
+    let (up, across, r0, r1) = on_the_crossing(false);
+    let one_step = simulate(&[(&up, r0.clone()), (&across, r1.clone())], Priority::XSpeed);
+    let off = |paths: &[Toolpath]| paths.iter().any(|p| p.tool == 0 && p.kind == PathKind::Travel);
+    assert!(
+        off(&one_step),
+        "tool 0 did not step aside checking one step ahead"
+    );
+    // Looking ahead, tool 1 is paused before it gets near, where its pause alone keeps
+    // them apart: nobody leaves its bead, each is late by its own waits alone, and
+    // the two finish sooner than with the side-step.
+    let paths = simulate_ahead(&[(&up, r0), (&across, r1)], Priority::XSpeed, 0.5);
+    assert!(!off(&paths), "tool 0 stepped aside looking ahead");
+    let h = holds(&paths);
+    assert!(h.iter().any(|h| h.tool == 1), "{h:?}");
+    let end = |paths: &[Toolpath], tool: usize| {
+        let line = timeline(paths, tool);
+        line[line.len() - 1].0
+    };
+    let waited = |tool: usize| -> f64 { h.iter().filter(|h| h.tool == tool).map(|h| h.to - h.from).sum() };
+    for (tool, alone) in [(0, 6.0), (1, 7.4)] {
+        let e = end(&paths, tool);
+        assert!(
+            (e - (alone + waited(tool))).abs() < 1e-6,
+            "tool {tool} ends at {e} s"
+        );
+    }
+    // Tool 0 clears tool 1's path by the two envelopes 0.4 s after reaching it: the
+    // waits come to little more than that.
+    assert!(waited(0) + waited(1) <= 0.5, "{h:?}");
+    assert!(end(&paths, 1) < end(&one_step, 1).max(end(&one_step, 0)));
 }
 
 /// Tool 0 crosses tool 1's path at 10 mm/s along Y (0 along X) and is 2 mm past the
@@ -695,12 +770,20 @@ fn priority_and_keep_faster_are_options_of_the_concurrent_planner() {
         "priority = \"clearing\"",
         "priority = \"returning\"",
         "keep_faster = true",
+        "look_ahead = 2.0",
+        "look_ahead = 0",
     ] {
         assert!(build(&format!("use = \"concurrent\"\n{ok}")).is_ok(), "{ok}");
         // Accepted by the sequential planner too, which ignores them.
         assert!(build(&format!("use = \"sequential\"\n{ok}")).is_ok(), "{ok}");
     }
-    for bad in ["priority = \"fastest\"", "priority = 1", "keep_faster = \"yes\""] {
+    for bad in [
+        "priority = \"fastest\"",
+        "priority = 1",
+        "keep_faster = \"yes\"",
+        "look_ahead = -1.0",
+        "look_ahead = 1000.0",
+    ] {
         assert!(build(&format!("use = \"concurrent\"\n{bad}")).is_err(), "{bad}");
     }
 }
