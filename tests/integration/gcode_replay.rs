@@ -279,7 +279,10 @@ fn gear_and_shaft_on_two_motion_systems_replay_without_collision() {
         100.0 * c["streams"][0]["paused_share"].as_f64().unwrap_or(f64::NAN),
         100.0 * c["streams"][1]["paused_share"].as_f64().unwrap_or(f64::NAN),
     );
-    assert!(ratio < 1.0, "the concurrent file is not faster: {ratio}");
+    // Layer by layer, the busier tool's work alone takes 0.66 of the sequential time
+    // (replayed): no schedule of these routes does better. Looking ahead 0.4 s the
+    // replayed ratio is 0.71 (0.86 checking only the next step).
+    assert!(ratio <= 0.75, "the concurrent file is not fast enough: {ratio}");
 }
 
 /// The two-cavity blade in three materials mixed by inverse distance weighting, on a
@@ -352,7 +355,14 @@ fn benchy_replays_on_every_machine() {
             time(c) / time(s)
         );
         assert_eq!(c["collisions"]["count"], 0);
-        assert!(time(c) < time(s), "the concurrent file is not faster");
+        // Layer by layer, the busier tool's work alone takes 0.73 of the sequential
+        // time (replayed); the replayed ratio is 0.81 (0.93 checking only the next
+        // step).
+        assert!(
+            time(c) <= 0.85 * time(s),
+            "the concurrent file is not fast enough: {:.3}",
+            time(c) / time(s)
+        );
     }
 }
 

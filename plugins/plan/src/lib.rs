@@ -79,8 +79,8 @@ lamina_core::stage_options! {
         compare: bool = "false",
         /// who keeps going when two tools are about to collide: `x-speed` (the paper's rule: the tool faster along X at the check, the X component of its velocity, goes on and the other pauses; on a tie the first tool goes on), `clearing` (a tool whose pausing alone clears the conflict pauses, else one returning from a side-step, else `x-speed`) or `returning` (a tool returning from a side-step gives way, else `x-speed`)
         priority: Priority = r#""x-speed""#,
-        /// seconds ahead a collision is looked for: one in prospect within it pauses a tool now, where its pausing alone keeps the tools apart (the priority decides when either would), so that tools meeting head-on wait before the way narrows instead of one stepping aside; 0 (up to `step`) checks only the next step, as the paper does. Looking ahead pauses more often and for shorter times, and every pause cuts a bead
-        look_ahead: f64 = "0.0",
+        /// seconds ahead a collision is looked for: one in prospect within half of it pauses a tool now, where its pausing alone keeps the tools apart (the priority decides when either would), until none is in prospect within the whole of it, and a paused tool goes on once its way is clear for half of it; tools meeting head-on then wait before the way narrows instead of one stepping aside, and a tool following another pauses seldom and for longer, cutting its bead (and making both heads stop at a synchronisation point) less often. 0 (up to `step`) checks only the next step, as the paper does
+        look_ahead: f64 = "0.5",
         /// deposit a layer one tool at a time when that is faster than the concurrent schedule (either way a warning says so); a layer whose tools stay blocked falls back to one tool at a time regardless
         keep_faster: bool = "false",
     }

@@ -9,12 +9,16 @@
 //!
 //! Each check covers the whole step: the closest approach of the two tools' motions
 //! during it is computed exactly, so no overlap can hide between two checks. With a
-//! look-ahead longer than the step, each check also looks that far along both routes:
-//! a collision in prospect there pauses, now, a tool whose pausing alone keeps the two
-//! apart over that time (the priority rule decides when either would do). Checking
-//! only the next step, two tools meeting head-on along neighbouring walls both get
-//! stuck where neither can pause out of the other's way, and one has to step aside;
-//! looking ahead, one waits before the way narrows. When
+//! look-ahead longer than the step, each check also looks along both routes: a
+//! collision in prospect within half the look-ahead pauses, now, a tool whose pausing
+//! alone keeps the two apart (the priority rule decides when either would do), until
+//! none is in prospect within the whole look-ahead. Checking only the next step, two
+//! tools meeting head-on along neighbouring walls both get stuck where neither can
+//! pause out of the other's way, and one has to step aside; looking ahead, one waits
+//! before the way narrows. And a paused tool goes on only once its way is clear for
+//! half the look-ahead, so that a tool catching up with another pauses once for a
+//! while instead of at every other check: each pause cuts a bead (and, on a machine
+//! with two motion systems, stops both heads at a synchronisation point). When
 //! pausing the lower-priority tool does not clear the conflict (it is ahead of the
 //! other), the other is held too. When every unfinished tool is held (each waits for
 //! another, as tools meeting head-on along neighbouring walls do), the tool with the
@@ -378,11 +382,10 @@ pub struct Settings {
     pub max_side_steps: usize,
     /// Who keeps going when two tools are about to collide.
     pub priority: Priority,
-    /// Seconds ahead a collision is looked for (at most; the one check step when no
-    /// longer than it). A collision in prospect within it is avoided by pausing one
-    /// tool now, where its pausing alone keeps the two apart over that time: a tool
-    /// about to meet another head-on waits before the way narrows instead of both
-    /// getting stuck there.
+    /// Seconds ahead a collision is looked for (only the next step when no longer than
+    /// it): one in prospect within half of it pauses, now, a tool whose pausing alone
+    /// keeps the two apart, until none is in prospect within the whole of it; a paused
+    /// tool goes on once its way is clear for half of it.
     pub look_ahead: f64,
 }
 
@@ -435,6 +438,8 @@ pub fn concurrent(
     let mut along_x: Vec<f64> = vec![0.0; n];
     let mut tracks: Vec<Track> = vec![Vec::new(); n];
     let mut ahead: Vec<Track> = vec![Vec::new(); n];
+    // Per tool: whether it paused at the last check.
+    let mut waited = vec![false; n];
     let mut moving = vec![false; n];
     while agents.iter().any(|a| !a.done) {
         if t > budget {
@@ -454,7 +459,15 @@ pub fn concurrent(
             };
         }
         if anticipate {
-            anticipate_holds(&agents, &ahead, &along_x, &mut moving, priority, look_ahead, step);
+            anticipate_holds(
+                &agents,
+                &ahead,
+                &along_x,
+                &mut moving,
+                &waited,
+                priority,
+                look_ahead,
+            );
         }
         // Whether tools i and j, moving or held, keep their envelopes apart for the
         // whole step: their closest approach along the two timed motions, exactly.
@@ -504,6 +517,38 @@ pub fn concurrent(
                 break;
             }
         }
+        if anticipate {
+            // A tool that waited at the last check goes on only when its way is clear
+            // for half the look-ahead; else it waits on (where it is clear for the next
+            // step), so that it does not go on for a step and pause again.
+            let half = look_ahead / 2.0;
+            for i in 0..n {
+                if !(moving[i] && waited[i]) {
+                    continue;
+                }
+                let blocked = (0..n).any(|j| {
+                    j != i && !agents[j].done && {
+                        let e = agents[i].spec.envelope + agents[j].spec.envelope;
+                        let still = [(0.0, agents[j].pos), (half, agents[j].pos)];
+                        let other: &[(f64, Point2)] = if moving[j] { &ahead[j] } else { &still };
+                        closest_until(&ahead[i], other, half) < e
+                    }
+                });
+                let others_move = (0..n).any(|j| j != i && moving[j]);
+                let stay_safe = (0..n).all(|j| {
+                    j == i || agents[j].done || {
+                        let e = agents[i].spec.envelope + agents[j].spec.envelope;
+                        let me = [(0.0, agents[i].pos), (step, agents[i].pos)];
+                        let still = [(0.0, agents[j].pos), (step, agents[j].pos)];
+                        let other: &[(f64, Point2)] = if moving[j] { &tracks[j] } else { &still };
+                        closest_until(&me, other, step) >= e
+                    }
+                });
+                if blocked && others_move && stay_safe {
+                    moving[i] = false;
+                }
+            }
+        }
         if !moving.iter().any(|&m| m) {
             // Every unfinished tool waits for another: the one with the least work left
             // steps aside, since the layer ends when the busiest tool is done.
@@ -524,6 +569,7 @@ pub fn concurrent(
             continue;
         }
         for (i, a) in agents.iter_mut().enumerate() {
+            waited[i] = !moving[i] && !a.done;
             if moving[i] {
                 a.advance(t, step);
             } else if !a.done {
@@ -593,18 +639,21 @@ fn truncate(track: &[(f64, Point2)], h: f64, out: &mut Track) {
 }
 
 /// Pauses, among tools that would all move, one of each pair heading for a collision
-/// within the look-ahead, where pausing that one alone keeps the two apart: over the
-/// longest horizon (the look-ahead, halved until one step) at which the two collide
-/// moving and a single pause avoids it. When either pause would do, `priority`
-/// decides; when neither does at any horizon, the one-step check deals with it.
+/// within the look-ahead, when pausing that one alone keeps the two apart over it;
+/// when either pause would, the one already waiting waits on, else `priority`
+/// decides. When neither would, the one-step check deals with it. A pair neither of
+/// whose tools waited at the last check looks half as far: a pause begins when a
+/// collision is in prospect within half the look-ahead and ends when none is within
+/// the whole of it, so that a tool following another does not pause and go on at
+/// every check, cutting its bead each time.
 fn anticipate_holds(
     agents: &[Agent<'_>],
     ahead: &[Track],
     along_x: &[f64],
     moving: &mut [bool],
+    waited: &[bool],
     priority: Priority,
     look_ahead: f64,
-    step: f64,
 ) {
     let n = agents.len();
     let still = |p: Point2| [(0.0, p), (look_ahead, p)];
@@ -620,25 +669,23 @@ fn anticipate_holds(
                 if gap(&ahead[i], &ahead[j]) >= e {
                     continue;
                 }
-                let mut h = look_ahead;
-                let mut loser = None;
-                while h > step * 1.5 {
-                    if closest_until(&ahead[i], &ahead[j], h) >= e {
-                        break;
-                    }
-                    let hold_i = closest_until(&still(a.pos), &ahead[j], h) >= e;
-                    let hold_j = closest_until(&ahead[i], &still(b.pos), h) >= e;
-                    loser = Some(match (hold_i, hold_j) {
-                        (true, true) => ruled_loser(priority, agents, i, j, along_x),
-                        (true, false) => i,
-                        (false, true) => j,
-                        (false, false) => {
-                            h /= 2.0;
-                            continue;
-                        }
-                    });
-                    break;
+                let h = if waited[i] || waited[j] {
+                    look_ahead
+                } else {
+                    look_ahead / 2.0
+                };
+                if closest_until(&ahead[i], &ahead[j], h) >= e {
+                    continue;
                 }
+                let hold_i = closest_until(&still(a.pos), &ahead[j], h) >= e;
+                let hold_j = closest_until(&ahead[i], &still(b.pos), h) >= e;
+                let loser = match (hold_i, hold_j) {
+                    (true, true) if waited[i] != waited[j] => Some(if waited[i] { i } else { j }),
+                    (true, true) => Some(ruled_loser(priority, agents, i, j, along_x)),
+                    (true, false) => Some(i),
+                    (false, true) => Some(j),
+                    (false, false) => None,
+                };
                 if let Some(l) = loser {
                     moving[l] = false;
                     change = true;

@@ -683,6 +683,37 @@ fn looking_ahead_a_tool_waits_before_the_way_narrows_instead_of_stepping_aside()
     assert!(end(&paths, 1) < end(&one_step, 1).max(end(&one_step, 0)));
 }
 
+#[test]
+fn looking_ahead_a_tool_catching_up_with_another_pauses_seldom() {
+    // Tool 1 follows tool 0 along one line at twice its speed and soon has to keep
+    // 4 mm behind it (`clearing`: the paper's rule would pause tool 0, faster along X
+    // and in front, and both would be stuck). Checking one step ahead it pauses and
+    // goes on step by step;
+    // looking ahead it goes on only once its way is clear for a quarter of a second,
+    // at most that much later in the end.
+    let (lead, follow) = (tool(0, 10.0, 2.0), tool(1, 20.0, 2.0));
+    let r0 = vec![bead(Point2::new(0.0, 0.0), Point2::new(60.0, 0.0), 10.0)];
+    let r1 = vec![bead(Point2::new(-30.0, 0.0), Point2::new(50.0, 0.0), 20.0)];
+    let pauses = |paths: &[Toolpath]| holds(paths).iter().filter(|h| h.tool == 1).count();
+    let end = |paths: &[Toolpath]| {
+        let line = timeline(paths, 1);
+        line[line.len() - 1].0
+    };
+    let one_step = simulate(&[(&lead, r0.clone()), (&follow, r1.clone())], Priority::Clearing);
+    let ahead = simulate_ahead(&[(&lead, r0), (&follow, r1)], Priority::Clearing, 0.5);
+    assert!(holds(&ahead).iter().all(|h| h.tool == 1));
+    let (n1, n2) = (pauses(&one_step), pauses(&ahead));
+    assert!(n1 >= 100, "{n1} pauses checking one step ahead");
+    assert!(n2 * 10 <= n1, "{n2} pauses looking ahead, {n1} checking one step");
+    // Tool 1 ends at x = 50 when tool 0 is 4 mm ahead, at 5.4 s at the earliest; it
+    // goes on once its way is clear for 0.25 s, so that it is late by no more than
+    // that.
+    for (paths, late) in [(&one_step, 2.0 * STEP), (&ahead, 0.25 + 2.0 * STEP)] {
+        let e = end(paths);
+        assert!(e >= 5.4 - 1e-9 && e <= 5.4 + late, "tool 1 ends at {e} s");
+    }
+}
+
 /// Tool 0 crosses tool 1's path at 10 mm/s along Y (0 along X) and is 2 mm past the
 /// crossing when tool 1 comes along X at 20 mm/s, 4 mm short of it at t = 3.2 s:
 /// holding tool 1 alone clears the way (tool 0 moves off), holding tool 0 does not.
