@@ -42,6 +42,7 @@ time         the replayed build time against ``; estimated printing time``
 
 from __future__ import annotations
 
+import bisect
 import math
 import re
 from types import SimpleNamespace
@@ -162,6 +163,7 @@ class StreamReplay(gr.Replay):
 
     def start_layer(self, number: int) -> None:
         super().start_layer(number)
+        self.mm.layer_marks.append((self.mm.line, number))
         every = max(1, self.o.coverage_every)
         self.layer.sampled = self.o.mesh is not None and number % every == 0
 
@@ -272,6 +274,8 @@ class MultiReplay:
         self.heaters: dict[int, SharedHeater] = {}
         self.warnings: list[str] = []
         self.line = 0
+        # (line, layer number) of every ;LAYER: comment, in file order.
+        self.layer_marks: list[tuple[int, int]] = []
         self.cur = 0
         self.forked = False
         self.warned_unforked = False
@@ -749,6 +753,20 @@ def build_timeline(mm: MultiReplay) -> dict:
         t = max(t + seg[s][k] for s in range(len(streams))) if streams else t
         release.append(t)
     build = release[-1] if release else 0.0
+    # Per layer, the work of its busiest stream: what a layer takes at least when its
+    # streams run these moves side by side with no wait. The work before barrier k
+    # belongs to the layer of the last ;LAYER: line before it (the layer changes
+    # between barriers).
+    marks = mm.layer_marks
+    mark_lines = [m[0] for m in marks]
+    per_layer: dict[int, list[float]] = {}
+    for k, b in enumerate(mm.barriers):
+        q = bisect.bisect_left(mark_lines, b["line"])
+        layer = marks[q - 1][1] if q > 0 else -1
+        row = per_layer.setdefault(layer, [0.0] * len(streams))
+        for s in range(len(streams)):
+            row[s] += seg[s][k]
+    busiest = sum(max(row, default=0.0) for row in per_layer.values())
     per_stream = []
     tracks = []
     for s, st in enumerate(streams):
@@ -786,7 +804,8 @@ def build_timeline(mm: MultiReplay) -> dict:
         tracks.append(tr)
         per_stream.append({"busy_s": busy, "wait_s": wait, "dwell_s": dwell, "by_kind_s": kinds,
                            "end_s": last_active, "waits": waits})
-    return {"build_s": build, "release": release, "streams": per_stream, "tracks": tracks}
+    return {"build_s": build, "release": release, "streams": per_stream, "tracks": tracks,
+            "layers_busiest_s": busiest}
 
 
 # ---------------------------------------------------------------------------
@@ -1098,6 +1117,7 @@ def build_report_multi(mm: MultiReplay, o: gr.Options, name: str) -> dict:
             "sequential_line": mm.sequential[1] if mm.sequential else None,
             "ratio_to_sequential": None,
             "streams_sum_s": sum(p["busy_s"] for p in tl["streams"]),
+            "layers_busiest_s": tl["layers_busiest_s"],
             "barriers": len(mm.barriers),
             "barrier_kinds": {},
             "junction": [("jerk" if st.jerk is not None else f"junction deviation {st.jd:g} mm") for st in streams]}
@@ -1257,6 +1277,8 @@ def summary_multi(rep: dict) -> str:
     if t["sequential_s"] is not None:
         line += f"; sequential {t['sequential_s']:.1f} s, ratio {t['ratio_to_sequential']:.3f}"
     out.append(line)
+    out.append(f"  per layer, the busiest stream's moves add up to {t['layers_busiest_s']:.1f} s "
+               f"(these moves side by side, never waiting; all streams' moves {t['streams_sum_s']:.1f} s)")
     for row in rep["streams"]:
         fil = ", ".join(f"{k} {v:.1f} mm" for k, v in row["filament_mm"].items()) or "no extrusion"
         out.append(f"  stream {row['system']}: busy {row['busy_s']:.1f} s, waits {row['wait_s']:.1f} s "

@@ -320,6 +320,22 @@ class Timing(unittest.TestCase):
         self.assertAlmostEqual(rows[0]["paused_share"], 0.4)
         self.assertAlmostEqual(rows[1]["longest_wait_s"], 2.0)
 
+    def test_busiest_stream_per_layer(self):
+        # Each layer: head 0 works while head 1 waits, then the other way round (a
+        # job taking the heads one at a time). Side by side, a layer would take its
+        # busier head's time: 3 s and 4 s, against 4 s and 5 s replayed.
+        body = "\n".join([
+            "M596 P0", ";LAYER:0", "G4 S3", "M596 P1", ";LAYER:0", "M598",
+            "M596 P1", "G4 S1", "M598",
+            "M596 P0", ";LAYER:1", "G4 S1", "M596 P1", ";LAYER:1", "M598",
+            "M596 P1", "G4 S4",
+        ]) + "\n"
+        rep = run(job(body))
+        t = rep["time"]
+        self.assertAlmostEqual(t["replayed_s"], 9.0, places=9)
+        self.assertAlmostEqual(t["streams_sum_s"], 9.0, places=9)
+        self.assertAlmostEqual(t["layers_busiest_s"], 7.0, places=9)
+
     def test_m400_synchronises(self):
         body = "\n".join(["M596 P0", "G4 S3", "M400", "M596 P1", "G4 S1"]) + "\n"
         self.assertAlmostEqual(run(job(body))["time"]["replayed_s"], 4.0, places=9)
