@@ -535,15 +535,8 @@ pub fn concurrent(
                     }
                 });
                 let others_move = (0..n).any(|j| j != i && moving[j]);
-                let stay_safe = (0..n).all(|j| {
-                    j == i || agents[j].done || {
-                        let e = agents[i].spec.envelope + agents[j].spec.envelope;
-                        let me = [(0.0, agents[i].pos), (step, agents[i].pos)];
-                        let still = [(0.0, agents[j].pos), (step, agents[j].pos)];
-                        let other: &[(f64, Point2)] = if moving[j] { &tracks[j] } else { &still };
-                        closest_until(&me, other, step) >= e
-                    }
-                });
+                // Staying put is what the one-step check calls safe for a held tool.
+                let stay_safe = (0..n).all(|j| j == i || safe(i, j, false, moving[j]));
                 if blocked && others_move && stay_safe {
                     moving[i] = false;
                 }
