@@ -191,26 +191,12 @@ impl Field {
         // row); the argmin names the column, whose column pass names the row of the
         // nearest seed. Seeds are kept as (row << 16) | column (grids stay below 2^16
         // samples a side), so that comparing them needs no division.
-        let mut scratch = Envelope::new(nx.max(ny));
-        let mut arg = vec![0u32; nx];
-        let mut g = vec![NONE; nx];
-        seed_of.clear();
+        let mut envelope = Envelope::new(nx);
+        // Every row is written whole (by the envelope, or as having no seed).
         seed_of.resize(n, u32::MAX);
         for j in 0..ny {
-            let from = &from_row[j * nx..(j + 1) * nx];
-            for (g, &r) in g.iter_mut().zip(from) {
-                *g = if r == u32::MAX {
-                    NONE
-                } else {
-                    let d = j.abs_diff(r as usize) as i64;
-                    d * d
-                };
-            }
-            if scratch.transform(&g, &mut arg) {
-                for (s, &col) in seed_of[j * nx..(j + 1) * nx].iter_mut().zip(&arg) {
-                    *s = (from[col as usize] << 16) | col;
-                }
-            }
+            let row = j * nx..(j + 1) * nx;
+            envelope.nearest(j, &from_row[row.clone()], &mut seed_of[row]);
         }
         // Every sample measures its nearest seed's boundary point (seeds their own,
         // exact); squared until the end.
@@ -222,15 +208,20 @@ impl Field {
                 (p.x - q[0]).powi(2) + (p.y - q[1]).powi(2)
             }
         };
-        let want = |k: usize| wanted.is_none_or(|w| w[k]);
-        for j in 0..ny {
+        for (j, ((values, seed_d2), seed_of)) in self
+            .values
+            .chunks_exact_mut(nx)
+            .zip(seed_d2.chunks_exact(nx))
+            .zip(seed_of.chunks_exact(nx))
+            .enumerate()
+        {
             let y = oy + j as f64 * h;
-            for i in 0..nx {
-                let k = j * nx + i;
-                self.values[k] = if seed_d2[k].is_finite() {
-                    seed_d2[k]
-                } else if want(k) {
-                    d2(Point2::new(ox + i as f64 * h, y), seed_of[k])
+            let wanted = wanted.map(|w| &w[j * nx..(j + 1) * nx]);
+            for (i, ((v, &seed), &s)) in values.iter_mut().zip(seed_d2).zip(seed_of).enumerate() {
+                *v = if seed.is_finite() {
+                    seed
+                } else if wanted.is_none_or(|w| w[i]) {
+                    d2(Point2::new(ox + i as f64 * h, y), s)
                 } else {
                     f64::INFINITY
                 };
@@ -243,14 +234,21 @@ impl Field {
         // A missing seed (all bits set) is more than two samples from every real one
         // (below 2^15 a side) and none from another missing one: no special case, and
         // no branch for the compiler to keep.
-        let apart = |a: u32, b: u32| (a & 0xffff).abs_diff(b & 0xffff).max((a >> 16).abs_diff(b >> 16)) > 2;
+        // Seeds are (row << 16) | column: two are apart when their columns or their
+        // rows differ by more than two, which is (difference + 2) > 4 unsigned in
+        // wrapping arithmetic, branch-free so that a whole row is tested at once.
+        let apart = |a: u32, b: u32| {
+            let dc = (a & 0xffff).wrapping_sub(b & 0xffff).wrapping_add(2);
+            let dr = (a >> 16).wrapping_sub(b >> 16).wrapping_add(2);
+            (dc > 4) | (dr > 4)
+        };
         let at = |i: usize, j: usize| Point2::new(ox + i as f64 * h, oy + j as f64 * h);
         let values = &mut self.values;
         // Each sample with its right and upper neighbours: with the samples that look
         // back, its four edge neighbours (the diagonals found nothing more on the
-        // tests' medial axes, and cost as much again). The test is inline; the rare
-        // pairs that are apart are measured out of line.
-        let mut cross = |(i, j): (usize, usize), (ni, nj): (usize, usize), s: u32, t: u32| {
+        // tests' medial axes, and cost as much again). A row's pairs are flagged in one
+        // sweep; the rare pairs that are apart are measured after it.
+        let cross = |values: &mut [f64], (i, j): (usize, usize), (ni, nj): (usize, usize), s: u32, t: u32| {
             let (k, m) = (j * nx + i, nj * nx + ni);
             if values[k].is_finite() {
                 values[k] = values[k].min(d2(at(i, j), t));
@@ -259,23 +257,33 @@ impl Field {
                 values[m] = values[m].min(d2(at(ni, nj), s));
             }
         };
+        let mut right = vec![false; nx];
+        let mut above = vec![false; nx];
         for j in 0..ny {
             let row = &seed_of[j * nx..(j + 1) * nx];
+            for ((f, s), t) in right.iter_mut().zip(row).zip(&row[1..]) {
+                *f = apart(*s, *t);
+            }
             let up = seed_of.get((j + 1) * nx..(j + 2) * nx);
-            for i in 0..nx {
-                let s = row[i];
-                if i + 1 < nx && apart(s, row[i + 1]) {
-                    cross((i, j), (i + 1, j), s, row[i + 1]);
-                }
-                if let Some(up) = up
-                    && apart(s, up[i])
-                {
-                    cross((i, j), (i, j + 1), s, up[i]);
+            if let Some(up) = up {
+                for ((f, s), t) in above.iter_mut().zip(row).zip(up) {
+                    *f = apart(*s, *t);
                 }
             }
-        }
-        for v in &mut self.values {
-            *v = v.sqrt();
+            for i in 0..nx {
+                if right[i] {
+                    cross(values, (i, j), (i + 1, j), row[i], row[i + 1]);
+                }
+                if let Some(up) = up
+                    && above[i]
+                {
+                    cross(values, (i, j), (i, j + 1), row[i], up[i]);
+                }
+            }
+            // No later pair reaches back to this row: its distances are final.
+            for v in &mut values[j * nx..(j + 1) * nx] {
+                *v = v.sqrt();
+            }
         }
     }
 }
@@ -299,9 +307,6 @@ thread_local! {
     static SCRATCH: std::cell::RefCell<Scratch> = std::cell::RefCell::default();
 }
 
-/// No seed in the column: the column pass leaves this for the row pass to skip.
-const NONE: i64 = i64::MAX;
-
 /// The lower envelope of parabolas of the 1-D transform, with buffers kept across rows.
 /// Inputs are squared distances in samples, so every comparison of intersections is
 /// made exactly in integers by cross-multiplying instead of dividing.
@@ -319,46 +324,62 @@ impl Envelope {
         }
     }
 
-    /// `arg[q]` = the p minimising `(q - p)^2 + f[p]` (Felzenszwalb and Huttenlocher).
-    /// `NONE` values are skipped; `false` (and `arg` untouched) when all are.
-    fn transform(&mut self, f: &[i64], arg: &mut [u32]) -> bool {
+    /// Row `j` of the row pass (Felzenszwalb and Huttenlocher): `from[p]` is the row
+    /// of the nearest seed in column p (`u32::MAX`: none), so f[p] = (j - from[p])^2;
+    /// each `seed[q]` is set to the seed (row << 16) | p of the p minimising
+    /// `(q - p)^2 + f[p]`, or to `u32::MAX` when no column has a seed.
+    fn nearest(&mut self, j: usize, from: &[u32], seed: &mut [u32]) {
+        // The stack below its top two parabolas, which stay in registers: each new
+        // parabola is compared with them first, and most pop none or one.
+        let (v, h) = (&mut self.v, &mut self.h);
         let mut k = 0usize;
-        for (q, &fq) in f.iter().enumerate() {
-            if fq == NONE {
+        let (mut v0, mut h0, mut v1, mut h1) = (0i64, 0i64, 0i64, 0i64);
+        for (q, &r) in from.iter().enumerate() {
+            if r == u32::MAX {
                 continue;
             }
+            let d = j.abs_diff(r as usize) as i64;
             let q = q as i64;
-            let hq = fq + q * q;
+            let hq = d * d + q * q;
             // Parabola k - 1 is hidden when the new one meets it left of where it
             // meets parabola k - 2: (hq - h1) / (q - v1) <= (h1 - h0) / (v1 - v0).
-            while k > 1 {
-                let (v0, h0, v1, h1) = (self.v[k - 2], self.h[k - 2], self.v[k - 1], self.h[k - 1]);
-                if (hq - h1) * (v1 - v0) <= (h1 - h0) * (q - v1) {
-                    k -= 1;
-                } else {
-                    break;
+            while k > 1 && (hq - h1) * (v1 - v0) <= (h1 - h0) * (q - v1) {
+                k -= 1;
+                (v1, h1) = (v0, h0);
+                if k > 1 {
+                    (v0, h0) = (v[k - 2], h[k - 2]);
                 }
             }
-            self.v[k] = q;
-            self.h[k] = hq;
+            if k > 0 {
+                (v0, h0) = (v1, h1);
+            }
+            (v1, h1) = (q, hq);
+            v[k] = q;
+            h[k] = hq;
             k += 1;
         }
-        if k == 0 {
-            return false;
-        }
         // Parabola m + 1 takes over from m at the first q where it is strictly lower:
-        // (q - v1)^2 + f1 < (q - v0)^2 + f0, that is 2 q (v1 - v0) > h1 - h0. A
-        // product per step instead of a division per parabola.
-        let (v, h) = (&self.v[..k], &self.h[..k]);
-        let mut m = 0usize;
-        for (q, a) in arg.iter_mut().enumerate() {
-            let q = q as i64;
-            while m + 1 < k && 2 * q * (v[m + 1] - v[m]) > h[m + 1] - h[m] {
-                m += 1;
-            }
-            *a = v[m] as u32;
+        // (q - v1)^2 + f1 < (q - v0)^2 + f0, that is 2 q (v1 - v0) > h1 - h0, so at
+        // q = floor((h1 - h0) / (2 (v1 - v0))) + 1. The intersections grow from one
+        // parabola to the next, so each parabola holds one run of samples, filled
+        // with its seed at once.
+        if k == 0 {
+            seed.fill(u32::MAX);
+            return;
         }
-        true
+        let (v, h) = (&self.v[..k], &self.h[..k]);
+        let n = seed.len() as i64;
+        let mut start = 0i64;
+        for m in 0..k {
+            let end = if m + 1 < k {
+                ((h[m + 1] - h[m]).div_euclid(2 * (v[m + 1] - v[m])) + 1).clamp(start, n)
+            } else {
+                n
+            };
+            let p = v[m] as usize;
+            seed[start as usize..end as usize].fill((from[p] << 16) | p as u32);
+            start = end;
+        }
     }
 }
 
@@ -373,6 +394,42 @@ mod tests {
 
     fn rect(x0: f64, y0: f64, w: f64, h: f64) -> Contour {
         Contour::rectangle(Point2::new(x0, y0), Point2::new(x0 + w, y0 + h))
+    }
+
+    #[test]
+    fn each_sample_of_a_row_takes_the_first_nearest_column_seed() {
+        // Rows of column results (with columns that have no seed, and many ties, as a
+        // grid gives), against the minimum over every column: the seed of the smallest
+        // column that reaches it. Runs of samples are filled per parabola, so this is
+        // where an off-by-one in a run's end would show.
+        let mut state = 0x9e37_79b9_7f4a_7c15u64;
+        let mut next = |m: u64| {
+            state ^= state << 13;
+            state ^= state >> 7;
+            state ^= state << 17;
+            state % m
+        };
+        let mut envelope = Envelope::new(64);
+        for _ in 0..2000 {
+            let n = 1 + next(64) as usize;
+            let j = next(40) as usize;
+            let from: Vec<u32> = (0..n)
+                .map(|_| if next(5) == 0 { u32::MAX } else { next(40) as u32 })
+                .collect();
+            let mut seed = vec![7u32; n];
+            envelope.nearest(j, &from, &mut seed);
+            for (q, &got) in seed.iter().enumerate() {
+                let cost = |p: usize| {
+                    let d = j.abs_diff(from[p] as usize);
+                    q.abs_diff(p).pow(2) + d * d
+                };
+                let best = (0..n)
+                    .filter(|&p| from[p] != u32::MAX)
+                    .min_by_key(|&p| (cost(p), p));
+                let want = best.map_or(u32::MAX, |p| (from[p] << 16) | p as u32);
+                assert_eq!(got, want, "row {j}, sample {q} of {from:?}");
+            }
+        }
     }
 
     #[test]

@@ -28,10 +28,19 @@ pub fn iso_levels(field: &Field, values: &[f64], levels: &[f64]) -> Vec<Vec<Cont
     // have the sample inside). A cell is crossed by the levels from its lowest corner's
     // band to its highest's, and by none when they agree.
     let band: Vec<u16> = if sorted.len() <= 32 {
-        // Samples below the lowest level (the outside) stop at once.
+        // Samples below the lowest level (the outside) stop at once; the others count
+        // every level without a branch (the levels are sorted, so the levels at or
+        // below a sample are the first ones).
+        let lowest = sorted[0];
         values
             .iter()
-            .map(|&v| sorted.iter().take_while(|&&t| t <= v).count() as u16)
+            .map(|&v| {
+                if lowest <= v {
+                    sorted.iter().map(|&t| u16::from(t <= v)).sum()
+                } else {
+                    0
+                }
+            })
             .collect()
     } else {
         values
@@ -42,15 +51,27 @@ pub fn iso_levels(field: &Field, values: &[f64], levels: &[f64]) -> Vec<Vec<Cont
     // Edge ids: horizontal edge (i, j)-(i+1, j) is j * (nx - 1) + i; vertical edge
     // (i, j)-(i, j+1) is horizontal count + j * nx + i.
     let horizontal = (nx - 1) * ny;
+    // A row of cells is first flagged in one branch-free sweep (a cell is crossed
+    // when its corners' bands differ); most cells are not, and only the flagged ones
+    // are looked at.
+    let mut crossed = vec![false; nx - 1];
     for j in 0..ny - 1 {
         let (row, up) = (&band[j * nx..(j + 1) * nx], &band[(j + 1) * nx..(j + 2) * nx]);
+        for (((c, &a), &b), (&u, &w)) in crossed
+            .iter_mut()
+            .zip(row)
+            .zip(&row[1..])
+            .zip(up.iter().zip(&up[1..]))
+        {
+            *c = (a != b) | (a != u) | (a != w);
+        }
         for i in 0..nx - 1 {
+            if !crossed[i] {
+                continue;
+            }
             let b = [row[i], row[i + 1], up[i + 1], up[i]];
             let lo = b[0].min(b[1]).min(b[2].min(b[3]));
             let hi = b[0].max(b[1]).max(b[2].max(b[3]));
-            if lo == hi {
-                continue;
-            }
             let k = j * nx + i;
             let v = [values[k], values[k + 1], values[k + nx + 1], values[k + nx]];
             for s in usize::from(lo)..usize::from(hi) {
@@ -68,8 +89,54 @@ pub fn iso_levels(field: &Field, values: &[f64], levels: &[f64]) -> Vec<Vec<Cont
             }
         }
     }
-    // One table of the next edge over every edge, filled and cleared level by level.
-    let mut next = vec![u32::MAX; horizontal + nx * (ny - 1)];
+    // One table of the next edge over every edge, filled and cleared level by level,
+    // and kept per thread: it is megabytes on a fine grid, and every link is followed
+    // once, which leaves it cleared for the next call.
+    NEXT.with(|next| {
+        let mut next = next.borrow_mut();
+        let Next { table, clear } = &mut *next;
+        // A call that stopped half-way (a panic caught further up) left it unknown.
+        if !*clear {
+            table.fill(u32::MAX);
+        }
+        let edges = horizontal + nx * (ny - 1);
+        if table.len() < edges {
+            table.resize(edges, u32::MAX);
+        }
+        *clear = false;
+        let loops = follow(field, values, levels, links, horizontal, table);
+        *clear = true;
+        if table.len() > KEEP_EDGES {
+            *table = Vec::new();
+        }
+        loops
+    })
+}
+
+/// The edge table of [`iso_levels`], all `u32::MAX` while `clear`.
+struct Next {
+    table: Vec<u32>,
+    clear: bool,
+}
+
+thread_local! {
+    static NEXT: std::cell::RefCell<Next> = const { std::cell::RefCell::new(Next { table: Vec::new(), clear: true }) };
+}
+
+/// Largest edge table a thread keeps for the next call (a 1024 x 1024 field's, 8 MiB).
+const KEEP_EDGES: usize = 1 << 21;
+
+/// The loops of every level from its links, through `next` (all `u32::MAX` on entry
+/// and on return).
+fn follow(
+    field: &Field,
+    values: &[f64],
+    levels: &[f64],
+    links: Vec<Vec<(u32, u32)>>,
+    horizontal: usize,
+    next: &mut [u32],
+) -> Vec<Vec<Contour>> {
+    let nx = field.nx;
     links
         .into_iter()
         .enumerate()

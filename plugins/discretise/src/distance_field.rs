@@ -248,13 +248,17 @@ impl DistanceField {
                 }
             }
         }
-        let max = field
-            .values
-            .iter()
-            .zip(&inside)
-            .filter(|(_, i)| **i)
-            .map(|(v, _)| *v)
-            .fold(0.0f64, f64::max);
+        // Eight running maxima, so that no comparison waits for the one before (the
+        // largest of them is the same whatever the grouping).
+        let mut maxima = [0.0f64; 8];
+        for (values, inside) in field.values.chunks(8).zip(inside.chunks(8)) {
+            for ((m, &v), &inside) in maxima.iter_mut().zip(values).zip(inside) {
+                if inside {
+                    *m = m.max(v);
+                }
+            }
+        }
+        let max = maxima.into_iter().fold(0.0f64, f64::max);
         let max = self.width.unwrap_or(max);
         if max.is_nan() || max <= 0.0 || max.is_infinite() {
             return None;
@@ -271,8 +275,10 @@ impl DistanceField {
                 row.fill(FLOOR);
                 continue;
             }
+            // Negating after dividing is exact: one division for every sample.
             for (v, &inside) in row.iter_mut().zip(inside) {
-                *v = if signed && !inside { -*v / max } else { *v / max };
+                let r = *v / max;
+                *v = if signed && !inside { -r } else { r };
             }
             row[0] = FLOOR;
             row[nx - 1] = FLOOR;
