@@ -64,6 +64,8 @@ pub struct Firmware {
     planner: Planner,
     /// The first line that moves the extruder of a cold or unselected tool.
     cold: Option<String>,
+    /// The words of the line being read.
+    params: Vec<(char, f64)>,
 }
 
 impl Firmware {
@@ -84,6 +86,7 @@ impl Firmware {
             homed: false,
             planner: Planner::new(limits),
             cold: None,
+            params: Vec::new(),
         }
     }
 
@@ -102,16 +105,24 @@ impl Firmware {
         }
         let mut words = code.split_whitespace();
         let Some(command) = words.next() else { return };
-        let params: Vec<(char, f64)> = words
-            .filter_map(|w| {
-                let mut c = w.chars();
-                let letter = c.next()?.to_ascii_uppercase();
-                Some((letter, c.as_str().parse::<f64>().ok()?))
-            })
-            .collect();
+        // The words' buffer is kept from line to line, and a command in capitals (as
+        // written) is read as it is: a file is hundreds of thousands of lines.
+        let mut params = std::mem::take(&mut self.params);
+        params.clear();
+        params.extend(words.filter_map(|w| {
+            let mut c = w.chars();
+            let letter = c.next()?.to_ascii_uppercase();
+            Some((letter, c.as_str().parse::<f64>().ok()?))
+        }));
         let get = |l: char| params.iter().find(|(k, _)| *k == l).map(|(_, v)| *v);
-        let command = command.to_ascii_uppercase();
-        match command.as_str() {
+        let upper;
+        let command = if command.bytes().any(|b| b.is_ascii_lowercase()) {
+            upper = command.to_ascii_uppercase();
+            upper.as_str()
+        } else {
+            command
+        };
+        match command {
             "G0" | "G1" => self.linear(&get, line),
             "G4" => {
                 let seconds = get('S').unwrap_or(0.0) + get('P').unwrap_or(0.0) / 1000.0;
@@ -207,10 +218,11 @@ impl Firmware {
                 };
             }
             "M107" => self.fan = 0.0,
-            "M201" | "M203" | "M204" | "M205" | "M566" => self.motion_setting(&command, &get),
+            "M201" | "M203" | "M204" | "M205" | "M566" => self.motion_setting(command, &get),
             _ if command.starts_with('T') => self.select(command[1..].parse::<i64>().ok()),
             _ => {}
         }
+        self.params = params;
     }
 
     fn linear(&mut self, get: &dyn Fn(char) -> Option<f64>, line: &str) {

@@ -26,6 +26,15 @@ pub fn clean(name: &str) -> String {
 /// A coordinate or temperature with at most `digits` decimals and no trailing zeros
 /// (`210`, `0.2`, `12.345`), and never `-0`.
 pub fn num(v: f64, digits: usize) -> String {
+    let mut out = String::with_capacity(24);
+    push_num(&mut out, v, digits);
+    out
+}
+
+/// [`num`] appended to `out`: the lines of moves are written without a string per
+/// number.
+pub fn push_num(out: &mut String, v: f64, digits: usize) {
+    use std::fmt::Write;
     // Fixed point through an integer: `format!` with a precision takes the exact
     // (slow) path for many values, and a G-code file formats millions of them.
     let scale = 10f64.powi(digits.min(15) as i32);
@@ -33,33 +42,33 @@ pub fn num(v: f64, digits: usize) -> String {
     if digits <= 9 && scaled.is_finite() && scaled.abs() < 9.0e15 {
         let n = scaled as i64;
         if n == 0 {
-            return "0".to_string();
+            out.push('0');
+            return;
         }
         let unit = 10i64.pow(digits as u32);
         let (int, mut frac) = (n.abs() / unit, n.abs() % unit);
-        let mut out = String::with_capacity(24);
         if n < 0 {
             out.push('-');
         }
-        out.push_str(&int.to_string());
+        // Writing into a `String` cannot fail.
+        let _ = write!(out, "{int}");
         if frac != 0 {
             let mut width = digits;
             while frac % 10 == 0 {
                 frac /= 10;
                 width -= 1;
             }
-            out.push('.');
-            out.push_str(&format!("{frac:0width$}"));
+            let _ = write!(out, ".{frac:0width$}");
         }
-        return out;
+        return;
     }
     let s = format!("{v:.digits$}");
     let s = if s.contains('.') {
-        s.trim_end_matches('0').trim_end_matches('.').to_string()
+        s.trim_end_matches('0').trim_end_matches('.')
     } else {
-        s
+        &s
     };
-    if s == "-0" { "0".to_string() } else { s }
+    out.push_str(if s == "-0" { "0" } else { s });
 }
 
 #[cfg(test)]

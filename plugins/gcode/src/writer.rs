@@ -18,7 +18,7 @@ use lamina_core::{Composition, Error, LayerPlan, PathKind, Point2, Result, RunIn
 use crate::firmware::{EXTRUDE_MIN_TEMPERATURE, Firmware};
 use crate::layout::Layout;
 use crate::setup::Setup;
-use crate::text::{clean, num};
+use crate::text::{clean, num, push_num};
 use crate::tower::{Feature, Stroke, Tower};
 
 mod multi;
@@ -117,6 +117,8 @@ pub struct Writer {
     first_head: usize,
     /// The streams of a machine with two motion systems working at once.
     multi: Option<multi::Multi>,
+    /// The line being written, kept for the next one.
+    text: String,
 }
 
 fn io(path: &std::path::Path, e: std::io::Error) -> Error {
@@ -199,6 +201,7 @@ impl Writer {
             planned: 0.0,
             first_head: used_heads.first().copied().unwrap_or(0),
             multi,
+            text: String::new(),
         };
         w.header(info, header, &used_heads);
         w.start(&used_heads)?;
@@ -606,11 +609,20 @@ impl Writer {
 
     /// The E word for `de` mm of filament, absolute or relative.
     fn e_word(&self, de: f64) -> String {
-        if self.s.relative_e {
-            format!("E{de:.5}")
+        let mut out = String::with_capacity(16);
+        self.push_e_word(&mut out, de);
+        out
+    }
+
+    /// [`Writer::e_word`] appended to `out`.
+    fn push_e_word(&self, out: &mut String, de: f64) {
+        use std::fmt::Write;
+        // Writing into a `String` cannot fail.
+        let _ = if self.s.relative_e {
+            write!(out, "E{de:.5}")
         } else {
-            format!("E{:.5}", self.fw.position()[3] + de)
-        }
+            write!(out, "E{:.5}", self.fw.position()[3] + de)
+        };
     }
 
     fn z_feed(&self) -> f64 {
@@ -700,6 +712,8 @@ impl Writer {
         let feed = self.print_feed(speed);
         let area = self.s.filament_area();
         let mut with_feed = (self.fw.feed() - feed).abs() > 0.5;
+        // One line buffer for the whole path: a path is thousands of moves.
+        let mut text = std::mem::take(&mut self.text);
         for (i, w) in points.windows(2).enumerate() {
             let d = (w[1] - w[0]).norm();
             if d <= 1e-9 {
@@ -711,15 +725,21 @@ impl Writer {
             let de = d * width(i) * height / area;
             self.account(h, de);
             self.extruded[h] = true;
-            let e = self.e_word(de);
-            let f = if with_feed {
+            text.clear();
+            text.push_str("G1 X");
+            push_num(&mut text, w[1].x, 4);
+            text.push_str(" Y");
+            push_num(&mut text, w[1].y, 4);
+            text.push(' ');
+            self.push_e_word(&mut text, de);
+            if with_feed {
                 with_feed = false;
-                format!(" F{}", num(feed, 0))
-            } else {
-                String::new()
-            };
-            self.line(format!("G1 X{} Y{} {e}{f}", num(w[1].x, 4), num(w[1].y, 4)));
+                text.push_str(" F");
+                push_num(&mut text, feed, 0);
+            }
+            self.line(&text);
         }
+        self.text = text;
         Ok(())
     }
 
