@@ -365,8 +365,9 @@ fn benchy_replays_on_every_machine() {
         );
         assert!(time(c) >= bound, "faster than the busier tool's work alone");
         assert_eq!(c["collisions"]["count"], 0);
-        // Layer by layer, the busier tool's work alone takes 0.73 of the sequential
-        // time; the replayed ratio is 0.82 (0.93 checking only the next step).
+        // Layer by layer, the busier tool's work alone takes 0.67 of the sequential
+        // time; the replayed ratio is 0.79 (0.82 with each ring given whole to one
+        // tool, `assign = "dominant"`).
         assert!(
             time(c) <= 0.85 * time(s),
             "the concurrent file is not fast enough: {:.3}",
