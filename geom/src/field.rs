@@ -231,12 +231,11 @@ impl Field {
         // boundary. There neighbouring samples take seeds on different stretches of
         // the boundary (seeds more than two samples apart), and each of the two also
         // tries the other's seed.
-        // A missing seed (all bits set) is more than two samples from every real one
-        // (below 2^15 a side) and none from another missing one: no special case, and
-        // no branch for the compiler to keep.
         // Seeds are (row << 16) | column: two are apart when their columns or their
-        // rows differ by more than two, which is (difference + 2) > 4 unsigned in
-        // wrapping arithmetic, branch-free so that a whole row is tested at once.
+        // rows differ by more than two, (difference + 2) > 4 in wrapping unsigned
+        // arithmetic, without a branch, so that a whole row is tested at once. A
+        // missing seed (all bits set) is apart from every real one (below 2^15 a side)
+        // and not from another missing one: no special case.
         let apart = |a: u32, b: u32| {
             let dc = (a & 0xffff).wrapping_sub(b & 0xffff).wrapping_add(2);
             let dr = (a >> 16).wrapping_sub(b >> 16).wrapping_add(2);
