@@ -259,15 +259,10 @@ fn round(x: f64) -> i64 {
     const EXACT: f64 = 4_503_599_627_370_496.0; // 2^52: from here on every f64 is whole
     if x.abs() < EXACT {
         let t = x as i64;
-        // Exact: `t` is `x` without its fraction.
+        // Exact: `t` is `x` without its fraction. The fraction is as likely to round
+        // up as down, so it is added as a flag, not branched on.
         let fraction = x - t as f64;
-        if fraction >= 0.5 {
-            t + 1
-        } else if fraction <= -0.5 {
-            t - 1
-        } else {
-            t
-        }
+        t + i64::from(fraction >= 0.5) - i64::from(fraction <= -0.5)
     } else {
         x as i64
     }
