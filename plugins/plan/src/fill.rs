@@ -127,59 +127,101 @@ fn shape_mean_width(shape: &[Vec<[f64; 2]>]) -> f64 {
 /// The beads filling `polygon`: loops outermost first, then the centre beads of what
 /// they leave. Empty only for a region with no area.
 pub fn fill(polygon: &Polygon, widths: &Widths) -> Vec<Bead> {
-    let mut beads = Vec::new();
-    if widths.nominal.is_nan() || widths.nominal <= 0.0 || polygon.outer.len() < 3 || polygon.area() <= 0.0 {
-        return beads;
+    Fill::start(polygon, widths).map(Fill::beads).unwrap_or_default()
+}
+
+/// A fill begun: the bead width fitted and the region's first erosion made, which is
+/// enough to tell that it will lay beads ([`Fill::surely_beads`]) before the rest is
+/// worked out.
+pub struct Fill {
+    w: f64,
+    level: Shapes,
+    /// The level eroded by a width less the slack: where the first loop runs.
+    deep: Shapes,
+}
+
+impl Fill {
+    /// The fill of `polygon`; `None` for a region with no area (no beads).
+    pub fn start(polygon: &Polygon, widths: &Widths) -> Option<Self> {
+        if widths.nominal.is_nan()
+            || widths.nominal <= 0.0
+            || polygon.outer.len() < 3
+            || polygon.area() <= 0.0
+        {
+            return None;
+        }
+        let w = widths.fitted(mean_width(polygon));
+        let level = shapes_of(polygon);
+        let deep = deep(&level, w);
+        Some(Self { w, level, deep })
     }
-    let w = widths.fitted(mean_width(polygon));
-    let slack = 0.1 * w;
-    let mut level = shapes_of(polygon);
-    let mut residue: Shapes = Vec::new();
-    for _ in 0..MAX_PASSES {
-        if level.is_empty() {
-            break;
-        }
-        // Where the level reaches one more width (less the slack), a loop at half a
-        // width; its band reaches from the level's boundary to the next level's.
-        let deep = if level.iter().all(|shape| surely_thin(shape, w - slack)) {
-            Vec::new()
-        } else {
-            offset(&level, -(w - slack))
-        };
-        if deep.is_empty() {
-            residue.extend(level);
-            break;
-        }
-        let loops = offset(&deep, w / 2.0 - slack);
-        for contour in loops.iter().flatten() {
-            let mut points: Vec<Point2> = contour.iter().map(|q| Point2::new(q[0], q[1])).collect();
-            // Every loop runs counter-clockwise, holes' too: two tools working along
-            // the same wall then move the same way round instead of meeting head-on,
-            // where one of them must step aside.
-            if ring_area(contour) < 0.0 {
-                points.reverse();
+
+    /// Whether the fill lays a loop, and so at least one bead (`false`: not known):
+    /// a region that reaches a width deep has a loop at half a width.
+    pub fn surely_beads(&self) -> bool {
+        self.deep.iter().any(|shape| shape_area(shape) > 0.0)
+    }
+
+    /// The beads: loops outermost first, then the centre beads of what they leave.
+    pub fn beads(self) -> Vec<Bead> {
+        let Self { w, mut level, deep } = self;
+        let slack = 0.1 * w;
+        let mut beads = Vec::new();
+        let mut residue: Shapes = Vec::new();
+        let mut first = Some(deep);
+        for _ in 0..MAX_PASSES {
+            if level.is_empty() {
+                break;
             }
-            beads.push(Bead::closed(points, w));
+            // Where the level reaches one more width (less the slack), a loop at half a
+            // width; its band reaches from the level's boundary to the next level's.
+            let deep = first.take().unwrap_or_else(|| self::deep(&level, w));
+            if deep.is_empty() {
+                residue.extend(level);
+                break;
+            }
+            let loops = offset(&deep, w / 2.0 - slack);
+            for contour in loops.iter().flatten() {
+                let mut points: Vec<Point2> = contour.iter().map(|q| Point2::new(q[0], q[1])).collect();
+                // Every loop runs counter-clockwise, holes' too: two tools working along
+                // the same wall then move the same way round instead of meeting head-on,
+                // where one of them must step aside.
+                if ring_area(contour) < 0.0 {
+                    points.reverse();
+                }
+                beads.push(Bead::closed(points, w));
+            }
+            let band = offset(&loops, w / 2.0);
+            let rest: Shapes = tidy(
+                level.overlay(&band, OverlayRule::Difference, FillRule::EvenOdd),
+                TOLERANCE,
+            );
+            residue.extend(rest);
+            level = offset(&level, -w);
         }
-        let band = offset(&loops, w / 2.0);
-        let rest: Shapes = tidy(
-            level.overlay(&band, OverlayRule::Difference, FillRule::EvenOdd),
-            TOLERANCE,
-        );
-        residue.extend(rest);
-        level = offset(&level, -w);
+        // Offsets and the difference leave rounding slivers, and a loop's band meets the
+        // next level along hairlines thinner than anything a nozzle lays: dropped once,
+        // here. Their area is nothing; their length would be minutes of nozzle travel.
+        residue.retain(|s| shape_area(s) > MIN_RESIDUE && shape_mean_width(s) >= HAIRLINE * w);
+        // Edges split to one width at most: a segment's bead stands for the triangle it
+        // crosses, and the longer the triangles the less a bead of their mean width
+        // covers them where the residue widens or bends (splitting to three widths saves
+        // a fifth of the plan's time and leaves 0.7 % of a layer uncovered on 3DBenchy's
+        // cabin, against 0.2 %).
+        beads.extend(centre_beads(&residue, w, TOLERANCE));
+        beads
     }
-    // Offsets and the difference leave rounding slivers, and a loop's band meets the
-    // next level along hairlines thinner than anything a nozzle lays: dropped once,
-    // here. Their area is nothing; their length would be minutes of nozzle travel.
-    residue.retain(|s| shape_area(s) > MIN_RESIDUE && shape_mean_width(s) >= HAIRLINE * w);
-    // Edges split to one width at most: a segment's bead stands for the triangle it
-    // crosses, and the longer the triangles the less a bead of their mean width
-    // covers them where the residue widens or bends (splitting to three widths saves
-    // a fifth of the plan's time and leaves 0.7 % of a layer uncovered on 3DBenchy's
-    // cabin, against 0.2 %).
-    beads.extend(centre_beads(&residue, w, TOLERANCE));
-    beads
+}
+
+/// `level` eroded by a width `w` less the slack: empty when the level is surely
+/// thinner than that.
+fn deep(level: &Shapes, w: f64) -> Shapes {
+    let slack = 0.1 * w;
+    if level.iter().all(|shape| surely_thin(shape, w - slack)) {
+        Vec::new()
+    } else {
+        offset(level, -(w - slack))
+    }
 }
 
 /// Largest number of sample points the thinness test spends on one shape before it

@@ -15,7 +15,7 @@ use i_overlay::float::simplify::SimplifyShape;
 use lamina_core::{Composition, Contour, Point2, Polygon, SubRegion};
 
 use crate::bead::Bead;
-use crate::fill::{Widths, fill, mean_width};
+use crate::fill::{Fill, Widths, fill, mean_width};
 use crate::pieces;
 
 lamina_core::option_type!(Thin = "string");
@@ -93,14 +93,14 @@ pub fn group(regions: &[SubRegion], widths: &Widths, thin: Thin) -> Grouping {
             .flat_map(|q| fill(q, widths))
             .collect()
     };
-    // The union's beads when every piece of it takes a bead: merged levels of a cell
-    // that do not touch stay as thin as they were.
-    let fill_if_wide = |members: &[usize]| -> Vec<Bead> {
+    // The fills of the union when every piece of it takes a bead (merged levels of a
+    // cell that do not touch stay as thin as they were) and it lays any.
+    let fills_if_wide = |members: &[usize]| -> Option<Fills> {
         let pieces = union(members.iter().map(|&m| &regions[m].polygon));
         if pieces.iter().all(|q| mean_width(q) >= width) {
-            pieces.iter().flat_map(|q| fill(q, widths)).collect()
+            Fills::of(pieces.iter().filter_map(|q| Fill::start(q, widths)).collect())
         } else {
-            Vec::new()
+            None
         }
     };
     // Half the perimeter of a level: the length of a band along its family, so that
@@ -115,22 +115,35 @@ pub fn group(regions: &[SubRegion], widths: &Widths, thin: Thin) -> Grouping {
     };
     for levels in buckets.values() {
         let first = out.groups.len();
+        // The groups of this family whose beads are not laid out yet. The last group
+        // takes the innermost levels when they are too thin on their own, and is then
+        // filled with them; so that no group is filled for nothing, fills wait until
+        // the family's groups are known.
+        let mut later: Vec<(usize, Vec<Fill>)> = Vec::new();
+        let mut push = |out: &mut Grouping, group: Group, fills: Fills| match fills {
+            Fills::Done(passes) => out.groups.push(Group { passes, ..group }),
+            Fills::Later(fills) => {
+                later.push((out.groups.len(), fills));
+                out.groups.push(group);
+            }
+        };
         let mut pending: Vec<usize> = Vec::new();
         let (mut area, mut along) = (0.0, 0.0f64);
         for members in levels.values() {
             if pending.is_empty() {
                 for &m in members {
-                    let passes = if mean_width(&regions[m].polygon) >= width {
-                        fill(&regions[m].polygon, widths)
+                    let fills = if mean_width(&regions[m].polygon) >= width {
+                        Fill::start(&regions[m].polygon, widths).and_then(|f| Fills::of(vec![f]))
                     } else {
-                        Vec::new()
+                        None
                     };
-                    if !passes.is_empty() {
-                        out.groups.push(Group {
+                    if let Some(fills) = fills {
+                        let group = Group {
                             members: vec![m],
-                            passes,
+                            passes: Vec::new(),
                             composition: regions[m].composition.clone(),
-                        });
+                        };
+                        push(&mut out, group, fills);
                     } else if thin == Thin::Skip {
                         out.thin.push((m, regions[m].area()));
                     } else {
@@ -150,44 +163,47 @@ pub fn group(regions: &[SubRegion], widths: &Widths, thin: Thin) -> Grouping {
             if area < width * along {
                 continue;
             }
-            let passes = fill_if_wide(&pending);
-            if !passes.is_empty() {
-                out.groups.push(Group {
+            if let Some(fills) = fills_if_wide(&pending) {
+                let group = Group {
                     members: std::mem::take(&mut pending),
-                    passes,
+                    passes: Vec::new(),
                     composition: None,
-                });
+                };
+                push(&mut out, group, fills);
                 (area, along) = (0.0, 0.0);
             }
-        }
-        if pending.is_empty() {
-            continue;
         }
         // The innermost levels: with the last group of the family, on their own when
         // they were never tried together, or left out when the whole family is
         // thinner than a pass.
-        if out.groups.len() > first {
-            let last = out.groups.last_mut().expect("a group of this family");
+        if !pending.is_empty() && out.groups.len() > first {
+            let last = out.groups.len() - 1;
+            later.retain(|(g, _)| *g != last);
+            let last = &mut out.groups[last];
             last.members.append(&mut pending);
             last.passes = fill_union(&last.members);
+        }
+        for (g, fills) in later {
+            out.groups[g].passes = fills.into_iter().flat_map(Fill::beads).collect();
+        }
+        if pending.is_empty() {
             continue;
         }
-        let passes = if area >= width * along {
-            fill_if_wide(&pending)
+        let fills = if area >= width * along {
+            fills_if_wide(&pending)
         } else {
-            Vec::new()
+            None
         };
-        if passes.is_empty() {
-            leftover
+        match fills {
+            None => leftover
                 .entry(regions[pending[0]].family)
                 .or_default()
-                .extend(pending);
-        } else {
-            out.groups.push(Group {
+                .extend(pending),
+            Some(fills) => out.groups.push(Group {
                 members: pending,
-                passes,
+                passes: fills.into_beads(),
                 composition: None,
-            });
+            }),
         }
     }
     // What stayed too thin within its cell (cells of neighbouring levels need not
@@ -220,6 +236,32 @@ pub fn group(regions: &[SubRegion], widths: &Widths, thin: Thin) -> Grouping {
         }
     }
     out
+}
+
+/// The fills of a group known to lay beads: laid out already, or begun with one that
+/// surely lays a loop, to be finished once it is known that the group keeps its
+/// members.
+enum Fills {
+    Done(Vec<Bead>),
+    Later(Vec<Fill>),
+}
+
+impl Fills {
+    /// The fills of `fills` in order, or `None` when they lay no bead.
+    fn of(fills: Vec<Fill>) -> Option<Self> {
+        if fills.iter().any(Fill::surely_beads) {
+            return Some(Fills::Later(fills));
+        }
+        let beads: Vec<Bead> = fills.into_iter().flat_map(Fill::beads).collect();
+        (!beads.is_empty()).then_some(Fills::Done(beads))
+    }
+
+    fn into_beads(self) -> Vec<Bead> {
+        match self {
+            Fills::Done(beads) => beads,
+            Fills::Later(fills) => fills.into_iter().flat_map(Fill::beads).collect(),
+        }
+    }
 }
 
 /// The sub-regions among `members` that lie in `piece` of their union.
