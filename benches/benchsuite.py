@@ -49,15 +49,16 @@ SLICE_MODELS = [
 def peer_slice(modules):
     """The start of a slicing peer's script: imports numpy, trimesh and ``modules``
     (", name, ..."), then loads the mesh argv[1] scaled by argv[2] into ``m``, timed
-    from ``t0`` to ``t1``; argv[3] is the layer height ``step``."""
+    from ``t0`` to ``t1`` (wall) and ``c0`` to ``c1`` (CPU of the process, all its
+    threads); argv[3] is the layer height ``step``."""
     return r"""
 import sys, time, json
 import numpy as np, trimesh""" + modules + r"""
 path, scale, step = sys.argv[1], float(sys.argv[2]), float(sys.argv[3])
-t0 = time.perf_counter()
+t0, c0 = time.perf_counter(), time.process_time()
 m = trimesh.load(path, force="mesh")
 m.apply_scale(scale)
-t1 = time.perf_counter()
+t1, c1 = time.perf_counter(), time.process_time()
 """
 
 
@@ -65,8 +66,9 @@ PEER_SLICE_TRIMESH = peer_slice("") + r"""z0, z1 = m.bounds[0][2], m.bounds[1][2
 heights = np.arange(step / 2, z1 - z0, step)
 sections = m.section_multiplane(plane_origin=[0, 0, z0], plane_normal=[0, 0, 1], heights=heights)
 loops = sum(len(s.polygons_full) for s in sections if s is not None)
-t2 = time.perf_counter()
-print(json.dumps({"work": t2 - t0, "load": t1 - t0, "slice": t2 - t1, "layers": len(heights), "loops": loops}))
+t2, c2 = time.perf_counter(), time.process_time()
+print(json.dumps({"work": t2 - t0, "cpu": c2 - c0, "load": t1 - t0, "slice": t2 - t1, "layers": len(heights),
+                  "loops": loops}))
 """
 
 PEER_SLICE_MANIFOLD = peer_slice(", manifold3d") + r"""mesh = manifold3d.Mesh(vert_properties=np.asarray(m.vertices, dtype=np.float32),
@@ -80,8 +82,8 @@ while z < z1:
     loops += len(man.slice(z).to_polygons())
     layers += 1
     z += step
-t2 = time.perf_counter()
-print(json.dumps({"work": t2 - t1, "load": t1 - t0, "layers": layers, "loops": loops,
+t2, c2 = time.perf_counter(), time.process_time()
+print(json.dumps({"work": t2 - t1, "cpu": c2 - c1, "load": t1 - t0, "layers": layers, "loops": loops,
                   "status": str(man.status())}))
 """
 
@@ -336,7 +338,11 @@ def main():
                 continue
             try:
                 w, m, o = repeat([args.python, "-c", script, file, scale, 0.2], runs)
-                detail = f"{median_of(o, 'loops'):.0f} loops"
+                # Lamina's work is its stages' time summed over threads, which is CPU
+                # time; the peer's is wall time inside the process, and manifold3d
+                # builds on several threads: its CPU time is given beside it.
+                cpu = median_of(o, "cpu")
+                detail = f"{median_of(o, 'loops'):.0f} loops, CPU {cpu:.4f} s ({cpu / base:.1f}x)"
                 try:
                     status = json.loads(o[-1].strip().splitlines()[-1]).get("status")
                 except (ValueError, IndexError):

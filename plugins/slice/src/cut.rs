@@ -99,6 +99,8 @@ pub struct CutMesh {
     /// `entries[starts[b]..starts[b + 1]]`.
     z0: f64,
     bucket: f64,
+    /// `1 / bucket`: the lookup of a bucket is a product.
+    per_bucket: f64,
     starts: Vec<u32>,
     entries: Vec<u32>,
     options: CutOptions,
@@ -156,11 +158,14 @@ impl CutMesh {
         };
         let count = (by_entries.min(n).floor() as usize).clamp(1, 65536);
         let bucket = height / count as f64;
+        let per_bucket = 1.0 / bucket;
         // `as usize` truncates like `floor` here and saturates negatives and NaN to 0.
+        // Scaling by `per_bucket` is monotonic, as the lookup in `segments` is the
+        // same: a range that holds z is listed in z's bucket.
         let span = |(lo, hi): (f64, f64)| {
-            let b0 = (((lo - z0) / bucket).max(0.0) as usize).min(count - 1);
-            let b1 = (((hi - z0) / bucket).max(0.0) as usize).min(count - 1);
-            b0..=b1
+            let b0 = (((lo - z0) * per_bucket).max(0.0) as usize).min(count - 1);
+            let b1 = (((hi - z0) * per_bucket).max(0.0) as usize).min(count - 1);
+            b0..b1 + 1
         };
         // The buckets as one array (counted, then filled), each in triangle order.
         let mut starts = vec![0u32; count + 1];
@@ -188,6 +193,7 @@ impl CutMesh {
             snap,
             z0,
             bucket,
+            per_bucket,
             starts,
             entries,
             options,
@@ -211,7 +217,7 @@ impl CutMesh {
         if !(z >= self.z0 - 3.0 * self.snap && z <= self.z0 + self.bucket * count as f64 + 3.0 * self.snap) {
             return Vec::new();
         }
-        let b = ((((z - self.z0) / self.bucket).max(0.0)) as usize).min(count - 1);
+        let b = ((((z - self.z0) * self.per_bucket).max(0.0)) as usize).min(count - 1);
         let snap = self.snap;
         // In the plane (within `snap`) counts as above, as exactly in the plane does.
         let on = |p: &lamina_core::Point3| (p.z - z).abs() <= snap;
