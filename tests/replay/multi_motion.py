@@ -729,6 +729,8 @@ def build_timeline(mm: MultiReplay) -> dict:
     nb = len(mm.barriers)
     timed = []
     seg = [[0.0] * nb for _ in streams]
+    # The same, of printing moves only.
+    seg_print = [[0.0] * nb for _ in streams]
     for s, st in enumerate(streams):
         vin, vout = gr.plan_speeds(st.moves, st.jd, st.jerk)
         phases = []
@@ -743,6 +745,9 @@ def build_timeline(mm: MultiReplay) -> dict:
         for ev in st.events:
             if ev[0] == "m":
                 seg[s][k] += phases[ev[1]][1]
+                m = st.moves[ev[1]]
+                if m[6] == 0.0 and m[10] != 0.0:
+                    seg_print[s][k] += phases[ev[1]][1]
             elif ev[0] == "d":
                 seg[s][k] += ev[1]
             else:
@@ -759,14 +764,20 @@ def build_timeline(mm: MultiReplay) -> dict:
     # between barriers).
     marks = mm.layer_marks
     mark_lines = [m[0] for m in marks]
+    # Of printing moves alone (no travel, retraction or dwell), the same sum is what
+    # no order of the same deposits at their feeds can beat.
     per_layer: dict[int, list[float]] = {}
+    per_layer_print: dict[int, list[float]] = {}
     for k, b in enumerate(mm.barriers):
         q = bisect.bisect_left(mark_lines, b["line"])
         layer = marks[q - 1][1] if q > 0 else -1
         row = per_layer.setdefault(layer, [0.0] * len(streams))
+        row_print = per_layer_print.setdefault(layer, [0.0] * len(streams))
         for s in range(len(streams)):
             row[s] += seg[s][k]
+            row_print[s] += seg_print[s][k]
     busiest = sum(max(row, default=0.0) for row in per_layer.values())
+    busiest_print = sum(max(row, default=0.0) for row in per_layer_print.values())
     per_stream = []
     tracks = []
     for s, st in enumerate(streams):
@@ -805,7 +816,7 @@ def build_timeline(mm: MultiReplay) -> dict:
         per_stream.append({"busy_s": busy, "wait_s": wait, "dwell_s": dwell, "by_kind_s": kinds,
                            "end_s": last_active, "waits": waits})
     return {"build_s": build, "release": release, "streams": per_stream, "tracks": tracks,
-            "layers_busiest_s": busiest}
+            "layers_busiest_s": busiest, "layers_busiest_print_s": busiest_print}
 
 
 # ---------------------------------------------------------------------------
@@ -1118,6 +1129,7 @@ def build_report_multi(mm: MultiReplay, o: gr.Options, name: str) -> dict:
             "ratio_to_sequential": None,
             "streams_sum_s": sum(p["busy_s"] for p in tl["streams"]),
             "layers_busiest_s": tl["layers_busiest_s"],
+            "layers_busiest_print_s": tl["layers_busiest_print_s"],
             "barriers": len(mm.barriers),
             "barrier_kinds": {},
             "junction": [("jerk" if st.jerk is not None else f"junction deviation {st.jd:g} mm") for st in streams]}
@@ -1278,7 +1290,8 @@ def summary_multi(rep: dict) -> str:
         line += f"; sequential {t['sequential_s']:.1f} s, ratio {t['ratio_to_sequential']:.3f}"
     out.append(line)
     out.append(f"  per layer, the busiest stream's moves add up to {t['layers_busiest_s']:.1f} s "
-               f"(these moves side by side, never waiting; all streams' moves {t['streams_sum_s']:.1f} s)")
+               f"(these moves side by side, never waiting; all streams' moves {t['streams_sum_s']:.1f} s); "
+               f"its printing moves alone {t['layers_busiest_print_s']:.1f} s")
     for row in rep["streams"]:
         fil = ", ".join(f"{k} {v:.1f} mm" for k, v in row["filament_mm"].items()) or "no extrusion"
         out.append(f"  stream {row['system']}: busy {row['busy_s']:.1f} s, waits {row['wait_s']:.1f} s "

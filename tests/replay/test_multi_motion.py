@@ -335,6 +335,24 @@ class Timing(unittest.TestCase):
         self.assertAlmostEqual(t["replayed_s"], 9.0, places=9)
         self.assertAlmostEqual(t["streams_sum_s"], 9.0, places=9)
         self.assertAlmostEqual(t["layers_busiest_s"], 7.0, places=9)
+        # Dwells are no printing.
+        self.assertEqual(t["layers_busiest_print_s"], 0.0)
+
+    def test_busiest_printing_per_layer(self):
+        # Both heads print a 40 mm square per layer after a travel to it: per layer,
+        # the busier head's printing moves, without the travel. The heads print the
+        # same, so over the layers that is about either head's printing (at least the
+        # busier head's), and neither both heads' nor the travel.
+        body, _ = clean_layers(layers=2)
+        rep = run(job(body))
+        t = rep["time"]
+        prints = [row["by_kind_s"]["print"] for row in rep["streams"]]
+        travel = min(row["by_kind_s"]["travel"] for row in rep["streams"])
+        self.assertGreater(min(prints), 2 * 160 / 30)  # 160 mm a layer at 30 mm/s
+        self.assertGreater(travel, 0.1)
+        self.assertGreaterEqual(t["layers_busiest_print_s"], max(prints) - 1e-9)
+        self.assertLess(t["layers_busiest_print_s"], max(prints) + 0.01)
+        self.assertLess(t["layers_busiest_print_s"] + travel, t["layers_busiest_s"] + 1e-9)
 
     def test_m400_synchronises(self):
         body = "\n".join(["M596 P0", "G4 S3", "M400", "M596 P1", "G4 S1"]) + "\n"
