@@ -299,17 +299,25 @@ impl Agent<'_> {
 /// Timed points of a tool's motion within one step, from 0 to the step length.
 type Track = Vec<(f64, Point2)>;
 
-/// The closest approach of two motions over the same step: between consecutive
-/// breakpoints of either, both move straight at constant speed, so their difference
-/// runs along a segment whose distance to the origin is exact.
-fn closest(a: &[(f64, Point2)], b: &[(f64, Point2)]) -> f64 {
-    closest_until(a, b, f64::INFINITY)
+/// Whether two motions over the same step keep at least `e` apart over its first
+/// `until` seconds: between consecutive breakpoints of either, both move straight at
+/// constant speed, so their difference runs along a segment whose distance to the
+/// origin is exact. The planner needs only the yes or no, so the walk stops at the
+/// first stretch that comes closer.
+fn keep_apart_until(a: &[(f64, Point2)], b: &[(f64, Point2)], until: f64, e: f64) -> bool {
+    closest_below(a, b, until, e) >= e
 }
 
-/// [`closest`] over the first `until` seconds of the two motions. The breakpoints of
-/// the two are walked together, in time order, without sorting or allocating: this
-/// runs for every pair of tools at every check.
-fn closest_until(a: &[(f64, Point2)], b: &[(f64, Point2)], until: f64) -> f64 {
+/// [`keep_apart_until`] over the whole step.
+fn keep_apart(a: &[(f64, Point2)], b: &[(f64, Point2)], e: f64) -> bool {
+    keep_apart_until(a, b, f64::INFINITY, e)
+}
+
+/// The closest approach of the two motions over the first `until` seconds, or, as
+/// soon as one stretch comes closer than `stop`, that stretch's approach. The
+/// breakpoints of the two are walked together, in time order, without sorting or
+/// allocating: this runs for every pair of tools at every check.
+fn closest_below(a: &[(f64, Point2)], b: &[(f64, Point2)], until: f64, stop: f64) -> f64 {
     if a.is_empty() || b.is_empty() {
         return f64::INFINITY;
     }
@@ -345,6 +353,9 @@ fn closest_until(a: &[(f64, Point2)], b: &[(f64, Point2)], until: f64) -> f64 {
             Some(q) => segment_distance(origin, q, d),
             None => (d - origin).norm(),
         });
+        if best < stop {
+            return best;
+        }
         prev = Some(d);
         if t >= until {
             break;
@@ -477,7 +488,7 @@ pub fn concurrent(
             let (si, sj) = (still(a.pos), still(b.pos));
             let ti: &[(f64, Point2)] = if mi { &tracks[i] } else { &si };
             let tj: &[(f64, Point2)] = if mj { &tracks[j] } else { &sj };
-            closest(ti, tj) >= a.spec.envelope + b.spec.envelope
+            keep_apart(ti, tj, a.spec.envelope + b.spec.envelope)
         };
         // Hold the lower-priority tool of each predicted collision until none is left;
         // held tools stay where they are, which was clear one step ago.
@@ -531,7 +542,7 @@ pub fn concurrent(
                         let e = agents[i].spec.envelope + agents[j].spec.envelope;
                         let still = [(0.0, agents[j].pos), (half, agents[j].pos)];
                         let other: &[(f64, Point2)] = if moving[j] { &ahead[j] } else { &still };
-                        closest_until(&ahead[i], other, half) < e
+                        !keep_apart_until(&ahead[i], other, half, e)
                     }
                 });
                 let others_move = (0..n).any(|j| j != i && moving[j]);
@@ -667,11 +678,11 @@ fn anticipate_holds(
                 } else {
                     look_ahead / 2.0
                 };
-                if closest_until(&ahead[i], &ahead[j], h) >= e {
+                if keep_apart_until(&ahead[i], &ahead[j], h, e) {
                     continue;
                 }
-                let hold_i = closest_until(&still(a.pos), &ahead[j], h) >= e;
-                let hold_j = closest_until(&ahead[i], &still(b.pos), h) >= e;
+                let hold_i = keep_apart_until(&still(a.pos), &ahead[j], h, e);
+                let hold_j = keep_apart_until(&ahead[i], &still(b.pos), h, e);
                 let loser = match (hold_i, hold_j) {
                     (true, true) if waited[i] != waited[j] => Some(if waited[i] { i } else { j }),
                     (true, true) => Some(ruled_loser(priority, agents, i, j, along_x)),
@@ -754,6 +765,15 @@ fn aside(
 mod tests {
     use super::*;
 
+    /// The exact closest approach over the first `until` seconds.
+    fn closest_until(a: &[(f64, Point2)], b: &[(f64, Point2)], until: f64) -> f64 {
+        closest_below(a, b, until, f64::NEG_INFINITY)
+    }
+
+    fn closest(a: &[(f64, Point2)], b: &[(f64, Point2)]) -> f64 {
+        closest_until(a, b, f64::INFINITY)
+    }
+
     /// The closest approach by brute force: both motions sampled every `dt`.
     fn sampled(a: &[(f64, Point2)], b: &[(f64, Point2)], until: f64, dt: f64) -> f64 {
         let at = |tr: &[(f64, Point2)], t: f64| -> Point2 {
@@ -808,6 +828,21 @@ mod tests {
             // two move in half a sampling step (speeds here are below 600 mm/s).
             assert!(exact <= brute + 1e-9, "{exact} > {brute}");
             assert!(brute - exact <= 0.07, "{exact} vs {brute}");
+            // Stopping at the first stretch closer than a clearance answers as the
+            // exact approach does, on either side of it and at it.
+            for e in [
+                exact * 0.5,
+                exact,
+                exact * (1.0 + 1e-12),
+                exact * 2.0,
+                next(&mut seed) * 20.0,
+            ] {
+                assert_eq!(
+                    keep_apart_until(&a, &b, until, e),
+                    exact >= e,
+                    "{exact} against {e}"
+                );
+            }
         }
     }
 
