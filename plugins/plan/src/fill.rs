@@ -165,7 +165,7 @@ impl Fill {
     /// The beads: loops outermost first, then the centre beads of what they leave.
     pub fn beads(self) -> Vec<Bead> {
         let Self { w, mut level, deep } = self;
-        let slack = 0.1 * w;
+        let slack = slack(w);
         let mut beads = Vec::new();
         let mut residue: Shapes = Vec::new();
         let mut first = Some(deep);
@@ -213,10 +213,15 @@ impl Fill {
     }
 }
 
+/// How much less than a width `w` a level must reach for another loop: a tenth of it.
+fn slack(w: f64) -> f64 {
+    0.1 * w
+}
+
 /// `level` eroded by a width `w` less the slack: empty when the level is surely
 /// thinner than that.
 fn deep(level: &Shapes, w: f64) -> Shapes {
-    let slack = 0.1 * w;
+    let slack = slack(w);
     if level.iter().all(|shape| surely_thin(shape, w - slack)) {
         Vec::new()
     } else {

@@ -159,13 +159,8 @@ impl CutMesh {
         let count = (by_entries.min(n).floor() as usize).clamp(1, 65536);
         let bucket = height / count as f64;
         let per_bucket = 1.0 / bucket;
-        // `as usize` truncates like `floor` here and saturates negatives and NaN to 0.
-        // Scaling by `per_bucket` is monotonic, as the lookup in `segments` is the
-        // same: a range that holds z is listed in z's bucket.
         let span = |(lo, hi): (f64, f64)| {
-            let b0 = (((lo - z0) * per_bucket).max(0.0) as usize).min(count - 1);
-            let b1 = (((hi - z0) * per_bucket).max(0.0) as usize).min(count - 1);
-            b0..b1 + 1
+            bucket_of(lo, z0, per_bucket, count)..bucket_of(hi, z0, per_bucket, count) + 1
         };
         // The buckets as one array (counted, then filled), each in triangle order.
         let mut starts = vec![0u32; count + 1];
@@ -217,7 +212,7 @@ impl CutMesh {
         if !(z >= self.z0 - 3.0 * self.snap && z <= self.z0 + self.bucket * count as f64 + 3.0 * self.snap) {
             return Vec::new();
         }
-        let b = ((((z - self.z0) * self.per_bucket).max(0.0)) as usize).min(count - 1);
+        let b = bucket_of(z, self.z0, self.per_bucket, count);
         let snap = self.snap;
         // In the plane (within `snap`) counts as above, as exactly in the plane does.
         let on = |p: &lamina_core::Point3| (p.z - z).abs() <= snap;
@@ -313,6 +308,13 @@ impl CutMesh {
         layer.contours = simple_contours(&contours, self.options);
         Ok(layer)
     }
+}
+
+/// The bucket of height `z`, for listing a triangle's range and for looking up a plane
+/// alike: the product is monotonic, so a range that holds z is listed in z's bucket.
+/// `as usize` truncates like `floor` here and saturates negatives and NaN to 0.
+fn bucket_of(z: f64, z0: f64, per_bucket: f64, count: usize) -> usize {
+    (((z - z0) * per_bucket).max(0.0) as usize).min(count - 1)
 }
 
 /// How close to the cutting plane a vertex is taken to lie in it: eight times the
