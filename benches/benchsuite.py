@@ -137,6 +137,50 @@ print(json.dumps({"work": edt + contours, "edt": edt, "contours": contours, "lay
 """
 
 
+# The same work as Lamina's `distance-field` stage: one field per family (an outer
+# contour and its holes), over the family's own box padded by 1.5 samples, with
+# argv[2] samples along its longer side (Lamina's `Field::over`), cut at 10 levels.
+# The whole-layer script above makes one field per layer, fewer fields than Lamina on
+# layers of several families (3DBenchy: 2.45 families a layer).
+PEER_SDF_SCIPY_FAMILIES = r"""
+import sys, time, json, math
+import numpy as np
+from scipy import ndimage
+from skimage import draw, measure
+layers = json.load(open(sys.argv[1]))
+cells, levels = int(sys.argv[2]), int(sys.argv[3])
+edt = contours = 0.0
+fields = 0
+for layer in layers:
+    for family in layer:
+        rings = [np.asarray(c, dtype=float) for c in family]
+        pts = np.concatenate(rings)
+        lo, hi = pts.min(axis=0), pts.max(axis=0)
+        extent = max((hi - lo).max(), 1e-300)
+        h = extent / (cells - 3.0)
+        nx = max(math.ceil((hi[0] - lo[0]) / h) + 4, 4)
+        ny = max(math.ceil((hi[1] - lo[1]) / h) + 4, 4)
+        origin = lo - 1.5 * h
+        mask = np.zeros((ny, nx), dtype=bool)
+        for c in rings:
+            q = (c - origin) / h
+            rr, cc = draw.polygon(q[:, 1], q[:, 0], (ny, nx))
+            mask[rr, cc] ^= True
+        t0 = time.perf_counter()
+        d = ndimage.distance_transform_edt(mask) - ndimage.distance_transform_edt(~mask)
+        t1 = time.perf_counter()
+        top = d.max()
+        for k in range(levels):
+            measure.find_contours(d, top * k / levels)
+        t2 = time.perf_counter()
+        edt += t1 - t0
+        contours += t2 - t1
+        fields += 1
+print(json.dumps({"work": edt + contours, "edt": edt, "contours": contours, "layers": len(layers),
+                  "fields": fields}))
+"""
+
+
 def run_process(cmd, cwd=None):
     """Runs a command; returns (wall seconds, stdout, stderr, exit code)."""
     start = time.perf_counter()
@@ -367,15 +411,22 @@ def main():
         subprocess.run([lamina, "run", "--quiet", "--out", work / "contours", pipe], check=True)
         plan = json.loads((work / "contours" / "plan.json").read_text())
         layers = []
+        # The same rings grouped by family, for the peer that makes a field per family.
+        families = []
         for layer in plan["layers"]:
             rings = []
+            fams = []
             for part in layer["parts"]:
                 for fam in part["families"]:
                     rings.append(fam["outer"])
                     rings.extend(fam["holes"])
+                    fams.append([fam["outer"]] + fam["holes"])
             if rings:
                 layers.append(rings)
+                families.append(fams)
         layers_json.write_text(json.dumps(layers))
+        families_json = work / "benchy_families.json"
+        families_json.write_text(json.dumps(families))
         n_layers = len(layers)
 
         if "offset" in tasks:
@@ -409,7 +460,14 @@ def main():
                 w, m, o = repeat([args.python, "-c", PEER_SDF_SCIPY, layers_json, 512, 10], runs)
                 done = median_of(o, "layers")
                 row("SDF per layer (1 thread)", "scipy+skimage", w, m, median_of(o, "work") / done, per_layer,
-                    detail=f"edt {median_of(o, 'edt') / done * 1e3:.1f} ms + contours "
+                    detail=f"one field per layer; edt {median_of(o, 'edt') / done * 1e3:.1f} ms + contours "
+                           f"{median_of(o, 'contours') / done * 1e3:.1f} ms")
+                w, m, o = repeat([args.python, "-c", PEER_SDF_SCIPY_FAMILIES, families_json, 512, 10], runs)
+                done = median_of(o, "layers")
+                row("SDF per layer (1 thread)", "scipy+skimage per family", w, m, median_of(o, "work") / done,
+                    per_layer,
+                    detail=f"one field per family as Lamina ({median_of(o, 'fields'):.0f} fields); "
+                           f"edt {median_of(o, 'edt') / done * 1e3:.1f} ms + contours "
                            f"{median_of(o, 'contours') / done * 1e3:.1f} ms")
 
         # --- STL to G-code ----------------------------------------------------------------
