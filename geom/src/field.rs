@@ -109,17 +109,15 @@ impl Field {
     fn distance_with(&mut self, contours: &[&Contour], wanted: Option<&[bool]>, scratch: &mut Scratch) {
         let n = self.nx * self.ny;
         let (nx, ny) = (self.nx, self.ny);
-        let Scratch {
-            near,
-            seed_d2,
-            from_row,
-            seed_of,
-        } = scratch;
+        let Scratch { near, from_row } = scratch;
         // Boundary points of the seeds: read only where a seed was measured in this
         // call, so what an earlier call left there needs no clearing.
         near.resize(n, [0.0; 2]);
-        seed_d2.clear();
-        seed_d2.resize(n, f64::INFINITY);
+        // The seeds' squared distances go straight into `values`, which every other
+        // sample overwrites below: infinite marks a sample that is not a seed.
+        let values = &mut self.values;
+        values.clear();
+        values.resize(n, f64::INFINITY);
         // Seeds are the samples within a cell of the boundary: a thin band keeps the
         // nearest seed's boundary point close to the true nearest boundary point. Each
         // segment visits, column by column, the samples of its cell-wide neighbourhood
@@ -151,8 +149,8 @@ impl Field {
                         let on = closest_on_segment(q, a, b);
                         let d2 = (q - on).norm_squared();
                         let k = j * nx + i;
-                        if d2 <= h2 && d2 < seed_d2[k] {
-                            seed_d2[k] = d2;
+                        if d2 <= h2 && d2 < values[k] {
+                            values[k] = d2;
                             near[k] = [on.x, on.y];
                         }
                     }
@@ -162,12 +160,14 @@ impl Field {
         // Column pass: the row of the nearest seed in each sample's column, by a sweep
         // up and a sweep down over whole rows (the seeds are all at 0, so the nearest
         // in a column is the nearest below or above).
-        // Every entry is written by the upward sweep.
+        // Every entry is written by the upward sweep, which leaves a seed's own row on
+        // the seeds and an earlier row (or none) on the others: the downward sweep
+        // tells the seeds by that.
         from_row.resize(n, u32::MAX);
         let mut last = vec![u32::MAX; nx];
         for j in 0..ny {
             let row = j * nx..(j + 1) * nx;
-            for ((l, d), r) in last.iter_mut().zip(&seed_d2[row.clone()]).zip(&mut from_row[row]) {
+            for ((l, d), r) in last.iter_mut().zip(&values[row.clone()]).zip(&mut from_row[row]) {
                 if d.is_finite() {
                     *l = j as u32;
                 }
@@ -176,9 +176,8 @@ impl Field {
         }
         last.fill(u32::MAX);
         for j in (0..ny).rev() {
-            let row = j * nx..(j + 1) * nx;
-            for ((l, d), r) in last.iter_mut().zip(&seed_d2[row.clone()]).zip(&mut from_row[row]) {
-                if d.is_finite() {
+            for (l, r) in last.iter_mut().zip(&mut from_row[j * nx..(j + 1) * nx]) {
+                if *r == j as u32 {
                     *l = j as u32;
                 }
                 // Below is nearer when there is none above or it is closer.
@@ -190,16 +189,11 @@ impl Field {
         // Row pass: over the column results (squared distances in samples, made row by
         // row); the argmin names the column, whose column pass names the row of the
         // nearest seed. Seeds are kept as (row << 16) | column (grids stay below 2^16
-        // samples a side), so that comparing them needs no division.
+        // samples a side), so that comparing them needs no division. Every sample
+        // then measures its nearest seed's boundary point (seeds keep their own,
+        // exact), squared until the end.
         let mut envelope = Envelope::new(nx);
-        // Every row is written whole (by the envelope, or as having no seed).
-        seed_of.resize(n, u32::MAX);
-        for j in 0..ny {
-            let row = j * nx..(j + 1) * nx;
-            envelope.nearest(j, &from_row[row.clone()], &mut seed_of[row]);
-        }
-        // Every sample measures its nearest seed's boundary point (seeds their own,
-        // exact); squared until the end.
+        let near = &near[..];
         let d2 = |p: Point2, s: u32| {
             if s == u32::MAX {
                 f64::INFINITY
@@ -208,25 +202,17 @@ impl Field {
                 (p.x - q[0]).powi(2) + (p.y - q[1]).powi(2)
             }
         };
-        for (j, ((values, seed_d2), seed_of)) in self
-            .values
-            .chunks_exact_mut(nx)
-            .zip(seed_d2.chunks_exact(nx))
-            .zip(seed_of.chunks_exact(nx))
-            .enumerate()
-        {
+        // Row `j` of seeds into `seeds` and of (squared) distances into `values`.
+        let mut measure_row = |j: usize, seeds: &mut [u32], values: &mut [f64]| {
+            envelope.nearest(j, &from_row[j * nx..(j + 1) * nx], seeds);
             let y = oy + j as f64 * h;
             let wanted = wanted.map(|w| &w[j * nx..(j + 1) * nx]);
-            for (i, ((v, &seed), &s)) in values.iter_mut().zip(seed_d2).zip(seed_of).enumerate() {
-                *v = if seed.is_finite() {
-                    seed
-                } else if wanted.is_none_or(|w| w[i]) {
-                    d2(Point2::new(ox + i as f64 * h, y), s)
-                } else {
-                    f64::INFINITY
-                };
+            for (i, (v, &s)) in values.iter_mut().zip(seeds.iter()).enumerate() {
+                if !v.is_finite() && wanted.is_none_or(|w| w[i]) {
+                    *v = d2(Point2::new(ox + i as f64 * h, y), s);
+                }
             }
-        }
+        };
         // Near a medial axis the nearest seed in samples may sit on the farther
         // boundary. There neighbouring samples take seeds on different stretches of
         // the boundary (seeds more than two samples apart), and each of the two also
@@ -242,7 +228,6 @@ impl Field {
             (dc > 4) | (dr > 4)
         };
         let at = |i: usize, j: usize| Point2::new(ox + i as f64 * h, oy + j as f64 * h);
-        let values = &mut self.values;
         // Each sample with its right and upper neighbours: with the samples that look
         // back, its four edge neighbours (the diagonals found nothing more on the
         // tests' medial axes, and cost as much again). A row's pairs are flagged in one
@@ -256,16 +241,23 @@ impl Field {
                 values[m] = values[m].min(d2(at(ni, nj), s));
             }
         };
+        // Rows are measured one ahead of the pairs, so that only two rows of seeds are
+        // kept and each row is still in cache when its pairs and roots are taken.
+        let mut row = vec![u32::MAX; nx];
+        let mut up = vec![u32::MAX; nx];
         let mut right = vec![false; nx];
         let mut above = vec![false; nx];
+        measure_row(0, &mut row, &mut values[..nx]);
         for j in 0..ny {
-            let row = &seed_of[j * nx..(j + 1) * nx];
-            for ((f, s), t) in right.iter_mut().zip(row).zip(&row[1..]) {
+            let has_up = j + 1 < ny;
+            if has_up {
+                measure_row(j + 1, &mut up, &mut values[(j + 1) * nx..(j + 2) * nx]);
+            }
+            for ((f, s), t) in right.iter_mut().zip(&row).zip(&row[1..]) {
                 *f = apart(*s, *t);
             }
-            let up = seed_of.get((j + 1) * nx..(j + 2) * nx);
-            if let Some(up) = up {
-                for ((f, s), t) in above.iter_mut().zip(row).zip(up) {
+            if has_up {
+                for ((f, s), t) in above.iter_mut().zip(&row).zip(&up) {
                     *f = apart(*s, *t);
                 }
             }
@@ -273,9 +265,7 @@ impl Field {
                 if right[i] {
                     cross(values, (i, j), (i + 1, j), row[i], row[i + 1]);
                 }
-                if let Some(up) = up
-                    && above[i]
-                {
+                if has_up && above[i] {
                     cross(values, (i, j), (i, j + 1), row[i], up[i]);
                 }
             }
@@ -283,6 +273,7 @@ impl Field {
             for v in &mut values[j * nx..(j + 1) * nx] {
                 *v = v.sqrt();
             }
+            std::mem::swap(&mut row, &mut up);
         }
     }
 }
@@ -293,13 +284,11 @@ impl Field {
 #[derive(Default)]
 struct Scratch {
     near: Vec<[f64; 2]>,
-    seed_d2: Vec<f64>,
     from_row: Vec<u32>,
-    seed_of: Vec<u32>,
 }
 
 /// Largest field (samples) whose work arrays a thread keeps for the next family: a
-/// 1024 x 1024 field, 24 MiB.
+/// 1024 x 1024 field, 20 MiB.
 const KEEP_SAMPLES: usize = 1 << 20;
 
 thread_local! {
