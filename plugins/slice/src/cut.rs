@@ -491,8 +491,12 @@ fn already_simple(loops: &[Contour]) -> bool {
         .max(eps);
     let nx = (w / cell) as usize + 1;
     let ny = (h / cell) as usize + 1;
+    // Any monotone map from coordinates to cells lists two overlapping boxes in a
+    // common cell (the cells of the overlap's corners are in both ranges), so a product
+    // serves as well as a quotient.
+    let per_cell = 1.0 / cell;
     let cells = |s: &Seg| {
-        let c = |v: f64, o: f64, n: usize| (((v - o) / cell).max(0.0) as usize).min(n - 1);
+        let c = |v: f64, o: f64, n: usize| (((v - o) * per_cell).max(0.0) as usize).min(n - 1);
         (
             c(s.lo.x, x0, nx)..=c(s.hi.x, x0, nx),
             c(s.lo.y, y0, ny)..=c(s.hi.y, y0, ny),
@@ -500,6 +504,8 @@ fn already_simple(loops: &[Contour]) -> bool {
     };
     let mut starts = vec![0u32; nx * ny + 1];
     let mut listed = 0usize;
+    // Each segment's cells, worked out once for counting and listing.
+    let mut spans = Vec::with_capacity(n);
     for s in &segs {
         let (xs, ys) = cells(s);
         listed += xs.clone().count() * ys.clone().count();
@@ -507,19 +513,19 @@ fn already_simple(loops: &[Contour]) -> bool {
         if listed > 16 * n + 64 {
             return false;
         }
-        for y in ys {
+        for y in ys.clone() {
             for x in xs.clone() {
                 starts[y * nx + x + 1] += 1;
             }
         }
+        spans.push((xs, ys));
     }
     for i in 0..nx * ny {
         starts[i + 1] += starts[i];
     }
     let mut members = vec![0u32; listed];
     let mut next = starts.clone();
-    for (g, s) in segs.iter().enumerate() {
-        let (xs, ys) = cells(s);
+    for (g, (xs, ys)) in spans.into_iter().enumerate() {
         for y in ys {
             for x in xs.clone() {
                 let slot = &mut next[y * nx + x];
