@@ -105,62 +105,41 @@ t1 = time.perf_counter()
 print(json.dumps({"work": t1 - t0, "layers": len(paths), "paths": total}))
 """
 
+# argv[1]: layers, each a list of families, each a list of rings. argv[4] says what one
+# field covers:
+# - "family": the same work as Lamina's `distance-field` stage, one field per family
+#   (an outer contour and its holes) over the family's own box padded by 1.5 samples,
+#   with argv[2] samples along its longer side (Lamina's `Field::over`);
+# - "layer": one square field per layer over the layer's box, argv[2] samples a side:
+#   fewer fields than Lamina on layers of several families (3DBenchy: 2.45 a layer).
+# Only the field and the contours at argv[3] levels are timed.
 PEER_SDF_SCIPY = r"""
-import sys, time, json
-import numpy as np
-from scipy import ndimage
-from skimage import draw, measure
-layers = json.load(open(sys.argv[1]))
-n, levels = int(sys.argv[2]), int(sys.argv[3])
-edt = contours = 0.0
-done = 0
-for layer in layers:
-    pts = np.concatenate([np.asarray(c) for c in layer])
-    lo, hi = pts.min(axis=0), pts.max(axis=0)
-    size = (hi - lo).max() * 1.02 + 1e-9
-    mask = np.zeros((n, n), dtype=bool)
-    for c in layer:
-        c = (np.asarray(c) - lo) / size * (n - 1)
-        rr, cc = draw.polygon(c[:, 1], c[:, 0], (n, n))
-        mask[rr, cc] ^= True
-    t0 = time.perf_counter()
-    d = ndimage.distance_transform_edt(mask) - ndimage.distance_transform_edt(~mask)
-    t1 = time.perf_counter()
-    top = d.max()
-    for k in range(levels):
-        measure.find_contours(d, top * k / levels)
-    t2 = time.perf_counter()
-    edt += t1 - t0
-    contours += t2 - t1
-    done += 1
-print(json.dumps({"work": edt + contours, "edt": edt, "contours": contours, "layers": done}))
-"""
-
-
-# The same work as Lamina's `distance-field` stage: one field per family (an outer
-# contour and its holes), over the family's own box padded by 1.5 samples, with
-# argv[2] samples along its longer side (Lamina's `Field::over`), cut at 10 levels.
-# The whole-layer script above makes one field per layer, fewer fields than Lamina on
-# layers of several families (3DBenchy: 2.45 families a layer).
-PEER_SDF_SCIPY_FAMILIES = r"""
 import sys, time, json, math
 import numpy as np
 from scipy import ndimage
 from skimage import draw, measure
 layers = json.load(open(sys.argv[1]))
-cells, levels = int(sys.argv[2]), int(sys.argv[3])
+cells, levels, per = int(sys.argv[2]), int(sys.argv[3]), sys.argv[4]
+
+def grid(rings):
+    # (origin, sample spacing, columns, rows) of the field over `rings`.
+    pts = np.concatenate(rings)
+    lo, hi = pts.min(axis=0), pts.max(axis=0)
+    if per == "layer":
+        size = (hi - lo).max() * 1.02 + 1e-9
+        return lo, size / (cells - 1), cells, cells
+    h = max((hi - lo).max(), 1e-300) / (cells - 3.0)
+    nx = max(math.ceil((hi[0] - lo[0]) / h) + 4, 4)
+    ny = max(math.ceil((hi[1] - lo[1]) / h) + 4, 4)
+    return lo - 1.5 * h, h, nx, ny
+
 edt = contours = 0.0
 fields = 0
 for layer in layers:
-    for family in layer:
-        rings = [np.asarray(c, dtype=float) for c in family]
-        pts = np.concatenate(rings)
-        lo, hi = pts.min(axis=0), pts.max(axis=0)
-        extent = max((hi - lo).max(), 1e-300)
-        h = extent / (cells - 3.0)
-        nx = max(math.ceil((hi[0] - lo[0]) / h) + 4, 4)
-        ny = max(math.ceil((hi[1] - lo[1]) / h) + 4, 4)
-        origin = lo - 1.5 * h
+    families = [[np.asarray(c, dtype=float) for c in family] for family in layer]
+    groups = [[c for family in families for c in family]] if per == "layer" else families
+    for rings in groups:
+        origin, h, nx, ny = grid(rings)
         mask = np.zeros((ny, nx), dtype=bool)
         for c in rings:
             q = (c - origin) / h
@@ -457,18 +436,14 @@ def main():
             row("SDF per layer (1 thread)", "lamina", wall, rss, per_layer,
                 detail=f"the whole distance-field stage, {n_layers} layers; target <= 8 ms per layer")
             if has["scipy"]:
-                w, m, o = repeat([args.python, "-c", PEER_SDF_SCIPY, layers_json, 512, 10], runs)
-                done = median_of(o, "layers")
-                row("SDF per layer (1 thread)", "scipy+skimage", w, m, median_of(o, "work") / done, per_layer,
-                    detail=f"one field per layer; edt {median_of(o, 'edt') / done * 1e3:.1f} ms + contours "
-                           f"{median_of(o, 'contours') / done * 1e3:.1f} ms")
-                w, m, o = repeat([args.python, "-c", PEER_SDF_SCIPY_FAMILIES, families_json, 512, 10], runs)
-                done = median_of(o, "layers")
-                row("SDF per layer (1 thread)", "scipy+skimage per family", w, m, median_of(o, "work") / done,
-                    per_layer,
-                    detail=f"one field per family as Lamina ({median_of(o, 'fields'):.0f} fields); "
-                           f"edt {median_of(o, 'edt') / done * 1e3:.1f} ms + contours "
-                           f"{median_of(o, 'contours') / done * 1e3:.1f} ms")
+                for per, label, what in [("layer", "scipy+skimage", "one field per layer"),
+                                         ("family", "scipy+skimage per family", "one field per family as Lamina")]:
+                    w, m, o = repeat([args.python, "-c", PEER_SDF_SCIPY, families_json, 512, 10, per], runs)
+                    done = median_of(o, "layers")
+                    row("SDF per layer (1 thread)", label, w, m, median_of(o, "work") / done, per_layer,
+                        detail=f"{what} ({median_of(o, 'fields'):.0f} fields); "
+                               f"edt {median_of(o, 'edt') / done * 1e3:.1f} ms + contours "
+                               f"{median_of(o, 'contours') / done * 1e3:.1f} ms")
 
         # --- STL to G-code ----------------------------------------------------------------
         if "gcode" in tasks:
