@@ -226,9 +226,37 @@ fn replay_file(
     reports
 }
 
+/// What a replayed file deposits besides the part (prime, purge, tower, skirt), over
+/// all it deposits, from the replay's `;TYPE:` volumes.
+fn waste_share(report: &serde_json::Value) -> f64 {
+    let by_type = report["volume"]["by_type_mm3"]
+        .as_object()
+        .expect("volumes by type");
+    let total: f64 = by_type.values().filter_map(serde_json::Value::as_f64).sum();
+    let part = by_type
+        .get("PART")
+        .and_then(serde_json::Value::as_f64)
+        .unwrap_or(0.0);
+    (total - part) / total
+}
+
 #[test]
 fn gear_mixing_gcode_replays() {
-    replay("pipelines/gear-mixing-gcode.toml", None, &[], 3);
+    // The next ring takes each change of mix: the prime line and skirt are the waste.
+    for r in replay("pipelines/gear-mixing-gcode.toml", None, &[], 3) {
+        let waste = waste_share(&r);
+        eprintln!("gear on the mixing head: waste {waste:.4} of all deposition");
+        assert!(waste <= 0.10, "waste {waste:.3}");
+    }
+    // Every change on the tower, as a mixing head without a graded part needs it.
+    for r in replay(
+        "pipelines/gear-mixing-gcode.toml",
+        None,
+        &["output.0.purge_into=\"tower\""],
+        6,
+    ) {
+        assert!(waste_share(&r) > 0.3, "the tower takes every change");
+    }
 }
 
 #[test]
@@ -335,7 +363,12 @@ fn benchy_replays_on_every_machine() {
         return;
     };
     let file = format!("model.file=\"{}\"", benchy.display());
-    replay("pipelines/benchy-two-tools.toml", None, &[&file], 10);
+    // On the tool changer, each tool's own beads take its prime after a change.
+    for r in replay("pipelines/benchy-two-tools.toml", None, &[&file], 10) {
+        let waste = waste_share(&r);
+        eprintln!("3DBenchy on marlin-toolchanger-2: waste {waste:.4} of all deposition");
+        assert!(waste <= 0.15, "waste {waste:.3}");
+    }
     replay(
         "pipelines/benchy-two-tools.toml",
         Some("rrf-idex-2"),
@@ -392,6 +425,33 @@ fn benchy_replays_on_every_machine() {
             "the concurrent file is not fast enough: {:.3}",
             time(c) / time(s)
         );
+    }
+}
+
+/// A tube whose rings all come out at one mix never changes it: no purge, no tower.
+#[test]
+#[ignore = "needs ../shared/models/tube_round.stl"]
+fn a_tube_of_one_mix_builds_no_tower() {
+    let Some(tube) = model("tube_round.stl") else {
+        return;
+    };
+    // The gear's pipeline with the tube's mesh for its model.
+    let mut table: toml::Table = toml::from_str(
+        &std::fs::read_to_string(root().join("pipelines/gear-mixing-gcode.toml")).expect("pipeline"),
+    )
+    .expect("TOML");
+    let mut model = toml::Table::new();
+    model.insert("file".into(), tube.display().to_string().into());
+    table.insert("model".into(), model.into());
+    let dir = tempfile::tempdir().expect("temp dir");
+    let pipeline = dir.path().join("tube.toml");
+    std::fs::write(&pipeline, toml::to_string(&table).expect("TOML")).expect("written");
+    for r in replay_file(&pipeline, None, &[], 10, TARGETS) {
+        let waste = waste_share(&r);
+        eprintln!("tube_round on the mixing head: waste {waste:.4} of all deposition");
+        assert!(waste <= 0.10, "waste {waste:.3}");
+        let by_type = r["volume"]["by_type_mm3"].as_object().expect("volumes");
+        assert!(!by_type.contains_key("TOWER") && !by_type.contains_key("PURGE"));
     }
 }
 

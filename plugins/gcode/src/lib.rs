@@ -34,6 +34,7 @@ pub mod motion;
 pub mod setup;
 pub mod text;
 pub mod tower;
+pub mod transition;
 pub mod writer;
 
 use std::collections::BTreeMap;
@@ -88,6 +89,8 @@ lamina_core::stage_options! {
         retract_speed: f64 = "35.0",
         /// without a machine, mixing flavours: material of each channel, in channel order; unset: the pipeline's materials
         channels: Option<Vec<String>>,
+        /// where the transition after a change of tool or mix goes: `part`, into the next beads as far as their design composition allows (a mixing head's beads stay within half their family's design step of their composition on average; a tool's own beads take its prime whole), the rest on the wipe tower; `tower`, all of it on the tower
+        purge_into: crate::transition::PurgeInto = r#""part""#,
         /// mixing heads: change the mix along a bead to the composition graded nearest each segment (regions graded at points, grade `xy` with `r = "points"`; Eq. 18 at the bead), not one mix per sub-region
         mix_along: bool = "false",
     }
@@ -124,6 +127,7 @@ impl Exporter for Gcode {
             None => Setup::from_options(&o.own(), info, o.relative_e, o.direct_mixing, o.virtual_tool)?,
         };
         setup.mix_along = o.mix_along && setup.flavor.is_mixing();
+        setup.purge_into = o.purge_into;
         if setup.flavor == Flavor::MarlinMixing
             && setup.direct_mixing
             && setup.channel_names.len() > M165_AXES.len()
@@ -144,7 +148,8 @@ impl Exporter for Gcode {
             && if setup.flavor.is_mixing() {
                 setup.transition_volume > 0.0 && setup.used_channels(info).len() >= 2
             } else {
-                setup.used_heads(info).len() >= 2
+                // A tool's own beads take its prime when the part may take it.
+                setup.used_heads(info).len() >= 2 && setup.purge_into == transition::PurgeInto::Tower
             };
         let primed = match (setup.prime_line, setup.flavor.is_mixing()) {
             (None, _) => 0,

@@ -102,6 +102,8 @@ pub struct Setup {
     pub blend_below: f64,
     /// A mixing head follows the compositions graded at points along each bead.
     pub mix_along: bool,
+    /// Where the transition after a change of tool or mix goes.
+    pub purge_into: crate::transition::PurgeInto,
     /// The motion systems when the machine runs two at once; `None`: one head at a time.
     pub systems: Option<Vec<System>>,
     pub templates: Templates,
@@ -250,6 +252,7 @@ impl Setup {
             transition_volume: m.mixer.map_or(0.0, |x| x.transition_volume),
             blend_below: m.mixer.map_or(0.0, |x| x.blend_below),
             mix_along: false,
+            purge_into: crate::transition::PurgeInto::Part,
             systems: (m.motion_systems > 1).then(|| {
                 m.tools
                     .iter()
@@ -369,6 +372,7 @@ impl Setup {
             transition_volume: 0.0,
             blend_below: 0.0,
             mix_along: false,
+            purge_into: crate::transition::PurgeInto::Part,
             systems: None,
             templates: Templates::default(),
             placed: false,

@@ -20,6 +20,7 @@ use crate::layout::Layout;
 use crate::setup::Setup;
 use crate::text::{clean, num, push_num};
 use crate::tower::{Feature, Stroke, Tower};
+use crate::transition::PurgeInto;
 
 mod multi;
 
@@ -80,6 +81,80 @@ struct Job<'a> {
     continues: bool,
 }
 
+/// The head and the mix in use, and what a mixing head's nozzle holds (fractions per
+/// channel, [`crate::transition`]).
+#[derive(Debug, Clone, Default)]
+struct State {
+    head: Option<usize>,
+    mix: Option<Vec<u32>>,
+    nozzle: Option<Vec<f64>>,
+}
+
+/// A change of head or mix before a job: what its transition puts on the wipe tower
+/// and into the part's next beads (mm³).
+#[derive(Debug, Clone, Copy)]
+struct Change {
+    tower: f64,
+    part: f64,
+}
+
+/// A layer's jobs from a given state, their mixes along each bead, the change before
+/// each job (if any), and the state the layer ends in.
+struct Analysis<'a> {
+    jobs: Vec<Job<'a>>,
+    along: Vec<Vec<Vec<u32>>>,
+    changes: Vec<Option<Change>>,
+    /// A job whose last mm³ already take the next job's mix (the transition begun in
+    /// the beads before the change): that volume and mix.
+    early: Vec<Option<(f64, Vec<u32>)>>,
+    end: State,
+}
+
+/// Layers waiting to be written, kept in a temporary file (MessagePack, each behind its
+/// length) so that a long wait holds no layer in memory.
+#[derive(Default)]
+struct Spool {
+    file: Option<std::fs::File>,
+    layers: usize,
+}
+
+impl Spool {
+    fn error(e: impl std::fmt::Display) -> Error {
+        Error::stage(crate::STAGE, format!("spooling layers to a temporary file: {e}"))
+    }
+
+    fn push(&mut self, plan: &LayerPlan) -> Result<()> {
+        let bytes = rmp_serde::to_vec_named(plan).map_err(Self::error)?;
+        if self.file.is_none() {
+            self.file = Some(tempfile::tempfile().map_err(Self::error)?);
+        }
+        let file = self.file.as_mut().ok_or_else(|| Self::error("no file"))?;
+        file.write_all(&(bytes.len() as u64).to_le_bytes())
+            .and_then(|()| file.write_all(&bytes))
+            .map_err(Self::error)?;
+        self.layers += 1;
+        Ok(())
+    }
+
+    /// Reads the layers back in order, one at a time, and empties the spool.
+    fn drain(&mut self, mut each: impl FnMut(LayerPlan) -> Result<()>) -> Result<()> {
+        use std::io::{Read, Seek};
+        let Some(mut file) = self.file.take() else {
+            return Ok(());
+        };
+        file.seek(std::io::SeekFrom::Start(0)).map_err(Self::error)?;
+        let mut reader = std::io::BufReader::new(file);
+        for _ in 0..std::mem::take(&mut self.layers) {
+            let mut len = [0u8; 8];
+            reader.read_exact(&mut len).map_err(Self::error)?;
+            let mut bytes = vec![0u8; u64::from_le_bytes(len) as usize];
+            reader.read_exact(&mut bytes).map_err(Self::error)?;
+            each(rmp_serde::from_slice(&bytes).map_err(Self::error)?)?;
+        }
+        Ok(())
+    }
+}
+
 /// The G-code being written.
 pub struct Writer {
     s: Setup,
@@ -100,10 +175,16 @@ pub struct Writer {
     feature: Option<Feature>,
     mix: Option<Vec<u32>>,
     tower: Option<Tower>,
-    /// Every layer up to this height has a tower level.
-    tower_end: f64,
-    /// The last layer had a tower level, so the tower can take one more change.
-    tower_alive: bool,
+    /// With a tower: the state after the last layer received (written or spooled).
+    received: Option<State>,
+    /// What a mixing head's nozzle holds, as the transitions' model follows it.
+    nozzle: Option<Vec<f64>>,
+    /// Layers received but not yet written (see [`Writer::write_layer`]).
+    spool: Spool,
+    /// Volume of transitions the part's beads took (mm³).
+    transition: f64,
+    /// Volume deposited per kind of stroke (mm³), in [`Feature`] order.
+    deposited: [f64; 5],
     layers: usize,
     started: bool,
     /// Filament fed per head (tool changers) or channel (mixing heads), mm.
@@ -139,7 +220,6 @@ impl Writer {
         let fw = Firmware::new(s.dialect, s.flavor, s.heads.len(), s.limits);
         let multi = s.systems.clone().map(multi::Multi::new);
         let used_heads = s.used_heads(info);
-        let needs_tower = layout.tower.is_some();
         let tower = layout.tower.map(|r| Tower::new(r, s.line_width()));
         let fed = vec![
             0.0;
@@ -176,11 +256,11 @@ impl Writer {
         let mut w = Writer {
             retracted: vec![0.0; s.heads.len()],
             extruded: vec![false; s.heads.len()],
-            tower_end: if needs_tower {
-                tower_end(info)
-            } else {
-                f64::NEG_INFINITY
-            },
+            received: None,
+            nozzle: None,
+            spool: Spool::default(),
+            transition: 0.0,
+            deposited: [0.0; 5],
             s,
             layout,
             out,
@@ -192,7 +272,6 @@ impl Writer {
             feature: None,
             mix: None,
             tower,
-            tower_alive: false,
             layers: 0,
             started: false,
             fed,
@@ -348,20 +427,26 @@ impl Writer {
         if let Some(r) = self.layout.tower {
             let purge = if s.flavor.is_mixing() {
                 format!(
-                    "{} mm³ after each change of mix between beads of {}% or more (smaller changes, and a mix that changes along a bead, are set in place and blend over about that volume)",
+                    "a change of mix of {}% or more flushes {} mm³ (smaller changes, and a mix that changes along a bead, are set in place and blend over about that volume)",
+                    num(s.blend_below * 100.0, 1),
                     num(s.transition_volume, 1),
-                    num(s.blend_below * 100.0, 1)
                 )
             } else {
                 format!(
-                    "{} mm³ after each tool change",
+                    "a tool change primes {} mm³",
                     num(s.wipe_tower.map_or(0.0, |w| w.purge_volume), 1)
                 )
             };
+            let into = match s.purge_into {
+                PurgeInto::Part => {
+                    "into the next beads as far as their design composition allows (within half the family's design step), the rest on the tower"
+                }
+                PurgeInto::Tower => "on the tower",
+            };
             let _ = writeln!(
                 t,
-                "; wipe tower: X {:.1}..{:.1}, Y {:.1}..{:.1}, up to z {:.3} mm, purging {purge}",
-                r.min.x, r.max.x, r.min.y, r.max.y, self.tower_end
+                "; wipe tower: X {:.1}..{:.1}, Y {:.1}..{:.1}, from the bed to the last layer that purges on it (none if no layer does); {purge}, {into}",
+                r.min.x, r.max.x, r.min.y, r.max.y
             );
         }
         self.buf.push_str(&t);
@@ -724,6 +809,7 @@ impl Writer {
             }
             let de = d * width(i) * height / area;
             self.account(h, de);
+            self.deposited[feature as usize] += de * area;
             self.extruded[h] = true;
             text.clear();
             text.push_str("G1 X");
@@ -836,19 +922,6 @@ impl Writer {
             .collect()
     }
 
-    /// Whether a change of mix from `a` to `b` between two beads is purged: it is a
-    /// change, and not one small enough to blend in place (`mixer.blend_below`).
-    fn purged_change(&self, a: Option<&[u32]>, b: Option<&[u32]>) -> bool {
-        let (Some(a), Some(b)) = (a, b) else {
-            return false;
-        };
-        if a == b {
-            return false;
-        }
-        let moved: u32 = a.iter().zip(b).map(|(x, y)| x.abs_diff(*y)).sum();
-        f64::from(moved) / 200.0 >= self.s.blend_below
-    }
-
     fn set_mix(&mut self, mix: Vec<u32>) {
         if self.mix.as_ref() == Some(&mix) {
             return;
@@ -865,7 +938,7 @@ impl Writer {
     /// (starting with the tool in use, to save a change), each tool's paths in planned
     /// order; mixing heads mix by mix, a bead cut into pieces of several mixes kept
     /// whole.
-    fn jobs<'a>(&self, info: &RunInfo, plan: &'a LayerPlan) -> Vec<Job<'a>> {
+    fn jobs<'a>(&self, info: &RunInfo, plan: &'a LayerPlan, state: &State) -> Vec<Job<'a>> {
         let mut paths: Vec<&Toolpath> = plan
             .toolpaths
             .iter()
@@ -890,7 +963,7 @@ impl Writer {
                     continues,
                 });
             }
-            return self.by_mix(jobs);
+            return self.by_mix(jobs, state.mix.clone());
         }
         let mut jobs: Vec<Job<'a>> = paths
             .into_iter()
@@ -901,7 +974,7 @@ impl Writer {
                 continues: false,
             })
             .collect();
-        let current = self.head;
+        let current = state.head;
         jobs.sort_by(|a, b| {
             let rank = |h: usize| (Some(h) != current, h);
             rank(a.head)
@@ -915,7 +988,7 @@ impl Writer {
     /// a purge, so each next chain of paths (a bead cut into pieces of several mixes
     /// stays whole) starts with the mix in the nozzle when one does, in planned order,
     /// else with the nearest mix. A layer of a few mixes changes once per mix.
-    fn by_mix<'a>(&self, jobs: Vec<Job<'a>>) -> Vec<Job<'a>> {
+    fn by_mix<'a>(&self, jobs: Vec<Job<'a>>, mut last: Option<Vec<u32>>) -> Vec<Job<'a>> {
         // Paths that go on from the previous one stay with it, under its mix.
         let mut chains: Vec<Vec<Job<'a>>> = Vec::new();
         for j in jobs {
@@ -935,7 +1008,6 @@ impl Writer {
         let distance = |a: &[u32], b: &[u32]| -> u32 { a.iter().zip(b).map(|(x, y)| x.abs_diff(*y)).sum() };
         let mut left: Vec<Option<Vec<Job<'a>>>> = chains.into_iter().map(Some).collect();
         let mut out = Vec::new();
-        let mut last = self.mix.clone();
         for _ in 0..left.len() {
             let same = last.as_ref().and_then(|l| {
                 let queue = by_first.get_mut(l)?;
@@ -980,7 +1052,7 @@ impl Writer {
     /// its line (the first layer's first head last, so the layer starts with it).
     fn prime(&mut self, info: &RunInfo, plan: &LayerPlan) -> Result<()> {
         self.z = plan.z;
-        let jobs = self.jobs(info, plan);
+        let jobs = self.jobs(info, plan, &self.state());
         let first = jobs.first().map(|j| j.head);
         let lines = self.layout.prime_lines.clone();
         if lines.is_empty() {
@@ -996,12 +1068,9 @@ impl Writer {
             order.push(f);
         }
         if self.s.flavor.is_mixing() {
-            let channels = self.s.used_channels(info);
-            let mut even = vec![0.0; self.s.channel_names.len()];
-            for c in &channels {
-                even[*c] = 1.0;
-            }
-            self.set_mix(percentages(&even));
+            let mix = self.prime_mix(info, plan);
+            self.nozzle = Some(fractions(&mix));
+            self.set_mix(mix);
         }
         let width = self.s.prime_line.map_or(self.s.line_width(), |p| p.width);
         // Clear of anything left on the bed, then down to the first layer.
@@ -1075,7 +1144,12 @@ impl Writer {
         }
     }
 
-    /// Writes one layer.
+    /// Takes one layer. Without a wipe tower it is written at once. With one, a layer
+    /// whose changes purge nothing on the tower waits (spooled to a temporary file, so
+    /// memory stays flat) until a later layer needs the tower, when it is written with a
+    /// tower level under that layer's, or until the end, when it is written without:
+    /// the tower stands from the bed to the last layer that purges on it, and a job
+    /// that never purges has none.
     pub fn write_layer(&mut self, info: &RunInfo, plan: &LayerPlan) -> Result<()> {
         if let Some(max) = self.s.max_layer_height
             && plan.thickness > max + 1e-9
@@ -1094,6 +1168,236 @@ impl Writer {
             self.layers += 1;
             return self.flush();
         }
+        if self.tower.is_none() {
+            return self.emit_layer(info, plan, false);
+        }
+        let start = match self.received {
+            Some(ref state) => state.clone(),
+            None => self.primed_state(info, plan),
+        };
+        let analysis = self.analyse(info, plan, &start);
+        let on_tower = analysis.changes.iter().flatten().any(|c| c.tower > 0.0);
+        self.received = Some(analysis.end.clone());
+        if !on_tower {
+            return self.spool.push(plan);
+        }
+        self.write_spooled(info, true)?;
+        self.emit_layer(info, plan, true)
+    }
+
+    /// Writes the spooled layers, with tower levels or without.
+    fn write_spooled(&mut self, info: &RunInfo, tower: bool) -> Result<()> {
+        let mut spool = std::mem::take(&mut self.spool);
+        spool.drain(|plan| self.emit_layer(info, &plan, tower))?;
+        self.spool = spool;
+        Ok(())
+    }
+
+    /// The head and mix in use when the first layer begins: those the prime lines leave.
+    fn primed_state(&self, info: &RunInfo, plan: &LayerPlan) -> State {
+        if self.layout.prime_lines.is_empty() {
+            return self.state();
+        }
+        let first = self.jobs(info, plan, &self.state()).first().map(|j| j.head);
+        let mix = self.s.flavor.is_mixing().then(|| self.prime_mix(info, plan));
+        State {
+            head: first.or(self.head),
+            nozzle: mix.as_deref().map(fractions).or(self.nozzle.clone()),
+            mix: mix.or(self.mix.clone()),
+        }
+    }
+
+    /// The state in use now.
+    fn state(&self) -> State {
+        State {
+            head: self.head,
+            mix: self.mix.clone(),
+            nozzle: self.nozzle.clone(),
+        }
+    }
+
+    /// A mixing head primes with the mix its first bead starts with, so that the first
+    /// layer begins without a transition (every channel the parts use in equal shares
+    /// when there is no bead).
+    fn prime_mix(&self, info: &RunInfo, plan: &LayerPlan) -> Vec<u32> {
+        let jobs = self.jobs(info, plan, &self.state());
+        if let Some(j) = jobs.first() {
+            let along = self.mixes_along(info, plan, j.path);
+            if let Some(mix) = along.first().or(j.mix.as_ref()) {
+                return mix.clone();
+            }
+        }
+        let mut even = vec![0.0; self.s.channel_names.len()];
+        for c in self.s.used_channels(info) {
+            even[c] = 1.0;
+        }
+        percentages(&even)
+    }
+
+    /// The layer's jobs from `state` (the head and mix in use before it), each job's
+    /// mixes along its bead, and the changes before each job with where their
+    /// transitions go (see [`crate::transition`]).
+    fn analyse<'a>(&self, info: &RunInfo, plan: &'a LayerPlan, state: &State) -> Analysis<'a> {
+        let jobs = self.jobs(info, plan, state);
+        // Each bead's mixes along it (`mix_along`; empty: one mix), and the mixes it
+        // starts and ends with: a change is decided between one bead's last mix and the
+        // next one's first.
+        let along: Vec<Vec<Vec<u32>>> = jobs
+            .iter()
+            .map(|j| self.mixes_along(info, plan, j.path))
+            .collect();
+        let first_mix = |k: usize| along[k].first().or(jobs[k].mix.as_ref()).cloned();
+        let last_mix = |k: usize| along[k].last().or(jobs[k].mix.as_ref()).cloned();
+        let mixing = self.s.flavor.is_mixing();
+        let full = if mixing {
+            self.s.transition_volume
+        } else {
+            self.s.wipe_tower.map_or(0.0, |w| w.purge_volume)
+        };
+        // Which jobs follow a change: of head, or of mix beyond what blends in place.
+        let mut state = state.clone();
+        let mut moves: Vec<Option<bool>> = Vec::with_capacity(jobs.len());
+        for (k, j) in jobs.iter().enumerate() {
+            let start = first_mix(k).or(state.mix.clone());
+            let moved = match (&state.mix, &start) {
+                (Some(a), Some(b)) if !j.continues => crate::transition::moved(a, b),
+                _ => 0.0,
+            };
+            let head_change = state.head.is_some_and(|h| h != j.head);
+            let purged_mix = moved > 0.0 && moved >= self.s.blend_below;
+            moves.push((state.head.is_some() && (head_change || purged_mix)).then_some(head_change));
+            state.head = Some(j.head);
+            state.mix = last_mix(k).or(start);
+        }
+        let volume = |j: &Job<'_>| -> f64 {
+            let p = j.path;
+            p.points
+                .windows(2)
+                .enumerate()
+                .map(|(i, w)| (w[1].p - w[0].p).norm() * p.segment_width(i))
+                .sum::<f64>()
+                * plan.thickness
+        };
+        let mut steps: std::collections::HashMap<(usize, usize), f64> = std::collections::HashMap::new();
+        let mut changes = Vec::with_capacity(jobs.len());
+        let mut early: Vec<Option<(f64, Vec<u32>)>> = vec![None; jobs.len()];
+        // What the nozzle holds before each job, and where the beads before a change
+        // began (the last change, or the layer's start).
+        let mut before: Vec<Option<Vec<f64>>> = Vec::with_capacity(jobs.len());
+        let mut chain_start = 0;
+        for (k, j) in jobs.iter().enumerate() {
+            let target = first_mix(k).as_deref().map(fractions);
+            if let Some(head_change) = moves[k] {
+                // The beads up to the next change: the same head, and the same mix or one
+                // that blends in place.
+                let next = (k + 1..jobs.len())
+                    .find(|&i| moves[i].is_some())
+                    .unwrap_or(jobs.len());
+                let chain: f64 = jobs[k..next].iter().map(volume).sum();
+                let tower = match self.s.purge_into {
+                    PurgeInto::Tower => full,
+                    PurgeInto::Part if !mixing && head_change => 0.0,
+                    PurgeInto::Part => {
+                        let step = self.design_step(info, plan, j.path, &mut steps);
+                        let moved = match (&state.nozzle, &target) {
+                            (Some(n), Some(t)) => crate::transition::departure(n, t),
+                            _ => 0.0,
+                        };
+                        crate::transition::tower_volume(moved, step, chain, full)
+                    }
+                };
+                // Rather than on the tower, the nozzle may start toward the new mix
+                // within the last bead before the change, when the beads before it stay
+                // within half their own design step (their design lies between the two).
+                let mut tower = tower;
+                if mixing
+                    && tower > 0.0
+                    && self.s.purge_into == PurgeInto::Part
+                    && k > chain_start
+                    && let (Some(n0), Some(t)) = (before[chain_start].clone(), &target)
+                {
+                    let last = k - 1;
+                    let x = tower.min(volume(&jobs[last]));
+                    let designs: Vec<Vec<f64>> = (chain_start..k)
+                        .map(|i| last_mix(i).as_deref().map(fractions).unwrap_or_else(|| t.clone()))
+                        .collect();
+                    let mut beads: Vec<(f64, &[f64], &[f64])> = (chain_start..k)
+                        .map(|i| {
+                            let d = &designs[i - chain_start];
+                            (volume(&jobs[i]), d.as_slice(), d.as_slice())
+                        })
+                        .collect();
+                    let own = designs[last - chain_start].as_slice();
+                    if let Some(b) = beads.last_mut() {
+                        b.0 -= x;
+                    }
+                    beads.push((x, t.as_slice(), own));
+                    let step = self.design_step(info, plan, jobs[last].path, &mut steps);
+                    if crate::transition::mean_departure(&n0, &beads, full) <= step / 2.0
+                        && let (Some(nl), Some(mix)) = (before[last].clone(), first_mix(k))
+                    {
+                        let at = crate::transition::flush(&nl, own, volume(&jobs[last]) - x, full);
+                        state.nozzle = Some(crate::transition::flush(&at, t, x, full));
+                        early[last] = Some((x, mix));
+                        tower -= x;
+                    }
+                }
+                if let (Some(n), Some(t)) = (&state.nozzle, &target) {
+                    state.nozzle = Some(crate::transition::flush(n, t, tower, full));
+                }
+                let part = (full - tower).min(chain).max(0.0);
+                changes.push(Some(Change { tower, part }));
+                chain_start = k;
+            } else {
+                changes.push(None);
+            }
+            before.push(state.nozzle.clone());
+            // The bead flushes the nozzle toward its mix (its last, along a bead).
+            if mixing && let Some(t) = last_mix(k).as_deref().map(fractions).or(target) {
+                let from = state.nozzle.clone().unwrap_or_else(|| t.clone());
+                state.nozzle = Some(crate::transition::flush(&from, &t, volume(j), full));
+            }
+        }
+        Analysis {
+            jobs,
+            along,
+            changes,
+            early,
+            end: state,
+        }
+    }
+
+    /// The design step of the family a path fills ([`crate::transition::design_step`]),
+    /// 0 when the path fills no graded sub-region.
+    fn design_step(
+        &self,
+        info: &RunInfo,
+        plan: &LayerPlan,
+        path: &Toolpath,
+        cache: &mut std::collections::HashMap<(usize, usize), f64>,
+    ) -> f64 {
+        let Some((part, r)) = path.part.zip(path.sub_region) else {
+            return 0.0;
+        };
+        let Some(layer) = plan.parts.iter().find(|pl| pl.part == part) else {
+            return 0.0;
+        };
+        let Some(family) = layer.regions.get(r).map(|x| x.family) else {
+            return 0.0;
+        };
+        *cache.entry((part, family)).or_insert_with(|| {
+            let regions: Vec<(f64, Vec<u32>)> = layer
+                .regions
+                .iter()
+                .filter(|x| x.family == family)
+                .map(|x| (x.level, self.mix_for(info, Some(part), x.composition.as_ref())))
+                .collect();
+            crate::transition::design_step(&regions)
+        })
+    }
+
+    /// Writes one layer, with a level of the wipe tower when `tower`.
+    fn emit_layer(&mut self, info: &RunInfo, plan: &LayerPlan, tower: bool) -> Result<()> {
         if !self.started {
             self.prime(info, plan)?;
             self.started = true;
@@ -1108,7 +1412,36 @@ impl Writer {
             self.after_first_layer();
         }
         self.set_fan();
-        let jobs = self.jobs(info, plan);
+        let analysis = self.analyse(info, plan, &self.state());
+        let Analysis {
+            jobs,
+            mut along,
+            changes,
+            early,
+            end,
+        } = analysis;
+        // A job that starts the next mix before its end carries the mix of each segment.
+        for (k, e) in early.iter().enumerate() {
+            let Some((x, mix)) = e else { continue };
+            let path = jobs[k].path;
+            let segments = path.points.len().saturating_sub(1);
+            let mut mixes = if along[k].is_empty() {
+                vec![jobs[k].mix.clone().unwrap_or_default(); segments]
+            } else {
+                along[k].clone()
+            };
+            let mut from_end = 0.0;
+            for i in (0..segments).rev() {
+                if from_end >= *x - 1e-9 {
+                    break;
+                }
+                from_end +=
+                    (path.points[i + 1].p - path.points[i].p).norm() * path.segment_width(i) * plan.thickness;
+                mixes[i] = mix.clone();
+            }
+            along[k] = mixes;
+        }
+        self.nozzle = end.nozzle;
         // Up to the layer's height.
         if (plan.z - self.z).abs() > 1e-9 || self.layers == 0 {
             self.retract(self.s.retraction.length);
@@ -1118,28 +1451,7 @@ impl Writer {
                 self.line(format!("G1 Z{} F{}", num(plan.z, 4), num(f, 0)));
             }
         }
-        // Where the head or mix changes.
-        // Each bead's mixes along it (`mix_along`; empty: one mix), and the mixes it
-        // starts and ends with: a purge is decided between one bead's last mix and the
-        // next one's first, both when counting the changes and when writing them.
-        let along: Vec<Vec<Vec<u32>>> = jobs
-            .iter()
-            .map(|j| self.mixes_along(info, plan, j.path))
-            .collect();
-        let first_mix = |k: usize| along[k].first().or(jobs[k].mix.as_ref()).cloned();
-        let last_mix = |k: usize| along[k].last().or(jobs[k].mix.as_ref()).cloned();
-        let mut state = (self.head, self.mix.clone());
-        let mut changes = 0usize;
-        for (k, j) in jobs.iter().enumerate() {
-            let start = first_mix(k).or(state.1.clone());
-            let purged_mix = !j.continues && self.purged_change(state.1.as_deref(), start.as_deref());
-            if state.0.is_some() && (Some(j.head) != state.0 || purged_mix) {
-                changes += 1;
-            }
-            state = (Some(j.head), last_mix(k).or(start));
-        }
-        let tower_here =
-            self.tower.is_some() && (plan.z <= self.tower_end + 1e-6 || (changes > 0 && self.tower_alive));
+        let tower_here = tower && self.tower.is_some();
         if tower_here && let Some(t) = &mut self.tower {
             t.begin(plan.z);
         }
@@ -1154,37 +1466,45 @@ impl Writer {
             }
         }
         let offset = self.layout.offset;
-        let purge = if self.s.flavor.is_mixing() {
-            self.s.transition_volume
-        } else {
-            self.s.wipe_tower.map_or(0.0, |w| w.purge_volume)
-        };
-        let mut left = changes;
+        let mut left = changes
+            .iter()
+            .filter(|c| c.as_ref().is_some_and(|c| c.tower > 0.0))
+            .count();
         for (k, j) in jobs.iter().enumerate() {
-            let changed_head = self.head.is_some() && self.head != Some(j.head);
             // Following the gradient along the bead, it starts with its first segment's.
-            let start = first_mix(k);
-            let changed_mix = !j.continues && self.purged_change(self.mix.as_deref(), start.as_deref());
-            if let Some(m) = start {
+            if let Some(m) = along[k].first().or(j.mix.as_ref()).cloned() {
                 self.set_mix(m);
             }
             self.ready(j.head)?;
-            if changed_head || changed_mix {
-                left = left.saturating_sub(1);
-                if tower_here && !self.tower.as_ref().is_some_and(Tower::open) {
-                    self.comment("the tower's level at this height is complete: the change is not purged");
-                } else if tower_here {
-                    let strokes = match &mut self.tower {
-                        Some(t) => t.purge(purge).map_err(|e| e.in_layer(plan.index, plan.z))?,
-                        None => Vec::new(),
-                    };
-                    self.strokes(j.head, strokes, self.tower_height())?;
-                    if left == 0 {
-                        let strokes = self.tower.as_mut().map(Tower::finish).unwrap_or_default();
+            if let Some(change) = &changes[k] {
+                if change.tower > 0.0 {
+                    left = left.saturating_sub(1);
+                    if tower_here && !self.tower.as_ref().is_some_and(Tower::open) {
+                        self.comment(
+                            "the tower's level at this height is complete: the change is not purged",
+                        );
+                    } else if tower_here {
+                        let strokes = match &mut self.tower {
+                            Some(t) => t
+                                .purge(change.tower)
+                                .map_err(|e| e.in_layer(plan.index, plan.z))?,
+                            None => Vec::new(),
+                        };
                         self.strokes(j.head, strokes, self.tower_height())?;
+                        if left == 0 {
+                            let strokes = self.tower.as_mut().map(Tower::finish).unwrap_or_default();
+                            self.strokes(j.head, strokes, self.tower_height())?;
+                        }
+                    } else {
+                        self.comment("no wipe tower at this height: the change is not purged");
                     }
-                } else {
-                    self.comment("no wipe tower at this height: the change is not purged");
+                }
+                if change.part > 0.0 {
+                    self.comment(format!(
+                        "transition: the next {} mm³ of beads take the change (their design allows it)",
+                        num(change.part, 1)
+                    ));
+                    self.transition += change.part;
                 }
             }
             let points: Vec<Point2> = j.path.points.iter().map(|p| p.p + offset).collect();
@@ -1210,10 +1530,22 @@ impl Writer {
                 self.strokes(h, strokes, self.tower_height())?;
             }
         }
-        self.tower_alive = tower_here;
         self.planned += plan.build_time.unwrap_or(0.0);
         self.layers += 1;
         self.flush()
+    }
+
+    /// What the file deposits, by kind (mm³).
+    fn deposit(&self) -> Deposit {
+        let d = &self.deposited;
+        Deposit {
+            part: d[Feature::Part as usize],
+            transition: self.transition,
+            purge: d[Feature::Purge as usize],
+            tower: d[Feature::Tower as usize],
+            prime: d[Feature::Prime as usize],
+            skirt: d[Feature::Skirt as usize],
+        }
     }
 
     fn tower_height(&self) -> f64 {
@@ -1223,6 +1555,8 @@ impl Writer {
     /// The end: retraction, the end template, every heater off, and the summary with
     /// the time the file takes.
     pub fn finish_file(mut self: Box<Self>, info: &RunInfo) -> Result<()> {
+        // No later layer purges on the tower: the waiting layers go without it.
+        self.write_spooled(info, false)?;
         self.end_streams();
         self.retract(self.s.retraction.length);
         self.feature = None;
@@ -1290,11 +1624,60 @@ impl Writer {
                 self.planned
             );
         }
+        let deposit = self.deposit();
+        let _ = writeln!(
+            t,
+            "; deposited: part {:.1} mm³ (of which {:.1} mm³ transitions), purge {:.1}, tower {:.1}, prime {:.1}, skirt {:.1}; waste {:.1} % of all deposition",
+            deposit.part,
+            deposit.transition,
+            deposit.purge,
+            deposit.tower,
+            deposit.prime,
+            deposit.skirt,
+            deposit.waste_share() * 100.0
+        );
+        if let Some(t2) = &self.tower {
+            let _ = writeln!(t, "; wipe tower: {} levels", t2.levels());
+        }
         let _ = writeln!(t, "; estimated printing time: {time:.1} s");
-        let _ = info;
         self.buf.push_str(&t);
         self.flush()?;
         self.out.flush().map_err(|e| io(&self.path, e))
+    }
+}
+
+/// A mix in percent as fractions.
+fn fractions(mix: &[u32]) -> Vec<f64> {
+    mix.iter().map(|p| f64::from(*p) / 100.0).collect()
+}
+
+/// What a file deposits, by kind (mm³): the part (transitions that the part's beads
+/// take included), and what is not part.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct Deposit {
+    pub part: f64,
+    /// Of `part`: transitions after a change of tool or mix.
+    pub transition: f64,
+    pub purge: f64,
+    pub tower: f64,
+    pub prime: f64,
+    pub skirt: f64,
+}
+
+impl Deposit {
+    /// All that is deposited.
+    pub fn total(&self) -> f64 {
+        self.part + self.purge + self.tower + self.prime + self.skirt
+    }
+
+    /// What is not part, over all deposition (0 when nothing is deposited).
+    pub fn waste_share(&self) -> f64 {
+        let total = self.total();
+        if total > 0.0 {
+            (total - self.part) / total
+        } else {
+            0.0
+        }
     }
 }
 
@@ -1302,30 +1685,6 @@ impl Writer {
 pub struct Header<'a> {
     pub pipeline: &'a str,
     pub layers: usize,
-}
-
-/// The highest layer top up to which two materials are deposited (tools or mixes still
-/// change there), from the parts' materials and heights: the tower reaches it.
-pub fn tower_end(info: &RunInfo) -> f64 {
-    let mut cuts: Vec<f64> = info.parts.iter().flat_map(|p| [p.z_min, p.z_max]).collect();
-    cuts.sort_by(f64::total_cmp);
-    cuts.dedup();
-    let mut end = f64::NEG_INFINITY;
-    for w in cuts.windows(2) {
-        let mid = (w[0] + w[1]) / 2.0;
-        let mut materials: Vec<usize> = info
-            .parts
-            .iter()
-            .filter(|p| p.z_min <= mid && mid <= p.z_max)
-            .flat_map(|p| p.materials.iter().copied())
-            .collect();
-        materials.sort_unstable();
-        materials.dedup();
-        if materials.len() >= 2 {
-            end = end.max(w[1]);
-        }
-    }
-    end
 }
 
 /// The machine of a run, for errors.

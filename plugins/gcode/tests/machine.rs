@@ -83,12 +83,16 @@ fn layers(seed: u64) -> Vec<LayerPlan> {
         .collect()
 }
 
+/// The synthetic layers on machine `name`, every transition purged on the tower.
 fn export_for(name: &str) -> (Machine, String) {
     let m = machine(name);
     let info = info(Some(m.clone()), ["red", "green"]);
-    let text = export("use = \"gcode\"", &info, &layers(11), "test").expect("exports");
+    let text = export(TOWER, &info, &layers(11), "test").expect("exports");
     (m, text)
 }
+
+/// The exporter with every transition on the wipe tower.
+const TOWER: &str = "use = \"gcode\"\npurge_into = \"tower\"";
 
 /// A move or command as the firmware reads it.
 #[derive(Debug, Clone)]
@@ -451,7 +455,7 @@ fn every_change_is_purged_on_the_tower() {
         m.mixer.as_mut().expect("mixer").blend_below = blend;
         let transition = m.mixer.expect("mixer").transition_volume;
         let info = info(Some(m), ["red", "green"]);
-        let text = export("use = \"gcode\"", &info, &layers(11), "test").expect("exports");
+        let text = export(TOWER, &info, &layers(11), "test").expect("exports");
         let lines: Vec<&str> = text.lines().collect();
         let (mut purged_mixes, mut blended) = (0, 0);
         let mut mix: Vec<f64> = Vec::new();
@@ -494,7 +498,8 @@ fn every_change_is_purged_on_the_tower() {
             }
         }
         let r = replay(&text, false);
-        let purged = r.fed["PURGE"] * area;
+        // A job whose every change blends in place purges nothing and has no tower.
+        let purged = r.fed.get("PURGE").copied().unwrap_or(0.0) * area;
         if blend == 0.0 {
             assert!(purged_mixes > 5 && blended == 0);
         } else if blend > 0.2 {
@@ -664,4 +669,115 @@ fn a_layer_thicker_than_the_nozzle_presses_is_refused() {
         e.contains("layer 2 is 0.45 mm thick") && e.contains("max_layer_height"),
         "{e}"
     );
+}
+
+#[test]
+fn a_tools_own_beads_take_its_prime_and_no_tower_is_built() {
+    let m = machine("marlin-toolchanger-2");
+    let info = info(Some(m.clone()), ["red", "green"]);
+    let part = export("use = \"gcode\"", &info, &layers(11), "test").expect("exports");
+    let (_, tower) = export_for("marlin-toolchanger-2");
+    let (rp, rt) = (replay(&part, false), replay(&tower, false));
+    // The same tool changes and the same beads of the part, without purge or tower.
+    assert_eq!(rp.selections.len(), rt.selections.len());
+    assert!((rp.fed["PART"] - rt.fed["PART"]).abs() < 1e-6);
+    assert!(!rp.fed.contains_key("PURGE") && !rp.fed.contains_key("TOWER"));
+    assert!(part.contains("; transition: the next"));
+    assert!(
+        !part.contains("; wipe tower:"),
+        "no tower is placed for the tool changer"
+    );
+}
+
+/// Rings graded in steps of `step` from the rim inward, one layer each way, as the
+/// offset discretiser and a mixing head's planner make them: each ring one bead of
+/// `volume` mm³ at 0.2 mm, with its sub-region graded.
+fn rings(step: u32, volume: f64) -> Vec<LayerPlan> {
+    let levels: Vec<u32> = (0..=100 / step).map(|i| i * step).collect();
+    (0..4)
+        .map(|index| {
+            let mut t = 0.0;
+            let mut regions = Vec::new();
+            let mut toolpaths = Vec::new();
+            for (k, share) in levels.iter().enumerate() {
+                let f = f64::from(*share) / 100.0;
+                let composition = Composition::binary(f).expect("valid");
+                regions.push(lamina_core::SubRegion {
+                    family: 0,
+                    index: k,
+                    count: levels.len(),
+                    level: k as f64 / (levels.len() - 1) as f64,
+                    polygon: lamina_core::Polygon::default(),
+                    cell: None,
+                    reference: Point2::origin(),
+                    composition: Some(composition.clone()),
+                    samples: Vec::new(),
+                });
+                // A square loop of the bead's length, smaller inward.
+                let side = volume / (0.45 * 0.2) / 4.0;
+                let h = side / 2.0;
+                let corners = [(-h, -h), (h, -h), (h, h), (-h, h), (-h, -h)];
+                let points = corners
+                    .iter()
+                    .map(|&(x, y)| {
+                        t += 1.0;
+                        TimedPoint {
+                            p: Point2::new(x * (1.0 - 0.05 * k as f64), y * (1.0 - 0.05 * k as f64)),
+                            t,
+                        }
+                    })
+                    .collect();
+                toolpaths.push(Toolpath {
+                    tool: 0,
+                    kind: PathKind::Extrude,
+                    points,
+                    width: 0.45,
+                    widths: Vec::new(),
+                    composition: Some(composition),
+                    part: Some(0),
+                    sub_region: Some(k),
+                });
+            }
+            let mut plan = layer_plan(index, toolpaths, t);
+            plan.parts = vec![lamina_core::PartLayer {
+                part: 0,
+                contours: Vec::new(),
+                tree: Default::default(),
+                families: vec![0],
+                regions,
+            }];
+            plan
+        })
+        .collect()
+}
+
+#[test]
+fn a_graded_parts_next_beads_take_its_transitions() {
+    let m = machine("marlin-mixing-2in1");
+    let info = info(Some(m.clone()), ["red", "green"]);
+    let area = std::f64::consts::PI * m.filament_diameter.powi(2) / 4.0;
+    let transition = m.mixer.expect("mixer").transition_volume;
+    // Rings of 20 % steps holding 30 mm³ each: every transition fits the next ring.
+    let text = export("use = \"gcode\"", &info, &rings(20, 30.0), "test").expect("exports");
+    let r = replay(&text, false);
+    assert!(
+        !r.fed.contains_key("PURGE") && !r.fed.contains_key("TOWER"),
+        "{:?}",
+        r.fed.keys()
+    );
+    assert!(text.lines().filter(|l| l.starts_with("M164")).count() > 10);
+    // Rings of 2 mm³ cannot take a 15 mm³ transition within half a step: the tower
+    // takes some, never more than a full flush a change.
+    let text = export("use = \"gcode\"", &info, &rings(20, 2.0), "test").expect("exports");
+    let r = replay(&text, false);
+    let purged = r.fed.get("PURGE").copied().unwrap_or(0.0) * area;
+    let changes = text.lines().filter(|l| l.starts_with("M164")).count();
+    assert!(purged > 0.0, "small rings purge");
+    assert!(
+        purged < changes as f64 * transition,
+        "{purged} mm³ for {changes} changes"
+    );
+    let tower = export(TOWER, &info, &rings(20, 2.0), "test").expect("exports");
+    let full = replay(&tower, false).fed["PURGE"] * area;
+    assert!(purged < full, "{purged} against {full} on the tower alone");
 }
