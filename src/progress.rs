@@ -199,15 +199,38 @@ pub fn summary(report: &RunReport, timings: bool) {
         report.warnings(),
         report.timings.wall().as_secs_f64()
     );
+    // The plan's time moves at the plan's constant speeds, without acceleration,
+    // heating or tool changes: a machine file's own estimate is what the machine takes.
     match (report.build_time, report.sequential_time) {
         (Some(t), Some(s)) if s > 0.0 => {
             eprintln!(
-                "planned build time: {t:.1} s ({s:.1} s one tool at a time: ratio {:.3})",
+                "the plan's build time (its toolpaths at constant speeds): {t:.1} s ({s:.1} s one tool at a time: ratio {:.3})",
                 t / s
             )
         }
-        (Some(t), _) => eprintln!("planned build time: {t:.1} s"),
+        (Some(t), _) => eprintln!("the plan's build time (its toolpaths at constant speeds): {t:.1} s"),
         _ => {}
+    }
+    for m in &report.machine_files {
+        let waste: Vec<String> = m
+            .waste
+            .iter()
+            .filter(|(_, v)| *v > 0.0)
+            .map(|(k, v)| format!("{k} {v:.1}"))
+            .collect();
+        let waste = if waste.is_empty() {
+            "nothing else".to_string()
+        } else {
+            waste.join(", ")
+        };
+        eprintln!(
+            "{}: {} by the file's own estimate; deposits part {:.1} mm³ ({:.1} of them transitions), {waste} mm³: waste {:.1} % of all deposition",
+            m.file.display(),
+            duration(m.time),
+            m.part,
+            m.transition,
+            100.0 * m.waste_share()
+        );
     }
     if let Some((deposited, volume)) = report.fill
         && volume > 0.0
@@ -250,6 +273,18 @@ pub fn summary(report: &RunReport, timings: bool) {
     if timings {
         self::timings(report);
     }
+}
+
+/// Seconds as `1 h 02 min 05 s (3725.0 s)`, the way a user reads a print's time.
+fn duration(seconds: f64) -> String {
+    let whole = seconds.max(0.0).round() as u64;
+    let (h, m, s) = (whole / 3600, whole / 60 % 60, whole % 60);
+    let hms = if h > 0 {
+        format!("{h} h {m:02} min {s:02} s")
+    } else {
+        format!("{m} min {s:02} s")
+    };
+    format!("{hms} ({seconds:.1} s)")
 }
 
 /// Per-stage times (summed over threads) and the wall time, on stdout.

@@ -54,6 +54,7 @@ fn process_alive(pid: u32) -> bool {
 pub struct AtomicOutputs {
     dir: PathBuf,
     pending: Vec<(TempPath, PathBuf)>,
+    reports: Vec<crate::stage::MachineFileReport>,
 }
 
 impl AtomicOutputs {
@@ -61,7 +62,13 @@ impl AtomicOutputs {
         Self {
             dir: dir.into(),
             pending: Vec::new(),
+            reports: Vec::new(),
         }
+    }
+
+    /// What the machine files of the run said of themselves, in the order they said it.
+    pub fn take_reports(&mut self) -> Vec<crate::stage::MachineFileReport> {
+        std::mem::take(&mut self.reports)
     }
 
     pub fn dir(&self) -> &Path {
@@ -96,6 +103,10 @@ impl AtomicOutputs {
 }
 
 impl OutputFiles for AtomicOutputs {
+    fn report(&mut self, report: crate::stage::MachineFileReport) {
+        self.reports.push(report);
+    }
+
     fn create(&mut self, name: &Path) -> Result<Box<dyn Write + Send>> {
         if name.is_absolute() || name.components().any(|c| matches!(c, Component::ParentDir)) {
             return Err(Error::config(format!(

@@ -338,6 +338,34 @@ pub trait OutputFiles {
     fn written(&self) -> Vec<(PathBuf, PathBuf)> {
         Vec::new()
     }
+    /// Records what a machine file says of itself (its own time estimate, what it
+    /// deposits), for the run's summary: what a user reads there is what the machine
+    /// will do. A host that keeps no summary ignores it.
+    fn report(&mut self, _report: MachineFileReport) {}
+}
+
+/// What a machine file (G-code, NC) says of itself.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct MachineFileReport {
+    /// The file, as its exporter created it.
+    pub file: PathBuf,
+    /// The time the file takes by its own estimate, every wait included (s).
+    pub time: f64,
+    /// Volume deposited as part (mm³).
+    pub part: f64,
+    /// Of `part`: transitions after a change of tool or mix that the part's beads took.
+    pub transition: f64,
+    /// Volume deposited beside the part, by kind (`purge`, `tower`, `prime`, `skirt`).
+    pub waste: Vec<(String, f64)>,
+}
+
+impl MachineFileReport {
+    /// What is deposited beside the part over all that is deposited (0 when nothing is).
+    pub fn waste_share(&self) -> f64 {
+        let waste: f64 = self.waste.iter().map(|(_, v)| v).sum();
+        let total = self.part + waste;
+        if total > 0.0 { waste / total } else { 0.0 }
+    }
 }
 
 /// Writes one kind of output.

@@ -546,3 +546,39 @@ fn help_says_what_happens_and_the_exit_codes() {
         );
     }
 }
+
+/// The run's summary gives the machine file's own time and what it deposits, as the
+/// file's footer says them, and labels the plan's time as the plan's.
+#[test]
+fn the_summary_tells_the_machine_files_own_time_and_waste() {
+    let out = tempfile::tempdir().expect("tempdir");
+    let pipeline = crate::support::pipelines().join("gear-mixing-gcode.toml");
+    let o = crate::support::lamina(&[
+        "run",
+        "--out",
+        out.path().to_str().expect("utf-8"),
+        pipeline.to_str().expect("utf-8"),
+    ]);
+    assert!(o.status.success(), "{}", crate::support::text(&o.stderr));
+    let summary = crate::support::text(&o.stderr);
+    let gcode = std::fs::read_to_string(out.path().join("gear-mixing.gcode")).expect("G-code");
+    let estimate = gcode
+        .lines()
+        .find_map(|l| l.strip_prefix("; estimated printing time: "))
+        .and_then(|t| t.strip_suffix(" s"))
+        .expect("the file's estimate");
+    let line = summary
+        .lines()
+        .find(|l| l.starts_with("gear-mixing.gcode: "))
+        .unwrap_or_else(|| panic!("no line for the G-code in:\n{summary}"));
+    assert!(
+        line.contains(&format!("({estimate} s) by the file's own estimate")),
+        "{line}"
+    );
+    assert!(
+        line.contains("waste ") && line.contains("deposits part "),
+        "{line}"
+    );
+    assert!(!summary.contains("planned build time:"), "{summary}");
+    assert!(summary.contains("the plan's build time"), "{summary}");
+}

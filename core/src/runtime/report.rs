@@ -90,6 +90,8 @@ pub struct RunReport {
     pub orientation: Option<Orientation>,
     /// How many operations of each kind the `[[process]]` stages planned.
     pub operations: std::collections::BTreeMap<String, usize>,
+    /// What each machine file says of itself: its own time, what it deposits.
+    pub machine_files: Vec<crate::stage::MachineFileReport>,
 }
 
 impl RunReport {

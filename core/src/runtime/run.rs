@@ -279,6 +279,7 @@ impl Engine {
         for sink in sinks {
             timings.time(StageKind::Export, || sink.finish(&info, &mut outputs))?;
         }
+        let machine_files = outputs.take_reports();
         let files = outputs.commit()?;
         timings
             .wall
@@ -294,6 +295,7 @@ impl Engine {
             fill,
             orientation,
             operations,
+            machine_files,
         })
     }
 }

@@ -187,8 +187,10 @@ impl LayerSink for Sink {
         self.0.write_layer(info, plan)
     }
 
-    fn finish(self: Box<Self>, info: &RunInfo, _files: &mut dyn OutputFiles) -> Result<()> {
-        self.0.finish_file(info)
+    fn finish(self: Box<Self>, info: &RunInfo, files: &mut dyn OutputFiles) -> Result<()> {
+        let report = self.0.finish_file(info)?;
+        files.report(report);
+        Ok(())
     }
 }
 

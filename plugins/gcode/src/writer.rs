@@ -13,7 +13,9 @@ use std::io::Write;
 use std::path::PathBuf;
 
 use lamina_core::machine::{Firmware as Dialect, FirstLayerSpeed, Flavor, Machine};
-use lamina_core::{Composition, Error, LayerPlan, PathKind, Point2, Result, RunInfo, Toolpath};
+use lamina_core::{
+    Composition, Error, LayerPlan, MachineFileReport, PathKind, Point2, Result, RunInfo, Toolpath,
+};
 
 use crate::firmware::{EXTRUDE_MIN_TEMPERATURE, Firmware};
 use crate::layout::Layout;
@@ -1554,7 +1556,7 @@ impl Writer {
 
     /// The end: retraction, the end template, every heater off, and the summary with
     /// the time the file takes.
-    pub fn finish_file(mut self: Box<Self>, info: &RunInfo) -> Result<()> {
+    pub fn finish_file(mut self: Box<Self>, info: &RunInfo) -> Result<MachineFileReport> {
         // No later layer purges on the tower: the waiting layers go without it.
         self.write_spooled(info, false)?;
         self.end_streams();
@@ -1642,7 +1644,19 @@ impl Writer {
         let _ = writeln!(t, "; estimated printing time: {time:.1} s");
         self.buf.push_str(&t);
         self.flush()?;
-        self.out.flush().map_err(|e| io(&self.path, e))
+        self.out.flush().map_err(|e| io(&self.path, e))?;
+        Ok(MachineFileReport {
+            file: self.path.clone(),
+            time,
+            part: deposit.part,
+            transition: deposit.transition,
+            waste: vec![
+                ("purge".into(), deposit.purge),
+                ("tower".into(), deposit.tower),
+                ("prime".into(), deposit.prime),
+                ("skirt".into(), deposit.skirt),
+            ],
+        })
     }
 }
 
