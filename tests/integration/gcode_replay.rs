@@ -76,10 +76,9 @@ fn profile(name: &str, pipeline: &Path) -> toml::Table {
     toml::from_str(&std::fs::read_to_string(&file).expect("profile")).expect("profile TOML")
 }
 
-/// The bed rectangle (x0, y0, x1, y1) of a machine: a profile's name or an inline
-/// table (over its `base`).
-fn bed(machine: &toml::Value, pipeline: &Path) -> [f64; 4] {
-    let table = match machine {
+/// A machine's profile: a built-in name or an inline table (over its `base`).
+fn machine_table(machine: &toml::Value, pipeline: &Path) -> toml::Table {
+    match machine {
         toml::Value::String(name) => profile(name, pipeline),
         toml::Value::Table(t) => {
             let mut base = t
@@ -93,7 +92,35 @@ fn bed(machine: &toml::Value, pipeline: &Path) -> [f64; 4] {
             base
         }
         _ => panic!("{}: `machine` is neither a name nor a table", pipeline.display()),
-    };
+    }
+}
+
+/// The replay's heating model from a machine's profile: its heaters' rates and
+/// residencies and its tool changes' own time (the machine defaults where the profile
+/// is silent; the residencies default by firmware in the replay as in Lamina).
+fn heating_args(table: &toml::Table) -> Vec<String> {
+    let number = |v: &toml::Value| v.as_float().or_else(|| v.as_integer().map(|i| i as f64));
+    let heating = table.get("heating").and_then(toml::Value::as_table);
+    let get = |key: &str| heating.and_then(|h| h.get(key)).and_then(number);
+    let mut args = vec![
+        format!("--heating-rate={}", get("nozzle_rate").unwrap_or(2.0)),
+        format!("--cooling-rate={}", get("nozzle_cooling").unwrap_or(1.0)),
+        format!("--bed-heating-rate={}", get("bed_rate").unwrap_or(0.5)),
+    ];
+    if let Some(r) = get("residency") {
+        args.push(format!("--residency={r}"));
+    }
+    if let Some(r) = get("bed_residency") {
+        args.push(format!("--bed-residency={r}"));
+    }
+    if let Some(t) = table.get("tool_change_time").and_then(number) {
+        args.push(format!("--tool-change-time={t}"));
+    }
+    args
+}
+
+/// The bed rectangle (x0, y0, x1, y1) of a machine's profile.
+fn bed(table: &toml::Table) -> [f64; 4] {
     let bed = table.get("bed").and_then(toml::Value::as_table).expect("[bed]");
     let size: Vec<f64> = bed
         .get("size")
@@ -187,7 +214,8 @@ fn replay_file(
     let mesh = model_stl(pipeline, &table, dir.path());
     let named = machine.map(|m| toml::Value::String(m.to_string()));
     let machine = named.as_ref().or(table.get("machine")).expect("a machine");
-    let [x0, y0, x1, y1] = bed(machine, pipeline);
+    let machine = machine_table(machine, pipeline);
+    let [x0, y0, x1, y1] = bed(&machine);
     let files: Vec<PathBuf> = std::fs::read_dir(&out)
         .expect("output folder")
         .map(|e| e.expect("entry").path())
@@ -207,6 +235,7 @@ fn replay_file(
             .arg(format!("--coverage-every={coverage_every}"))
             .arg(format!("--coverage-min={}", targets.coverage))
             .arg(format!("--overlap-max={}", targets.overlap))
+            .args(heating_args(&machine))
             .arg("--json")
             .arg(&report)
             .output()

@@ -51,8 +51,46 @@ Checks (each reported with the line numbers of its violations):
               the file sets them (M205 X Y Z E in mm/s, RepRapFirmware M566 in
               mm/min), with a look-ahead over the whole file (a backward then a
               forward pass). G4 dwells count; heating waits (M109, M190, M116)
-              count as 0 s. The result is compared with the file's footer
+              count as 0 s unless ``--heating-rate`` turns the heating model
+              on (below); each change of tool adds ``--tool-change-time``
+              (default 0). The result is compared with the file's footer
               ``; estimated printing time: <seconds> s`` within ``--time-tol``.
+
+Heating model (``--heating-rate``; off by default). Every heater (each hotend
+as check 4 keys them, and the bed) is at ``--ambient`` (25 degC) at time 0.
+When its target changes -- M104/M109 S|R, M140/M190, RepRapFirmware G10 P S R
+and M568, a tool selected (active) or deselected (standby) -- at machine time
+t (the look-ahead's time of all moves before that line, plus the dwells and
+waits before it), it moves linearly toward the target: up at
+``--heating-rate`` (bed ``--bed-heating-rate``, 0.5), down at
+``--cooling-rate`` (1.0; the bed at a fixed 0.3 degC/s), never below ambient.
+A wait is a dwell at its line (the planner is empty there) lasting:
+
+* Marlin M109 S<t> (hotend) / M190 S<t> (bed; the same with the bed's rate and
+  ``--bed-residency``): 0 s when the heater is above the target (S does not
+  wait for cooling); else, with a residency time R (``--residency``, Marlin's
+  TEMP_RESIDENCY_TIME, 10 s by default), until it is within TEMP_WINDOW (1
+  degC) of the target, then R; already within the window at the wait, 4R/3
+  (wait_for_hotend/wait_for_bed then start the residency timer R/3 late,
+  Marlin PR #18421). With R = 0 the firmware waits until the heater reaches
+  the target itself. M109/M190 R<t> waits the same way for cooling too (to
+  within the window above the target; a target below ambient ends the wait
+  when the heater arrives at ambient, where Marlin's cooling-slope check would
+  give up). M109/M190 with neither S nor R does not wait.
+* RepRapFirmware M109/M190 (S heating only, R both ways; M109 with neither
+  still waits for the tool): until within TEMPERATURE_CLOSE_ENOUGH (1 degC).
+  M116 [P<tool>|H<heater>] (neither: every hotend and the bed): until every
+  named heater is within S<tol> (2 degC) of its target, heating or cooling.
+  Targets below 40 degC are not waited for; no residency (``--residency``
+  defaults to 0 for RepRapFirmware).
+
+A change of tool is a ``T<n>`` that selects another tool than the selected one
+(not ``T-1``, not the same tool, not the first selection after none, and not on
+a mixing head, whose tools are mixes of one nozzle); its dwell comes before
+RepRapFirmware switches the heaters (standby after tfree, active after tpre).
+With multiple motion systems both are timed per stream (the part before the
+fork on stream 0's clock, then each stream's heaters on its own; see
+README.md, "Multiple motion systems").
 
 It also reports per-tool and per-mix-channel filament, tool changes, mix
 changes, XY extents and layer count.
@@ -76,7 +114,8 @@ import re
 import sys
 from dataclasses import dataclass, field
 from functools import reduce
-from typing import Iterable
+from itertools import accumulate
+from typing import Iterable, NamedTuple
 
 import numpy as np
 
@@ -106,6 +145,36 @@ BED_TOL = 1e-6
 LAYER_Z_TOL = 1e-4
 #: Violations kept per check in the report (the count is always exact).
 MAX_EXAMPLES = 200
+
+# Heating model (on with --heating-rate): what a wait for a temperature costs.
+#: Hotend cooling and bed heating rates (degC/s) when the options leave them out.
+DEFAULT_COOLING_RATE = 1.0
+DEFAULT_BED_HEATING_RATE = 0.5
+#: The bed cools at this fixed rate (degC/s): there is no option for it, and only
+#: M190 R (or a target re-raised after lowering it) ever depends on it.
+BED_COOLING_RATE = 0.3
+DEFAULT_AMBIENT = 25.0
+#: Marlin's stock TEMP_RESIDENCY_TIME and TEMP_BED_RESIDENCY_TIME (s).
+MARLIN_RESIDENCY = 10.0
+#: Marlin's TEMP_WINDOW / TEMP_BED_WINDOW (degC): the residency timer starts
+#: when the heater is this close to its target.
+MARLIN_TEMP_WINDOW = 1.0
+#: Marlin's wait_for_hotend/wait_for_bed, finding the heater already inside the
+#: window on its first pass, start the residency timer a third of the residency
+#: time in the future (PR #18421, meant to give 4/3 of the residency). Current
+#: Marlin tests that timer with the three-argument PENDING of core/millis_t.h,
+#: ``(now - start) < interval`` in unsigned arithmetic: a start in the future
+#: wraps, the test is false at once and the wait ends (older releases compared
+#: signed and waited 4/3). The current code is modelled: such a wait takes no time.
+MARLIN_FIRST_PASS_RESIDENCY = 0.0
+#: RepRapFirmware's TEMPERATURE_CLOSE_ENOUGH (degC), the tolerance of M109/M190.
+RRF_CLOSE_ENOUGH = 1.0
+#: RepRapFirmware's default M116 tolerance (degC; M116 S overrides).
+RRF_M116_TOLERANCE = 2.0
+#: RepRapFirmware does not wait for targets below this (TEMPERATURE_LOW_SO_DONT_CARE, degC).
+RRF_LOW_DONT_CARE = 40.0
+#: Heater key of the bed in the heating model (hotends are keyed by number).
+BED = "bed"
 
 FEATURE_TYPES = ("PART", "SKIRT", "PRIME", "TOWER", "PURGE")
 AXES = "XYZ"
@@ -283,6 +352,103 @@ class Tool:
     mix: list[float] | None = None  # normalised mix (Marlin vtool / RRF M567)
 
 
+class WaitRule(NamedTuple):
+    """When a firmware's wait for one heater ends (see ``Ramp.wait``)."""
+
+    cooling: bool  # waits for the heater to cool down too (M109/M190 R, M116)
+    window: float  # done within this of the target (degC)
+    residency: float  # then holds this long (s)
+    first_pass: float  # the whole wait when already within the window (s)
+    low: float  # targets below this are not waited for (degC)
+
+
+class Ramp:
+    """A heater's temperature over machine time: from (t0, temp0) it moves
+    linearly toward its target, up at ``up`` and down at ``down`` degC/s, and
+    stays there; it never cools below the ambient ``floor``."""
+
+    __slots__ = ("t0", "temp0", "target", "up", "down", "floor")
+
+    def __init__(self, up: float, down: float, floor: float):
+        self.t0 = 0.0
+        self.temp0 = floor
+        self.target = 0.0
+        self.up = up
+        self.down = down
+        self.floor = floor
+
+    def at(self, t: float) -> float:
+        goal = max(self.target, self.floor)
+        dt = t - self.t0
+        if goal >= self.temp0:
+            return min(goal, self.temp0 + self.up * dt)
+        return max(goal, self.temp0 - self.down * dt)
+
+    def retarget(self, t: float, target: float) -> None:
+        self.temp0 = self.at(t)
+        self.t0 = t
+        self.target = target
+
+    def wait(self, t: float, rule: WaitRule) -> float:
+        """Seconds a wait starting at t takes for this heater."""
+        temp = self.at(t)
+        target = self.target
+        if target < rule.low:
+            return 0.0
+        if temp > target and not rule.cooling:
+            return 0.0  # Marlin M109/M190 S, RRF M109/M190 S: no wait for cooling
+        if abs(temp - target) <= rule.window:
+            return rule.first_pass
+        if temp < target:
+            return (target - rule.window - temp) / self.up + rule.residency
+        level = target + rule.window
+        if level < self.floor:
+            # It stops at ambient, never reaching the window: Marlin gives up when
+            # the temperature stops falling (MIN_COOLING_SLOPE), here when it arrives.
+            return (temp - self.floor) / self.down
+        return (temp - level) / self.down + rule.residency
+
+    def copy(self) -> "Ramp":
+        r = Ramp(self.up, self.down, self.floor)
+        r.t0, r.temp0, r.target = self.t0, self.temp0, self.target
+        return r
+
+
+class HeatingModel:
+    """The machine's heaters on one clock (``Ramp`` each, created at ambient on
+    first use): ``apply`` plays a ``Replay.heat_events`` entry at machine time
+    t. Shared by the single-stream replay (``heating_waits``) and the
+    multi-motion one, which copies the model for each stream at the fork."""
+
+    def __init__(self, o: "Options"):
+        self.o = o
+        self.ramps: dict[int | str, Ramp] = {}
+
+    def ramp(self, key: int | str) -> Ramp:
+        h = self.ramps.get(key)
+        if h is None:
+            o = self.o
+            if key == BED:
+                h = Ramp(o.bed_heating_rate, BED_COOLING_RATE, o.ambient)
+            else:
+                h = Ramp(o.heating_rate, o.cooling_rate, o.ambient)
+            self.ramps[key] = h
+        return h
+
+    def apply(self, t: float, ev: tuple) -> float:
+        """A target change (``("set", ...)``: 0 s) or a wait (its seconds:
+        until every heater it names is done by its rule) at time t."""
+        if ev[0] == "set":
+            self.ramp(ev[3]).retarget(t, ev[4])
+            return 0.0
+        return max((self.ramp(k).wait(t, ev[5]) for k in ev[4]), default=0.0)
+
+    def copy(self) -> "HeatingModel":
+        m = HeatingModel(self.o)
+        m.ramps = {k: r.copy() for k, r in self.ramps.items()}
+        return m
+
+
 # A move for the time replay is a plain tuple (fast to build by the million):
 #   (length, speed, accel, ux, uy, uz, ue, cx, cy, cz, ce, stop_before)
 # length: path length (XYZ, or |E| for E-only moves), mm; speed: nominal
@@ -368,6 +534,15 @@ class Options:
     homes: dict[int, tuple[float, float]] = field(default_factory=dict)  # system -> head X, Y after homing
     shared_gantry: bool | None = None  # heads on one gantry: check X order instead of discs
     extrusion_tol: float = 0.01  # planned extrusion per tool
+    # Heating waits and tool changes in the time replay; the heating model is on
+    # only with a heating rate (None: waits take 0 s, as the replay always did).
+    heating_rate: float | None = None  # hotends heating, degC/s
+    cooling_rate: float = DEFAULT_COOLING_RATE  # hotends cooling, degC/s
+    bed_heating_rate: float = DEFAULT_BED_HEATING_RATE  # degC/s
+    residency: float | None = None  # s; None: 10 (Marlin) or 0 (RepRapFirmware)
+    bed_residency: float | None = None  # s; the same defaults
+    ambient: float = DEFAULT_AMBIENT  # degC: every heater at time 0, and the floor of cooling
+    tool_change_time: float = 0.0  # s of dwell per change of tool
 
 
 #: Time tolerance when --time-tol is not given: one motion system / several.
@@ -442,7 +617,13 @@ class Replay:
         self.retracted: dict[int, float] = {}  # per nozzle (heater key)
         self.fw_retracted: dict[int, bool] = {}
         self.tool_changes = 0
+        self.tool_change_s = 0.0  # dwell of tool changes (also in self.dwell)
         self.tool_selects: list[dict] = []
+        # Heating model: target changes and waits, each stamped with the number
+        # of moves and the dwell before it; timed once the look-ahead has timed
+        # the moves (heating_waits).
+        self.heat_on = opts.heating_rate is not None
+        self.heat_events: list[tuple] = []
         # Mixing
         self.collector: dict[int, float] = {}
         self.mix_commands = 0
@@ -492,6 +673,43 @@ class Replay:
         if h is None:
             h = self.heaters[key] = Heater()
         return h
+
+    def set_target(self, key: int | str, value: float) -> None:
+        """Sets a heater's target (hotend ``key``, or ``BED``) and stamps the
+        change for the heating model."""
+        if key == BED:
+            self.bed_target = value
+        else:
+            self.heater(key).set_target(value)
+        if self.heat_on:
+            self.heat_events.append(("set", len(self.moves), self.dwell, key, value))
+
+    def heat_wait(self, keys: Iterable[int | str], rule: WaitRule) -> None:
+        """A wait for these heaters at this point (the planner is empty here),
+        timed by the heating model."""
+        if self.heat_on:
+            self.heat_events.append(("wait", len(self.moves), self.dwell, self.line, list(keys), rule))
+
+    def wait_rule(self, bed: bool, cooling: bool) -> WaitRule:
+        """How M109 (``bed`` False) or M190 waits in this file's firmware.
+
+        Marlin (wait_for_hotend / wait_for_bed): with a residency time the
+        timer starts within TEMP_WINDOW of the target and the wait ends the
+        residency later; already inside the window on the first pass, the
+        timer starts a third of the residency late. Without residency the
+        loop runs while the heater is heating (or cooling): until it reaches
+        the target itself. RepRapFirmware: within TEMPERATURE_CLOSE_ENOUGH,
+        no residency (unless the option gives one), nothing below 40 degC."""
+        o = self.o
+        rrf = self.flavor == "rrf"
+        res = o.bed_residency if bed else o.residency
+        if res is None:
+            res = 0.0 if rrf else MARLIN_RESIDENCY
+        if rrf:
+            return WaitRule(cooling, RRF_CLOSE_ENOUGH, res, 0.0, RRF_LOW_DONT_CARE)
+        if res > 0:
+            return WaitRule(cooling, MARLIN_TEMP_WINDOW, res, res * MARLIN_FIRST_PASS_RESIDENCY, -math.inf)
+        return WaitRule(cooling, 0.0, 0.0, 0.0, -math.inf)
 
     def tool_heaters(self, n: int) -> list[int]:
         """Heater keys of tool n: Marlin hotend n (hotend 0 for a mixing
@@ -865,15 +1083,23 @@ class Replay:
             return
         prev = self.current
         t = self.tool(n)
-        if prev is not None and prev != n:
+        changed = prev is not None and prev != n
+        if changed:
             self.tool_changes += 1
         self.tool_selects.append({"line": line, "tool": n})
+        if changed and not self.mixing and self.o.tool_change_time > 0:
+            # The firmware's own parking and pick-up, as a dwell. It comes before
+            # the heaters' switch-over: RepRapFirmware sets the old tool to standby
+            # after tfree and the new one active after tpre. A mixing head's tools
+            # are mixes of one nozzle: selecting another moves no tool.
+            self.dwell += self.o.tool_change_time
+            self.tool_change_s += self.o.tool_change_time
         if self.flavor == "rrf" and prev != n:
             if prev is not None:
                 self.to_standby(prev)
             if t.active is not None:
                 for key in self.tool_heaters(n):
-                    self.heater(key).set_target(t.active)
+                    self.set_target(key, t.active)
         t.ever_selected = True
         self.current = n
         self.in_run = False
@@ -883,7 +1109,7 @@ class Replay:
         t = self.tool(n)
         if t.standby is not None:
             for key in self.tool_heaters(n):
-                self.heater(key).set_target(t.standby)
+                self.set_target(key, t.standby)
 
     def set_tool_temps(self, n: int, active: float | None, standby: float | None) -> None:
         """RepRapFirmware G10 P / M568: active and standby temperatures."""
@@ -896,10 +1122,10 @@ class Replay:
         if self.current == n:
             if t.active is not None:
                 for key in self.tool_heaters(n):
-                    self.heater(key).set_target(t.active)
+                    self.set_target(key, t.active)
         elif t.ever_selected and t.standby is not None:
             for key in self.tool_heaters(n):
-                self.heater(key).set_target(t.standby)
+                self.set_target(key, t.standby)
 
     def set_hotend(self, raw, wait: bool) -> None:
         self.ready_cache = None
@@ -931,11 +1157,15 @@ class Replay:
                 keys = self.tool_heaters(n if n is not None else 0)
             if temp is not None:
                 for key in keys:
-                    self.heater(key).set_target(temp)
+                    self.set_target(key, temp)
         if wait:
             self.sync()
             for key in keys:
                 self.heater(key).waited = True
+            # S waits only while heating, R both ways. Marlin's M109 without
+            # either waits for nothing; RepRapFirmware's waits for the tool.
+            if temp is not None or self.flavor == "rrf":
+                self.heat_wait(keys, self.wait_rule(bed=False, cooling=p.get("S") is None and p.get("R") is not None))
 
 
 # -- command handlers ---------------------------------------------------------
@@ -1030,12 +1260,17 @@ def _h_m109(r: Replay, raw):
 def _h_m140(r: Replay, raw):
     p = r.floats(raw)
     if p.get("S") is not None:
-        r.bed_target = p["S"]
+        r.set_target(BED, p["S"])
 
 
 def _h_m190(r: Replay, raw):
-    _h_m140(r, raw)
+    # M190 S<t> waits while heating, R<t> heating or cooling; neither: no wait.
+    p = r.floats(raw)
+    temp = p.get("S") if p.get("S") is not None else p.get("R")
     r.sync()
+    if temp is not None:
+        r.set_target(BED, temp)
+        r.heat_wait([BED], r.wait_rule(bed=True, cooling=p.get("S") is None))
 
 
 def _h_m116(r: Replay, raw):
@@ -1043,12 +1278,20 @@ def _h_m116(r: Replay, raw):
     r.ready_cache = None
     if "P" in raw and raw["P"] is not None:
         keys = r.tool_heaters(int(_first(raw["P"], r.line, "P")))
+        timed: list[int | str] = list(keys)
     elif "H" in raw and raw["H"] is not None:
         keys = [int(_number(v, r.line, "H")) for v in raw["H"].split(":")]
+        timed = list(keys)
     else:
         keys = list(r.heaters.keys())
+        timed = keys + [BED]
     for key in keys:
         r.heater(key).waited = True
+    # RepRapFirmware: every heater within the tolerance (S, default 2 degC) of
+    # its target, heating or cooling; no residency; nothing below 40 degC.
+    s = raw.get("S")
+    tol = _number(s, r.line, "S") if s is not None else RRF_M116_TOLERANCE
+    r.heat_wait(timed, WaitRule(True, tol, 0.0, 0.0, RRF_LOW_DONT_CARE))
 
 
 def _h_m568(r: Replay, raw):
@@ -1254,11 +1497,12 @@ _HANDLERS = {
 # ---------------------------------------------------------------------------
 
 def replay_time(moves: list[tuple], jd: float, jerk: list[float] | None,
-                breakdown: dict[str, float] | None = None) -> float:
+                breakdown: dict[str, float] | None = None, times: list[float] | None = None) -> float:
     """Total time of the moves with trapezoidal profiles and a look-ahead
     (the speeds of ``plan_speeds``, each move timed by ``trapezoid_time``).
     ``breakdown``, when given, receives the time of printing moves (XYZ with
-    E), travel (XYZ without E) and E-only moves (retractions and recoveries).
+    E), travel (XYZ without E) and E-only moves (retractions and recoveries);
+    ``times``, when given, each move's time in order.
     """
     n = len(moves)
     if n == 0:
@@ -1272,9 +1516,35 @@ def replay_time(moves: list[tuple], jd: float, jerk: list[float] | None,
         total += t
         if breakdown is not None:
             kinds["e_only" if m[6] != 0.0 else ("print" if m[10] != 0.0 else "travel")] += t
+        if times is not None:
+            times.append(t)
     if breakdown is not None:
         breakdown.update(kinds)
     return total
+
+
+def heating_waits(r: Replay, times: list[float]) -> tuple[float, list[dict]]:
+    """Total time of the file's heating waits, and each wait that took time
+    (``{"line", "wait_s"}``), from the heating model.
+
+    Every heater starts at ``--ambient`` at time 0. A target change or a wait
+    happens at the machine time of its line: the time of the moves before it
+    (``times``, from the look-ahead over the whole file; a wait empties the
+    planner, so nothing after it changes the moves before it), plus the dwells
+    and earlier waits before it. From a target change on, the heater moves
+    linearly toward its target (``Ramp``); a wait lasts until every heater it
+    names is done by its rule (``Ramp.wait``), and that time is a dwell there.
+    """
+    model = HeatingModel(r.o)
+    before = list(accumulate(times, initial=0.0))
+    waited = 0.0
+    waits: list[dict] = []
+    for ev in r.heat_events:
+        w = model.apply(before[ev[1]] + ev[2] + waited, ev)
+        if w > 0.0:
+            waited += w
+            waits.append({"line": ev[3], "wait_s": w})
+    return waited, waits
 
 
 def plan_speeds(moves: list[tuple], jd: float, jerk: list[float] | None) -> tuple[list[float], list[float]]:
@@ -1664,7 +1934,10 @@ def build_report(r: Replay, o: Options, name: str) -> dict:
 
     # Time
     by_kind: dict[str, float] = {}
-    replayed = replay_time(r.moves, r.jd, r.jerk, by_kind) + r.dwell
+    times: list[float] | None = [] if r.heat_on else None
+    replayed = replay_time(r.moves, r.jd, r.jerk, by_kind, times) + r.dwell
+    heating_s, waits = heating_waits(r, times) if times is not None else (0.0, [])
+    replayed += heating_s
     time_tol = time_tolerance(o)
     time = {
         "replayed_s": replayed,
@@ -1673,7 +1946,11 @@ def build_report(r: Replay, o: Options, name: str) -> dict:
         "rel_error": None,
         "tolerance": time_tol,
         "moves": len(r.moves),
-        "dwell_s": r.dwell,
+        "dwell_s": r.dwell - r.tool_change_s,
+        "heating_wait_s": heating_s,
+        "tool_change_s": r.tool_change_s,
+        "heating_waits": waits[:MAX_EXAMPLES],
+        "heating_model": heating_model(r),
         "by_kind_s": by_kind,
         "junction": ("jerk" if r.jerk is not None else f"junction deviation {r.jd:g} mm"),
         "accel_print": r.accel_print, "accel_travel": r.accel_travel, "accel_retract": r.accel_retract,
@@ -1735,6 +2012,21 @@ def build_report(r: Replay, o: Options, name: str) -> dict:
     return report
 
 
+def heating_model(r: Replay) -> dict | None:
+    """The heating model's parameters as this file's waits used them (None
+    when it is off)."""
+    if not r.heat_on:
+        return None
+    o = r.o
+    hot, bed = r.wait_rule(bed=False, cooling=False), r.wait_rule(bed=True, cooling=False)
+    return {
+        "heating_rate": o.heating_rate, "cooling_rate": o.cooling_rate,
+        "bed_heating_rate": o.bed_heating_rate, "bed_cooling_rate": BED_COOLING_RATE,
+        "residency_s": hot.residency, "bed_residency_s": bed.residency,
+        "window": hot.window, "bed_window": bed.window, "ambient": o.ambient,
+    }
+
+
 def options_report(o: Options, time_tol: float) -> dict:
     """The options every report states, with the time tolerance applied."""
     return {
@@ -1743,6 +2035,9 @@ def options_report(o: Options, time_tol: float) -> dict:
         "volume_tol": o.volume_tol, "coverage_min": o.coverage_min, "overlap_max": o.overlap_max,
         "coverage_every": o.coverage_every, "bead_ends": o.bead_ends, "time_tol": time_tol,
         "accel": list(o.accel), "junction_deviation": o.junction_deviation,
+        "heating_rate": o.heating_rate, "cooling_rate": o.cooling_rate, "bed_heating_rate": o.bed_heating_rate,
+        "residency": o.residency, "bed_residency": o.bed_residency, "ambient": o.ambient,
+        "tool_change_time": o.tool_change_time,
     }
 
 
@@ -1855,7 +2150,9 @@ def summary(rep: dict) -> str:
     est = f"{t['estimated_s']:.1f} s" if t["estimated_s"] is not None else "none"
     k = t.get("by_kind_s") or {}
     out.append(f"time: replayed {t['replayed_s']:.1f} s (print {k.get('print', 0):.0f}, travel {k.get('travel', 0):.0f}, "
-               f"E-only {k.get('e_only', 0):.0f}, dwell {t['dwell_s']:.0f}), file estimate {est}")
+               f"E-only {k.get('e_only', 0):.0f}, dwell {t['dwell_s']:.0f}, heating waits {t['heating_wait_s']:.0f}"
+               + ("" if t["heating_model"] else " (not modelled)")
+               + f", tool changes {t['tool_change_s']:.0f}), file estimate {est}")
     cov = rep["coverage"]
     if cov["layers"]:
         wc = cov["worst_coverage"]
@@ -1927,6 +2224,25 @@ def parse_args(argv: list[str]) -> tuple[str, Options, str | None]:
                     help="default accelerations P[,T[,R]] in mm/s^2 before any M204 (default 3000, Marlin's stock value)")
     ap.add_argument("--junction-deviation", type=float, default=DEFAULT_JUNCTION_DEVIATION,
                     help="junction deviation (mm) before any M205 J, default 0.013")
+    heat = ap.add_argument_group("heating waits and tool changes in the time replay (without --heating-rate "
+                                 "M109/M190/M116 waits take 0 s)")
+    heat.add_argument("--heating-rate", type=float, metavar="DEGC_S",
+                      help="hotends heat at this rate (degC/s): turns the heating model on")
+    heat.add_argument("--cooling-rate", type=float, metavar="DEGC_S",
+                      help=f"hotends cool at this rate (degC/s), default {DEFAULT_COOLING_RATE:g}")
+    heat.add_argument("--bed-heating-rate", type=float, metavar="DEGC_S",
+                      help=f"the bed heats at this rate (degC/s), default {DEFAULT_BED_HEATING_RATE:g} "
+                           f"(it cools at {BED_COOLING_RATE:g})")
+    heat.add_argument("--residency", type=float, metavar="S",
+                      help="M109 holds this long once at temperature (Marlin TEMP_RESIDENCY_TIME), "
+                           f"default {MARLIN_RESIDENCY:g} for Marlin, 0 for RepRapFirmware")
+    heat.add_argument("--bed-residency", type=float, metavar="S",
+                      help="the same for M190 (Marlin TEMP_BED_RESIDENCY_TIME), same defaults")
+    heat.add_argument("--ambient", type=float, metavar="DEGC",
+                      help=f"every heater's temperature at the start (degC), default {DEFAULT_AMBIENT:g}")
+    heat.add_argument("--tool-change-time", type=float, default=0.0, metavar="S",
+                      help="dwell of each change of tool (T<n> to another tool; not T-1, not the same tool), "
+                           "default 0")
     mm = ap.add_argument_group("multiple motion systems (RepRapFirmware 3.5 M596; override the file's header)")
     mm.add_argument("--head-radius", type=float, help="envelope radius of every tool head (mm)")
     mm.add_argument("--envelope", action="append", default=[], metavar="N:R",
@@ -1988,6 +2304,7 @@ def parse_args(argv: list[str]) -> tuple[str, Options, str | None]:
         rr = vals[2] if len(vals) > 2 else p
         o.accel = (p, t, rr)
     o.junction_deviation = a.junction_deviation
+    _heating_options(a, o)
     if a.head_radius is not None:
         if a.head_radius < 0:
             raise UsageError("--head-radius must not be negative")
@@ -2015,6 +2332,35 @@ def parse_args(argv: list[str]) -> tuple[str, Options, str | None]:
         raise UsageError("--extrusion-tol must be positive")
     o.extrusion_tol = a.extrusion_tol
     return a.file, o, a.json
+
+
+def _heating_options(a: argparse.Namespace, o: Options) -> None:
+    """The heating model's and tool changes' options, checked."""
+    tuning = {"--cooling-rate": a.cooling_rate, "--bed-heating-rate": a.bed_heating_rate,
+              "--residency": a.residency, "--bed-residency": a.bed_residency, "--ambient": a.ambient}
+    if a.heating_rate is None:
+        # Silently ignoring them would hide a command line that lost its --heating-rate.
+        given = [k for k, v in tuning.items() if v is not None]
+        if given:
+            raise UsageError(f"{', '.join(given)} need(s) --heating-rate (the heating model is off without it)")
+    for name, v in (("--heating-rate", a.heating_rate), ("--cooling-rate", a.cooling_rate),
+                    ("--bed-heating-rate", a.bed_heating_rate)):
+        if v is not None and not v > 0:
+            raise UsageError(f"{name} must be positive")
+    for name, v in (("--residency", a.residency), ("--bed-residency", a.bed_residency),
+                    ("--tool-change-time", a.tool_change_time)):
+        if v is not None and not v >= 0:
+            raise UsageError(f"{name} must not be negative")
+    o.heating_rate = a.heating_rate
+    if a.cooling_rate is not None:
+        o.cooling_rate = a.cooling_rate
+    if a.bed_heating_rate is not None:
+        o.bed_heating_rate = a.bed_heating_rate
+    o.residency = a.residency
+    o.bed_residency = a.bed_residency
+    if a.ambient is not None:
+        o.ambient = a.ambient
+    o.tool_change_time = a.tool_change_time
 
 
 def _system_item(item: str, what: str) -> tuple[int, str]:

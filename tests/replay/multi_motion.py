@@ -19,7 +19,10 @@ stream stops and waits until all have reached that line); ``M606 S1`` (forking
 the job into one reader per motion system) starts the streams together; the
 end of the job waits for all. Between barriers each stream's moves are timed with the
 checker's look-ahead trapezoid model and G4 dwells; the build time is the
-release time of the last barrier.
+release time of the last barrier. With ``--heating-rate`` the heating waits
+are timed by ``gcode_replay.HeatingModel`` (``heating_timeline``): the
+prologue before the fork as a single-stream file, then each stream with a copy
+of the heaters as the prologue left them, its own targets and its own clock.
 
 Further checks of this mode:
 
@@ -43,6 +46,7 @@ time         the replayed build time against ``; estimated printing time``
 from __future__ import annotations
 
 import bisect
+import heapq
 import math
 import re
 from types import SimpleNamespace
@@ -152,6 +156,7 @@ class StreamReplay(gr.Replay):
         self.tools = mm.tools
         self.heaters = mm.heaters
         self.events: list[tuple] = []
+        self.dwell_logged = 0.0  # self.dwell already in self.events
         self.part_by_tool: dict[int, float] = {}
         self.commands = 0
 
@@ -160,6 +165,30 @@ class StreamReplay(gr.Replay):
         if h is None:
             h = self.heaters[key] = SharedHeater(self.mm.ctx)
         return h
+
+    def log_dwell(self) -> None:
+        """The dwell (G4, tool change) added since the last entry, as an event."""
+        if self.dwell > self.dwell_logged:
+            m = self.machine()
+            self.events.append(("d", self.dwell - self.dwell_logged, m[0], m[1], self.line))
+        self.dwell_logged = self.dwell
+
+    def set_target(self, key, value: float) -> None:
+        super().set_target(key, value)
+        self.log_heat()
+
+    def heat_wait(self, keys, rule: gr.WaitRule) -> None:
+        super().heat_wait(keys, rule)
+        self.log_heat()
+
+    def log_heat(self) -> None:
+        """A heating-model entry (``heat_events``) at its place among the
+        stream's moves, dwells and barriers (a tool change's dwell comes before
+        the heaters' switch-over)."""
+        if self.heat_on:
+            self.log_dwell()
+            m = self.machine()
+            self.events.append(("h", len(self.heat_events) - 1, m[0], m[1], self.line))
 
     def start_layer(self, number: int) -> None:
         super().start_layer(number)
@@ -278,6 +307,9 @@ class MultiReplay:
         self.layer_marks: list[tuple[int, int]] = []
         self.cur = 0
         self.forked = False
+        # Index in self.barriers of the fork (M606 S1): the heating model's
+        # prologue ends there.
+        self.fork_barrier: int | None = None
         self.warned_unforked = False
         self.barriers: list[dict] = []
         self.configure(text)
@@ -441,9 +473,9 @@ class MultiReplay:
         axes = self.systems[s].axes
         self.take_axes(s, [axes[r] for r in ROLES if params.get(r) is not None])
         before = st.machine()
-        e0, n0, d0 = st.e, len(st.moves), st.dwell
+        e0, n0 = st.e, len(st.moves)
         st.do_move(cmd, params)
-        self.after(s, st, before, e0, n0, d0, moved=True)
+        self.after(s, st, before, e0, n0, moved=True)
 
     def run_on(self, s: int, cmd: str, raw: dict) -> None:
         st = self.enter(s)
@@ -457,18 +489,18 @@ class MultiReplay:
                 named = [axes[r] for r in ROLES if r in raw]
                 self.take_axes(s, named or list(axes.values()))
         before = st.machine()
-        e0, n0, d0 = st.e, len(st.moves), st.dwell
+        e0, n0 = st.e, len(st.moves)
         st.command(cmd, raw)
         if cmd == "G28" and self.systems[s].home is not None:
             homed = [r for r in ROLES if r in raw] or list(ROLES)
             for i, r in enumerate("XY"):
                 if r in homed:
                     st.pos[i] = self.systems[s].home[i]
-        self.after(s, st, before, e0, n0, d0, moved=cmd in ("G0", "G1", "G2", "G3"))
+        self.after(s, st, before, e0, n0, moved=cmd in ("G0", "G1", "G2", "G3"))
         for other in self.streams:
             other.ready_cache = None
 
-    def after(self, s: int, st: StreamReplay, before, e0: float, n0: int, d0: float, moved: bool) -> None:
+    def after(self, s: int, st: StreamReplay, before, e0: float, n0: int, moved: bool) -> None:
         """Records what the command did to the stream's timeline, the physical
         axes and the current synchronisation epoch."""
         now = st.machine()
@@ -478,8 +510,7 @@ class MultiReplay:
             st.events.append(("m", n0, before[0], before[1], now[0], now[1], line))
             for k in range(n0 + 1, n1):  # never more than one move per command today
                 st.events.append(("m", k, now[0], now[1], now[0], now[1], line))
-        if st.dwell > d0:
-            st.events.append(("d", st.dwell - d0, now[0], now[1], line))
+        st.log_dwell()
         axes = self.systems[s].axes
         for i, role in enumerate(ROLES):
             L = axes[role]
@@ -521,6 +552,7 @@ class MultiReplay:
             s = raw.get("S")
             if s is not None and gr._number(s, self.line, "S") == 1 and not self.forked:
                 self.forked = True
+                self.fork_barrier = len(self.barriers)
                 self.barrier("M606", release=False)
             return
         if cmd == "M598":
@@ -722,9 +754,88 @@ class Track:
         return t0 + self.ta[k], t0 + self.ta[k] + self.tc[k]
 
 
+def heating_timeline(mm: MultiReplay, timed: list) -> dict:
+    """Times the streams' heating waits with ``gr.HeatingModel`` (the rules of
+    a single-stream file).
+
+    The streams are run barrier to barrier, every stream starting a block at
+    the release of the previous barrier; within a block the streams' heating
+    entries (target changes and waits, ``"h"`` events) are taken in time
+    order, each at its stream's clock: the block's start plus the stream's
+    moves, dwells and waits before it. Up to the fork (M606 S1) the heaters
+    are one model (in practice only stream 0 reads the prologue), so the
+    prologue is timed as a single-stream file; at the fork each stream gets a
+    copy of it and from then on sees only its own commands' targets (a heater
+    belongs to the tool its stream selects). A heater that two streams touch
+    after the fork is not modelled beyond that: a warning names it.
+
+    Returns ``waits`` (per stream: event index -> seconds), ``listed`` (each
+    wait that took time: system, line, time_s, wait_s) and ``total_s``."""
+    streams = mm.streams
+    n = len(streams)
+    fork = mm.fork_barrier
+    shared = gr.HeatingModel(mm.o)
+    models = [shared] * n
+    cur = [0] * n
+    clock = [0.0] * n
+    waits: list[dict[int, float]] = [{} for _ in streams]
+    listed: list[dict] = []
+    touched: dict = {}
+    start = 0.0
+
+    def advance(s: int) -> float:
+        """Moves stream s to its next heating entry or barrier; its clock there."""
+        ev = streams[s].events
+        phases = timed[s][0]
+        i, t = cur[s], clock[s]
+        while ev[i][0] not in ("h", "b"):
+            e = ev[i]
+            t += phases[e[1]][1] if e[0] == "m" else e[1]
+            i += 1
+        cur[s], clock[s] = i, t
+        return t
+
+    for k in range(len(mm.barriers)):
+        after_fork = fork is not None and k > fork
+        clock = [start] * n
+        heap = [(advance(s), s) for s in range(n)]
+        heapq.heapify(heap)
+        arrive = [start] * n
+        while heap:
+            t, s = heapq.heappop(heap)
+            st = streams[s]
+            i = cur[s]
+            e = st.events[i]
+            cur[s] = i + 1
+            if e[0] == "b":
+                arrive[s] = t
+                continue
+            he = st.heat_events[e[1]]
+            if after_fork:
+                for key in ([he[3]] if he[0] == "set" else he[4]):
+                    touched.setdefault(key, {}).setdefault(s, e[4])
+            w = models[s].apply(t, he)
+            if w > 0.0:
+                waits[s][i] = w
+                listed.append({"system": s, "line": he[3], "time_s": t, "wait_s": w})
+            clock[s] = t + w
+            heapq.heappush(heap, (advance(s), s))
+        start = max(arrive, default=start)
+        if k == fork:
+            models = [shared.copy() for _ in streams]
+    for key, who in sorted(touched.items(), key=lambda kv: str(kv[0])):
+        if len(who) > 1:
+            name = "the bed" if key == gr.BED else f"heater {key}"
+            by = " and ".join(f"motion system {s} (line {line})" for s, line in sorted(who.items()))
+            mm.warnings.append(f"{name} is set or waited for by {by} after the fork: not modelled (each stream's "
+                               "waits see only the targets its own commands set, on its own clock)")
+    return {"waits": waits, "listed": listed, "total_s": sum(w["wait_s"] for w in listed)}
+
+
 def build_timeline(mm: MultiReplay) -> dict:
-    """Times every stream's moves, dwells and barrier waits; returns the
-    build time, barrier release times, per-stream figures and head tracks."""
+    """Times every stream's moves, dwells, heating waits and barrier waits;
+    returns the build time, barrier release times, per-stream figures and
+    head tracks."""
     streams = mm.streams
     nb = len(mm.barriers)
     timed = []
@@ -741,8 +852,12 @@ def build_timeline(mm: MultiReplay) -> dict:
             phases.append((ph, dur))
             kinds["e_only" if m[6] != 0.0 else ("print" if m[10] != 0.0 else "travel")] += dur
         timed.append((phases, kinds))
+    heat = heating_timeline(mm, timed) if streams and streams[0].heat_on else None
+    for s, st in enumerate(streams):
+        phases = timed[s][0]
+        heat_waits = heat["waits"][s] if heat else {}
         k = 0
-        for ev in st.events:
+        for i, ev in enumerate(st.events):
             if ev[0] == "m":
                 seg[s][k] += phases[ev[1]][1]
                 m = st.moves[ev[1]]
@@ -750,6 +865,8 @@ def build_timeline(mm: MultiReplay) -> dict:
                     seg_print[s][k] += phases[ev[1]][1]
             elif ev[0] == "d":
                 seg[s][k] += ev[1]
+            elif ev[0] == "h":
+                seg[s][k] += heat_waits.get(i, 0.0)
             else:
                 k += 1
     release = []
@@ -782,12 +899,13 @@ def build_timeline(mm: MultiReplay) -> dict:
     tracks = []
     for s, st in enumerate(streams):
         phases, kinds = timed[s]
+        heat_waits = heat["waits"][s] if heat else {}
         tr = Track()
         t = 0.0
-        busy = wait = dwell = 0.0
+        busy = wait = dwell = heating = 0.0
         last_active = 0.0
         waits = []
-        for ev in st.events:
+        for i, ev in enumerate(st.events):
             if ev[0] == "m":
                 m = st.moves[ev[1]]
                 ph, dur = phases[ev[1]]
@@ -802,6 +920,15 @@ def build_timeline(mm: MultiReplay) -> dict:
                 busy += ev[1]
                 dwell += ev[1]
                 last_active = t
+            elif ev[0] == "h":
+                w = heat_waits.get(i, 0.0)
+                if w > 0.0:
+                    # a heating wait: the head stands still
+                    tr.add(t, t + w, ev[2], ev[3], ev[2], ev[3], line=ev[4], kind=3)
+                    t += w
+                    busy += w
+                    heating += w
+                    last_active = t
             else:
                 r = release[ev[1]]
                 w = max(0.0, r - t)
@@ -813,10 +940,11 @@ def build_timeline(mm: MultiReplay) -> dict:
             tr.add(0.0, build, None, None, None, None, kind=2)
         tr.freeze()
         tracks.append(tr)
-        per_stream.append({"busy_s": busy, "wait_s": wait, "dwell_s": dwell, "by_kind_s": kinds,
-                           "end_s": last_active, "waits": waits})
+        per_stream.append({"busy_s": busy, "wait_s": wait, "dwell_s": dwell, "heating_wait_s": heating,
+                           "by_kind_s": kinds, "end_s": last_active, "waits": waits})
     return {"build_s": build, "release": release, "streams": per_stream, "tracks": tracks,
-            "layers_busiest_s": busiest, "layers_busiest_print_s": busiest_print}
+            "layers_busiest_s": busiest, "layers_busiest_print_s": busiest_print,
+            "heating_wait_s": heat["total_s"] if heat else 0.0, "heating_waits": heat["listed"] if heat else []}
 
 
 # ---------------------------------------------------------------------------
@@ -926,7 +1054,7 @@ def check_collisions(mm: MultiReplay, tl: dict) -> dict:
     check = mm.checks["collisions"]
     systems = mm.systems
     missing = [s.number for s in systems if s.radius is None]
-    active = [s for s, st in enumerate(mm.streams) if st.events and any(e[0] != "b" for e in st.events)]
+    active = [s for s, st in enumerate(mm.streams) if any(e[0] in ("m", "d") for e in st.events)]
     if len(active) < 2:
         check.skip("fewer than two motion systems move")
         return out
@@ -1130,6 +1258,11 @@ def build_report_multi(mm: MultiReplay, o: gr.Options, name: str) -> dict:
             "streams_sum_s": sum(p["busy_s"] for p in tl["streams"]),
             "layers_busiest_s": tl["layers_busiest_s"],
             "layers_busiest_print_s": tl["layers_busiest_print_s"],
+            # Tool changes are dwells of their stream, heating waits waits of their stream.
+            "heating_wait_s": tl["heating_wait_s"],
+            "tool_change_s": sum(st.tool_change_s for st in streams),
+            "heating_waits": tl["heating_waits"][:gr.MAX_EXAMPLES],
+            "heating_model": gr.heating_model(streams[0]) if streams else None,
             "barriers": len(mm.barriers),
             "barrier_kinds": {},
             "junction": [("jerk" if st.jerk is not None else f"junction deviation {st.jd:g} mm") for st in streams]}
@@ -1202,6 +1335,7 @@ def build_report_multi(mm: MultiReplay, o: gr.Options, name: str) -> dict:
             "paused_share": p["wait_s"] / build if build > 0 else 0.0,
             "end_s": p["end_s"],
             "dwell_s": p["dwell_s"],
+            "heating_wait_s": p["heating_wait_s"],
             "by_kind_s": p["by_kind_s"],
             "longest_wait_s": max(p["waits"], default=0.0),
             "tools": sorted(_tool_key(k) for k in st.filament_by_tool),
@@ -1289,6 +1423,10 @@ def summary_multi(rep: dict) -> str:
     if t["sequential_s"] is not None:
         line += f"; sequential {t['sequential_s']:.1f} s, ratio {t['ratio_to_sequential']:.3f}"
     out.append(line)
+    if t["heating_model"] is not None or t["tool_change_s"]:
+        out.append(f"  heating waits {t['heating_wait_s']:.1f} s (summed over the streams"
+                   + ("" if t["heating_model"] else "; not modelled: no --heating-rate")
+                   + f"), tool changes {t['tool_change_s']:.1f} s")
     out.append(f"  per layer, the busiest stream's moves add up to {t['layers_busiest_s']:.1f} s "
                f"(these moves side by side, never waiting; all streams' moves {t['streams_sum_s']:.1f} s); "
                f"its printing moves alone {t['layers_busiest_print_s']:.1f} s")

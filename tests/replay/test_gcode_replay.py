@@ -524,6 +524,165 @@ class Time(unittest.TestCase):
         self.assertEqual(status(rep, "time"), "skipped")
 
 
+MARLIN = "; flavor: marlin\n"
+RRF = "; flavor: rrf\n"
+# 100 mm at 100 mm/s from rest to rest with the stock 3000 mm/s^2.
+MOVE_S = 2 * 100 / 3000 + (100 - 100 ** 2 / 3000) / 100
+
+
+def timed(text, **kw):
+    """The time section of ``text``'s report, with ``kw`` as options."""
+    return run_checks(text, **kw)["time"]
+
+
+class HeatingWaits(unittest.TestCase):
+    """The heating model (``--heating-rate``) and tool changes in the time replay."""
+
+    def test_marlin_m109_heats_from_ambient_then_holds_the_residency(self):
+        t = timed(MARLIN + "M104 S215\nM109 S215\n", heating_rate=2.0)
+        # to TEMP_WINDOW below the target at 2 degC/s from 25 degC, then TEMP_RESIDENCY_TIME
+        self.assertAlmostEqual(t["heating_wait_s"], (215 - 1 - 25) / 2 + 10)
+        self.assertAlmostEqual(t["replayed_s"], 104.5)
+        self.assertEqual(t["heating_waits"], [{"line": 3, "wait_s": 104.5}])
+        self.assertEqual(t["heating_model"]["residency_s"], 10.0)
+
+    def test_heating_before_the_wait_shortens_it(self):
+        # 50 s of dwell heat the hotend to 125 degC: the wait is what is left.
+        t = timed(MARLIN + "M104 S215\nG4 S50\nM109 S215\n", heating_rate=2.0)
+        self.assertAlmostEqual(t["heating_wait_s"], (214 - 125) / 2 + 10)
+        self.assertAlmostEqual(t["replayed_s"], 104.5)
+
+    def test_preheated_hotend(self):
+        text = MARLIN + "M104 S215\nG4 S200\nM109 S215\n"
+        # At the target: without residency the wait ends at once.
+        t = timed(text, heating_rate=2.0, residency=0.0)
+        self.assertEqual(t["heating_wait_s"], 0.0)
+        self.assertAlmostEqual(t["replayed_s"], 200.0)
+        # Marlin with residency, already inside TEMP_WINDOW on its first pass: the
+        # timer starts R/3 in the future, and current Marlin's unsigned PENDING
+        # ends the wait at once.
+        t = timed(text, heating_rate=2.0)
+        self.assertEqual(t["heating_wait_s"], 0.0)
+        # RepRapFirmware: within the tolerance, no wait.
+        t = timed(RRF + "G10 P0 S215 R150\nT0\nG4 S200\nM116 P0\n", heating_rate=2.0)
+        self.assertEqual(t["heating_wait_s"], 0.0)
+
+    def test_m109_s_does_not_wait_for_cooling_but_r_does(self):
+        t = timed(MARLIN + "M109 S215\nM109 S200\n", heating_rate=2.0)
+        self.assertAlmostEqual(t["heating_wait_s"], 104.5)
+        t = timed(MARLIN + "M109 S215\nM109 R200\n", heating_rate=2.0, cooling_rate=1.0)
+        # cools from 215 to TEMP_WINDOW above 200 at 1 degC/s, then the residency
+        self.assertAlmostEqual(t["heating_wait_s"], 104.5 + (215 - 201) / 1 + 10)
+
+    def test_target_change_is_stamped_with_the_moves_before_it(self):
+        move = "G92 X0 Y0 Z0\nG1 X100 F6000\n"
+        self.assertAlmostEqual(timed(MARLIN + move, heating_rate=2.0)["replayed_s"], MOVE_S)
+        # Set before the move, the hotend heats during it: the total is the wait alone.
+        t = timed(MARLIN + "G92 X0 Y0 Z0\nM104 S215\nG1 X100 F6000\nM109 S215\n", heating_rate=2.0)
+        self.assertAlmostEqual(t["replayed_s"], 104.5)
+        self.assertAlmostEqual(t["heating_wait_s"], 104.5 - MOVE_S)
+        # Set after it, nothing heats during the move.
+        t = timed(MARLIN + move + "M104 S215\nM109 S215\n", heating_rate=2.0)
+        self.assertAlmostEqual(t["replayed_s"], MOVE_S + 104.5)
+
+    def test_marlin_bed(self):
+        t = timed(MARLIN + "M140 S60\nM190 S60\n", heating_rate=2.0)
+        self.assertAlmostEqual(t["heating_wait_s"], (60 - 1 - 25) / 0.5 + 10)
+        t = timed(MARLIN + "M190 S60\n", heating_rate=2.0, bed_heating_rate=1.0, bed_residency=0.0)
+        self.assertAlmostEqual(t["heating_wait_s"], 60 - 25)
+        # M190 with neither S nor R sets nothing and does not wait.
+        self.assertEqual(timed(MARLIN + "M140 S60\nM190\n", heating_rate=2.0)["heating_wait_s"], 0.0)
+
+    def test_rrf_m116_tools_standby_and_tolerance(self):
+        setup = RRF + "G10 P0 S215 R150\nG10 P1 S220 R150\nT0\n"
+        t = timed(setup + "M116 P0\n", heating_rate=2.0)
+        self.assertAlmostEqual(t["heating_wait_s"], (215 - 2 - 25) / 2)  # 2 degC tolerance, no residency
+        t = timed(setup + "M116 P0 S5\n", heating_rate=2.0)
+        self.assertAlmostEqual(t["heating_wait_s"], (215 - 5 - 25) / 2)
+        t = timed(setup + "M116 P0\nT1\nM116 P1\nT0\nM116 P0\n", heating_rate=2.0)
+        # T1 heats from ambient; meanwhile T0 cools to its standby 150 degC and stays there.
+        w1 = (220 - 2 - 25) / 2
+        self.assertGreater(w1, (215 - 150) / 1.0)
+        self.assertEqual([w["line"] for w in t["heating_waits"]], [5, 7, 9])
+        self.assertAlmostEqual(t["heating_waits"][1]["wait_s"], w1)
+        self.assertAlmostEqual(t["heating_waits"][2]["wait_s"], (215 - 2 - 150) / 2)
+        # M116 alone waits for every heater, the bed included.
+        t = timed(RRF + "M140 S90\nG10 P0 S215 R150\nT0\nM116\n", heating_rate=2.0)
+        self.assertAlmostEqual(t["heating_wait_s"], (90 - 2 - 25) / 0.5)
+
+    def test_tool_changes(self):
+        t = timed(MARLIN + "T0\nT1\nT0\n", tool_change_time=5.0)
+        self.assertEqual(t["tool_change_s"], 10.0)
+        self.assertAlmostEqual(t["replayed_s"], 10.0)
+        self.assertEqual(t["dwell_s"], 0.0)
+        # Not T-1, not the same tool again, not the first selection after none.
+        t = timed(RRF + "T0\nT0\nT1\nT-1\nT1\n", tool_change_time=5.0)
+        self.assertEqual(t["tool_change_s"], 5.0)
+        # A mixing head's tools are mixes of one nozzle.
+        mix = MARLIN + "M163 S0 P0.5\nM163 S1 P0.5\nM164 S1\nT0\nT1\nT0\n"
+        self.assertEqual(timed(mix, tool_change_time=5.0)["tool_change_s"], 0.0)
+
+    def test_tool_change_comes_before_rrf_heats_the_new_tool(self):
+        text = RRF + "G10 P0 S215 R150\nG10 P1 S215 R150\nT0\nM116\nT1\nM116 P1\n"
+        t = timed(text, heating_rate=2.0, tool_change_time=5.0)
+        self.assertAlmostEqual(t["heating_wait_s"], 2 * (215 - 2 - 25) / 2)
+        self.assertAlmostEqual(t["replayed_s"], 2 * 94 + 5)
+
+    def test_off_without_a_heating_rate(self):
+        text = box_gcode(footer_time=False)
+        off = timed(text)
+        self.assertEqual(off["heating_wait_s"], 0.0)
+        self.assertEqual(off["tool_change_s"], 0.0)
+        self.assertIsNone(off["heating_model"])
+        self.assertEqual(timed(MARLIN + "M104 S215\nM109 S215\nM190 S60\n")["replayed_s"], 0.0)
+        on = timed(text, heating_rate=2.0)
+        # M190 S60 from ambient, then M109 S210: the hotend had no target before it.
+        self.assertAlmostEqual(on["heating_wait_s"], ((60 - 1 - 25) / 0.5 + 10) + ((210 - 1 - 25) / 2 + 10))
+        self.assertAlmostEqual(on["replayed_s"] - on["heating_wait_s"], off["replayed_s"])
+
+    def test_multi_motion_times_tool_changes_and_waits(self):
+        # The prologue's M116 P0 (94 s) starts the fork; stream 1 then heats T1
+        # from ambient (94 s) and changes to T2 (5 s). Details: test_multi_motion.
+        text = (RRF + "G10 P0 S215 R150\nG10 P1 S215 R150\nT0\nM116 P0\nM606 S1\nM596 P1\nM83\n"
+                "T1\nM116 P1\nT2\nM598\n")
+        rep = run_checks(text, heating_rate=2.0, tool_change_time=5.0)
+        self.assertEqual(rep["mode"], "multi-motion")
+        self.assertAlmostEqual(rep["time"]["heating_wait_s"], 2 * (215 - 2 - 25) / 2)
+        self.assertEqual(rep["time"]["tool_change_s"], 5.0)
+        self.assertAlmostEqual(rep["time"]["replayed_s"], 94 + 94 + 5)
+        self.assertEqual([(w["system"], w["line"]) for w in rep["time"]["heating_waits"]], [(0, 5), (1, 10)])
+        self.assertFalse(any("not modelled" in w for w in rep["warnings"]))
+
+    def test_cli_options(self):
+        _, o, _ = gr.parse_args(["f.gcode", "--heating-rate", "2", "--cooling-rate", "0.8",
+                                 "--bed-heating-rate", "0.4", "--residency", "5", "--bed-residency", "7",
+                                 "--ambient", "20", "--tool-change-time", "3"])
+        self.assertEqual((o.heating_rate, o.cooling_rate, o.bed_heating_rate, o.residency, o.bed_residency,
+                          o.ambient, o.tool_change_time), (2.0, 0.8, 0.4, 5.0, 7.0, 20.0, 3.0))
+        _, o, _ = gr.parse_args(["f.gcode"])
+        self.assertIsNone(o.heating_rate)
+        self.assertEqual(o.tool_change_time, 0.0)
+        with redirect_stderr(io.StringIO()) as err:
+            self.assertEqual(gr.main(["f.gcode", "--residency", "5"]), 2)  # the model is off
+            self.assertEqual(gr.main(["f.gcode", "--heating-rate", "0"]), 2)
+            self.assertEqual(gr.main(["f.gcode", "--tool-change-time", "-1"]), 2)
+        self.assertIn("--heating-rate", err.getvalue())
+        with tempfile.TemporaryDirectory() as tmp:
+            path = os.path.join(tmp, "heat.gcode")
+            with open(path, "w") as fh:
+                fh.write(MARLIN + "M104 S215\nM109 S215\nT0\nT1\n; estimated printing time: 108.5 s\n")
+            out = io.StringIO()
+            with redirect_stdout(out):
+                rc = gr.main([path, "--heating-rate", "2", "--tool-change-time", "4",
+                              "--json", os.path.join(tmp, "r.json")])
+            self.assertEqual(rc, 0, out.getvalue())
+            self.assertIn("heating waits 104, tool changes 4)", out.getvalue())
+            with open(os.path.join(tmp, "r.json")) as fh:
+                rep = json.load(fh)
+            self.assertEqual(rep["time"]["heating_wait_s"], 104.5)
+            self.assertEqual(rep["time"]["tool_change_s"], 4.0)
+
+
 class Parsing(unittest.TestCase):
     def test_glued_words_comments_and_checksums(self):
         text = HOT + "G1X20Y10E0.5F1200 ; a comment\nN12 G1 X30 Y10 E1.0*57\n"

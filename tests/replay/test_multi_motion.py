@@ -392,6 +392,161 @@ class Heating(unittest.TestCase):
         self.assertTrue(any("T1 selected while motion system 1 holds it" in m for m in messages(rep, "streams")))
 
 
+# A prologue that heats the bed (M140 ... M190) while it dwells and moves, then
+# forks; each stream selects its tool and waits for it (M116 P<n>) on its own.
+HEAT_PROLOGUE = """; flavor: rrf
+; motion system 0: X axis X, Y axis Y, Z axis Z, envelope 5 mm, home X 0 Y 0
+; motion system 1: X axis U, Y axis V, Z axis Z, envelope 5 mm, home X 300 Y 300
+G21
+G90
+M83
+M204 P1000 T2000
+G92 X0 Y0 Z0
+M140 S65
+G4 S10
+G1 X100 Y0 F6000
+M190 S65
+G10 P0 S215 R150
+G10 P1 S215 R150
+G4 S2
+"""
+HEAT_FORK = """M606 S1
+M596 P0
+T0
+M116 P0
+M596 P1
+M83
+T1
+M116 P1
+M598
+"""
+# Lines of the waits above: M190 S65, M116 P0, M116 P1.
+BED_WAIT_LINE, WAIT0_LINE, WAIT1_LINE = 12, 19, 23
+# From ambient (25 degC) at 2 degC/s to M116's 2 degC below 215 degC.
+TOOL_WAIT = (215 - 2 - 25) / 2
+# ... where the wait leaves the tool: a raise to 240 degC then waits this long.
+RAISE_WAIT = (240 - 2 - 213) / 2
+
+
+def heated(body: str = "", **kw) -> dict:
+    """The report of the heated two-stream job with ``body`` after its first M598."""
+    kw.setdefault("heating_rate", 2.0)
+    return run(HEAT_PROLOGUE + HEAT_FORK + body + "M598\n", **kw)
+
+
+class HeatingWaits(unittest.TestCase):
+    """The heating model (``--heating-rate``) across the fork and in each stream."""
+
+    def test_prologue_is_timed_as_a_single_stream_file(self):
+        single = gr.analyse(HEAT_PROLOGUE, gr.Options(heating_rate=2.0))
+        self.assertEqual(single["mode"], "single")
+        prologue_s = single["time"]["replayed_s"]
+        # The bed heats during the dwell and the move: at 0.5 degC/s to 1 degC below 65
+        # it needs 78 s from 25 degC, and M190 waits for what is left; 2 s of dwell after.
+        self.assertAlmostEqual(prologue_s, 78 + 2)
+        self.assertLess(single["time"]["heating_waits"][0]["wait_s"], 78 - 10 - 0.5)
+        rep = heated()
+        t = rep["time"]
+        first = t["heating_waits"][0]
+        self.assertEqual((first["system"], first["line"]), (0, BED_WAIT_LINE))
+        self.assertAlmostEqual(first["wait_s"], single["time"]["heating_waits"][0]["wait_s"])
+        self.assertAlmostEqual(first["time_s"], 78 - first["wait_s"])
+        # Both streams start at the end of the prologue and heat their tools from ambient.
+        later = [(w["system"], w["line"]) for w in t["heating_waits"][1:]]
+        self.assertEqual(later, [(0, WAIT0_LINE), (1, WAIT1_LINE)])
+        for w in t["heating_waits"][1:]:
+            self.assertAlmostEqual(w["time_s"], prologue_s)
+            self.assertAlmostEqual(w["wait_s"], TOOL_WAIT)
+        self.assertAlmostEqual(t["replayed_s"], prologue_s + TOOL_WAIT)
+        self.assertAlmostEqual(t["heating_wait_s"], first["wait_s"] + 2 * TOOL_WAIT)
+        rows = rep["streams"]
+        self.assertAlmostEqual(rows[0]["heating_wait_s"], first["wait_s"] + TOOL_WAIT)
+        self.assertAlmostEqual(rows[1]["heating_wait_s"], TOOL_WAIT)
+        self.assertIsNotNone(t["heating_model"])
+        self.assertEqual(t["heating_model"]["heating_rate"], 2.0)
+        self.assertEqual(status(rep, "heating"), "pass")
+        self.assertFalse(any("not modelled" in w for w in rep["warnings"]), rep["warnings"])
+        self.assertIn(f"heating waits {t['heating_wait_s']:.1f} s", mmod.summary_multi(rep))
+
+    def test_the_tracks_stand_still_while_waiting(self):
+        mm = mmod.MultiReplay(gr.Options(heating_rate=2.0), HEAT_PROLOGUE + HEAT_FORK)
+        mm.run(HEAT_PROLOGUE + HEAT_FORK)
+        tl = mmod.build_timeline(mm)
+        for s, tr in enumerate(tl["tracks"]):
+            self.assertAlmostEqual(tr.t1[-1], tl["build_s"])
+            self.assertTrue(np.allclose(tr.t0[1:], tr.t1[:-1]))  # contiguous
+            heat = tr.kind == 3
+            self.assertAlmostEqual(float((tr.t1 - tr.t0)[heat].sum()), tl["streams"][s]["heating_wait_s"])
+            self.assertEqual(int(tr.line[heat][-1]), (WAIT0_LINE, WAIT1_LINE)[s])
+
+    def test_a_wait_in_one_stream_delays_the_barrier(self):
+        base = heated()["time"]["replayed_s"]
+        # Stream 1 raises its tool to 240 degC and waits 12.5 s; stream 0 travels 100 mm
+        # meanwhile and then waits at the M598 for stream 1.
+        body = "M596 P0\nG1 X200 Y0 F6000\nM596 P1\nG10 P1 S240\nM116 P1\nM598\nM596 P0\nG4 S1\n"
+        rep = heated(body)
+        t = rep["time"]
+        self.assertEqual([(w["system"], w["line"]) for w in t["heating_waits"]][-1], (1, 29))
+        self.assertAlmostEqual(t["heating_waits"][-1]["wait_s"], RAISE_WAIT)
+        self.assertAlmostEqual(t["heating_waits"][-1]["time_s"], base)
+        self.assertAlmostEqual(t["replayed_s"], base + RAISE_WAIT + 1.0)
+        # stream 0's travels: 100 mm in the prologue and 100 mm here, from rest to rest
+        travel = rep["streams"][0]["by_kind_s"]["travel"] / 2
+        self.assertGreater(travel, 0.5)
+        self.assertAlmostEqual(rep["streams"][0]["longest_wait_s"], RAISE_WAIT - travel)
+        # Without the model the streams wait for nothing: the dwells and the travels.
+        off = heated(body, heating_rate=None)["time"]
+        self.assertAlmostEqual(off["replayed_s"], 10 + travel + 2 + travel + 1.0)
+
+    def test_each_stream_heats_with_its_own_commands(self):
+        # Stream 0 raises T0 and waits for it; stream 1 only waits for T1, which is at its
+        # target: stream 0's raise does not lengthen stream 1's wait.
+        body = "M596 P0\nG10 P0 S240\nM116 P0\nM596 P1\nM116 P1\n"
+        rep = heated(body)
+        late = [w for w in rep["time"]["heating_waits"] if w["line"] > 24]
+        self.assertEqual([(w["system"], w["line"]) for w in late], [(0, 27)])
+        self.assertAlmostEqual(late[0]["wait_s"], RAISE_WAIT)
+        self.assertAlmostEqual(rep["time"]["replayed_s"], 80 + TOOL_WAIT + RAISE_WAIT)
+        self.assertFalse(any("not modelled" in w for w in rep["warnings"]), rep["warnings"])
+
+    def test_heater_of_both_streams_warns_and_waits_on_the_waiting_stream(self):
+        # The bed (65 degC since the prologue): stream 1 raises it to 80 and waits,
+        # stream 0 switches it off meanwhile. Stream 1's wait sees its own target only.
+        body = "M596 P0\nG4 S5\nM140 S0\nM596 P1\nG4 S3\nM190 S80\n"
+        rep = heated(body)
+        t = rep["time"]
+        bed = t["heating_waits"][-1]
+        self.assertEqual((bed["system"], bed["line"]), (1, 30))
+        self.assertAlmostEqual(bed["wait_s"], (80 - 1 - 65) / 0.5)
+        self.assertAlmostEqual(bed["time_s"], 80 + TOOL_WAIT + 3)
+        self.assertAlmostEqual(t["replayed_s"], 80 + TOOL_WAIT + 3 + bed["wait_s"])
+        warn = [w for w in rep["warnings"] if "not modelled" in w]
+        self.assertEqual(len(warn), 1, rep["warnings"])
+        self.assertIn("the bed", warn[0])
+        self.assertIn("motion system 0 (line 27) and motion system 1 (line 30)", warn[0])
+
+    def test_tool_changes_and_waits_in_a_stream(self):
+        # Stream 1 changes from T1 to T2 (5 s, then T2 heats from ambient) and waits.
+        body = "M596 P1\nG10 P2 S200 R150\nT2\nM116 P2\n"
+        rep = heated(body, tool_change_time=5.0)
+        t = rep["time"]
+        self.assertEqual(t["tool_change_s"], 5.0)
+        self.assertAlmostEqual(t["heating_waits"][-1]["wait_s"], (200 - 2 - 25) / 2)
+        self.assertAlmostEqual(t["heating_waits"][-1]["time_s"], 80 + TOOL_WAIT + 5.0)
+        self.assertAlmostEqual(t["replayed_s"], 80 + TOOL_WAIT + 5.0 + (200 - 2 - 25) / 2)
+
+    def test_off_without_a_heating_rate(self):
+        rep = heated(heating_rate=None)
+        t = rep["time"]
+        self.assertEqual(t["heating_wait_s"], 0.0)
+        self.assertEqual(t["heating_waits"], [])
+        self.assertIsNone(t["heating_model"])
+        self.assertAlmostEqual(t["replayed_s"], 10 + 2 + rep["streams"][0]["by_kind_s"]["travel"])
+        mm = mmod.MultiReplay(gr.Options(), HEAT_PROLOGUE + HEAT_FORK)
+        mm.run(HEAT_PROLOGUE + HEAT_FORK)
+        self.assertFalse(any(e[0] == "h" for st in mm.streams for e in st.events))
+
+
 class FirmwareRules(unittest.TestCase):
     def test_unforked_job_fails(self):
         header = HEADER.format(r0=5, r1=5, t0=210, t1=210).replace("M606 S1\n", "")

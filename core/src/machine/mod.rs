@@ -67,6 +67,14 @@ pub struct Machine {
     pub wipe_tower: Option<WipeTower>,
     /// What a mixing head purges after a mix change; `Some` exactly for mixing flavours.
     pub mixer: Option<Mixer>,
+    /// How fast the heaters heat and cool, and how long the firmware lets them settle:
+    /// what a wait for a temperature costs.
+    #[serde(default)]
+    pub heating: Heating,
+    /// What a tool change takes besides the moves the file writes for it (s): the
+    /// firmware's own parking and pick-up.
+    #[serde(default)]
+    pub tool_change_time: f64,
     pub gcode: Templates,
     /// Where the profile came from, for messages.
     #[serde(skip)]
@@ -362,10 +370,53 @@ pub struct WipeTower {
     pub purge_volume: f64,
 }
 
+/// The heaters' physics, for the time a wait takes. The rates are those of the
+/// temperature range a print moves in (standby to printing), where heaters run at full
+/// power and cool by convection and the part fan.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct Heating {
+    /// °C/s a nozzle heats.
+    pub nozzle_rate: f64,
+    /// °C/s a nozzle cools.
+    pub nozzle_cooling: f64,
+    /// °C/s the bed heats.
+    pub bed_rate: f64,
+    /// Seconds the firmware keeps waiting once a nozzle is at temperature (Marlin's
+    /// `TEMP_RESIDENCY_TIME`; RepRapFirmware's `M116` has none).
+    pub residency: f64,
+    /// The same for the bed (Marlin's `TEMP_BED_RESIDENCY_TIME`).
+    pub bed_residency: f64,
+}
+
+impl Heating {
+    /// Typical of a 40 W cartridge hotend and a 24 V bed, with the firmware's own
+    /// residency defaults.
+    pub fn typical(firmware: Firmware) -> Self {
+        let residency = match firmware {
+            Firmware::Marlin => 10.0,
+            Firmware::RepRapFirmware => 0.0,
+        };
+        Self {
+            nozzle_rate: 2.0,
+            nozzle_cooling: 1.0,
+            bed_rate: 0.5,
+            residency,
+            bed_residency: residency,
+        }
+    }
+}
+
+impl Default for Heating {
+    fn default() -> Self {
+        Self::typical(Firmware::Marlin)
+    }
+}
+
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct Mixer {
-    /// Volume that leaves the nozzle after a mix change before the new mix is pure
-    /// (mm³): it is purged before the next sub-region.
+    /// Volume that leaves the nozzle after a mix change before 95 % of what comes out
+    /// is the new mix (mm³): the transition, which the part's next beads take where
+    /// their design allows it and the wipe tower takes otherwise.
     pub transition_volume: f64,
     /// Share of the mix (half the sum of the channels' differences, 0..1) below which
     /// a change between beads is blended in place rather than purged: a graded part

@@ -36,7 +36,19 @@ pub(crate) struct RawMachine {
     pub prime_line: Option<Switch<RawPrimeLine>>,
     pub wipe_tower: Option<Switch<RawWipeTower>>,
     pub mixer: Option<RawMixer>,
+    pub heating: Option<RawHeating>,
+    pub tool_change_time: Option<f64>,
     pub gcode: Option<RawTemplates>,
+}
+
+#[derive(Debug, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(crate) struct RawHeating {
+    pub nozzle_rate: Option<f64>,
+    pub nozzle_cooling: Option<f64>,
+    pub bed_rate: Option<f64>,
+    pub residency: Option<f64>,
+    pub bed_residency: Option<f64>,
 }
 
 #[derive(Debug, Default, Deserialize)]

@@ -373,6 +373,37 @@ pub(super) fn validate(raw: RawMachine, c: &Check<'_>) -> Result<Machine> {
         (false, None) => None,
     };
 
+    let typical = Heating::typical(firmware);
+    let raw_heating = raw.heating.unwrap_or_default();
+    let rate = |v: Option<f64>, d: f64, key: &str| c.within(v.unwrap_or(d), 0.01, 100.0, key, "°C/s");
+    let wait = |v: Option<f64>, d: f64, key: &str| c.within(v.unwrap_or(d), 0.0, 600.0, key, "s");
+    let heating = Heating {
+        nozzle_rate: rate(
+            raw_heating.nozzle_rate,
+            typical.nozzle_rate,
+            "heating.nozzle_rate",
+        )?,
+        nozzle_cooling: rate(
+            raw_heating.nozzle_cooling,
+            typical.nozzle_cooling,
+            "heating.nozzle_cooling",
+        )?,
+        bed_rate: rate(raw_heating.bed_rate, typical.bed_rate, "heating.bed_rate")?,
+        residency: wait(raw_heating.residency, typical.residency, "heating.residency")?,
+        bed_residency: wait(
+            raw_heating.bed_residency,
+            typical.bed_residency,
+            "heating.bed_residency",
+        )?,
+    };
+    let tool_change_time = c.within(
+        raw.tool_change_time.unwrap_or(0.0),
+        0.0,
+        600.0,
+        "tool_change_time",
+        "s",
+    )?;
+
     let raw_gcode = raw.gcode.unwrap_or_default();
     let n = tools.len();
     let gcode = Templates {
@@ -411,6 +442,8 @@ pub(super) fn validate(raw: RawMachine, c: &Check<'_>) -> Result<Machine> {
         prime_line,
         wipe_tower,
         mixer,
+        heating,
+        tool_change_time,
         gcode,
         origin: MachineOrigin::default(),
     })

@@ -6,7 +6,7 @@
 //! that it heats and selects a tool before extruding with it whatever a template did,
 //! and so that the time estimate is that of the file itself.
 
-use lamina_core::machine::{Firmware as Dialect, Flavor};
+use lamina_core::machine::{Firmware as Dialect, Flavor, Heating};
 
 use crate::motion::{Corner, Limits, Planner};
 
@@ -14,23 +14,98 @@ use crate::motion::{Corner, Limits, Planner};
 pub const EXTRUDE_MIN_TEMPERATURE: f64 = 170.0;
 /// Within this of a target, a heater counts as at temperature (°C), as M109 does.
 const TEMPERATURE_WINDOW: f64 = 1.0;
+/// RepRapFirmware's `M116` default tolerance (°C).
+const M116_TOLERANCE: f64 = 2.0;
+/// Where every heater starts (°C).
+const AMBIENT: f64 = 25.0;
 
-/// One heater: its target and how hot it is known to be (the last target waited for,
-/// lowered when the target drops, since the heater cools).
-#[derive(Debug, Clone, Copy, Default, PartialEq)]
+/// One heater: its target, how hot it is known to be for the firmware's checks (the
+/// last target waited for, lowered when the target drops, since the heater cools), and
+/// its temperature as the time model follows it: `temperature` at `at` seconds, moving
+/// toward the target at the heater's rates.
+#[derive(Debug, Clone, Copy, PartialEq)]
 struct Heater {
     target: f64,
     reached: f64,
+    temperature: f64,
+    at: f64,
+    /// °C/s up and down.
+    heat: f64,
+    cool: f64,
 }
 
 impl Heater {
-    fn set(&mut self, t: f64) {
+    fn new(heat: f64, cool: f64) -> Self {
+        Self {
+            target: 0.0,
+            reached: 0.0,
+            temperature: AMBIENT,
+            at: 0.0,
+            heat,
+            cool,
+        }
+    }
+
+    /// The temperature at `now` (s).
+    fn temperature_at(&self, now: f64) -> f64 {
+        let dt = (now - self.at).max(0.0);
+        let goal = self.target.max(AMBIENT);
+        if self.temperature < goal {
+            (self.temperature + self.heat * dt).min(goal)
+        } else {
+            (self.temperature - self.cool * dt).max(goal)
+        }
+    }
+
+    fn set(&mut self, t: f64, now: f64) {
+        self.temperature = self.temperature_at(now);
+        self.at = now;
         self.target = t;
         self.reached = self.reached.min(t);
     }
 
-    fn wait(&mut self) {
+    /// How long a wait at `now` takes until the heater is within `window` of its target
+    /// (heating only, or both ways), plus `residency` once it had to move. A heater
+    /// already within the window waits no time: current Marlin starts the residency
+    /// timer in the future on the first pass of its wait, and its unsigned
+    /// `PENDING(now, start, interval)` then ends the wait at once.
+    fn wait_time(&self, now: f64, window: f64, both_ways: bool, residency: f64) -> f64 {
+        let t = self.temperature_at(now);
+        let goal = self.target.max(AMBIENT);
+        if t < goal - window {
+            (goal - window - t) / self.heat + residency
+        } else if both_ways && t > goal + window {
+            (t - goal - window) / self.cool + residency
+        } else {
+            0.0
+        }
+    }
+
+    /// The wait is over at `now` (the dwell it took already counted): a heater that
+    /// had to heat is at its target, one that is hotter goes on cooling.
+    fn wait(&mut self, now: f64) {
+        self.temperature = self.temperature_at(now);
+        self.at = now;
         self.reached = self.target;
+    }
+}
+
+/// What the time model needs of the heaters and tool changes.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Thermal {
+    pub heating: Heating,
+    /// Seconds a tool change takes besides its moves.
+    pub tool_change_time: f64,
+}
+
+impl Thermal {
+    /// Typical heaters of `dialect`'s firmware and tool changes that take no time of
+    /// their own.
+    pub fn typical(dialect: Dialect) -> Self {
+        Self {
+            heating: Heating::typical(dialect),
+            tool_change_time: 0.0,
+        }
     }
 }
 
@@ -58,6 +133,10 @@ pub struct Firmware {
     heaters: Vec<Heater>,
     rrf: Vec<RrfTemperatures>,
     bed: Heater,
+    thermal: Thermal,
+    /// Seconds spent waiting for heaters, and changing tools.
+    heating_wait: f64,
+    tool_changes: f64,
     /// Part-cooling fan, 0 to 1.
     fan: f64,
     homed: bool,
@@ -69,8 +148,9 @@ pub struct Firmware {
 }
 
 impl Firmware {
-    pub fn new(dialect: Dialect, flavor: Flavor, tools: usize, limits: Limits) -> Self {
+    pub fn new(dialect: Dialect, flavor: Flavor, tools: usize, limits: Limits, thermal: Thermal) -> Self {
         let heaters = if flavor.is_mixing() { 1 } else { tools.max(1) };
+        let h = thermal.heating;
         Self {
             dialect,
             mixing: flavor.is_mixing(),
@@ -79,9 +159,12 @@ impl Firmware {
             absolute_e: true,
             feed: 3000.0,
             tool: None,
-            heaters: vec![Heater::default(); heaters],
+            heaters: vec![Heater::new(h.nozzle_rate, h.nozzle_cooling); heaters],
             rrf: vec![RrfTemperatures::default(); heaters],
-            bed: Heater::default(),
+            bed: Heater::new(h.bed_rate, h.nozzle_cooling),
+            thermal,
+            heating_wait: 0.0,
+            tool_changes: 0.0,
             fan: 0.0,
             homed: false,
             planner: Planner::new(limits),
@@ -179,33 +262,62 @@ impl Firmware {
                     if self.dialect == Dialect::RepRapFirmware {
                         self.rrf[h].active = t;
                     }
-                    self.heaters[h].set(t);
+                    let now = self.planner.elapsed();
+                    self.heaters[h].set(t, now);
                     if command == "M109" {
-                        self.planner.stop();
-                        self.heaters[h].wait();
+                        // `S` waits only to heat, `R` either way; Marlin lets the
+                        // heater settle once it had to move.
+                        let both = get('R').is_some();
+                        let residency = self.thermal.heating.residency;
+                        self.wait_for(|f, now| {
+                            f.heaters[h].wait_time(now, TEMPERATURE_WINDOW, both, residency)
+                        });
+                        let now = self.planner.elapsed();
+                        self.heaters[h].wait(now);
                     }
                 }
             }
             "M116" => {
-                self.planner.stop();
-                match get('P').map(|p| p as usize) {
-                    Some(p) if p < self.heaters.len() => self.heaters[p].wait(),
-                    Some(_) => {}
-                    None => {
-                        for h in &mut self.heaters {
-                            h.wait();
-                        }
-                        self.bed.wait();
-                    }
+                let tolerance = get('S').unwrap_or(M116_TOLERANCE);
+                let residency = self.thermal.heating.residency;
+                let which: Vec<usize> = match get('P').map(|p| p as usize) {
+                    Some(p) if p < self.heaters.len() => vec![p],
+                    Some(_) => Vec::new(),
+                    None => (0..self.heaters.len()).collect(),
+                };
+                let bed = get('P').is_none();
+                let bed_residency = self.thermal.heating.bed_residency;
+                self.wait_for(|f, now| {
+                    let nozzles = which
+                        .iter()
+                        .map(|&h| f.heaters[h].wait_time(now, tolerance, true, residency))
+                        .fold(0.0, f64::max);
+                    let bed = if bed {
+                        f.bed.wait_time(now, tolerance, true, bed_residency)
+                    } else {
+                        0.0
+                    };
+                    nozzles.max(bed)
+                });
+                let now = self.planner.elapsed();
+                for h in which {
+                    self.heaters[h].wait(now);
+                }
+                if bed {
+                    self.bed.wait(now);
                 }
             }
             "M140" | "M190" => {
                 if let Some(t) = get('S').or(get('R')) {
-                    self.bed.set(t);
+                    let now = self.planner.elapsed();
+                    self.bed.set(t, now);
                 }
                 if command == "M190" {
-                    self.planner.stop();
-                    self.bed.wait();
+                    let both = get('R').is_some();
+                    let residency = self.thermal.heating.bed_residency;
+                    self.wait_for(|f, now| f.bed.wait_time(now, TEMPERATURE_WINDOW, both, residency));
+                    let now = self.planner.elapsed();
+                    self.bed.wait(now);
                 }
             }
             "M106" => {
@@ -269,6 +381,14 @@ impl Firmware {
         (h < self.heaters.len()).then_some(h)
     }
 
+    /// The machine stops and waits as long as `how_long` says at that moment.
+    fn wait_for(&mut self, how_long: impl Fn(&Self, f64) -> f64) {
+        self.planner.stop();
+        let seconds = how_long(self, self.planner.elapsed());
+        self.planner.dwell(seconds);
+        self.heating_wait += seconds;
+    }
+
     fn select(&mut self, tool: Option<i64>) {
         self.planner.stop();
         let previous = self.tool;
@@ -276,6 +396,12 @@ impl Firmware {
             Some(t) if t >= 0 && (self.mixing || (t as usize) < self.heaters.len()) => Some(t as usize),
             _ => None,
         };
+        // The firmware parks one tool and picks up the next: time of its own (the
+        // first selection finds the machine with no tool to park, and is not counted).
+        if previous.is_some() && self.tool.is_some() && self.tool != previous && !self.mixing {
+            self.planner.dwell(self.thermal.tool_change_time);
+            self.tool_changes += self.thermal.tool_change_time;
+        }
         if self.dialect == Dialect::RepRapFirmware {
             if self.mixing {
                 self.rrf_heater_follows(0);
@@ -297,7 +423,8 @@ impl Firmware {
         if self.mixing {
             if self.tool.is_some() {
                 let active = self.rrf[0].active;
-                self.heaters[0].set(active);
+                let now = self.planner.elapsed();
+                self.heaters[0].set(active, now);
             }
             return;
         }
@@ -309,7 +436,8 @@ impl Firmware {
         } else {
             0.0
         };
-        self.heaters[t].set(target);
+        let now = self.planner.elapsed();
+        self.heaters[t].set(target, now);
     }
 
     fn motion_setting(&mut self, command: &str, get: &dyn Fn(char) -> Option<f64>) {
@@ -367,6 +495,25 @@ impl Firmware {
             _ => {}
         }
         self.planner.set_limits(l);
+    }
+
+    /// Seconds the file waits for heaters, and spends changing tools besides its moves.
+    pub fn waits(&self) -> (f64, f64) {
+        (self.heating_wait, self.tool_changes)
+    }
+
+    /// The temperature tool `t`'s heater has `seconds` from now, as the time model
+    /// follows it (the moves written so far at their cruise speed).
+    pub fn temperature_in(&self, t: usize, seconds: f64) -> f64 {
+        let h = if self.mixing { 0 } else { t };
+        self.heaters
+            .get(h)
+            .map_or(AMBIENT, |h| h.temperature_at(self.planner.elapsed() + seconds))
+    }
+
+    /// The model's heating rate of a nozzle (°C/s).
+    pub fn nozzle_rate(&self) -> f64 {
+        self.thermal.heating.nozzle_rate
     }
 
     /// The selected tool (the virtual tool of a mixing head).
@@ -461,7 +608,13 @@ mod tests {
 
     #[test]
     fn marlin_heats_per_tool_and_cools_on_standby() {
-        let mut f = Firmware::new(Dialect::Marlin, Flavor::ToolChange, 2, Limits::default());
+        let mut f = Firmware::new(
+            Dialect::Marlin,
+            Flavor::ToolChange,
+            2,
+            Limits::default(),
+            Thermal::typical(Dialect::Marlin),
+        );
         f.feed_text("M104 T1 S215\nT1\n");
         assert!(!f.is_hot(1, 215.0), "set but not waited for");
         f.feed_line("M109 T1 S215");
@@ -481,7 +634,13 @@ mod tests {
 
     #[test]
     fn reprapfirmware_tools_go_to_standby_when_deselected() {
-        let mut f = Firmware::new(Dialect::RepRapFirmware, Flavor::ToolChange, 2, Limits::default());
+        let mut f = Firmware::new(
+            Dialect::RepRapFirmware,
+            Flavor::ToolChange,
+            2,
+            Limits::default(),
+            Thermal::typical(Dialect::RepRapFirmware),
+        );
         f.feed_text("G10 P0 S210 R160\nG10 P1 S215 R160\nT0\nM116 P0\n");
         assert!(f.is_hot(0, 210.0));
         assert_eq!(f.target(1), 0.0, "never used: off");
@@ -500,6 +659,7 @@ mod tests {
             Flavor::ReprapMixing,
             2,
             Limits::default(),
+            Thermal::typical(Dialect::RepRapFirmware),
         );
         f.feed_text(
             "G90\nM83\nG1 X10 Y10 F6000\nG91\nG1 X5\nG90\nG92 E0\nM566 X600 Y600 Z24 E300\nM204 P800 T2000\n",
@@ -509,5 +669,45 @@ mod tests {
         assert_eq!(f.limits().corner, Corner::Jerk([10.0, 10.0, 0.4, 5.0]));
         assert_eq!((f.limits().print, f.limits().travel), (800.0, 2000.0));
         assert!(f.time() > 0.0);
+    }
+
+    fn marlin(tool_change_time: f64) -> Firmware {
+        let thermal = Thermal {
+            heating: Heating::typical(Dialect::Marlin),
+            tool_change_time,
+        };
+        Firmware::new(Dialect::Marlin, Flavor::ToolChange, 2, Limits::default(), thermal)
+    }
+
+    #[test]
+    fn a_wait_takes_the_heating_and_the_residency_a_preheat_spares_it() {
+        // From ambient at 2 °C/s to within a degree of 215, then Marlin's 10 s.
+        let mut f = marlin(0.0);
+        f.feed_text("M104 T0 S215\nM109 T0 S215\n");
+        assert!((f.time() - ((215.0 - 1.0 - 25.0) / 2.0 + 10.0)).abs() < 1e-9);
+        assert!((f.waits().0 - f.time()).abs() < 1e-9);
+        // Set 200 s of dwell ahead, the heater is there when the wait comes.
+        let mut f = marlin(0.0);
+        f.feed_text("M104 T0 S215\nG4 S200\nM109 T0 S215\n");
+        assert!((f.time() - 200.0).abs() < 1e-9, "{}", f.time());
+        // Half heated: the rest of the ramp and the residency.
+        let mut f = marlin(0.0);
+        f.feed_text("M104 T0 S215\nG4 S50\nM109 T0 S215\n");
+        assert!((f.time() - (50.0 + (214.0 - 125.0) / 2.0 + 10.0)).abs() < 1e-9);
+        // M109 S does not wait for a hotter heater to cool; M109 R does.
+        let mut f = marlin(0.0);
+        f.feed_text("M109 T0 S215\nM109 T0 S200\n");
+        assert!((f.waits().0 - 104.5).abs() < 1e-9);
+        f.feed_text("M109 T0 R190\n");
+        assert!((f.waits().0 - (104.5 + (215.0 - 191.0) / 1.0 + 10.0)).abs() < 1e-9);
+    }
+
+    #[test]
+    fn a_tool_change_takes_the_machines_own_time() {
+        let mut f = marlin(5.0);
+        f.feed_text("T0\nT1\nT1\nT0\n");
+        // The first selection parks nothing; re-selecting changes nothing.
+        assert!((f.waits().1 - 10.0).abs() < 1e-9);
+        assert!((f.time() - 10.0).abs() < 1e-9);
     }
 }

@@ -32,6 +32,7 @@ pub mod layout;
 mod mix_along;
 pub mod motion;
 pub mod setup;
+mod solid;
 pub mod text;
 pub mod tower;
 pub mod transition;

@@ -230,6 +230,24 @@ impl Planner {
         }
     }
 
+    /// Seconds of the moves so far without stopping the machine: those still open to
+    /// look-ahead at their cruise speed. For what runs beside the motion, such as a
+    /// heater set by one line and waited for many moves later.
+    pub fn elapsed(&self) -> f64 {
+        self.time
+            + self
+                .window
+                .iter()
+                .map(|b| {
+                    if b.nominal > 0.0 {
+                        b.length / b.nominal
+                    } else {
+                        0.0
+                    }
+                })
+                .sum::<f64>()
+    }
+
     /// Seconds of every move so far, as if the machine stopped after the last one.
     pub fn total(&mut self) -> f64 {
         self.stop();

@@ -104,6 +104,8 @@ pub struct Setup {
     pub mix_along: bool,
     /// Where the transition after a change of tool or mix goes.
     pub purge_into: crate::transition::PurgeInto,
+    /// The heaters' rates and the tool changes' own time, for the time estimate.
+    pub thermal: crate::firmware::Thermal,
     /// The motion systems when the machine runs two at once; `None`: one head at a time.
     pub systems: Option<Vec<System>>,
     pub templates: Templates,
@@ -253,6 +255,10 @@ impl Setup {
             blend_below: m.mixer.map_or(0.0, |x| x.blend_below),
             mix_along: false,
             purge_into: crate::transition::PurgeInto::Part,
+            thermal: crate::firmware::Thermal {
+                heating: m.heating,
+                tool_change_time: m.tool_change_time,
+            },
             systems: (m.motion_systems > 1).then(|| {
                 m.tools
                     .iter()
@@ -373,6 +379,7 @@ impl Setup {
             blend_below: 0.0,
             mix_along: false,
             purge_into: crate::transition::PurgeInto::Part,
+            thermal: crate::firmware::Thermal::typical(dialect),
             systems: None,
             templates: Templates::default(),
             placed: false,

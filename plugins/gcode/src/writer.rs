@@ -37,6 +37,12 @@ const TOWER_SPEED: f64 = 40.0;
 const DEFAULT_PRINT_SPEED: f64 = 30.0;
 /// Z speed when the machine sets no Z limit (mm/s).
 const DEFAULT_Z_SPEED: f64 = 10.0;
+/// The last digit of the E words (mm of filament).
+const E_RESOLUTION: f64 = 1e-5;
+/// A segment shorter than this (mm) that feeds nothing is passed over.
+const SLIVER: f64 = 0.01;
+/// Seconds a preheated tool is at temperature before its change, to spare.
+const PREHEAT_MARGIN: f64 = 2.0;
 /// Clearance above the print when parking (mm).
 const PARK_CLEARANCE: f64 = 10.0;
 
@@ -169,6 +175,11 @@ pub struct Writer {
     head: Option<usize>,
     /// Filament pulled back, per head (mm).
     retracted: Vec<f64>,
+    /// The solid areas of the layer being written, for its travels.
+    solid: Option<crate::solid::Solid>,
+    /// RepRapFirmware heads whose standby temperature was raised to heat them ahead of
+    /// their change.
+    raised: Vec<bool>,
     /// Whether each head has extruded: a head fresh from loading has nothing to pull
     /// back.
     extruded: Vec<bool>,
@@ -219,7 +230,7 @@ impl Writer {
         path: PathBuf,
         header: &Header<'_>,
     ) -> Result<Writer> {
-        let fw = Firmware::new(s.dialect, s.flavor, s.heads.len(), s.limits);
+        let fw = Firmware::new(s.dialect, s.flavor, s.heads.len(), s.limits, s.thermal);
         let multi = s.systems.clone().map(multi::Multi::new);
         let used_heads = s.used_heads(info);
         let tower = layout.tower.map(|r| Tower::new(r, s.line_width()));
@@ -257,6 +268,8 @@ impl Writer {
         };
         let mut w = Writer {
             retracted: vec![0.0; s.heads.len()],
+            raised: vec![false; s.heads.len()],
+            solid: None,
             extruded: vec![false; s.heads.len()],
             received: None,
             nozzle: None,
@@ -621,7 +634,77 @@ impl Writer {
                 }
             }
         }
+        // A standby raised to heat the tool ahead of its change goes back down, for
+        // when the tool waits again.
+        if self.raised.get(h).copied().unwrap_or(false) {
+            self.raised[h] = false;
+            self.line(crate::commands::rrf_tool_temperatures(
+                head.index,
+                temperature,
+                head.standby_temperature,
+            ));
+        }
         Ok(())
+    }
+
+    /// Before job `k`: when the layer changes to another head later and that head,
+    /// waiting at its standby temperature, would not be at its printing temperature by
+    /// then, it starts heating now (Marlin `M104 T`, RepRapFirmware a raised standby
+    /// `G10 P R`), so that the change waits for no heater. The time left is that of the
+    /// jobs before the change at their planned speeds and the travels between them.
+    fn preheat(&mut self, jobs: &[Job<'_>], k: usize) {
+        if self.s.flavor.is_mixing() || self.s.machine.is_none() {
+            return;
+        }
+        let Some(current) = self.head else { return };
+        let Some(next) = jobs[k..].iter().position(|j| j.head != current).map(|n| k + n) else {
+            return;
+        };
+        let h = jobs[next].head;
+        let head = self.s.heads[h].clone();
+        let print = head.temperature(self.layers);
+        if self.fw.target(head.index) >= print - 0.5 {
+            return;
+        }
+        let mut left = 0.0;
+        let mut at = Point2::new(self.fw.position()[0], self.fw.position()[1]) - self.layout.offset;
+        for j in &jobs[k..next] {
+            let (Some(a), Some(b)) = (j.path.points.first(), j.path.points.last()) else {
+                continue;
+            };
+            left += (a.p - at).norm() / self.s.travel_speed;
+            left += if b.t > a.t {
+                b.t - a.t
+            } else {
+                j.path.length() / DEFAULT_PRINT_SPEED
+            };
+            at = b.p;
+        }
+        // Heating from where it will be then, with a margin for what the estimate of
+        // the moves leaves out (acceleration, retractions).
+        let rate = self.fw.nozzle_rate();
+        let then = self.fw.temperature_in(head.index, left);
+        let needed = (print - then).max(0.0) / rate;
+        if 0.8 * left > needed + PREHEAT_MARGIN {
+            return;
+        }
+        match self.s.dialect {
+            Dialect::Marlin => {
+                self.line(format!(
+                    "M104 T{} S{} ; heat ahead of its change",
+                    head.index,
+                    num(print, 0)
+                ));
+            }
+            Dialect::RepRapFirmware => {
+                self.line(format!(
+                    "G10 P{} R{} ; heat ahead of its change (standby raised)",
+                    head.index,
+                    num(print, 0)
+                ));
+                self.raised[h] = true;
+            }
+        }
     }
 
     /// Parks the head in use (retracted, at standby) and selects head `h`.
@@ -740,11 +823,27 @@ impl Writer {
         if d < 2e-4 && (z - self.z).abs() < 1e-9 {
             return;
         }
-        if d > RETRACT_MIN_TRAVEL {
-            self.retract(self.s.retraction.length);
-            self.lift();
-        }
+        // A travel over the part keeps the filament where it is: what oozes lands on
+        // the layer.
+        let over_part = || {
+            self.solid
+                .as_ref()
+                .is_some_and(|s| s.holds(Point2::new(x, y), to))
+        };
         let f = speed * 60.0;
+        if d > RETRACT_MIN_TRAVEL && !over_part() {
+            // Around what is not part, when one turn inside keeps the way short.
+            let turn = self.solid.as_ref().and_then(|s| s.detour(Point2::new(x, y), to));
+            match turn {
+                Some(w) if (z - self.z).abs() < 1e-9 => {
+                    self.line(format!("G0 X{} Y{} F{}", num(w.x, 4), num(w.y, 4), num(f, 0)));
+                }
+                _ => {
+                    self.retract(self.s.retraction.length);
+                    self.lift();
+                }
+            }
+        }
         self.line(format!("G0 X{} Y{} F{}", num(to.x, 4), num(to.y, 4), num(f, 0)));
         if (self.fw.position()[2] - self.z).abs() > 1e-9 {
             let f = self.z_feed();
@@ -801,18 +900,42 @@ impl Writer {
         let mut with_feed = (self.fw.feed() - feed).abs() > 0.5;
         // One line buffer for the whole path: a path is thousands of moves.
         let mut text = std::mem::take(&mut self.text);
+        let mut from = points[0];
         for (i, w) in points.windows(2).enumerate() {
-            let d = (w[1] - w[0]).norm();
+            let d = (w[1] - from).norm();
             if d <= 1e-9 {
                 continue;
             }
             if let Some(m) = mixes.get(i) {
                 self.set_mix(m.clone());
             }
+            // E is written to five decimals: a move that would feed less than half of
+            // the last digit extrudes nothing as written. A stretch the bead leaves
+            // empty (no width) is a move without E; a sliver of a segment is passed
+            // over, and the next move goes on from the last point written (its length,
+            // and so its filament, takes the sliver's).
             let de = d * width(i) * height / area;
+            if de < E_RESOLUTION / 2.0 {
+                if d >= SLIVER {
+                    text.clear();
+                    text.push_str("G1 X");
+                    push_num(&mut text, w[1].x, 4);
+                    text.push_str(" Y");
+                    push_num(&mut text, w[1].y, 4);
+                    if with_feed {
+                        with_feed = false;
+                        text.push_str(" F");
+                        push_num(&mut text, feed, 0);
+                    }
+                    self.line(&text);
+                    from = w[1];
+                }
+                continue;
+            }
             self.account(h, de);
             self.deposited[feature as usize] += de * area;
             self.extruded[h] = true;
+            from = w[1];
             text.clear();
             text.push_str("G1 X");
             push_num(&mut text, w[1].x, 4);
@@ -1453,6 +1576,7 @@ impl Writer {
                 self.line(format!("G1 Z{} F{}", num(plan.z, 4), num(f, 0)));
             }
         }
+        self.solid = Some(crate::solid::Solid::new(plan, self.layout.offset));
         let tower_here = tower && self.tower.is_some();
         if tower_here && let Some(t) = &mut self.tower {
             t.begin(plan.z);
@@ -1473,6 +1597,7 @@ impl Writer {
             .filter(|c| c.as_ref().is_some_and(|c| c.tower > 0.0))
             .count();
         for (k, j) in jobs.iter().enumerate() {
+            self.preheat(&jobs, k);
             // Following the gradient along the bead, it starts with its first segment's.
             if let Some(m) = along[k].first().or(j.mix.as_ref()).cloned() {
                 self.set_mix(m);
@@ -1641,6 +1766,11 @@ impl Writer {
         if let Some(t2) = &self.tower {
             let _ = writeln!(t, "; wipe tower: {} levels", t2.levels());
         }
+        let (heating, changes) = self.fw.waits();
+        let _ = writeln!(
+            t,
+            "; of the time below: {heating:.1} s waiting for heaters, {changes:.1} s changing tools besides the moves"
+        );
         let _ = writeln!(t, "; estimated printing time: {time:.1} s");
         self.buf.push_str(&t);
         self.flush()?;

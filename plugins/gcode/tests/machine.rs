@@ -342,8 +342,11 @@ fn idle_tools_wait_at_standby_and_are_heated_again_before_printing() {
             for (line, t, s) in &r.standby {
                 let tool = &m.tools[*t as usize];
                 let expected = tool.standby_temperature.expect("standby");
+                // Or its printing temperature, heating ahead of its change.
+                let ahead = lines[line - 1].contains("heat ahead of its change")
+                    && (*s == tool.nozzle_temperature || *s == tool.first_layer_temperature);
                 assert!(
-                    *s == expected || *s == tool.first_layer_temperature || *s == 0.0,
+                    *s == expected || *s == tool.first_layer_temperature || *s == 0.0 || ahead,
                     "{name}: T{t} waits at {s}: {}",
                     lines[line - 1]
                 );
@@ -600,6 +603,18 @@ fn the_footer_states_the_time_the_moves_take() {
             }
         }
         let _ = rrf;
+        // Besides the moves, the waits the file states (heaters, tool changes).
+        let waits: f64 = text
+            .lines()
+            .find_map(|l| l.strip_prefix("; of the time below: "))
+            .map(|l| {
+                l.split(" s ")
+                    .filter_map(|w| w.rsplit(' ').next()?.parse::<f64>().ok())
+                    .sum()
+            })
+            .expect("the waits' line");
+        assert!(waits > 0.0, "{name}: the start heats the bed and a tool");
+        let (lower, upper) = (lower + waits, upper + waits);
         assert!(
             seconds >= lower * 0.999 && seconds <= upper * 1.001,
             "{name}: {seconds} s outside {lower}..{upper}"
