@@ -11,7 +11,12 @@ work, and prints a table of times, ratios and peak memory (also written to a fil
 - signed distance field (512 x 512 grid, 10 iso-levels per layer): scipy
   `distance_transform_edt` + scikit-image `find_contours`;
 - STL to G-code: `prusa-slicer --export-gcode` (0.2 mm, 3 perimeters, 20 % infill),
-  when Lamina has a `gcode` exporter.
+  when Lamina has a `gcode` exporter;
+- print economy (`--only economy`): for the gear on the mixing head, the two-tool
+  3DBenchy on `marlin-toolchanger-2` and the turbine blade on the mixing head, the file's
+  own time (every wait included), its deposited part volume, waste share and retraction
+  count, read back by tests/replay/gcode_replay.py, next to PrusaSlicer's file for the
+  same mesh at 100 % infill, the same layer height and speeds (../shared/REFERENCES.md).
 
 Every figure is the median of several runs after a warm-up, each run a fresh process:
 its whole-process wall time and peak RSS (from wait4), plus the time the work itself
@@ -287,6 +292,113 @@ def graded_growth(job, base, subdivided, benchy, runs, work, row, notes):
         notes.append(f"lamina graded job at 0.05 mm: {e}")
 
 
+# PrusaSlicer at full density, 0.2 mm layers, 30 mm/s and 120 mm/s travel: the machine
+# time and material a single-material print of the same mesh takes.
+PRUSA_FULL = ["--export-gcode", "--layer-height", "0.2", "--first-layer-height", "0.2",
+              "--nozzle-diameter", "0.4", "--fill-density", "100%", "--fill-pattern", "rectilinear",
+              "--perimeter-speed", "30", "--external-perimeter-speed", "30", "--infill-speed", "30",
+              "--solid-infill-speed", "30", "--top-solid-infill-speed", "30", "--gap-fill-speed", "30",
+              "--small-perimeter-speed", "30", "--bridge-speed", "30", "--first-layer-speed", "25",
+              "--travel-speed", "120"]
+
+# What a file deposits besides the part, by its `;TYPE:` labels as the replay keys them
+# (the first word, in capitals): Lamina's, and PrusaSlicer's skirt, wipe tower and the
+# start code's purge line (`Custom`).
+WASTE_TYPES = {"PRIME", "PURGE", "TOWER", "SKIRT", "SKIRT/BRIM", "WIPE", "CUSTOM"}
+
+
+def file_time(gcode):
+    """The file's own time estimate in seconds: Lamina's footer or PrusaSlicer's
+    `estimated printing time (normal mode) = 1h 2m 3s`."""
+    for line in reversed(Path(gcode).read_text(errors="replace").splitlines()[-400:]):
+        if "estimated printing time" not in line:
+            continue
+        text = line.split("=", 1)[1] if "=" in line else line.split(":", 1)[1]
+        if text.strip().endswith(" s") and "h" not in text and "m" not in text:
+            return float(text.strip()[:-2])
+        total = 0.0
+        for part in text.split():
+            for unit, scale in (("d", 86400), ("h", 3600), ("m", 60), ("s", 1)):
+                if part.endswith(unit) and part[:-1].replace(".", "").isdigit():
+                    total += float(part[:-1]) * scale
+        return total
+    return None
+
+
+def retractions(gcode):
+    """Moves that only pull filament back (G1 E- without X or Y), following M82/M83
+    and G92."""
+    e, relative, n = 0.0, False, 0
+    for line in Path(gcode).read_text(errors="replace").splitlines():
+        words = line.split(";")[0].split()
+        if not words:
+            continue
+        cmd, args = words[0].upper(), {w[0].upper(): w[1:] for w in words[1:] if w}
+        if cmd == "M83":
+            relative = True
+        elif cmd == "M82":
+            relative = False
+        elif cmd == "G92" and "E" in args:
+            e = float(args["E"])
+        elif cmd in ("G0", "G1") and "E" in args:
+            v = float(args["E"])
+            de = v if relative else v - e
+            e = e + de if relative else v
+            if de < 0 and "X" not in args and "Y" not in args:
+                n += 1
+    return n
+
+
+def economy_of(gcode, python):
+    """(file time s, part mm³, waste share, retractions) of a G-code file, its volumes
+    read back by the replay checker."""
+    report = Path(str(gcode) + ".replay.json")
+    subprocess.run([python, ROOT / "tests" / "replay" / "gcode_replay.py", gcode, "--json", report],
+                   capture_output=True, text=True)
+    volumes = json.loads(report.read_text())["volume"]["by_type_mm3"]
+    total = sum(volumes.values())
+    waste = sum(v for k, v in volumes.items() if k in WASTE_TYPES)
+    return file_time(gcode), total - waste, (waste / total if total else 0.0), retractions(gcode)
+
+
+def economy(lamina, models, work, python, notes):
+    """The economy table's rows: each job's Lamina file and PrusaSlicer's for the same
+    mesh, side by side."""
+    rows = []
+    gear = work / "gear.stl"
+    subprocess.run([lamina, "generate", "gear", "teeth=16", "height=5", "-o", gear], check=True,
+                   capture_output=True)
+    jobs = [
+        ("gear on the mixing head", ROOT / "pipelines" / "gear-mixing-gcode.toml", [], gear,
+         ["--retract-length", "4"]),
+        ("two-tool 3DBenchy, marlin-toolchanger-2", ROOT / "pipelines" / "benchy-two-tools.toml",
+         ["--model", models / "3DBenchy.stl"], models / "3DBenchy.stl", []),
+        ("turbine blade on the mixing head", ROOT / "pipelines" / "gear-mixing-gcode.toml",
+         ["--model", models / "turbine_blade_vtk.stl"], models / "turbine_blade_vtk.stl", ["--retract-length", "4"]),
+    ]
+    for label, pipeline, extra, mesh, prusa_extra in jobs:
+        if not Path(mesh).exists():
+            notes.append(f"economy, {label}: {mesh} absent, skipped")
+            continue
+        out = work / "economy" / label.split()[0]
+        r = subprocess.run([lamina, "run", "--quiet", "--out", out, pipeline, *extra], capture_output=True, text=True)
+        files = sorted(out.glob("*.gcode"))
+        if r.returncode != 0 or not files:
+            notes.append(f"economy, {label}: lamina failed: {r.stderr.strip()[-200:]}")
+            continue
+        ours = economy_of(files[0], python)
+        rows.append((label, "lamina", *ours))
+        if shutil.which("prusa-slicer"):
+            theirs_file = work / "economy" / (label.split()[0] + "-prusa.gcode")
+            p = subprocess.run(["prusa-slicer", *PRUSA_FULL, *prusa_extra, "--output", theirs_file, mesh],
+                               capture_output=True, text=True)
+            if p.returncode == 0:
+                rows.append((label, "prusa-slicer", *economy_of(theirs_file, python)))
+            else:
+                notes.append(f"economy, {label}: prusa-slicer failed: {p.stderr.strip()[-200:]}")
+    return rows
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--quick", action="store_true", help="fewer models and runs (under 2 minutes)")
@@ -295,7 +407,7 @@ def main():
     ap.add_argument("--lamina", default=str(ROOT / "target" / "release" / "lamina"))
     ap.add_argument("--python", default=sys.executable, help="interpreter that has the Python peers")
     ap.add_argument("--out", default=None, help="where to write the table (default target/benchsuite/...)")
-    ap.add_argument("--only", action="append", choices=["slice", "offset", "sdf", "gcode"],
+    ap.add_argument("--only", action="append", choices=["slice", "offset", "sdf", "gcode", "economy"],
                     help="run only these tasks (repeatable; default all)")
     args = ap.parse_args()
     runs = args.runs or (1 if args.quick else 5)
@@ -326,7 +438,7 @@ def main():
         print(f"  {task:<28} {tool:<14} wall {wall:7.3f} s  work {inside:7.3f} s  {rss:7.1f} MiB  {ratio} {detail}",
               flush=True)
 
-    tasks = set(args.only or ["slice", "offset", "sdf", "gcode"])
+    tasks = set(args.only or ["slice", "offset", "sdf", "gcode", "economy"])
 
     # --- slicing -------------------------------------------------------------------
     slice_models = [] if "slice" not in tasks else SLICE_MODELS[:2] if args.quick else SLICE_MODELS
@@ -505,6 +617,12 @@ def main():
     else:
         notes.append("3DBenchy absent: offsets, distance fields and G-code skipped")
 
+    # --- print economy ---------------------------------------------------------------------
+    economy_rows = []
+    if "economy" in tasks:
+        print("print economy: file time, part volume, waste, retractions", flush=True)
+        economy_rows = economy(lamina, models, work, args.python, notes)
+
     # --- report -------------------------------------------------------------------------
     stamp = datetime.datetime.now().strftime("%Y-%m-%d %H:%M")
     lines = [f"# Lamina benchsuite ({'quick, ' if args.quick else ''}median of {runs} run(s) after a warm-up, {stamp})",
@@ -515,6 +633,15 @@ def main():
         ratio = f"{r['ratio']:.1f}x" if r["ratio"] else ""
         lines.append(f"| {r['task']} | {r['tool']} | {r['wall']:.3f} | {r['inside']:.4f} | {r['rss']:.1f} | "
                      f"{ratio} | {r['detail']} |")
+    if economy_rows:
+        lines += ["", "Print economy (the file's own time with every wait, part volume and waste from the replay's "
+                  ";TYPE: volumes, retractions; PrusaSlicer at 100 % infill, same layer height and speeds):", "",
+                  "| job | tool | file time s | part mm³ | waste share | retractions | time vs PrusaSlicer |",
+                  "|---|---|---|---|---|---|---|"]
+        peers = {r[0]: r for r in economy_rows if r[1] == "prusa-slicer"}
+        for job, tool, t, part, waste, retracts in economy_rows:
+            ratio = f"{t / peers[job][2]:.3f}x" if tool == "lamina" and job in peers and t and peers[job][2] else ""
+            lines.append(f"| {job} | {tool} | {t:.1f} | {part:.1f} | {waste:.4f} | {retracts} | {ratio} |")
     lines += [""] + [f"- {n}" for n in notes]
     text = "\n".join(lines) + "\n"
     print()

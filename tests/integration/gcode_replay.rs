@@ -542,6 +542,8 @@ fn prusa_slicer_and_lamina_deposit_the_same_volume_for_the_gear() {
             "0.4",
             "--filament-diameter",
             "1.75",
+            "--retract-length",
+            "4",
             "--center",
             "110,110",
             "--output",
@@ -585,6 +587,150 @@ fn prusa_slicer_and_lamina_deposit_the_same_volume_for_the_gear() {
         (ours / theirs - 1.0).abs() < 0.02,
         "Lamina {ours} vs PrusaSlicer {theirs}"
     );
+    // Both with 4 mm retractions: travels over the part, and around a gap inside it,
+    // keep the filament where it is.
+    let read = |p: &Path| std::fs::read_to_string(p).expect("G-code");
+    let (ours, theirs) = (
+        retraction_count(&read(&out.join("gear-mixing.gcode"))),
+        retraction_count(&read(&reference)),
+    );
+    eprintln!("gear: {ours} retractions, PrusaSlicer {theirs}");
+    assert!(ours as f64 <= 1.5 * theirs as f64, "{ours} against {theirs}");
+}
+
+/// Moves that only pull filament back (`G1 E` lower, without X or Y), as Marlin reads
+/// `M82`/`M83` and `G92`.
+fn retraction_count(gcode: &str) -> usize {
+    let (mut e, mut relative, mut n) = (0.0f64, false, 0);
+    for line in gcode.lines() {
+        let code = line.split(';').next().unwrap_or("");
+        let mut words = code.split_whitespace();
+        let Some(command) = words.next() else { continue };
+        let word = |l: char| {
+            code.split_whitespace()
+                .skip(1)
+                .find(|w| w.starts_with(l))
+                .and_then(|w| w[1..].parse::<f64>().ok())
+        };
+        match command {
+            "M82" => relative = false,
+            "M83" => relative = true,
+            "G92" => e = word('E').unwrap_or(e),
+            "G0" | "G1" => {
+                if let Some(v) = word('E') {
+                    let de = if relative { v } else { v - e };
+                    e = if relative { e + v } else { v };
+                    if de < 0.0 && word('X').is_none() && word('Y').is_none() {
+                        n += 1;
+                    }
+                }
+            }
+            _ => {}
+        }
+    }
+    n
+}
+
+/// PrusaSlicer's own estimate (`estimated printing time (normal mode) = 2h 8m 40s`), s.
+fn prusa_estimate(gcode: &str) -> f64 {
+    let line = gcode
+        .lines()
+        .find(|l| l.contains("estimated printing time (normal mode)"))
+        .expect("PrusaSlicer's estimate");
+    let text = line.split('=').nth(1).expect("a time");
+    text.split_whitespace()
+        .map(|part| {
+            let (value, unit) = part.split_at(part.len() - 1);
+            let scale = match unit {
+                "d" => 86_400.0,
+                "h" => 3_600.0,
+                "m" => 60.0,
+                _ => 1.0,
+            };
+            value.parse::<f64>().unwrap_or(0.0) * scale
+        })
+        .sum()
+}
+
+/// The two-tool 3DBenchy on the tool changer, every wait of the file included (heating
+/// and tool changes, which the replay times alike), within a quarter more than
+/// PrusaSlicer's single-material 3DBenchy at 100 % infill, the same layer height and
+/// speeds (../shared/REFERENCES.md).
+#[test]
+#[ignore = "needs ../shared/models/3DBenchy.stl"]
+fn benchy_on_the_tool_changer_takes_at_most_a_quarter_more_than_prusa_slicer() {
+    let Some(benchy) = model("3DBenchy.stl") else {
+        return;
+    };
+    if Command::new("prusa-slicer").arg("--help").output().is_err() {
+        skip("prusa-slicer is not installed (Debian package prusa-slicer)");
+        return;
+    }
+    let dir = tempfile::tempdir().expect("temp dir");
+    let reference = dir.path().join("prusa.gcode");
+    let speeds = [
+        "--perimeter-speed",
+        "--external-perimeter-speed",
+        "--infill-speed",
+        "--solid-infill-speed",
+        "--top-solid-infill-speed",
+        "--gap-fill-speed",
+        "--small-perimeter-speed",
+        "--bridge-speed",
+    ];
+    let mut args: Vec<String> = [
+        "--export-gcode",
+        "--layer-height",
+        "0.2",
+        "--first-layer-height",
+        "0.2",
+        "--nozzle-diameter",
+        "0.4",
+        "--fill-density",
+        "100%",
+        "--fill-pattern",
+        "rectilinear",
+        "--first-layer-speed",
+        "25",
+        "--travel-speed",
+        "120",
+    ]
+    .map(String::from)
+    .to_vec();
+    for s in speeds {
+        args.extend([s.to_string(), "30".into()]);
+    }
+    let o = Command::new("prusa-slicer")
+        .args(&args)
+        .arg("--output")
+        .arg(&reference)
+        .arg(&benchy)
+        .output()
+        .expect("prusa-slicer runs");
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let theirs = prusa_estimate(&std::fs::read_to_string(&reference).expect("G-code"));
+    let out = dir.path().join("out");
+    let pipeline = root().join("pipelines/benchy-two-tools.toml");
+    lamina(&[
+        "run",
+        pipeline.to_str().expect("utf-8"),
+        "--model",
+        benchy.to_str().expect("utf-8"),
+        "--out",
+        out.to_str().expect("utf-8"),
+        "-q",
+    ]);
+    let gcode = std::fs::read_to_string(out.join("benchy-two-tools.gcode")).expect("G-code");
+    let ours: f64 = gcode
+        .lines()
+        .find_map(|l| l.strip_prefix("; estimated printing time: "))
+        .and_then(|t| t.strip_suffix(" s")?.parse().ok())
+        .expect("the file's estimate");
+    eprintln!(
+        "3DBenchy: Lamina's two-tool file {ours:.1} s, PrusaSlicer single material {theirs:.1} s: {:.3}",
+        ours / theirs
+    );
+    assert!(ours <= 1.25 * theirs, "{ours} s against {theirs} s");
 }
 
 #[test]

@@ -493,6 +493,23 @@ impl Writer {
             if !probe.homed() {
                 self.line("G28 ; home all axes (the start template does not)");
             }
+            // The other tools warm to their standby while the machine homes and the bed
+            // heats (warm, not oozing), so that their first heating is short.
+            if self.s.dialect == Dialect::Marlin && !self.s.flavor.is_mixing() {
+                for &h in used_heads {
+                    let head = self.s.heads[h].clone();
+                    if h != self.first_head
+                        && let Some(standby) = head.standby_temperature
+                        && self.fw.target(head.index) < standby - 0.5
+                    {
+                        self.line(format!(
+                            "M104 T{} S{} ; warm at standby while the machine homes",
+                            head.index,
+                            num(standby, 0)
+                        ));
+                    }
+                }
+            }
             self.template(&start);
             let bed = self.s.first_layer_bed_temperature;
             if bed > 0.0 && !self.fw.bed_is_hot(bed) {
@@ -831,6 +848,7 @@ impl Writer {
                 .is_some_and(|s| s.holds(Point2::new(x, y), to))
         };
         let f = speed * 60.0;
+        let mut ramp = false;
         if d > RETRACT_MIN_TRAVEL && !over_part() {
             // Around what is not part, when one turn inside keeps the way short.
             let turn = self.solid.as_ref().and_then(|s| s.detour(Point2::new(x, y), to));
@@ -840,11 +858,26 @@ impl Writer {
                 }
                 _ => {
                     self.retract(self.s.retraction.length);
-                    self.lift();
+                    // The z-hop rises along the travel (a ramping lift) rather than
+                    // before it: the nozzle leaves the layer as it moves away, and the
+                    // machine spends no stop on a separate lift.
+                    let hop = self.s.retraction.z_hop;
+                    ramp = hop > 0.0 && z < self.z + hop - 1e-9;
                 }
             }
         }
-        self.line(format!("G0 X{} Y{} F{}", num(to.x, 4), num(to.y, 4), num(f, 0)));
+        if ramp {
+            let hop = self.z + self.s.retraction.z_hop;
+            self.line(format!(
+                "G0 X{} Y{} Z{} F{}",
+                num(to.x, 4),
+                num(to.y, 4),
+                num(hop, 4),
+                num(f, 0)
+            ));
+        } else {
+            self.line(format!("G0 X{} Y{} F{}", num(to.x, 4), num(to.y, 4), num(f, 0)));
+        }
         if (self.fw.position()[2] - self.z).abs() > 1e-9 {
             let f = self.z_feed();
             self.line(format!("G1 Z{} F{}", num(self.z, 4), num(f, 0)));
