@@ -12,8 +12,10 @@
 //!
 //! With a machine profile (the pipeline's `machine`, see `lamina_core::machine`) the
 //! file homes, heats the bed and the tools, places the parts on the bed, primes each
-//! tool, prints a skirt, purges every tool or mix change on a wipe tower beside the
-//! parts, runs the fan and slows the first layer. Without one, the exporter's own
+//! tool, prints a skirt, lets the part's next beads take the transition after a tool or
+//! mix change where the design allows it and purges the rest on a wipe tower beside the
+//! parts ([`transition`]), heats tools ahead of their change, runs the fan and slows the
+//! first layer. Without one, the exporter's own
 //! options describe the machine and the file holds only the parts.
 //!
 //! Extrusion follows the bead: E = segment length x width x layer height over the
