@@ -438,7 +438,8 @@ def main():
         print(f"  {task:<28} {tool:<14} wall {wall:7.3f} s  work {inside:7.3f} s  {rss:7.1f} MiB  {ratio} {detail}",
               flush=True)
 
-    tasks = set(args.only or ["slice", "offset", "sdf", "gcode", "economy"])
+    # The economy table slices three jobs twice over: not part of a quick run.
+    tasks = set(args.only or ["slice", "offset", "sdf", "gcode"] + ([] if args.quick else ["economy"]))
 
     # --- slicing -------------------------------------------------------------------
     slice_models = [] if "slice" not in tasks else SLICE_MODELS[:2] if args.quick else SLICE_MODELS
