@@ -711,7 +711,7 @@ fn benchy_on_the_tool_changer_takes_at_most_a_quarter_more_than_prusa_slicer() {
     let theirs = prusa_estimate(&std::fs::read_to_string(&reference).expect("G-code"));
     let out = dir.path().join("out");
     let pipeline = root().join("pipelines/benchy-two-tools.toml");
-    lamina(&[
+    let run = lamina(&[
         "run",
         pipeline.to_str().expect("utf-8"),
         "--model",
@@ -720,6 +720,12 @@ fn benchy_on_the_tool_changer_takes_at_most_a_quarter_more_than_prusa_slicer() {
         out.to_str().expect("utf-8"),
         "-q",
     ]);
+    // What the run says is for people: no debug text, no region of no area.
+    let said = String::from_utf8_lossy(&run.stderr);
+    assert!(
+        !said.contains("Deadlock(") && !said.contains("(0.000 mm²)"),
+        "{said}"
+    );
     let gcode = std::fs::read_to_string(out.join("benchy-two-tools.gcode")).expect("G-code");
     let ours: f64 = gcode
         .lines()

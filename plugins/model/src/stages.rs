@@ -94,6 +94,18 @@ fn build_file(config: &StageConfig<'_>, format: Format) -> Result<AnyStage> {
     if !(o.weld.is_finite() && o.weld >= 0.0) {
         return Err(config.error("weld", "must be a non-negative number of mm"));
     }
+    // What `run` will read, `check` finds readable: a missing or unreadable model is
+    // said before anything runs.
+    let path = config.base_dir.join(&o.file);
+    if let Err(e) = std::fs::File::open(&path) {
+        return Err(config.error("file", format!("cannot read `{}`: {e}", path.display())));
+    }
+    if path.is_dir() {
+        return Err(config.error(
+            "file",
+            format!("`{}` is a folder, not a model file", path.display()),
+        ));
+    }
     Ok(AnyStage::Model(Box::new(FileSource {
         file: o.file,
         weld: o.weld,

@@ -247,19 +247,21 @@ fn prepare(o: &Options, info: &RunInfo, plan: &mut LayerPlan, step: f64) -> Resu
     }
     let widths = o.widths();
     let work = distribute(info, plan, tools.len(), &widths, o.mixing, o.thin, o.assign);
-    if !work.thin.is_empty() {
-        let list: Vec<String> = work
-            .thin
+    // A sub-region of no area (below what the message's three decimals show) leaves
+    // nothing out of the part: it is not reported.
+    let thin: Vec<&(String, usize, f64)> = work.thin.iter().filter(|(_, _, a)| *a >= 0.0005).collect();
+    if !thin.is_empty() {
+        let list: Vec<String> = thin
             .iter()
             .take(5)
             .map(|(part, r, a)| format!("part `{part}` sub-region {r} ({a:.3} mm²)"))
             .collect();
-        let more = work.thin.len().saturating_sub(5);
+        let more = thin.len().saturating_sub(5);
         plan.warn(
             StageKind::Plan,
             format!(
                 "{} sub-region(s) narrower than the narrowest bead ({:.3} mm){} are not deposited: {}{}",
-                work.thin.len(),
+                thin.len(),
                 widths.min,
                 match o.thin {
                     Thin::Merge => ", even with their neighbours,",
@@ -398,9 +400,7 @@ impl Planner for Concurrent {
             Err(e) => {
                 plan.warn(
                     StageKind::Plan,
-                    format!(
-                        "concurrent planning gave up ({e:?}); this layer is deposited one tool at a time"
-                    ),
+                    format!("concurrent planning gave up ({e}); this layer is deposited one tool at a time"),
                 );
                 (seq_paths, seq_time)
             }

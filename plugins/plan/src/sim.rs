@@ -77,6 +77,15 @@ pub enum Stuck {
     Timeout(f64),
 }
 
+impl std::fmt::Display for Stuck {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Stuck::Deadlock(n) => write!(f, "the tools kept blocking each other after {n} side-steps"),
+            Stuck::Timeout(s) => write!(f, "the simulation ran past its {s} s budget"),
+        }
+    }
+}
+
 /// Where a tool is on its route.
 #[derive(Debug, Clone, Copy, PartialEq)]
 struct Cursor {
