@@ -133,9 +133,18 @@ impl Solid {
     pub fn detour(&self, a: Point2, b: Point2) -> Option<Point2> {
         let middle = Point2::from((a.coords + b.coords) / 2.0);
         let direct = (b - a).norm();
-        let mut centres = self.centres.clone();
-        centres.sort_by(|p, q| (p - middle).norm().total_cmp(&(q - middle).norm()));
-        for c in centres.iter().take(2) {
+        // The two nearest families' middles, nearest first.
+        let mut near: [Option<Point2>; 2] = [None, None];
+        for &c in &self.centres {
+            let d = (c - middle).norm();
+            let closer = |p: Option<Point2>| p.is_none_or(|p| d < (p - middle).norm());
+            if closer(near[0]) {
+                near = [Some(c), near[0]];
+            } else if closer(near[1]) {
+                near[1] = Some(c);
+            }
+        }
+        for c in near.into_iter().flatten() {
             for t in [0.15, 0.3, 0.45, 0.6, 0.75, 0.9] {
                 let w = middle + (c - middle) * t;
                 if (w - a).norm() + (b - w).norm() > 2.0 * direct {
@@ -153,24 +162,20 @@ impl Solid {
     fn inside(&self, p: Point2) -> bool {
         // A ray toward +x meets the edges filed in the cells of its row to the right.
         let ((c0, r), _) = self.span(p, p);
-        let mut seen: Vec<u32> = Vec::new();
-        let mut inside = false;
-        for c in c0..self.cols {
-            for &e in &self.grid[r * self.cols + c] {
-                if seen.contains(&e) {
-                    continue;
-                }
-                seen.push(e);
+        // An edge filed in several cells of the row counts once.
+        let mut row: Vec<u32> = (c0..self.cols)
+            .flat_map(|c| self.grid[r * self.cols + c].iter().copied())
+            .collect();
+        row.sort_unstable();
+        row.dedup();
+        let crossings = row
+            .into_iter()
+            .filter(|&e| {
                 let (a, b) = self.edges[e as usize];
-                if (a.y > p.y) != (b.y > p.y) {
-                    let x = a.x + (p.y - a.y) / (b.y - a.y) * (b.x - a.x);
-                    if x > p.x {
-                        inside = !inside;
-                    }
-                }
-            }
-        }
-        inside
+                (a.y > p.y) != (b.y > p.y) && a.x + (p.y - a.y) / (b.y - a.y) * (b.x - a.x) > p.x
+            })
+            .count();
+        crossings % 2 == 1
     }
 }
 

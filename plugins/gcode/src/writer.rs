@@ -25,6 +25,9 @@ use crate::tower::{Feature, Stroke, Tower};
 use crate::transition::PurgeInto;
 
 mod multi;
+mod spool;
+
+use spool::Spool;
 
 /// Travel shorter than this (mm) keeps the filament where it is (PrusaSlicer's
 /// `retract_before_travel` default): short hops stay over the part.
@@ -116,51 +119,6 @@ struct Analysis<'a> {
     /// the beads before the change): that volume and mix.
     early: Vec<Option<(f64, Vec<u32>)>>,
     end: State,
-}
-
-/// Layers waiting to be written, kept in a temporary file (MessagePack, each behind its
-/// length) so that a long wait holds no layer in memory.
-#[derive(Default)]
-struct Spool {
-    file: Option<std::fs::File>,
-    layers: usize,
-}
-
-impl Spool {
-    fn error(e: impl std::fmt::Display) -> Error {
-        Error::stage(crate::STAGE, format!("spooling layers to a temporary file: {e}"))
-    }
-
-    fn push(&mut self, plan: &LayerPlan) -> Result<()> {
-        let bytes = rmp_serde::to_vec_named(plan).map_err(Self::error)?;
-        if self.file.is_none() {
-            self.file = Some(tempfile::tempfile().map_err(Self::error)?);
-        }
-        let file = self.file.as_mut().ok_or_else(|| Self::error("no file"))?;
-        file.write_all(&(bytes.len() as u64).to_le_bytes())
-            .and_then(|()| file.write_all(&bytes))
-            .map_err(Self::error)?;
-        self.layers += 1;
-        Ok(())
-    }
-
-    /// Reads the layers back in order, one at a time, and empties the spool.
-    fn drain(&mut self, mut each: impl FnMut(LayerPlan) -> Result<()>) -> Result<()> {
-        use std::io::{Read, Seek};
-        let Some(mut file) = self.file.take() else {
-            return Ok(());
-        };
-        file.seek(std::io::SeekFrom::Start(0)).map_err(Self::error)?;
-        let mut reader = std::io::BufReader::new(file);
-        for _ in 0..std::mem::take(&mut self.layers) {
-            let mut len = [0u8; 8];
-            reader.read_exact(&mut len).map_err(Self::error)?;
-            let mut bytes = vec![0u8; u64::from_le_bytes(len) as usize];
-            reader.read_exact(&mut bytes).map_err(Self::error)?;
-            each(rmp_serde::from_slice(&bytes).map_err(Self::error)?)?;
-        }
-        Ok(())
-    }
 }
 
 /// The G-code being written.
@@ -866,18 +824,17 @@ impl Writer {
                 }
             }
         }
-        if ramp {
-            let hop = self.z + self.s.retraction.z_hop;
-            self.line(format!(
-                "G0 X{} Y{} Z{} F{}",
-                num(to.x, 4),
-                num(to.y, 4),
-                num(hop, 4),
-                num(f, 0)
-            ));
+        let z_word = if ramp {
+            format!(" Z{}", num(self.z + self.s.retraction.z_hop, 4))
         } else {
-            self.line(format!("G0 X{} Y{} F{}", num(to.x, 4), num(to.y, 4), num(f, 0)));
-        }
+            String::new()
+        };
+        self.line(format!(
+            "G0 X{} Y{}{z_word} F{}",
+            num(to.x, 4),
+            num(to.y, 4),
+            num(f, 0)
+        ));
         if (self.fw.position()[2] - self.z).abs() > 1e-9 {
             let f = self.z_feed();
             self.line(format!("G1 Z{} F{}", num(self.z, 4), num(f, 0)));
@@ -948,34 +905,23 @@ impl Writer {
             // over, and the next move goes on from the last point written (its length,
             // and so its filament, takes the sliver's).
             let de = d * width(i) * height / area;
-            if de < E_RESOLUTION / 2.0 {
-                if d >= SLIVER {
-                    text.clear();
-                    text.push_str("G1 X");
-                    push_num(&mut text, w[1].x, 4);
-                    text.push_str(" Y");
-                    push_num(&mut text, w[1].y, 4);
-                    if with_feed {
-                        with_feed = false;
-                        text.push_str(" F");
-                        push_num(&mut text, feed, 0);
-                    }
-                    self.line(&text);
-                    from = w[1];
-                }
+            let feeds = de >= E_RESOLUTION / 2.0;
+            if !feeds && d < SLIVER {
                 continue;
             }
-            self.account(h, de);
-            self.deposited[feature as usize] += de * area;
-            self.extruded[h] = true;
             from = w[1];
             text.clear();
             text.push_str("G1 X");
             push_num(&mut text, w[1].x, 4);
             text.push_str(" Y");
             push_num(&mut text, w[1].y, 4);
-            text.push(' ');
-            self.push_e_word(&mut text, de);
+            if feeds {
+                self.account(h, de);
+                self.deposited[feature as usize] += de * area;
+                self.extruded[h] = true;
+                text.push(' ');
+                self.push_e_word(&mut text, de);
+            }
             if with_feed {
                 with_feed = false;
                 text.push_str(" F");
@@ -1427,15 +1373,9 @@ impl Writer {
             state.head = Some(j.head);
             state.mix = last_mix(k).or(start);
         }
-        let volume = |j: &Job<'_>| -> f64 {
-            let p = j.path;
-            p.points
-                .windows(2)
-                .enumerate()
-                .map(|(i, w)| (w[1].p - w[0].p).norm() * p.segment_width(i))
-                .sum::<f64>()
-                * plan.thickness
-        };
+        // Each job's bead volume, once.
+        let volumes: Vec<f64> = jobs.iter().map(|j| j.path.bead_area() * plan.thickness).collect();
+        let volume = |i: usize| volumes[i];
         let mut steps: std::collections::HashMap<(usize, usize), f64> = std::collections::HashMap::new();
         let mut changes = Vec::with_capacity(jobs.len());
         let mut early: Vec<Option<(f64, Vec<u32>)>> = vec![None; jobs.len()];
@@ -1451,7 +1391,7 @@ impl Writer {
                 let next = (k + 1..jobs.len())
                     .find(|&i| moves[i].is_some())
                     .unwrap_or(jobs.len());
-                let chain: f64 = jobs[k..next].iter().map(volume).sum();
+                let chain: f64 = volumes[k..next].iter().sum();
                 let tower = match self.s.purge_into {
                     PurgeInto::Tower => full,
                     PurgeInto::Part if !mixing && head_change => 0.0,
@@ -1475,14 +1415,14 @@ impl Writer {
                     && let (Some(n0), Some(t)) = (before[chain_start].clone(), &target)
                 {
                     let last = k - 1;
-                    let x = tower.min(volume(&jobs[last]));
+                    let x = tower.min(volume(last));
                     let designs: Vec<Vec<f64>> = (chain_start..k)
                         .map(|i| last_mix(i).as_deref().map(fractions).unwrap_or_else(|| t.clone()))
                         .collect();
                     let mut beads: Vec<(f64, &[f64], &[f64])> = (chain_start..k)
                         .map(|i| {
                             let d = &designs[i - chain_start];
-                            (volume(&jobs[i]), d.as_slice(), d.as_slice())
+                            (volume(i), d.as_slice(), d.as_slice())
                         })
                         .collect();
                     let own = designs[last - chain_start].as_slice();
@@ -1494,7 +1434,7 @@ impl Writer {
                     if crate::transition::mean_departure(&n0, &beads, full) <= step / 2.0
                         && let (Some(nl), Some(mix)) = (before[last].clone(), first_mix(k))
                     {
-                        let at = crate::transition::flush(&nl, own, volume(&jobs[last]) - x, full);
+                        let at = crate::transition::flush(&nl, own, volume(last) - x, full);
                         state.nozzle = Some(crate::transition::flush(&at, t, x, full));
                         early[last] = Some((x, mix));
                         tower -= x;
@@ -1513,7 +1453,7 @@ impl Writer {
             // The bead flushes the nozzle toward its mix (its last, along a bead).
             if mixing && let Some(t) = last_mix(k).as_deref().map(fractions).or(target) {
                 let from = state.nozzle.clone().unwrap_or_else(|| t.clone());
-                state.nozzle = Some(crate::transition::flush(&from, &t, volume(j), full));
+                state.nozzle = Some(crate::transition::flush(&from, &t, volume(k), full));
             }
         }
         Analysis {
