@@ -211,6 +211,17 @@ pub fn summary(report: &RunReport, timings: bool) {
         (Some(t), _) => eprintln!("the plan's build time (its toolpaths at constant speeds): {t:.1} s"),
         _ => {}
     }
+    if let Some(p) = report.pauses {
+        // Of two tools heading for a collision, the paper's rule pauses the one slower
+        // along X; a pause decided otherwise breaks it.
+        eprintln!(
+            "pauses of the concurrent schedule: {} ({} by speed along X, {} forced: only that tool's pause cleared the way, {} by another rule)",
+            p.total(),
+            p.by_x_speed,
+            p.forced,
+            p.other
+        );
+    }
     for m in &report.machine_files {
         let waste: Vec<String> = m
             .waste

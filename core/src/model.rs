@@ -503,6 +503,9 @@ pub struct LayerPlan {
     /// How much of the layer's sub-regions the planned beads fill, when planned.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub fill: Option<Fill>,
+    /// Why the tools of a concurrent schedule paused, when one was planned and kept.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub pauses: Option<Pauses>,
     /// The operations of a hybrid process on this layer, in the machine's order
     /// (`[[process]]` stages).
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
@@ -540,6 +543,35 @@ pub struct Fill {
     pub deposited: f64,
     /// Least deposited / area over the whole run (volumes, layer thickness weighted).
     pub min_ratio: f64,
+}
+
+/// The pauses of a concurrent schedule by what decided them, so that a reader can
+/// check the schedule against its priority rule: of two moving tools heading for a
+/// collision where either pause would keep them apart, the paper's rule (Choi and
+/// Zhu) pauses the one slower along X. Every pause that starts is counted once.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
+pub struct Pauses {
+    /// Either tool's pause would have cleared the way and the one slower along X
+    /// paused (on a tie, the later one).
+    pub by_x_speed: usize,
+    /// Only this tool's pause cleared the way: the other's would not have (it was
+    /// ahead, or already paused), or neither alone would and both paused.
+    pub forced: usize,
+    /// Decided by another rule than X speed (a `priority` other than `x-speed`):
+    /// breaks of the paper's rule.
+    pub other: usize,
+}
+
+impl Pauses {
+    pub fn total(&self) -> usize {
+        self.by_x_speed + self.forced + self.other
+    }
+
+    pub fn add(&mut self, o: &Pauses) {
+        self.by_x_speed += o.by_x_speed;
+        self.forced += o.forced;
+        self.other += o.other;
+    }
 }
 
 #[cfg(test)]

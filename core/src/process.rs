@@ -280,6 +280,7 @@ mod tests {
             build_time: None,
             sequential_time: None,
             fill: None,
+            pauses: None,
             operations: ops
                 .iter()
                 .map(|&(kind, surface, levels)| {

@@ -99,6 +99,16 @@ fn check_layer(layer: &serde_json::Value, envelope: f64) -> (usize, f64) {
     (checked, closest_seen)
 }
 
+/// The layer's pauses by what decided them (`by_x_speed`, `forced`, `other`), summed
+/// into `sum`; none when the layer has no concurrent schedule.
+fn add_pauses(layer: &serde_json::Value, sum: &mut [u64; 3]) {
+    if let Some(p) = layer.get("pauses") {
+        for (k, key) in ["by_x_speed", "forced", "other"].iter().enumerate() {
+            sum[k] += p[key].as_u64().expect("a count");
+        }
+    }
+}
+
 /// The pipeline's `plan.envelope` (default 5 mm).
 fn envelope(table: &toml::Table) -> f64 {
     table["plan"]
@@ -129,13 +139,21 @@ fn concurrent_tools_never_collide_on_the_assembly() {
     )
     .expect("valid");
     let (mut checked, mut closest_seen) = (0, f64::INFINITY);
+    let mut pauses = [0; 3];
     for layer in plan["layers"].as_array().expect("layers") {
         let (n, d) = check_layer(layer, envelope(&table));
         checked += n;
         closest_seen = closest_seen.min(d);
+        add_pauses(layer, &mut pauses);
     }
     assert!(checked > 0, "no layer had two tools");
-    println!("{checked} tool pairs checked; closest approach {closest_seen:.3} mm");
+    // The default priority is the paper's: no pause decided by another rule, and
+    // some by speed along X.
+    let [by_speed, forced, other] = pauses;
+    assert!(by_speed > 0 && other == 0, "pauses {pauses:?}");
+    println!(
+        "{checked} tool pairs checked; closest approach {closest_seen:.3} mm; pauses: {by_speed} by speed along X, {forced} forced, {other} otherwise"
+    );
 }
 
 #[test]
@@ -163,16 +181,22 @@ fn concurrent_tools_never_collide_on_the_two_material_benchy() {
     run(&pipeline, &dir.path().join("out"));
     let text = std::fs::read_to_string(dir.path().join("out/plan.jsonl")).expect("plan");
     let (mut checked, mut closest_seen, mut layers) = (0, f64::INFINITY, 0);
+    let mut pauses = [0; 3];
     for line in text.lines().skip(1) {
         let layer: serde_json::Value = serde_json::from_str(line).expect("a layer");
         let (n, d) = check_layer(&layer, envelope(&table));
         checked += n;
         closest_seen = closest_seen.min(d);
+        add_pauses(&layer, &mut pauses);
         layers += 1;
     }
     assert_eq!(layers, 240);
     assert!(checked > 200, "only {checked} layers had two tools at work");
-    println!("{checked} tool pairs checked over {layers} layers; closest approach {closest_seen:.3} mm");
+    let [by_speed, forced, other] = pauses;
+    assert!(by_speed > 0 && other == 0, "pauses {pauses:?}");
+    println!(
+        "{checked} tool pairs checked over {layers} layers; closest approach {closest_seen:.3} mm; pauses: {by_speed} by speed along X, {forced} forced, {other} otherwise"
+    );
 }
 
 /// Bead area of a JSON toolpath (mm²): each segment's length times its width.

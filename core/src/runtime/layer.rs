@@ -117,6 +117,7 @@ impl Engine {
             build_time: None,
             sequential_time: None,
             fill: None,
+            pauses: None,
             operations: Vec::new(),
             diagnostics,
         };

@@ -83,6 +83,8 @@ pub struct RunReport {
     /// Sum of the layers' one-tool-at-a-time build times (s), when the planner timed
     /// that baseline (a concurrent planner).
     pub sequential_time: Option<f64>,
+    /// The concurrent schedules' pauses by what decided them, when any was kept.
+    pub pauses: Option<crate::Pauses>,
     /// Volume the planned beads deposit and volume of the sub-regions they fill (mm³),
     /// when a planner reported its fill.
     pub fill: Option<(f64, f64)>,

@@ -214,6 +214,7 @@ impl Engine {
         let mut regions = 0;
         let mut build_time: Option<f64> = None;
         let mut sequential_time: Option<f64> = None;
+        let mut pauses: Option<crate::Pauses> = None;
         let mut fill: Option<(f64, f64)> = None;
         let mut min_fill = 0.0f64;
         // The pool computes the layers while this thread hands each finished one, in
@@ -248,6 +249,9 @@ impl Engine {
                 }
                 if let Some(t) = plan.sequential_time {
                     *sequential_time.get_or_insert(0.0) += t;
+                }
+                if let Some(p) = &plan.pauses {
+                    pauses.get_or_insert_default().add(p);
                 }
                 if let Some(f) = plan.fill {
                     let sum = fill.get_or_insert((0.0, 0.0));
@@ -292,6 +296,7 @@ impl Engine {
             timings,
             build_time,
             sequential_time,
+            pauses,
             fill,
             orientation,
             operations,

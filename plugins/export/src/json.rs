@@ -76,6 +76,8 @@ struct LayerOut<'a> {
     #[serde(skip_serializing_if = "Option::is_none")]
     sequential_time: Option<f64>,
     #[serde(skip_serializing_if = "Option::is_none")]
+    pauses: Option<lamina_core::Pauses>,
+    #[serde(skip_serializing_if = "Option::is_none")]
     fill: Option<lamina_core::Fill>,
     #[serde(skip_serializing_if = "<[lamina_core::Operation]>::is_empty")]
     operations: &'a [lamina_core::Operation],
@@ -178,6 +180,7 @@ fn layer_out<'a>(info: &'a RunInfo, plan: &'a LayerPlan, toolpaths: bool) -> Lay
         toolpaths: (toolpaths && !plan.toolpaths.is_empty()).then_some(plan.toolpaths.as_slice()),
         build_time: plan.build_time,
         sequential_time: plan.sequential_time,
+        pauses: plan.pauses,
         fill: plan.fill,
         operations: &plan.operations,
         diagnostics: &plan.diagnostics,

@@ -226,6 +226,7 @@ mod tests {
             build_time: None,
             sequential_time: None,
             fill: None,
+            pauses: None,
             operations: Vec::new(),
             diagnostics: Vec::new(),
         }

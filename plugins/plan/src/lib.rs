@@ -77,9 +77,9 @@ lamina_core::stage_options! {
         step: f64 = "0.01",
         /// add a note to each layer with the sequential build time
         compare: bool = "false",
-        /// who keeps going when two tools are about to collide: `x-speed` (the paper's rule: the tool faster along X at the check, the X component of its velocity, goes on and the other pauses; on a tie the first tool goes on), `clearing` (a tool whose pausing alone clears the conflict pauses, else one returning from a side-step, else `x-speed`) or `returning` (a tool returning from a side-step gives way, else `x-speed`)
+        /// who keeps going when two tools are about to collide: `x-speed` (the paper's rule: the tool faster along X at the check, the X component of its velocity, goes on and the other pauses; on a tie the first tool goes on; a tool whose pausing would not clear the conflict is never the one paused), `clearing` (a tool whose pausing alone clears the conflict pauses, else one already paused stays paused, else one returning from a side-step gives way, else `x-speed`), `returning` (a tool returning from a side-step gives way, else one already paused stays paused, else `x-speed`) or `waiting` (one already paused stays paused, else `x-speed`); the run counts the pauses each rule decided
         priority: Priority = r#""x-speed""#,
-        /// seconds ahead a collision is looked for: one in prospect within half of it pauses a tool now, where its pausing alone keeps the tools apart (when either would, one already paused stays paused, else the priority decides), until none is in prospect within the whole of it, and a paused tool goes on once its way is clear for half of it; tools meeting head-on then wait before the way narrows instead of one stepping aside, and a tool following another pauses seldom and for longer, cutting its bead (and making both heads stop at a synchronisation point) less often. 0 (up to `step`) checks only the next step, as the paper does
+        /// seconds ahead a collision is looked for: one in prospect within half of it pauses a tool now, where its pausing alone keeps the tools apart (when either would, the priority decides), until none is in prospect within the whole of it, and a paused tool goes on once its way is clear for half of it; tools meeting head-on then wait before the way narrows instead of one stepping aside, and a tool following another pauses seldom and for longer, cutting its bead (and making both heads stop at a synchronisation point) less often. 0 (up to `step`) checks only the next step, as the paper does
         look_ahead: f64 = "0.5",
         /// deposit a layer one tool at a time when that is faster than the concurrent schedule (either way a warning says so); a layer whose tools stay blocked falls back to one tool at a time regardless
         keep_faster: bool = "false",
@@ -377,11 +377,15 @@ impl Planner for Concurrent {
             priority: o.priority,
             look_ahead: o.look_ahead,
         };
-        let (paths, t) = match sim::concurrent(&busy, &settings, &layer.arena) {
+        let (paths, t, pauses) = match sim::concurrent(&busy, &settings, &layer.arena) {
             // Tools that mostly wait for each other can end up slower than taking turns:
             // said, and the concurrent schedule kept unless asked for the faster one
             // (the sequential schedule is collision-free too).
-            Ok((paths, t)) if t > seq_time => {
+            Ok(sim::Schedule {
+                paths,
+                end: t,
+                pauses,
+            }) if t > seq_time => {
                 plan.warn(StageKind::Plan, format!(
                     "the concurrent schedule ({t:.2} s) is slower than one tool at a time ({seq_time:.2} s); {}",
                     if o.keep_faster {
@@ -391,20 +395,21 @@ impl Planner for Concurrent {
                     }
                 ));
                 if o.keep_faster {
-                    (seq_paths, seq_time)
+                    (seq_paths, seq_time, None)
                 } else {
-                    (paths, t)
+                    (paths, t, Some(pauses))
                 }
             }
-            Ok(r) => r,
+            Ok(s) => (s.paths, s.end, Some(s.pauses)),
             Err(e) => {
                 plan.warn(
                     StageKind::Plan,
                     format!("concurrent planning gave up ({e}); this layer is deposited one tool at a time"),
                 );
-                (seq_paths, seq_time)
+                (seq_paths, seq_time, None)
             }
         };
+        plan.pauses = pauses;
         if o.compare {
             plan.note(
                 StageKind::Plan,

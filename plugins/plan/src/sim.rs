@@ -28,7 +28,7 @@
 //! sequential deposition.
 
 use lamina_core::geom::segment_distance;
-use lamina_core::{BBox2, PathKind, Point2, TimedPoint, Toolpath, Vector2};
+use lamina_core::{BBox2, PathKind, Pauses, Point2, TimedPoint, Toolpath, Vector2};
 
 use crate::route::{Move, ToolSpec, pause, toolpath};
 
@@ -55,17 +55,75 @@ pub enum Priority {
     /// wall parallel to Y), not its set deposition or travel speed: the paper compares
     /// speeds *along the x-axis* and assigns priority afresh at every collision it
     /// detects, which a tool's fixed speed would not. On a tie the tool listed first
-    /// keeps going.
+    /// keeps going. The one exception is feasibility: a tool whose pausing would not
+    /// clear the conflict (it is ahead of the other, or the other is already paused)
+    /// is not the one paused.
     #[default]
     XSpeed,
     /// Lamina's rules first, then the paper's: when pausing only one of the two tools
     /// clears the conflict (a tool following another along a wall), that one pauses
-    /// whatever the speeds; else a tool on its way back from a side-step gives way;
-    /// else [`Priority::XSpeed`].
+    /// whatever the speeds; else, looking ahead, one already paused stays paused; else
+    /// a tool on its way back from a side-step gives way; else [`Priority::XSpeed`].
     Clearing,
-    /// A tool on its way back from a side-step gives way to every other; else
-    /// [`Priority::XSpeed`].
+    /// A tool on its way back from a side-step gives way to every other; looking
+    /// ahead, one already paused stays paused; else [`Priority::XSpeed`] without its
+    /// feasibility exception at the one-step check.
     Returning,
+    /// Looking ahead, when either tool's pause would clear the conflict, one already
+    /// paused stays paused, so that a tool pauses once for longer rather than the two
+    /// taking turns; else [`Priority::XSpeed`] without its feasibility exception at
+    /// the one-step check. Often a little faster, but it breaks the paper's rule.
+    Waiting,
+}
+
+/// Why a tool starts a pause at a check (see [`Pauses`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Why {
+    XSpeed,
+    Forced,
+    Other,
+}
+
+impl Why {
+    /// Why `loser` of the pair `(i, j)` pauses, given whether pausing `i` alone and
+    /// `j` alone keeps the two apart: forced when the other's pause would not (or
+    /// neither would and both pause), else by the paper's rule when `loser` is the
+    /// tool it pauses.
+    fn of(loser: usize, i: usize, j: usize, clears: (bool, bool), along_x: &[f64]) -> Why {
+        let theirs = if loser == i { clears.1 } else { clears.0 };
+        if !theirs {
+            Why::Forced
+        } else if loser == slower_along_x(i, j, along_x) {
+            Why::XSpeed
+        } else {
+            Why::Other
+        }
+    }
+}
+
+/// Counts `by` (one pause, or one taken back) to the pauses of `why`.
+fn tally(pauses: &mut Pauses, why: Why, by: isize) {
+    let n = match why {
+        Why::XSpeed => &mut pauses.by_x_speed,
+        Why::Forced => &mut pauses.forced,
+        Why::Other => &mut pauses.other,
+    };
+    *n = n.checked_add_signed(by).unwrap_or(0);
+}
+
+/// The paper's choice between two moving tools: the one slower along X pauses (on a
+/// tie, the later one).
+fn slower_along_x(i: usize, j: usize, along_x: &[f64]) -> usize {
+    if along_x[j] > along_x[i] { i } else { j }
+}
+
+/// A concurrent schedule: every tool's toolpaths with their pauses, the time the last
+/// tool parks, and why the tools paused.
+#[derive(Debug, Clone)]
+pub struct Schedule {
+    pub paths: Vec<Toolpath>,
+    pub end: f64,
+    pub pauses: Pauses,
 }
 
 /// Why the concurrent schedule gave up.
@@ -410,13 +468,12 @@ pub struct Settings {
 }
 
 /// Runs the tools' routes together from time 0 with checks every `settings.step`
-/// seconds: the toolpaths of every tool (with their pauses) and the time the last tool
-/// parks. Tools stepping aside stay inside `arena` (an empty box: anywhere).
+/// seconds. Tools stepping aside stay inside `arena` (an empty box: anywhere).
 pub fn concurrent(
     tools: &[(&ToolSpec, Vec<Move>)],
     settings: &Settings,
     arena: &BBox2,
-) -> Result<(Vec<Toolpath>, f64), Stuck> {
+) -> Result<Schedule, Stuck> {
     let Settings {
         step,
         budget,
@@ -461,10 +518,16 @@ pub fn concurrent(
     // Per tool: whether it paused at the last check.
     let mut waited = vec![false; n];
     let mut moving = vec![false; n];
+    // Per tool: why it was first held at this check.
+    let mut why: Vec<Option<Why>> = vec![None; n];
+    // Per tool: how its pause under way is counted.
+    let mut counted: Vec<Why> = vec![Why::Other; n];
+    let mut pauses = Pauses::default();
     while agents.iter().any(|a| !a.done) {
         if t > budget {
             return Err(Stuck::Timeout(budget));
         }
+        why.fill(None);
         for (i, a) in agents.iter_mut().enumerate() {
             moving[i] = !a.done;
             along_x[i] = if a.done {
@@ -484,9 +547,9 @@ pub fn concurrent(
                 &ahead,
                 &along_x,
                 &mut moving,
+                &mut why,
                 &waited,
-                priority,
-                look_ahead,
+                settings,
             );
         }
         // Whether tools i and j, moving or held, keep their envelopes apart for the
@@ -508,27 +571,25 @@ pub fn concurrent(
                     if !(moving[i] || moving[j]) || safe(i, j, moving[i], moving[j]) {
                         continue;
                     }
-                    let loser = match (moving[i], moving[j]) {
+                    let (loser, reason) = match (moving[i], moving[j]) {
                         (true, true) => {
+                            // Whether holding i alone, and j alone, clears the other's
+                            // next position: a tool moving away from the one behind it
+                            // is not the one to hold.
+                            let clears = (safe(i, j, false, true), safe(i, j, true, false));
                             let ruled = ruled_loser(priority, &agents, i, j, &along_x);
-                            match priority {
-                                // Holding a tool only helps when its staying put
-                                // clears the other's next position: a tool moving
-                                // away from the one behind it goes on whatever its
-                                // speed along X.
-                                Priority::Clearing => {
-                                    match (safe(i, j, false, true), safe(i, j, true, false)) {
-                                        (true, false) => i,
-                                        (false, true) => j,
-                                        _ => ruled,
-                                    }
-                                }
+                            let loser = match (priority, clears) {
+                                (Priority::XSpeed | Priority::Clearing, (true, false)) => i,
+                                (Priority::XSpeed | Priority::Clearing, (false, true)) => j,
                                 _ => ruled,
-                            }
+                            };
+                            (loser, Why::of(loser, i, j, clears, &along_x))
                         }
-                        (true, false) => i,
-                        _ => j,
+                        // The other is held where it is: only this one's pause helps.
+                        (true, false) => (i, Why::Forced),
+                        _ => (j, Why::Forced),
                     };
+                    why[loser].get_or_insert(reason);
                     moving[loser] = false;
                     change = true;
                 }
@@ -582,6 +643,20 @@ pub fn concurrent(
             continue;
         }
         for (i, a) in agents.iter_mut().enumerate() {
+            if !moving[i] && !a.done {
+                if !waited[i] {
+                    // A pause starts: counted once, by what started it.
+                    counted[i] = why[i].unwrap_or(Why::Other);
+                    tally(&mut pauses, counted[i], 1);
+                } else if why[i] == Some(Why::Other) && counted[i] != Why::Other {
+                    // A pause goes on by another rule than speed along X (one
+                    // already paused stays paused where the faster should): it breaks
+                    // the rule after all.
+                    tally(&mut pauses, counted[i], -1);
+                    counted[i] = Why::Other;
+                    tally(&mut pauses, Why::Other, 1);
+                }
+            }
             waited[i] = !moving[i] && !a.done;
             if moving[i] {
                 a.advance(t, step);
@@ -601,19 +676,23 @@ pub fn concurrent(
         }
         out.extend(a.out);
     }
-    Ok((out, end))
+    Ok(Schedule {
+        paths: out,
+        end,
+        pauses,
+    })
 }
 
 /// Which of two moving tools `priority` pauses, feasibility aside (for
 /// [`Priority::Clearing`], its rule once either pause would clear the way).
 fn ruled_loser(priority: Priority, agents: &[Agent<'_>], i: usize, j: usize, along_x: &[f64]) -> usize {
-    // The paper's rule: the tool slower along X pauses (on a tie, the later one).
-    let by_speed = if along_x[j] > along_x[i] { i } else { j };
+    let by_speed = slower_along_x(i, j, along_x);
     let (yi, yj) = (agents[i].yields(), agents[j].yields());
     let by_return = (yi != yj).then_some(if yi { i } else { j });
     match priority {
         Priority::XSpeed => by_speed,
         Priority::Returning | Priority::Clearing => by_return.unwrap_or(by_speed),
+        Priority::Waiting => by_speed,
     }
 }
 
@@ -653,8 +732,9 @@ fn truncate(track: &[(f64, Point2)], h: f64, out: &mut Track) {
 
 /// Pauses, among tools that would all move, one of each pair heading for a collision
 /// within the look-ahead, when pausing that one alone keeps the two apart over it;
-/// when either pause would, the one already waiting waits on, else `priority`
-/// decides. When neither would, the one-step check deals with it. A pair neither of
+/// when either pause would, `settings.priority` decides (the paper's rule by default;
+/// the others first let one already waiting wait on). When neither would, the one-step
+/// check deals with it. A pair neither of
 /// whose tools waited at the last check looks half as far: a pause begins when a
 /// collision is in prospect within half the look-ahead and ends when none is within
 /// the whole of it, so that a tool following another does not pause and go on at
@@ -664,10 +744,13 @@ fn anticipate_holds(
     ahead: &[Track],
     along_x: &[f64],
     moving: &mut [bool],
+    why: &mut [Option<Why>],
     waited: &[bool],
-    priority: Priority,
-    look_ahead: f64,
+    settings: &Settings,
 ) {
+    let Settings {
+        priority, look_ahead, ..
+    } = *settings;
     let n = agents.len();
     let still = |p: Point2| [(0.0, p), (look_ahead, p)];
     loop {
@@ -693,7 +776,9 @@ fn anticipate_holds(
                 let hold_i = keep_apart_until(&still(a.pos), &ahead[j], h, e);
                 let hold_j = keep_apart_until(&ahead[i], &still(b.pos), h, e);
                 let loser = match (hold_i, hold_j) {
-                    (true, true) if waited[i] != waited[j] => Some(if waited[i] { i } else { j }),
+                    (true, true) if priority != Priority::XSpeed && waited[i] != waited[j] => {
+                        Some(if waited[i] { i } else { j })
+                    }
                     (true, true) => Some(ruled_loser(priority, agents, i, j, along_x)),
                     (true, false) => Some(i),
                     (false, true) => Some(j),
@@ -701,6 +786,7 @@ fn anticipate_holds(
                 };
                 if let Some(l) = loser {
                     moving[l] = false;
+                    why[l].get_or_insert(Why::of(l, i, j, (hold_i, hold_j), along_x));
                     change = true;
                 }
             }

@@ -123,6 +123,7 @@ fn layout(rng: &mut Rng, tools: usize) -> (RunInfo, LayerPlan) {
         build_time: None,
         sequential_time: None,
         fill: None,
+        pauses: None,
         operations: Vec::new(),
         diagnostics: Vec::new(),
     };
@@ -251,10 +252,13 @@ fn holds(paths: &[Toolpath]) -> Vec<Hold> {
 /// Checks the paper's rule on a two-tool schedule: whenever one tool starts a pause
 /// while the other goes on (an encounter decided by priority, not a tool held behind
 /// a held one or both held for a side-step), the one going on was at least as fast
-/// along X as the paused one was about to move. Returns the encounters checked.
-fn check_priority_by_speed_along_x(paths: &[Toolpath], step: f64) -> usize {
+/// along X as the paused one was about to move, unless pausing the other instead would
+/// not have kept the two apart: the paused tool, going on along its route (as it does
+/// after the pause) for `horizon` seconds, comes within `e` of the other held where it
+/// was. Returns the encounters decided by speed and those forced.
+fn check_priority_by_speed_along_x(paths: &[Toolpath], step: f64, horizon: f64, e: f64) -> (usize, usize) {
     let lines = [timeline(paths, 0), timeline(paths, 1)];
-    let mut decided = 0;
+    let (mut decided, mut forced) = (0, 0);
     for h in holds(paths) {
         let other = 1 - h.tool;
         let line = &lines[other];
@@ -266,6 +270,28 @@ fn check_priority_by_speed_along_x(paths: &[Toolpath], step: f64) -> usize {
         if moved < 1e-9 {
             continue;
         }
+        // A travel is routed afresh from where the tool waited, so that what it does
+        // after the pause is not what it would have done: only pauses on a bead, which
+        // the tool takes up where it left it, are checked.
+        let on_bead = paths
+            .iter()
+            .any(|p| p.tool == h.tool && p.kind == PathKind::Extrude && (p.points[0].t - h.to).abs() <= 1e-9);
+        if !on_bead {
+            continue;
+        }
+        // Would holding the other have cleared the way? Its position then against this
+        // tool's motion after the pause, sampled finely (a little slack for the
+        // samples missing the closest approach between them).
+        let held = position(line, h.from);
+        let samples = (horizon / 1e-3).ceil() as usize;
+        let near = (0..=samples).any(|k| {
+            let t = h.to + horizon * k as f64 / samples as f64;
+            (position(&lines[h.tool], t) - held).norm() < e + 0.05
+        });
+        if near {
+            forced += 1;
+            continue;
+        }
         // The paused tool's speed along X is that of the stretch it was on when held
         // (after the pause it may step aside instead of going on), or at the start of
         // the layer the stretch it starts with.
@@ -274,14 +300,14 @@ fn check_priority_by_speed_along_x(paths: &[Toolpath], step: f64) -> usize {
         let theirs = speed_along_x_at(line, h.from);
         assert!(
             mine <= theirs + 1e-6 * theirs.max(1.0),
-            "tool {} paused at t = {:.3} s at {:?} for tool {other}, which is slower along X ({theirs:.3} mm/s against {mine:.3} mm/s)",
+            "tool {} paused at t = {:.3} s at {:?} for tool {other}, which is slower along X ({theirs:.3} mm/s against {mine:.3} mm/s), though pausing that one would have cleared the way",
             h.tool,
             h.from,
             h.at
         );
         decided += 1;
     }
-    decided
+    (decided, forced)
 }
 
 /// The seconds a tool of a plan spends moving (its paths other than pauses).
@@ -365,11 +391,11 @@ fn random_layouts(look_ahead: Option<f64>) {
             if tc < ts {
                 faster += 1;
             }
-            // Looking ahead, a tool may pause because only its pausing keeps the two
-            // apart, whatever the speeds: the rule then decides only free choices,
-            // which the toolpaths do not tell apart.
-            if tools == 2 && look_ahead == Some(0.0) {
-                decided += check_priority_by_speed_along_x(&conc.toolpaths, 0.02);
+            // A tool may pause because only its pausing keeps the two apart, whatever
+            // the speeds: the rule decides the free choices.
+            if tools == 2 {
+                let horizon = look_ahead.unwrap_or(0.5).max(0.02);
+                decided += check_priority_by_speed_along_x(&conc.toolpaths, 0.02, horizon, 2.0 * envelope).0;
             }
         }
         // Asked for, the faster of the two is kept.
@@ -400,9 +426,7 @@ fn random_layouts(look_ahead: Option<f64>) {
         "concurrent was faster in only {faster} of 40 layouts"
     );
     assert!(pauses > 0, "no layout made a tool give way");
-    if look_ahead == Some(0.0) {
-        assert!(decided > 0, "no two-tool encounter was decided by priority");
-    }
+    assert!(decided > 0, "no two-tool encounter was decided by priority");
     println!(
         "look-ahead {look_ahead:?}: {faster} of 40 layouts faster concurrently, {slower} slower; {decided} two-tool encounters by speed along X"
     );
@@ -426,10 +450,8 @@ fn tools_crossing_head_on_give_way_by_speed_along_x() {
     assert!(plan.toolpaths.iter().any(|p| p.kind == PathKind::Pause));
     // Every pause while the other tool goes on is the slower tool's along X (tool 1
     // deposits at 10 mm/s, tool 0 at 30 mm/s).
-    assert!(
-        check_priority_by_speed_along_x(&plan.toolpaths, 0.01) > 0,
-        "no pause was decided by priority"
-    );
+    let (decided, forced) = check_priority_by_speed_along_x(&plan.toolpaths, 0.01, 0.01, 4.0);
+    assert!(decided + forced > 0, "no pause was decided");
     // Split extrusions keep their beads' widths: loops of 2 mm / 5 = 0.4 mm... bent
     // to the bars' mean width, centre beads narrower.
     for p in plan.toolpaths.iter().filter(|p| p.kind == PathKind::Extrude) {
@@ -571,6 +593,11 @@ fn simulate(tools: &[(&ToolSpec, Vec<Move>)], priority: Priority) -> Vec<Toolpat
 }
 
 fn simulate_ahead(tools: &[(&ToolSpec, Vec<Move>)], priority: Priority, look_ahead: f64) -> Vec<Toolpath> {
+    schedule(tools, priority, look_ahead).paths
+}
+
+/// The concurrent schedule of two tools, checked to keep them apart.
+fn schedule(tools: &[(&ToolSpec, Vec<Move>)], priority: Priority, look_ahead: f64) -> sim::Schedule {
     let settings = Settings {
         step: STEP,
         budget: 100.0,
@@ -578,14 +605,19 @@ fn simulate_ahead(tools: &[(&ToolSpec, Vec<Move>)], priority: Priority, look_ahe
         priority,
         look_ahead,
     };
-    let (paths, _) = sim::concurrent(tools, &settings, &BBox2::EMPTY).expect("no deadlock");
-    let lines = [timeline(&paths, 0), timeline(&paths, 1)];
+    let s = sim::concurrent(tools, &settings, &BBox2::EMPTY).expect("no deadlock");
+    let lines = [timeline(&s.paths, 0), timeline(&s.paths, 1)];
     let (d, t) = closest(&lines[0], &lines[1]);
     assert!(
         d >= 2.0 * tools[0].0.envelope - 1e-6,
         "{priority:?}: {d} mm apart at t = {t}"
     );
-    paths
+    assert_eq!(
+        s.pauses.total(),
+        holds(&s.paths).len(),
+        "{priority:?}: every pause is counted once"
+    );
+    s
 }
 
 /// Two tools whose paths cross at right angles at the origin: tool 0 runs up along Y at
@@ -624,7 +656,8 @@ fn at_a_crossing_the_tool_faster_along_x_goes_on_and_the_other_pauses_before_it(
     // Tool 1 keeps its pace: 60 mm at 20 mm/s.
     let end = across_line[across_line.len() - 1].0;
     assert!((end - 3.0).abs() < 1e-9, "tool 1 ends at {end} s");
-    assert_eq!(check_priority_by_speed_along_x(&paths, STEP), h.len());
+    let (decided, forced) = check_priority_by_speed_along_x(&paths, STEP, 0.5, 4.0);
+    assert_eq!(decided + forced, h.len());
 }
 
 #[test]
@@ -644,15 +677,17 @@ fn looking_ahead_the_tool_slower_along_x_still_gives_way_at_a_crossing_only_soon
     let across_line = timeline(&paths, 1);
     let end = across_line[across_line.len() - 1].0;
     assert!((end - 3.0).abs() < 1e-9, "tool 1 ends at {end} s");
-    assert_eq!(check_priority_by_speed_along_x(&paths, STEP), h.len());
+    let (decided, forced) = check_priority_by_speed_along_x(&paths, STEP, 0.5, 4.0);
+    assert_eq!(decided + forced, h.len());
 }
 
 #[test]
 fn looking_ahead_a_tool_waits_before_the_way_narrows_instead_of_stepping_aside() {
-    // Checking one step ahead, tool 1 (faster along X) comes up to tool 0, which is
-    // still on its path, both are held and tool 0 steps aside, off its bead.
+    // Checking one step ahead by speed along X alone (`waiting` does not exclude a
+    // pause that cannot clear the way), tool 1 (faster along X) comes up to tool 0,
+    // which is still on its path, both are held and tool 0 steps aside, off its bead.
     let (up, across, r0, r1) = on_the_crossing(false);
-    let one_step = simulate(&[(&up, r0.clone()), (&across, r1.clone())], Priority::XSpeed);
+    let one_step = simulate(&[(&up, r0.clone()), (&across, r1.clone())], Priority::Waiting);
     let off = |paths: &[Toolpath]| paths.iter().any(|p| p.tool == 0 && p.kind == PathKind::Travel);
     assert!(
         off(&one_step),
@@ -769,15 +804,30 @@ fn on_the_crossing_with(returning: bool, priority: Priority) -> Outcome {
 
 #[test]
 fn priority_by_clearing_pauses_the_tool_whose_pausing_clears_the_way() {
-    // The paper's rule: tool 1, faster along X, has priority; tool 0 gives way first
-    // (it is held on tool 1's path, so it steps aside).
-    assert_eq!(on_the_crossing_with(false, Priority::XSpeed).first, Some(0));
-    // `clearing`: tool 1 waits, where it comes within 4 mm of tool 0 (2 mm off its
-    // path), for tool 0 to move off; tool 0 never waits.
-    let o = on_the_crossing_with(false, Priority::Clearing);
-    assert_eq!(o.gave_way, [false, true]);
-    let at = o.paused_at.expect("tool 1 paused");
-    assert!(at.x < -3.2 && at.x > -3.7 && at.y.abs() < 1e-9, "{at:?}");
+    // Speed along X alone (`waiting` at the one-step check): tool 1, faster along X,
+    // has priority; tool 0 gives way first (it is held on tool 1's path, so it steps
+    // aside).
+    assert_eq!(on_the_crossing_with(false, Priority::Waiting).first, Some(0));
+    // `clearing`, and the paper's rule with its one exception (holding tool 0 would
+    // not clear the way): tool 1 waits, where it comes within 4 mm of tool 0 (2 mm off
+    // its path), for tool 0 to move off; tool 0 never waits.
+    for priority in [Priority::Clearing, Priority::XSpeed] {
+        let o = on_the_crossing_with(false, priority);
+        assert_eq!(o.gave_way, [false, true], "{priority:?}");
+        let at = o.paused_at.expect("tool 1 paused");
+        assert!(
+            at.x < -3.2 && at.x > -3.7 && at.y.abs() < 1e-9,
+            "{priority:?}: {at:?}"
+        );
+    }
+    // Counted as forced, not as decided by speed.
+    let (up, across, r0, r1) = on_the_crossing(false);
+    let s = schedule(&[(&up, r0), (&across, r1)], Priority::XSpeed, 0.0);
+    assert!(
+        s.pauses.forced > 0 && s.pauses.by_x_speed == 0 && s.pauses.other == 0,
+        "{:?}",
+        s.pauses
+    );
 }
 
 #[test]
@@ -785,13 +835,57 @@ fn priority_by_returning_pauses_the_tool_back_from_a_side_step() {
     // Without a side-step, `returning` is the paper's rule.
     assert_eq!(on_the_crossing_with(false, Priority::Returning).first, Some(0));
     // Tool 1 on its way back from a side-step gives way with `returning` (and
-    // `clearing`): it waits and tool 0 never does; not with `x-speed`.
+    // `clearing`): it waits and tool 0 never does; not by speed along X alone.
     for priority in [Priority::Returning, Priority::Clearing] {
         let o = on_the_crossing_with(true, priority);
         assert_eq!(o.gave_way, [false, true], "{priority:?}");
         assert!(o.paused_at.is_some(), "{priority:?}: tool 1 paused");
     }
-    assert_eq!(on_the_crossing_with(true, Priority::XSpeed).first, Some(0));
+    assert_eq!(on_the_crossing_with(true, Priority::Waiting).first, Some(0));
+}
+
+/// Two tools heading for a crossing where either pause would keep them apart, listed
+/// in both orders: tool `up` runs along Y (0 mm/s along X) and is the faster, tool
+/// `across` runs along X. Whichever is listed first, the one slower along X pauses and
+/// the pause is counted as decided by speed; a rule that ignored X speed (always the
+/// first, or always the second) or reversed it would pause `across`.
+#[test]
+fn the_tool_slower_along_x_pauses_whichever_is_listed_first() {
+    let (up, across, r0, r1) = crossing();
+    for look_ahead in [0.5, 1.0] {
+        for swap in [false, true] {
+            let (mut a, mut b) = (up.clone(), across.clone());
+            let tools = if swap {
+                a.index = 1;
+                b.index = 0;
+                vec![(&b, r1.clone()), (&a, r0.clone())]
+            } else {
+                vec![(&a, r0.clone()), (&b, r1.clone())]
+            };
+            let s = schedule(&tools, Priority::XSpeed, look_ahead);
+            let h = holds(&s.paths);
+            let (up_index, across_index) = (a.index, b.index);
+            assert!(
+                !h.is_empty(),
+                "look-ahead {look_ahead}, swapped {swap}: nobody gave way"
+            );
+            assert!(
+                h.iter().all(|h| h.tool == up_index),
+                "look-ahead {look_ahead}, swapped {swap}: {h:?}"
+            );
+            // The tool along X keeps its pace: 60 mm at 20 mm/s.
+            let line = timeline(&s.paths, across_index);
+            assert!((line[line.len() - 1].0 - 3.0).abs() < 1e-9);
+            assert!(
+                s.pauses.by_x_speed >= 1 && s.pauses.other == 0,
+                "look-ahead {look_ahead}, swapped {swap}: {:?}",
+                s.pauses
+            );
+        }
+    }
+    // `waiting` puts one rule of its own first, and is counted when it decides.
+    let s = schedule(&[(&up, r0), (&across, r1)], Priority::Waiting, 0.5);
+    assert_eq!(s.pauses.total(), holds(&s.paths).len());
 }
 
 #[test]

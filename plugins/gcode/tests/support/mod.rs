@@ -116,6 +116,7 @@ pub fn layer_plan(index: usize, toolpaths: Vec<Toolpath>, build_time: f64) -> La
         build_time: Some(build_time),
         sequential_time: None,
         fill: None,
+        pauses: None,
         operations: Vec::new(),
         diagnostics: Vec::new(),
     }
