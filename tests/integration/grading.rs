@@ -145,3 +145,178 @@ fn blade_graded_along_z_and_across_at_once() {
     }
     assert!(checked > 100, "{checked} regions");
 }
+
+type Ring = Vec<[f64; 2]>;
+
+fn ring(v: &serde_json::Value) -> Ring {
+    v.as_array()
+        .expect("a ring")
+        .iter()
+        .map(|p| [p[0].as_f64().expect("x"), p[1].as_f64().expect("y")])
+        .collect()
+}
+
+/// Shortest distance from `p` to the closed ring's edges.
+fn ring_distance(r: &Ring, p: [f64; 2]) -> f64 {
+    (0..r.len())
+        .map(|i| {
+            let (a, b) = (r[i], r[(i + 1) % r.len()]);
+            let (dx, dy) = (b[0] - a[0], b[1] - a[1]);
+            let len2 = dx * dx + dy * dy;
+            let t = if len2 > 0.0 {
+                (((p[0] - a[0]) * dx + (p[1] - a[1]) * dy) / len2).clamp(0.0, 1.0)
+            } else {
+                0.0
+            };
+            (p[0] - a[0] - t * dx).hypot(p[1] - a[1] - t * dy)
+        })
+        .fold(f64::INFINITY, f64::min)
+}
+
+/// Whether `p` is inside the ring (crossing count of a ray along +x).
+fn ring_contains(r: &Ring, p: [f64; 2]) -> bool {
+    let mut inside = false;
+    for i in 0..r.len() {
+        let (a, b) = (r[i], r[(i + 1) % r.len()]);
+        if (a[1] > p[1]) != (b[1] > p[1]) && p[0] < a[0] + (p[1] - a[1]) / (b[1] - a[1]) * (b[0] - a[0]) {
+            inside = !inside;
+        }
+    }
+    inside
+}
+
+/// Signed area and area-weighted centroid sums of a ring (shoelace).
+fn ring_moments(r: &Ring) -> (f64, f64, f64) {
+    let (mut a, mut x, mut y) = (0.0, 0.0, 0.0);
+    for i in 0..r.len() {
+        let (p, q) = (r[i], r[(i + 1) % r.len()]);
+        let c = p[0] * q[1] - q[0] * p[1];
+        a += c / 2.0;
+        x += (p[0] + q[0]) * c / 6.0;
+        y += (p[1] + q[1]) * c / 6.0;
+    }
+    (a, x, y)
+}
+
+#[test]
+fn blade_idw_gives_every_cell_eq_23_of_its_cavities_materials_at_its_centre() {
+    // Fig. 21: m1 on the blade's outer contour, m2 on the leading cavity and m3 on the
+    // trailing one, as the pipeline assigns them (each cavity the material of the
+    // nearest listed point), and every cell graded by Eq. 23 at its centre (Fig. 14).
+    let plan = run("blade-idw.toml", "blade-idw.json");
+    let listed = [([-14.0, 0.0], "m2"), ([8.0, 1.0], "m3")];
+    let (mut cells, mut off_centre, mut families, mut farthest) = (0, 0, 0, 0.0f64);
+    let mut dominant = std::collections::BTreeMap::<&str, usize>::new();
+    for layer in plan["layers"].as_array().expect("layers") {
+        for f in layer["parts"][0]["families"].as_array().expect("families") {
+            let outer = ring(&f["outer"]);
+            let holes: Vec<Ring> = f["holes"].as_array().expect("holes").iter().map(ring).collect();
+            assert_eq!(
+                holes.len(),
+                2,
+                "layer {}: a family with two cavities",
+                layer["index"]
+            );
+            families += 1;
+            // Each cavity's material: that of the listed point nearest to it.
+            let mut contours = vec![(outer, "m1")];
+            for h in holes {
+                let (_, m) = listed
+                    .iter()
+                    .map(|(p, m)| (ring_distance(&h, *p), *m))
+                    .min_by(|a, b| a.0.total_cmp(&b.0))
+                    .expect("listed points");
+                contours.push((h, m));
+            }
+            assert_ne!(contours[1].1, contours[2].1, "each cavity its own material");
+            for r in f["regions"].as_array().expect("regions") {
+                let reference = [
+                    r["reference"][0].as_f64().expect("x"),
+                    r["reference"][1].as_f64().expect("y"),
+                ];
+                // Eq. 23: the weight of contour i is the product of the other contours'
+                // distances over the sum of such products.
+                let d: Vec<f64> = contours
+                    .iter()
+                    .map(|(c, _)| ring_distance(c, reference))
+                    .collect();
+                let prod = |i: usize| -> f64 { (0..d.len()).filter(|&k| k != i).map(|k| d[k]).product() };
+                let sum: f64 = (0..d.len()).map(prod).sum();
+                let composition = &r["composition"];
+                let mut best = ("", 0.0);
+                for (i, (_, m)) in contours.iter().enumerate() {
+                    let want = prod(i) / sum;
+                    let got = composition[*m].as_f64().unwrap_or(0.0);
+                    assert!(
+                        (got - want).abs() < 1e-6,
+                        "layer {} region {} cell {}: {m} {got} against Eq. 23's {want} at {reference:?}",
+                        layer["index"],
+                        r["index"],
+                        r["cell"]
+                    );
+                    if got > best.1 {
+                        best = (m, got);
+                    }
+                }
+                *dominant.entry(best.0).or_default() += 1;
+                // The reference point is the cell's centre: its centroid where that lies
+                // inside the cell, else a point inside it.
+                let polygon = &r["polygon"];
+                let outer = ring(&polygon["outer"]);
+                let holes: Vec<Ring> = polygon["holes"]
+                    .as_array()
+                    .expect("holes")
+                    .iter()
+                    .map(ring)
+                    .collect();
+                let inside =
+                    |p: [f64; 2]| ring_contains(&outer, p) && !holes.iter().any(|h| ring_contains(h, p));
+                let (mut a, mut x, mut y) = ring_moments(&outer);
+                let s = a.signum();
+                (a, x, y) = (a * s, x * s, y * s);
+                for h in &holes {
+                    let (ha, hx, hy) = ring_moments(h);
+                    let hs = ha.signum();
+                    (a, x, y) = (a - ha * hs, x - hx * hs, y - hy * hs);
+                }
+                let centroid = [x / a, y / a];
+                assert!(inside(reference), "a reference outside its cell: {reference:?}");
+                let off = (reference[0] - centroid[0]).hypot(reference[1] - centroid[1]);
+                if inside(centroid) {
+                    assert!(off < 1e-6, "reference {reference:?}, centroid {centroid:?}");
+                } else {
+                    // A cell around a corner: the point of the cell nearest its
+                    // centroid.
+                    let gap = std::iter::once(&outer)
+                        .chain(&holes)
+                        .map(|r| ring_distance(r, centroid))
+                        .fold(f64::INFINITY, f64::min);
+                    assert!(
+                        (off - gap).abs() < 1e-3,
+                        "reference {reference:?} {off} mm from the centroid {centroid:?}, the cell {gap} mm"
+                    );
+                    off_centre += 1;
+                    farthest = farthest.max(off);
+                }
+                cells += 1;
+            }
+        }
+    }
+    assert_eq!(families, 70, "one family per layer");
+    assert!(cells > 10_000, "{cells} cells");
+    // Each material dominates the cells about its own contour.
+    for m in ["m1", "m2", "m3"] {
+        assert!(
+            dominant.get(m).copied().unwrap_or(0) > cells / 20,
+            "{m}: {dominant:?}"
+        );
+    }
+    // Cells around the blade's corners have their centroid outside them.
+    assert!(
+        off_centre * 5 <= cells,
+        "{off_centre} of {cells} cells off centre"
+    );
+    println!(
+        "{cells} cells by Eq. 23 at their centres ({off_centre} around corners at the point nearest their centroid, at most {farthest:.3} mm off); dominant {dominant:?}"
+    );
+}

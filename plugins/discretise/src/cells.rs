@@ -24,7 +24,7 @@ use serde::Deserialize;
 
 use crate::bands::{options, solver};
 use crate::grid::Grid;
-use crate::measure::{interior_point, pole};
+use crate::measure::{cell_centre, interior_point, pole};
 use crate::regions::region;
 
 /// More cells around one region than anyone could deposit: a guard against typos.
@@ -125,7 +125,8 @@ impl Cells {
     }
 
     /// Splits every region of `regions` (one family `family` on `grid`) into its
-    /// cells, each with `cell = Some(i)` and a reference point inside it.
+    /// cells, each with `cell = Some(i)` and its centre as reference point
+    /// ([`cell_centre`]).
     /// Refused when the cells of all regions would exceed `limits.regions` (a
     /// `cell_length` of a micrometre on a large family).
     pub fn split(
@@ -193,6 +194,7 @@ impl Cells {
                     }
                     let mut c = region(r.family, r.index, r.count, r.level, polygon);
                     c.cell = Some(cell);
+                    c.reference = cell_centre(&c.polygon).unwrap_or(c.reference);
                     out.push(c);
                     cell += 1;
                 }
@@ -237,6 +239,7 @@ impl Cells {
             for (i, (_, polygon)) in cells.into_iter().enumerate() {
                 let mut c = region(r.family, r.index, r.count, r.level, polygon);
                 c.cell = Some(i);
+                c.reference = cell_centre(&c.polygon).unwrap_or(c.reference);
                 out.push(c);
             }
         }

@@ -5,7 +5,7 @@
 use std::cmp::Ordering;
 use std::collections::BinaryHeap;
 
-use lamina_core::geom::segment_distance;
+use lamina_core::geom::{closest_on_segment, segment_distance};
 use lamina_core::{Contour, Point2, Polygon};
 use rstar::primitives::Line;
 use rstar::{AABB, PointDistance, RTree};
@@ -220,6 +220,68 @@ pub fn interior_point(polygon: &Polygon) -> Option<Point2> {
     best.map(|b| b.1)
 }
 
+/// The centroid of a polygon's material area (outer less holes), `None` without area.
+/// It may lie outside the polygon (a ring, a cell bent around a tight turn).
+pub fn centroid(polygon: &Polygon) -> Option<Point2> {
+    // Each ring's area and first moments, relative to its first point for precision
+    // far from the origin, counted positive for the outer ring and negative for holes
+    // whatever their orientation.
+    let moments = |c: &Contour| -> (f64, f64, f64) {
+        let Some(&o) = c.points.first() else {
+            return (0.0, 0.0, 0.0);
+        };
+        let (mut twice, mut mx, mut my) = (0.0, 0.0, 0.0);
+        for (a, b) in c.edges() {
+            let (a, b) = (a - o, b - o);
+            let cross = a.x * b.y - b.x * a.y;
+            twice += cross;
+            mx += (a.x + b.x) * cross;
+            my += (a.y + b.y) * cross;
+        }
+        if twice == 0.0 {
+            return (0.0, 0.0, 0.0);
+        }
+        let area = (twice / 2.0).abs();
+        let (cx, cy) = (o.x + mx / (3.0 * twice), o.y + my / (3.0 * twice));
+        (area, area * cx, area * cy)
+    };
+    let (mut a, mut mx, mut my) = moments(&polygon.outer);
+    for h in &polygon.holes {
+        let (ha, hx, hy) = moments(h);
+        a -= ha;
+        mx -= hx;
+        my -= hy;
+    }
+    (a > 0.0).then(|| Point2::new(mx / a, my / a))
+}
+
+/// The reference point of a circumferential cell: its centre, as the paper locates it
+/// (topological-hierarchy Fig. 14), that is the centroid of its area. A cell that
+/// wraps around a corner of its ring (an L) has its centroid outside it; a composition
+/// is the cell's own only at a point of the cell, so it takes the point of the cell
+/// nearest its centroid (a hair inside the boundary), and a central point inside it
+/// ([`interior_point`]) should that fail.
+pub fn cell_centre(polygon: &Polygon) -> Option<Point2> {
+    let c = centroid(polygon)?;
+    if polygon.contains(c) {
+        return Some(c);
+    }
+    let q = polygon
+        .contours()
+        .flat_map(|r| r.edges())
+        .map(|(a, b)| closest_on_segment(c, a, b))
+        .min_by(|p, q| (p - c).norm_squared().total_cmp(&(q - c).norm_squared()));
+    // From outside, the way to the nearest boundary point goes on into the cell.
+    let hair = 1e-6 * polygon.bbox().diagonal().max(1e-3);
+    q.and_then(|q| {
+        let d = q - c;
+        let n = d.norm();
+        (n > 0.0).then(|| q + d * (hair / n))
+    })
+    .filter(|&p| polygon.contains(p))
+    .or_else(|| interior_point(polygon))
+}
+
 /// Distance from `p` to the nearest of `contours`.
 pub fn distance_to(contours: &[&Contour], p: Point2) -> f64 {
     contours
@@ -233,6 +295,44 @@ pub fn distance_to(contours: &[&Contour], p: Point2) -> f64 {
 mod tests {
     use super::*;
     use crate::shapes::{circle, rect};
+
+    #[test]
+    fn centroid_of_a_ring_and_the_centre_of_an_l() {
+        // A 10 x 10 square less a 2 x 2 hole off centre (1..3): centroid by moments.
+        let hole = rect(1.0, 1.0, 2.0, 2.0);
+        let ring = Polygon::new(rect(0.0, 0.0, 10.0, 10.0), vec![hole]);
+        let c = centroid(&ring).expect("an area");
+        let want = (100.0 * 5.0 - 4.0 * 2.0) / 96.0;
+        assert!((c.x - want).abs() < 1e-12 && (c.y - want).abs() < 1e-12, "{c:?}");
+        // Inside: the centroid itself.
+        assert_eq!(cell_centre(&ring), Some(c));
+        // An L (4 x 1 and 1 x 4 legs): its centroid (19/14, 19/14) lies in the notch,
+        // outside; the centre is the point of the L nearest to it, on one of the
+        // inner edges, 5/14 mm away.
+        let l = Polygon::new(
+            Contour::new(
+                [
+                    (0.0, 0.0),
+                    (4.0, 0.0),
+                    (4.0, 1.0),
+                    (1.0, 1.0),
+                    (1.0, 4.0),
+                    (0.0, 4.0),
+                ]
+                .map(|(x, y)| Point2::new(x, y))
+                .to_vec(),
+            ),
+            vec![],
+        );
+        let c = centroid(&l).expect("an area");
+        let want = (4.0 * 2.0 + 3.0 * 0.5) / 7.0;
+        assert!((c.x - want).abs() < 1e-12 && (c.y - want).abs() < 1e-12, "{c:?}");
+        assert!(!l.contains(c));
+        let p = cell_centre(&l).expect("a point");
+        assert!(l.contains(p));
+        assert!(((p - c).norm() - 5.0 / 14.0).abs() < 1e-4, "{p:?}");
+        assert!((p.x - 1.0).abs() < 1e-4 || (p.y - 1.0).abs() < 1e-4, "{p:?}");
+    }
 
     #[test]
     fn tube_distance_and_pole() {
