@@ -256,3 +256,65 @@ fn a_surface_source_measures_in_space_from_every_face() {
         assert!(close(rs, &bands), "in the layer, z = {z}: {rs:?}");
     }
 }
+
+/// A plane through the middle of a box, normal +x: behind it lies the -ve
+/// complementary region (f(d) < 0, grading-step-width Eq. 3), where the composition is
+/// the start composition Ms (Eq. 5) throughout; in front, Eq. 4 in steps of t_g up to
+/// the width, and Me beyond it (Eq. 6, the +ve region).
+#[test]
+fn behind_a_plane_the_composition_is_the_start_one() {
+    for combine in ["intersection", "everywhere"] {
+        let text = format!(
+            "[model]\nuse = \"box\"\nsize = [40.0, 40.0, 2.0]\nplace = \"centre\"\n\
+            [materials.a]\ncolour = [255, 0, 0]\n[materials.b]\ncolour = [0, 0, 255]\n\
+            [discretise]\nuse = \"sources\"\ncombine = \"{combine}\"\n\
+            sources = [{{ kind = \"plane\", at = [0.0, 0.0, 0.0], direction = [1.0, 0.0, 0.0], width = 10.0, start = [0.75, 0.25], end = [0.0, 1.0], step = 0.25 }}]\n\
+            [slice]\nuse = \"uniform\"\nthickness = 1.0\n\
+            [[output]]\nuse = \"json\"\npath = \"plan.json\"\n"
+        );
+        let plan = run(&text);
+        for layer in plan["layers"].as_array().expect("layers") {
+            let mut behind = 0;
+            let mut by_a: Vec<(f64, f64)> = Vec::new();
+            for r in regions(layer) {
+                let a = r["composition"]["a"].as_f64().expect("a");
+                let area = r["area"].as_f64().expect("area");
+                let x = r["reference"][0].as_f64().expect("x");
+                // Every point of a region behind the plane has Ms.
+                let xs: Vec<f64> = r["polygon"]["outer"]
+                    .as_array()
+                    .expect("outer")
+                    .iter()
+                    .map(|p| p[0].as_f64().expect("x"))
+                    .collect();
+                if xs.iter().any(|&x| x < -1e-9) {
+                    assert_eq!(
+                        a, 0.75,
+                        "{combine}: a region reaching behind the plane (reference x = {x}) has a = {a}"
+                    );
+                    behind += 1;
+                }
+                by_a.push((a, area));
+            }
+            assert_eq!(behind, 1, "{combine}: one region behind the plane");
+            by_a.sort_by(|p, q| q.0.total_cmp(&p.0));
+            // Ms behind the plane and on the first half step (x < 1.25); then
+            // 0.5625, 0.375, 0.1875 on bands of 2.5 mm; Me from x = 8.75 on.
+            let want = [
+                (0.75, 21.25 * 40.0),
+                (0.5625, 100.0),
+                (0.375, 100.0),
+                (0.1875, 100.0),
+                (0.0, 11.25 * 40.0),
+            ];
+            assert_eq!(by_a.len(), want.len(), "{combine}: {by_a:?}");
+            for ((a, area), (wa, warea)) in by_a.iter().zip(want) {
+                assert!((a - wa).abs() < 1e-12, "{combine}: {by_a:?}");
+                assert!(
+                    (area - warea).abs() < 1e-6 * 1600.0,
+                    "{combine}: a = {a}: {area} mm² vs {warea}"
+                );
+            }
+        }
+    }
+}
