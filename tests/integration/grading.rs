@@ -320,3 +320,38 @@ fn blade_idw_gives_every_cell_eq_23_of_its_cavities_materials_at_its_centre() {
         "{cells} cells by Eq. 23 at their centres ({off_centre} around corners at the point nearest their centroid, at most {farthest:.3} mm off); dominant {dominant:?}"
     );
 }
+
+/// f1 = (alpha r)^k over r in [0, 1] is a volume fraction only with alpha <= 1: a
+/// larger alpha is refused at its key when the pipeline is read (by `check` as by
+/// `run`), not when a layer meets f > 1 mid-run.
+#[test]
+fn a_power_law_past_one_is_refused_at_its_key() {
+    let path = pipelines().join("distance-field-power.toml");
+    let text = std::fs::read_to_string(&path).expect("pipeline");
+    assert!(text.contains("alpha = 1.0"));
+    let dir = tempfile::tempdir().expect("tempdir");
+    let bad = crate::support::write(
+        dir.path(),
+        "power.toml",
+        &text.replace("alpha = 1.0", "alpha = 2.0"),
+    );
+    for command in ["check", "run"] {
+        let out = crate::support::lamina_in(dir.path(), &[command, bad.to_str().expect("path")]);
+        let err = crate::support::text(&out.stderr);
+        assert_eq!(out.status.code(), Some(2), "{command}: {err}");
+        assert!(
+            err.contains("alpha") && err.contains("(0, 1]") && err.contains("r > 0.5000"),
+            "{command}: {err}"
+        );
+        let line = text
+            .lines()
+            .position(|l| l.starts_with("alpha = "))
+            .expect("line")
+            + 1;
+        assert!(err.contains(&format!("power.toml:{line}")), "{command}: {err}");
+    }
+    assert!(
+        !dir.path().join("out").exists(),
+        "a refused run leaves nothing behind"
+    );
+}

@@ -18,7 +18,7 @@ use crate::bands::{clean, nested_bands};
 use crate::cells::Cells;
 use crate::grid::Grid;
 use crate::measure::pole;
-use crate::regions::{from_bands, uniform_level, whole};
+use crate::regions::{from_bands, whole};
 use lamina_geom::field::Field;
 use lamina_geom::iso::iso_levels;
 use lamina_geom::simplify::simplify_into;
@@ -68,7 +68,7 @@ lamina_core::stage_options! {
         points: Option<Vec<[f64; 2]>>,
         /// the faces of the feature `surface`: `{ normal = [x, y, z], within = 30.0 }` (outward normal within that many degrees) and/or `{ groups = ["name"] }` (named face groups of a 3MF)
         faces: Option<FaceSelection>,
-        /// number of equal parts of r; levels j / (count - 1)
+        /// number of equal parts of r; each part's level is Eq. 2's d / max(d) where it starts: k / count
         count: usize = "10",
         /// grading step-width t_g: levels 0, t_g, ..., 1 at half steps
         step: Option<f64>,
@@ -89,7 +89,9 @@ lamina_core::stage_options! {
 /// How the normalised distance is cut into levels.
 #[derive(Debug, Clone)]
 pub enum Levels {
-    /// `n` equal parts of r, levels j / (n - 1) (Eq. 21).
+    /// `n` equal parts of r; the part [k/n, (k+1)/n) has Eq. 2's f = d / max(d) at its
+    /// start, k / n, as the regions between Fig. 7's iso-contours do (the same reading
+    /// as [`Levels::Spacing`]): the innermost part stops short of 1.
     Equal(usize),
     Steps(Truncation),
     /// Iso-contours every `s` mm of distance from the feature (Fig. 7: 0, 1.5, ...,
@@ -115,7 +117,7 @@ impl Levels {
         match self {
             Levels::Equal(n) => Cut {
                 thresholds: (1..*n).map(|k| k as f64 / *n as f64).collect(),
-                levels: (0..*n).map(|k| uniform_level(k, *n)).collect(),
+                levels: (0..*n).map(|k| k as f64 / *n as f64).collect(),
             },
             Levels::Steps(t) => Cut {
                 thresholds: t.thresholds(),

@@ -10,10 +10,16 @@ fn tube_field_from_outer_gives_rings_close_to_the_exact_ones() {
     let fam = OneFamily::new(circle(0.0, 0.0, 10.0, 512), vec![circle(0.0, 0.0, 5.0, 512)]);
     let regions = fam.tiles("use = \"distance-field\"\nfeature = \"outer\"\ncount = 5\ncells = 256");
     assert_eq!(indices(&regions), vec![0, 1, 2, 3, 4]);
-    // r = d / 5 from the outer: band j is the ring 10 - j .. 9 - j.
+    // r = d / 5 from the outer: band j is the ring 10 - j .. 9 - j, with Eq. 2's
+    // f = d / max(d) where it starts: j / 5.
     assert_ring_areas(&regions, 10.0, 1.0, 1e-2);
     for r in &regions {
-        assert!((r.level - r.index as f64 / 4.0).abs() < 1e-12);
+        assert!(
+            (r.level - r.index as f64 / 5.0).abs() < 1e-12,
+            "{}: {}",
+            r.index,
+            r.level
+        );
     }
 }
 
@@ -95,9 +101,19 @@ fn fig_7_iso_contours_every_one_and_a_half_over_a_maximum_of_11_76() {
             r.area()
         );
     }
-    // Fractions of the maximum stay available: eight equal parts of r.
+    // Fractions of the maximum stay available: eight equal parts of r, each with
+    // Eq. 2 where it starts, as the spacing's regions: 0, 0.125, ..., 0.875 (not
+    // j / 7, which would give the band 0.875-1 f = 1 and band 1 0.1429).
     let parts = fam.run(&*stage("use = \"distance-field\"\ncount = 8"));
     assert_eq!(indices(&parts), (0..8).collect::<Vec<_>>());
+    for r in &parts {
+        assert!(
+            (r.level - r.index as f64 / 8.0).abs() < 1e-12,
+            "{}: {}",
+            r.index,
+            r.level
+        );
+    }
 }
 
 /// Material features beyond the boundary, centre and point: a straight line (the

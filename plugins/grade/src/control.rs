@@ -42,8 +42,8 @@ pub const F: SharedOption = SharedOption::new(
 );
 pub const MU: SharedOption = SharedOption::without_default("unset: linear: 1; constant: 1; wave: 1");
 pub const LAMBDA: SharedOption = SharedOption::without_default("unset: linear: 0; wave: pi");
-pub const ALPHA: SharedOption = SharedOption::without_default("power: scale of r; unset: 1.0");
-pub const K: SharedOption = SharedOption::without_default("power: exponent; unset: 1.0");
+pub const ALPHA: SharedOption = SharedOption::without_default("power: scale of r, in (0, 1]; unset: 1.0");
+pub const K: SharedOption = SharedOption::without_default("power: exponent, positive; unset: 1.0");
 
 impl Control {
     /// Builds the control function from a stage's options; `default_linear` gives the
@@ -97,10 +97,32 @@ impl Control {
             }
             "power" => {
                 unused(&[("mu", o.mu.is_some()), ("lambda", o.lambda.is_some())])?;
-                Control::Power {
-                    alpha: num("alpha", o.alpha, 1.0)?,
-                    k: num("k", o.k, 1.0)?,
+                // r runs over [0, 1] (normalised, as d in distance-field Eq. 1), so
+                // (alpha r)^k is a volume fraction for every r only with 0 < alpha <= 1
+                // and k > 0; past 1 the paper leaves it undefined (a grading source's
+                // f > 1 is its +ve complementary region instead).
+                let alpha = num("alpha", o.alpha, 1.0)?;
+                if !(alpha > 0.0 && alpha <= 1.0) {
+                    return Err(config.error(
+                        "alpha",
+                        format!(
+                            "must be in (0, 1], not {alpha}: r runs from 0 to 1, so (alpha r)^k would leave [0, 1]{};                              to saturate a composition use a grading source (`discretise.sources`), whose f > 1 is its +ve complementary region",
+                            if alpha > 1.0 {
+                                format!(" for r > {:.4}", 1.0 / alpha)
+                            } else {
+                                String::new()
+                            }
+                        ),
+                    ));
                 }
+                let k = num("k", o.k, 1.0)?;
+                if k <= 0.0 {
+                    return Err(config.error(
+                        "k",
+                        format!("must be positive, not {k}: (alpha r)^k at r = 0 is 0 only then"),
+                    ));
+                }
+                Control::Power { alpha, k }
             }
             script => {
                 unused(&[

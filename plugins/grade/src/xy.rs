@@ -6,7 +6,7 @@
 //! far end, as the paper's green-to-black example does.
 
 use lamina_core::stage::{AnyStage, FamilyContext, Grader, StageConfig, StageInfo, StageKind};
-use lamina_core::{Composition, Point2, Polygon, Result, Sample, StageFactory, SubRegion};
+use lamina_core::{Composition, Contour, Point2, Polygon, Result, Sample, StageFactory, SubRegion, Vector2};
 use serde::Deserialize;
 
 use crate::control::{Control, ControlOptions, region_args};
@@ -21,10 +21,10 @@ enum LevelSource {
     Index,
     /// The level the discretiser gave the region (a distance ratio).
     Level,
-    /// Eq. 18 at points: r = D_e / L_r at every point of a grid inside the region (the
-    /// distance from the outer contour over the length of the line through the point
-    /// from the outer contour to the nearest hole, or to the family's most inland point
-    /// without holes); the control function is evaluated at each point, with its x and
+    /// Eq. 18 at points: r = D_e / L_r at every point of a grid inside the region, along
+    /// the radial line through the point (from the centre of the nearest hole, or of the
+    /// family's most inland point without holes, out to the outer contour); the control
+    /// function is evaluated at each point, with its x and
     /// y, and the region takes the mean composition.
     Points,
 }
@@ -89,25 +89,86 @@ fn grid_points(polygon: &Polygon, fallback: Point2, step: f64) -> Vec<Point2> {
     points
 }
 
-/// Eq. 18 at a point: the distance from the family's outer contour over the length of
-/// the line from the outer contour through the point to the nearest hole (to `pole`
-/// without holes).
+/// Where the ray from `from` along the unit vector `u` crosses `contour`: the ray's
+/// parameters (mm along it) at every crossing.
+fn crossings(contour: &Contour, from: Point2, u: Vector2) -> impl Iterator<Item = f64> + '_ {
+    contour.edges().filter_map(move |(a, b)| {
+        let e = b - a;
+        let denom = u.x * e.y - u.y * e.x;
+        if denom.abs() < 1e-15 {
+            return None;
+        }
+        let w = a - from;
+        let t = (w.x * e.y - w.y * e.x) / denom;
+        let s = (w.x * u.y - w.y * u.x) / denom;
+        ((0.0..=1.0).contains(&s) && t >= 0.0).then_some(t)
+    })
+}
+
+/// Eq. 18 at a point ε: r = D_ε / L_r along the radial line through ε (Fig. 7-8). The
+/// radial lines run from the outer contour to the centre of the inner contour (the
+/// centroid of the hole nearest ε, or `pole` without holes), so the line through ε is
+/// the ray from that centre through ε: L_r runs from where it leaves the hole to where
+/// it meets the outer contour, D_ε from ε to the outer contour. Where the ray does not
+/// meet them in that order (a hole that is not star-shaped about its centre, a point
+/// in a bay of the outer contour hidden from the centre), the shortest distances stand
+/// in: d_out / (d_out + d_in).
 pub fn point_level(family: &Polygon, pole: Option<Point2>, p: Point2) -> f64 {
+    let nearest = family
+        .holes
+        .iter()
+        .min_by(|a, b| a.distance(p).total_cmp(&b.distance(p)));
     let d_out = family.outer.distance(p);
-    let d_in = if family.holes.is_empty() {
-        pole.map_or(0.0, |c| (p - c).norm())
-    } else {
-        family
-            .holes
-            .iter()
-            .map(|h| h.distance(p))
-            .fold(f64::INFINITY, f64::min)
+    let d_in = match nearest {
+        Some(h) => h.distance(p),
+        None => pole.map_or(0.0, |c| (p - c).norm()),
     };
+    let centre = match nearest {
+        Some(h) => centroid(h),
+        None => pole,
+    };
+    if let Some(c) = centre {
+        let to = p - c;
+        let at = to.norm();
+        if at > 0.0 {
+            let u = to / at;
+            // The hole's last crossing before ε (the centre itself without a hole) and
+            // the outer contour's first after it.
+            let leave = match nearest {
+                Some(h) => crossings(h, c, u)
+                    .filter(|&t| t <= at)
+                    .fold(None, |m: Option<f64>, t| Some(m.map_or(t, |m| m.max(t)))),
+                None => Some(0.0),
+            };
+            let meet = crossings(&family.outer, c, u)
+                .filter(|&t| t >= at)
+                .fold(None, |m: Option<f64>, t| Some(m.map_or(t, |m| m.min(t))));
+            if let (Some(t0), Some(t1)) = (leave, meet)
+                && t1 > t0
+            {
+                return ((t1 - at) / (t1 - t0)).clamp(0.0, 1.0);
+            }
+        }
+    }
     if d_out + d_in > 0.0 {
         (d_out / (d_out + d_in)).clamp(0.0, 1.0)
     } else {
         0.0
     }
+}
+
+/// The centroid of the area a contour bounds; `None` without area.
+fn centroid(c: &Contour) -> Option<Point2> {
+    let o = *c.points.first()?;
+    let (mut twice, mut mx, mut my) = (0.0, 0.0, 0.0);
+    for (a, b) in c.edges() {
+        let (a, b) = (a - o, b - o);
+        let cross = a.x * b.y - b.x * a.y;
+        twice += cross;
+        mx += (a.x + b.x) * cross;
+        my += (a.y + b.y) * cross;
+    }
+    (twice != 0.0).then(|| Point2::new(o.x + mx / (3.0 * twice), o.y + my / (3.0 * twice)))
 }
 
 /// Eq. 21: r_j = j / (N_R - 1); a family that is one region sits at r = 0.
@@ -264,6 +325,35 @@ mod tests {
                 samples: Vec::new(),
             })
             .collect()
+    }
+
+    /// Eq. 18 along the radial line (Fig. 8): a disc of radius 20 about the origin with
+    /// a hole of radius 5 about (5, 0). Straight above the hole's centre, at (5, 12),
+    /// the radial line leaves the hole at y = 5 and meets the outer contour at
+    /// y = sqrt(400 - 25): D = 19.365 - 12, L = 19.365 - 5, r = 0.5127, where the
+    /// shortest distances (7 and 7) would give 0.5.
+    #[test]
+    fn eq_18_follows_the_radial_line_from_the_holes_centre() {
+        let family = Polygon::new(
+            Contour::circle(Point2::new(0.0, 0.0), 20.0, 4096),
+            vec![Contour::circle(Point2::new(5.0, 0.0), 5.0, 4096).oriented(false)],
+        );
+        let top = (400.0f64 - 25.0).sqrt();
+        let want = (top - 12.0) / (top - 5.0);
+        let r = point_level(&family, None, Point2::new(5.0, 12.0));
+        assert!((r - want).abs() < 1e-4, "{r} vs {want}");
+        assert!((r - 0.5).abs() > 0.01);
+        // Along the line of centres, both readings agree: (12, 0) is 8 mm in from the
+        // outer contour on a 10 mm line.
+        let r = point_level(&family, None, Point2::new(12.0, 0.0));
+        assert!((r - 0.8).abs() < 1e-4, "{r}");
+        // Without a hole, the line runs from the pole: at (10, 0) from (0, 0), 10 of 20.
+        let disc = Polygon::new(Contour::circle(Point2::new(0.0, 0.0), 20.0, 4096), vec![]);
+        let r = point_level(&disc, Some(Point2::new(0.0, 0.0)), Point2::new(0.0, 10.0));
+        assert!((r - 0.5).abs() < 1e-4, "{r}");
+        // On the outer contour r = 0, on the hole r = 1.
+        assert!(point_level(&family, None, Point2::new(-20.0, 0.0)).abs() < 1e-3);
+        assert!((point_level(&family, None, Point2::new(5.0, -5.0)) - 1.0).abs() < 1e-3);
     }
 
     /// topological-hierarchy-fgm Eq. 20-21 and Fig. 8: ten sub-regions from green at
