@@ -328,32 +328,66 @@ mod tests {
     }
 
     /// Eq. 18 along the radial line (Fig. 8): a disc of radius 20 about the origin with
-    /// a hole of radius 5 about (5, 0). Straight above the hole's centre, at (5, 12),
-    /// the radial line leaves the hole at y = 5 and meets the outer contour at
-    /// y = sqrt(400 - 25): D = 19.365 - 12, L = 19.365 - 5, r = 0.5127, where the
-    /// shortest distances (7 and 7) would give 0.5.
+    /// a hole of radius 5 about (5, 3). Straight above the hole's centre, at (5, 12),
+    /// the radial line leaves the hole at y = 8 and meets the outer contour at
+    /// y = sqrt(400 - 25): D = 19.365 - 12, L = 19.365 - 8, r = 0.648, where the
+    /// shortest distances (7 and 4) would give 0.636.
     #[test]
     fn eq_18_follows_the_radial_line_from_the_holes_centre() {
         let family = Polygon::new(
             Contour::circle(Point2::new(0.0, 0.0), 20.0, 4096),
-            vec![Contour::circle(Point2::new(5.0, 0.0), 5.0, 4096).oriented(false)],
+            vec![Contour::circle(Point2::new(5.0, 3.0), 5.0, 4096).oriented(false)],
         );
         let top = (400.0f64 - 25.0).sqrt();
-        let want = (top - 12.0) / (top - 5.0);
+        let want = (top - 12.0) / (top - 8.0);
         let r = point_level(&family, None, Point2::new(5.0, 12.0));
         assert!((r - want).abs() < 1e-4, "{r} vs {want}");
-        assert!((r - 0.5).abs() > 0.01);
-        // Along the line of centres, both readings agree: (12, 0) is 8 mm in from the
-        // outer contour on a 10 mm line.
-        let r = point_level(&family, None, Point2::new(12.0, 0.0));
-        assert!((r - 0.8).abs() < 1e-4, "{r}");
-        // Without a hole, the line runs from the pole: at (10, 0) from (0, 0), 10 of 20.
+        assert!((r - 7.0 / 11.0).abs() > 0.01);
+        // Along the hole's centre line to the right, at (12, 3): the line leaves the
+        // hole at x = 10 and meets the disc at x = sqrt(400 - 9).
+        let right = (400.0f64 - 9.0).sqrt();
+        let r = point_level(&family, None, Point2::new(12.0, 3.0));
+        let want = (right - 12.0) / (right - 10.0);
+        assert!((r - want).abs() < 1e-4, "{r} vs {want}");
+        // Without a hole, the line runs from the pole: at (0, 10) from (0, 0), 10 of 20.
         let disc = Polygon::new(Contour::circle(Point2::new(0.0, 0.0), 20.0, 4096), vec![]);
         let r = point_level(&disc, Some(Point2::new(0.0, 0.0)), Point2::new(0.0, 10.0));
         assert!((r - 0.5).abs() < 1e-4, "{r}");
         // On the outer contour r = 0, on the hole r = 1.
         assert!(point_level(&family, None, Point2::new(-20.0, 0.0)).abs() < 1e-3);
-        assert!((point_level(&family, None, Point2::new(5.0, -5.0)) - 1.0).abs() < 1e-3);
+        assert!((point_level(&family, None, Point2::new(5.0, -2.0)) - 1.0).abs() < 1e-3);
+    }
+
+    /// Where the radial line misses the hole (a U-shaped hole whose centroid lies in
+    /// its opening), the shortest distances stand in: at (0, 10) in a 40 mm square, 10
+    /// mm from the outer contour and sqrt(32) from the U's nearest corner.
+    #[test]
+    fn eq_18_falls_back_to_the_shortest_distances_where_the_radial_line_misses() {
+        let pts = |v: &[(f64, f64)]| Contour::new(v.iter().map(|&(x, y)| Point2::new(x, y)).collect());
+        let u = pts(&[
+            (-6.0, -6.0),
+            (-6.0, 6.0),
+            (-4.0, 6.0),
+            (-4.0, -4.0),
+            (4.0, -4.0),
+            (4.0, 6.0),
+            (6.0, 6.0),
+            (6.0, -6.0),
+        ]);
+        let family = Polygon::new(rect_contour(40.0), vec![u]);
+        let r = point_level(&family, None, Point2::new(0.0, 10.0));
+        let want = 10.0 / (10.0 + 32f64.sqrt());
+        assert!((r - want).abs() < 1e-9, "{r} vs {want}");
+    }
+
+    fn rect_contour(side: f64) -> Contour {
+        let h = side / 2.0;
+        Contour::new(vec![
+            Point2::new(-h, -h),
+            Point2::new(h, -h),
+            Point2::new(h, h),
+            Point2::new(-h, h),
+        ])
     }
 
     /// topological-hierarchy-fgm Eq. 20-21 and Fig. 8: ten sub-regions from green at
