@@ -184,3 +184,66 @@ pub fn region_args<'a>(ctx: &FamilyContext<'a>, region: &SubRegion, r: f64) -> S
         part: &ctx.info.parts[ctx.part].name,
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn at(c: &Control, r: f64, n: usize) -> Result<Composition> {
+        let args = ScriptArgs {
+            r,
+            d: 0.0,
+            x: 0.0,
+            y: 0.0,
+            z: 0.0,
+            layer: 0,
+            part: "p",
+        };
+        c.composition(&args, n, "test")
+    }
+
+    fn first(c: &Control, r: f64) -> f64 {
+        let comp = at(c, r, 2).expect("a composition");
+        assert!((comp.fractions[0] + comp.fractions[1] - 1.0).abs() < 1e-12);
+        comp.fractions[0]
+    }
+
+    /// Eq. 10-12 and the power law at points where a wrong operator shows: the
+    /// fraction of the first material, the second taking the rest.
+    #[test]
+    fn built_in_control_functions_give_the_papers_fractions() {
+        let linear = Control::Linear {
+            mu: -0.5,
+            lambda: 0.75,
+        };
+        assert!((first(&linear, 0.3) - 0.6).abs() < 1e-12);
+        assert!((first(&Control::Constant { mu: 0.25 }, 0.9) - 0.25).abs() < 1e-12);
+        // The gear's wave of Fig. 4: sin(pi r), and a half wave at r = 1/6.
+        let wave = Control::Wave {
+            mu: 1.0,
+            lambda: std::f64::consts::PI,
+        };
+        assert!((first(&wave, 1.0 / 6.0) - 0.5).abs() < 1e-12);
+        assert!((first(&wave, 0.5) - 1.0).abs() < 1e-12);
+        assert!(first(&wave, 1.0).abs() < 1e-15);
+        let damped = Control::Wave { mu: 0.8, lambda: 2.0 };
+        assert!((first(&damped, 0.25) - 0.8 * 0.5f64.sin()).abs() < 1e-12);
+        // (alpha r)^k: (0.5 x 0.8)^2 = 0.16.
+        let power = Control::Power { alpha: 0.5, k: 2.0 };
+        assert!((first(&power, 0.8) - 0.16).abs() < 1e-12);
+        // A fraction past 1 is an error naming the place.
+        let over = Control::Linear { mu: 1.0, lambda: 0.5 };
+        let e = at(&over, 0.75, 2).expect_err("f = 1.25").to_string();
+        assert!(e.contains("test") && e.contains("1.25"), "{e}");
+    }
+
+    /// One material: f must be 1 (the part is that material); three need a script.
+    #[test]
+    fn one_material_takes_f_of_one_and_three_need_a_script() {
+        let one = Control::Constant { mu: 1.0 };
+        assert_eq!(at(&one, 0.5, 1).expect("pure").fractions, vec![1.0]);
+        assert!(at(&Control::Constant { mu: 0.5 }, 0.5, 1).is_err());
+        let e = at(&one, 0.5, 3).expect_err("three").to_string();
+        assert!(e.contains("Rhai"), "{e}");
+    }
+}
