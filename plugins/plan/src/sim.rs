@@ -112,9 +112,14 @@ fn tally(pauses: &mut Pauses, why: Why, by: isize) {
 }
 
 /// The paper's choice between two moving tools: the one slower along X pauses (on a
-/// tie, the later one).
+/// tie, the later one). Speeds within rounding of each other (a part in 10^9: they
+/// come from positions along the routes) are a tie.
 fn slower_along_x(i: usize, j: usize, along_x: &[f64]) -> usize {
-    if along_x[j] > along_x[i] { i } else { j }
+    if along_x[j] > along_x[i] + 1e-9 * along_x[i].abs().max(1.0) {
+        i
+    } else {
+        j
+    }
 }
 
 /// A concurrent schedule: every tool's toolpaths with their pauses, the time the last

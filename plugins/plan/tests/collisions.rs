@@ -852,7 +852,18 @@ fn priority_by_returning_pauses_the_tool_back_from_a_side_step() {
 #[test]
 fn the_tool_slower_along_x_pauses_whichever_is_listed_first() {
     let (up, across, r0, r1) = crossing();
-    for look_ahead in [0.5, 1.0] {
+    // The same crossing 50 mm along +x too: a speed along X taken from positions
+    // rather than displacements would rank the tool along Y first there.
+    let shift = |r: &[Move], dx: f64| -> Vec<Move> {
+        r.iter()
+            .map(|m| Move {
+                points: m.points.iter().map(|p| Point2::new(p.x + dx, p.y)).collect(),
+                ..m.clone()
+            })
+            .collect()
+    };
+    for (look_ahead, dx) in [(0.5, 0.0), (1.0, 0.0), (0.5, 50.0)] {
+        let (r0, r1) = (shift(&r0, dx), shift(&r1, dx));
         for swap in [false, true] {
             let (mut a, mut b) = (up.clone(), across.clone());
             let tools = if swap {
@@ -884,8 +895,48 @@ fn the_tool_slower_along_x_pauses_whichever_is_listed_first() {
         }
     }
     // `waiting` puts one rule of its own first, and is counted when it decides.
-    let s = schedule(&[(&up, r0), (&across, r1)], Priority::Waiting, 0.5);
+    let s = schedule(
+        &[(&up, r0.clone()), (&across, r1.clone())],
+        Priority::Waiting,
+        0.5,
+    );
     assert_eq!(s.pauses.total(), holds(&s.paths).len());
+    // A look-ahead no longer than about a step is the paper's one-step check.
+    let one = schedule(&[(&up, r0.clone()), (&across, r1.clone())], Priority::XSpeed, 0.0);
+    let step = schedule(&[(&up, r0), (&across, r1)], Priority::XSpeed, STEP);
+    assert_eq!(one.paths, step.paths);
+}
+
+/// Two tools crossing diagonally at the same speed along X (one up and right, one up
+/// and left): a tie, where the paper's rule lets the tool listed first go on, whichever
+/// it is. Looking ahead, so that either pause would clear the way when the collision
+/// comes in prospect.
+#[test]
+fn on_a_tie_along_x_the_tool_listed_first_goes_on() {
+    let right = vec![bead(Point2::new(-20.0, -20.0), Point2::new(20.0, 20.0), 20.0)];
+    let left = vec![bead(Point2::new(22.0, -18.0), Point2::new(-18.0, 22.0), 20.0)];
+    for look_ahead in [0.5, 1.0] {
+        for swap in [false, true] {
+            let (a, b) = (tool(0, 20.0, 2.0), tool(1, 20.0, 2.0));
+            let routes = if swap { [&left, &right] } else { [&right, &left] };
+            let s = schedule(
+                &[(&a, routes[0].clone()), (&b, routes[1].clone())],
+                Priority::XSpeed,
+                look_ahead,
+            );
+            let h = holds(&s.paths);
+            assert!(
+                !h.is_empty(),
+                "look-ahead {look_ahead}, swapped {swap}: nobody gave way"
+            );
+            assert!(
+                h.iter().all(|h| h.tool == 1),
+                "look-ahead {look_ahead}, swapped {swap}: {h:?} {:?}",
+                s.pauses
+            );
+            assert!(s.pauses.by_x_speed >= 1, "{:?}", s.pauses);
+        }
+    }
 }
 
 #[test]
