@@ -197,6 +197,21 @@ fn concurrent_tools_never_collide_on_the_two_material_benchy() {
     println!(
         "{checked} tool pairs checked over {layers} layers; closest approach {closest_seen:.3} mm; pauses: {by_speed} by speed along X, {forced} forced, {other} otherwise"
     );
+    // `waiting` (a tool already paused stays paused) breaks the rule here, and the
+    // count says so.
+    table["plan"]
+        .as_table_mut()
+        .expect("[plan]")
+        .insert("priority".into(), "waiting".into());
+    std::fs::write(&pipeline, toml::to_string(&table).expect("toml")).expect("write");
+    run(&pipeline, &dir.path().join("waiting"));
+    let text = std::fs::read_to_string(dir.path().join("waiting/plan.jsonl")).expect("plan");
+    let mut pauses = [0; 3];
+    for line in text.lines().skip(1) {
+        add_pauses(&serde_json::from_str(line).expect("a layer"), &mut pauses);
+    }
+    assert!(pauses[2] > 0, "`waiting` broke the rule nowhere: {pauses:?}");
+    println!("with `waiting`: pauses {pauses:?}");
 }
 
 /// Bead area of a JSON toolpath (mm²): each segment's length times its width.

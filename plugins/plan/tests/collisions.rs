@@ -822,11 +822,22 @@ fn priority_by_clearing_pauses_the_tool_whose_pausing_clears_the_way() {
     }
     // Counted as forced, not as decided by speed.
     let (up, across, r0, r1) = on_the_crossing(false);
-    let s = schedule(&[(&up, r0), (&across, r1)], Priority::XSpeed, 0.0);
+    let s = schedule(&[(&up, r0.clone()), (&across, r1.clone())], Priority::XSpeed, 0.0);
     assert!(
         s.pauses.forced > 0 && s.pauses.by_x_speed == 0 && s.pauses.other == 0,
         "{:?}",
         s.pauses
+    );
+    // Listed the other way round, the tool along X (now the first) still waits and the
+    // one on the crossing never does.
+    let (mut up, mut across) = (up, across);
+    (up.index, across.index) = (1, 0);
+    let s = schedule(&[(&across, r1), (&up, r0)], Priority::XSpeed, 0.0);
+    let h = holds(&s.paths);
+    assert!(!h.is_empty() && h.iter().all(|h| h.tool == 0), "{h:?}");
+    assert!(
+        !s.paths.iter().any(|p| p.tool == 1 && p.kind != PathKind::Extrude),
+        "the tool on the crossing gave way"
     );
 }
 
