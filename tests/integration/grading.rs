@@ -354,4 +354,24 @@ fn a_power_law_past_one_is_refused_at_its_key() {
         !dir.path().join("out").exists(),
         "a refused run leaves nothing behind"
     );
+    // No scale at all, or an exponent that is not positive, is refused too, at its key.
+    for (from, to, key) in [
+        ("alpha = 1.0", "alpha = 0.0", "alpha"),
+        ("k = 2.0", "k = 0.0", "k"),
+    ] {
+        assert!(text.contains(from));
+        let bad = crate::support::write(dir.path(), "power.toml", &text.replacen(from, to, 1));
+        let out = crate::support::lamina_in(dir.path(), &["check", bad.to_str().expect("path")]);
+        let err = crate::support::text(&out.stderr);
+        let line = text.lines().position(|l| l.starts_with(from)).expect("line") + 1;
+        assert_eq!(out.status.code(), Some(2), "{to}: {err}");
+        assert!(
+            err.contains(&format!("power.toml:{line}")) && err.contains(key),
+            "{to}: {err}"
+        );
+    }
+    // alpha = 1 is the paper's own (Fig. 5): accepted.
+    let ok = crate::support::write(dir.path(), "power.toml", &text);
+    let out = crate::support::lamina_in(dir.path(), &["check", ok.to_str().expect("path")]);
+    assert!(out.status.success(), "{}", crate::support::text(&out.stderr));
 }

@@ -334,10 +334,11 @@ mod tests {
     /// shortest distances (7 and 4) would give 0.636.
     #[test]
     fn eq_18_follows_the_radial_line_from_the_holes_centre() {
-        let family = Polygon::new(
-            Contour::circle(Point2::new(0.0, 0.0), 20.0, 4096),
-            vec![Contour::circle(Point2::new(5.0, 3.0), 5.0, 4096).oriented(false)],
-        );
+        // The hole's points start a third of the way round, not level with its
+        // centre, so that a centroid wrong in y shows.
+        let mut hole = Contour::circle(Point2::new(5.0, 3.0), 5.0, 4096).oriented(false);
+        hole.points.rotate_left(1365);
+        let family = Polygon::new(Contour::circle(Point2::new(0.0, 0.0), 20.0, 4096), vec![hole]);
         let top = (400.0f64 - 25.0).sqrt();
         let want = (top - 12.0) / (top - 8.0);
         let r = point_level(&family, None, Point2::new(5.0, 12.0));
