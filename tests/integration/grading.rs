@@ -375,3 +375,70 @@ fn a_power_law_past_one_is_refused_at_its_key() {
     let out = crate::support::lamina_in(dir.path(), &["check", ok.to_str().expect("path")]);
     assert!(out.status.success(), "{}", crate::support::text(&out.stderr));
 }
+
+/// Eq. 9's span given as heights: the layers' own heights of layers 3 and 9 give the
+/// gear exactly the compositions `from_layer = 3`, `to_layer = 9` give. Spans and
+/// weights that mean nothing are refused at their keys.
+#[test]
+fn a_z_span_by_heights_matches_the_span_by_layers_and_bad_spans_are_refused() {
+    let text = std::fs::read_to_string(pipelines().join("gear-z-gradient.toml")).expect("pipeline");
+    let by_layers = run("gear-z-gradient.toml", "gear-z-gradient.json");
+    let z_of = |i: u64| -> f64 {
+        by_layers["layers"]
+            .as_array()
+            .expect("layers")
+            .iter()
+            .find(|l| l["index"].as_u64() == Some(i))
+            .and_then(|l| l["z"].as_f64())
+            .expect("the layer's z")
+    };
+    let heights = text.replace(
+        "from_layer = 3\nto_layer = 9",
+        &format!("from_z = {:?}\nto_z = {:?}", z_of(3), z_of(9)),
+    );
+    assert_ne!(heights, text);
+    let dir = tempfile::tempdir().expect("tempdir");
+    let by_heights = crate::support::run_text(dir.path(), &heights, "gear-z-gradient.json");
+    let (a, b) = (gear_layers(&by_layers), gear_layers(&by_heights));
+    assert_eq!(a.len(), b.len());
+    let mut graded = 0;
+    for ((i, ra), (j, rb)) in a.iter().zip(&b) {
+        assert_eq!(i, j);
+        for (x, y) in ra.iter().zip(rb) {
+            assert!((x.1 - y.1).abs() < 1e-12, "layer {i}: {} vs {}", x.1, y.1);
+            graded += usize::from(x.1 > 0.0 && x.1 < 1.0);
+        }
+    }
+    assert!(graded > 0, "no layer between the two materials");
+    for (bad, key) in [
+        (format!("from_z = {:?}\nto_z = {:?}", z_of(9), z_of(3)), "to_z"),
+        (format!("from_z = {:?}", z_of(3)), "from_layer"),
+        ("to_layer = 9".to_string(), "from_layer"),
+    ] {
+        let t = text.replace("from_layer = 3\nto_layer = 9", &bad);
+        let path = crate::support::write(dir.path(), "bad.toml", &t);
+        let out = crate::support::lamina_in(dir.path(), &["check", path.to_str().expect("path")]);
+        let err = crate::support::text(&out.stderr);
+        assert_eq!(out.status.code(), Some(2), "{bad}: {err}");
+        assert!(err.contains(key), "{bad}: {err}");
+    }
+    // Eq. 8's weights: none negative, not both zero.
+    let zxy = std::fs::read_to_string(pipelines().join("blade-zxy.toml")).expect("pipeline");
+    for bad in ["weights = [0.0, 0.0]", "weights = [-1.0, 2.0]"] {
+        let t = zxy.replace("weights = [1.0, 1.0]", bad);
+        assert_ne!(t, zxy);
+        let path = crate::support::write(dir.path(), "bad.toml", &t);
+        let out = crate::support::lamina_in(dir.path(), &["check", path.to_str().expect("path")]);
+        let err = crate::support::text(&out.stderr);
+        assert_eq!(out.status.code(), Some(2), "{bad}: {err}");
+        assert!(err.contains("weights"), "{bad}: {err}");
+    }
+    // IDW's exponent: positive.
+    let idw = std::fs::read_to_string(pipelines().join("blade-idw.toml")).expect("pipeline");
+    let t = idw.replace("outer = \"m1\"", "outer = \"m1\"\npower = 0.0");
+    let path = crate::support::write(dir.path(), "bad.toml", &t);
+    let out = crate::support::lamina_in(dir.path(), &["check", path.to_str().expect("path")]);
+    let err = crate::support::text(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{err}");
+    assert!(err.contains("power"), "{err}");
+}
