@@ -2,4 +2,4 @@
 //! and the geometry algorithms they share through `lamina-geom` itself.
 
 pub use lamina_geom::shape::*;
-pub use lamina_geom::{closest_on_segment, segment_distance};
+pub use lamina_geom::{closest_on_segment, contour_centroid, polygon_centroid, segment_distance};

@@ -6,6 +6,7 @@
 //! - [`shape`]: contours, polygons and boxes with their measures; they cross the
 //!   plugin boundary.
 //! - [`segment`]: a point against a segment.
+//! - [`centroid`]: the centroids of contours and polygons.
 //! - [`ring`]: the `[x, y]` rings and shapes the boolean engine takes, and conversions.
 //! - [`simplify`]: the one ring simplifier.
 //! - [`follow`]: one solid area followed from layer to layer.
@@ -16,6 +17,7 @@
 //!   the sections a layer's plane cuts from them (the search band of Fig. 5).
 
 pub mod cell;
+pub mod centroid;
 pub mod field;
 pub mod follow;
 pub mod iso;
@@ -26,6 +28,7 @@ pub mod segment;
 pub mod shape;
 pub mod simplify;
 
+pub use centroid::{contour_centroid, polygon_centroid};
 pub use ring::{Ring, Shape, Shapes};
 pub use segment::{closest_on_segment, segment_distance, segment_distance2, segment_parameter};
 pub use shape::{BBox2, Contour, Point2, Polygon, Vector2};

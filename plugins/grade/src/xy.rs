@@ -5,6 +5,7 @@
 //! f = 1 - r, puts the part's first material at the outer contour and the second at the
 //! far end, as the paper's green-to-black example does.
 
+use lamina_core::geom::contour_centroid;
 use lamina_core::stage::{AnyStage, FamilyContext, Grader, StageConfig, StageInfo, StageKind};
 use lamina_core::{Composition, Contour, Point2, Polygon, Result, Sample, StageFactory, SubRegion, Vector2};
 use serde::Deserialize;
@@ -105,70 +106,74 @@ fn crossings(contour: &Contour, from: Point2, u: Vector2) -> impl Iterator<Item 
     })
 }
 
-/// Eq. 18 at a point ε: r = D_ε / L_r along the radial line through ε (Fig. 7-8). The
-/// radial lines run from the outer contour to the centre of the inner contour (the
-/// centroid of the hole nearest ε, or `pole` without holes), so the line through ε is
-/// the ray from that centre through ε: L_r runs from where it leaves the hole to where
-/// it meets the outer contour, D_ε from ε to the outer contour. Where the ray does not
-/// meet them in that order (a hole that is not star-shaped about its centre, a point
-/// in a bay of the outer contour hidden from the centre), the shortest distances stand
-/// in: d_out / (d_out + d_in).
-pub fn point_level(family: &Polygon, pole: Option<Point2>, p: Point2) -> f64 {
-    let nearest = family
-        .holes
-        .iter()
-        .min_by(|a, b| a.distance(p).total_cmp(&b.distance(p)));
-    let d_out = family.outer.distance(p);
-    let d_in = match nearest {
-        Some(h) => h.distance(p),
-        None => pole.map_or(0.0, |c| (p - c).norm()),
-    };
-    let centre = match nearest {
-        Some(h) => centroid(h),
-        None => pole,
-    };
-    if let Some(c) = centre {
-        let to = p - c;
-        let at = to.norm();
-        if at > 0.0 {
-            let u = to / at;
-            // The hole's last crossing before ε (the centre itself without a hole) and
-            // the outer contour's first after it.
-            let leave = match nearest {
-                Some(h) => crossings(h, c, u)
-                    .filter(|&t| t <= at)
-                    .fold(None, |m: Option<f64>, t| Some(m.map_or(t, |m| m.max(t)))),
-                None => Some(0.0),
-            };
-            let meet = crossings(&family.outer, c, u)
-                .filter(|&t| t >= at)
-                .fold(None, |m: Option<f64>, t| Some(m.map_or(t, |m| m.min(t))));
-            if let (Some(t0), Some(t1)) = (leave, meet)
-                && t1 > t0
-            {
-                return ((t1 - at) / (t1 - t0)).clamp(0.0, 1.0);
-            }
-        }
-    }
-    if d_out + d_in > 0.0 {
-        (d_out / (d_out + d_in)).clamp(0.0, 1.0)
-    } else {
-        0.0
-    }
+/// Eq. 18 at the points of one family: r = D_ε / L_r along the radial line through ε
+/// (Fig. 7-8). The radial lines run from the outer contour to the centre of the inner
+/// contour (the centroid of the hole nearest ε, or `pole` without holes), so the line
+/// through ε is the ray from that centre through ε: L_r runs from where it leaves the
+/// hole to where it meets the outer contour, D_ε from ε to the outer contour. Where the
+/// ray does not meet them in that order (a hole that is not star-shaped about its
+/// centre, a point in a bay of the outer contour hidden from the centre), the shortest
+/// distances stand in: d_out / (d_out + d_in). The holes' centres are found once per
+/// family.
+pub struct RadialLines<'a> {
+    family: &'a Polygon,
+    pole: Option<Point2>,
+    centres: Vec<Option<Point2>>,
 }
 
-/// The centroid of the area a contour bounds; `None` without area.
-fn centroid(c: &Contour) -> Option<Point2> {
-    let o = *c.points.first()?;
-    let (mut twice, mut mx, mut my) = (0.0, 0.0, 0.0);
-    for (a, b) in c.edges() {
-        let (a, b) = (a - o, b - o);
-        let cross = a.x * b.y - b.x * a.y;
-        twice += cross;
-        mx += (a.x + b.x) * cross;
-        my += (a.y + b.y) * cross;
+impl<'a> RadialLines<'a> {
+    pub fn new(family: &'a Polygon, pole: Option<Point2>) -> Self {
+        let centres = family.holes.iter().map(contour_centroid).collect();
+        RadialLines {
+            family,
+            pole,
+            centres,
+        }
     }
-    (twice != 0.0).then(|| Point2::new(o.x + mx / (3.0 * twice), o.y + my / (3.0 * twice)))
+
+    /// r at the point `p`.
+    pub fn level(&self, p: Point2) -> f64 {
+        let family = self.family;
+        let nearest = family
+            .holes
+            .iter()
+            .enumerate()
+            .map(|(k, h)| (k, h, h.distance(p)))
+            .min_by(|a, b| a.2.total_cmp(&b.2));
+        let (centre, d_in) = match nearest {
+            Some((k, _, d)) => (self.centres[k], d),
+            None => (self.pole, self.pole.map_or(0.0, |c| (p - c).norm())),
+        };
+        if let Some(c) = centre {
+            let to = p - c;
+            let at = to.norm();
+            if at > 0.0 {
+                let u = to / at;
+                // The hole's last crossing before ε (the centre itself without a hole)
+                // and the outer contour's first after it.
+                let leave = match nearest {
+                    Some((_, h, _)) => crossings(h, c, u)
+                        .filter(|&t| t <= at)
+                        .fold(None, |m: Option<f64>, t| Some(m.map_or(t, |m| m.max(t)))),
+                    None => Some(0.0),
+                };
+                let meet = crossings(&family.outer, c, u)
+                    .filter(|&t| t >= at)
+                    .fold(None, |m: Option<f64>, t| Some(m.map_or(t, |m| m.min(t))));
+                if let (Some(t0), Some(t1)) = (leave, meet)
+                    && t1 > t0
+                {
+                    return ((t1 - at) / (t1 - t0)).clamp(0.0, 1.0);
+                }
+            }
+        }
+        let d_out = family.outer.distance(p);
+        if d_out + d_in > 0.0 {
+            (d_out / (d_out + d_in)).clamp(0.0, 1.0)
+        } else {
+            0.0
+        }
+    }
 }
 
 /// Eq. 21: r_j = j / (N_R - 1); a family that is one region sits at r = 0.
@@ -194,12 +199,13 @@ impl Grader for InPlane {
                     .max_by(|a, b| family.outer.distance(*a).total_cmp(&family.outer.distance(*b)))
                     .unwrap_or_else(|| family.bbox().center())
             });
+            let lines = RadialLines::new(&family, pole);
             for region in regions.iter_mut() {
                 let points = grid_points(&region.polygon, region.reference, self.grid);
                 let mut sum = vec![0.0; n];
                 let mut samples = Vec::with_capacity(points.len());
                 for &p in &points {
-                    let r = point_level(&family, pole, p);
+                    let r = lines.level(p);
                     let mut args = region_args(ctx, region, r);
                     (args.x, args.y) = (p.x, p.y);
                     let context = format!(
@@ -341,22 +347,23 @@ mod tests {
         let family = Polygon::new(Contour::circle(Point2::new(0.0, 0.0), 20.0, 4096), vec![hole]);
         let top = (400.0f64 - 25.0).sqrt();
         let want = (top - 12.0) / (top - 8.0);
-        let r = point_level(&family, None, Point2::new(5.0, 12.0));
+        let lines = RadialLines::new(&family, None);
+        let r = lines.level(Point2::new(5.0, 12.0));
         assert!((r - want).abs() < 1e-4, "{r} vs {want}");
         assert!((r - 7.0 / 11.0).abs() > 0.01);
         // Along the hole's centre line to the right, at (12, 3): the line leaves the
         // hole at x = 10 and meets the disc at x = sqrt(400 - 9).
         let right = (400.0f64 - 9.0).sqrt();
-        let r = point_level(&family, None, Point2::new(12.0, 3.0));
+        let r = lines.level(Point2::new(12.0, 3.0));
         let want = (right - 12.0) / (right - 10.0);
         assert!((r - want).abs() < 1e-4, "{r} vs {want}");
         // Without a hole, the line runs from the pole: at (0, 10) from (0, 0), 10 of 20.
         let disc = Polygon::new(Contour::circle(Point2::new(0.0, 0.0), 20.0, 4096), vec![]);
-        let r = point_level(&disc, Some(Point2::new(0.0, 0.0)), Point2::new(0.0, 10.0));
+        let r = RadialLines::new(&disc, Some(Point2::new(0.0, 0.0))).level(Point2::new(0.0, 10.0));
         assert!((r - 0.5).abs() < 1e-4, "{r}");
         // On the outer contour r = 0, on the hole r = 1.
-        assert!(point_level(&family, None, Point2::new(-20.0, 0.0)).abs() < 1e-3);
-        assert!((point_level(&family, None, Point2::new(5.0, -2.0)) - 1.0).abs() < 1e-3);
+        assert!(lines.level(Point2::new(-20.0, 0.0)).abs() < 1e-3);
+        assert!((lines.level(Point2::new(5.0, -2.0)) - 1.0).abs() < 1e-3);
     }
 
     /// Where the radial line misses the hole (a U-shaped hole whose centroid lies in
@@ -376,7 +383,7 @@ mod tests {
             (6.0, -6.0),
         ]);
         let family = Polygon::new(rect_contour(40.0), vec![u]);
-        let r = point_level(&family, None, Point2::new(0.0, 10.0));
+        let r = RadialLines::new(&family, None).level(Point2::new(0.0, 10.0));
         let want = 10.0 / (10.0 + 32f64.sqrt());
         assert!((r - want).abs() < 1e-9, "{r} vs {want}");
     }
