@@ -223,6 +223,23 @@ pub fn summary(report: &RunReport, timings: bool) {
         );
     }
     for m in &report.machine_files {
+        if !m.shares.is_empty() && m.part == 0.0 && m.waste.is_empty() {
+            // A machining program: its time and what it goes to.
+            let total: f64 = m.shares.iter().map(|(_, s)| s).sum();
+            let shares: Vec<String> = m
+                .shares
+                .iter()
+                .filter(|(_, s)| *s > 0.0)
+                .map(|(k, s)| format!("{k} {:.0} %", 100.0 * s / total.max(1e-9)))
+                .collect();
+            eprintln!(
+                "{}: {} by the file's own estimate: {}",
+                m.file.display(),
+                duration(m.time),
+                shares.join(", ")
+            );
+            continue;
+        }
         let waste: Vec<String> = m
             .waste
             .iter()

@@ -357,6 +357,12 @@ pub struct MachineFileReport {
     pub transition: f64,
     /// Volume deposited beside the part, by kind (`purge`, `tower`, `prime`, `skirt`).
     pub waste: Vec<(String, f64)>,
+    /// Of `time`: what it is spent on (s), by operation, where the file knows (an NC
+    /// program's spraying, grinding, tool changes).
+    pub shares: Vec<(String, f64)>,
+    /// What the machine will do otherwise than the plan asks, in the user's words (a
+    /// wheel that cannot reach its surface speed); the run prints them as warnings.
+    pub notes: Vec<String>,
 }
 
 impl MachineFileReport {

@@ -284,6 +284,14 @@ impl Engine {
             timings.time(StageKind::Export, || sink.finish(&info, &mut outputs))?;
         }
         let machine_files = outputs.take_reports();
+        for m in &machine_files {
+            for note in &m.notes {
+                diagnostics.push(Diagnostic::warning(
+                    StageKind::Export,
+                    format!("{}: {note}", m.file.display()),
+                ));
+            }
+        }
         let files = outputs.commit()?;
         timings
             .wall

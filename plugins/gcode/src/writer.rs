@@ -1759,6 +1759,7 @@ impl Writer {
                 ("prime".into(), deposit.prime),
                 ("skirt".into(), deposit.skirt),
             ],
+            ..MachineFileReport::default()
         })
     }
 }

@@ -5,7 +5,9 @@
 //! cut) are engraved by a laser from the surface down through the layer: rings inside
 //! each void's outline, the first half a spot in, the next ones a spot less the overlap
 //! further, and one at the deepest point where a core would be left, so the void is
-//! cleared. A void narrower than the spot gets none, and the layer says so.
+//! cleared. A void narrower than the spot gets none, and the layer says so. The rings
+//! are burnt in passes of `depth_per_pass`, each focused on the floor it leaves, so the
+//! last pass's height is the layer's bottom: the depth is in the paths' Z.
 
 use i_overlay::core::fill_rule::FillRule;
 use i_overlay::core::overlay_rule::OverlayRule;
@@ -48,6 +50,8 @@ lamina_core::stage_options! {
         feed: f64 = "50.0",
         /// laser power (W)
         power: f64 = "20.0",
+        /// depth one pass of the laser takes off (mm): the rings are repeated, each pass focused on the floor it leaves, down to the layer's bottom
+        depth_per_pass: f64 = "0.1",
     }
 }
 
@@ -182,7 +186,7 @@ impl Process for Engrave {
             return Ok(());
         }
         let bottom = plan.z - plan.thickness;
-        // The laser focuses on the surface and burns down to the layer's bottom.
+        // The laser burns from the surface down to the layer's bottom.
         let surface = surface_now(plan);
         let spot = self.tool.diameter;
         let step = spot * (1.0 - self.options.overlap);
@@ -199,16 +203,32 @@ impl Process for Engrave {
             rings,
             &format!("laser rings {step} mm apart in the layer's voids"),
         )?;
-        let mut paths = Vec::new();
+        let depth = surface - bottom;
+        let passes = (depth / self.options.depth_per_pass - 1e-9).ceil().max(1.0);
+        self.limits.check(
+            Limit::GridCells,
+            rings * passes,
+            &format!(
+                "laser rings in {passes} passes of {} mm",
+                self.options.depth_per_pass
+            ),
+        )?;
+        let mut rings = Vec::new();
         let mut narrow = 0;
         for v in &voids {
-            let rings = v.rings(spot, step);
-            if rings.is_empty() {
+            let r = v.rings(spot, step);
+            if r.is_empty() {
                 narrow += 1;
             }
-            paths.extend(rings.into_iter().map(|c| OperationPath {
-                z: surface,
-                points: c.points,
+            rings.extend(r);
+        }
+        // Pass k focuses on the floor it leaves, the last on the layer's bottom.
+        let mut paths = Vec::with_capacity(rings.len() * passes as usize);
+        for k in 1..=passes as usize {
+            let z = crate::area::micrometres(surface - depth * k as f64 / passes);
+            paths.extend(rings.iter().map(|c| OperationPath {
+                z,
+                points: c.points.clone(),
                 closed: true,
             }));
         }
@@ -227,7 +247,8 @@ impl Process for Engrave {
         op.values.insert("voids".into(), voids.len() as f64);
         op.values
             .insert("void_area".into(), voids.iter().map(Void::area).sum());
-        op.values.insert("depth".into(), surface - bottom);
+        op.values.insert("depth".into(), depth);
+        op.values.insert("passes".into(), passes);
         plan.operations.push(op);
         Ok(())
     }
@@ -276,6 +297,9 @@ fn build(config: &StageConfig<'_>) -> Result<AnyStage> {
     };
     if !(options.overlap.is_finite() && (0.0..0.9).contains(&options.overlap)) {
         return Err(config.error("overlap", "must be at least 0 and below 0.9"));
+    }
+    if !(options.depth_per_pass.is_finite() && options.depth_per_pass >= 0.001) {
+        return Err(config.error("depth_per_pass", "must be at least 0.001 mm"));
     }
     let tool = checked(
         config,

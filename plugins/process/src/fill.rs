@@ -1,7 +1,11 @@
-//! `fill` and `remove-filler`: steps 5 and 7 of the process. Where a layer's voids were
-//! engraved, a low-strength, high-melting filler is laid over the area in passes so
-//! the next spray cannot fill them; the finish grind then takes the surplus off. At
-//! the end of the job the filler is removed.
+//! `fill`: step 5 of the process. Where a layer's voids were engraved, a low-strength,
+//! high-melting filler is laid over the area in passes so the next spray cannot fill
+//! them; the finish grind then takes the surplus off. The paper leaves the filler in
+//! the voids, where it protects the part from erosion (cmpm-process-planning §2, step
+//! 7: repeat from step 1 until the part is done).
+//!
+//! `remove-filler` is not the paper's: an extra operation for a part whose voids must
+//! end empty, melted out or leached once the last layer is done.
 
 use lamina_core::pipeline::TableRef;
 use lamina_core::stage::{AnyStage, Process, StageConfig, StageInfo, StageKind};
@@ -133,7 +137,7 @@ lamina_core::register_stage!(StageFactory {
     info: StageInfo {
         kind: StageKind::Process,
         name: "remove-filler",
-        doc: "Removes the voids' filler once the last layer is done (CMPM step 7), by melting it out or leaching it.",
+        doc: "Removes the voids' filler once the last layer is done, by melting it out or leaching it: an extra operation, since the CMPM process leaves the filler in the voids.",
         options: RemoveOptions::SPECS,
         example: "use = \"remove-filler\"\nmethod = \"melt-out\"",
     },

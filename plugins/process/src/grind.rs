@@ -42,8 +42,10 @@ lamina_core::stage_options! {
         stepover: f64 = "0.5",
         /// table feed (mm/s)
         feed: f64 = "20.0",
-        /// wheel speed (rev/min)
-        spindle: f64 = "3000.0",
+        /// speed of the wheel's rim (m/s): vitrified wheels want 20-35; the spindle speed follows from the diameter
+        surface_speed: f64 = "25.0",
+        /// wheel speed (rev/min), instead of `surface_speed`
+        spindle: Option<f64>,
     }
 }
 
@@ -99,6 +101,16 @@ fn build(config: &StageConfig<'_>) -> Result<AnyStage> {
     if !(options.stepover.is_finite() && options.stepover > 0.0 && options.stepover <= 1.0) {
         return Err(config.error("stepover", "must be above 0 and at most 1 (a whole diameter)"));
     }
+    if !(options.surface_speed.is_finite() && options.surface_speed > 0.0) {
+        return Err(config.error("surface_speed", "must be a positive number of m/s"));
+    }
+    if options.spindle.is_some() && config.has("surface_speed") {
+        return Err(config.error("spindle", "give `spindle` or `surface_speed`, not both"));
+    }
+    // v = pi d n: rev/min from m/s on a rim of d mm.
+    let spindle = options.spindle.unwrap_or_else(|| {
+        (options.surface_speed * 60_000.0 / (std::f64::consts::PI * options.diameter)).round()
+    });
     let tool = checked(
         config,
         ToolSpec {
@@ -106,7 +118,7 @@ fn build(config: &StageConfig<'_>) -> Result<AnyStage> {
             kind: "grinding-wheel",
             diameter: options.diameter,
             feed: options.feed,
-            spindle: Some(options.spindle),
+            spindle: Some(spindle),
             power: None,
         },
     )?;

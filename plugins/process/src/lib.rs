@@ -15,7 +15,9 @@
 //! 4. `engrave`: a laser engraves the voids of a periodic microstructure;
 //! 5. `fill`: the voids are filled with a low-strength, high-melting material;
 //! 6. `grind` (finish): down to the layer's design height;
-//! 7. `remove-filler`: at the end of the job, the filler is removed.
+//! 7. repeat from step 1 for the next layer until the part is done; the filler stays in
+//!    the voids, where it protects the part from erosion. (`remove-filler`, an extra
+//!    operation a pipeline may ask for, melts or leaches it out at the end.)
 //!
 //! The `nc` exporter writes the operations as G-code for a hybrid cell.
 

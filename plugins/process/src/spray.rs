@@ -2,14 +2,20 @@
 //! layer thicker by the grinding allowances (the rough allowance on every region, the
 //! finish allowance on the regions whose voids are engraved and filled before the last
 //! grind), with the inclusions of a composite region.
+//!
+//! The gun mixes its powders as it goes (cmpm-process-planning §2, step 2, and §4.2.2:
+//! the constituents' volume fractions "for every pixel"): the area is sprayed by
+//! sub-regions of one composition, one operation each, whose `fraction:<material>`
+//! values are the graded composition the feeders are set to (`inclusion:<name>` the
+//! inclusions' volume fractions).
 
 use std::collections::BTreeMap;
 
 use lamina_core::pipeline::TableRef;
 use lamina_core::stage::{AnyStage, Process, StageConfig, StageInfo, StageKind};
-use lamina_core::{LayerPlan, Operation, OperationTool, ProcessContext, Result, StageFactory};
+use lamina_core::{LayerPlan, Operation, OperationTool, Polygon, ProcessContext, Result, StageFactory};
 
-use crate::area::{layer_area, raster};
+use crate::area::raster;
 use crate::regions::{check_names, selected, value_for};
 use crate::tool::{ToolSpec, checked, non_negative};
 
@@ -52,32 +58,89 @@ impl Process for Spray {
         if !selected(ctx, &self.table, plan, &o.regions)? {
             return Ok(());
         }
-        let area = layer_area(plan);
-        if area.is_empty() {
-            return Ok(());
-        }
         let finish = value_for(ctx, plan, &o.finish_allowance).copied().unwrap_or(0.0);
         let surface = crate::area::micrometres(plan.z + o.rough_allowance + finish);
-        let mut op = Operation::new("spray", plan.material_region);
-        op.tool = Some(self.tool.clone());
-        op.surface = Some(surface);
-        op.paths = raster(
-            &area,
-            self.tool.diameter * (1.0 - o.overlap),
-            surface,
-            &self.limits,
-        )?;
-        op.values.insert("thickness".into(), plan.thickness);
-        op.values.insert("rough_allowance".into(), o.rough_allowance);
-        op.values.insert("finish_allowance".into(), finish);
-        if let Some(inclusions) = value_for(ctx, plan, &o.inclusions) {
-            for (name, fraction) in inclusions {
-                op.values.insert(format!("inclusion:{name}"), *fraction);
+        let spacing = self.tool.diameter * (1.0 - o.overlap);
+        for (fractions, polygons) in by_composition(ctx, plan) {
+            let mut op = Operation::new("spray", plan.material_region);
+            op.tool = Some(self.tool.clone());
+            op.surface = Some(surface);
+            op.paths = raster(&polygons, spacing, surface, &self.limits)?;
+            op.values.insert("thickness".into(), plan.thickness);
+            op.values.insert("rough_allowance".into(), o.rough_allowance);
+            op.values.insert("finish_allowance".into(), finish);
+            for (name, fraction) in fractions {
+                op.values.insert(format!("fraction:{name}"), fraction);
             }
+            if let Some(inclusions) = value_for(ctx, plan, &o.inclusions) {
+                for (name, fraction) in inclusions {
+                    op.values.insert(format!("inclusion:{name}"), *fraction);
+                }
+            }
+            plan.operations.push(op);
         }
-        plan.operations.push(op);
         Ok(())
     }
+}
+
+/// The layer's area as sprayed: each part's graded sub-regions, grouped by
+/// composition (by material name, in the order they first come); a part not graded
+/// gives its whole area, with its material when it has one. A part with several
+/// materials and no grading gets no fractions: the plan does not say what to mix.
+fn by_composition(ctx: &ProcessContext<'_>, plan: &LayerPlan) -> Vec<(BTreeMap<String, f64>, Vec<Polygon>)> {
+    let name = |part: usize, i: usize| -> String {
+        ctx.info
+            .parts
+            .get(part)
+            .and_then(|p| p.materials.get(i))
+            .and_then(|&m| ctx.info.materials.get(m))
+            .map_or_else(|| format!("material {i}"), |m| m.name.clone())
+    };
+    let mut groups: Vec<(BTreeMap<String, f64>, Vec<Polygon>)> = Vec::new();
+    let mut add = |fractions: BTreeMap<String, f64>, polygon: Polygon| {
+        if polygon.area() <= 0.0 {
+            return;
+        }
+        match groups.iter_mut().find(|(g, _)| same(g, &fractions)) {
+            Some((_, polygons)) => polygons.push(polygon),
+            None => groups.push((fractions, vec![polygon])),
+        }
+    };
+    for part in &plan.parts {
+        let graded = !part.regions.is_empty() && part.regions.iter().all(|r| r.composition.is_some());
+        if graded {
+            for r in &part.regions {
+                let mut fractions = BTreeMap::new();
+                for (i, f) in r.composition.iter().flat_map(|c| c.fractions.iter().enumerate()) {
+                    *fractions.entry(name(part.part, i)).or_insert(0.0) += f;
+                }
+                add(fractions, r.polygon.clone());
+            }
+        } else {
+            let single = ctx
+                .info
+                .parts
+                .get(part.part)
+                .is_some_and(|p| p.materials.len() == 1);
+            let fractions: BTreeMap<String, f64> = if single {
+                [(name(part.part, 0), 1.0)].into()
+            } else {
+                BTreeMap::new()
+            };
+            for &f in &part.families {
+                add(fractions.clone(), part.tree.family_polygon(&part.contours, f));
+            }
+        }
+    }
+    groups
+}
+
+/// Two compositions a feeder cannot tell apart (1e-9 in every fraction).
+fn same(a: &BTreeMap<String, f64>, b: &BTreeMap<String, f64>) -> bool {
+    a.len() == b.len()
+        && a.iter()
+            .zip(b)
+            .all(|((ka, va), (kb, vb))| ka == kb && (va - vb).abs() <= 1e-9)
 }
 
 fn build(config: &StageConfig<'_>) -> Result<AnyStage> {

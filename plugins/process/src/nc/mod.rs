@@ -1,0 +1,618 @@
+//! `nc`: the operations as an NC program for a hybrid cell, in the dialect of the cell's
+//! controller (`cell.rs`: LinuxCNC, a Fanuc-like controller and Grbl ship built in).
+//!
+//! - **Start and end.** The controller's header and safe start (units, plane, modes,
+//!   compensations cancelled, work offset); at the end everything stops, the length
+//!   offset is cancelled, the head rises to the safe height in machine coordinates,
+//!   then the program ends.
+//! - **Tool changes** at the safe height in machine coordinates, with the length offset
+//!   cancelled before and the new tool's applied after. Tools are numbered by the cell,
+//!   or without one by the `tools` table, the rest in the order they first come.
+//! - **Cutters never plunge.** An end mill ramps down along its own path
+//!   (`entry::ramp`); a cup wheel enters each pass from the side, lowered beside the
+//!   part where its face is clear (`entry::side_entry`). Both turn at the cell's cutting
+//!   data (a wheel's speed from its surface speed) with the chip vacuum on.
+//! - **The laser** stays at its focal height across a layer's rings, off between them;
+//!   it steps down to each pass's floor, so the engraving's depth is in Z.
+//! - **The spray** sets every powder feeder to its volume fraction in the sub-region's
+//!   composition, with the inclusions (a composite's matrix takes what they leave),
+//!   before the gun opens; the gun stands `spray_standoff` above the surface.
+//! - **No wasted lines.** A move to where the tool is, or a word already in force, is
+//!   not written.
+//! - **Cycle time.** The program's header gives the time it takes by the cell's motion
+//!   limits, tool-change and spindle times, with each operation's share; the run's
+//!   summary prints the same.
+//!
+//! The program is held until the last layer, since its header carries the time.
+
+mod entry;
+mod program;
+
+use std::collections::BTreeMap;
+use std::io::Write;
+use std::path::PathBuf;
+
+use lamina_core::stage::{
+    AnyStage, ExportContext, Exporter, LayerSink, OutputFiles, StageConfig, StageInfo, StageKind,
+};
+use lamina_core::{
+    Error, LayerPlan, MachineFileReport, Operation, Point2, Polygon, Result, RunInfo, Sequence, StageFactory,
+};
+
+use crate::area::{distance_to_area, layer_area};
+use crate::cell::{Cell, Cutting, RAMP_ANGLE};
+use program::{Program, number};
+
+lamina_core::stage_options! {
+    #[derive(Debug, Clone)]
+    struct Options {
+        /// the NC file
+        path: PathBuf = r#""job.nc""#,
+        /// the hybrid cell: a built-in profile (`cmpm-hybrid`, `cmpm-hybrid-fanuc`, `grbl-laser`) or a TOML file; its controller, tools, feeders and motion shape the program, and every operation is checked against it; empty: a LinuxCNC program with tools numbered by `tools`
+        cell: String = "\"\"",
+        /// tool numbers by tool name, without a cell; tools not listed get the next free number
+        tools: BTreeMap<String, u32> = "{}",
+        /// height above the highest surface so far at which tools travel between operations (mm)
+        clearance: f64 = "5.0",
+        /// height above the highest surface so far from which cutters ramp in and at which they move between passes (mm)
+        approach: f64 = "1.0",
+        /// room between a cup wheel's face and the part where it is lowered beside it (mm)
+        wheel_margin: f64 = "1.0",
+        /// height of the spray gun above the surface it sprays (mm)
+        spray_standoff: f64 = "80.0",
+        /// height of the filler nozzle above the surface (mm)
+        fill_standoff: f64 = "1.0",
+        /// feed of a cutter's ramp into the work, as a share of its feed
+        plunge: f64 = "0.3",
+    }
+}
+
+/// The controller and motion of a program written without a cell.
+const GENERIC: &str = include_str!("../../cells/generic-linuxcnc.toml");
+
+struct Nc {
+    options: Options,
+    /// The cell named, or the generic profile (`named` false).
+    cell: Cell,
+    named: bool,
+}
+
+struct Sink {
+    out: Box<dyn Write + Send>,
+    path: PathBuf,
+    options: Options,
+    regions: Vec<String>,
+    numbers: BTreeMap<String, u32>,
+    named: bool,
+    program: Program,
+    /// Highest surface so far (mm).
+    top: f64,
+    notes: Vec<String>,
+    title: String,
+}
+
+fn io(path: &std::path::Path) -> impl Fn(std::io::Error) -> Error + '_ {
+    move |e| Error::io(path, e)
+}
+
+/// A comment's text: one line, no parentheses (they would end it) and no semicolons
+/// (they start a comment of their own), at most 200 characters (LinuxCNC reads lines of
+/// up to 255).
+pub(crate) fn comment(s: &str) -> String {
+    let text = lamina_core::output::one_line(s)
+        .replace(['(', ')'], "")
+        .replace(';', ",");
+    match text.char_indices().nth(200) {
+        Some((i, _)) => text[..i].to_string(),
+        None => text,
+    }
+}
+
+/// Seconds as hours, minutes and seconds.
+fn duration(s: f64) -> String {
+    let s = s.round() as u64;
+    match (s / 3600, s % 3600 / 60, s % 60) {
+        (0, 0, sec) => format!("{sec} s"),
+        (0, m, sec) => format!("{m} min {sec} s"),
+        (h, m, sec) => format!("{h} h {m} min {sec} s"),
+    }
+}
+
+impl Exporter for Nc {
+    fn open(&self, ctx: &mut ExportContext<'_>) -> Result<Box<dyn LayerSink>> {
+        let path = self.options.path.clone();
+        let out = ctx.files.create(&path)?;
+        let regions = ctx
+            .sequence
+            .map(|s: &Sequence| s.regions.iter().map(|r| r.name.clone()).collect())
+            .unwrap_or_default();
+        let numbers: BTreeMap<String, u32> = if self.named {
+            self.cell
+                .tools
+                .iter()
+                .map(|t| (t.name.clone(), t.number))
+                .collect()
+        } else {
+            self.options.tools.clone()
+        };
+        Ok(Box::new(Sink {
+            out,
+            path,
+            options: self.options.clone(),
+            regions,
+            numbers,
+            named: self.named,
+            program: Program::new(self.cell.clone()),
+            top: 0.0,
+            notes: Vec::new(),
+            title: format!("lamina nc: {}, {} layers", ctx.pipeline_name, ctx.layer_count),
+        }))
+    }
+}
+
+impl Sink {
+    fn region_name(&self, r: Option<usize>, none: &str) -> String {
+        r.map(|r| self.regions.get(r).cloned().unwrap_or_else(|| format!("#{r}")))
+            .unwrap_or_else(|| none.into())
+    }
+
+    /// Over to `p` and down to `z`: first up to `clear` where the tool stands lower
+    /// (from an unknown height, the safe height, across first).
+    fn travel_to(&mut self, p: Point2, z: f64, clear: f64) -> Result<()> {
+        let pr = &mut self.program;
+        match pr.z() {
+            Some(now) if now < clear - 1e-9 => pr.rapid(None, None, Some(clear))?,
+            _ => {}
+        }
+        pr.rapid(Some(p.x), Some(p.y), None)?;
+        pr.rapid(None, None, Some(z))
+    }
+
+    fn operation(&mut self, op: &Operation, area: &[Polygon]) -> Result<()> {
+        let mut about = op.kind.clone();
+        if !op.pass.is_empty() {
+            about.push_str(&format!(" {}", op.pass));
+        }
+        about.push_str(&format!(", region {}", self.region_name(op.region, "-")));
+        if let Some(s) = op.surface {
+            about.push_str(&format!(", surface to {}", number(s, false)));
+        }
+        for (k, v) in &op.values {
+            about.push_str(&format!(", {k} {}", number(*v, false)));
+        }
+        self.program.line(format!("({})", comment(&about)));
+        let Some(tool) = &op.tool else {
+            // An operation without a tool is for the operator, with everything off and
+            // the head out of the way.
+            let pr = &mut self.program;
+            pr.spindle_off();
+            pr.laser_off();
+            pr.outputs_off();
+            pr.retract();
+            pr.line("M0 (operator: see the comment above)");
+            return Ok(());
+        };
+        if op.paths.is_empty() {
+            return Ok(());
+        }
+        let next = self.numbers.values().max().copied().unwrap_or(0) + 1;
+        let n = *self.numbers.entry(tool.name.clone()).or_insert(next);
+        self.program.change(&tool.name, n)?;
+        self.program.doing = op.kind.clone();
+        let cutting = if self.named {
+            self.program.cell.cutting(tool, &mut self.notes)?
+        } else {
+            Cutting {
+                feed: tool.feed,
+                spindle: tool.spindle,
+                power: tool.power,
+                ramp_angle: RAMP_ANGLE,
+            }
+        };
+        let top = self
+            .top
+            .max(op.paths.iter().map(|p| p.z).fold(f64::NEG_INFINITY, f64::max));
+        match tool.kind.as_str() {
+            "spray" => self.spray(op, &cutting)?,
+            "dispenser" => self.fill(op, &cutting, area)?,
+            "laser" => self.laser(op, &cutting)?,
+            "grinding-wheel" => self.grind(op, &cutting, tool.diameter / 2.0, area)?,
+            _ => self.cut(op, &cutting)?,
+        }
+        self.top = top;
+        if let Some(s) = op.surface {
+            self.top = self.top.max(s);
+        }
+        let z = self.top + self.options.clearance;
+        self.program.rapid(None, None, Some(z))
+    }
+
+    /// The feeders set to the spray's mix, then each pass with the gun open.
+    fn spray(&mut self, op: &Operation, c: &Cutting) -> Result<()> {
+        let fractions: Vec<(&str, f64)> = op
+            .values
+            .iter()
+            .filter_map(|(k, v)| k.strip_prefix("fraction:").map(|m| (m, *v)))
+            .collect();
+        let inclusions: Vec<(&str, f64)> = op
+            .values
+            .iter()
+            .filter_map(|(k, v)| k.strip_prefix("inclusion:").map(|m| (m, *v)))
+            .collect();
+        let matrix = 1.0 - inclusions.iter().map(|(_, v)| v).sum::<f64>();
+        let mix: Vec<(&str, f64)> = fractions
+            .iter()
+            .map(|&(m, f)| (m, f * matrix))
+            .chain(inclusions.iter().copied())
+            .collect();
+        let feeders = self.program.cell.feeders.clone();
+        if feeders.outputs.is_empty() {
+            let said: Vec<String> = mix
+                .iter()
+                .map(|(m, f)| format!("{m} {}", number(*f, false)))
+                .collect();
+            self.program.line(format!(
+                "({})",
+                comment(&format!(
+                    "mix set by hand, the cell has no feeders: {}",
+                    said.join(", ")
+                ))
+            ));
+        } else {
+            if fractions.is_empty() {
+                return Err(Error::stage(
+                    "export:nc",
+                    "`spray`: the plan gives no composition to set the feeders to (a part of several materials that is not graded)",
+                ));
+            }
+            for (m, _) in &mix {
+                if !feeders.outputs.contains_key(*m) {
+                    let names: Vec<&str> = feeders.outputs.keys().map(String::as_str).collect();
+                    return Err(Error::stage(
+                        "export:nc",
+                        format!(
+                            "`spray`: the cell `{}` has no feeder for `{m}` (feeders: {})",
+                            self.program.cell.name,
+                            names.join(", ")
+                        ),
+                    ));
+                }
+            }
+            for (name, &output) in &feeders.outputs {
+                let f: f64 = mix.iter().filter(|(m, _)| m == name).map(|(_, f)| f).sum();
+                self.program.analog(output, f * feeders.scale)?;
+            }
+        }
+        let gun = self.program.cell.outputs.spray;
+        let standoff = self.options.spray_standoff;
+        let clear = self.top + self.options.clearance;
+        for (i, p) in op.paths.iter().enumerate() {
+            let Some(&first) = p.points.first() else { continue };
+            let h = p.z + standoff;
+            if i == 0 {
+                self.travel_to(first, h, clear.max(h))?;
+            } else {
+                // The gun stands far above everything: straight over.
+                self.program.rapid(Some(first.x), Some(first.y), Some(h))?;
+            }
+            self.program.output(gun, true, "spray gun")?;
+            self.along(&p.points, p.closed, h, c.feed)?;
+            self.program.output(gun, false, "spray gun")?;
+        }
+        Ok(())
+    }
+
+    /// Feed moves along `points` at height `z` (closed: back to the first).
+    fn along(&mut self, points: &[Point2], closed: bool, z: f64, feed: f64) -> Result<()> {
+        let closing = closed && points.len() > 2;
+        for q in points.iter().skip(1).chain(closing.then_some(&points[0])) {
+            self.program.feed(Some(q.x), Some(q.y), Some(z), feed)?;
+        }
+        Ok(())
+    }
+
+    /// The laser's rings: down to each pass's focal height, on along a ring, off
+    /// between rings, never up until the operation ends.
+    fn laser(&mut self, op: &Operation, c: &Cutting) -> Result<()> {
+        let vacuum = self.program.cell.outputs.vacuum;
+        if vacuum.is_some() {
+            self.program.output(vacuum, true, "chip vacuum")?;
+        }
+        let power = c.power.ok_or_else(|| {
+            Error::stage(
+                "export:nc",
+                "`engrave`: the laser has no power, in the plan or in the cell",
+            )
+        })?;
+        let clear = self.top + self.options.clearance;
+        for (i, p) in op.paths.iter().enumerate() {
+            let Some(&first) = p.points.first() else { continue };
+            if i == 0 {
+                self.travel_to(first, p.z, clear)?;
+            } else {
+                self.program.rapid(Some(first.x), Some(first.y), Some(p.z))?;
+            }
+            self.program.laser_on(power)?;
+            self.along(&p.points, p.closed, p.z, c.feed)?;
+            self.program.laser_off();
+        }
+        Ok(())
+    }
+
+    /// The filler's passes, the nozzle lifted between them only where the way over
+    /// leaves the layer's area (where another region may stand higher).
+    fn fill(&mut self, op: &Operation, c: &Cutting, area: &[Polygon]) -> Result<()> {
+        let output = self.program.cell.outputs.filler;
+        let standoff = self.options.fill_standoff;
+        let (clear, approach) = (
+            self.top + self.options.clearance,
+            self.top + self.options.approach,
+        );
+        let mut at: Option<Point2> = None;
+        for (i, p) in op.paths.iter().enumerate() {
+            let Some(&first) = p.points.first() else { continue };
+            let h = p.z + standoff;
+            match at {
+                Some(from) if i > 0 && over(from, first, area) => {
+                    self.program.rapid(Some(first.x), Some(first.y), Some(h))?;
+                }
+                _ => self.travel_to(first, h, if i == 0 { clear } else { approach.max(h) })?,
+            }
+            self.program.output(output, true, "filler nozzle")?;
+            self.along(&p.points, p.closed, h, c.feed)?;
+            self.program.output(output, false, "filler nozzle")?;
+            at = if p.closed {
+                Some(first)
+            } else {
+                p.points.last().copied()
+            };
+        }
+        Ok(())
+    }
+
+    /// A rotating cutter (an end mill, or a plugin's tool): ramped in along each path
+    /// from just above the highest surface, up to it between paths.
+    fn cut(&mut self, op: &Operation, c: &Cutting) -> Result<()> {
+        self.spin(c)?;
+        let approach = self.top + self.options.approach;
+        let clear = self.top + self.options.clearance;
+        for (i, p) in op.paths.iter().enumerate() {
+            let start = approach.max(p.z);
+            let way = entry::ramp(&p.points, p.closed, start, p.z, c.ramp_angle);
+            let Some(&(first, _)) = way.first() else { continue };
+            self.travel_to(first, start, if i == 0 { clear } else { approach })?;
+            for &(q, z) in way.iter().skip(1) {
+                let feed = if z < p.z + 1e-9 {
+                    c.feed
+                } else {
+                    c.feed * self.options.plunge
+                };
+                self.program.feed(Some(q.x), Some(q.y), Some(z), feed)?;
+            }
+            self.program.rapid(None, None, Some(approach))?;
+        }
+        Ok(())
+    }
+
+    /// A cup wheel's passes, each entered from the side.
+    fn grind(&mut self, op: &Operation, c: &Cutting, radius: f64, area: &[Polygon]) -> Result<()> {
+        self.spin(c)?;
+        let approach = self.top + self.options.approach;
+        let clear = self.top + self.options.clearance;
+        for (i, p) in op.paths.iter().enumerate() {
+            let (Some(&a), Some(&b)) = (p.points.first(), p.points.last()) else {
+                continue;
+            };
+            let wheel = entry::Wheel {
+                radius,
+                margin: self.options.wheel_margin,
+                angle_deg: c.ramp_angle,
+            };
+            let way = entry::side_entry(a, b, p.z, approach.max(p.z), wheel, area);
+            let Some(&(first, z0)) = way.first() else { continue };
+            self.travel_to(first, z0, if i == 0 { clear } else { approach })?;
+            let (down, _) = way[1];
+            self.program.feed(
+                Some(down.x),
+                Some(down.y),
+                Some(p.z),
+                c.feed * self.options.plunge,
+            )?;
+            for &(q, z) in &way[2..] {
+                self.program.feed(Some(q.x), Some(q.y), Some(z), c.feed)?;
+            }
+            self.program.rapid(None, None, Some(approach))?;
+        }
+        Ok(())
+    }
+
+    /// The chip vacuum on and the spindle at the cutting speed.
+    fn spin(&mut self, c: &Cutting) -> Result<()> {
+        let vacuum = self.program.cell.outputs.vacuum;
+        if vacuum.is_some() {
+            self.program.output(vacuum, true, "chip vacuum")?;
+        }
+        match c.spindle {
+            Some(s) => self.program.spindle_on(s),
+            None => Ok(()),
+        }
+    }
+}
+
+/// True when the straight way from `a` to `b` stays over `area` (sampled every
+/// 0.25 mm).
+fn over(a: Point2, b: Point2, area: &[Polygon]) -> bool {
+    let steps = ((b - a).norm() / 0.25).ceil().max(1.0) as usize;
+    (0..=steps).all(|k| distance_to_area(a + (b - a) * (k as f64 / steps as f64), area) == 0.0)
+}
+
+impl LayerSink for Sink {
+    fn layer(&mut self, _info: &RunInfo, plan: &LayerPlan, _files: &mut dyn OutputFiles) -> Result<()> {
+        if plan.operations.is_empty() {
+            return Ok(());
+        }
+        for op in &plan.operations {
+            crate::cell::readable(op).map_err(|e| e.in_layer(plan.index, plan.z))?;
+            if self.named {
+                self.program
+                    .cell
+                    .admits(op)
+                    .map_err(|e| e.in_layer(plan.index, plan.z))?;
+            }
+        }
+        let region = self.region_name(plan.material_region, "all");
+        self.program.line(format!(
+            "(layer {} region {} z {} thickness {})",
+            plan.index,
+            comment(&region),
+            number(plan.z, false),
+            number(plan.thickness, false)
+        ));
+        let needs_area = plan.operations.iter().any(|o| {
+            o.tool
+                .as_ref()
+                .is_some_and(|t| matches!(t.kind.as_str(), "dispenser" | "grinding-wheel"))
+        });
+        let area = if needs_area { layer_area(plan) } else { Vec::new() };
+        for op in &plan.operations {
+            self.operation(op, &area)
+                .map_err(|e| e.in_layer(plan.index, plan.z))?;
+        }
+        Ok(())
+    }
+
+    fn finish(mut self: Box<Self>, _info: &RunInfo, files: &mut dyn OutputFiles) -> Result<()> {
+        self.program.end();
+        let cell = &self.program.cell;
+        let c = &cell.controller;
+        let mut head = String::new();
+        for l in c.header.lines() {
+            head.push_str(l);
+            head.push('\n');
+        }
+        let mut say = |s: String| {
+            head.push_str(&format!("({})\n", comment(&s)));
+        };
+        say(self.title.clone());
+        if self.named {
+            say(format!("cell: {} - {}", cell.name, cell.description));
+        }
+        say(format!("controller: {}", c.dialect));
+        let total = self.program.shares.total();
+        let shares: Vec<String> = self
+            .program
+            .shares
+            .by
+            .iter()
+            .filter(|(_, s)| *s > 0.0)
+            .map(|(k, s)| format!("{k} {}", duration(*s)))
+            .collect();
+        say(format!(
+            "estimated cycle time {} ({total:.0} s): {}",
+            duration(total),
+            shares.join(", ")
+        ));
+        let o = cell.outputs;
+        let outputs: Vec<String> = [
+            (o.spray, "spray gun"),
+            (o.filler, "filler nozzle"),
+            (o.vacuum, "chip vacuum"),
+        ]
+        .into_iter()
+        .filter_map(|(n, what)| n.map(|n| format!("{n} {what}")))
+        .collect();
+        if !outputs.is_empty() {
+            say(format!("outputs: {}", outputs.join(", ")));
+        }
+        if !cell.feeders.outputs.is_empty() {
+            let feeders: Vec<String> = cell
+                .feeders
+                .outputs
+                .iter()
+                .map(|(m, n)| format!("{n} {m}"))
+                .collect();
+            say(format!(
+                "feeders: {}, each set to its volume fraction times {}",
+                feeders.join(", "),
+                number(cell.feeders.scale, false)
+            ));
+        }
+        let mut listed: Vec<(&String, &u32)> = self.numbers.iter().collect();
+        listed.sort_by_key(|(_, n)| **n);
+        for (name, n) in listed {
+            say(format!("T{n} {name}"));
+        }
+        for l in c.start.lines() {
+            head.push_str(l);
+            head.push('\n');
+        }
+        self.out.write_all(head.as_bytes()).map_err(io(&self.path))?;
+        self.out
+            .write_all(self.program.text.as_bytes())
+            .map_err(io(&self.path))?;
+        self.out.flush().map_err(io(&self.path))?;
+        files.report(MachineFileReport {
+            file: self.path.clone(),
+            time: total,
+            shares: self.program.shares.by.clone(),
+            notes: std::mem::take(&mut self.notes),
+            ..MachineFileReport::default()
+        });
+        Ok(())
+    }
+}
+
+fn build(config: &StageConfig<'_>) -> Result<AnyStage> {
+    let options: Options = config.parse()?;
+    for (key, v) in [
+        ("clearance", options.clearance),
+        ("approach", options.approach),
+        ("wheel_margin", options.wheel_margin),
+        ("spray_standoff", options.spray_standoff),
+        ("fill_standoff", options.fill_standoff),
+    ] {
+        crate::tool::non_negative(config, key, v)?;
+    }
+    if options.approach > options.clearance {
+        return Err(config.error("approach", "must be at most `clearance`"));
+    }
+    if !(options.plunge.is_finite() && options.plunge > 0.0 && options.plunge <= 1.0) {
+        return Err(config.error("plunge", "must be above 0 and at most 1"));
+    }
+    let mut seen = BTreeMap::new();
+    for (name, &n) in &options.tools {
+        if n == 0 {
+            return Err(config.error("tools", format!("`{name}`: tool numbers start at 1")));
+        }
+        if let Some(other) = seen.insert(n, name) {
+            return Err(config.error("tools", format!("`{other}` and `{name}` both have number {n}")));
+        }
+    }
+    let (cell, named) = if options.cell.is_empty() {
+        let generic: Cell = toml::from_str(GENERIC).map_err(|e| config.error("cell", e.to_string()))?;
+        (generic, false)
+    } else {
+        if !options.tools.is_empty() {
+            return Err(config.error(
+                "tools",
+                "the cell numbers its tools: give `cell` or `tools`, not both",
+            ));
+        }
+        (
+            Cell::load(&options.cell, config.base_dir).map_err(|m| config.error("cell", m))?,
+            true,
+        )
+    };
+    Ok(AnyStage::Export(Box::new(Nc { options, cell, named })))
+}
+
+lamina_core::register_stage!(StageFactory {
+    info: StageInfo {
+        kind: StageKind::Export,
+        name: "nc",
+        doc: "NC program for a hybrid cell in its controller's dialect: safe start, tool changes at the safe height, ramped and side entries, feeders set to each sub-region's composition, laser at focal height, cycle-time estimate.",
+        options: Options::SPECS,
+        example: "use = \"nc\"\npath = \"job.nc\"\ncell = \"cmpm-hybrid\"",
+    },
+    build,
+});

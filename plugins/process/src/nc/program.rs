@@ -1,0 +1,480 @@
+//! The program as the controller will run it: the lines, the machine's state they
+//! leave (position, feed, spindle, laser, outputs, tool), and the time they take.
+//!
+//! A move is written only for the axes it changes, as they will be printed: a move to
+//! where the tool already is, or a feed word already in force, is not written. Every
+//! position is checked against the cell's travel. The time of each move follows the
+//! controller's limits for a straight move from rest to rest: its speed is the feed (or
+//! the rapid speed) capped so no axis exceeds its own, its acceleration the most every
+//! axis allows along it, on a trapezoidal profile. Blending corners can only make the
+//! machine faster than this estimate.
+
+use std::collections::{BTreeMap, BTreeSet};
+
+use lamina_core::{Error, Result};
+
+use crate::cell::{Cell, render};
+
+/// What the program's time went to, in the order first met.
+#[derive(Debug, Default)]
+pub struct Shares {
+    pub by: Vec<(String, f64)>,
+}
+
+impl Shares {
+    fn add(&mut self, what: &str, seconds: f64) {
+        match self.by.iter_mut().find(|(k, _)| k == what) {
+            Some((_, s)) => *s += seconds,
+            None => self.by.push((what.to_string(), seconds)),
+        }
+    }
+
+    pub fn total(&self) -> f64 {
+        self.by.iter().map(|(_, s)| s).sum()
+    }
+}
+
+pub struct Program {
+    pub cell: Cell,
+    pub text: String,
+    /// Position in work coordinates as printed; `None` until known (after a retract in
+    /// machine coordinates, z is not).
+    pos: [Option<f64>; 3],
+    /// True from a retract to the safe height until z moves.
+    safe: bool,
+    feed: Option<String>,
+    /// Tool in the spindle, by name.
+    pub tool: Option<String>,
+    length: bool,
+    /// Speed while the spindle turns (rev/min).
+    spindle: Option<f64>,
+    laser: bool,
+    outputs: BTreeSet<u32>,
+    analog: BTreeMap<u32, String>,
+    /// The last line, when it is a rapid along z alone: (where the line starts in
+    /// `text`, z before it, its seconds). A rapid along z that follows it the same way
+    /// replaces it, since both go along the same line.
+    last_z_rapid: Option<(usize, f64, f64)>,
+    /// What the time goes to now.
+    pub doing: String,
+    pub shares: Shares,
+}
+
+/// `v` as the controller reads it: four decimals at most, no trailing zeros, and a
+/// decimal point on every number where the dialect wants one.
+pub fn number(v: f64, decimal_point: bool) -> String {
+    let s = format!("{v:.4}");
+    let s = s.trim_end_matches('0').trim_end_matches('.');
+    let s = if s == "-0" { "0" } else { s };
+    if decimal_point && !s.contains('.') {
+        format!("{s}.")
+    } else {
+        s.to_string()
+    }
+}
+
+/// Seconds to travel `length` from rest to rest at top speed `v` and acceleration `a`.
+pub fn trapezoid(length: f64, v: f64, a: f64) -> f64 {
+    if length <= 0.0 {
+        0.0
+    } else if length >= v * v / a {
+        length / v + v / a
+    } else {
+        2.0 * (length / a).sqrt()
+    }
+}
+
+impl Program {
+    pub fn new(cell: Cell) -> Self {
+        Self {
+            cell,
+            text: String::new(),
+            pos: [None; 3],
+            safe: false,
+            feed: None,
+            tool: None,
+            length: false,
+            spindle: None,
+            laser: false,
+            outputs: BTreeSet::new(),
+            analog: BTreeMap::new(),
+            last_z_rapid: None,
+            doing: "setup".into(),
+            shares: Shares::default(),
+        }
+    }
+
+    pub fn line(&mut self, s: impl AsRef<str>) {
+        self.last_z_rapid = None;
+        self.text.push_str(s.as_ref());
+        self.text.push('\n');
+    }
+
+    pub fn num(&self, v: f64) -> String {
+        number(v, self.cell.controller.decimal_point)
+    }
+
+    fn wait(&mut self, seconds: f64) {
+        let doing = self.doing.clone();
+        self.shares.add(&doing, seconds);
+    }
+
+    /// The lines of a template, each with `values` put in.
+    fn template(&mut self, lines: &[String], values: &[(&str, String)]) {
+        for l in lines {
+            let s = render(l, values);
+            self.line(s);
+        }
+    }
+
+    /// A needed capability the controller lacks.
+    fn lacks(&self, key: &str, what: &str) -> Error {
+        Error::stage(
+            "export:nc",
+            format!(
+                "the cell `{}` cannot {what}: its controller ({}) has no `controller.{key}`",
+                self.cell.name, self.cell.controller.dialect
+            ),
+        )
+    }
+
+    pub fn z(&self) -> Option<f64> {
+        self.pos[2]
+    }
+
+    /// A straight move to `to` (an axis left `None` stays), rapid or at `feed` (mm/s).
+    fn go(&mut self, to: [Option<f64>; 3], feed: Option<f64>) -> Result<()> {
+        let travel = self.cell.travel;
+        let limits = [travel.x, travel.y, travel.z];
+        let mut words = Vec::new();
+        let mut delta = [0.0f64; 3];
+        let mut next = self.pos;
+        for (i, axis) in ['X', 'Y', 'Z'].into_iter().enumerate() {
+            let Some(v) = to[i] else { continue };
+            let printed = self.num(v);
+            let value: f64 = printed.trim_end_matches('.').parse().unwrap_or(v);
+            if self.pos[i].is_some_and(|p| self.num(p) == printed) {
+                continue;
+            }
+            let [lo, hi] = limits[i];
+            if value < lo - 1e-9 || value > hi + 1e-9 {
+                return Err(Error::stage(
+                    "export:nc",
+                    format!(
+                        "a move to {axis} {printed} is outside the cell `{}`'s travel x {:?}, y {:?}, z {:?}",
+                        self.cell.name, travel.x, travel.y, travel.z
+                    ),
+                ));
+            }
+            // From an unknown position (after a retract in machine coordinates), the
+            // distance is the travel's top down to the value.
+            delta[i] = match self.pos[i] {
+                Some(p) => value - p,
+                None => hi - value,
+            };
+            next[i] = Some(value);
+            words.push(format!("{axis}{printed}"));
+        }
+        if words.is_empty() {
+            return Ok(());
+        }
+        // A second rapid up (or down) along z: one move from where the first began.
+        let z_only = feed.is_none() && to[0].is_none() && to[1].is_none();
+        let mut before = None;
+        if z_only
+            && let (Some((start, z0, seconds)), Some(z1), Some(z2)) =
+                (self.last_z_rapid, self.pos[2], next[2])
+            && (z1 - z0) * (z2 - z1) > 0.0
+        {
+            self.text.truncate(start);
+            let doing = self.doing.clone();
+            self.shares.add(&doing, -seconds);
+            delta[2] = z2 - z0;
+            before = Some(z0);
+        }
+        let m = self.cell.motion;
+        let length = delta.iter().map(|d| d * d).sum::<f64>().sqrt();
+        let (mut v, mut a) = (f64::INFINITY, f64::INFINITY);
+        for (i, d) in delta.iter().enumerate() {
+            let u = d.abs() / length;
+            if u > 1e-12 {
+                v = v.min(m.rapid[i] / 60.0 / u);
+                a = a.min(m.acceleration[i] / u);
+            }
+        }
+        let mut line = match feed {
+            None => format!("G0 {}", words.join(" ")),
+            Some(f) => {
+                v = v.min(f);
+                format!("G1 {}", words.join(" "))
+            }
+        };
+        if let Some(f) = feed {
+            let word = self.num(f * 60.0);
+            if self.feed.as_deref() != Some(word.as_str()) {
+                line.push_str(&format!(" F{word}"));
+                self.feed = Some(word);
+            }
+        }
+        let start = self.text.len();
+        self.line(line);
+        let seconds = trapezoid(length, v, a);
+        self.wait(seconds);
+        if z_only && let Some(z0) = before.or(self.pos[2]) {
+            self.last_z_rapid = Some((start, z0, seconds));
+        }
+        if next[2] != self.pos[2] {
+            self.safe = false;
+        }
+        self.pos = next;
+        Ok(())
+    }
+
+    pub fn rapid(&mut self, x: Option<f64>, y: Option<f64>, z: Option<f64>) -> Result<()> {
+        self.go([x, y, z], None)
+    }
+
+    pub fn feed(&mut self, x: Option<f64>, y: Option<f64>, z: Option<f64>, feed: f64) -> Result<()> {
+        self.go([x, y, z], Some(feed))
+    }
+
+    /// Up to the safe height in machine coordinates; z is then unknown.
+    pub fn retract(&mut self) {
+        if self.safe {
+            return;
+        }
+        let lines = self.cell.controller.retract.lines().to_vec();
+        self.template(&lines, &[]);
+        let m = self.cell.motion;
+        let up = match self.pos[2] {
+            Some(z) => self.cell.travel.z[1] - z,
+            None => 0.0,
+        };
+        self.wait(trapezoid(up.max(0.0), m.rapid[2] / 60.0, m.acceleration[2]));
+        self.pos[2] = None;
+        self.safe = true;
+    }
+
+    pub fn spindle_off(&mut self) {
+        if self.spindle.take().is_some() {
+            let lines = self.cell.controller.spindle_off.lines().to_vec();
+            self.template(&lines, &[]);
+        }
+    }
+
+    pub fn spindle_on(&mut self, speed: f64) -> Result<()> {
+        if self.spindle == Some(speed) {
+            return Ok(());
+        }
+        if self.cell.controller.spindle_on.is_empty() {
+            return Err(self.lacks("spindle_on", "turn a spindle"));
+        }
+        let lines = self.cell.controller.spindle_on.lines().to_vec();
+        let speed_word = self.num(speed);
+        self.template(&lines, &[("speed", speed_word)]);
+        if self.spindle.is_none() {
+            self.wait(self.cell.motion.spindle_start);
+        }
+        self.spindle = Some(speed);
+        Ok(())
+    }
+
+    pub fn laser_on(&mut self, watts: f64) -> Result<()> {
+        if self.cell.controller.laser_on.is_empty() {
+            return Err(self.lacks("laser_on", "switch a laser"));
+        }
+        let lines = self.cell.controller.laser_on.lines().to_vec();
+        let power = self.num(watts * self.cell.controller.power_scale);
+        self.template(&lines, &[("power", power)]);
+        self.laser = true;
+        Ok(())
+    }
+
+    pub fn laser_off(&mut self) {
+        if std::mem::take(&mut self.laser) {
+            let lines = self.cell.controller.laser_off.lines().to_vec();
+            self.template(&lines, &[]);
+        }
+    }
+
+    /// Switches digital output `n`; `what` names it in an error.
+    pub fn output(&mut self, n: Option<u32>, on: bool, what: &str) -> Result<()> {
+        let Some(n) = n else {
+            if on {
+                return Err(Error::stage(
+                    "export:nc",
+                    format!(
+                        "the cell `{}` has no output for the {what} (`outputs`)",
+                        self.cell.name
+                    ),
+                ));
+            }
+            return Ok(());
+        };
+        if self.outputs.contains(&n) == on {
+            return Ok(());
+        }
+        let c = &self.cell.controller;
+        let lines = if on {
+            c.output_on.lines()
+        } else {
+            c.output_off.lines()
+        }
+        .to_vec();
+        if lines.is_empty() {
+            return Err(self.lacks("output_on", &format!("switch the {what}")));
+        }
+        self.template(&lines, &[("output", n.to_string())]);
+        if on {
+            self.outputs.insert(n);
+        } else {
+            self.outputs.remove(&n);
+        }
+        Ok(())
+    }
+
+    /// Every digital output off.
+    pub fn outputs_off(&mut self) {
+        let on: Vec<u32> = self.outputs.iter().copied().collect();
+        for n in on {
+            let _ = self.output(Some(n), false, "output");
+        }
+    }
+
+    /// Sets analog output `n` to `value`, unless it holds it already.
+    pub fn analog(&mut self, n: u32, value: f64) -> Result<()> {
+        let word = self.num(value);
+        if self.analog.get(&n) == Some(&word) {
+            return Ok(());
+        }
+        if self.cell.controller.analog.is_empty() {
+            return Err(self.lacks("analog", "set the feeders' flow"));
+        }
+        let lines = self.cell.controller.analog.lines().to_vec();
+        self.template(&lines, &[("output", n.to_string()), ("value", word.clone())]);
+        self.analog.insert(n, word);
+        Ok(())
+    }
+
+    /// Loads `name` as tool `number`: everything stops, the length offset is
+    /// cancelled, the head goes up to the safe height in machine coordinates, the tool
+    /// is changed and its length offset applied.
+    pub fn change(&mut self, name: &str, number: u32) -> Result<()> {
+        if self.tool.as_deref() == Some(name) {
+            return Ok(());
+        }
+        self.doing = "tool changes".into();
+        self.spindle_off();
+        self.laser_off();
+        self.outputs_off();
+        let c = self.cell.controller.clone();
+        if self.tool.is_some() && c.tool_change.is_empty() {
+            let now = self.tool.clone().unwrap_or_default();
+            return Err(self.lacks(
+                "tool_change",
+                &format!("change tools: the program needs `{now}` and `{name}`"),
+            ));
+        }
+        if self.length {
+            self.template(c.length_off.lines(), &[]);
+            self.length = false;
+        }
+        self.retract();
+        self.line(format!("(tool {number}: {})", super::comment(name)));
+        if !c.tool_change.is_empty() {
+            self.template(c.tool_change.lines(), &[("tool", number.to_string())]);
+            self.wait(self.cell.motion.tool_change);
+        }
+        if !c.length_on.is_empty() {
+            self.template(c.length_on.lines(), &[("tool", number.to_string())]);
+            self.length = true;
+        }
+        self.tool = Some(name.to_string());
+        Ok(())
+    }
+
+    /// Everything stopped and off, the length offset cancelled, up to the safe height,
+    /// and the program's end.
+    pub fn end(&mut self) {
+        self.doing = "end".into();
+        self.spindle_off();
+        self.laser_off();
+        self.outputs_off();
+        let c = self.cell.controller.clone();
+        if self.length {
+            self.template(c.length_off.lines(), &[]);
+            self.length = false;
+        }
+        self.retract();
+        self.template(c.end.lines(), &[]);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn program(cell: &str) -> Program {
+        Program::new(Cell::load(cell, std::path::Path::new(".")).expect("cell"))
+    }
+
+    #[test]
+    fn a_move_is_written_only_for_what_it_changes_and_two_rises_are_one() {
+        let mut p = program("cmpm-hybrid");
+        p.rapid(Some(1.0), Some(2.0), Some(10.0)).expect("in travel");
+        p.rapid(Some(1.0), Some(2.0), Some(10.00001)).expect("in travel");
+        p.feed(Some(3.0), Some(2.0), None, 10.0).expect("in travel");
+        p.feed(Some(4.0), Some(2.0), None, 10.0).expect("in travel");
+        p.rapid(None, None, Some(12.0)).expect("in travel");
+        p.rapid(None, None, Some(15.0)).expect("in travel");
+        assert_eq!(p.text, "G0 X1 Y2 Z10\nG1 X3 F600\nG1 X4\nG0 Z15\n");
+        // Up then down is two moves.
+        p.rapid(None, None, Some(14.0)).expect("in travel");
+        assert!(p.text.ends_with("G0 Z15\nG0 Z14\n"), "{}", p.text);
+        // The merged rise takes the time of one move of 3 mm, not of two.
+        let z = p.cell.motion;
+        let one = trapezoid(3.0, z.rapid[2] / 60.0, z.acceleration[2]);
+        let two = trapezoid(2.0, z.rapid[2] / 60.0, z.acceleration[2])
+            + trapezoid(1.0, z.rapid[2] / 60.0, z.acceleration[2]);
+        assert!(one < two);
+        let before = p.shares.total();
+        let mut q = program("cmpm-hybrid");
+        q.rapid(Some(1.0), Some(2.0), Some(10.0)).expect("in travel");
+        q.feed(Some(3.0), Some(2.0), None, 10.0).expect("in travel");
+        q.feed(Some(4.0), Some(2.0), None, 10.0).expect("in travel");
+        q.rapid(None, None, Some(15.0)).expect("in travel");
+        q.rapid(None, None, Some(14.0)).expect("in travel");
+        assert!((before - q.shares.total()).abs() < 1e-12);
+    }
+
+    #[test]
+    fn a_move_beyond_the_travel_is_refused_and_a_fanuc_gets_decimal_points() {
+        let mut p = program("cmpm-hybrid");
+        let err = p.rapid(Some(151.0), None, None).expect_err("outside").to_string();
+        assert!(
+            err.contains("X 151 is outside the cell `cmpm-hybrid`'s travel"),
+            "{err}"
+        );
+        let mut f = program("cmpm-hybrid-fanuc");
+        f.rapid(Some(10.0), Some(-2.5), Some(0.0)).expect("in travel");
+        assert_eq!(f.text, "G0 X10. Y-2.5 Z0.\n");
+        assert_eq!(number(-0.00001, false), "0");
+    }
+
+    #[test]
+    fn grbl_changes_no_tools_and_sets_no_feeders_and_says_so() {
+        let mut g = program("grbl-laser");
+        g.change("laser", 1).expect("the first tool is the one loaded");
+        assert!(!g.text.contains("M6") && !g.text.contains("G43"), "{}", g.text);
+        let err = g.change("end-mill", 2).expect_err("no changer").to_string();
+        assert!(
+            err.contains("cannot change tools: the program needs `laser` and `end-mill`")
+                && err.contains("(grbl) has no `controller.tool_change`"),
+            "{err}"
+        );
+        let err = g.analog(0, 5.0).expect_err("no analog").to_string();
+        assert!(err.contains("cannot set the feeders' flow"), "{err}");
+        g.laser_on(10.0).expect("laser mode");
+        assert!(g.text.ends_with("M4 S200\n"), "{}", g.text);
+    }
+}
