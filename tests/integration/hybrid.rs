@@ -369,7 +369,9 @@ fn replay_nc(file: &Path, cell: &Path) -> Value {
 }
 
 fn has_pygcode() -> bool {
-    let probe = Command::new("python3").args(["-c", "import pygcode, tomllib"]).output();
+    let probe = Command::new("python3")
+        .args(["-c", "import pygcode, tomllib"])
+        .output();
     if probe.is_ok_and(|o| o.status.success()) {
         true
     } else {
@@ -438,7 +440,10 @@ fn a_third_party_parser_runs_the_nc_program_as_a_machinist_would_and_finds_the_p
     assert!(f(&report["tool_changes"]) >= 46.0, "{}", report["tool_changes"]);
     assert_eq!(report["tool_changes_at_safe_height"], report["tool_changes"]);
     assert_eq!(report["laser_z_cycles"], 0);
-    assert_eq!(report["pauses"], 0, "the filler stays: no operator stop to melt it out");
+    assert_eq!(
+        report["pauses"], 0,
+        "the filler stays: no operator stop to melt it out"
+    );
     // The program's own estimate against the replay's.
     let program = std::fs::read_to_string(&nc).expect("nc");
     let header = program
@@ -479,25 +484,40 @@ fn a_third_party_parser_runs_the_nc_program_as_a_machinist_would_and_finds_the_p
             .flat_map(|p| p["families"].as_array().expect("families"))
             .flat_map(|fam| fam["regions"].as_array().expect("regions"))
             .collect();
-        assert_eq!(sprays.len(), 1, "one composition per layer of the pipe: {sprays:?}");
+        assert_eq!(
+            sprays.len(),
+            1,
+            "one composition per layer of the pipe: {sprays:?}"
+        );
         let got = &sprays[0];
         let inclusion = if region == 2 { 0.2 } else { 0.0 };
         for sub in &subregions {
             for m in &materials {
                 let want = f(sub["composition"].get(*m).unwrap_or(&Value::from(0.0))) * (1.0 - inclusion);
                 let read = f(&got[*m]);
-                assert!((read - want).abs() <= 0.01, "layer at z {z}, {m}: {read} read back, {want} planned");
+                assert!(
+                    (read - want).abs() <= 0.01,
+                    "layer at z {z}, {m}: {read} read back, {want} planned"
+                );
                 checked += 1;
             }
         }
         assert!((f(&got["SiC"]) - inclusion).abs() <= 0.01, "{got}");
         let lowest = &r["lowest"];
         if let Some(mill) = lowest.get("end-mill") {
-            assert!(f(mill) >= z - t - 1e-6, "end mill at {mill} below the base {}", z - t);
+            assert!(
+                f(mill) >= z - t - 1e-6,
+                "end mill at {mill} below the base {}",
+                z - t
+            );
         }
         assert!(f(&lowest["grinding-wheel"]) >= z - 1e-6, "wheel below z {z}");
         if let Some(laser) = lowest.get("laser") {
-            assert!((f(laser) - (z - t)).abs() < 1e-6, "laser's last pass at {laser}, the bottom at {}", z - t);
+            assert!(
+                (f(laser) - (z - t)).abs() < 1e-6,
+                "laser's last pass at {laser}, the bottom at {}",
+                z - t
+            );
         }
     }
     assert_eq!(checked, layers.len() * materials.len());
@@ -875,4 +895,120 @@ fn cells_turn_with_the_model_when_it_is_oriented_by_them() {
     // The plate's 20 cells (10 along x, 2 up its turned 2 mm height, 1 across its
     // 1 mm), each cut by the two layers through it.
     assert_eq!(seen, 10 * 2 * 2, "{seen}");
+}
+
+/// The pipe's pipeline with only the outputs `keep` (by their `use`).
+fn pipe_with_outputs(pipe: &str, keep: &[&str]) -> String {
+    let mut parts = pipe.split("[[output]]");
+    let mut out = parts.next().expect("the head").to_string();
+    for block in parts {
+        if keep.iter().any(|k| block.contains(&format!("use = \"{k}\""))) {
+            out.push_str("[[output]]");
+            out.push_str(block);
+        }
+    }
+    out
+}
+
+#[test]
+fn the_program_speaks_its_controllers_dialect_or_is_refused_with_what_the_controller_lacks() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let pipe = std::fs::read_to_string(pipelines().join("pipe-work-cycles.toml")).expect("pipe");
+    let pipe = pipe_with_outputs(&pipe, &["nc"]);
+    // A Fanuc-like controller: program number, reference return, M06, feeders as macro
+    // variables, a decimal point on every coordinate.
+    let fanuc = pipe.replace("cell = \"cmpm-hybrid\"", "cell = \"cmpm-hybrid-fanuc\"");
+    let o = try_run_text(dir.path(), &fanuc);
+    assert!(o.status.success(), "{}", text(&o.stderr));
+    let nc = std::fs::read_to_string(dir.path().join("out/pipe-work-cycles.nc")).expect("nc");
+    assert!(nc.starts_with("%\nO1000 (LAMINA HYBRID)\n("), "{}", &nc[..80]);
+    assert!(
+        nc.ends_with("G49\nG91 G28 Z0.\nG90\nM30\n%\n"),
+        "{}",
+        &nc[nc.len() - 80..]
+    );
+    assert!(nc.contains("\nT2 M06\nG43 H2\n") && nc.contains("\n#501=") && !nc.contains("M68"));
+    for line in nc.lines().filter(|l| l.starts_with("G0") || l.starts_with("G1")) {
+        for word in line.split_whitespace().filter(|w| w.starts_with(['X', 'Y', 'Z'])) {
+            assert!(
+                word.contains('.'),
+                "`{word}` in `{line}` reads as micrometres on a Fanuc"
+            );
+        }
+    }
+    // Grbl cannot hold the hybrid process: no spray gun, no tool changer.
+    let grbl = pipe.replace("cell = \"cmpm-hybrid\"", "cell = \"grbl-laser\"");
+    let dir = tempfile::tempdir().expect("tempdir");
+    let o = try_run_text(dir.path(), &grbl);
+    assert!(!o.status.success());
+    assert!(
+        text(&o.stderr).contains("the cell `grbl-laser` has no tool `spray-gun` (tools: laser)"),
+        "{}",
+        text(&o.stderr)
+    );
+    assert!(
+        !dir.path().join("out/pipe-work-cycles.nc").exists(),
+        "no partial output"
+    );
+    // It can engrave: one tool, already loaded; the laser in M4 at S per its scale.
+    let mut engrave_only = String::new();
+    for (i, block) in grbl.split("[[process]]").enumerate() {
+        if i == 0 {
+            engrave_only.push_str(block);
+        } else if block.contains("use = \"engrave\"") {
+            engrave_only.push_str("[[process]]");
+            engrave_only.push_str(block);
+        } else if let Some(at) = block.find("[[output]]") {
+            // The outputs follow the last process.
+            engrave_only.push_str(&block[at..]);
+        }
+    }
+    let dir = tempfile::tempdir().expect("tempdir");
+    let o = try_run_text(dir.path(), &engrave_only);
+    assert!(o.status.success(), "{}", text(&o.stderr));
+    let nc = std::fs::read_to_string(dir.path().join("out/pipe-work-cycles.nc")).expect("nc");
+    assert!(
+        !nc.contains("M6") && !nc.contains("G43") && !nc.contains("M64"),
+        "{}",
+        &nc[..400]
+    );
+    assert!(nc.contains("\nM4 S400\n"), "20 W at 20 S per W");
+    assert!(nc.ends_with("M9\nG53 G0 Z0\nM2\n"), "{}", &nc[nc.len() - 60..]);
+}
+
+#[test]
+fn a_wheel_its_spindle_cannot_turn_fast_enough_grinds_at_the_top_speed_and_the_run_says_so() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let cell = include_str!("../../plugins/process/cells/cmpm-hybrid.toml");
+    let slow = cell.replacen(
+        "surface_speed = 25.0\nramp_angle = 5.0\nmax_spindle = 30000.0",
+        "surface_speed = 25.0\nramp_angle = 5.0\nmax_spindle = 6000.0",
+        1,
+    );
+    assert_ne!(slow, cell);
+    std::fs::write(dir.path().join("slow.toml"), slow).expect("cell");
+    let pipe = std::fs::read_to_string(pipelines().join("pipe-work-cycles.toml")).expect("pipe");
+    let pipe = pipe_with_outputs(&pipe, &["nc"]).replace("cell = \"cmpm-hybrid\"", "cell = \"slow.toml\"");
+    let o = try_run_text(dir.path(), &pipe);
+    let err = text(&o.stderr);
+    assert!(o.status.success(), "{err}");
+    assert!(
+        err.contains(
+            "`cup-wheel` turns at most 6000 rev/min: 6.3 m/s on its 20 mm rim, below the 25 m/s it wants"
+        ),
+        "{err}"
+    );
+    let nc = std::fs::read_to_string(dir.path().join("out/pipe-work-cycles.nc")).expect("nc");
+    assert!(nc.contains("\nS6000 M3\n") && !nc.contains("S23873"));
+    // The shipped cell reaches it.
+    let dir = tempfile::tempdir().expect("tempdir");
+    let shipped = pipe.replace("cell = \"slow.toml\"", "cell = \"cmpm-hybrid\"");
+    let o = try_run_text(dir.path(), &shipped);
+    assert!(
+        o.status.success() && !text(&o.stderr).contains("rev/min"),
+        "{}",
+        text(&o.stderr)
+    );
+    let nc = std::fs::read_to_string(dir.path().join("out/pipe-work-cycles.nc")).expect("nc");
+    assert!(nc.contains("\nS23873 M3\n"), "25 m/s on 20 mm");
 }

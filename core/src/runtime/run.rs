@@ -286,10 +286,9 @@ impl Engine {
         let machine_files = outputs.take_reports();
         for m in &machine_files {
             for note in &m.notes {
-                diagnostics.push(Diagnostic::warning(
-                    StageKind::Export,
-                    format!("{}: {note}", m.file.display()),
-                ));
+                let d = Diagnostic::warning(StageKind::Export, format!("{}: {note}", m.file.display()));
+                observer.diagnostic(&d);
+                diagnostics.push(d);
             }
         }
         let files = outputs.commit()?;
