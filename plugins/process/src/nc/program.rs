@@ -60,17 +60,35 @@ pub struct Program {
     pub shares: Shares,
 }
 
+/// `v` in the program's unit, a ten-thousandth of a millimetre: what is printed.
+fn quantum(v: f64) -> i64 {
+    (v * 10_000.0).round() as i64
+}
+
 /// `v` as the controller reads it: four decimals at most, no trailing zeros, and a
-/// decimal point on every number where the dialect wants one.
+/// decimal point on every number where the dialect wants one. Written from the
+/// rounded integer: formatting floats to a fixed precision is the program's hot path.
 pub fn number(v: f64, decimal_point: bool) -> String {
-    let s = format!("{v:.4}");
-    let s = s.trim_end_matches('0').trim_end_matches('.');
-    let s = if s == "-0" { "0" } else { s };
-    if decimal_point && !s.contains('.') {
-        format!("{s}.")
-    } else {
-        s.to_string()
+    use std::fmt::Write as _;
+    if !(v.is_finite() && v.abs() < 1e14) {
+        return format!("{v}");
     }
+    let n = quantum(v);
+    let (int, frac) = (n.unsigned_abs() / 10_000, n.unsigned_abs() % 10_000);
+    let mut s = String::with_capacity(16);
+    if n < 0 {
+        s.push('-');
+    }
+    let _ = write!(s, "{int}");
+    if frac != 0 {
+        let _ = write!(s, ".{frac:04}");
+        while s.ends_with('0') {
+            s.pop();
+        }
+    } else if decimal_point {
+        s.push('.');
+    }
+    s
 }
 
 /// Seconds to travel `length` from rest to rest at top speed `v` and acceleration `a`.
@@ -151,11 +169,12 @@ impl Program {
         let mut next = self.pos;
         for (i, axis) in ['X', 'Y', 'Z'].into_iter().enumerate() {
             let Some(v) = to[i] else { continue };
-            let printed = self.num(v);
-            let value: f64 = printed.trim_end_matches('.').parse().unwrap_or(v);
-            if self.pos[i].is_some_and(|p| self.num(p) == printed) {
+            let q = quantum(v);
+            if self.pos[i].is_some_and(|p| quantum(p) == q) {
                 continue;
             }
+            let printed = self.num(v);
+            let value = q as f64 / 10_000.0;
             let [lo, hi] = limits[i];
             if value < lo - 1e-9 || value > hi + 1e-9 {
                 return Err(Error::stage(
@@ -458,7 +477,23 @@ mod tests {
         let mut f = program("cmpm-hybrid-fanuc");
         f.rapid(Some(10.0), Some(-2.5), Some(0.0)).expect("in travel");
         assert_eq!(f.text, "G0 X10. Y-2.5 Z0.\n");
-        assert_eq!(number(-0.00001, false), "0");
+        for (v, want) in [
+            (-0.00001, "0"),
+            (1.23456, "1.2346"),
+            (-0.0001, "-0.0001"),
+            (0.5, "0.5"),
+            (-2.5, "-2.5"),
+            (123.4, "123.4"),
+            (80.32, "80.32"),
+        ] {
+            assert_eq!(number(v, false), want, "{v}");
+            assert_eq!(number(v, false), {
+                let s = format!("{v:.4}");
+                let s = s.trim_end_matches('0').trim_end_matches('.').to_string();
+                if s == "-0" { "0".to_string() } else { s }
+            });
+        }
+        assert_eq!(number(10.0, true), "10.");
     }
 
     #[test]
