@@ -419,6 +419,17 @@ fn a_third_party_parser_runs_the_nc_program_as_a_machinist_would_and_finds_the_p
     let nc = dir.path().join("pipe-work-cycles.nc");
     let cell = root().join("plugins/process/cells/cmpm-hybrid.toml");
     let report = replay_nc(&nc, &cell);
+    // The replay says which tool kinds it knows.
+    let help = Command::new("python3")
+        .arg(root().join("tests/replay/nc_replay.py"))
+        .arg("--help")
+        .output()
+        .expect("python3 runs");
+    assert!(
+        text(&help.stdout).contains("dispenser, end-mill, grinding-wheel, laser, spray"),
+        "{}",
+        text(&help.stdout)
+    );
     // What each tool works: the spray, the laser and the filler exactly their paths;
     // the cutters more (ramps cut at depth again, the wheel runs on past the part).
     assert_eq!(planned.len(), 5, "{planned:?}");

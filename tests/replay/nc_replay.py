@@ -41,10 +41,12 @@ in XY), the laser's Z cycles (the head going up, then down again, with the laser
 loaded) per layer, and per layer (`(layer ...)` comments) the lowest Z of each tool
 kind and the feeder values in force each time the spray gun opens.
 
-The cycle time follows the controller's limits for each straight move from rest to
-rest: the speed is the feed (or the rapids' speed) capped so no axis exceeds its own
-rapid speed, the acceleration the most each axis allows along the move, on a
-trapezoidal profile; plus the profile's seconds per tool change and per spindle start.
+The cycle time follows the controller's limits: each move's speed is the feed (or the
+rapids' speed) capped so no axis exceeds its own rapid speed, its acceleration the most
+each axis allows along the move, on a trapezoidal profile. Rapids start and end at
+rest; consecutive feed moves run through their corners at the speed the profile's
+`junction_deviation` allows (Grbl's junction-deviation rule), and stop at any line that
+does something else; plus the profile's seconds per tool change and per spindle start.
 
 Tool kinds known: end-mill and grinding-wheel (rotating), laser, spray, dispenser.
 
@@ -66,6 +68,47 @@ except ImportError:  # pragma: no cover - the caller checks first
 
 ROTATING = {"end-mill", "grinding-wheel"}
 KINDS = sorted(ROTATING | {"laser", "spray", "dispenser"})
+
+
+def chain_time(moves, deviation):
+    """Seconds for consecutive feed moves that start and end at rest.
+
+    Each move is (length, cruise speed, acceleration, unit vector). A corner is taken
+    at the speed whose circle, tangent to both moves, passes `deviation` from the
+    corner at the acceleration's centripetal limit (the junction-deviation rule in
+    Grbl's planner documentation); then a backward and a forward pass keep every speed
+    reachable from its neighbours within each move's length.
+    """
+    if not moves:
+        return 0.0
+    limit = [0.0] * (len(moves) + 1)
+    for k in range(1, len(moves)):
+        (_, v_prev, a_prev, u_prev), (_, v_next, a_next, u_next) = moves[k - 1], moves[k]
+        cos_theta = -sum(p * q for p, q in zip(u_prev, u_next))
+        if deviation <= 0 or cos_theta > 0.999999:
+            corner = 0.0
+        elif cos_theta < -0.999999:
+            corner = math.inf
+        else:
+            half = math.sqrt(0.5 * (1.0 - cos_theta))
+            corner = math.sqrt(min(a_prev, a_next) * deviation * half / (1.0 - half))
+        limit[k] = min(corner, v_prev, v_next)
+    for k in reversed(range(len(moves))):
+        length, _, accel, _ = moves[k]
+        limit[k] = min(limit[k], math.sqrt(limit[k + 1] ** 2 + 2 * accel * length))
+    for k in range(len(moves)):
+        length, _, accel, _ = moves[k]
+        limit[k + 1] = min(limit[k + 1], math.sqrt(limit[k] ** 2 + 2 * accel * length))
+    total = 0.0
+    for k, (length, cruise, accel, _) in enumerate(moves):
+        v0, v1 = limit[k], limit[k + 1]
+        top = math.sqrt((2 * accel * length + v0 * v0 + v1 * v1) / 2)
+        if top <= cruise:
+            total += (max(top - v0, 0.0) + max(top - v1, 0.0)) / accel
+        else:
+            ramps = (cruise * cruise - v0 * v0 + cruise * cruise - v1 * v1) / (2 * accel)
+            total += (2 * cruise - v0 - v1) / accel + (length - ramps) / cruise
+    return total
 
 
 def trapezoid(length, v, a):
@@ -138,6 +181,8 @@ def main():
     layers = []
     layer = None
     laser_rising = False
+    chain = []
+    deviation = float(motion.get("junction_deviation", 0.0)) if motion else 0.0
 
     def bad(n, msg):
         if len(violations) < 50:
@@ -167,6 +212,11 @@ def main():
         if state["ended"] and line.block.gcodes:
             bad(n, "a command after the program's end")
         comment = line.comment.text if line.comment else ""
+        # Feed moves run on through their corners until a line does anything else.
+        names = [type(g).__name__ for g in line.block.gcodes]
+        if names and any(nm not in ("GCodeLinearMove", "GCodeFeedRate") for nm in names):
+            time += chain_time(chain, deviation)
+            chain = []
         if comment.startswith("layer "):
             layer = {"label": comment[6:], "lowest": {}, "sprays": [], "laser_z_cycles": 0}
             layers.append(layer)
@@ -274,9 +324,11 @@ def main():
                         if u > 1e-12:
                             v = min(v, motion["rapid"][i] / 60.0 / u)
                             a = min(a, motion["acceleration"][i] / u)
-                    if name == "GCodeLinearMove" and state["feed"]:
-                        v = min(v, state["feed"] / 60.0)
-                    time += trapezoid(length, v, a)
+                    if name == "GCodeLinearMove":
+                        v = min(v, (state["feed"] or math.inf) / 60.0)
+                        chain.append((length, v, a, [x / length for x in d]))
+                    else:
+                        time += trapezoid(length, v, a)
             elif motion and state["pos"][2] is None and target[2] is not None and all(p is not None for p in state["pos"][:2]) and not moves_xy:
                 # Down from the safe height.
                 top = cell["travel"]["z"][1]
@@ -317,6 +369,7 @@ def main():
             state["pos"] = target
         if laser_rising and kinds.get(state["loaded"]) != "laser":
             laser_rising = False
+    time += chain_time(chain, deviation)
     if not state["ended"]:
         bad(len(text), "the program does not end with M2 or M30")
     if state["spindle"] or state["outputs"]:

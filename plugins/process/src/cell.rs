@@ -154,6 +154,11 @@ pub struct Motion {
     /// Seconds the spindle takes to reach its speed.
     #[serde(default)]
     pub spindle_start: f64,
+    /// How far the controller may round a corner between feed moves (mm), as its
+    /// blending tolerance is set in `start` (LinuxCNC: `G64 P`): the speed through a
+    /// corner follows from it and the acceleration. 0: every move stops at its end.
+    #[serde(default)]
+    pub junction_deviation: f64,
 }
 
 /// The spray gun's powder feeders: which analog output meters which powder, and the
@@ -399,6 +404,9 @@ impl Cell {
             .any(|v| !(v.is_finite() && *v > 0.0))
         {
             return Err("motion: every rapid speed and acceleration must be positive".into());
+        }
+        if !(m.junction_deviation.is_finite() && m.junction_deviation >= 0.0) {
+            return Err("motion.junction_deviation must be zero or a positive number of mm".into());
         }
         if !(m.tool_change.is_finite()
             && m.tool_change >= 0.0

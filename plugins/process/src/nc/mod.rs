@@ -508,7 +508,7 @@ impl LayerSink for Sink {
             .map(|(k, s)| format!("{k} {}", duration(*s)))
             .collect();
         say(format!(
-            "estimated cycle time {total:.0} s = {}, each move from rest to rest: {}",
+            "estimated cycle time {total:.0} s = {}: {}",
             duration(total),
             shares.join(", ")
         ));

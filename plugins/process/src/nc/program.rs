@@ -3,17 +3,80 @@
 //!
 //! A move is written only for the axes it changes, as they will be printed: a move to
 //! where the tool already is, or a feed word already in force, is not written. Every
-//! position is checked against the cell's travel. The time of each move follows the
-//! controller's limits for a straight move from rest to rest: its speed is the feed (or
-//! the rapid speed) capped so no axis exceeds its own, its acceleration the most every
-//! axis allows along it, on a trapezoidal profile. Blending corners can only make the
-//! machine faster than this estimate.
+//! position is checked against the cell's travel.
+//!
+//! The time of each move follows the controller's limits: its speed is the feed (or the
+//! rapid speed) capped so no axis exceeds its own, its acceleration the most every axis
+//! allows along it, on a trapezoidal profile. A rapid starts and ends at rest, and so
+//! does every run of feed moves, which any other line ends. Within a run, the speed
+//! through a corner is the one that keeps the tool within the cell's junction deviation
+//! δ of the corner at its acceleration a: v² = a δ sin(θ/2) / (1 − sin(θ/2)), θ the
+//! angle between the moves (the junction-deviation rule of Grbl's planner, a model of a
+//! controller blending within a tolerance), and a look-ahead over the run lowers each
+//! corner's speed so the tool can still brake for the next.
 
 use std::collections::{BTreeMap, BTreeSet};
 
 use lamina_core::{Error, Result};
 
 use crate::cell::{Cell, render};
+
+/// A feed move waiting for the run it belongs to to end.
+#[derive(Debug, Clone, Copy)]
+struct Pending {
+    length: f64,
+    /// Cruise speed (mm/s) and acceleration (mm/s²).
+    speed: f64,
+    accel: f64,
+    unit: [f64; 3],
+}
+
+/// Seconds for `length` entered at `v0`, left at `v1`, at most `v`, at acceleration `a`.
+pub fn segment(length: f64, v0: f64, v1: f64, v: f64, a: f64) -> f64 {
+    if length <= 0.0 {
+        return 0.0;
+    }
+    let peak = ((2.0 * a * length + v0 * v0 + v1 * v1) / 2.0).sqrt();
+    if peak <= v {
+        (peak - v0).max(0.0) / a + (peak - v1).max(0.0) / a
+    } else {
+        let accel = (v * v - v0 * v0) / (2.0 * a);
+        let brake = (v * v - v1 * v1) / (2.0 * a);
+        (v - v0) / a + (v - v1) / a + (length - accel - brake) / v
+    }
+}
+
+/// Seconds for a run of feed moves from rest to rest, corners taken at the speed the
+/// junction deviation `delta` allows.
+fn run_time(moves: &[Pending], delta: f64) -> f64 {
+    let n = moves.len();
+    // Speed limits at each junction: 0 at both ends.
+    let mut j = vec![0.0f64; n + 1];
+    for k in 1..n {
+        let (p, q) = (&moves[k - 1], &moves[k]);
+        let cos = -(p.unit[0] * q.unit[0] + p.unit[1] * q.unit[1] + p.unit[2] * q.unit[2]);
+        let limit = if delta <= 0.0 || cos > 0.999_999 {
+            0.0
+        } else if cos < -0.999_999 {
+            f64::INFINITY
+        } else {
+            let s = (0.5 * (1.0 - cos)).sqrt();
+            (p.accel.min(q.accel) * delta * s / (1.0 - s)).sqrt()
+        };
+        j[k] = limit.min(p.speed).min(q.speed);
+    }
+    for k in (0..n).rev() {
+        j[k] = j[k].min((j[k + 1] * j[k + 1] + 2.0 * moves[k].accel * moves[k].length).sqrt());
+    }
+    for k in 0..n {
+        j[k + 1] = j[k + 1].min((j[k] * j[k] + 2.0 * moves[k].accel * moves[k].length).sqrt());
+    }
+    moves
+        .iter()
+        .enumerate()
+        .map(|(k, m)| segment(m.length, j[k], j[k + 1], m.speed, m.accel))
+        .sum()
+}
 
 /// What the program's time went to, in the order first met.
 #[derive(Debug, Default)]
@@ -55,6 +118,8 @@ pub struct Program {
     /// `text`, z before it, its seconds). A rapid along z that follows it the same way
     /// replaces it, since both go along the same line.
     last_z_rapid: Option<(usize, f64, f64)>,
+    /// The feed moves of the run not yet ended.
+    run: Vec<Pending>,
     /// What the time goes to now.
     pub doing: String,
     pub shares: Shares,
@@ -117,15 +182,32 @@ impl Program {
             outputs: BTreeSet::new(),
             analog: BTreeMap::new(),
             last_z_rapid: None,
+            run: Vec::new(),
             doing: "setup".into(),
             shares: Shares::default(),
         }
     }
 
+    /// A line that is not a feed move: the run of feed moves before it ends.
     pub fn line(&mut self, s: impl AsRef<str>) {
+        self.end_run();
         self.last_z_rapid = None;
-        self.text.push_str(s.as_ref());
+        self.push(s.as_ref());
+    }
+
+    fn push(&mut self, s: &str) {
+        self.text.push_str(s);
         self.text.push('\n');
+    }
+
+    /// Times the run of feed moves written since the last other line.
+    pub fn end_run(&mut self) {
+        if self.run.is_empty() {
+            return;
+        }
+        let t = run_time(&self.run, self.cell.motion.junction_deviation);
+        self.run.clear();
+        self.wait(t);
     }
 
     pub fn num(&self, v: f64) -> String {
@@ -235,12 +317,25 @@ impl Program {
                 self.feed = Some(word);
             }
         }
-        let start = self.text.len();
-        self.line(line);
-        let seconds = trapezoid(length, v, a);
-        self.wait(seconds);
-        if z_only && let Some(z0) = before.or(self.pos[2]) {
-            self.last_z_rapid = Some((start, z0, seconds));
+        if feed.is_some() {
+            self.last_z_rapid = None;
+            self.push(&line);
+            let unit = [delta[0] / length, delta[1] / length, delta[2] / length];
+            self.run.push(Pending {
+                length,
+                speed: v,
+                accel: a,
+                unit,
+            });
+        } else {
+            self.end_run();
+            let start = self.text.len();
+            self.line(line);
+            let seconds = trapezoid(length, v, a);
+            self.wait(seconds);
+            if z_only && let Some(z0) = before.or(self.pos[2]) {
+                self.last_z_rapid = Some((start, z0, seconds));
+            }
         }
         if next[2] != self.pos[2] {
             self.safe = false;
@@ -464,6 +559,39 @@ mod tests {
         q.rapid(None, None, Some(15.0)).expect("in travel");
         q.rapid(None, None, Some(14.0)).expect("in travel");
         assert!((before - q.shares.total()).abs() < 1e-12);
+    }
+
+    #[test]
+    fn feed_moves_run_through_corners_as_the_junction_deviation_allows() {
+        let along = |x: f64, y: f64, length: f64| Pending {
+            length,
+            speed: 50.0,
+            accel: 500.0,
+            unit: [x, y, 0.0],
+        };
+        // A straight line in two moves takes what it takes in one.
+        let one = run_time(&[along(1.0, 0.0, 20.0)], 0.01);
+        let two = run_time(&[along(1.0, 0.0, 8.0), along(1.0, 0.0, 12.0)], 0.01);
+        assert!((one - two).abs() < 1e-12, "{one} {two}");
+        assert!((one - trapezoid(20.0, 50.0, 500.0)).abs() < 1e-12);
+        // Round a square: without deviation every corner stops, with it the tool keeps
+        // v = sqrt(a d sin(45) / (1 - sin(45))) through them.
+        let square: Vec<Pending> = [(1.0, 0.0), (0.0, 1.0), (-1.0, 0.0), (0.0, -1.0)]
+            .iter()
+            .map(|&(x, y)| along(x, y, 5.0))
+            .collect();
+        let stops = run_time(&square, 0.0);
+        assert!((stops - 4.0 * trapezoid(5.0, 50.0, 500.0)).abs() < 1e-12);
+        let s = std::f64::consts::FRAC_1_SQRT_2;
+        let corner = (500.0 * 0.01 * s / (1.0 - s)).sqrt();
+        let rounded = run_time(&square, 0.01);
+        let want = segment(5.0, 0.0, corner, 50.0, 500.0)
+            + 2.0 * segment(5.0, corner, corner, 50.0, 500.0)
+            + segment(5.0, corner, 0.0, 50.0, 500.0);
+        assert!(
+            (rounded - want).abs() < 1e-12 && rounded < stops,
+            "{rounded} {want} {stops}"
+        );
     }
 
     #[test]
