@@ -603,6 +603,11 @@ mod tests {
             "{}",
             notes[0]
         );
+        // A feed beyond the tool's limit is refused, naming the tool and both figures.
+        let mut fast = tool.clone();
+        fast.feed = 150.0;
+        let err = cell.cutting(&fast, &mut notes).expect_err("too fast").to_string();
+        assert!(err.contains("`cup-wheel` feeds at most 100 mm/s, the program asks 150"), "{err}");
         // Within the spindle's range, the speed follows v = pi d n.
         let fast = cell
             .tools
