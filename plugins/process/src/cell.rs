@@ -607,7 +607,10 @@ mod tests {
         let mut fast = tool.clone();
         fast.feed = 150.0;
         let err = cell.cutting(&fast, &mut notes).expect_err("too fast").to_string();
-        assert!(err.contains("`cup-wheel` feeds at most 100 mm/s, the program asks 150"), "{err}");
+        assert!(
+            err.contains("`cup-wheel` feeds at most 100 mm/s, the program asks 150"),
+            "{err}"
+        );
         // Within the spindle's range, the speed follows v = pi d n.
         let fast = cell
             .tools
