@@ -269,3 +269,53 @@ fn the_first_layer_takes_the_machine_height_and_layers_stay_within_the_nozzle() 
     );
     assert!(!out_dir.join("box.gcode").exists());
 }
+
+#[test]
+fn a_template_that_leaves_relative_moves_on_or_moves_off_the_bed_is_refused_and_a_partial_home_is_completed()
+{
+    let dir = tempfile::tempdir().expect("tempdir");
+    let with_start = |start: &str| {
+        pipeline(
+            "size = [20.0, 20.0, 1.0]",
+            &format!(
+                "[machine]\nbase = \"marlin-mixing-2in1\"\n\n[machine.gcode]\nstart = \"\"\"\n{start}\n\"\"\""
+            ),
+        )
+    };
+    for (start, want) in [
+        (
+            "G28\nG91\nG1 Z5 F600",
+            "the start template leaves relative positioning (G91) on",
+        ),
+        (
+            "G28\nG1 Z-10 F600",
+            "the start template moves off the bed at its line 2 (`G1 Z-10 F600`)",
+        ),
+        (
+            "G28\nG1 X1e300 F600",
+            "the start template moves off the bed at its line 2 (`G1 X1e300 F600`)",
+        ),
+        ("G28\nG1 X500 Y10 F6000", "where the bed spans X 0 to"),
+    ] {
+        let p = write(dir.path(), "hostile.toml", &with_start(start));
+        let out = run(&p, &dir.path().join("out"));
+        let err = text(&out.stderr);
+        assert!(!out.status.success(), "{start}: {err}");
+        assert!(err.contains(want), "{start}: {err}");
+        assert!(
+            !dir.path().join("out/box.gcode").exists(),
+            "{start}: no partial output"
+        );
+    }
+    // `G28 X` homes X alone: the file homes every axis before anything moves.
+    let p = write(dir.path(), "partial.toml", &with_start("G28 X\nG1 Z5 F600"));
+    let out = run(&p, &dir.path().join("out"));
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let gcode = std::fs::read_to_string(dir.path().join("out/box.gcode")).expect("gcode");
+    let home = gcode.find("\nG28 ; home all axes").expect("a full home added");
+    assert!(
+        home < gcode.find("\nG28 X").expect("the template's line"),
+        "{}",
+        &gcode[..home + 40]
+    );
+}

@@ -139,7 +139,8 @@ pub struct Firmware {
     tool_changes: f64,
     /// Part-cooling fan, 0 to 1.
     fan: f64,
-    homed: bool,
+    /// X, Y and Z homed.
+    homed: [bool; 3],
     planner: Planner,
     /// The first line that moves the extruder of a cold or unselected tool.
     cold: Option<String>,
@@ -166,7 +167,7 @@ impl Firmware {
             heating_wait: 0.0,
             tool_changes: 0.0,
             fan: 0.0,
-            homed: false,
+            homed: [false; 3],
             planner: Planner::new(limits),
             cold: None,
             params: Vec::new(),
@@ -226,11 +227,20 @@ impl Firmware {
             }
             "G28" => {
                 self.planner.stop();
-                self.homed = true;
+                // `G28` homes every axis; `G28 X` (or `G28 X0 Y0`) only those named,
+                // with or without a value.
+                let named: Vec<char> = code
+                    .split_whitespace()
+                    .skip(1)
+                    .filter_map(|w| w.chars().next())
+                    .map(|c| c.to_ascii_uppercase())
+                    .filter(|c| "XYZ".contains(*c))
+                    .collect();
+                let all = named.is_empty();
                 for (a, letter) in ['X', 'Y', 'Z'].into_iter().enumerate() {
-                    let all = !params.iter().any(|(k, _)| "XYZ".contains(*k));
-                    if all || params.iter().any(|(k, _)| *k == letter) {
+                    if all || named.contains(&letter) {
                         self.position[a] = 0.0;
+                        self.homed[a] = true;
                     }
                 }
             }
@@ -558,8 +568,14 @@ impl Firmware {
         self.fan
     }
 
+    /// True once X, Y and Z have all been homed.
     pub fn homed(&self) -> bool {
-        self.homed
+        self.homed.iter().all(|&h| h)
+    }
+
+    /// True while X, Y and Z moves are absolute (`G90`), false after `G91`.
+    pub fn absolute(&self) -> bool {
+        self.absolute
     }
 
     pub fn position(&self) -> [f64; 4] {
@@ -669,6 +685,25 @@ mod tests {
         assert_eq!(f.limits().corner, Corner::Jerk([10.0, 10.0, 0.4, 5.0]));
         assert_eq!((f.limits().print, f.limits().travel), (800.0, 2000.0));
         assert!(f.time() > 0.0);
+        assert!(f.absolute());
+        f.feed_line("G91");
+        assert!(!f.absolute());
+    }
+
+    #[test]
+    fn only_the_axes_g28_names_are_homed() {
+        let mut f = marlin(0.0);
+        f.feed_text(
+            "G28 X
+G28 Y0
+",
+        );
+        assert!(!f.homed(), "Z was never homed");
+        f.feed_line("G28 Z");
+        assert!(f.homed());
+        let mut g = marlin(0.0);
+        g.feed_line("G28 ; all");
+        assert!(g.homed());
     }
 
     fn marlin(tool_change_time: f64) -> Firmware {

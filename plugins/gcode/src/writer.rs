@@ -284,13 +284,51 @@ impl Writer {
     }
 
     /// Writes a rendered template line by line.
-    fn template(&mut self, text: &str) {
+    /// Writes a machine template's lines, checked first as the firmware will run them
+    /// from the state the file is in: a template is the machine profile's, which a
+    /// pipeline names, so its lines are not trusted. Every position must be a number
+    /// on the bed (within its shape, Z from 0 to its height), and absolute positioning
+    /// must be in force when it ends; otherwise the run fails, naming the template and
+    /// its line.
+    fn template(&mut self, name: &str, text: &str) -> Result<()> {
+        if let Some(bed) = self.s.bed {
+            let machine = self.s.machine.as_deref().unwrap_or("?").to_string();
+            let fail = |m: String| {
+                Err(Error::stage(
+                    crate::STAGE,
+                    format!("machine `{machine}`: the {name} template {m}"),
+                ))
+            };
+            let mut probe = self.fw.clone();
+            for (i, l) in text.lines().enumerate() {
+                probe.feed_line(l);
+                let [x, y, z, _] = probe.position();
+                let on_bed = [x, y, z].iter().all(|v| v.is_finite())
+                    && bed.contains(Point2::new(x, y), -1e-6)
+                    && (-1e-6..=bed.max_height + 1e-6).contains(&z);
+                if !on_bed {
+                    return fail(format!(
+                        "moves off the bed at its line {} (`{}`): to X {x} Y {y} Z {z}, where the bed spans {} and Z 0 to {}",
+                        i + 1,
+                        l.trim(),
+                        bed_span(&bed),
+                        bed.max_height
+                    ));
+                }
+            }
+            if !probe.absolute() {
+                return fail(
+                    "leaves relative positioning (G91) on: every move after it would be taken as a step from the last; end it with G90".into(),
+                );
+            }
+        }
         for l in text.lines() {
             let l = l.trim_end();
             if !l.trim().is_empty() {
                 self.line(l);
             }
         }
+        Ok(())
     }
 
     fn flush(&mut self) -> Result<()> {
@@ -468,7 +506,7 @@ impl Writer {
                     }
                 }
             }
-            self.template(&start);
+            self.template("start", &start)?;
             let bed = self.s.first_layer_bed_temperature;
             if bed > 0.0 && !self.fw.bed_is_hot(bed) {
                 if self.fw.bed_target() < bed - 0.5 {
@@ -708,7 +746,7 @@ impl Writer {
         } else {
             String::new()
         };
-        self.template(&text);
+        self.template("tool change", &text)?;
         if self.fw.tool() != Some(to.index) {
             self.line(format!("T{}", to.index));
         }
@@ -1662,7 +1700,7 @@ impl Writer {
         self.feature = None;
         if self.s.machine.is_some() {
             let end = self.render(&self.s.templates.end.clone(), None, self.z)?;
-            self.template(&end);
+            self.template("end", &end)?;
         }
         let targets = self.fw.targets();
         let (heaters, bed) = targets.split_at(targets.len() - 1);
@@ -1761,6 +1799,22 @@ impl Writer {
             ],
             ..MachineFileReport::default()
         })
+    }
+}
+
+/// The bed's extent in words: `X 0 to 220, Y 0 to 220` or a circle's centre and radius.
+fn bed_span(bed: &lamina_core::machine::Bed) -> String {
+    let b = bed.bounds();
+    match bed.shape {
+        lamina_core::machine::BedShape::Rectangle { .. } => {
+            format!("X {} to {}, Y {} to {}", b.min.x, b.max.x, b.min.y, b.max.y)
+        }
+        lamina_core::machine::BedShape::Circle { diameter } => format!(
+            "a circle of radius {} about X {} Y {}",
+            diameter / 2.0,
+            b.center().x,
+            b.center().y
+        ),
     }
 }
 
