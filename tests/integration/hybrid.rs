@@ -1023,3 +1023,33 @@ fn a_wheel_its_spindle_cannot_turn_fast_enough_grinds_at_the_top_speed_and_the_r
     let nc = std::fs::read_to_string(dir.path().join("out/pipe-work-cycles.nc")).expect("nc");
     assert!(nc.contains("\nS23873 M3\n"), "25 m/s on 20 mm");
 }
+
+#[test]
+fn tool_numbers_beyond_any_machine_are_refused_at_their_key_with_the_range() {
+    let pipe = std::fs::read_to_string(pipelines().join("pipe-work-cycles.toml")).expect("pipe");
+    for (from, to, want) in [
+        (
+            "use = \"end-mill\"\ndiameter = 0.8",
+            "use = \"end-mill\"\ndiameter = 1e300",
+            "must lie between 0.001 and 1000 mm, not 1e300",
+        ),
+        (
+            "rough_allowance = 0.1\n",
+            "rough_allowance = 0.1\nfeed = 5e-324\n",
+            "must lie between 0.01 and 10000 mm/s, not 5e-324",
+        ),
+        (
+            "pass = \"rough\"\n",
+            "pass = \"rough\"\nspindle = 1e9\n",
+            "must lie between 1 and 200000 rev/min",
+        ),
+    ] {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let bad = pipe.replace(from, to);
+        assert_ne!(bad, pipe, "{from}");
+        let o = try_run_text(dir.path(), &bad);
+        let err = text(&o.stderr);
+        assert_eq!(o.status.code(), Some(2), "{to}: {err}");
+        assert!(err.contains(want), "{to}: {err}");
+    }
+}
