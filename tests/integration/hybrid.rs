@@ -1053,3 +1053,23 @@ fn tool_numbers_beyond_any_machine_are_refused_at_their_key_with_the_range() {
         assert!(err.contains(want), "{to}: {err}");
     }
 }
+
+#[test]
+fn a_part_name_with_a_line_break_stays_on_its_line_in_the_bitmap_header() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let pipe = std::fs::read_to_string(pipelines().join("pipe-work-cycles.toml")).expect("pipe");
+    let named = pipe_with_outputs(&pipe, &["bitmap"])
+        .replace("\"inner\"", "\"inner\\nG28\"")
+        .replace("{ inner = 0.02 }", "{ \"inner\\nG28\" = 0.02 }");
+    assert!(named.matches("inner\\nG28").count() >= 4, "{named}");
+    let o = try_run_text(dir.path(), &named);
+    assert!(o.status.success(), "{}", text(&o.stderr));
+    let header = std::fs::read_to_string(dir.path().join("out/inner-bitmap.hdr")).expect("header");
+    assert!(header.contains("# parts: inner G28\n"), "{header}");
+    assert!(
+        header
+            .lines()
+            .all(|l| l.starts_with('#') || l.starts_with(|c: char| c.is_ascii_digit())),
+        "{header}"
+    );
+}

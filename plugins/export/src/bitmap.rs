@@ -229,7 +229,8 @@ impl Exporter for Bitmap {
              # parts: {}\n\
              # voids: {}\n\
              # layer z thickness cut_z pixel origin_x origin_y width height offset",
-            names.join(", "),
+            // A part's name is the pipeline's text: one line, or it would add records.
+            lamina_core::output::one_line(&names.join(", ")),
             lamina_core::output::one_line(&voids),
         )
         .map_err(io(&header_path))?;
