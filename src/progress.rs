@@ -136,7 +136,7 @@ impl Progress {
         }
         let Ok(groups) = self.groups.lock() else { return };
         for g in groups.iter() {
-            eprintln!("{}", g.line());
+            eprintln!("{}", crate::report::visible(&g.line()));
         }
     }
 
@@ -167,7 +167,7 @@ impl Observer for Progress {
     /// they are grouped and printed at the end.
     fn diagnostic(&self, d: &Diagnostic) {
         if self.verbose {
-            self.print(&format!("{}: {d}", d.severity.name()));
+            self.print(&crate::report::visible(&format!("{}: {d}", d.severity.name())));
             return;
         }
         let Ok(mut groups) = self.groups.lock() else {

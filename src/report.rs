@@ -41,6 +41,35 @@ impl Diagnostic for Located {
     }
 }
 
+/// `s` as it may reach a terminal: a control character (an escape sequence that would
+/// clear the screen or move the cursor, from a name or a script's message) is shown
+/// as its code, `\x1b`; line breaks and tabs stay.
+pub fn visible(s: &str) -> String {
+    let mut out = String::with_capacity(s.len());
+    for c in s.chars() {
+        if c.is_control() && !matches!(c, '\n' | '\t') {
+            out.push_str(&format!("\\x{:02x}", c as u32));
+        } else {
+            out.push(c);
+        }
+    }
+    out
+}
+
+/// The same text with each control character but line breaks and tabs replaced by
+/// `?`, one byte for one byte, so that spans into it still point where they did.
+fn same_length(s: &str) -> String {
+    s.chars()
+        .map(|c| {
+            if c.is_control() && !matches!(c, '\n' | '\t' | '\r') {
+                '?'
+            } else {
+                c
+            }
+        })
+        .collect()
+}
+
 /// Prints `e` to stderr. The first line always reads `error: FILE:LINE:COL: message`
 /// when the error has a place, so scripts and tests can rely on it.
 pub fn print(e: &Error) {
@@ -61,14 +90,15 @@ pub fn print(e: &Error) {
         }
         cause = c.source();
     }
-    eprintln!("error: {message}");
+    eprintln!("error: {}", visible(&message));
     let Some(loc) = e.location() else {
         if let Some(h) = e.help() {
-            eprintln!("help: {h}");
+            eprintln!("help: {}", visible(h));
         }
         return;
     };
-    let text = loc.file.text.clone();
+    // Control characters are one byte each: replaced one for one, spans still fit.
+    let text = same_length(&loc.file.text);
     let start = loc.span.start.min(text.len());
     let len = loc
         .span
@@ -77,7 +107,7 @@ pub fn print(e: &Error) {
         .min(text.len() - start);
     let diag = Located {
         message: "here:".into(),
-        help: e.help().map(str::to_string),
+        help: e.help().map(visible),
         source: NamedSource::new(loc.file.path.display().to_string(), text),
         span: (start, len).into(),
     };

@@ -931,3 +931,83 @@ fn a_five_million_triangle_mesh_runs_within_budget() {
         serde_json::from_slice(&std::fs::read(s.out().join("plan.json")).expect("the plan")).expect("JSON");
     assert_eq!(plan["layers"].as_array().map(Vec::len), Some(200));
 }
+
+/// A graded box named `name` (TOML basic-string escapes allowed), written as 3MF and
+/// SVG, graded by the script `f`.
+fn named_box(name: &str, f: &str) -> String {
+    format!(
+        r#"name = "names"
+
+[[parts]]
+name = "{name}"
+materials = ["red", "blue\u0007"]
+[parts.model]
+use = "box"
+size = [10.0, 10.0, 1.0]
+[parts.grade]
+use = "script"
+f = "{f}"
+
+[materials.red]
+colour = [255, 0, 0]
+[materials."blue\u0007"]
+colour = [0, 0, 255]
+
+[slice]
+use = "uniform"
+thickness = 0.5
+
+[[output]]
+use = "3mf"
+path = "names.3mf"
+
+[[output]]
+use = "svg"
+path = "svg/names"
+"#
+    )
+}
+
+#[test]
+fn control_characters_in_names_make_valid_xml_and_reach_no_terminal_raw() {
+    let probe = std::process::Command::new("python3")
+        .args(["-c", "import zipfile, xml.etree.ElementTree"])
+        .output();
+    if !probe.is_ok_and(|o| o.status.success()) {
+        crate::support::skip("python3 is not installed");
+        return;
+    }
+    let dir = tempfile::tempdir().expect("tempdir");
+    let o = crate::support::try_run_text(dir.path(), &named_box("box\\u001b[2J\\u0007", "0.5"));
+    assert!(o.status.success(), "{}", crate::support::text(&o.stderr));
+    // An XML parser of Python's own reads both files.
+    let check = std::process::Command::new("python3")
+        .arg("-c")
+        .arg(
+            "import sys, zipfile, glob, xml.etree.ElementTree as ET\n\
+             z = zipfile.ZipFile(sys.argv[1])\n\
+             ET.fromstring(z.read('3D/3dmodel.model'))\n\
+             for f in glob.glob(sys.argv[2] + '/*.svg'):\n    ET.parse(f)\n\
+             print('ok')",
+        )
+        .arg(dir.path().join("out/names.3mf"))
+        .arg(dir.path().join("out/svg"))
+        .output()
+        .expect("python3 runs");
+    assert_eq!(
+        crate::support::text(&check.stdout).trim(),
+        "ok",
+        "{}",
+        crate::support::text(&check.stderr)
+    );
+    // A script's message with an escape sequence is shown, not obeyed.
+    let dir = tempfile::tempdir().expect("tempdir");
+    let o = crate::support::try_run_text(
+        dir.path(),
+        &named_box("box", "throw \\\"\\u001b[2J\\u001b[32mall checks passed\\\""),
+    );
+    let err = crate::support::text(&o.stderr);
+    assert!(!o.status.success(), "{err}");
+    assert!(!err.contains('\u{1b}'), "{err:?}");
+    assert!(err.contains("\\x1b[2J"), "{err}");
+}

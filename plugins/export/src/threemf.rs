@@ -42,7 +42,10 @@ struct Sink {
 }
 
 fn xml_escape(s: &str) -> String {
-    s.replace('&', "&amp;")
+    // XML 1.0 allows no control character but tab and line breaks, not even as a
+    // reference, and a name is one line: each becomes a space.
+    lamina_core::output::one_line(s)
+        .replace('&', "&amp;")
         .replace('<', "&lt;")
         .replace('>', "&gt;")
         .replace('"', "&quot;")

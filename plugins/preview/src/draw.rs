@@ -68,7 +68,10 @@ pub fn layer_bounds(plan: &LayerPlan) -> Option<[f64; 4]> {
 
 /// Text safe inside XML and HTML.
 pub fn escape(s: &str) -> String {
-    s.replace('&', "&amp;")
+    // XML 1.0 allows no control character but tab and line breaks, not even as a
+    // reference, and a name is one line: each becomes a space.
+    lamina_core::output::one_line(s)
+        .replace('&', "&amp;")
         .replace('<', "&lt;")
         .replace('>', "&gt;")
         .replace('"', "&quot;")
