@@ -108,6 +108,7 @@ impl OutputFiles for AtomicOutputs {
     }
 
     fn create(&mut self, name: &Path) -> Result<Box<dyn Write + Send>> {
+        check_name(name).map_err(Error::config)?;
         if name.is_absolute() || name.components().any(|c| matches!(c, Component::ParentDir)) {
             return Err(Error::config(format!(
                 "output path `{}` must be relative and stay inside the output folder",
@@ -163,6 +164,35 @@ impl OutputFiles for AtomicOutputs {
 /// A name as one line of text for a file a machine reads: control characters and
 /// Unicode line breaks become spaces, so that no name (of a pipeline, part or material)
 /// can start a line of its own.
+/// Longest name of one file or folder, in bytes: the limit of ext4, XFS, btrfs and
+/// APFS (255), below NTFS's 255 UTF-16 units for any name that fits it.
+pub const NAME_MAX: usize = 255;
+
+/// Checks what no file system would take in an output's path: a NUL, or a file or
+/// folder name longer than [`NAME_MAX`] bytes. Checked when the pipeline is read and
+/// again when the file is created, so that a run never writes some outputs and then
+/// fails on the name of the next.
+pub fn check_name(name: &Path) -> std::result::Result<(), String> {
+    let text = name.to_string_lossy();
+    if text.contains('\0') {
+        return Err(format!(
+            "output path `{}` holds a NUL character",
+            text.replace('\0', "\\0")
+        ));
+    }
+    for c in name.components() {
+        let part = c.as_os_str();
+        if part.len() > NAME_MAX {
+            return Err(format!(
+                "output path `{}`: a name of {} bytes, longer than the {NAME_MAX} a file system takes",
+                one_line(&text),
+                part.len()
+            ));
+        }
+    }
+    Ok(())
+}
+
 pub fn one_line(name: &str) -> String {
     name.chars()
         .map(|c| {

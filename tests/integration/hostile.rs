@@ -1011,3 +1011,29 @@ fn control_characters_in_names_make_valid_xml_and_reach_no_terminal_raw() {
     assert!(!err.contains('\u{1b}'), "{err:?}");
     assert!(err.contains("\\x1b[2J"), "{err}");
 }
+
+#[test]
+fn an_output_name_no_file_system_takes_is_refused_by_check_and_run_before_anything_is_written() {
+    let long = "a".repeat(300);
+    for (bad, want) in [
+        (format!("{long}.json"), "a name of 305 bytes, longer than the 255"),
+        ("x\\u0000y.json".to_string(), "holds a NUL character"),
+    ] {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let text = format!(
+            "{}\n[[output]]\nuse = \"json\"\npath = \"{bad}\"\n",
+            named_box("box", "0.5")
+        );
+        let p = crate::support::write(dir.path(), "p.toml", &text);
+        let check = crate::support::lamina(&["check", p.to_str().expect("utf-8")]);
+        let err = crate::support::text(&check.stderr);
+        assert_eq!(check.status.code(), Some(2), "{err}");
+        assert!(err.contains(want) && err.contains("[output.2] path"), "{err}");
+        let run = crate::support::try_run(&p, &dir.path().join("out"), &[]);
+        assert!(!run.status.success());
+        assert!(
+            !dir.path().join("out/names.3mf").exists(),
+            "the first output is not committed when a later one cannot be"
+        );
+    }
+}

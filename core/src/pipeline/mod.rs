@@ -390,6 +390,14 @@ impl Pipeline {
             .enumerate()
             .map(|(i, t)| table_ref(vec![key("output"), PathElem::Index(i)], t))
             .collect();
+        for t in &outputs {
+            let t: &TableRef = t;
+            if let Some(path) = t.table.get("path").and_then(|v| v.as_str())
+                && let Err(m) = crate::output::check_name(std::path::Path::new(path))
+            {
+                return Err(t.error_at("path", m));
+            }
+        }
         let name = raw.name.unwrap_or_else(|| {
             file.path
                 .file_stem()
