@@ -189,6 +189,17 @@ mod tests {
     }
 
     #[test]
+    fn a_script_cannot_read_the_clock_so_outputs_stay_the_same_from_run_to_run() {
+        let f = host().expression("timestamp().elapsed", None);
+        let args = ScriptArgs::default();
+        let e = match f {
+            Err(e) => e.to_string(),
+            Ok(f) => f.number(&args, "t").expect_err("no clock").to_string(),
+        };
+        assert!(e.contains("timestamp"), "{e}");
+    }
+
+    #[test]
     fn integer_arguments_are_accepted() {
         let f = host()
             .expression("linear(1, 0, r) + sin(0)", None)
