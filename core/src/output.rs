@@ -55,6 +55,20 @@ pub struct AtomicOutputs {
     dir: PathBuf,
     pending: Vec<(TempPath, PathBuf)>,
     reports: Vec<crate::stage::MachineFileReport>,
+    /// Folders this run created, outermost first: a run that fails removes them again
+    /// where they are empty, so it leaves nothing behind.
+    made: Vec<PathBuf>,
+}
+
+impl Drop for AtomicOutputs {
+    fn drop(&mut self) {
+        // The temporary files go first (dropping them deletes them), then the folders
+        // made for them, innermost first; one that holds anything else stays.
+        self.pending.clear();
+        for dir in self.made.iter().rev() {
+            let _ = std::fs::remove_dir(dir);
+        }
+    }
 }
 
 impl AtomicOutputs {
@@ -63,6 +77,7 @@ impl AtomicOutputs {
             dir: dir.into(),
             pending: Vec::new(),
             reports: Vec::new(),
+            made: Vec::new(),
         }
     }
 
@@ -94,7 +109,10 @@ impl AtomicOutputs {
             }
         }
         let mut done = Vec::new();
-        for (temp, dest) in self.pending {
+        let mut this = self;
+        // Committed: the folders hold the outputs and stay.
+        this.made.clear();
+        for (temp, dest) in std::mem::take(&mut this.pending) {
             temp.persist(&dest).map_err(|e| Error::io(&dest, e.error))?;
             done.push(dest);
         }
@@ -126,7 +144,13 @@ impl OutputFiles for AtomicOutputs {
             return Err(Error::config(format!("two outputs write `{}`", dest.display())));
         }
         let parent = dest.parent().unwrap_or(&self.dir).to_path_buf();
+        let missing: Vec<PathBuf> = parent
+            .ancestors()
+            .take_while(|a| !a.as_os_str().is_empty() && !a.exists())
+            .map(Path::to_path_buf)
+            .collect();
         std::fs::create_dir_all(&parent).map_err(|e| Error::io(&parent, e))?;
+        self.made.extend(missing.into_iter().rev());
         // A link inside the output folder must not lead the file out of it.
         if let (Ok(root), Ok(real)) = (self.dir.canonicalize(), parent.canonicalize())
             && !real.starts_with(&root)
@@ -161,9 +185,6 @@ impl OutputFiles for AtomicOutputs {
     }
 }
 
-/// A name as one line of text for a file a machine reads: control characters and
-/// Unicode line breaks become spaces, so that no name (of a pipeline, part or material)
-/// can start a line of its own.
 /// Longest name of one file or folder, in bytes: the limit of ext4, XFS, btrfs and
 /// APFS (255), below NTFS's 255 UTF-16 units for any name that fits it.
 pub const NAME_MAX: usize = 255;
@@ -193,6 +214,9 @@ pub fn check_name(name: &Path) -> std::result::Result<(), String> {
     Ok(())
 }
 
+/// A name as one line of text for a file a machine reads: control characters and
+/// Unicode line breaks become spaces, so that no name (of a pipeline, part or material)
+/// can start a line of its own.
 pub fn one_line(name: &str) -> String {
     name.chars()
         .map(|c| {

@@ -1010,6 +1010,11 @@ fn control_characters_in_names_make_valid_xml_and_reach_no_terminal_raw() {
     assert!(!o.status.success(), "{err}");
     assert!(!err.contains('\u{1b}'), "{err:?}");
     assert!(err.contains("\\x1b[2J"), "{err}");
+    // The failed run leaves no folder behind: not `out`, which it made.
+    assert!(
+        !dir.path().join("out").exists(),
+        "a failed run leaves its folders"
+    );
 }
 
 #[test]
