@@ -859,14 +859,18 @@ fn the_nc_file_is_refused_where_the_cell_could_not_run_the_plan() {
 fn options_that_would_exhaust_the_machine_stop_at_the_grid_limit() {
     let dir = tempfile::tempdir().expect("tempdir");
     let pipe = std::fs::read_to_string(pipelines().join("pipe-work-cycles.toml")).expect("pipe");
-    // Spray passes a nanometre apart.
+    // A spray spot of a nanometre is no spray gun's: refused at its key before any
+    // pass is counted.
     let fine = pipe.replace(
         "inclusions = { outer = { SiC = 0.2 } }",
         "inclusions = { outer = { SiC = 0.2 } }\ndiameter = 1e-9",
     );
     assert_ne!(fine, pipe);
     let err = text(&try_run_text(dir.path(), &fine).stderr);
-    assert!(err.contains("grid_cells"), "{err}");
+    assert!(
+        err.contains("diameter: must lie between 0.001 and 1000 mm, not 1e-9"),
+        "{err}"
+    );
     // A lattice a micrometre apart over the pipe's layers.
     // (The engraving's lattice; the bitmap keeps a coarse one.)
     let dense = CELLS
