@@ -158,13 +158,7 @@ pub fn number(v: f64, decimal_point: bool) -> String {
 
 /// Seconds to travel `length` from rest to rest at top speed `v` and acceleration `a`.
 pub fn trapezoid(length: f64, v: f64, a: f64) -> f64 {
-    if length <= 0.0 {
-        0.0
-    } else if length >= v * v / a {
-        length / v + v / a
-    } else {
-        2.0 * (length / a).sqrt()
-    }
+    segment(length, 0.0, 0.0, v, a)
 }
 
 impl Program {
