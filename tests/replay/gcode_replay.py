@@ -347,6 +347,9 @@ class Tool:
     active: float | None = None  # RepRapFirmware active temperature
     standby: float | None = None  # RepRapFirmware standby temperature
     ever_selected: bool = False
+    # RepRapFirmware M568 A: the heater state set without selecting the tool
+    # (0 off, 1 standby, 2 active); selecting or deselecting the tool sets it again.
+    state: int | None = None
     drives: list[int] | None = None  # M563 D
     heaters: list[int] | None = None  # M563 H
     mix: list[float] | None = None  # normalised mix (Marlin vtool / RRF M567)
@@ -533,6 +536,10 @@ class Options:
     axis_maps: dict[int, dict[str, str]] = field(default_factory=dict)  # system -> {"X": "U", ...}
     homes: dict[int, tuple[float, float]] = field(default_factory=dict)  # system -> head X, Y after homing
     shared_gantry: bool | None = None  # heads on one gantry: check X order instead of discs
+    dual_gantry: bool | None = None  # heads on two gantries over one pair of Y rails: check Y order
+    # system -> (feed scale, acceleration scale): a machine that runs one system's
+    # moves slower than the file asks, to check what the file's synchronisation holds.
+    perturb: dict[int, tuple[float, float]] = field(default_factory=dict)
     extrusion_tol: float = 0.01  # planned extrusion per tool
     # Heating waits and tool changes in the time replay; the heating model is on
     # only with a heating rate (None: waits take 0 s, as the replay always did).
@@ -1078,6 +1085,7 @@ class Replay:
         line = self.line
         if n < 0:  # RepRapFirmware T-1: deselect
             if self.current is not None and self.flavor == "rrf":
+                self.tool(self.current).state = None
                 self.to_standby(self.current)
             self.current = None
             return
@@ -1096,7 +1104,9 @@ class Replay:
             self.tool_change_s += self.o.tool_change_time
         if self.flavor == "rrf" and prev != n:
             if prev is not None:
+                self.tool(prev).state = None
                 self.to_standby(prev)
+            t.state = None
             if t.active is not None:
                 for key in self.tool_heaters(n):
                     self.set_target(key, t.active)
@@ -1119,13 +1129,29 @@ class Replay:
             t.active = active
         if standby is not None:
             t.standby = standby
-        if self.current == n:
+        if t.state is not None:
+            self.apply_tool_state(n)
+        elif self.current == n:
             if t.active is not None:
                 for key in self.tool_heaters(n):
                     self.set_target(key, t.active)
         elif t.ever_selected and t.standby is not None:
             for key in self.tool_heaters(n):
                 self.set_target(key, t.standby)
+
+    def set_tool_state(self, n: int, state: int) -> None:
+        """RepRapFirmware M568 A<state>: the tool's heaters off (0), at standby
+        (1) or active (2), whether or not the tool is selected."""
+        self.ready_cache = None
+        self.tool(n).state = state
+        self.apply_tool_state(n)
+
+    def apply_tool_state(self, n: int) -> None:
+        t = self.tool(n)
+        value = {0: 0.0, 1: t.standby, 2: t.active}.get(t.state)
+        if t.state == 0 or value is not None:
+            for key in self.tool_heaters(n):
+                self.set_target(key, value or 0.0)
 
     def set_hotend(self, raw, wait: bool) -> None:
         self.ready_cache = None
@@ -1299,6 +1325,9 @@ def _h_m568(r: Replay, raw):
     if n is None:
         return
     r.set_tool_temps(n, _first(raw.get("S"), r.line, "S"), _first(raw.get("R"), r.line, "R"))
+    if raw.get("A") is not None:
+        # RepRapFirmware 3.3+: A0 off, A1 standby, A2 active.
+        r.set_tool_state(n, int(_number(raw["A"], r.line, "A")))
 
 
 def _h_m563(r: Replay, raw):
@@ -2253,6 +2282,13 @@ def parse_args(argv: list[str]) -> tuple[str, Options, str | None]:
                     help="where motion system N's head is at the start and after homing (repeatable)")
     mm.add_argument("--shared-gantry", action="store_true", default=None,
                     help="the heads share one gantry: check their X order (system 0 leftmost) instead of discs")
+    mm.add_argument("--dual-gantry", action="store_true", default=None,
+                    help="each head on a gantry of its own over one pair of Y rails: check their Y order "
+                         "(system 0 in front) instead of discs")
+    mm.add_argument("--perturb", action="append", default=[], metavar="N:FEED,ACCEL",
+                    help="time motion system N's moves at FEED times their feed rates and ACCEL times their "
+                         "accelerations (e.g. 1:0.8,1 or 1:1,0.5), as a machine that keeps the file's order but "
+                         "not its pace would (repeatable)")
     mm.add_argument("--extrusion-tol", type=float, default=0.01,
                     help="relative tolerance of the planned extrusion per tool, default 0.01")
     ap.add_argument("--json", help="JSON report path (default FILE.replay.json; '-' prints it instead of the summary)")
@@ -2328,6 +2364,13 @@ def parse_args(argv: list[str]) -> tuple[str, Options, str | None]:
         n, val = _system_item(item, "--home")
         o.homes[n] = _floats(val, 2, "--home")  # type: ignore[assignment]
     o.shared_gantry = a.shared_gantry
+    o.dual_gantry = a.dual_gantry
+    for item in a.perturb:
+        n, val = _system_item(item, "--perturb")
+        scales = _floats(val, 2, "--perturb")
+        if not all(0.05 <= v <= 20 for v in scales):
+            raise UsageError("--perturb scales must lie in 0.05..20")
+        o.perturb[n] = tuple(scales)  # type: ignore[assignment]
     if a.extrusion_tol <= 0:
         raise UsageError("--extrusion-tol must be positive")
     o.extrusion_tol = a.extrusion_tol

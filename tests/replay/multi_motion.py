@@ -65,7 +65,21 @@ MAX_COLLISIONS = 200
 #: Envelopes may touch; they overlap when closer than the radii's sum minus this (mm).
 OVERLAP_TOL = 1e-9
 #: Commands whose effect is machine-wide configuration: applied to every stream.
-BROADCAST = {"M201", "M203", "M204", "M205", "M566", "M220", "M221", "M302"}
+BROADCAST = {"M220", "M221", "M302"}
+#: Per-axis limits (accelerations, speeds, jerk): machine-wide, but each value is
+#: the named axis's own, so a motion system gets the values of its own letters
+#: (U and V for a head driven by U and V), and none for a letter left out.
+AXIS_SETTINGS = {"M201", "M203", "M205", "M566"}
+#: Axis settings that a motion system runs at firmware defaults without.
+REQUIRED_AXIS_SETTINGS = ("M201", "M203", "M566")
+#: M204 (print and travel accelerations) is per motion system in RepRapFirmware
+#: 3.5: it applies to the system selected, and one before the fork to system 0.
+PER_SYSTEM = {"M204"}
+#: Filament pulled back at least this far (mm) counts as retracted at a barrier.
+PULLED_BACK_MIN = 0.2
+#: A loaded nozzle standing this long (s) at a barrier oozes nothing that shows: as
+#: long as it stands at a sharp corner of any print.
+LOADED_WAIT_MIN = 0.2
 #: Moves and other commands that carry axis letters (translated per stream).
 AXIS_COMMANDS = {"G0", "G1", "G2", "G3", "G28", "G30", "G92"}
 
@@ -254,6 +268,8 @@ def parse_header(text: str) -> tuple[dict[int, dict], bool | None, list[str]]:
             continue
         if "shared gantry" in body:
             gantry = True
+        elif "dual gantry" in body:
+            gantry = "dual"
     return systems, gantry, warnings
 
 
@@ -298,7 +314,19 @@ class MultiReplay:
             ("collisions", "the tool heads' envelopes never overlap"),
             ("separation", "the file's M597 axis separation holds in every block between synchronisation points"),
         ]
+        names += [
+            ("settings", "every moving motion system gets its own M204 and axis limits naming its own axes"),
+            ("end", "the job ends with every heater off"),
+            ("waits", "no motion system waits at a synchronisation point with its nozzle loaded (filament not "
+                      "pulled back)"),
+        ]
         self.checks = {k: SharedCheck(k, d, self.ctx) for k, d in names}
+        self.axis_settings_used: set[str] = set()
+        self.axis_settings: dict[int, set] = {}
+        self.per_system_set: dict[int, set] = {}
+        # Per barrier index: the streams that reached it with a loaded nozzle.
+        self.loaded_at: dict[int, list[int]] = {}
+        self.extruded_tools: dict[int, set] = {}
         self.tools: dict[int, gr.Tool] = {}
         self.heaters: dict[int, SharedHeater] = {}
         self.warnings: list[str] = []
@@ -395,9 +423,10 @@ class MultiReplay:
                 s.source["home"] = "option --home"
             if s.number > 0 and s.source["axes"] == "default":
                 self.warnings.append(f"no axis map for motion system {s.number}: assuming it drives X, Y and Z")
-        self.shared_gantry = bool(o.shared_gantry if o.shared_gantry is not None else gantry)
+        self.shared_gantry = bool(o.shared_gantry if o.shared_gantry is not None else gantry is True)
         self.shared_gantry_from = ("option --shared-gantry" if o.shared_gantry else
-                                   "header" if gantry else None)
+                                   "header" if gantry is True else None)
+        self.dual_gantry = bool(o.dual_gantry if o.dual_gantry is not None else gantry == "dual")
         self.sequential = None
         for m in _SEQ_RE.finditer(text):
             self.sequential = (float(m.group(1)), _line_of(text, m.start()))
@@ -524,6 +553,8 @@ class MultiReplay:
             if moved and b is not None:
                 self.moved.setdefault(L, {}).setdefault(s, line)
                 self.update_separation(L, b)
+        if moved and st.e > e0 + 1e-12 and st.active_tool() is not None:
+            self.extruded_tools.setdefault(s, set()).add(st.active_tool())
         if moved and st.e != e0:
             self.extruded.setdefault(s, line)
             if not self.e_mode_set[s] and s not in self.e_mode_reported:
@@ -580,6 +611,18 @@ class MultiReplay:
             for s in range(len(self.streams)):
                 self.run_on(s, cmd, raw)
             return
+        if cmd in AXIS_SETTINGS:
+            self.axis_settings_used.add(cmd)
+            for s in range(len(self.streams)):
+                own = {k: v for k, v in raw.items() if k not in AXIS_LETTERS}
+                for role, letter in self.systems[s].axes.items():
+                    if raw.get(letter) is not None:
+                        own[role] = raw[letter]
+                        self.axis_settings.setdefault(s, set()).add((cmd, letter))
+                self.run_on(s, cmd, own)
+            return
+        if cmd in PER_SYSTEM:
+            self.per_system_set.setdefault(self.cur, set()).add(cmd)
         target = self.cur
         if cmd in ("M82", "M83"):
             self.e_mode_set[target] = True
@@ -602,11 +645,13 @@ class MultiReplay:
         self.ctx.stream = None
         self.close_epoch()
         idx = len(self.barriers)
-        for st in self.streams:
+        for s, st in enumerate(self.streams):
             st.sync()
             st.in_run = False
             m = st.machine()
             st.events.append(("b", idx, m[0], m[1], self.line))
+            if self.forked and kind == "M598" and self.loaded(st):
+                self.loaded_at.setdefault(idx, []).append(s)
         everyone = range(len(self.streams))
         for h in self.heaters.values():
             h.release(everyone)
@@ -622,6 +667,17 @@ class MultiReplay:
             self.owner_reported.clear()
         self.barriers.append({"kind": kind, "line": self.line})
         self.open_separation_blocks()
+
+    def loaded(self, st) -> bool:
+        """Whether a stream's nozzle is hot with filament pushed to its tip: it has
+        extruded with its tool, and not pulled back since."""
+        tool = st.active_tool()
+        if tool is None or tool not in self.extruded_tools.get(st.system, set()):
+            return False
+        keys = st.tool_heaters(tool)
+        if not keys or self.heaters.get(keys[0]) is None or self.heaters[keys[0]].target <= 0:
+            return False
+        return st.retracted.get(keys[0], 0.0) < PULLED_BACK_MIN
 
     def close_epoch(self) -> None:
         """A shared axis (several systems drive it, e.g. one Z) must not move
@@ -843,10 +899,14 @@ def build_timeline(mm: MultiReplay) -> dict:
     # The same, of printing moves only.
     seg_print = [[0.0] * nb for _ in streams]
     for s, st in enumerate(streams):
-        vin, vout = gr.plan_speeds(st.moves, st.jd, st.jerk)
+        moves = st.moves
+        feed, accel = mm.o.perturb.get(s, (1.0, 1.0))
+        if (feed, accel) != (1.0, 1.0):
+            moves = [(m[0], m[1] * feed, m[2] * accel) + tuple(m[3:]) for m in moves]
+        vin, vout = gr.plan_speeds(moves, st.jd, st.jerk)
         phases = []
         kinds = {"print": 0.0, "travel": 0.0, "e_only": 0.0}
-        for i, m in enumerate(st.moves):
+        for i, m in enumerate(moves):
             ph = gr.trapezoid_phases(m[0], vin[i], vout[i], m[1], m[2])
             dur = ph[3] + ph[4] + ph[5]
             phases.append((ph, dur))
@@ -903,6 +963,8 @@ def build_timeline(mm: MultiReplay) -> dict:
         tr = Track()
         t = 0.0
         busy = wait = dwell = heating = 0.0
+        loaded_wait = 0.0
+        loaded_waits = []
         last_active = 0.0
         waits = []
         for i, ev in enumerate(st.events):
@@ -935,13 +997,17 @@ def build_timeline(mm: MultiReplay) -> dict:
                 tr.add(t, t + w, ev[2], ev[3], ev[2], ev[3], line=ev[4], kind=2)
                 wait += w
                 waits.append(w)
+                if w > LOADED_WAIT_MIN and s in mm.loaded_at.get(ev[1], ()):
+                    loaded_wait += w
+                    loaded_waits.append((w, ev[4]))
                 t = t + w
         if not tr.rows:
             tr.add(0.0, build, None, None, None, None, kind=2)
         tr.freeze()
         tracks.append(tr)
         per_stream.append({"busy_s": busy, "wait_s": wait, "dwell_s": dwell, "heating_wait_s": heating,
-                           "by_kind_s": kinds, "end_s": last_active, "waits": waits})
+                           "by_kind_s": kinds, "end_s": last_active, "waits": waits,
+                           "loaded_wait_s": loaded_wait, "loaded_waits": loaded_waits})
     return {"build_s": build, "release": release, "streams": per_stream, "tracks": tracks,
             "layers_busiest_s": busiest, "layers_busiest_print_s": busiest_print,
             "heating_wait_s": heat["total_s"] if heat else 0.0, "heating_waits": heat["listed"] if heat else []}
@@ -1010,9 +1076,9 @@ def _min_quadratic(c0, c1, k) -> tuple[float, float]:
     return min((c0 + c1 * sv + k * sv * sv, sv) for sv in cands)
 
 
-def _exact(A: Track, ka: int, B: Track, kb: int, ts: float, te: float, gantry: bool):
+def _exact(A: Track, ka: int, B: Track, kb: int, ts: float, te: float, gantry: int | None):
     """Closest approach of heads A (piece ka) and B (piece kb) over [ts, te]:
-    (distance or X gap, time, A's XY, B's XY). Exact: each phase pair is a
+    (distance, or the gap along axis ``gantry``, time, A's XY, B's XY). Exact: each phase pair is a
     quadratic in time per axis."""
     cuts = {ts, te}
     for tr, k in ((A, ka), (B, kb)):
@@ -1032,8 +1098,8 @@ def _exact(A: Track, ka: int, B: Track, kb: int, ts: float, te: float, gantry: b
         c0 = (xb - xa, yb - ya)
         c1 = ((vxb - vxa) * T, (vyb - vya) * T)
         k = (0.5 * (axb - axa) * T * T, 0.5 * (ayb - aya) * T * T)
-        if gantry:
-            d, sv = _min_quadratic(c0[0], c1[0], k[0])
+        if gantry is not None:
+            d, sv = _min_quadratic(c0[gantry], c1[gantry], k[gantry])
         else:
             d, sv = _min_quartic(c0, c1, k)
         if d < best[0]:
@@ -1044,12 +1110,71 @@ def _exact(A: Track, ka: int, B: Track, kb: int, ts: float, te: float, gantry: b
     return best
 
 
+def moving_systems(mm: MultiReplay) -> list[int]:
+    return [s for s, st in enumerate(mm.streams) if any(e[0] == "m" for e in st.events)]
+
+
+def check_settings(mm: MultiReplay) -> None:
+    """RepRapFirmware 3.5 keeps M204 per motion system, and axis limits per axis:
+    a system that moves without its own M204, or whose axis letters no M201, M203
+    or M566 names (when the file sets them at all), runs at the firmware's
+    defaults, not at what the file assumes."""
+    check = mm.checks["settings"]
+    moving = moving_systems(mm)
+    details = {"M204": sorted(mm.per_system_set), "axis_settings": sorted(mm.axis_settings_used)}
+    check.details.update(details)
+    if not moving:
+        check.skip("no motion system moves")
+        return
+    any_m204 = any("M204" in v for v in mm.per_system_set.values())
+    for s in moving:
+        if any_m204 and "M204" not in mm.per_system_set.get(s, set()):
+            check.fail(None, f"motion system {s} moves without an M204 of its own: it runs at the firmware's "
+                             "default accelerations (M204 is per motion system)")
+        for cmd in REQUIRED_AXIS_SETTINGS:
+            if cmd not in mm.axis_settings_used:
+                continue
+            for role in "XY":
+                letter = mm.systems[s].axes.get(role, role)
+                if (cmd, letter) not in mm.axis_settings.get(s, set()):
+                    check.fail(None, f"no {cmd} names axis {letter} (motion system {s}'s {role}): it runs at "
+                                     "the firmware's default")
+
+
+def check_end(mm: MultiReplay) -> None:
+    """Every heater the job heated is off when it ends."""
+    check = mm.checks["end"]
+    on = {str(k): h.target for k, h in mm.heaters.items() if h.target > 0.0}
+    check.details["heaters_on"] = dict(sorted(on.items()))
+    for k, t in sorted(on.items()):
+        what = "the bed" if k == gr.BED else f"heater {k}"
+        check.fail(None, f"{what} is left at {t:g} degC at the end of the job")
+
+
+def check_waits(mm: MultiReplay, tl: dict) -> None:
+    """A system that waits at an M598 with its nozzle loaded (hot, filament not
+    pulled back) oozes onto the part for as long as it waits. Which system waits
+    depends on the machine's pace: replay with ``--perturb`` to see a file's
+    barriers hold when one system runs slower than the file assumes."""
+    check = mm.checks["waits"]
+    loaded = sum(len(v) for v in mm.loaded_at.values())
+    waited = [p["loaded_wait_s"] for p in tl["streams"]]
+    check.details.update({"loaded_barriers": loaded, "loaded_wait_s": waited,
+                          "loaded_waits": sum(len(p["loaded_waits"]) for p in tl["streams"])})
+    for s, p in enumerate(tl["streams"]):
+        for w, line in p["loaded_waits"]:
+            check.fail(line, f"motion system {s} waits {w:.3f} s here with its nozzle loaded (filament not "
+                             "pulled back)")
+
+
 def check_collisions(mm: MultiReplay, tl: dict) -> dict:
     """Every pair of heads over the whole build: envelopes (discs) must not
     overlap, or with a shared gantry the higher-numbered head must stay at
     least the radii's sum to the right (+X) of the lower-numbered one."""
-    gantry = mm.shared_gantry
-    out = {"mode": "shared-gantry" if gantry else "discs", "count": 0, "pairs": [], "examples": [],
+    # The axis along which gantry-borne heads keep their order (0: X on one shared
+    # gantry, 1: Y on two gantries), or None for discs.
+    gantry = 0 if mm.shared_gantry else 1 if mm.dual_gantry else None
+    out = {"mode": {0: "shared-gantry", 1: "dual-gantry"}.get(gantry, "discs"), "count": 0, "pairs": [], "examples": [],
            "unchecked_s": 0.0, "closest_mm": None, "closest_at_s": None, "intervals": 0, "solved_exactly": 0}
     check = mm.checks["collisions"]
     systems = mm.systems
@@ -1086,8 +1211,10 @@ def check_collisions(mm: MultiReplay, tl: dict) -> dict:
             # Within an interval each head moves monotonically along a straight
             # line: it stays on the segment between its positions at the ends.
             # The segments' distance (or X gap) is a lower bound of the heads'.
-            if gantry:
+            if gantry == 0:
                 lower = np.minimum(bx0, bx1) - np.maximum(ax0, ax1)
+            elif gantry == 1:
+                lower = np.minimum(by0, by1) - np.maximum(ay0, ay1)
             else:
                 lower = _segment_distance(ax0, ay0, ax1, ay1, bx0, by0, bx1, by1)
             lower = np.where(unknown, np.inf, lower)
@@ -1123,7 +1250,7 @@ def check_collisions(mm: MultiReplay, tl: dict) -> dict:
                            "lines": {str(i): int(A.line[ia[k]]), str(j): int(B.line[ib[k]])}}
                     if len(out["examples"]) < MAX_COLLISIONS:
                         out["examples"].append(cur)
-                    what = "X gap" if gantry else "distance"
+                    what = {0: "X gap", 1: "Y gap"}.get(gantry, "distance")
                     check.fail(max(int(A.line[ia[k]]), int(B.line[ib[k]])),
                                f"heads {i} and {j} at t = {tt:.3f} s: {what} {d:.3f} mm < {need:g} mm "
                                f"(head {i} at ({pa[0]:.3f}, {pa[1]:.3f}), line {int(A.line[ia[k]])}; head {j} at "
@@ -1270,7 +1397,9 @@ def build_report_multi(mm: MultiReplay, o: gr.Options, name: str) -> dict:
         time["barrier_kinds"][b["kind"]] = time["barrier_kinds"].get(b["kind"], 0) + 1
     if mm.sequential and mm.sequential[0] > 0:
         time["ratio_to_sequential"] = build / mm.sequential[0]
-    if est is None:
+    if mm.o.perturb:
+        checks["time"].skip("--perturb times a machine slower than the file's estimate assumes")
+    elif est is None:
         checks["time"].skip("no '; estimated printing time: <seconds> s' line")
     else:
         rel = (est[0] - build) / build if build > 0 else (0.0 if est[0] == 0 else math.inf)
@@ -1316,6 +1445,11 @@ def build_report_multi(mm: MultiReplay, o: gr.Options, name: str) -> dict:
     checks["extrusion"].details.update({"part_mm3": extrusion["part_mm3"], "planned_mm3": extrusion["planned_mm3"],
                                         "rel_error": extrusion["rel_error"]})
 
+    mm.ctx.stream = None
+    check_settings(mm)
+    check_end(mm)
+    check_waits(mm, tl)
+
     collisions = check_collisions(mm, tl)
     checks["collisions"].details.update({"count": collisions["count"], "mode": collisions["mode"],
                                          "closest_mm": collisions["closest_mm"],
@@ -1338,6 +1472,7 @@ def build_report_multi(mm: MultiReplay, o: gr.Options, name: str) -> dict:
             "heating_wait_s": p["heating_wait_s"],
             "by_kind_s": p["by_kind_s"],
             "longest_wait_s": max(p["waits"], default=0.0),
+            "loaded_wait_s": p["loaded_wait_s"],
             "tools": sorted(_tool_key(k) for k in st.filament_by_tool),
             "tool_selections": len(st.tool_selects),
             "filament_mm": by_stream[str(s)]["filament_mm"],
@@ -1368,7 +1503,7 @@ def build_report_multi(mm: MultiReplay, o: gr.Options, name: str) -> dict:
         "mixing": mm.mixing,
         "lines": mm.line,
         "checks": {k: c.to_json() for k, c in checks.items()},
-        "motion_systems": {"systems": [s.to_json() for s in mm.systems], "shared_gantry": mm.shared_gantry,
+        "motion_systems": {"systems": [s.to_json() for s in mm.systems], "shared_gantry": mm.shared_gantry, "dual_gantry": mm.dual_gantry,
                            "shared_gantry_from": mm.shared_gantry_from, "forked": mm.forked,
                            "shared_axes": sorted(mm.shared_letters),
                            "separation_rules": mm.separation},
@@ -1396,7 +1531,8 @@ def build_report_multi(mm: MultiReplay, o: gr.Options, name: str) -> dict:
             "head_radius": o.head_radius, "envelopes": {str(k): v for k, v in o.envelopes.items()},
             "axis_maps": {str(k): v for k, v in o.axis_maps.items()},
             "homes": {str(k): list(v) for k, v in o.homes.items()},
-            "shared_gantry": o.shared_gantry, "extrusion_tol": o.extrusion_tol,
+            "shared_gantry": o.shared_gantry, "dual_gantry": o.dual_gantry, "extrusion_tol": o.extrusion_tol,
+            "perturb": {str(k): list(v) for k, v in o.perturb.items()},
         },
     }
     return report

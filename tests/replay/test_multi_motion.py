@@ -43,10 +43,14 @@ T0
 M116 P0
 M596 P1
 M83
+M204 P1000 T2000
 T1
 M116 P1
 M598
 """
+
+#: The end of a job: each system turns its own tool's heater off.
+END = "M596 P1\nM568 P1 S0 R0 A0\nM596 P0\nM568 P0 S0 R0 A0\n"
 
 
 def job(body: str, *, r0=5.0, r1=5.0, t0=210, t1=210, estimate=None, factor=1.0, extra_footer="",
@@ -57,7 +61,7 @@ def job(body: str, *, r0=5.0, r1=5.0, t0=210, t1=210, estimate=None, factor=1.0,
     text = (header if header is not None else HEADER.format(r0=r0, r1=r1, t0=t0, t1=t1)) + body
     if not text.endswith("\n"):
         text += "\n"
-    text += "M598\n" + extra_footer
+    text += "M598\n" + END + extra_footer
     return tg.with_estimate(text, estimate, factor, digits=4)
 
 
@@ -78,11 +82,15 @@ def clean_layers(layers=3, h=0.2) -> tuple[str, dict]:
             body.append(f";LAYER:{li}")
             body.append(";TYPE:PART")
             body.append(f"G0 {letterx}{x0:.3f} {lettery}20 F6000")
+            if li > 0:
+                body.append("G1 E1 F2400")
             pts = [(x0 + 40, 20), (x0 + 40, 60), (x0, 60), (x0, 20)]
             for (px, py) in pts:
                 e = 40 * e_per_mm
                 body.append(f"G1 {letterx}{px:.3f} {lettery}{py:.3f} E{e:.5f} F1800")
                 fil[f"T{sysno}"] += e
+            # Pulled back before the barrier, pushed out again at the next outline.
+            body.append("G1 E-1 F2400")
         body.append("M598")
     return "\n".join(body) + "\n", fil
 
@@ -168,7 +176,8 @@ class CleanConcurrent(unittest.TestCase):
         single = "\n".join(["; flavor: rrf", "G21", "G90", "M83", "M204 P1000 T2000", "G10 P0 S210 R150",
                             "T0", "M116", "G0 X300 Y300 Z0.2", "G4 P0", ";LAYER:0", ";TYPE:PART",
                             "G0 X220 Y20 F6000"]
-                           + [f"G1 X{x} Y{y} E2.00000 F1800" for x, y in ((260, 20), (260, 60), (220, 60), (220, 20))])
+                           + [f"G1 X{x} Y{y} E2.00000 F1800" for x, y in ((260, 20), (260, 60), (220, 60), (220, 20))]
+                           + ["G1 E-1 F2400"])
         ref = run(single + "\n")
         self.assertAlmostEqual(rep["streams"][1]["busy_s"], ref["time"]["replayed_s"], places=9)
 
@@ -669,6 +678,68 @@ class MeshChecks(unittest.TestCase):
             self.assertGreater(row["coverage"], 0.9999)
             self.assertLess(row["overlap"], 1e-4)
         self.assertEqual(status(rep, "collisions"), "pass", rep["collisions"]["examples"][:1])
+
+
+class MachineState(unittest.TestCase):
+    """Per-system settings, the end state and waits with a loaded nozzle."""
+
+    def test_m204_and_axis_limits_are_per_system(self):
+        body, _ = clean_layers(layers=1)
+        self.assertEqual(status(run(job(body)), "settings"), "pass")
+        # Without system 1's own M204 it runs at the firmware's accelerations.
+        header = HEADER.format(r0=5, r1=5, t0=210, t1=210).replace("M83\nM204 P1000 T2000\nT1", "M83\nT1")
+        rep = run(job(body, header=header))
+        self.assertEqual(status(rep, "settings"), "fail")
+        self.assertIn("motion system 1", messages(rep, "settings")[0])
+        # Axis limits naming X and Y only leave U and V at the defaults.
+        xy = HEADER.format(r0=5, r1=5, t0=210, t1=210).replace("G21\n", "G21\nM201 X3000 Y3000 Z200 E3000\n")
+        rep = run(job(body, header=xy))
+        self.assertEqual(status(rep, "settings"), "fail")
+        self.assertTrue(any("axis U" in m for m in messages(rep, "settings")))
+        uv = HEADER.format(r0=5, r1=5, t0=210, t1=210).replace(
+            "G21\n", "G21\nM201 X3000 Y3000 U3000 V3000 Z200 E3000\n")
+        self.assertEqual(status(run(job(body, header=uv)), "settings"), "pass")
+
+    def test_a_heater_left_on_fails_the_end(self):
+        body, _ = clean_layers(layers=1)
+        text = job(body).replace("M568 P1 S0 R0 A0\n", "")
+        rep = run(text)
+        self.assertEqual(status(rep, "end"), "fail")
+        self.assertIn("heater 1", messages(rep, "end")[0])
+
+    def test_m568_a2_heats_a_tool_without_selecting_it(self):
+        text = ("; flavor: rrf\nG21\nG90\nM83\nG10 P0 S210 R150\nM568 P0 A2\nM116\nT0\n"
+                ";LAYER:0\n;TYPE:PART\nG1 X10 Y10 Z0.2 F600\nG1 X20 Y10 E0.5 F1200\n")
+        self.assertEqual(run(text)["checks"]["heating"]["status"], "pass")
+        # Without A2 the tool heats only when selected, after the wait.
+        rep = run(text.replace("M568 P0 A2\n", ""))
+        self.assertEqual(rep["checks"]["heating"]["status"], "fail")
+
+    def test_a_barrier_reached_with_a_loaded_nozzle_fails(self):
+        body, _ = clean_layers(layers=2)
+        self.assertEqual(status(run(job(body)), "waits"), "pass")
+        rep = run(job(body.replace("G1 E-1 F2400\n", "")))
+        self.assertEqual(status(rep, "waits"), "fail")
+        self.assertGreater(rep["checks"]["waits"]["loaded_barriers"], 0)
+
+    def test_a_slower_system_shifts_the_release_times(self):
+        body, _ = clean_layers(layers=2)
+        base = run(job(body, estimate=False))
+        slow = run(job(body, estimate=False), perturb={1: (0.8, 1.0)})
+        self.assertGreater(slow["streams"][1]["busy_s"], base["streams"][1]["busy_s"] * 1.1)
+        self.assertAlmostEqual(slow["streams"][0]["busy_s"], base["streams"][0]["busy_s"], places=9)
+
+    def test_dual_gantry_checks_y_order(self):
+        # Head 1 moves in front of head 0, far away in X: discs pass, gantries do not.
+        body = "\n".join(["M596 P0", "G0 X20 Y100 F6000", "M596 P1", "G0 U250 V200 F6000", "M598",
+                          "M596 P1", "G0 U250 V50"]) + "\n"
+        self.assertEqual(run(job(body))["collisions"]["count"], 0)
+        header = HEADER.format(r0=5, r1=5, t0=210, t1=210).replace(
+            "; flavor: rrf\n", "; flavor: rrf\n; machine: dual gantry\n")
+        rep = run(job(body, header=header))
+        self.assertEqual(rep["collisions"]["mode"], "dual-gantry")
+        self.assertEqual(rep["collisions"]["count"], 1)
+        self.assertLess(rep["collisions"]["examples"][0]["distance_mm"], 10.0)
 
 
 class HeaderAndCli(unittest.TestCase):

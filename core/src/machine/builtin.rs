@@ -23,6 +23,11 @@ pub const PROFILES: &[BuiltinProfile] = &[
         text: include_str!("../../../profiles/marlin-toolchanger-2.toml"),
     },
     BuiltinProfile {
+        name: "rrf-dual-gantry-2",
+        path: "profiles/rrf-dual-gantry-2.toml",
+        text: include_str!("../../../profiles/rrf-dual-gantry-2.toml"),
+    },
+    BuiltinProfile {
         name: "rrf-idex-2",
         path: "profiles/rrf-idex-2.toml",
         text: include_str!("../../../profiles/rrf-idex-2.toml"),

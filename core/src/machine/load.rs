@@ -445,4 +445,41 @@ mod tests {
             assert!(e.to_string().contains(field), "{text}: {e}");
         }
     }
+
+    #[test]
+    fn kinematics_order_gantries_by_their_homes_and_keep_one_beam_to_one_system() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let m = named("rrf-dual-gantry-2", dir.path()).expect("valid");
+        assert_eq!(m.kinematics.class, super::super::HeadClass::DualGantry);
+        assert_eq!(m.kinematics.margin, 1.0);
+        assert_eq!(m.tools[0].envelope, Some(15.0));
+        let free = named("rrf-two-systems-2", dir.path()).expect("valid");
+        assert_eq!(free.kinematics.class, super::super::HeadClass::Free);
+        // A profile without the table: free heads, 1 mm.
+        let idex = named("rrf-idex-2", dir.path()).expect("valid");
+        assert_eq!(idex.kinematics, super::super::Kinematics::default());
+        for (text, field) in [
+            // Both gantries homing at the same Y have no order.
+            (
+                "base = \"rrf-dual-gantry-2\"\n[[tools]]\n[[tools]]\nhome = [300.0, 0.0]\n",
+                "kinematics.class",
+            ),
+            (
+                "base = \"rrf-two-systems-2\"\n[kinematics]\nclass = \"shared-beam\"\n",
+                "kinematics.class",
+            ),
+            (
+                "base = \"rrf-two-systems-2\"\n[kinematics]\nmargin = -1.0\n",
+                "kinematics.margin",
+            ),
+            (
+                "base = \"rrf-two-systems-2\"\n[kinematics]\nclass = \"robot\"\n",
+                "unknown variant `robot`, expected one of `free`, `dual-gantry`, `shared-beam`",
+            ),
+        ] {
+            std::fs::write(dir.path().join("kin.toml"), text).expect("write");
+            let e = named("kin.toml", dir.path()).expect_err(text);
+            assert!(e.to_string().contains(field), "{text}: {e}");
+        }
+    }
 }

@@ -71,6 +71,10 @@ pub struct Machine {
     /// what a wait for a temperature costs.
     #[serde(default)]
     pub heating: Heating,
+    /// How the heads may move around each other: what a planner running several at
+    /// once must respect.
+    #[serde(default)]
+    pub kinematics: Kinematics,
     /// What a tool change takes besides the moves the file writes for it (s): the
     /// firmware's own parking and pick-up.
     #[serde(default)]
@@ -83,6 +87,55 @@ pub struct Machine {
 
 fn one() -> usize {
     1
+}
+
+/// How the heads of a machine with several of them move around each other.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct Kinematics {
+    pub class: HeadClass,
+    /// What a plan keeps beyond the heads' envelopes (mm, per head): the firmware's
+    /// accelerations move each head off the plan's constant-speed timing between two
+    /// synchronisations, and this is the room that leaves. The planner keeps it around
+    /// every head, and the file's synchronisation points keep it too.
+    pub margin: f64,
+}
+
+impl Default for Kinematics {
+    fn default() -> Self {
+        Kinematics {
+            class: HeadClass::Free,
+            margin: 1.0,
+        }
+    }
+}
+
+/// The mechanics that carry the heads, and so which of their relative positions exist.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum HeadClass {
+    /// Heads that go anywhere around each other (robot arms, delta pairs, heads on
+    /// separate frames): each keeps the disc of its envelope clear of the others'.
+    #[default]
+    Free,
+    /// Each head on a gantry beam of its own, the beams on one pair of Y rails: the
+    /// heads keep their order in Y (the one homing nearer Y = 0 is in front) and each
+    /// beam is an obstacle across the whole bed, so they keep the envelopes' sum apart
+    /// in Y wherever they are in X.
+    DualGantry,
+    /// Two carriages on one beam (IDEX): ordered in X, one Y for both. Only one works
+    /// at a time unless both follow the same Y, which no plan of different materials
+    /// does: one motion system, heads taking turns.
+    SharedBeam,
+}
+
+impl HeadClass {
+    pub fn name(self) -> &'static str {
+        match self {
+            HeadClass::Free => "free",
+            HeadClass::DualGantry => "dual-gantry",
+            HeadClass::SharedBeam => "shared-beam",
+        }
+    }
 }
 
 /// How the firmware is asked to change material.

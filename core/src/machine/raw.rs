@@ -37,8 +37,16 @@ pub(crate) struct RawMachine {
     pub wipe_tower: Option<Switch<RawWipeTower>>,
     pub mixer: Option<RawMixer>,
     pub heating: Option<RawHeating>,
+    pub kinematics: Option<RawKinematics>,
     pub tool_change_time: Option<f64>,
     pub gcode: Option<RawTemplates>,
+}
+
+#[derive(Debug, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(crate) struct RawKinematics {
+    pub class: Option<super::HeadClass>,
+    pub margin: Option<f64>,
 }
 
 #[derive(Debug, Default, Deserialize)]

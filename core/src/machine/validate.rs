@@ -419,6 +419,7 @@ pub(super) fn validate(raw: RawMachine, c: &Check<'_>) -> Result<Machine> {
 
     let motion_systems = raw.motion_systems.unwrap_or(1);
     check_motion_systems(c, motion_systems, firmware, flavor, &tools)?;
+    let kinematics = kinematics(c, raw.kinematics, motion_systems, &tools)?;
     Ok(Machine {
         name,
         motion_systems,
@@ -443,8 +444,46 @@ pub(super) fn validate(raw: RawMachine, c: &Check<'_>) -> Result<Machine> {
         wipe_tower,
         mixer,
         heating,
+        kinematics,
         tool_change_time,
         gcode,
         origin: MachineOrigin::default(),
     })
+}
+
+/// The heads' kinematics class and margin. Two gantries need heads homing at
+/// different Y (their order); one beam cannot carry two motion systems (they would
+/// share its Y).
+fn kinematics(
+    c: &Check<'_>,
+    raw: Option<super::raw::RawKinematics>,
+    motion_systems: usize,
+    tools: &[ToolSlot],
+) -> Result<Kinematics> {
+    let raw = raw.unwrap_or_default();
+    let class = raw.class.unwrap_or_default();
+    let margin = c.within(raw.margin.unwrap_or(1.0), 0.0, 100.0, "kinematics.margin", "mm")?;
+    match class {
+        HeadClass::DualGantry if motion_systems == 2 => {
+            let ys: Vec<Option<f64>> = tools.iter().map(|t| t.home.map(|h| h[1])).collect();
+            match ys[..] {
+                [Some(a), Some(b)] if (a - b).abs() > 1e-9 => {}
+                _ => {
+                    return Err(c.err(
+                        "kinematics.class",
+                        "two gantries keep their heads in Y order: give each tool a `home` with its own Y \
+                         (the head homing nearer Y = 0 is the front one)",
+                    ));
+                }
+            }
+        }
+        HeadClass::SharedBeam if motion_systems > 1 => {
+            return Err(c.err(
+                "kinematics.class",
+                "two carriages on one beam share its Y axis, so they cannot be two motion systems",
+            ));
+        }
+        _ => {}
+    }
+    Ok(Kinematics { class, margin })
 }

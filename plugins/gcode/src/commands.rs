@@ -11,6 +11,25 @@ use crate::setup::Setup;
 use crate::text::num;
 use crate::writer::M165_AXES;
 
+/// The print and travel accelerations (`M204`). RepRapFirmware 3.5 keeps them per
+/// motion system: a job on two writes them again in each system's stream.
+pub fn accelerations(s: &Setup) -> String {
+    let l = &s.limits;
+    match s.dialect {
+        Dialect::Marlin => format!(
+            "M204 P{} R{} T{} ; print, retract and travel accelerations (mm/s²)",
+            num(l.print, 0),
+            num(l.retract, 0),
+            num(l.travel, 0)
+        ),
+        Dialect::RepRapFirmware => format!(
+            "M204 P{} T{} ; print and travel accelerations (mm/s²)",
+            num(l.print, 0),
+            num(l.travel, 0)
+        ),
+    }
+}
+
 /// Motion settings at the start of the file, so the firmware runs with the ones the
 /// time estimate assumes and a replay can read them.
 pub fn motion(s: &Setup) -> Vec<String> {
@@ -20,14 +39,27 @@ pub fn motion(s: &Setup) -> Vec<String> {
     } else {
         1.0
     };
+    // Axis settings are per axis: the heads of other motion systems (their own X and Y
+    // letters, U and V say) take the same as X and Y, or they would run at the
+    // firmware's defaults.
+    let others: Vec<(&str, &str)> = s
+        .systems
+        .iter()
+        .flatten()
+        .filter(|m| m.x != "X" || m.y != "Y")
+        .map(|m| (m.x.as_str(), m.y.as_str()))
+        .collect();
     let axes = |v: [f64; 4], scale: f64| {
-        format!(
-            "X{} Y{} Z{} E{}",
-            num(v[0] * scale, 2),
-            num(v[1] * scale, 2),
-            num(v[2] * scale, 2),
-            num(v[3] * scale, 2)
-        )
+        let mut t = format!("X{} Y{}", num(v[0] * scale, 2), num(v[1] * scale, 2));
+        for (x, y) in &others {
+            t.push_str(&format!(
+                " {x}{} {y}{}",
+                num(v[0] * scale, 2),
+                num(v[1] * scale, 2)
+            ));
+        }
+        t.push_str(&format!(" Z{} E{}", num(v[2] * scale, 2), num(v[3] * scale, 2)));
+        t
     };
     let mut out = Vec::new();
     if s.axis_limits {
@@ -45,19 +77,7 @@ pub fn motion(s: &Setup) -> Vec<String> {
             ));
         }
     }
-    match s.dialect {
-        Dialect::Marlin => out.push(format!(
-            "M204 P{} R{} T{} ; print, retract and travel accelerations (mm/s²)",
-            num(l.print, 0),
-            num(l.retract, 0),
-            num(l.travel, 0)
-        )),
-        Dialect::RepRapFirmware => out.push(format!(
-            "M204 P{} T{} ; print and travel accelerations (mm/s²)",
-            num(l.print, 0),
-            num(l.travel, 0)
-        )),
-    }
+    out.push(accelerations(s));
     match (s.dialect, l.corner) {
         (Dialect::Marlin, Corner::JunctionDeviation(j)) => {
             out.push(format!("M205 J{} ; junction deviation (mm)", num(j, 4)))

@@ -116,6 +116,10 @@ struct RrfTemperatures {
     standby: f64,
     /// Selected once: it waits at standby when deselected (a tool never used is off).
     used: bool,
+    /// The heater state `M568 A` forced while the tool is not selected: 0 off, 1
+    /// standby, 2 active (RepRapFirmware 3.3 and later). Selecting or deselecting the
+    /// tool sets it again as the firmware does.
+    forced: Option<u8>,
 }
 
 /// The firmware's state, fed line by line.
@@ -212,7 +216,7 @@ impl Firmware {
                 let seconds = get('S').unwrap_or(0.0) + get('P').unwrap_or(0.0) / 1000.0;
                 self.planner.dwell(seconds);
             }
-            "G10" if self.dialect == Dialect::RepRapFirmware => {
+            "G10" | "M568" if self.dialect == Dialect::RepRapFirmware => {
                 if let Some(p) = get('P').map(|p| p as usize)
                     && p < self.rrf.len()
                 {
@@ -221,6 +225,11 @@ impl Firmware {
                     }
                     if let Some(r) = get('R') {
                         self.rrf[p].standby = r;
+                    }
+                    if command == "M568"
+                        && let Some(a) = get('A')
+                    {
+                        self.rrf[p].forced = Some(a.clamp(0.0, 2.0) as u8);
                     }
                     self.rrf_heater_follows(p);
                 }
@@ -419,9 +428,11 @@ impl Firmware {
             }
             if let Some(t) = self.tool {
                 self.rrf[t].used = true;
+                self.rrf[t].forced = None;
                 self.rrf_heater_follows(t);
             }
             if let Some(p) = previous.filter(|p| Some(*p) != self.tool) {
+                self.rrf[p].forced = None;
                 self.rrf_heater_follows(p);
             }
         }
@@ -439,12 +450,13 @@ impl Firmware {
             return;
         }
         let r = self.rrf[t];
-        let target = if self.tool == Some(t) {
-            r.active
-        } else if r.used {
-            r.standby
-        } else {
-            0.0
+        let target = match r.forced {
+            Some(0) => 0.0,
+            Some(1) => r.standby,
+            Some(_) => r.active,
+            None if self.tool == Some(t) => r.active,
+            None if r.used => r.standby,
+            None => 0.0,
         };
         let now = self.planner.elapsed();
         self.heaters[t].set(target, now);
@@ -666,6 +678,26 @@ mod tests {
         assert!(!f.is_hot(1, 215.0));
         f.feed_text("M116 P1\nG1 X5 E0.5 F1200\n");
         assert!(f.cold_extrusion().is_none());
+    }
+
+    #[test]
+    fn m568_a_sets_a_tools_heater_without_selecting_it() {
+        let mut f = Firmware::new(
+            Dialect::RepRapFirmware,
+            Flavor::ToolChange,
+            2,
+            Limits::default(),
+            Thermal::typical(Dialect::RepRapFirmware),
+        );
+        f.feed_text("G10 P0 S210 R160\nG10 P1 S215 R150\nM568 P1 A2\n");
+        assert_eq!(f.target(1), 215.0, "active, not selected");
+        assert_eq!(f.target(0), 0.0, "never used: off");
+        f.feed_text("M568 P1 A1\n");
+        assert_eq!(f.target(1), 150.0, "standby");
+        f.feed_text("M568 P0 A2\nM116\nT0\n");
+        assert!(f.is_hot(0, 210.0), "heated before its selection");
+        f.feed_text("M568 P0 S0 R0 A0\n");
+        assert_eq!(f.target(0), 0.0, "off while selected");
     }
 
     #[test]

@@ -108,6 +108,9 @@ pub struct Setup {
     pub thermal: crate::firmware::Thermal,
     /// The motion systems when the machine runs two at once; `None`: one head at a time.
     pub systems: Option<Vec<System>>,
+    /// How the heads move around each other, and the margin plans keep beyond their
+    /// envelopes.
+    pub kinematics: lamina_core::machine::Kinematics,
     pub templates: Templates,
     /// Whether the parts are placed by the machine (else moved only off negative
     /// coordinates).
@@ -270,6 +273,7 @@ impl Setup {
                     })
                     .collect()
             }),
+            kinematics: m.kinematics,
             templates: m.gcode.clone(),
             placed: true,
         })
@@ -381,6 +385,7 @@ impl Setup {
             purge_into: crate::transition::PurgeInto::Part,
             thermal: crate::firmware::Thermal::typical(dialect),
             systems: None,
+            kinematics: Default::default(),
             templates: Templates::default(),
             placed: false,
         })

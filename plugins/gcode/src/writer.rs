@@ -189,8 +189,15 @@ impl Writer {
         header: &Header<'_>,
     ) -> Result<Writer> {
         let fw = Firmware::new(s.dialect, s.flavor, s.heads.len(), s.limits, s.thermal);
-        let multi = s.systems.clone().map(multi::Multi::new);
+        let multi = s
+            .systems
+            .clone()
+            .map(|systems| multi::Multi::new(systems, s.kinematics));
         let used_heads = s.used_heads(info);
+        let mut multi = multi;
+        if let Some(m) = multi.as_mut() {
+            m.used = used_heads.clone();
+        }
         let tower = layout.tower.map(|r| Tower::new(r, s.line_width()));
         let fed = vec![
             0.0;
@@ -506,6 +513,20 @@ impl Writer {
                     }
                 }
             }
+            // Heads on motion systems of their own heat all at once from the start,
+            // while the machine homes and the bed heats (`M568 A2`: a tool's heater
+            // active without selecting it, which only its own motion system may do).
+            if self.multi.is_some() {
+                for &h in used_heads {
+                    let head = self.s.heads[h].clone();
+                    self.line(crate::commands::rrf_tool_temperatures(
+                        head.index,
+                        head.first_layer_temperature,
+                        head.standby_temperature,
+                    ));
+                    self.line(format!("M568 P{} A2 ; T{} heats now", head.index, head.index));
+                }
+            }
             self.template("start", &start)?;
             let bed = self.s.first_layer_bed_temperature;
             if bed > 0.0 && !self.fw.bed_is_hot(bed) {
@@ -517,7 +538,8 @@ impl Writer {
             // Every head the parts use warms up together; each is waited for before it
             // moves its extruder. Without prime lines a head that does not print first
             // waits at its standby temperature until it is needed.
-            for &h in used_heads {
+            let single = self.multi.is_none();
+            for &h in used_heads.iter().filter(|_| single) {
                 let head = self.s.heads[h].clone();
                 let warm = if self.s.prime_line.is_some() || h == self.first_head {
                     head.first_layer_temperature

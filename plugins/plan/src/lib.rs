@@ -23,6 +23,7 @@ pub mod sim;
 
 use std::collections::BTreeMap;
 
+use lamina_core::machine::HeadClass;
 use lamina_core::stage::{AnyStage, Planner, StageConfig, StageInfo, StageKind};
 use lamina_core::{BBox2, Error, LayerPlan, Point2, Result, RunInfo, StageFactory, Toolpath};
 use serde::Deserialize;
@@ -81,6 +82,8 @@ lamina_core::stage_options! {
         priority: Priority = r#""x-speed""#,
         /// seconds ahead a collision is looked for: one in prospect within half of it pauses a tool now, where its pausing alone keeps the tools apart (when either would, the priority decides), until none is in prospect within the whole of it, and a paused tool goes on once its way is clear for half of it; tools meeting head-on then wait before the way narrows instead of one stepping aside, and a tool following another pauses seldom and for longer, cutting its bead (and making both heads stop at a synchronisation point) less often. 0 (up to `step`) checks only the next step, as the paper does
         look_ahead: f64 = "0.5",
+        /// room (mm) beyond the envelopes that looking ahead keeps between two tools: one following another hangs back this much more, pausing less often and for longer (on a machine with two motion systems, far fewer synchronisation points, each of which stops both nozzles with their filament pulled back); the envelopes themselves are kept either way
+        room: f64 = "0.0",
         /// deposit a layer one tool at a time when that is faster than the concurrent schedule (either way a warning says so); a layer whose tools stay blocked falls back to one tool at a time regardless
         keep_faster: bool = "false",
     }
@@ -134,6 +137,7 @@ impl Options {
         let _ = concurrent;
         within("step", self.step, 1e-4, 10.0, "s")?;
         within("look_ahead", self.look_ahead, 0.0, 60.0, "s")?;
+        within("room", self.room, 0.0, 1e3, "mm")?;
         for (name, t) in &self.tools {
             for (k, v) in [
                 ("speed", t.speed),
@@ -178,6 +182,7 @@ impl Options {
                     speed: t.and_then(|t| t.speed).unwrap_or(self.speed),
                     travel_speed: t.and_then(|t| t.travel_speed).unwrap_or(self.travel_speed),
                     envelope: t.and_then(|t| t.envelope).unwrap_or(self.envelope),
+                    rear: rear(info, index, &name),
                     name,
                 }
             })
@@ -203,12 +208,13 @@ impl Options {
         }
         // Heads that must keep out of each other: the machine's envelopes are the least
         // the plan may keep.
+        let margin = config.machine.map_or(1.0, |m| m.kinematics.margin);
         let machine = config
             .machine
             .and_then(|m| m.tools.iter().filter_map(|t| t.envelope).reduce(f64::max));
         if let Some(e) = machine {
             if !config.has("envelope") {
-                o.envelope = e + ENVELOPE_MARGIN;
+                o.envelope = e + margin;
             } else if o.envelope < e {
                 return Err(config.error(
                     "envelope",
@@ -229,6 +235,30 @@ impl Options {
             max: self.width() * self.width_range[1],
         }
     }
+}
+
+/// The machine's heads' kinematics class (free heads without a machine).
+fn head_class(info: &RunInfo) -> HeadClass {
+    info.machine
+        .as_ref()
+        .map_or(HeadClass::Free, |m| m.kinematics.class)
+}
+
+/// Whether tool `index` (material `name`) is on the rear gantry of a two-gantry
+/// machine: its head homes behind the other's.
+fn rear(info: &RunInfo, index: usize, name: &str) -> bool {
+    let Some(m) = info
+        .machine
+        .as_ref()
+        .filter(|m| m.kinematics.class == HeadClass::DualGantry)
+    else {
+        return false;
+    };
+    let home_y = |slot: usize| m.tools.get(slot).and_then(|t| t.home).map(|h| h[1]);
+    let front = (0..m.tools.len())
+        .filter_map(home_y)
+        .fold(f64::INFINITY, f64::min);
+    m.tool_of(name, index).and_then(home_y).is_some_and(|y| y > front)
 }
 
 /// The routes of every tool with work in the layer, and the layer's warnings.
@@ -286,12 +316,14 @@ fn prepare(o: &Options, info: &RunInfo, plan: &mut LayerPlan, step: f64) -> Resu
     let rmax = tools.iter().map(|t| t.envelope).fold(0.0, f64::max);
     let vmax = tools.iter().map(ToolSpec::max_speed).fold(0.0, f64::max);
     let parks = Parks::new(&work.bbox, tools.len(), 2.0 * rmax + 2.0 * vmax * step + 1.0);
+    // Gantries sweep the layer front to back in bands of an envelope.
+    let sweep = (head_class(info) == HeadClass::DualGantry).then_some(rmax);
     let routes = tools
         .iter()
         .zip(work.jobs)
-        .map(|(t, jobs)| route(t, jobs, &parks, o.seam))
+        .map(|(t, jobs)| route(t, jobs, &parks, o.seam, sweep))
         .collect();
-    let arena = if work.bbox.is_empty() {
+    let arena = if work.bbox.is_empty() || sweep.is_some() {
         work.bbox
     } else {
         BBox2 {
@@ -335,11 +367,6 @@ fn report_fill(o: &Options, plan: &mut LayerPlan) {
     });
 }
 
-/// What the plan keeps beyond the machine's head envelopes (mm, per head): the
-/// firmware's accelerations move heads off the plan's timing between two
-/// synchronisations, and this is the room that leaves.
-const ENVELOPE_MARGIN: f64 = 1.0;
-
 struct Sequential(Options);
 struct Concurrent(Options);
 
@@ -359,6 +386,20 @@ impl Planner for Concurrent {
         let o = &self.0;
         let layer = prepare(o, info, plan, o.step())?;
         let (seq_paths, seq_time) = sequential(&layer, o.tool_change);
+        let class = head_class(info);
+        if class == HeadClass::SharedBeam && layer.routes.iter().filter(|r| !r.is_empty()).count() > 1 {
+            // Two carriages on one beam share its Y: they cannot follow routes of their
+            // own at once.
+            plan.note(
+                StageKind::Plan,
+                "the heads share one beam (kinematics `shared-beam`): deposited one tool at a time",
+            );
+            plan.toolpaths.extend(seq_paths);
+            plan.build_time = Some(plan.build_time.unwrap_or(0.0) + seq_time);
+            plan.sequential_time = Some(plan.sequential_time.unwrap_or(0.0) + seq_time);
+            report_fill(o, plan);
+            return Ok(());
+        }
         let busy: Vec<(&ToolSpec, Vec<Move>)> = layer
             .tools
             .iter()
@@ -376,6 +417,12 @@ impl Planner for Concurrent {
             max_side_steps: MAX_SIDE_STEPS,
             priority: o.priority,
             look_ahead: o.look_ahead,
+            room: o.room,
+            separation: if class == HeadClass::DualGantry {
+                sim::Separation::OrderedY
+            } else {
+                sim::Separation::Discs
+            },
         };
         let (paths, t, pauses) = match sim::concurrent(&busy, &settings, &layer.arena) {
             // Tools that mostly wait for each other can end up slower than taking turns:

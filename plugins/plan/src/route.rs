@@ -34,6 +34,9 @@ pub struct ToolSpec {
     /// Envelope radius (mm): two tools collide when their centres come closer than the
     /// sum of their radii.
     pub envelope: f64,
+    /// The rear head of two gantries: it parks and enters behind the work (+Y), and
+    /// the other stays in front of it.
+    pub rear: bool,
 }
 
 impl ToolSpec {
@@ -187,16 +190,21 @@ pub struct Parks {
     pub spacing: f64,
     pub park_y: f64,
     pub entry_y: f64,
+    /// The row behind the layer where the rear head of two gantries enters, and its
+    /// park behind that.
+    pub rear_entry_y: f64,
+    pub rear_park_y: f64,
 }
 
 impl Parks {
     pub fn new(bbox: &BBox2, tools: usize, spacing: f64) -> Self {
-        let (min_x, max_x, min_y) = if bbox.is_empty() {
-            (0.0, 0.0, 0.0)
+        let (min_x, max_x, min_y, max_y) = if bbox.is_empty() {
+            (0.0, 0.0, 0.0, 0.0)
         } else {
-            (bbox.min.x, bbox.max.x, bbox.min.y)
+            (bbox.min.x, bbox.max.x, bbox.min.y, bbox.max.y)
         };
         let entry_y = min_y - 1.0;
+        let rear_entry_y = max_y + 1.0;
         let gaps = tools.saturating_sub(1) as f64;
         let (x0, step) = if gaps > 0.0 && (max_x - min_x) / gaps > spacing {
             (min_x, (max_x - min_x) / gaps)
@@ -208,6 +216,28 @@ impl Parks {
             spacing: step,
             park_y: entry_y - spacing,
             entry_y,
+            rear_entry_y,
+            rear_park_y: rear_entry_y + spacing,
+        }
+    }
+
+    /// Where `tool` parks: in the front row, or behind the layer for a gantry's rear head.
+    pub fn park_of(&self, tool: &ToolSpec) -> Point2 {
+        let p = self.park(tool.index);
+        if tool.rear {
+            Point2::new(p.x, self.rear_park_y)
+        } else {
+            p
+        }
+    }
+
+    /// Where `tool` enters the layer, in front of its park.
+    pub fn entry_of(&self, tool: &ToolSpec) -> Point2 {
+        let p = self.entry(tool.index);
+        if tool.rear {
+            Point2::new(p.x, self.rear_entry_y)
+        } else {
+            p
         }
     }
 
@@ -222,13 +252,18 @@ impl Parks {
 
 /// The route of one tool: out of its park, each loop in nearest-next order starting at
 /// its seam, and back. Empty when the tool has nothing to deposit.
-pub fn route(tool: &ToolSpec, jobs: Vec<Job>, parks: &Parks, seam: Seam) -> Vec<Move> {
+///
+/// With a `sweep` band (mm), the route works from front to back: the next loop is the
+/// nearest of those starting within the band behind the frontmost one left. Heads on
+/// two gantries keep their order in Y, so both sweep the same way, the rear head
+/// leading and the front one following, instead of meeting where neither can pass.
+pub fn route(tool: &ToolSpec, jobs: Vec<Job>, parks: &Parks, seam: Seam, sweep: Option<f64>) -> Vec<Move> {
     let mut moves = Vec::new();
     if jobs.is_empty() {
         return moves;
     }
-    let park = parks.park(tool.index);
-    let entry = parks.entry(tool.index);
+    let park = parks.park_of(tool);
+    let entry = parks.entry_of(tool);
     let mut at = entry;
     let mut travel = vec![park, entry];
     let mut left: Vec<Option<Job>> = jobs.into_iter().map(Some).collect();
@@ -237,10 +272,19 @@ pub fn route(tool: &ToolSpec, jobs: Vec<Job>, parks: &Parks, seam: Seam) -> Vec<
         // Nearest next loop: exact vertex distances, visited in order of the bounding
         // box lower bound and stopped once the bound exceeds the best found.
         order.clear();
+        let reach = sweep.map_or(f64::INFINITY, |band| {
+            left.iter()
+                .flatten()
+                .map(|j| j.bbox.min.y)
+                .fold(f64::INFINITY, f64::min)
+                + band
+        });
         order.extend(
             left.iter()
                 .enumerate()
-                .filter_map(|(i, j)| j.as_ref().map(|j| (box_distance(&j.bbox, at), i))),
+                .filter_map(|(i, j)| j.as_ref().map(|j| (i, j)))
+                .filter(|(_, j)| j.bbox.min.y <= reach)
+                .map(|(i, j)| (box_distance(&j.bbox, at), i)),
         );
         order.sort_by(|a, b| a.0.total_cmp(&b.0));
         let mut best: Option<(usize, usize, f64)> = None;

@@ -380,9 +380,97 @@ fn keep_apart_until(a: &[(f64, Point2)], b: &[(f64, Point2)], until: f64, e: f64
     closest_below(a, b, until, e) >= e
 }
 
-/// [`keep_apart_until`] over the whole step.
-fn keep_apart(a: &[(f64, Point2)], b: &[(f64, Point2)], e: f64) -> bool {
-    keep_apart_until(a, b, f64::INFINITY, e)
+/// How far apart two tools must keep, by the machine's kinematics.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Separation {
+    /// Discs: the nozzles keep the sum of their envelopes apart in the plane.
+    #[default]
+    Discs,
+    /// Heads on gantries of their own over one pair of Y rails: the rear head (see
+    /// [`ToolSpec::rear`]) stays the envelopes' sum behind (+Y) the front one, wherever
+    /// either is in X, and the two never pass.
+    OrderedY,
+}
+
+impl Separation {
+    /// Whether tools `a` and `b`, on tracks `ta` and `tb`, keep `e` apart over the
+    /// first `until` seconds.
+    fn apart_until(
+        self,
+        a: &ToolSpec,
+        b: &ToolSpec,
+        ta: &[(f64, Point2)],
+        tb: &[(f64, Point2)],
+        until: f64,
+        e: f64,
+    ) -> bool {
+        match self {
+            Separation::Discs => keep_apart_until(ta, tb, until, e),
+            Separation::OrderedY => {
+                behind_until(
+                    ta,
+                    tb,
+                    until,
+                    if a.rear == b.rear {
+                        0.0
+                    } else if a.rear {
+                        1.0
+                    } else {
+                        -1.0
+                    },
+                ) >= e
+            }
+        }
+    }
+
+    /// [`Separation::apart_until`] over the whole tracks.
+    fn apart(self, a: &ToolSpec, b: &ToolSpec, ta: &[(f64, Point2)], tb: &[(f64, Point2)], e: f64) -> bool {
+        self.apart_until(a, b, ta, tb, f64::INFINITY, e)
+    }
+
+    /// A lower bound of the separation of two motions, from their bounding boxes.
+    fn bound(self, a: &ToolSpec, b: &ToolSpec, ta: &[(f64, Point2)], tb: &[(f64, Point2)]) -> f64 {
+        match self {
+            Separation::Discs => gap(ta, tb),
+            Separation::OrderedY => {
+                let (front, rear) = if a.rear { (tb, ta) } else { (ta, tb) };
+                let max_front = front.iter().map(|q| q.1.y).fold(f64::NEG_INFINITY, f64::max);
+                let min_rear = rear.iter().map(|q| q.1.y).fold(f64::INFINITY, f64::min);
+                if a.rear == b.rear {
+                    f64::INFINITY
+                } else {
+                    min_rear - max_front
+                }
+            }
+        }
+    }
+}
+
+/// The least of `sign * (a.y - b.y)` over the first `until` seconds of the two motions
+/// (both piecewise straight at constant speed: the least is at a breakpoint). With
+/// `sign` 0 (two heads on the same side) there is nothing to keep.
+fn behind_until(a: &[(f64, Point2)], b: &[(f64, Point2)], until: f64, sign: f64) -> f64 {
+    if a.is_empty() || b.is_empty() || sign == 0.0 {
+        return f64::INFINITY;
+    }
+    let at = |tr: &[(f64, Point2)], t: f64| -> f64 {
+        let k = tr.partition_point(|q| q.0 <= t);
+        match (k.checked_sub(1).map(|i| tr[i]), tr.get(k)) {
+            (Some((t0, p0)), Some(&(t1, p1))) if t1 > t0 => p0.y + (p1.y - p0.y) * ((t - t0) / (t1 - t0)),
+            (Some((_, p0)), _) => p0.y,
+            (None, Some(&(_, p1))) => p1.y,
+            (None, None) => 0.0,
+        }
+    };
+    let end = until.min(a[a.len() - 1].0.max(b[b.len() - 1].0));
+    let start = a[0].0.min(b[0].0).min(end);
+    a.iter()
+        .chain(b)
+        .map(|q| q.0)
+        .filter(|&t| t > start && t < end)
+        .chain([start, end])
+        .map(|t| sign * (at(a, t) - at(b, t)))
+        .fold(f64::INFINITY, f64::min)
 }
 
 /// The closest approach of the two motions over the first `until` seconds, or, as
@@ -470,6 +558,14 @@ pub struct Settings {
     /// keeps the two apart, until none is in prospect within the whole of it; a paused
     /// tool goes on once its way is clear for half of it.
     pub look_ahead: f64,
+    /// How the tools keep apart.
+    pub separation: Separation,
+    /// Room (mm) beyond the envelopes that looking ahead keeps: a tool pauses before
+    /// coming closer than the envelopes and this, and goes on once its way is that
+    /// clear. The envelopes alone are never entered either way; the room makes a tool
+    /// following another hang back instead of tracking it at the envelopes' distance,
+    /// where every stretch it moves would need its own synchronisation point.
+    pub room: f64,
 }
 
 /// Runs the tools' routes together from time 0 with checks every `settings.step`
@@ -485,6 +581,8 @@ pub fn concurrent(
         max_side_steps,
         priority,
         look_ahead,
+        separation,
+        ..
     } = *settings;
     let anticipate = look_ahead > step * 1.5;
     let mut agents: Vec<Agent<'_>> = tools
@@ -565,7 +663,7 @@ pub fn concurrent(
             let (si, sj) = (still(a.pos), still(b.pos));
             let ti: &[(f64, Point2)] = if mi { &tracks[i] } else { &si };
             let tj: &[(f64, Point2)] = if mj { &tracks[j] } else { &sj };
-            keep_apart(ti, tj, a.spec.envelope + b.spec.envelope)
+            separation.apart(a.spec, b.spec, ti, tj, a.spec.envelope + b.spec.envelope)
         };
         // Hold the lower-priority tool of each predicted collision until none is left;
         // held tools stay where they are, which was clear one step ago.
@@ -614,10 +712,10 @@ pub fn concurrent(
                 }
                 let blocked = (0..n).any(|j| {
                     j != i && !agents[j].done && {
-                        let e = agents[i].spec.envelope + agents[j].spec.envelope;
+                        let e = agents[i].spec.envelope + agents[j].spec.envelope + settings.room;
                         let still = [(0.0, agents[j].pos), (half, agents[j].pos)];
                         let other: &[(f64, Point2)] = if moving[j] { &ahead[j] } else { &still };
-                        !keep_apart_until(&ahead[i], other, half, e)
+                        !separation.apart_until(agents[i].spec, agents[j].spec, &ahead[i], other, half, e)
                     }
                 });
                 let others_move = (0..n).any(|j| j != i && moving[j]);
@@ -643,7 +741,19 @@ pub fn concurrent(
             else {
                 break;
             };
-            let to = aside(&agents, k, &clear, arena);
+            let to = match separation {
+                Separation::Discs => aside(&agents, k, &clear, arena),
+                // On gantries the only way out of another's way is back toward the
+                // tool's own side of the bed.
+                Separation::OrderedY => {
+                    let reach = (0..n)
+                        .filter(|&j| j != k)
+                        .map(|j| clear(&agents[k], &agents[j]))
+                        .fold(0.0, f64::max);
+                    let dir = if agents[k].spec.rear { 1.0 } else { -1.0 };
+                    agents[k].pos + Vector2::new(0.0, dir * 2.0 * reach)
+                }
+            };
             agents[k].side_step(to);
             continue;
         }
@@ -754,7 +864,10 @@ fn anticipate_holds(
     settings: &Settings,
 ) {
     let Settings {
-        priority, look_ahead, ..
+        priority,
+        look_ahead,
+        separation,
+        ..
     } = *settings;
     let n = agents.len();
     let still = |p: Point2| [(0.0, p), (look_ahead, p)];
@@ -766,8 +879,8 @@ fn anticipate_holds(
                     continue;
                 }
                 let (a, b) = (&agents[i], &agents[j]);
-                let e = a.spec.envelope + b.spec.envelope;
-                if gap(&ahead[i], &ahead[j]) >= e {
+                let e = a.spec.envelope + b.spec.envelope + settings.room;
+                if separation.bound(a.spec, b.spec, &ahead[i], &ahead[j]) >= e {
                     continue;
                 }
                 let h = if waited[i] || waited[j] {
@@ -775,11 +888,14 @@ fn anticipate_holds(
                 } else {
                     look_ahead / 2.0
                 };
-                if keep_apart_until(&ahead[i], &ahead[j], h, e) {
+                let apart = |ta: &[(f64, Point2)], tb: &[(f64, Point2)]| {
+                    separation.apart_until(a.spec, b.spec, ta, tb, h, e)
+                };
+                if apart(&ahead[i], &ahead[j]) {
                     continue;
                 }
-                let hold_i = keep_apart_until(&still(a.pos), &ahead[j], h, e);
-                let hold_j = keep_apart_until(&ahead[i], &still(b.pos), h, e);
+                let hold_i = apart(&still(a.pos), &ahead[j]);
+                let hold_j = apart(&ahead[i], &still(b.pos));
                 let loser = match (hold_i, hold_j) {
                     (true, true) if priority != Priority::XSpeed && waited[i] != waited[j] => {
                         Some(if waited[i] { i } else { j })

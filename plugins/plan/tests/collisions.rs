@@ -574,6 +574,7 @@ fn tool(index: usize, speed: f64, envelope: f64) -> ToolSpec {
         speed,
         travel_speed: speed,
         envelope,
+        rear: false,
     }
 }
 
@@ -604,6 +605,8 @@ fn schedule(tools: &[(&ToolSpec, Vec<Move>)], priority: Priority, look_ahead: f6
         max_side_steps: 20,
         priority,
         look_ahead,
+        separation: sim::Separation::Discs,
+        room: 0.0,
     };
     let s = sim::concurrent(tools, &settings, &BBox2::EMPTY).expect("no deadlock");
     let lines = [timeline(&s.paths, 0), timeline(&s.paths, 1)];
@@ -973,4 +976,64 @@ fn priority_and_keep_faster_are_options_of_the_concurrent_planner() {
     ] {
         assert!(build(&format!("use = \"concurrent\"\n{bad}")).is_err(), "{bad}");
     }
+}
+
+/// Two gantries: the rear head never comes closer than the envelopes' sum behind the
+/// front one in Y, however far apart they are in X; the same routes as free heads
+/// pass without a pause.
+#[test]
+fn heads_on_two_gantries_keep_their_order_in_y() {
+    let front = tool(0, 30.0, 5.0);
+    let rear = ToolSpec {
+        rear: true,
+        ..tool(1, 10.0, 5.0)
+    };
+    // Both sweep from front to back, 60 mm apart in X: the faster front head catches
+    // up with the slower rear one.
+    let a = vec![bead(Point2::new(0.0, 0.0), Point2::new(0.0, 60.0), 30.0)];
+    // The rear head then goes back to its park behind the layer, out of the way.
+    let b = vec![
+        bead(Point2::new(60.0, 15.0), Point2::new(60.0, 45.0), 10.0),
+        Move::travel(vec![Point2::new(60.0, 45.0), Point2::new(60.0, 100.0)], 10.0),
+    ];
+    let mut laid = Vec::new();
+    for (separation, look_ahead) in [
+        (sim::Separation::OrderedY, 0.0),
+        (sim::Separation::OrderedY, 0.5),
+        (sim::Separation::Discs, 0.5),
+    ] {
+        let settings = Settings {
+            step: STEP,
+            budget: 100.0,
+            max_side_steps: 20,
+            priority: Priority::XSpeed,
+            look_ahead,
+            separation,
+            room: 0.0,
+        };
+        let s = sim::concurrent(
+            &[(&front, a.clone()), (&rear, b.clone())],
+            &settings,
+            &BBox2::EMPTY,
+        )
+        .expect("no deadlock");
+        let (ta, tb) = (timeline(&s.paths, 0), timeline(&s.paths, 1));
+        let end = s.end;
+        let steps = 20_000;
+        let least = (0..=steps)
+            .map(|k| end * k as f64 / steps as f64)
+            .map(|t| position(&tb, t).y - position(&ta, t).y)
+            .fold(f64::INFINITY, f64::min);
+        let paused = s.pauses.by_x_speed + s.pauses.forced + s.pauses.other;
+        laid.push(extruded(&s.paths));
+        if separation == sim::Separation::OrderedY {
+            assert!(least >= 10.0 - 1e-6, "look-ahead {look_ahead}: {least} mm in Y");
+            assert!(paused > 0, "the front head waits behind the rear one");
+        } else {
+            assert!(least < 0.0, "free heads pass each other in Y");
+            assert_eq!(paused, 0);
+        }
+    }
+    // Pauses cut beads, never shorten them: every schedule lays the same beads.
+    assert!(laid.iter().all(|v| (v - laid[0]).abs() < 1e-6), "{laid:?}");
 }

@@ -252,6 +252,7 @@ macro_rules! benchy {
 benchy! {
     benchy_two_tools_marlin_mixing_2in1: "marlin-mixing-2in1",
     benchy_two_tools_marlin_toolchanger_2: "marlin-toolchanger-2",
+    benchy_two_tools_rrf_dual_gantry_2: "rrf-dual-gantry-2",
     benchy_two_tools_rrf_idex_2: "rrf-idex-2",
     benchy_two_tools_rrf_two_systems_2: "rrf-two-systems-2",
 }
@@ -268,6 +269,7 @@ fn every_shipped_machine_profile_has_a_benchy_golden_test() {
     let tested = [
         "marlin-mixing-2in1",
         "marlin-toolchanger-2",
+        "rrf-dual-gantry-2",
         "rrf-idex-2",
         "rrf-two-systems-2",
     ];

@@ -19,12 +19,23 @@
 //! and releasing every barrier when the later system reaches it.
 
 use lamina_core::BBox2;
+use lamina_core::machine::{HeadClass, Kinematics};
 
 use super::*;
 use crate::setup::System;
 
 /// Seconds: plan times closer than this are one instant.
 const SAME_TIME: f64 = 1e-6;
+
+/// How much slower than the file's time model (a share of its time since the last
+/// barrier) the machine may run one motion system's moves before a stream the model
+/// has reaching a barrier last could reach it first.
+const SLOWER_THAN_PLANNED: f64 = 0.5;
+
+/// Seconds a nozzle may stand loaded at a barrier: as long as it stands at a sharp
+/// corner of any print, too short to ooze. A stream that may wait longer pulls its
+/// filament back first.
+const SHORT_WAIT: f64 = 0.2;
 
 /// Longest stretch (mm) a head moves between two instants the barrier placement
 /// looks at.
@@ -94,7 +105,11 @@ fn segment_gap(a0: Point2, a1: Point2, b0: Point2, b1: Point2) -> f64 {
 /// barriers, the heads cannot meet. `fixed` are barriers that must be there (the ends
 /// of the plan's waits); where the heads pass close, barriers come as often as the
 /// plan's own clearance needs.
-fn safe_times(first: Course<'_>, second: Course<'_>, fixed: &[f64], keep_out: f64, end: f64) -> Vec<f64> {
+fn safe_times(first: Course<'_>, second: Course<'_>, fixed: &[f64], keep: Keep, end: f64) -> Vec<f64> {
+    let Keep {
+        distance: keep_out,
+        front,
+    } = keep;
     let (a, beads_a, b, beads_b) = (first.track, first.beads, second.track, second.beads);
     if a.is_empty() || b.is_empty() {
         // One head at work: the other stays where it was, out of the layer's way.
@@ -141,9 +156,26 @@ fn safe_times(first: Course<'_>, second: Course<'_>, fixed: &[f64], keep_out: f6
         let prev = if i == 0 { 0.0 } else { events[i - 1] };
         let na = (at(a, prev), at(a, t));
         let nb = (at(b, prev), at(b, t));
-        let fits = sb.clear_of(na, keep_out)
-            && sa.clear_of(nb, keep_out)
-            && segment_gap(na.0, na.1, nb.0, nb.1) >= keep_out;
+        let fits = match front {
+            None => {
+                sb.clear_of(na, keep_out)
+                    && sa.clear_of(nb, keep_out)
+                    && segment_gap(na.0, na.1, nb.0, nb.1) >= keep_out
+            }
+            // Gantries: whatever either swept since the barrier, the front one's
+            // furthest back stays the keep-out in front of the rear one's furthest
+            // forward.
+            Some(f) => {
+                let (fs, rs, fseg, rseg) = if f == 0 {
+                    (&sa, &sb, na, nb)
+                } else {
+                    (&sb, &sa, nb, na)
+                };
+                let front_max = fs.bbox.max.y.max(fseg.0.y).max(fseg.1.y);
+                let rear_min = rs.bbox.min.y.min(rseg.0.y).min(rseg.1.y);
+                rear_min - front_max >= keep_out
+            }
+        };
         if !fits && i > start {
             // A barrier before this step: at the latest instant of the stretch where
             // neither head is in the middle of a bead, else just before the step.
@@ -240,6 +272,29 @@ impl Swept {
     }
 }
 
+/// How far apart two heads keep, by the machine's kinematics.
+#[derive(Debug, Clone, Copy)]
+struct Keep {
+    /// The envelopes' sum and the plan's margin around each (mm).
+    distance: f64,
+    /// On two gantries, the head in front (lower Y): the other stays `distance`
+    /// behind it in Y. `None`: free heads, discs apart in the plane.
+    front: Option<usize>,
+}
+
+impl Keep {
+    /// Whether head 0 sweeping `a` and head 1 sweeping `b`, at any pace, keep apart.
+    fn apart(&self, a: (Point2, Point2), b: (Point2, Point2)) -> bool {
+        match self.front {
+            None => segment_gap(a.0, a.1, b.0, b.1) >= self.distance,
+            Some(f) => {
+                let (fr, re) = if f == 0 { (a, b) } else { (b, a) };
+                re.0.y.min(re.1.y) - fr.0.y.max(fr.1.y) >= self.distance
+            }
+        }
+    }
+}
+
 /// A stream's state while another is selected.
 struct Saved {
     fw: Firmware,
@@ -263,12 +318,20 @@ pub(super) struct Multi {
     barriers: usize,
     /// Planned deposit per head (mm³).
     planned: Vec<f64>,
+    kinematics: Kinematics,
+    /// Barriers inside layers, where both nozzles wait pulled back.
+    retracted_barriers: usize,
+    /// The heads the parts use.
+    pub(super) used: Vec<usize>,
 }
 
 impl Multi {
-    pub(super) fn new(systems: Vec<System>) -> Self {
+    pub(super) fn new(systems: Vec<System>, kinematics: Kinematics) -> Self {
         let n = systems.len();
         Multi {
+            kinematics,
+            retracted_barriers: 0,
+            used: (0..n).collect(),
             systems,
             saved: (0..n).map(|_| None).collect(),
             current: 0,
@@ -279,6 +342,24 @@ impl Multi {
             barriers: 0,
             planned: vec![0.0; n],
         }
+    }
+
+    /// How far apart the heads keep whatever the firmware's accelerations do to their
+    /// timing between two barriers: the envelopes' sum and the margin, in the plane
+    /// or, on two gantries, in Y. The plan keeps the margin around each head, twice
+    /// this margin in all: the other half is the room a barrier stretch may use.
+    fn keep(&self) -> Keep {
+        let distance = self.systems.iter().map(|s| s.envelope).sum::<f64>() + self.kinematics.margin;
+        let front = (self.kinematics.class == HeadClass::DualGantry).then(|| {
+            let y = |i: usize| {
+                self.systems
+                    .get(i)
+                    .and_then(|s| s.home)
+                    .map_or(i as f64, |h| h[1])
+            };
+            usize::from(y(1) < y(0))
+        });
+        Keep { distance, front }
     }
 
     /// The header's description of the machine the file assumes.
@@ -301,10 +382,20 @@ impl Multi {
                 num(s.envelope, 3)
             );
         }
+        let keep = self.keep();
+        if let Some(f) = keep.front {
+            let _ = writeln!(
+                t,
+                "; machine: dual gantry (each head on a beam of its own over one pair of Y rails: head {f} in front, head {} behind it in Y)",
+                1 - f
+            );
+        }
         let _ = writeln!(
             t,
-            "; keep-out distance between the heads: {} mm (the envelopes' sum)",
-            num(self.systems.iter().map(|s| s.envelope).sum::<f64>(), 3)
+            "; keep-out distance between the heads: {} mm (the envelopes' sum and a margin of {} mm){}",
+            num(keep.distance, 3),
+            num(self.kinematics.margin, 3),
+            if keep.front.is_some() { ", in Y" } else { "" }
         );
         t
     }
@@ -492,6 +583,10 @@ impl Writer {
     /// Forks the job, selects and heats each head in its stream, and primes.
     fn fork(&mut self, plan: &LayerPlan) -> Result<()> {
         self.retract(self.s.retraction.length);
+        // Every head has heated since the start (`M568 A2`); the one reader there is
+        // so far waits for them all before any nozzle comes near the bed, and each
+        // system then selects a tool that is already hot.
+        self.line("M116 ; wait for every heater, before any nozzle nears the bed");
         // Down to the first layer before the fork: Z is shared, and a forked system
         // moving it would race the other's extrusion.
         self.z = plan.z;
@@ -522,6 +617,8 @@ impl Writer {
             } else {
                 "M82 ; absolute extrusion"
             });
+            // Accelerations are the motion system's own.
+            self.line(crate::commands::accelerations(&self.s));
             self.ready(h)?;
         }
         // Prime lines: the first head's along the front, the second's across the bed
@@ -614,10 +711,13 @@ impl Writer {
         // also go where the heads' paths come close ([`safe_times`]).
         times.retain(|&t| t > SAME_TIME && t < end - SAME_TIME);
         let tracks: Vec<Vec<(f64, Point2)>> = paths.iter().map(|l| track(l)).collect();
-        let keep_out = self
-            .multi
-            .as_ref()
-            .map_or(0.0, |m| m.systems.iter().map(|s| s.envelope).sum());
+        let keep = self.multi.as_ref().map_or(
+            Keep {
+                distance: 0.0,
+                front: None,
+            },
+            Multi::keep,
+        );
         if n == 2 {
             let (ba, bb) = (beads(&paths[0]), beads(&paths[1]));
             let course = |track, beads| Course { track, beads };
@@ -625,7 +725,7 @@ impl Writer {
                 course(&tracks[0], &ba),
                 course(&tracks[1], &bb),
                 &times,
-                keep_out,
+                keep,
                 end,
             );
         }
@@ -642,10 +742,19 @@ impl Writer {
             let starts: Vec<Option<Point2>> =
                 tracks.iter().map(|t| t.first().map(|q| q.1 + offset)).collect();
             let now = [self.stream_position(0), self.stream_position(1)];
+            // Head `p` moving first, then `q`: each sweep is clear of the other head
+            // where it stands.
             let clear = |p: usize, q: usize| {
                 let (p0, p1) = (now[p], starts[p].unwrap_or(now[p]));
                 let q1 = starts[q].unwrap_or(now[q]);
-                segment_gap(p0, p1, now[q], now[q]) >= keep_out && segment_gap(now[q], q1, p1, p1) >= keep_out
+                let pair = |mp: (Point2, Point2), mq: (Point2, Point2)| {
+                    if p == 0 {
+                        keep.apart(mp, mq)
+                    } else {
+                        keep.apart(mq, mp)
+                    }
+                };
+                pair((p0, p1), (now[q], now[q])) && pair((p1, p1), (now[q], q1))
             };
             let order = if clear(0, 1) || !clear(1, 0) {
                 [0, 1]
@@ -673,7 +782,14 @@ impl Writer {
         if self.layers == 1 {
             self.after_first_layer_multi();
         }
-        self.set_fan();
+        // Each head's part-cooling fan is its tool's, commanded in its own system.
+        for h in 0..n {
+            if self.stream_head(h).is_some() {
+                self.select_stream(h);
+                self.set_fan();
+            }
+        }
+        self.select_stream(0);
         self.barrier();
         if let Some(m) = self.multi.as_mut() {
             for st in m.saved.iter_mut().flatten() {
@@ -737,10 +853,63 @@ impl Writer {
                     }
                 }
             }
+            // Either system may get to the barrier first and wait there for the
+            // other: with its nozzle pulled back, never oozing onto the part.
+            self.retract_streams();
+            if let Some(m) = self.multi.as_mut() {
+                m.retracted_barriers += 1;
+            }
             self.barrier_at(Some(to));
             from = to;
         }
         Ok(())
+    }
+
+    /// The head stream `h` has selected.
+    fn stream_head(&self, h: usize) -> Option<usize> {
+        match self.multi.as_ref() {
+            Some(m) if m.current != h => m.saved[h].as_ref().and_then(|s| s.head),
+            _ => self.head,
+        }
+    }
+
+    /// When stream `h` gets to the next barrier, by the file's own time model.
+    fn stream_time(&mut self, h: usize) -> f64 {
+        match self.multi.as_mut() {
+            Some(m) if m.current != h => m.saved[h].as_mut().map_or(0.0, |s| s.fw.time()),
+            _ => self.fw.time(),
+        }
+    }
+
+    /// Before a barrier, every stream that may wait there longer than [`SHORT_WAIT`]
+    /// pulls its filament back, in its own system, so that no nozzle oozes on the
+    /// part while it waits. How long a stream may wait is counted with the other
+    /// running its moves since the last barrier [`SLOWER_THAN_PLANNED`] slower than
+    /// the file's time model (its feeds a fifth slower, or its accelerations halved,
+    /// stay within that): a stream that gets there last by a wide margin need not.
+    fn retract_streams(&mut self) {
+        let n = self.s.heads.len();
+        let length = self.s.retraction.length;
+        let current = self.multi.as_ref().map_or(0, |m| m.current);
+        let release = self.multi.as_ref().map_or(0.0, |m| m.release);
+        let arrival: Vec<f64> = (0..n).map(|h| self.stream_time(h)).collect();
+        // The longest stream `h` may wait here: until another running its moves since
+        // the last barrier that much slower than planned gets here too.
+        let longest_wait = |h: usize| {
+            (0..n)
+                .filter(|&o| o != h)
+                .map(|o| arrival[o] + SLOWER_THAN_PLANNED * (arrival[o] - release).max(0.0) - arrival[h])
+                .fold(0.0, f64::max)
+        };
+        // The selected stream first: no switch when it is the only one to retract.
+        let order = std::iter::once(current).chain((0..n).filter(|&h| h != current));
+        for h in order.collect::<Vec<_>>() {
+            let Some(head) = self.stream_head(h) else { continue };
+            if self.extruded[head] && self.retracted[head] < length - 1e-9 && longest_wait(h) > SHORT_WAIT {
+                self.select_stream(h);
+                self.retract(length);
+            }
+        }
     }
 
     /// After the first layer each head goes to its own printing temperature, in its
@@ -764,15 +933,93 @@ impl Writer {
         }
     }
 
-    /// Before the end: both systems finish, and system 0 ends the job.
+    /// Before the end: every system finishes its head. Each pulls its filament back;
+    /// system 0 lifts the shared Z clear of the part while the other waits; each head
+    /// then goes home, one at a time in an order that keeps them apart, and each
+    /// system turns its own tool's heater and fan off. System 0 then ends the job
+    /// (the end template).
     pub(super) fn end_streams(&mut self) {
-        if self.multi.as_ref().is_some_and(|m| m.forked) {
-            for h in (0..self.s.heads.len()).rev() {
-                self.select_stream(h);
-                self.retract(self.s.retraction.length);
+        if !self.multi.as_ref().is_some_and(|m| m.forked) {
+            return;
+        }
+        let n = self.s.heads.len();
+        self.retract_streams();
+        self.barrier();
+        self.select_stream(0);
+        self.feature = None;
+        let park =
+            (self.z_max + super::PARK_CLEARANCE).min(self.s.bed.map_or(f64::INFINITY, |b| b.max_height));
+        if self.fw.position()[2] < park - 1e-9 {
+            let f = self.z_feed();
+            self.line(format!("G1 Z{} F{} ; clear of the part", num(park, 3), num(f, 0)));
+            self.z = park;
+        }
+        self.barrier();
+        if let Some(m) = self.multi.as_mut() {
+            for st in m.saved.iter_mut().flatten() {
+                st.fw.assume_z(park);
             }
-            self.barrier();
-            self.select_stream(0);
+        }
+        let homes: Vec<Option<Point2>> = self
+            .multi
+            .as_ref()
+            .map(|m| {
+                m.systems
+                    .iter()
+                    .map(|s| s.home.map(|[x, y]| Point2::new(x, y)))
+                    .collect()
+            })
+            .unwrap_or_default();
+        if n == 2 {
+            let keep = self.multi.as_ref().map(Multi::keep);
+            let now = [self.stream_position(0), self.stream_position(1)];
+            let to = |h: usize| homes.get(h).copied().flatten().unwrap_or(now[h]);
+            let first_clear = |p: usize, q: usize| {
+                keep.is_none_or(|k| {
+                    let pair = |mp: (Point2, Point2), mq: (Point2, Point2)| {
+                        if p == 0 { k.apart(mp, mq) } else { k.apart(mq, mp) }
+                    };
+                    pair((now[p], to(p)), (now[q], now[q])) && pair((to(p), to(p)), (now[q], to(q)))
+                })
+            };
+            let order = if first_clear(0, 1) || !first_clear(1, 0) {
+                [0, 1]
+            } else {
+                [1, 0]
+            };
+            for h in order {
+                if let Some(home) = homes.get(h).copied().flatten() {
+                    self.select_stream(h);
+                    self.comment(format!("T{} home, clear of the part", self.s.heads[h].index));
+                    self.line(format!(
+                        "G0 X{} Y{} F{}",
+                        num(home.x, 3),
+                        num(home.y, 3),
+                        num(self.s.travel_speed * 60.0, 0)
+                    ));
+                    self.barrier();
+                }
+            }
+        }
+        for h in (0..n).rev() {
+            let Some(head) = self.stream_head(h) else { continue };
+            self.select_stream(h);
+            let index = self.s.heads[head].index;
+            if self.fw.fan() > 0.0 {
+                self.line("M107 ; this system's part-cooling fan off");
+            }
+            if self.fw.target(index) > 0.0 {
+                self.line(format!("M568 P{index} S0 R0 A0 ; T{index} heater off"));
+            }
+        }
+        self.barrier();
+        self.select_stream(0);
+        // The heaters are the machine's: system 0's model learns what the others did.
+        for h in 1..n {
+            if let Some(head) = self.stream_head(h) {
+                let index = self.s.heads[head].index;
+                self.fw.feed_line(&format!("M568 P{index} S0 R0 A0"));
+            }
         }
     }
 
@@ -843,11 +1090,47 @@ mod tests {
     /// Barriers for two heads without beads.
     fn barriers(a: &[(f64, Point2)], b: &[(f64, Point2)], fixed: &[f64]) -> Vec<f64> {
         let course = |track| Course { track, beads: &[] };
-        safe_times(course(a), course(b), fixed, 10.0, 10.0)
+        let keep = Keep {
+            distance: 10.0,
+            front: None,
+        };
+        safe_times(course(a), course(b), fixed, keep, 10.0)
     }
 
     fn line_track(from: (f64, f64), to: (f64, f64), t0: f64, t1: f64) -> Vec<(f64, Point2)> {
         vec![(t0, Point2::new(from.0, from.1)), (t1, Point2::new(to.0, to.1))]
+    }
+
+    #[test]
+    fn gantries_keep_their_order_in_y_whatever_their_x() {
+        let keep = Keep {
+            distance: 31.0,
+            front: Some(0),
+        };
+        let p = |x: f64, y: f64| Point2::new(x, y);
+        // Far apart in X, but head 1 comes within 31 mm behind head 0 in Y.
+        assert!(!keep.apart((p(0.0, 0.0), p(0.0, 10.0)), (p(200.0, 40.0), p(200.0, 60.0))));
+        assert!(keep.apart((p(0.0, 0.0), p(0.0, 10.0)), (p(200.0, 41.0), p(200.0, 60.0))));
+        // In front of it is never apart, however far.
+        assert!(!keep.apart((p(0.0, 100.0), p(0.0, 100.0)), (p(0.0, 0.0), p(0.0, 0.0))));
+        // Barriers: head 0 sweeps back while head 1 waits ahead of it, then head 1
+        // moves on; between barriers the swept spans keep the order.
+        let a = line_track((0.0, 0.0), (0.0, 100.0), 0.0, 10.0);
+        let b = line_track((50.0, 40.0), (50.0, 140.0), 0.0, 10.0);
+        let course = |track| Course { track, beads: &[] };
+        let times = safe_times(course(&a), course(&b), &[], keep, 10.0);
+        assert!(!times.is_empty(), "40 mm ahead, both moving: barriers");
+        let mut bounds = vec![0.0];
+        bounds.extend(&times);
+        bounds.push(10.0);
+        for w in bounds.windows(2) {
+            let front_max = position(&a, w[1]).expect("a").y;
+            let rear_min = position(&b, w[0]).expect("b").y;
+            assert!(
+                rear_min - front_max >= 31.0 - 1e-6,
+                "{w:?}: {front_max} {rear_min}"
+            );
+        }
     }
 
     #[test]
