@@ -68,7 +68,7 @@ lamina_core::stage_options! {
         travel_speed: f64 = "120.0",
         /// tool envelope radius (mm); tools park outside each other's envelopes; the machine's head envelope plus 1 mm when it gives one (and at least the envelope)
         envelope: f64 = "5.0",
-        /// seconds to change tools between two tools' turns (sequential)
+        /// seconds to change tools between two tools' turns (sequential); 0 by default on a machine whose heads are on motion systems of their own
         tool_change: f64 = "5.0",
         /// per-tool `speed`, `travel_speed`, `envelope`, keyed by material name (or `mixer`)
         tools: BTreeMap<String, ToolOptions> = "{}",
@@ -84,8 +84,8 @@ lamina_core::stage_options! {
         look_ahead: f64 = "0.5",
         /// room (mm) beyond the envelopes that looking ahead keeps between two tools: one following another hangs back this much more, pausing less often and for longer (on a machine with two motion systems, far fewer synchronisation points, each of which stops both nozzles with their filament pulled back); the envelopes themselves are kept either way
         room: f64 = "0.0",
-        /// deposit a layer one tool at a time when that is faster than the concurrent schedule (either way a warning says so); a layer whose tools stay blocked falls back to one tool at a time regardless
-        keep_faster: bool = "false",
+        /// deposit a layer one tool at a time when that is faster than the concurrent schedule, each synchronisation of the heads counted at what it costs the machine (a stop, and a retraction, on a machine with two motion systems); a note says which and why. `false` keeps the concurrent schedule (with a warning when it is slower). A layer whose tools stay blocked falls back to one tool at a time regardless
+        keep_faster: bool = "true",
     }
 }
 
@@ -208,6 +208,14 @@ impl Options {
         }
         // Heads that must keep out of each other: the machine's envelopes are the least
         // the plan may keep.
+        // Heads on motion systems of their own change no tool: one waits in its park
+        // while the other works.
+        if !config.has("tool_change")
+            && let Some(m) = config.machine
+            && m.motion_systems > 1
+        {
+            o.tool_change = 0.0;
+        }
         let margin = config.machine.map_or(1.0, |m| m.kinematics.margin);
         let machine = config
             .machine
@@ -235,6 +243,19 @@ impl Options {
             max: self.width() * self.width_range[1],
         }
     }
+}
+
+/// What one synchronisation of two heads costs a machine that runs them on motion
+/// systems of their own (s): each head stops from its deposition speed and starts
+/// again, and pulls its filament back and pushes it out while it may wait. Machines
+/// that take the tools in turn synchronise nothing.
+fn sync_cost(o: &Options, info: &RunInfo) -> f64 {
+    let Some(m) = info.machine.as_ref().filter(|m| m.motion_systems > 1) else {
+        return 0.0;
+    };
+    let stop = o.speed / m.motion.print_acceleration.max(1.0);
+    let retract = 2.0 * m.retraction.length / m.retraction.speed.max(1e-3);
+    stop + retract
 }
 
 /// The machine's heads' kinematics class (free heads without a machine).
@@ -424,6 +445,9 @@ impl Planner for Concurrent {
                 sim::Separation::Discs
             },
         };
+        let sync = sync_cost(o, info);
+        // Each pause ends where the waiting head goes on: a synchronisation.
+        let syncs = |p: &lamina_core::Pauses| (p.by_x_speed + p.forced + p.other) as f64;
         let (paths, t, pauses) = match sim::concurrent(&busy, &settings, &layer.arena) {
             // Tools that mostly wait for each other can end up slower than taking turns:
             // said, and the concurrent schedule kept unless asked for the faster one
@@ -432,18 +456,31 @@ impl Planner for Concurrent {
                 paths,
                 end: t,
                 pauses,
-            }) if t > seq_time => {
-                plan.warn(StageKind::Plan, format!(
-                    "the concurrent schedule ({t:.2} s) is slower than one tool at a time ({seq_time:.2} s); {}",
-                    if o.keep_faster {
-                        "this layer is deposited one tool at a time (`keep_faster`)"
-                    } else {
-                        "it is kept (`keep_faster = true` plans the faster)"
-                    }
-                ));
+            }) if t + syncs(&pauses) * sync > seq_time => {
+                let n = syncs(&pauses);
+                let costed = if sync > 0.0 && n > 0.0 {
+                    format!(
+                        ", {:.2} s with its {n} synchronisation{} at {sync:.3} s each",
+                        t + n * sync,
+                        if n == 1.0 { "" } else { "s" }
+                    )
+                } else {
+                    String::new()
+                };
+                let what = format!(
+                    "the concurrent schedule ({t:.2} s{costed}) is slower than one tool at a time ({seq_time:.2} s)"
+                );
                 if o.keep_faster {
+                    plan.note(
+                        StageKind::Plan,
+                        format!("{what}: this layer is deposited one tool at a time"),
+                    );
                     (seq_paths, seq_time, None)
                 } else {
+                    plan.warn(
+                        StageKind::Plan,
+                        format!("{what}; it is kept (`keep_faster = false`)"),
+                    );
                     (paths, t, Some(pauses))
                 }
             }
@@ -512,7 +549,7 @@ lamina_core::register_stage!(StageFactory {
     info: StageInfo {
         kind: StageKind::Plan,
         name: "concurrent",
-        doc: "Contour-parallel loops deposited by all tools at once; on a predicted collision dynamic priority pauses one tool (by default the paper's rule: the tool slower along X pauses, the faster goes on). The concurrent schedule is planned even when one tool at a time would be faster (with a warning) unless `keep_faster` is set.",
+        doc: "Contour-parallel loops deposited by all tools at once; on a predicted collision dynamic priority pauses one tool (by default the paper's rule: the tool slower along X pauses, the faster goes on). A layer goes one tool at a time where that is faster, synchronisations counted at what they cost the machine (`keep_faster = false` keeps every concurrent schedule).",
         options: Options::SPECS,
         example: "use = \"concurrent\"\nwidth = 0.5\nenvelope = 2.0\nstep = 0.02",
     },
