@@ -74,6 +74,10 @@ pub enum Priority {
     /// taking turns; else [`Priority::XSpeed`] without its feasibility exception at
     /// the one-step check. Often a little faster, but it breaks the paper's rule.
     Waiting,
+    /// The critical path: when pausing only one of the two clears the conflict, that
+    /// one pauses; else the tool with less of its route left pauses, since the layer
+    /// ends when the busiest tool is done (on a tie, [`Priority::XSpeed`]).
+    Busiest,
 }
 
 /// Why a tool starts a pause at a check (see [`Pauses`]).
@@ -682,8 +686,14 @@ pub fn concurrent(
                             let clears = (safe(i, j, false, true), safe(i, j, true, false));
                             let ruled = ruled_loser(priority, &agents, i, j, &along_x);
                             let loser = match (priority, clears) {
-                                (Priority::XSpeed | Priority::Clearing, (true, false)) => i,
-                                (Priority::XSpeed | Priority::Clearing, (false, true)) => j,
+                                (
+                                    Priority::XSpeed | Priority::Clearing | Priority::Busiest,
+                                    (true, false),
+                                ) => i,
+                                (
+                                    Priority::XSpeed | Priority::Clearing | Priority::Busiest,
+                                    (false, true),
+                                ) => j,
                                 _ => ruled,
                             };
                             (loser, Why::of(loser, i, j, clears, &along_x))
@@ -808,6 +818,16 @@ fn ruled_loser(priority: Priority, agents: &[Agent<'_>], i: usize, j: usize, alo
         Priority::XSpeed => by_speed,
         Priority::Returning | Priority::Clearing => by_return.unwrap_or(by_speed),
         Priority::Waiting => by_speed,
+        Priority::Busiest => {
+            let (ri, rj) = (agents[i].remaining(), agents[j].remaining());
+            if (ri - rj).abs() <= 1e-9 * ri.max(rj).max(1.0) {
+                by_speed
+            } else if ri < rj {
+                i
+            } else {
+                j
+            }
+        }
     }
 }
 
@@ -897,7 +917,10 @@ fn anticipate_holds(
                 let hold_i = apart(&still(a.pos), &ahead[j]);
                 let hold_j = apart(&ahead[i], &still(b.pos));
                 let loser = match (hold_i, hold_j) {
-                    (true, true) if priority != Priority::XSpeed && waited[i] != waited[j] => {
+                    (true, true)
+                        if !matches!(priority, Priority::XSpeed | Priority::Busiest)
+                            && waited[i] != waited[j] =>
+                    {
                         Some(if waited[i] { i } else { j })
                     }
                     (true, true) => Some(ruled_loser(priority, agents, i, j, along_x)),

@@ -1037,3 +1037,28 @@ fn heads_on_two_gantries_keep_their_order_in_y() {
     // Pauses cut beads, never shorten them: every schedule lays the same beads.
     assert!(laid.iter().all(|v| (v - laid[0]).abs() < 1e-6), "{laid:?}");
 }
+
+/// At the same crossing, `busiest` lets the tool with more of its route left go on:
+/// tool 0 (120 mm at 40 mm/s, 3 s) keeps going and tool 1 (60 mm at 20 mm/s, 3 s,
+/// less once both have started) gives way, the other way round from the paper's rule.
+#[test]
+fn by_busiest_the_tool_with_more_work_left_goes_on() {
+    let (up, across, r0, mut r1) = crossing();
+    // Tool 1's route made shorter: 40 mm, 2 s.
+    r1[0].points[1] = Point2::new(10.0, 0.0);
+    // Looking ahead, where either pause would clear the way, so that the rule decides.
+    let paths = simulate_ahead(
+        &[(&up, r0.clone()), (&across, r1.clone())],
+        Priority::Busiest,
+        0.5,
+    );
+    let h = holds(&paths);
+    assert!(!h.is_empty(), "nobody gave way");
+    assert!(h.iter().all(|h| h.tool == 1), "{h:?}");
+    // Tool 0 keeps its pace: 120 mm at 40 mm/s.
+    let line = timeline(&paths, 0);
+    assert!((line[line.len() - 1].0 - 3.0).abs() < 1e-9);
+    // The paper's rule pauses tool 0 instead.
+    let paths = simulate_ahead(&[(&up, r0), (&across, r1)], Priority::XSpeed, 0.5);
+    assert!(holds(&paths).iter().all(|h| h.tool == 0));
+}
