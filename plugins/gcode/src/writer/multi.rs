@@ -587,6 +587,21 @@ impl Writer {
         // so far waits for them all before any nozzle comes near the bed, and each
         // system then selects a tool that is already hot.
         self.line("M116 ; wait for every heater, before any nozzle nears the bed");
+        // On two gantries the firmware keeps the order too: it aborts the job before a
+        // block that would bring the rear gantry's Y closer than this to the front's.
+        if let Some(m) = self.multi.as_ref()
+            && let Keep {
+                distance,
+                front: Some(f),
+            } = m.keep()
+        {
+            let (front, rear) = (m.systems[f].y.clone(), m.systems[1 - f].y.clone());
+            self.line(format!(
+                "M597 {front}0 {rear}{} ; collision avoidance: {rear} stays {} mm behind {front}",
+                num(distance, 3),
+                num(distance, 3)
+            ));
+        }
         // Down to the first layer before the fork: Z is shared, and a forked system
         // moving it would race the other's extrusion.
         self.z = plan.z;
