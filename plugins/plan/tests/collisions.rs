@@ -1028,6 +1028,13 @@ fn heads_on_two_gantries_keep_their_order_in_y() {
         laid.push(extruded(&s.paths));
         if separation == sim::Separation::OrderedY {
             assert!(least >= 10.0 - 1e-6, "look-ahead {look_ahead}: {least} mm in Y");
+            // Looking ahead, the front head hangs back once for a while instead of
+            // pausing at every other check (7 pauses against 175).
+            if look_ahead > 0.0 {
+                assert!(paused < 20, "look-ahead {look_ahead}: {paused} pauses");
+            } else {
+                assert!(paused > 50, "{paused} pauses");
+            }
             assert!(paused > 0, "the front head waits behind the rear one");
         } else {
             assert!(least < 0.0, "free heads pass each other in Y");
