@@ -1086,6 +1086,62 @@ mod tests {
     }
 
     #[test]
+    fn the_least_gap_in_y_is_that_of_the_sampled_motions() {
+        let mut seed = 0x9e37_79b9_7f4a_7c15u64;
+        let mut next = move || {
+            seed ^= seed << 13;
+            seed ^= seed >> 7;
+            seed ^= seed << 17;
+            (seed >> 11) as f64 / (1u64 << 53) as f64
+        };
+        let y_at = |tr: &[(f64, Point2)], t: f64| -> f64 {
+            match tr.iter().position(|q| q.0 > t) {
+                Some(0) => tr[0].1.y,
+                None => tr[tr.len() - 1].1.y,
+                Some(k) => {
+                    let ((t0, p0), (t1, p1)) = (tr[k - 1], tr[k]);
+                    p0.y + (p1.y - p0.y) * ((t - t0) / (t1 - t0))
+                }
+            }
+        };
+        for _ in 0..300 {
+            // Breakpoints of the two at different times, so that each is read
+            // between two of its own at the other's.
+            let mut track = |n: usize| {
+                let mut t = 0.0;
+                (0..n)
+                    .map(|k| {
+                        if k > 0 {
+                            t += 0.05 + next() * 0.3;
+                        }
+                        (t, Point2::new(next() * 20.0, next() * 20.0))
+                    })
+                    .collect::<Vec<_>>()
+            };
+            let (a, b) = (track(2 + 5), track(3 + 4));
+            for (sign, until) in [
+                (1.0, f64::INFINITY),
+                (-1.0, f64::INFINITY),
+                (1.0, 0.4),
+                (-1.0, 0.7),
+            ] {
+                let exact = behind_until(&a, &b, until, sign);
+                let end = until.min(a[a.len() - 1].0.max(b[b.len() - 1].0));
+                let steps = 20_000;
+                let brute = (0..=steps)
+                    .map(|k| end * k as f64 / steps as f64)
+                    .map(|t| sign * (y_at(&a, t) - y_at(&b, t)))
+                    .fold(f64::INFINITY, f64::min);
+                assert!(exact <= brute + 1e-9, "{exact} > {brute}");
+                assert!(brute - exact <= 0.05, "{exact} against {brute}");
+            }
+        }
+        // Two heads on the same side keep nothing.
+        let a = [(0.0, Point2::new(0.0, 0.0)), (1.0, Point2::new(0.0, 1.0))];
+        assert_eq!(behind_until(&a, &a, 1.0, 0.0), f64::INFINITY);
+    }
+
+    #[test]
     fn closest_approach_is_found_between_the_checks() {
         // Two tools passing each other 1 mm apart: 10 mm apart at both ends of the
         // step, 1 mm at its middle.
