@@ -157,6 +157,7 @@ fn parse_model(path: &Path, part: &str, text: &str, limits: &Limits) -> Result<V
     let mut base_groups: HashMap<u32, Vec<String>> = HashMap::new();
     let mut current_group: Option<(u32, Vec<String>)> = None;
     let mut items: Vec<(u32, Transform)> = Vec::new();
+    let mut vertices = 0usize;
     loop {
         let pos = reader.buffer_position();
         let event = reader
@@ -238,6 +239,12 @@ fn parse_model(path: &Path, part: &str, text: &str, limits: &Limits) -> Result<V
                             .as_mut()
                             .ok_or_else(|| at("vertex outside an object".into()))?;
                         o.vertices.push(Point3::new(num("x")?, num("y")?, num("z")?));
+                        // More vertices than the allowed triangles could use are
+                        // refused as they come, before they take the memory.
+                        vertices += 1;
+                        if vertices % 65_536 == 0 {
+                            vertex_cap(path, vertices, limits)?;
+                        }
                     }
                     "triangle" => {
                         let (_, o) = current
@@ -301,6 +308,12 @@ fn parse_model(path: &Path, part: &str, text: &str, limits: &Limits) -> Result<V
         group_offset.insert(g, material_names.len() as u32);
         material_names.extend(base_groups[&g].iter().cloned());
     }
+    vertex_cap(path, vertices, limits)?;
+    // Each instance copies its object's vertices: only those its triangles use are
+    // kept, so that what the build expands to is bounded by its triangles.
+    for o in objects.values_mut() {
+        o.compact();
+    }
     let units: Transform = [scale, 0.0, 0.0, 0.0, scale, 0.0, 0.0, 0.0, scale, 0.0, 0.0, 0.0];
     let mut expanded = HashMap::new();
     let mut total = 0.0;
@@ -342,6 +355,46 @@ fn parse_model(path: &Path, part: &str, text: &str, limits: &Limits) -> Result<V
         meshes.push(mesh);
     }
     Ok(meshes)
+}
+
+/// Refuses more vertices than three per allowed triangle: no mesh within the
+/// triangle limit uses them, and each takes memory.
+fn vertex_cap(path: &Path, vertices: usize, limits: &Limits) -> Result<()> {
+    limits.check(
+        Limit::Triangles,
+        vertices as f64 / 3.0,
+        &format!("{} (its vertices, three to a triangle)", path.display()),
+    )
+}
+
+impl Object {
+    /// Drops the vertices no triangle of the object uses, renumbering the rest in
+    /// their order.
+    fn compact(&mut self) {
+        let mut used = vec![false; self.vertices.len()];
+        for t in &self.triangles {
+            for &v in t {
+                used[v as usize] = true;
+            }
+        }
+        if used.iter().all(|&u| u) {
+            return;
+        }
+        let mut new_index = vec![u32::MAX; self.vertices.len()];
+        let mut kept = Vec::new();
+        for (i, p) in self.vertices.iter().enumerate() {
+            if used[i] {
+                new_index[i] = kept.len() as u32;
+                kept.push(*p);
+            }
+        }
+        for t in &mut self.triangles {
+            for v in t.iter_mut() {
+                *v = new_index[*v as usize];
+            }
+        }
+        self.vertices = kept;
+    }
 }
 
 /// Object `id`, met `depth` components down; refused past [`MAX_DEPTH`] (a cycle).
@@ -577,6 +630,39 @@ mod tests {
         };
         assert_eq!(names(&again[0]), names(&meshes[0]));
         assert_eq!(names(&again[1]), names(&meshes[1]));
+    }
+
+    /// One object of many vertices and few triangles, instanced a thousand times:
+    /// only the vertices its triangles use are copied, so it reads small; more
+    /// vertices than the triangle limit could use are refused as they are read.
+    #[test]
+    fn instanced_vertices_are_bounded_by_the_triangles() {
+        let mut spare = String::new();
+        for i in 0..20_000 {
+            spare.push_str(&format!("<vertex x=\"{i}\" y=\"0\" z=\"0\"/>"));
+        }
+        let components: String = (0..1000)
+            .map(|i| format!("<component objectid=\"2\" transform=\"1 0 0 0 1 0 0 0 1 {i} 0 0\"/>"))
+            .collect();
+        let model = format!(
+            "<?xml version=\"1.0\"?><model unit=\"millimeter\" xmlns=\"http://schemas.microsoft.com/3dmanufacturing/core/2015/02\"><resources>\
+             <object id=\"2\" type=\"model\"><mesh><vertices>\
+             <vertex x=\"0\" y=\"0\" z=\"0\"/><vertex x=\"1\" y=\"0\" z=\"0\"/><vertex x=\"0\" y=\"1\" z=\"0\"/><vertex x=\"0\" y=\"0\" z=\"1\"/>{spare}\
+             </vertices><triangles><triangle v1=\"0\" v2=\"2\" v3=\"1\"/><triangle v1=\"0\" v2=\"1\" v3=\"3\"/>\
+             <triangle v1=\"0\" v2=\"3\" v3=\"2\"/><triangle v1=\"1\" v2=\"2\" v3=\"3\"/></triangles></mesh></object>\
+             <object id=\"3\" type=\"model\"><components>{components}</components></object>\
+             </resources><build><item objectid=\"3\"/></build></model>"
+        );
+        let meshes = read(Path::new("bomb.3mf"), &package(&model)).expect("reads");
+        assert_eq!(meshes[0].triangles.len(), 4000);
+        assert_eq!(meshes[0].vertices.len(), 4000, "four vertices per instance");
+        // With room for 1000 triangles, 20,004 vertices are more than they could use.
+        let limits = Limits {
+            triangles: 1000,
+            ..Limits::default()
+        };
+        let e = read_within(Path::new("bomb.3mf"), &package(&model), &limits).expect_err("too many vertices");
+        assert!(e.to_string().contains("vertices"), "{e}");
     }
 
     #[test]
