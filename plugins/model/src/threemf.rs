@@ -242,7 +242,7 @@ fn parse_model(path: &Path, part: &str, text: &str, limits: &Limits) -> Result<V
                         // More vertices than the allowed triangles could use are
                         // refused as they come, before they take the memory.
                         vertices += 1;
-                        if vertices % 65_536 == 0 {
+                        if vertices.is_multiple_of(65_536) {
                             vertex_cap(path, vertices, limits)?;
                         }
                     }
