@@ -75,12 +75,16 @@ impl SourceFile {
             .as_ref()
     }
 
-    /// Reads a file; the error names the path.
+    /// Reads a text file of at most [`MAX_TEXT_BYTES`] (see [`read_regular`]); the
+    /// error names the path.
     pub fn read(path: &Path) -> crate::Result<Arc<Self>> {
-        let text = std::fs::read_to_string(path).map_err(|e| crate::Error::Io {
+        let io = |e| crate::Error::Io {
             path: path.to_path_buf(),
             source: e,
-        })?;
+        };
+        let bytes = read_regular(path, MAX_TEXT_BYTES).map_err(io)?;
+        let text = String::from_utf8(bytes)
+            .map_err(|e| io(std::io::Error::new(std::io::ErrorKind::InvalidData, e)))?;
         Ok(Self::new(path, text))
     }
 
@@ -159,6 +163,54 @@ impl fmt::Display for Location {
         let (line, col) = self.line_col();
         write!(f, "{}:{}:{}", self.file.path.display(), line, col)
     }
+}
+
+/// Largest text file read (a pipeline, a machine profile or cell, a script): far above
+/// any real one, and what a mistaken or hostile path cannot make the process hold.
+pub const MAX_TEXT_BYTES: u64 = 16 << 20;
+
+/// Reads the regular file `path`, at most `cap` bytes. A device, a FIFO or a folder
+/// named where a file belongs is refused before it is opened (reading `/dev/zero`
+/// would fill the memory, a FIFO would never end), and a file larger than `cap`, or
+/// growing past it while read, is refused too.
+pub fn read_regular(path: &Path, cap: u64) -> std::io::Result<Vec<u8>> {
+    use std::io::{Error, ErrorKind, Read};
+    regular_file(path)?;
+    let file = std::fs::File::open(path)?;
+    let len = file.metadata()?.len();
+    let too_large = |n: u64| {
+        Error::new(
+            ErrorKind::InvalidData,
+            format!("{n} bytes or more, more than the {cap} read"),
+        )
+    };
+    if len > cap {
+        return Err(too_large(len));
+    }
+    let mut bytes = Vec::with_capacity(len as usize);
+    file.take(cap.saturating_add(1)).read_to_end(&mut bytes)?;
+    if bytes.len() as u64 > cap {
+        return Err(too_large(bytes.len() as u64));
+    }
+    Ok(bytes)
+}
+
+/// The size of the regular file `path` (links followed); anything else is an error
+/// saying what it is.
+pub fn regular_file(path: &Path) -> std::io::Result<u64> {
+    let meta = std::fs::metadata(path)?;
+    if meta.is_file() {
+        return Ok(meta.len());
+    }
+    let what = if meta.is_dir() {
+        "a folder"
+    } else {
+        "not a regular file (a device, a FIFO or a socket)"
+    };
+    Err(std::io::Error::new(
+        std::io::ErrorKind::InvalidInput,
+        format!("it is {what}"),
+    ))
 }
 
 #[cfg(test)]

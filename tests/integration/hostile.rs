@@ -541,6 +541,41 @@ fn files_that_expand_without_bound_are_refused_by_a_named_limit() {
     assert!(o.stderr.contains("limits.model_bytes"), "{}", o.stderr);
 }
 
+/// A device or a FIFO where a model, a machine profile or a plugin belongs is refused
+/// before it is read: `/dev/zero` would fill the memory, a FIFO would never end.
+#[test]
+fn devices_and_fifos_are_refused_before_they_are_read() {
+    let s = Scratch::new();
+    for (name, model) in [
+        ("zero.stl", "zero.stl"),
+        ("zero.3mf", "zero.3mf"),
+        ("zero.obj", "zero.obj"),
+    ] {
+        let link = s.path().join(name);
+        std::os::unix::fs::symlink("/dev/zero", &link).expect("symlink");
+        let p = s.write("p.toml", pipeline_for(model));
+        let o = s.run(&p, &[]);
+        refused(&s, name, &o, "not a regular file");
+        assert!(o.stderr.contains(name), "{name}: {}", o.stderr);
+    }
+    let fifo = s.path().join("pipe.stl");
+    let made = Command::new("mkfifo").arg(&fifo).status().expect("mkfifo runs");
+    assert!(made.success());
+    let p = s.write("p.toml", pipeline_for("pipe.stl"));
+    refused(&s, "a FIFO model", &s.run(&p, &[]), "not a regular file");
+    // A machine profile.
+    let fifo = s.path().join("machine.toml");
+    let made = Command::new("mkfifo").arg(&fifo).status().expect("mkfifo runs");
+    assert!(made.success());
+    let p = s.write(
+        "m.toml",
+        format!("machine = \"machine.toml\"\n{}", pipeline_for("tetra.3mf")),
+    );
+    let o = s.run(&p, &[]);
+    refused(&s, "a FIFO machine profile", &o, "not a regular file");
+    assert!(o.stderr.contains("machine.toml"), "{}", o.stderr);
+}
+
 #[test]
 fn inputs_large_in_count_are_handled_in_time() {
     // Thousands of material tables: each is read from the file's one parse.

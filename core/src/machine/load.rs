@@ -125,12 +125,16 @@ pub(super) fn config(location: Option<Location>, message: String) -> Error {
 fn load_named(reference: &str, dir: &Path, at: Option<Location>) -> Result<Layer> {
     let (file, dir, label) = if reference.ends_with(".toml") {
         let path = dir.join(reference);
-        let text = std::fs::read_to_string(&path).map_err(|e| {
-            config(
-                at.clone(),
-                format!("machine profile `{}` cannot be read: {e}", path.display()),
-            )
-        })?;
+        let text = crate::source::read_regular(&path, crate::source::MAX_TEXT_BYTES)
+            .and_then(|b| {
+                String::from_utf8(b).map_err(|e| std::io::Error::new(std::io::ErrorKind::InvalidData, e))
+            })
+            .map_err(|e| {
+                config(
+                    at.clone(),
+                    format!("machine profile `{}` cannot be read: {e}", path.display()),
+                )
+            })?;
         let label = path.display().to_string();
         let dir = path
             .parent()

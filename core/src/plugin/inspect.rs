@@ -16,9 +16,15 @@ pub fn inspect(path: &Path) -> Result<()> {
 }
 
 /// [`inspect`], giving the name of the entry symbol to look up.
+/// Largest plugin library read.
+const MAX_LIBRARY_BYTES: u64 = 1 << 30;
+
 pub(crate) fn entry_symbol(path: &Path) -> Result<String> {
     use object::{Object, ObjectSection, ObjectSegment};
-    let data = std::fs::read(path).map_err(|e| refuse(path, format!("cannot read: {e}")))?;
+    // A plugin library is a regular file; a device or FIFO in its place would be read
+    // without end. 1 GiB is far above any plugin.
+    let data = crate::source::read_regular(path, MAX_LIBRARY_BYTES)
+        .map_err(|e| refuse(path, format!("cannot read: {e}")))?;
     let file = object::File::parse(&*data).map_err(|e| {
         refuse(
             path,

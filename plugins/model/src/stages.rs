@@ -39,8 +39,10 @@ struct FileSource {
     limits: Limits,
 }
 
-fn read(path: &Path) -> Result<Vec<u8>> {
-    std::fs::read(path).map_err(|e| Error::io(path, e))
+/// The file, at most `cap` bytes: a device or a FIFO named as a model is refused
+/// before it is read.
+fn read(path: &Path, cap: u64) -> Result<Vec<u8>> {
+    lamina_core::source::read_regular(path, cap).map_err(|e| Error::io(path, e))
 }
 
 impl ModelSource for FileSource {
@@ -57,19 +59,23 @@ impl ModelSource for FileSource {
 impl FileSource {
     fn read(&self, path: &Path) -> Result<Vec<Mesh>> {
         let path = path.to_path_buf();
-        let bytes = std::fs::metadata(&path).map_err(|e| Error::io(&path, e))?.len();
+        let bytes = lamina_core::source::regular_file(&path).map_err(|e| Error::io(&path, e))?;
         self.limits
             .check(Limit::ModelBytes, bytes as f64, &path.display().to_string())?;
         let soups: Vec<(String, Soup)> = match self.format {
             Format::Stl => return crate::stl::read_welded(&path, self.weld),
             Format::ThreeMf => {
-                return Ok(crate::threemf::read_within(&path, &read(&path)?, &self.limits)?
-                    .iter()
-                    .map(|m| crate::weld::weld_mesh(m, self.weld))
-                    .collect());
+                return Ok(crate::threemf::read_within(
+                    &path,
+                    &read(&path, self.limits.model_bytes)?,
+                    &self.limits,
+                )?
+                .iter()
+                .map(|m| crate::weld::weld_mesh(m, self.weld))
+                .collect());
             }
             Format::Obj => {
-                let bytes = read(&path)?;
+                let bytes = read(&path, self.limits.model_bytes)?;
                 let text = String::from_utf8_lossy(&bytes);
                 crate::obj::parse(&path, &text)?
                     .into_iter()
@@ -96,15 +102,14 @@ fn build_file(config: &StageConfig<'_>, format: Format) -> Result<AnyStage> {
     }
     // What `run` will read, `check` finds readable: a missing or unreadable model is
     // said before anything runs.
+    // A device or a FIFO is refused before it is opened (opening a FIFO waits for a
+    // writer).
     let path = config.base_dir.join(&o.file);
-    if let Err(e) = std::fs::File::open(&path) {
+    if let Err(e) = lamina_core::source::regular_file(&path) {
         return Err(config.error("file", format!("cannot read `{}`: {e}", path.display())));
     }
-    if path.is_dir() {
-        return Err(config.error(
-            "file",
-            format!("`{}` is a folder, not a model file", path.display()),
-        ));
+    if let Err(e) = std::fs::File::open(&path) {
+        return Err(config.error("file", format!("cannot read `{}`: {e}", path.display())));
     }
     Ok(AnyStage::Model(Box::new(FileSource {
         file: o.file,

@@ -312,13 +312,18 @@ impl Cell {
             None => {
                 let path = base_dir.join(reference);
                 let names: Vec<&str> = BUILT_IN.iter().map(|(n, _)| *n).collect();
-                let text = std::fs::read_to_string(&path).map_err(|e| {
-                    format!(
-                        "`{reference}` is no built-in cell ({}) and {} cannot be read: {e}",
-                        names.join(", "),
-                        path.display()
-                    )
-                })?;
+                let text = lamina_core::source::read_regular(&path, lamina_core::source::MAX_TEXT_BYTES)
+                    .and_then(|b| {
+                        String::from_utf8(b)
+                            .map_err(|e| std::io::Error::new(std::io::ErrorKind::InvalidData, e))
+                    })
+                    .map_err(|e| {
+                        format!(
+                            "`{reference}` is no built-in cell ({}) and {} cannot be read: {e}",
+                            names.join(", "),
+                            path.display()
+                        )
+                    })?;
                 (path.display().to_string(), text)
             }
         };
