@@ -1065,6 +1065,14 @@ fn by_busiest_the_tool_with_more_work_left_goes_on() {
     // Tool 0 keeps its pace: 120 mm at 40 mm/s.
     let line = timeline(&paths, 0);
     assert!((line[line.len() - 1].0 - 3.0).abs() < 1e-9);
+    // Listed the other way round, the same tool gives way.
+    let paths = simulate_ahead(
+        &[(&across, r1.clone()), (&up, r0.clone())],
+        Priority::Busiest,
+        0.5,
+    );
+    let h = holds(&paths);
+    assert!(!h.is_empty() && h.iter().all(|h| h.tool == 1), "{h:?}");
     // The paper's rule pauses tool 0 instead.
     let paths = simulate_ahead(&[(&up, r0), (&across, r1)], Priority::XSpeed, 0.5);
     assert!(holds(&paths).iter().all(|h| h.tool == 0));
