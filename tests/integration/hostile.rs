@@ -789,7 +789,23 @@ fn script_paths_stay_in_the_pipeline_folder_and_errors_quote_only_scripts() {
 /// A run long enough to be interrupted: a tube sliced into a thousand layers.
 fn long_run(s: &Scratch) -> Child {
     std::fs::copy(pipelines().join("gradient.rhai"), s.path().join("gradient.rhai")).expect("copy");
-    Command::new(env!("CARGO_BIN_EXE_lamina"))
+    let mut command = Command::new(env!("CARGO_BIN_EXE_lamina"));
+    // The run takes SIGINT as a terminal delivers it, whatever this test inherited: a
+    // test started in the background by a shell without job control ignores SIGINT,
+    // and its children would too.
+    #[cfg(unix)]
+    {
+        use std::os::unix::process::CommandExt;
+        // SAFETY: between fork and exec the child only resets a signal's disposition,
+        // which is async-signal-safe.
+        unsafe {
+            command.pre_exec(|| {
+                libc::signal(libc::SIGINT, libc::SIG_DFL);
+                Ok(())
+            });
+        }
+    }
+    command
         .current_dir(s.path())
         .args(["run"])
         .arg(pipelines().join("tube-gradient.toml"))
