@@ -4,7 +4,7 @@
 //! `LAMINA_PLUGIN_HOST` names another `lamina` binary to load them with (continuous
 //! integration uses the release build).
 
-use crate::support::{root, write};
+use crate::support::{cargo, profile_dir, root, target_dir, write};
 use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::sync::OnceLock;
@@ -13,20 +13,14 @@ use std::sync::OnceLock;
 fn libraries() -> &'static Path {
     static DIR: OnceLock<PathBuf> = OnceLock::new();
     DIR.get_or_init(|| {
-        let target = std::env::var_os("CARGO_TARGET_DIR")
-            .map(PathBuf::from)
-            .unwrap_or_else(|| root().join("target"));
-        let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
-        let status = Command::new(cargo)
-            .current_dir(root())
-            // The whole workspace's libraries: the same feature set as `cargo test
-            // --workspace` built, so nothing but the plugins is compiled again.
-            .args(["build", "--quiet", "--workspace", "--lib", "--target-dir"])
-            .arg(&target)
+        // The whole workspace's libraries, with the targets `cargo test --workspace`
+        // built: the same features resolve (dev-dependencies included), so after it
+        // nothing is compiled again.
+        let status = cargo(root(), &["build", "--quiet", "--workspace", "--lib", "--tests"])
             .status()
             .expect("cargo runs");
         assert!(status.success(), "building the plugin libraries failed");
-        target.join("debug")
+        target_dir().join(profile_dir())
     })
 }
 
@@ -355,27 +349,23 @@ fn an_endless_script_in_a_dynamic_plugin_is_stopped_within_a_second() {
     }
 }
 
-/// Builds the plugin crate outside the workspace, with its own lock file.
+/// Builds the plugin crate outside the workspace, with its own lock file, into the
+/// workspace's target folder and profile: what both resolve alike is compiled once.
 fn outside_library() -> PathBuf {
-    let target = std::env::var_os("CARGO_TARGET_DIR")
-        .map(PathBuf::from)
-        .unwrap_or_else(|| root().join("target"))
-        .join("outside");
-    let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
-    let status = Command::new(cargo)
-        .current_dir(root())
-        .args([
+    let status = cargo(
+        root(),
+        &[
             "build",
             "--quiet",
+            "--locked",
             "--manifest-path",
             "tests/outside/skewed-plugin/Cargo.toml",
-            "--target-dir",
-        ])
-        .arg(&target)
-        .status()
-        .expect("cargo runs");
+        ],
+    )
+    .status()
+    .expect("cargo runs");
     assert!(status.success(), "building the outside plugin failed");
-    target.join("debug").join(format!(
+    target_dir().join(profile_dir()).join(format!(
         "{}lamina_fixture_skewed{}",
         std::env::consts::DLL_PREFIX,
         std::env::consts::DLL_SUFFIX

@@ -3,28 +3,19 @@
 //! and runs the pipeline the crate comes with. Every kind with a template is built and
 //! tested; the grader's output is checked against what its template computes.
 
-use crate::support::{lamina_in, root};
+use crate::support::{self, lamina_in, profile_dir, root, target_dir};
 use std::path::{Path, PathBuf};
-use std::process::Command;
 
-/// Where the scaffolded crates build: one folder for all, so their dependencies are
-/// compiled once.
-fn target_dir() -> PathBuf {
-    std::env::var_os("CARGO_TARGET_DIR")
-        .map(PathBuf::from)
-        .unwrap_or_else(|| root().join("target"))
-        .join("outside")
-}
-
+/// Runs cargo in a scaffolded crate, in the workspace's target folder and profile, with
+/// the workspace's lock file: the crate resolves the releases Lamina is built and
+/// tested with (not whatever the registry holds today), and what it shares with the
+/// workspace is compiled once.
 fn cargo(dir: &Path, args: &[&str]) {
-    let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
-    let out = Command::new(cargo)
-        .current_dir(dir)
-        .args(args)
-        .arg("--target-dir")
-        .arg(target_dir())
-        .output()
-        .expect("cargo runs");
+    let lock = dir.join("Cargo.lock");
+    if !lock.exists() {
+        std::fs::copy(root().join("Cargo.lock"), &lock).expect("the workspace's lock file");
+    }
+    let out = support::cargo(dir, args).output().expect("cargo runs");
     assert!(
         out.status.success(),
         "cargo {args:?} in {}:\n{}\n{}",
@@ -35,7 +26,7 @@ fn cargo(dir: &Path, args: &[&str]) {
 }
 
 fn library(name: &str) -> PathBuf {
-    target_dir().join("debug").join(format!(
+    target_dir().join(profile_dir()).join(format!(
         "{}{}{}",
         std::env::consts::DLL_PREFIX,
         name.replace('-', "_"),

@@ -15,6 +15,47 @@ pub fn pipelines() -> PathBuf {
     root().join("pipelines")
 }
 
+/// `cargo <args>` in `dir`, for the builds the tests start themselves (plugin
+/// libraries, scaffolded crates): into the workspace's target folder, in the profile
+/// the tests were built with (`cargo test` builds in `test`, `cargo test --release` in
+/// `release`), so the workspace's own artifacts are found fresh instead of the tree
+/// being compiled again. `RUSTC_BOOTSTRAP` is not passed on: a runner may set it for
+/// libtest's per-test times (.ci/timed), and cargo rebuilds everything when it changes.
+pub fn cargo(dir: &Path, args: &[&str]) -> Command {
+    let mut command = Command::new(std::env::var("CARGO").unwrap_or_else(|_| "cargo".into()));
+    command
+        .current_dir(dir)
+        .env_remove("RUSTC_BOOTSTRAP")
+        .args(args)
+        .arg("--target-dir")
+        .arg(target_dir())
+        .args([
+            "--profile",
+            if profile_dir() == "debug" {
+                "test"
+            } else {
+                profile_dir()
+            },
+        ]);
+    command
+}
+
+/// The folder under the target folder that holds the artifacts of the tests' profile.
+pub fn profile_dir() -> &'static str {
+    Path::new(env!("CARGO_BIN_EXE_lamina"))
+        .parent()
+        .and_then(Path::file_name)
+        .and_then(|d| d.to_str())
+        .unwrap_or("debug")
+}
+
+/// The folder every build the tests start shares with the workspace's.
+pub fn target_dir() -> PathBuf {
+    std::env::var_os("CARGO_TARGET_DIR")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| root().join("target"))
+}
+
 /// Runs the `lamina` binary with `args` in the current folder.
 pub fn lamina(args: &[&str]) -> Output {
     lamina_in(Path::new("."), args)
