@@ -51,6 +51,11 @@ SLICE_MODELS = [
 ]
 
 
+# `--allow` for the models folder: pipelines read files outside their own folder only
+# when the command line allows it (set in main).
+ALLOW = []
+
+
 def peer_slice(modules):
     """The start of a slicing peer's script: imports numpy, trimesh and ``modules``
     (", name, ..."), then loads the mesh argv[1] scaled by argv[2] into ``m``, timed
@@ -285,7 +290,7 @@ def graded_growth(job, base, subdivided, benchy, runs, work, row, notes):
     text = text.replace('file = "../../shared/models/3DBenchy.stl"', f'file = "{benchy}"')
     pipe = write_pipeline(work, "graded-thin", text)
     try:
-        r = repeat_all([job[0], "run", "--quiet", "--out", work / "graded-thin", pipe], runs)
+        r = repeat_all([job[0], "run", *ALLOW, "--quiet", "--out", work / "graded-thin", pipe], runs)
         row("graded job, 0.05 mm layers", "lamina", r["wall"], r["rss"], r["wall"],
             detail=f"whole process, CPU {r['cpu']:.2f} s, {r['wall'] / base:.2f}x the 0.2 mm job (target <= 4.4x)")
     except RuntimeError as e:
@@ -381,7 +386,7 @@ def economy(lamina, models, work, python, notes):
             notes.append(f"economy, {label}: {mesh} absent, skipped")
             continue
         out = work / "economy" / label.split()[0]
-        r = subprocess.run([lamina, "run", "--quiet", "--out", out, pipeline, *extra], capture_output=True, text=True)
+        r = subprocess.run([lamina, "run", *ALLOW, "--quiet", "--out", out, pipeline, *extra], capture_output=True, text=True)
         files = sorted(out.glob("*.gcode"))
         if r.returncode != 0 or not files:
             notes.append(f"economy, {label}: lamina failed: {r.stderr.strip()[-200:]}")
@@ -412,6 +417,7 @@ def main():
     args = ap.parse_args()
     runs = args.runs or (1 if args.quick else 5)
     models = Path(args.models)
+    ALLOW[:] = ["--allow", str(models)]
     if not models.is_dir():
         print(f"note: {models} not found; nothing to measure")
         return 0
@@ -461,7 +467,7 @@ def main():
             notes.append(f"{label}: {file} absent, skipped")
             continue
         pipe = write_pipeline(work, "slice", model_table(file, scale) + '[slice]\nuse = "uniform"\nthickness = 0.2\n')
-        wall, rss, outs = repeat([lamina, "run", "--quiet", "--timings", "--out", work / "out", pipe], runs)
+        wall, rss, outs = repeat([lamina, "run", *ALLOW, "--quiet", "--timings", "--out", work / "out", pipe], runs)
         stages = [lamina_timings(o) for o in outs]
         inside = statistics.median(s.get("model", 0) + s.get("slice", 0) + s.get("sort", 0) for s in stages)
         base = inside
@@ -500,7 +506,7 @@ def main():
         pipe = write_pipeline(work, "contours", model_table(benchy, 1.0)
                               + f'[slice]\nuse = "uniform"\nthickness = {thickness}\n'
                               + '[[output]]\nuse = "json"\npath = "plan.json"\n')
-        subprocess.run([lamina, "run", "--quiet", "--out", work / "contours", pipe], check=True)
+        subprocess.run([lamina, "run", *ALLOW, "--quiet", "--out", work / "contours", pipe], check=True)
         plan = json.loads((work / "contours" / "plan.json").read_text())
         layers = []
         # The same rings grouped by family, for the peer that makes a field per family.
@@ -526,7 +532,7 @@ def main():
             pipe = write_pipeline(work, "offset", model_table(benchy, 1.0)
                                   + f'[slice]\nuse = "uniform"\nthickness = {thickness}\n'
                                   + '[discretise]\nuse = "offset"\ncount = 10\nspacing = 0.4\n')
-            wall, rss, outs = repeat([lamina, "run", "--quiet", "--timings", "--out", work / "out", pipe], runs)
+            wall, rss, outs = repeat([lamina, "run", *ALLOW, "--quiet", "--timings", "--out", work / "out", pipe], runs)
             # The whole job's wall time against the peer's offsets alone.
             inside = wall
             stage = statistics.median(lamina_timings(o).get("discretise", float("nan")) for o in outs)
@@ -542,7 +548,7 @@ def main():
             pipe = write_pipeline(work, "sdf", model_table(benchy, 1.0)
                                   + f'[slice]\nuse = "uniform"\nthickness = {thickness}\n'
                                   + '[discretise]\nuse = "distance-field"\ncells = 512\ncount = 10\n')
-            wall, rss, outs = repeat([lamina, "run", "--quiet", "--timings", "--threads", "1", "--out",
+            wall, rss, outs = repeat([lamina, "run", *ALLOW, "--quiet", "--timings", "--threads", "1", "--out",
                                       work / "out", pipe], runs)
             # The `distance-field` stage as a whole: field, iso-lines, bands and regions.
             per_layer = statistics.median(lamina_timings(o).get("discretise", float("nan")) for o in outs) / n_layers
@@ -570,7 +576,7 @@ def main():
                                       + '[plan]\nuse = "sequential"\n'
                                       + '[[output]]\nuse = "gcode"\npath = "benchy.gcode"\n')
                 try:
-                    wall, rss, outs = repeat([lamina, "run", "--quiet", "--timings", "--out", work / "out", pipe], runs)
+                    wall, rss, outs = repeat([lamina, "run", *ALLOW, "--quiet", "--timings", "--out", work / "out", pipe], runs)
                     base = wall
                     row("G-code 3DBenchy", "lamina", wall, rss, wall, detail="whole process")
                 except RuntimeError as e:
@@ -585,7 +591,7 @@ def main():
             graded = None
             if has_gcode:
                 print("graded two-tool 3DBenchy job (pipelines/benchy-two-tools.toml)", flush=True)
-                job = [lamina, "run", "--quiet", "--out", work / "graded", ROOT / "pipelines" / "benchy-two-tools.toml",
+                job = [lamina, "run", *ALLOW, "--quiet", "--out", work / "graded", ROOT / "pipelines" / "benchy-two-tools.toml",
                        "--set", f'model.file="{benchy}"']
                 try:
                     one = repeat_all(job[:2] + ["--threads", "1"] + job[2:], runs)

@@ -30,7 +30,10 @@ fn set(s: &str) -> Override {
 
 /// Runs a pipeline of `pipelines/` with overrides, writing under `out`.
 fn run(name: &str, overrides: &[Override], out: &Path) -> RunReport {
-    let pipeline = Pipeline::load(&root().join("pipelines").join(name), overrides).expect("pipeline");
+    // The Benchy pipeline reads its model beside the repository.
+    let models = [root().join("../shared/models")];
+    let pipeline =
+        Pipeline::load_allowing(&root().join("pipelines").join(name), overrides, &models).expect("pipeline");
     let engine = Engine::build(pipeline, registry(), &RunOptions::default()).expect("engine");
     engine.run(out, &Silent).expect("runs")
 }

@@ -17,6 +17,7 @@ const WIRE_SOURCES: &[&str] = &[
     "src/plugin/wire/error.rs",
     "src/plugin/wire/mod.rs",
     "src/process.rs",
+    "src/reach.rs",
     "src/stage.rs",
 ];
 

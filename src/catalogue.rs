@@ -69,11 +69,7 @@ fn machine_profiles() -> Vec<(&'static str, String)> {
     lamina_core::machine::builtin::PROFILES
         .iter()
         .map(|p| {
-            let spec = lamina_core::machine::load::MachineSpec::Named {
-                reference: p.name.to_string(),
-                at: None,
-            };
-            let description = lamina_core::machine::resolve(&spec, std::path::Path::new("."))
+            let description = lamina_core::machine::load::builtin(p.name)
                 .map(|m| m.description)
                 .unwrap_or_else(|e| format!("(invalid: {e})"));
             (p.name, description)

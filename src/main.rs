@@ -61,9 +61,23 @@ struct PipelineArgs {
     /// Overrides a pipeline value, e.g. `--set slice.thickness=0.1` (repeatable).
     #[arg(long = "set", value_name = "TABLE.KEY=VALUE")]
     set: Vec<Override>,
-    /// Loads a plugin library in addition to the pipeline's `plugins` (repeatable).
+    /// Loads a plugin library (repeatable); a pipeline's `plugins` only says which it
+    /// needs, and is refused without them.
     #[arg(long = "plugin", value_name = "PATH")]
     plugins: Vec<PathBuf>,
+    /// Lets the pipeline read files (models, machine profiles, cells, scripts) under
+    /// this folder, or this one file, too (repeatable). Without it a pipeline reads
+    /// only in its own folder and the output folder.
+    #[arg(long = "allow", value_name = "PATH")]
+    allow: Vec<PathBuf>,
+}
+
+impl PipelineArgs {
+    /// The pipeline, reading within its folder, `out` and what `--allow` names.
+    fn load(&self, out: Option<&std::path::Path>) -> lamina_core::Result<Pipeline> {
+        let allowed: Vec<PathBuf> = self.allow.iter().cloned().chain(out.map(PathBuf::from)).collect();
+        Pipeline::load_allowing(&self.pipeline, &self.set, &allowed)
+    }
 }
 
 #[derive(Debug, Subcommand)]
@@ -189,6 +203,7 @@ static ALLOCATOR: lamina_core::script::CountingAllocator = lamina_core::script::
 
 fn main() -> ExitCode {
     let cli = Cli::parse();
+    remove_outputs_on_signals();
     match execute(cli) {
         Ok(()) => ExitCode::SUCCESS,
         Err(f) => {
@@ -198,11 +213,36 @@ fn main() -> ExitCode {
     }
 }
 
+/// SIGINT, SIGTERM and SIGHUP end the process as they would, with their exit status
+/// (128 + the signal), after the run's temporary outputs and the folders made for them
+/// are removed: an interrupted run leaves nothing behind. (SIGKILL cannot be caught:
+/// the next run into the folder removes what a killed one left.)
+fn remove_outputs_on_signals() {
+    #[cfg(unix)]
+    {
+        use signal_hook::consts::{SIGHUP, SIGINT, SIGTERM};
+        let Ok(mut signals) = signal_hook::iterator::Signals::new([SIGINT, SIGTERM, SIGHUP]) else {
+            return;
+        };
+        std::thread::spawn(move || {
+            if let Some(signal) = signals.forever().next() {
+                lamina_core::output::abandon();
+                eprintln!("lamina: interrupted");
+                std::process::exit(128 + signal);
+            }
+        });
+    }
+}
+
 /// Parses and builds the pipeline. Everything that fails here (options, scripts that do
 /// not compile, plugins) is a usage error.
-fn engine(args: &PipelineArgs, threads: Option<usize>) -> Result<Engine, Failure> {
+fn engine(
+    args: &PipelineArgs,
+    out: Option<&std::path::Path>,
+    threads: Option<usize>,
+) -> Result<Engine, Failure> {
     let build = || {
-        let pipeline = Pipeline::load(&args.pipeline, &args.set)?;
+        let pipeline = args.load(out)?;
         let options = RunOptions {
             threads,
             model: args.model.clone(),
@@ -227,7 +267,7 @@ fn execute(cli: Cli) -> Result<(), Failure> {
             if threads == Some(0) {
                 return Err(lamina_core::Error::config("--threads must be at least 1").into());
             }
-            let engine = engine(&args, threads)?;
+            let engine = engine(&args, Some(&out), threads)?;
             let observer = progress::Progress::new(quiet, verbose);
             let report = engine.run(&out, &observer);
             observer.finish();
@@ -241,7 +281,7 @@ fn execute(cli: Cli) -> Result<(), Failure> {
         }
         Command::View { args, out, no_open } => {
             let build = || {
-                let mut pipeline = Pipeline::load(&args.pipeline, &args.set)?;
+                let mut pipeline = args.load(Some(&out))?;
                 if !pipeline.outputs.iter().any(|o| o.use_name() == Some("html")) {
                     let mut table = toml::Table::new();
                     table.insert("use".into(), "html".into());
@@ -270,6 +310,8 @@ fn execute(cli: Cli) -> Result<(), Failure> {
                 .ok_or_else(|| lamina_core::Error::config("the run wrote no HTML viewer"))?;
             println!("{}", page.display());
             if !no_open {
+                // Absolute, so that an output folder named `-x` is not read as an option.
+                let page = std::path::absolute(&page).unwrap_or(page);
                 let opened = std::process::Command::new("xdg-open")
                     .arg(&page)
                     .stdout(std::process::Stdio::null())
@@ -283,7 +325,7 @@ fn execute(cli: Cli) -> Result<(), Failure> {
             Ok(())
         }
         Command::Check { args } => {
-            let engine = engine(&args, None)?;
+            let engine = engine(&args, None, None)?;
             println!("{}: ok", args.pipeline.display());
             for line in engine.summary() {
                 println!("  {line}");

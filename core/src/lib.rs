@@ -18,6 +18,7 @@ pub mod output;
 pub mod pipeline;
 pub mod plugin;
 pub mod process;
+pub mod reach;
 pub mod registry;
 pub mod runtime;
 pub mod script;

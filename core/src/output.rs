@@ -15,28 +15,83 @@ use crate::stage::OutputFiles;
 /// a later run which are left over from a run that was killed.
 const PARTIAL_PREFIX: &str = ".lamina-";
 
-/// Removes the temporary files in `dir` of runs that are no longer running (a killed
-/// run leaves its partial outputs behind; a run still writing keeps its own).
+/// Most entries [`remove_stale`] looks at in one output folder tree: an output folder
+/// is no place for a million files, and the search must not cost more than the run.
+const STALE_SEARCH_ENTRIES: usize = 100_000;
+
+/// Removes the temporary files of runs that are no longer running anywhere under `dir`
+/// (a killed run leaves its partial outputs behind, in whatever subfolder they were
+/// being written; a run still writing keeps its own). Links are not followed.
 fn remove_stale(dir: &Path) {
-    let Ok(entries) = std::fs::read_dir(dir) else {
-        return;
-    };
-    for entry in entries.flatten() {
-        let name = entry.file_name();
-        let Some(name) = name.to_str() else { continue };
-        let Some(rest) = name.strip_prefix(PARTIAL_PREFIX) else {
+    let mut folders = vec![dir.to_path_buf()];
+    let mut seen = 0;
+    while let Some(folder) = folders.pop() {
+        let Ok(entries) = std::fs::read_dir(&folder) else {
             continue;
         };
-        if !name.ends_with(".partial") {
-            continue;
-        }
-        let Some(pid) = rest.split('-').next().and_then(|p| p.parse::<u32>().ok()) else {
-            continue;
-        };
-        if pid != std::process::id() && !process_alive(pid) {
-            let _ = std::fs::remove_file(entry.path());
+        for entry in entries.flatten() {
+            seen += 1;
+            if seen > STALE_SEARCH_ENTRIES {
+                return;
+            }
+            let Ok(kind) = entry.file_type() else { continue };
+            if kind.is_dir() {
+                folders.push(entry.path());
+            } else if kind.is_file() && stale(&entry.file_name()) {
+                let _ = std::fs::remove_file(entry.path());
+            }
         }
     }
+}
+
+/// Whether `name` is a temporary output of a process that no longer runs.
+fn stale(name: &std::ffi::OsStr) -> bool {
+    let Some(name) = name.to_str() else { return false };
+    let Some(rest) = name.strip_prefix(PARTIAL_PREFIX) else {
+        return false;
+    };
+    if !name.ends_with(".partial") {
+        return false;
+    }
+    let Some(pid) = rest.split('-').next().and_then(|p| p.parse::<u32>().ok()) else {
+        return false;
+    };
+    pid != std::process::id() && !process_alive(pid)
+}
+
+/// The temporary outputs and the folders made for them that this process holds, so
+/// that a signal that ends it can remove them ([`abandon`]).
+struct Live {
+    files: Vec<PathBuf>,
+    folders: Vec<PathBuf>,
+    /// Set by [`abandon`]: the process is ending, and no new temporary file may stay.
+    abandoned: bool,
+}
+
+static LIVE: std::sync::Mutex<Live> = std::sync::Mutex::new(Live {
+    files: Vec::new(),
+    folders: Vec::new(),
+    abandoned: false,
+});
+
+fn live() -> std::sync::MutexGuard<'static, Live> {
+    LIVE.lock().unwrap_or_else(std::sync::PoisonError::into_inner)
+}
+
+/// Removes every temporary output of this process and the (empty) folders made for
+/// them, for a process that a signal ends: call it, then exit without returning. The
+/// lock stays held, so that no thread of the run creates or commits a file after it.
+pub fn abandon() {
+    let mut live = live();
+    live.abandoned = true;
+    for file in &live.files {
+        let _ = std::fs::remove_file(file);
+    }
+    for folder in live.folders.iter().rev() {
+        let _ = std::fs::remove_dir(folder);
+    }
+    live.files.clear();
+    std::mem::forget(live);
 }
 
 /// Whether process `pid` runs (Linux: its `/proc` entry; elsewhere assumed alive, so
@@ -58,12 +113,19 @@ pub struct AtomicOutputs {
     /// Folders this run created, outermost first: a run that fails removes them again
     /// where they are empty, so it leaves nothing behind.
     made: Vec<PathBuf>,
+    /// Whether the output folder was searched for the leftovers of killed runs.
+    searched: bool,
 }
 
 impl Drop for AtomicOutputs {
     fn drop(&mut self) {
         // The temporary files go first (dropping them deletes them), then the folders
         // made for them, innermost first; one that holds anything else stays.
+        let mut live = live();
+        for (temp, _) in &self.pending {
+            live.files.retain(|f| f.as_path() != &**temp);
+        }
+        live.folders.retain(|f| !self.made.contains(f));
         self.pending.clear();
         for dir in self.made.iter().rev() {
             let _ = std::fs::remove_dir(dir);
@@ -78,6 +140,7 @@ impl AtomicOutputs {
             pending: Vec::new(),
             reports: Vec::new(),
             made: Vec::new(),
+            searched: false,
         }
     }
 
@@ -110,9 +173,17 @@ impl AtomicOutputs {
         }
         let mut done = Vec::new();
         let mut this = self;
+        // Under the lock: a signal that ends the process finds each file either still
+        // temporary (and removes it) or committed.
+        let mut live = live();
+        if live.abandoned {
+            return Err(Error::config("the run was interrupted"));
+        }
         // Committed: the folders hold the outputs and stay.
+        live.folders.retain(|f| !this.made.contains(f));
         this.made.clear();
         for (temp, dest) in std::mem::take(&mut this.pending) {
+            live.files.retain(|f| f.as_path() != &*temp);
             temp.persist(&dest).map_err(|e| Error::io(&dest, e.error))?;
             done.push(dest);
         }
@@ -149,7 +220,12 @@ impl OutputFiles for AtomicOutputs {
             .take_while(|a| !a.as_os_str().is_empty() && !a.exists())
             .map(Path::to_path_buf)
             .collect();
+        let mut live = live();
+        if live.abandoned {
+            return Err(Error::config("the run was interrupted"));
+        }
         std::fs::create_dir_all(&parent).map_err(|e| Error::io(&parent, e))?;
+        live.folders.extend(missing.iter().rev().cloned());
         self.made.extend(missing.into_iter().rev());
         // A link inside the output folder must not lead the file out of it.
         if let (Ok(root), Ok(real)) = (self.dir.canonicalize(), parent.canonicalize())
@@ -161,7 +237,10 @@ impl OutputFiles for AtomicOutputs {
                 real.display()
             )));
         }
-        remove_stale(&parent);
+        if !self.searched {
+            self.searched = true;
+            remove_stale(&self.dir);
+        }
         let mut builder = tempfile::Builder::new();
         let prefix = format!("{PARTIAL_PREFIX}{}-", std::process::id());
         builder.prefix(&prefix).suffix(".partial");
@@ -170,6 +249,7 @@ impl OutputFiles for AtomicOutputs {
         builder.permissions(std::os::unix::fs::PermissionsExt::from_mode(0o644));
         let temp = builder.tempfile_in(&parent).map_err(|e| Error::io(&parent, e))?;
         let (file, path): (File, TempPath) = temp.into_parts();
+        live.files.push(path.to_path_buf());
         self.pending.push((path, dest));
         Ok(Box::new(BufWriter::with_capacity(1 << 16, file)))
     }

@@ -260,10 +260,20 @@ impl Registry {
         base_dir: &Path,
         context: PipelineContext<'_>,
     ) -> Result<AnyStage> {
+        // Without the pipeline's reach, a stage reads from `base_dir` only.
+        let folder;
+        let reach = match context.reach {
+            Some(r) => r,
+            None => {
+                folder = crate::reach::Reach::folder(base_dir);
+                &folder
+            }
+        };
         let config = StageConfig {
             table,
             scripts,
             base_dir,
+            reach,
             machine: context.machine,
             limits: context.limits,
         };

@@ -398,6 +398,10 @@ pub struct StageConfig<'a> {
     pub table: &'a crate::pipeline::TableRef,
     pub scripts: &'a ScriptHost,
     pub base_dir: &'a Path,
+    /// Where the files the stage's options name may be read from (checked with
+    /// [`Reach::check`](crate::reach::Reach::check) or read with
+    /// [`Reach::read`](crate::reach::Reach::read)): a pipeline is untrusted data.
+    pub reach: &'a crate::reach::Reach,
     /// The machine the pipeline names, so a stage can check its options against it
     /// when the pipeline is checked rather than when it runs.
     pub machine: Option<&'a Machine>,
@@ -410,6 +414,9 @@ pub struct StageConfig<'a> {
 #[derive(Debug, Clone, Copy, Default)]
 pub struct PipelineContext<'a> {
     pub machine: Option<&'a Machine>,
+    /// Where the files a stage's options name may be read from; `None` is the stage's
+    /// base folder only.
+    pub reach: Option<&'a crate::reach::Reach>,
     pub limits: crate::Limits,
 }
 

@@ -272,59 +272,68 @@ fn real_models_discretise_into_tiling_sub_regions() {
             .layers(std::slice::from_ref(&mesh), &info, None)
             .expect("slots");
         let step = slots.len().div_ceil(12).max(1);
-        let (mut families, mut regions, mut worst_area, mut worst_overlap) = (0, 0, 0.0f64, 0.0f64);
-        for slot in &slots {
-            let sampled = slot.index % step == 0;
-            let layer = prepared.slice(slot).expect("slices");
-            let tree = sorter.sort(&layer).expect("sorts");
-            for f in 0..tree.families.len() {
-                let family = tree.family_polygon(&layer.contours, f);
-                let invalid = ogc_errors(&family);
-                assert!(
-                    invalid.is_empty(),
-                    "{}: layer {} family {f} is not a valid polygon: {invalid:?}",
-                    m.file,
-                    slot.index
-                );
-                families += 1;
-                let ctx = lamina_core::stage::FamilyContext {
-                    info: &info,
-                    layer: &layer,
-                    tree: &tree,
-                    // The stages that measure in space (the outer-surface source) read it.
-                    mesh: Some(&mesh),
-                    part: 0,
-                    family: f,
-                };
-                for (k, (text, stage)) in stages.iter().enumerate() {
-                    // The first is the default (the paper's Method 1): on every layer.
-                    if k > 0 && !sampled {
-                        continue;
-                    }
-                    let out = stage.discretise(&ctx).expect("discretises");
-                    regions += out.len();
-                    for r in &out {
-                        let invalid = ogc_errors(&r.polygon);
-                        assert!(
-                            invalid.is_empty(),
-                            "{}: layer {} family {f} ({text}): region {} is not a valid polygon: {invalid:?}",
-                            m.file,
-                            slot.index,
-                            r.index
-                        );
-                    }
-                    let t = lamina_discretise::check::tiling(&family, &out);
+        // Layers are independent: checked on every core, the figures combined.
+        use rayon::prelude::*;
+        let (families, regions, worst_area, worst_overlap) = slots
+            .par_iter()
+            .map(|slot| {
+                let (mut families, mut regions, mut worst_area, mut worst_overlap) = (0, 0, 0.0f64, 0.0f64);
+                let sampled = slot.index % step == 0;
+                let layer = prepared.slice(slot).expect("slices");
+                let tree = sorter.sort(&layer).expect("sorts");
+                for f in 0..tree.families.len() {
+                    let family = tree.family_polygon(&layer.contours, f);
+                    let invalid = ogc_errors(&family);
                     assert!(
-                        t.is_ok(1e-3),
-                        "{}: layer {} family {f} ({text}): {t:?}",
+                        invalid.is_empty(),
+                        "{}: layer {} family {f} is not a valid polygon: {invalid:?}",
                         m.file,
                         slot.index
                     );
-                    worst_area = worst_area.max(t.area_error);
-                    worst_overlap = worst_overlap.max(t.overlap);
+                    families += 1;
+                    let ctx = lamina_core::stage::FamilyContext {
+                        info: &info,
+                        layer: &layer,
+                        tree: &tree,
+                        // The stages that measure in space (the outer-surface source) read it.
+                        mesh: Some(&mesh),
+                        part: 0,
+                        family: f,
+                    };
+                    for (k, (text, stage)) in stages.iter().enumerate() {
+                        // The first is the default (the paper's Method 1): on every layer.
+                        if k > 0 && !sampled {
+                            continue;
+                        }
+                        let out = stage.discretise(&ctx).expect("discretises");
+                        regions += out.len();
+                        for r in &out {
+                            let invalid = ogc_errors(&r.polygon);
+                            assert!(
+                                invalid.is_empty(),
+                                "{}: layer {} family {f} ({text}): region {} is not a valid polygon: {invalid:?}",
+                                m.file,
+                                slot.index,
+                                r.index
+                            );
+                        }
+                        let t = lamina_discretise::check::tiling(&family, &out);
+                        assert!(
+                            t.is_ok(1e-3),
+                            "{}: layer {} family {f} ({text}): {t:?}",
+                            m.file,
+                            slot.index
+                        );
+                        worst_area = worst_area.max(t.area_error);
+                        worst_overlap = worst_overlap.max(t.overlap);
+                    }
                 }
-            }
-        }
+                (families, regions, worst_area, worst_overlap)
+            })
+            .reduce(
+                || (0, 0, 0.0f64, 0.0f64),
+                |a, b| (a.0 + b.0, a.1 + b.1, a.2.max(b.2), a.3.max(b.3)),
+            );
         println!(
             "{:<36} {:>4} layers {:>5} families {:>7} regions  area error <= {:.1e}  overlap <= {:.1e} {:>8.1} ms",
             m.file,

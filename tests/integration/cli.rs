@@ -217,7 +217,14 @@ fn example_pipelines_check() {
                 );
                 continue;
             }
-            let out = lamina(&["check", path.to_str().expect("utf-8")]);
+            // It reads its model outside its folder, where the command line allows.
+            let models = crate::support::root().join("../shared/models");
+            let out = lamina(&[
+                "check",
+                path.to_str().expect("utf-8"),
+                "--allow",
+                models.to_str().expect("utf-8"),
+            ]);
             assert!(out.status.success(), "{}: {}", path.display(), text(&out.stderr));
         }
     }
@@ -365,6 +372,37 @@ fn view_writes_a_viewer_even_when_the_pipeline_has_none() {
     let html = std::fs::read_to_string(&page).expect("the printed path is the viewer");
     assert!(html.contains("LAYERS.push("));
     assert!(page.starts_with(dir.path()));
+}
+
+/// The browser opener gets the viewer's absolute path: an output folder named `-x`
+/// must not reach `xdg-open` as an option.
+#[cfg(unix)]
+#[test]
+fn view_hands_the_opener_a_path_never_an_option() {
+    use std::os::unix::fs::PermissionsExt;
+    let dir = tempfile::tempdir().expect("tempdir");
+    let bin = dir.path().join("bin");
+    std::fs::create_dir(&bin).expect("mkdir");
+    let opener = bin.join("xdg-open");
+    std::fs::write(
+        &opener,
+        "#!/bin/sh\nprintf '%s\\n' \"$@\" > \"$(dirname \"$0\")/args\"\n",
+    )
+    .expect("write");
+    std::fs::set_permissions(&opener, std::fs::Permissions::from_mode(0o755)).expect("chmod");
+    let path = format!("{}:{}", bin.display(), std::env::var("PATH").unwrap_or_default());
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_lamina"))
+        .current_dir(dir.path())
+        .env("PATH", path)
+        .args(["view", "--out=-x"])
+        .arg(pipelines().join("assembly.toml"))
+        .output()
+        .expect("lamina runs");
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let args = std::fs::read_to_string(bin.join("args")).expect("the opener ran");
+    let page = Path::new(args.trim());
+    assert!(page.is_absolute() && page.is_file(), "{args}");
+    assert!(page.starts_with(dir.path().canonicalize().expect("real")) || page.starts_with(dir.path()));
 }
 
 /// The blade with layers so thick that the planner leaves sub-regions out on every

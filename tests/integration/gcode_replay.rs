@@ -11,7 +11,7 @@
 //! skip with a note, unless `LAMINA_REQUIRE` is set (as `.ci/run` does), where a skip is
 //! a failure.
 
-use crate::support::{model, root, skip};
+use crate::support::{allow_models, model, root, skip};
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
@@ -232,6 +232,8 @@ fn replay_file(
         args.push("--set");
         args.push(o);
     }
+    let allow = allow_models();
+    args.extend(allow.iter().map(String::as_str));
     lamina(&args);
     let mut table: toml::Table =
         toml::from_str(&std::fs::read_to_string(pipeline).expect("pipeline")).expect("TOML");

@@ -148,10 +148,13 @@ fn generate_writes_files_the_readers_take_back() {
                 String::from_utf8_lossy(&out.stderr)
             );
             assert!(String::from_utf8_lossy(&out.stdout).contains("closed"));
-            let back = model(&format!(
-                "use = \"{ext}\"\nfile = \"{}\"",
-                path.display().to_string().replace('\\', "/")
-            ));
+            let back = lamina_test_support::meshes(
+                &format!(
+                    "use = \"{ext}\"\nfile = \"{}\"",
+                    path.display().to_string().replace('\\', "/")
+                ),
+                dir.path(),
+            );
             // An STL holds one solid; OBJ and 3MF keep the parts apart.
             assert_eq!(
                 back.len(),

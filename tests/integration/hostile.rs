@@ -419,6 +419,18 @@ fn option_values_that_would_exhaust_the_machine_are_refused_before_work() {
             &[],
             "more than 16 parts",
         ),
+        (
+            "a tube of 65536 sides",
+            "distance-field-power.toml",
+            &["model.segments=65536"],
+            "3..=4096",
+        ),
+        (
+            "65536 directions to orient by",
+            "tube-gradient.toml",
+            &["orient.use=\"candidates\"", "orient.samples=65536"],
+            "at most 4096 directions",
+        ),
     ];
     let deep_path = format!("{}=1", vec!["a"; 20_000].join("."));
     for &(label, pipeline, sets, expected) in cases {
@@ -546,6 +558,8 @@ fn files_that_expand_without_bound_are_refused_by_a_named_limit() {
 #[test]
 fn devices_and_fifos_are_refused_before_they_are_read() {
     let s = Scratch::new();
+    // A link to a device leads out of the pipeline's folder; allowed by the command
+    // line, it is still no regular file.
     for (name, model) in [
         ("zero.stl", "zero.stl"),
         ("zero.3mf", "zero.3mf"),
@@ -555,8 +569,12 @@ fn devices_and_fifos_are_refused_before_they_are_read() {
         std::os::unix::fs::symlink("/dev/zero", &link).expect("symlink");
         let p = s.write("p.toml", pipeline_for(model));
         let o = s.run(&p, &[]);
-        refused(&s, name, &o, "not a regular file");
+        refused(&s, name, &o, "outside what the pipeline may read");
         assert!(o.stderr.contains(name), "{name}: {}", o.stderr);
+        let mut args: Vec<OsString> = vec!["check".into(), p.clone().into()];
+        args.extend(["--allow".into(), "/dev".into()]);
+        let o = lamina_in(s.path(), &args);
+        refused(&s, name, &o, "not a regular file");
     }
     let fifo = s.path().join("pipe.stl");
     let made = Command::new("mkfifo").arg(&fifo).status().expect("mkfifo runs");
@@ -596,7 +614,10 @@ fn inputs_large_in_count_are_handled_in_time() {
 
     // Rhai functions by the ten thousand: refused before Rhai's parser, which slows
     // down with their square, sees them; and a script file of megabytes.
-    for (count, expected) in [(20_000, "defines 20001 functions"), (200_000, "bytes, more than")] {
+    for (count, expected) in [
+        (20_000, "defines 20001 functions"),
+        (200_000, "more than the 1048576"),
+    ] {
         let functions: String = (0..count).map(|i| format!("fn f{i}(z) {{ z }}\n")).collect();
         s.write(
             "gradient.rhai",
@@ -746,23 +767,20 @@ fn output_paths_stay_inside_the_output_folder() {
 }
 
 #[test]
-fn script_paths_stay_in_the_pipeline_folder_and_errors_quote_only_scripts() {
+fn files_a_pipeline_names_stay_in_its_folder_unless_the_command_line_allows_more() {
     let s = Scratch::new();
     let secret = s.write("secret.rhai", "root:x:0:0:the secret line\n");
+    let secret_toml = s.write("secret.toml", "token = \"the secret line\"\n");
     let sub = s.path().join("sub");
     std::fs::create_dir(&sub).expect("mkdir");
     let p = sub.join("p.toml");
     std::fs::copy(pipelines().join("tube-gradient.toml"), &p).expect("copy");
-    let cases = [
-        ("parent", "grade.f=\"../secret.rhai#f\"".to_string()),
-        ("absolute", format!("grade.f=\"{}#f\"", secret.display())),
-    ];
-    for (label, set) in &cases {
-        let o = s.check(&p, &[set]);
-        within_budget(label, &o);
+    let abs = |p: &Path| p.display().to_string();
+    let refused = |label: &str, o: &Outcome| {
+        within_budget(label, o);
         assert_eq!(o.code, Some(2), "{label}: {}", o.stderr);
         assert!(
-            o.stderr.contains("outside the pipeline's folder"),
+            o.stderr.contains("outside what the pipeline may read") && o.stderr.contains("--allow"),
             "{label}: {}",
             o.stderr
         );
@@ -771,17 +789,62 @@ fn script_paths_stay_in_the_pipeline_folder_and_errors_quote_only_scripts() {
             "{label}: quoted {}",
             o.stderr
         );
+    };
+    let sets = [
+        ("script, parent", "grade.f=\"../secret.rhai#f\"".to_string()),
+        ("script, absolute", format!("grade.f=\"{}#f\"", abs(&secret))),
+        ("machine, parent", "machine=\"../secret.toml\"".to_string()),
+        ("machine, absolute", format!("machine=\"{}\"", abs(&secret_toml))),
+        (
+            "machine base",
+            "machine={base = \"../secret.toml\", name = \"x\"}".to_string(),
+        ),
+    ];
+    for (label, set) in &sets {
+        refused(label, &s.check(&p, &[set]));
     }
+    // A model, a machining cell and a plugin library named outside.
+    let head = "[materials.a]\ncolour = [255, 0, 0]\n\n[slice]\nuse = \"uniform\"\nthickness = 1.0\n\n";
+    let model = sub.join("model.toml");
+    std::fs::write(
+        &model,
+        format!("[model]\nuse = \"stl\"\nfile = \"../secret.toml\"\n\n{head}[[output]]\nuse = \"json\"\npath = \"plan.json\"\n"),
+    )
+    .expect("write");
+    refused("model", &s.check(&model, &[]));
+    let cell = sub.join("cell.toml");
+    std::fs::write(
+        &cell,
+        format!("[model]\nuse = \"tube\"\nheight = 2.0\n\n{head}[[output]]\nuse = \"nc\"\npath = \"x.nc\"\ncell = \"{}\"\n", abs(&secret_toml)),
+    )
+    .expect("write");
+    refused("cell", &s.check(&cell, &[]));
     #[cfg(unix)]
     {
         std::os::unix::fs::symlink(&secret, sub.join("gradient.rhai")).expect("symlink");
-        let o = s.check(&p, &[]);
-        assert_eq!(o.code, Some(2), "{}", o.stderr);
-        assert!(o.stderr.contains("outside the pipeline's folder"), "{}", o.stderr);
-        assert!(!o.stderr.contains("the secret line"), "quoted {}", o.stderr);
+        refused("a link out", &s.check(&p, &[]));
+        std::fs::remove_file(sub.join("gradient.rhai")).expect("unlink");
     }
-    // An option lets a folder in.
-    let o = s.check(&p, &["grade.f=\"../secret.rhai#f\"", "script_dirs=[\"..\"]"]);
+    // The pipeline cannot widen its reach, nor load code.
+    let o = s.check(&p, &["script_dirs=[\"/\"]"]);
+    assert_eq!(o.code, Some(2), "{}", o.stderr);
+    assert!(
+        o.stderr.contains("cannot widen") && o.stderr.contains("--allow"),
+        "{}",
+        o.stderr
+    );
+    let o = s.check(&p, &[&format!("plugins=[\"{}\"]", abs(&secret_toml))]);
+    assert_eq!(o.code, Some(2), "{}", o.stderr);
+    assert!(
+        o.stderr.contains("cannot load code by itself") && o.stderr.contains("--plugin"),
+        "{}",
+        o.stderr
+    );
+    // The command line lets a folder in: the script is read (and is no Rhai).
+    let mut args: Vec<OsString> = vec!["check".into(), p.clone().into(), "--set".into()];
+    args.push("grade.f=\"../secret.rhai#f\"".into());
+    args.extend(["--allow".into(), s.path().into()]);
+    let o = lamina_in(s.path(), &args);
     assert_eq!(o.code, Some(2), "{}", o.stderr);
     assert!(o.stderr.contains("does not compile"), "{}", o.stderr);
 }
@@ -829,7 +892,7 @@ fn long_run(s: &Scratch) -> Child {
 #[cfg(unix)]
 #[test]
 fn an_interrupted_run_leaves_no_output_and_its_leftovers_are_removed_by_the_next() {
-    for signal in [libc::SIGKILL, libc::SIGINT] {
+    for signal in [libc::SIGKILL, libc::SIGINT, libc::SIGTERM] {
         let s = Scratch::new();
         let mut child = long_run(&s);
         // Until the output's temporary file exists, then a little longer.
@@ -846,6 +909,18 @@ fn an_interrupted_run_leaves_no_output_and_its_leftovers_are_removed_by_the_next
             !s.out().join("tube-gradient.json").exists(),
             "an interrupted run committed its output"
         );
+        if signal != libc::SIGKILL {
+            // A signal that can be caught ends the run as it would, and nothing of the
+            // run is left.
+            assert_eq!(status.code(), Some(128 + signal), "{status:?}");
+            assert_eq!(s.outputs(), Vec::<PathBuf>::new(), "signal {signal}");
+            continue;
+        }
+        // What a killed run leaves deeper in the folder (a process id above Linux's
+        // largest is never running).
+        let deep = s.out().join("a/b");
+        std::fs::create_dir_all(&deep).expect("mkdir");
+        std::fs::write(deep.join(".lamina-4194399-x.partial"), "left").expect("write");
         // The next run into the same folder cleans up and commits.
         let o = s.run(&pipelines().join("tube-gradient.toml"), &[]);
         within_budget("the next run", &o);

@@ -4,7 +4,7 @@
 //! `LAMINA_PLUGIN_HOST` names another `lamina` binary to load them with (continuous
 //! integration uses the release build).
 
-use crate::support::{cargo, profile_dir, root, target_dir, write};
+use crate::support::{cargo, cargo_outside, profile_dir, root, target_dir, write};
 use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::sync::OnceLock;
@@ -89,18 +89,34 @@ fn write_pipeline(dir: &Path, extra: &str) -> PathBuf {
 fn example_plugin_is_loaded_and_plans_toolpaths() {
     let lib = library("lamina-zigzag");
     let dir = tempfile::tempdir().expect("tempdir");
-    // Named from the pipeline, relative to its folder.
+    // Listed by the pipeline, relative to its folder.
     std::fs::copy(&lib, dir.path().join("zigzag.so")).expect("copy library");
     let pipeline = write_pipeline(dir.path(), "[plan]\nuse = \"zigzag\"\nwidth = 0.5\n");
     let text = std::fs::read_to_string(&pipeline).expect("read");
     std::fs::write(&pipeline, format!("plugins = [\"zigzag.so\"]\n{text}")).expect("write");
     let out_dir = dir.path().join("out");
-    let out = lamina(&[
-        "run",
-        pipeline.to_str().expect("utf-8"),
-        "--out",
-        out_dir.to_str().expect("utf-8"),
-    ]);
+    let run = |extra: &[&str]| {
+        let mut args = vec![
+            "run",
+            pipeline.to_str().expect("utf-8"),
+            "--out",
+            out_dir.to_str().expect("utf-8"),
+        ];
+        args.extend(extra);
+        lamina(&args)
+    };
+    // The pipeline says it needs the library; it runs only when the command line loads
+    // it (a pipeline is data, and cannot make code run).
+    let refused = run(&[]);
+    assert_eq!(refused.status.code(), Some(2));
+    let err = String::from_utf8_lossy(&refused.stderr);
+    assert!(
+        err.contains("cannot load code by itself") && err.contains("--plugin"),
+        "{err}"
+    );
+    assert!(!out_dir.exists(), "a refused run wrote {}", out_dir.display());
+    let loaded = dir.path().join("zigzag.so");
+    let out = run(&["--plugin", loaded.to_str().expect("utf-8")]);
     let layers = plan_layers(&out, &out_dir);
     assert_eq!(layers.len(), 4);
     for layer in &layers {
@@ -349,10 +365,9 @@ fn an_endless_script_in_a_dynamic_plugin_is_stopped_within_a_second() {
     }
 }
 
-/// Builds the plugin crate outside the workspace, with its own lock file, into the
-/// workspace's target folder and profile: what both resolve alike is compiled once.
+/// Builds the plugin crate outside the workspace, with its own lock file.
 fn outside_library() -> PathBuf {
-    let status = cargo(
+    let status = cargo_outside(
         root(),
         &[
             "build",
@@ -365,7 +380,7 @@ fn outside_library() -> PathBuf {
     .status()
     .expect("cargo runs");
     assert!(status.success(), "building the outside plugin failed");
-    target_dir().join(profile_dir()).join(format!(
+    target_dir().join("debug").join(format!(
         "{}lamina_fixture_skewed{}",
         std::env::consts::DLL_PREFIX,
         std::env::consts::DLL_SUFFIX

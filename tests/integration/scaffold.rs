@@ -3,19 +3,19 @@
 //! and runs the pipeline the crate comes with. Every kind with a template is built and
 //! tested; the grader's output is checked against what its template computes.
 
-use crate::support::{self, lamina_in, profile_dir, root, target_dir};
+use crate::support::{self, lamina_in, root, target_dir};
 use std::path::{Path, PathBuf};
 
-/// Runs cargo in a scaffolded crate, in the workspace's target folder and profile, with
-/// the workspace's lock file: the crate resolves the releases Lamina is built and
-/// tested with (not whatever the registry holds today), and what it shares with the
-/// workspace is compiled once.
+/// Runs cargo in a scaffolded crate, with the workspace's lock file: the crate
+/// resolves the releases Lamina is built and tested with, not whatever the registry
+/// holds today. The crates scaffolded share one build folder, so their dependencies
+/// are compiled once.
 fn cargo(dir: &Path, args: &[&str]) {
     let lock = dir.join("Cargo.lock");
     if !lock.exists() {
         std::fs::copy(root().join("Cargo.lock"), &lock).expect("the workspace's lock file");
     }
-    let out = support::cargo(dir, args).output().expect("cargo runs");
+    let out = support::cargo_outside(dir, args).output().expect("cargo runs");
     assert!(
         out.status.success(),
         "cargo {args:?} in {}:\n{}\n{}",
@@ -26,7 +26,7 @@ fn cargo(dir: &Path, args: &[&str]) {
 }
 
 fn library(name: &str) -> PathBuf {
-    target_dir().join(profile_dir()).join(format!(
+    target_dir().join("debug").join(format!(
         "{}{}{}",
         std::env::consts::DLL_PREFIX,
         name.replace('-', "_"),

@@ -15,28 +15,36 @@ pub fn pipelines() -> PathBuf {
     root().join("pipelines")
 }
 
-/// `cargo <args>` in `dir`, for the builds the tests start themselves (plugin
-/// libraries, scaffolded crates): into the workspace's target folder, in the profile
-/// the tests were built with (`cargo test` builds in `test`, `cargo test --release` in
-/// `release`), so the workspace's own artifacts are found fresh instead of the tree
-/// being compiled again. `RUSTC_BOOTSTRAP` is not passed on: a runner may set it for
-/// libtest's per-test times (.ci/timed), and cargo rebuilds everything when it changes.
+/// `cargo <args>` in `dir` for the workspace's own crates (the plugin libraries the
+/// tests load): into the workspace's target folder, in the profile the tests were
+/// built with (`cargo test` builds in `test`, `cargo test --release` in `release`), so
+/// that the artifacts `cargo test` made are found fresh instead of the tree being
+/// compiled again.
 pub fn cargo(dir: &Path, args: &[&str]) -> Command {
+    let profile = if profile_dir() == "debug" {
+        "test"
+    } else {
+        profile_dir()
+    };
+    let mut command = cargo_outside(dir, args);
+    command.args(["--profile", profile]);
+    command
+}
+
+/// `cargo <args>` in `dir` for a crate outside the workspace (a scaffolded plugin, the
+/// skewed fixture): its own workspace and profiles, so nothing of the workspace's
+/// build is reused, and the quickest to compile (the default `dev` profile, in
+/// `target/debug`) serves best. `RUSTC_BOOTSTRAP` is not passed on: a runner may set
+/// it for libtest's per-test times (.ci/timed), and cargo rebuilds everything when it
+/// changes.
+pub fn cargo_outside(dir: &Path, args: &[&str]) -> Command {
     let mut command = Command::new(std::env::var("CARGO").unwrap_or_else(|_| "cargo".into()));
     command
         .current_dir(dir)
         .env_remove("RUSTC_BOOTSTRAP")
         .args(args)
         .arg("--target-dir")
-        .arg(target_dir())
-        .args([
-            "--profile",
-            if profile_dir() == "debug" {
-                "test"
-            } else {
-                profile_dir()
-            },
-        ]);
+        .arg(target_dir());
     command
 }
 
@@ -75,12 +83,15 @@ pub fn text(out: &[u8]) -> String {
     String::from_utf8_lossy(out).into_owned()
 }
 
-/// `lamina run --quiet --out <out> <pipeline> [extra]`, whatever its outcome.
+/// `lamina run --quiet --out <out> <pipeline> --allow <models> [extra]`, whatever its
+/// outcome: the pipeline may read the real models (`../shared/models`) too.
 pub fn try_run(pipeline: &Path, out: &Path, extra: &[&str]) -> Output {
     let mut args = vec!["run", "--quiet", "--out"];
     let out_str = out.to_str().expect("utf-8 path");
     let pipeline_str = pipeline.to_str().expect("utf-8 path");
     args.extend([out_str, pipeline_str]);
+    let allow = allow_models();
+    args.extend(allow.iter().map(String::as_str));
     args.extend(extra);
     lamina(&args)
 }
@@ -147,6 +158,15 @@ pub fn models_dir() -> Option<PathBuf> {
         skip(&format!("{} not found", dir.display()));
         None
     }
+}
+
+/// `--allow <models folder>`: a pipeline reads a model outside its own folder only where
+/// the command line allows (the folder need not exist).
+pub fn allow_models() -> [String; 2] {
+    let dir = std::env::var_os("LAMINA_MODELS")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| root().join("../shared/models"));
+    ["--allow".into(), dir.to_string_lossy().into_owned()]
 }
 
 /// A model of `models_dir()`, when it is there; otherwise the test skips (or fails).

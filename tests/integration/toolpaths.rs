@@ -122,6 +122,7 @@ fn run(pipeline: &Path, out: &Path) {
         .args(["run", "--quiet", "--out"])
         .arg(out)
         .arg(pipeline)
+        .args(crate::support::allow_models())
         .output()
         .expect("lamina runs");
     assert!(run.status.success(), "{}", String::from_utf8_lossy(&run.stderr));

@@ -38,14 +38,6 @@ impl Check<'_> {
         v.ok_or_else(|| self.err(path, format!("missing: {what}")))
     }
 
-    pub(super) fn positive(&self, v: f64, path: &str) -> Result<f64> {
-        if v.is_finite() && v > 0.0 {
-            Ok(v)
-        } else {
-            Err(self.err(path, format!("must be a positive number, not {v}")))
-        }
-    }
-
     pub(super) fn within(&self, v: f64, lo: f64, hi: f64, path: &str, unit: &str) -> Result<f64> {
         if v.is_finite() && (lo..=hi).contains(&v) {
             Ok(v)
@@ -54,10 +46,17 @@ impl Check<'_> {
         }
     }
 
-    pub(super) fn axes(&self, a: RawAxes, path: &str) -> Result<Axes> {
+    /// Per-axis values, each within `lo..=hi` (in `unit`).
+    pub(super) fn axes(&self, a: RawAxes, path: &str, lo: f64, hi: f64, unit: &str) -> Result<Axes> {
         let get = |v: Option<f64>, k: &str| -> Result<f64> {
             let p = format!("{path}.{k}");
-            self.positive(self.required(v, &p, "a value for every axis x, y, z, e")?, &p)
+            self.within(
+                self.required(v, &p, "a value for every axis x, y, z, e")?,
+                lo,
+                hi,
+                &p,
+                unit,
+            )
         };
         Ok(Axes {
             x: get(a.x, "x")?,

@@ -19,6 +19,7 @@ use super::validate::validate;
 use super::*;
 use crate::error::{Error, Result};
 use crate::pipeline::{PathElem, TableRef};
+use crate::reach::Reach;
 use crate::source::{Location, SourceFile};
 
 /// How deep `base` chains may go, which also stops cycles that change names.
@@ -33,11 +34,23 @@ pub enum MachineSpec {
     Inline(TableRef),
 }
 
+/// The built-in profile `name`, resolved and validated (it reads no file).
+pub fn builtin(name: &str) -> Result<Machine> {
+    let spec = MachineSpec::Named {
+        reference: name.to_string(),
+        at: None,
+    };
+    resolve(&spec, Path::new("."), &Reach::folder(Path::new(".")))
+}
+
 /// Reads, merges and validates the machine a pipeline names; relative paths resolve
-/// against `base_dir` (the pipeline's folder).
-pub fn resolve(spec: &MachineSpec, base_dir: &Path) -> Result<Machine> {
+/// against `base_dir` (the pipeline's folder), and profile files are read within
+/// `reach` only.
+pub fn resolve(spec: &MachineSpec, base_dir: &Path, reach: &Reach) -> Result<Machine> {
     let (top, at) = match spec {
-        MachineSpec::Named { reference, at } => (load_named(reference, base_dir, at.clone())?, at.clone()),
+        MachineSpec::Named { reference, at } => {
+            (load_named(reference, base_dir, reach, at.clone())?, at.clone())
+        }
         MachineSpec::Inline(table) => {
             let layer = inline_layer(table, base_dir)?;
             let at = layer.root.clone();
@@ -60,7 +73,7 @@ pub fn resolve(spec: &MachineSpec, base_dir: &Path) -> Result<Machine> {
                 format!("profiles extend each other more than {MAX_BASE_DEPTH} deep"),
             ));
         }
-        let next = load_named(reference, &last.dir, last.locations.get("base").cloned())?;
+        let next = load_named(reference, &last.dir, reach, last.locations.get("base").cloned())?;
         if layers.iter().any(|l| l.label == next.label) {
             return Err(last.error(
                 "base",
@@ -121,20 +134,17 @@ pub(super) fn config(location: Option<Location>, message: String) -> Error {
     }
 }
 
-/// A profile named by a string: a built-in name, or a `.toml` path relative to `dir`.
-fn load_named(reference: &str, dir: &Path, at: Option<Location>) -> Result<Layer> {
+/// A profile named by a string: a built-in name, or a `.toml` path relative to `dir`
+/// (within `reach`).
+fn load_named(reference: &str, dir: &Path, reach: &Reach, at: Option<Location>) -> Result<Layer> {
     let (file, dir, label) = if reference.ends_with(".toml") {
         let path = dir.join(reference);
-        let text = crate::source::read_regular(&path, crate::source::MAX_TEXT_BYTES)
-            .and_then(|b| {
-                String::from_utf8(b).map_err(|e| std::io::Error::new(std::io::ErrorKind::InvalidData, e))
-            })
-            .map_err(|e| {
-                config(
-                    at.clone(),
-                    format!("machine profile `{}` cannot be read: {e}", path.display()),
-                )
-            })?;
+        let text = reach.read_text(&path).map_err(|e| {
+            config(
+                at.clone(),
+                format!("machine profile `{}` cannot be read: {e}", path.display()),
+            )
+        })?;
         let label = path.display().to_string();
         let dir = path
             .parent()
@@ -298,6 +308,7 @@ mod tests {
                 at: None,
             },
             dir,
+            &Reach::folder(dir),
         )
     }
 

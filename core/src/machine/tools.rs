@@ -80,10 +80,19 @@ pub(super) fn tools(raw_tools: Option<Vec<RawTool>>, flavor: Flavor, c: &Check<'
                 format!("`{axis}` is not an axis letter (Y, V, ...)"),
             ));
         }
-        let envelope = t.envelope.map(|e| c.positive(e, &p("envelope"))).transpose()?;
+        let envelope = t
+            .envelope
+            .map(|e| c.within(e, 0.1, 1_000.0, &p("envelope"), "mm"))
+            .transpose()?;
+        let travel = super::validate::MAX_TRAVEL;
         let home = match t.home {
-            Some([x, y]) if x.is_finite() && y.is_finite() => Some([x, y]),
-            Some(_) => return Err(c.err(&p("home"), "must be two finite numbers [x, y] (mm)")),
+            Some([x, y]) if [x, y].iter().all(|v| v.abs() <= travel) => Some([x, y]),
+            Some(_) => {
+                return Err(c.err(
+                    &p("home"),
+                    format!("must be two numbers [x, y] within ±{travel} mm"),
+                ));
+            }
             None => None,
         };
         tools.push(ToolSlot {

@@ -9,6 +9,21 @@ use super::tools::{MAX_BED_TEMPERATURE, check_motion_systems, tools};
 use super::*;
 use crate::error::Result;
 
+// The physical ranges of a machine's motion: wider than any machine builds, narrow
+// enough that every value is a number the firmware reads (a speed of 5e-324 mm/s would
+// be written `F0`, one of 1e300 a word of 300 digits).
+
+/// Longest travel, bed side or height (mm).
+pub(super) const MAX_TRAVEL: f64 = 10_000.0;
+/// Slowest and fastest speed (mm/s).
+const MIN_SPEED: f64 = 0.01;
+const MAX_SPEED: f64 = 5_000.0;
+/// Largest jerk (mm/s).
+const MAX_JERK: f64 = 1_000.0;
+/// Smallest and largest acceleration (mm/s²).
+const MIN_ACCELERATION: f64 = 1.0;
+const MAX_ACCELERATION: f64 = 500_000.0;
+
 pub(super) fn validate(raw: RawMachine, c: &Check<'_>) -> Result<Machine> {
     let name = c.required(raw.name, "name", "the profile's name")?;
     if name.trim().is_empty() {
@@ -43,12 +58,12 @@ pub(super) fn validate(raw: RawMachine, c: &Check<'_>) -> Result<Machine> {
             ));
         }
         (Some(RawShape::Rectangle) | None, Some(size), None) => {
-            c.positive(size[0], "bed.size")?;
-            c.positive(size[1], "bed.size")?;
+            c.within(size[0], 1.0, MAX_TRAVEL, "bed.size", "mm")?;
+            c.within(size[1], 1.0, MAX_TRAVEL, "bed.size", "mm")?;
             BedShape::Rectangle { size }
         }
         (Some(RawShape::Circle) | None, None, Some(d)) => BedShape::Circle {
-            diameter: c.positive(d, "bed.diameter")?,
+            diameter: c.within(d, 1.0, MAX_TRAVEL, "bed.diameter", "mm")?,
         },
         (_, None, None) => {
             return Err(c.err(
@@ -61,13 +76,16 @@ pub(super) fn validate(raw: RawMachine, c: &Check<'_>) -> Result<Machine> {
         BedShape::Rectangle { .. } => BedOrigin::FrontLeft,
         BedShape::Circle { .. } => BedOrigin::Centre,
     });
-    let max_height = c.positive(
+    let max_height = c.within(
         c.required(
             raw_bed.max_height,
             "bed.max_height",
             "how high the machine builds (mm)",
         )?,
+        1.0,
+        MAX_TRAVEL,
         "bed.max_height",
+        "mm",
     )?;
     let bed = Bed {
         shape,
@@ -148,7 +166,9 @@ pub(super) fn validate(raw: RawMachine, c: &Check<'_>) -> Result<Machine> {
             (Some(_), Some(_)) => {
                 return Err(c.err("first_layer", "give `speed` (mm/s) or `speed_factor`, not both"));
             }
-            (Some(s), None) => FirstLayerSpeed::Speed(c.positive(s, "first_layer.speed")?),
+            (Some(s), None) => {
+                FirstLayerSpeed::Speed(c.within(s, MIN_SPEED, MAX_SPEED, "first_layer.speed", "mm/s")?)
+            }
             (None, Some(f)) => {
                 FirstLayerSpeed::Factor(c.within(f, 0.05, 1.0, "first_layer.speed_factor", "")?)
             }
@@ -172,7 +192,13 @@ pub(super) fn validate(raw: RawMachine, c: &Check<'_>) -> Result<Machine> {
             "retraction.tool_change_length",
             "mm",
         )?,
-        speed: c.positive(raw_retraction.speed.unwrap_or(35.0), "retraction.speed")?,
+        speed: c.within(
+            raw_retraction.speed.unwrap_or(35.0),
+            MIN_SPEED,
+            MAX_SPEED,
+            "retraction.speed",
+            "mm/s",
+        )?,
         z_hop: c.within(
             raw_retraction.z_hop.unwrap_or(0.0),
             0.0,
@@ -181,14 +207,21 @@ pub(super) fn validate(raw: RawMachine, c: &Check<'_>) -> Result<Machine> {
             "mm",
         )?,
     };
-    let travel_speed = c.positive(raw.travel_speed.unwrap_or(150.0), "travel_speed")?;
+    let travel_speed = c.within(
+        raw.travel_speed.unwrap_or(150.0),
+        MIN_SPEED,
+        MAX_SPEED,
+        "travel_speed",
+        "mm/s",
+    )?;
 
     let raw_motion = c.required(
         raw.motion,
         "motion",
         "the [motion] table (accelerations, junction_deviation or jerk)",
     )?;
-    let print_acceleration = c.positive(
+    let acceleration = |v: f64, key: &str| c.within(v, MIN_ACCELERATION, MAX_ACCELERATION, key, "mm/s²");
+    let print_acceleration = acceleration(
         c.required(
             raw_motion.print_acceleration,
             "motion.print_acceleration",
@@ -209,7 +242,7 @@ pub(super) fn validate(raw: RawMachine, c: &Check<'_>) -> Result<Machine> {
         (Some(jd), None) => {
             Cornering::JunctionDeviation(c.within(jd, 0.001, 1.0, "motion.junction_deviation", "mm")?)
         }
-        (None, Some(j)) => Cornering::Jerk(c.axes(j, "motion.jerk")?),
+        (None, Some(j)) => Cornering::Jerk(c.axes(j, "motion.jerk", MIN_SPEED, MAX_JERK, "mm/s")?),
         (None, None) => {
             return Err(c.err(
                 "motion.junction_deviation",
@@ -219,22 +252,30 @@ pub(super) fn validate(raw: RawMachine, c: &Check<'_>) -> Result<Machine> {
     };
     let motion = Motion {
         print_acceleration,
-        travel_acceleration: c.positive(
+        travel_acceleration: acceleration(
             raw_motion.travel_acceleration.unwrap_or(print_acceleration),
             "motion.travel_acceleration",
         )?,
-        retract_acceleration: c.positive(
+        retract_acceleration: acceleration(
             raw_motion.retract_acceleration.unwrap_or(print_acceleration),
             "motion.retract_acceleration",
         )?,
         cornering,
         max_speed: raw_motion
             .max_speed
-            .map(|a| c.axes(a, "motion.max_speed"))
+            .map(|a| c.axes(a, "motion.max_speed", MIN_SPEED, MAX_SPEED, "mm/s"))
             .transpose()?,
         max_acceleration: raw_motion
             .max_acceleration
-            .map(|a| c.axes(a, "motion.max_acceleration"))
+            .map(|a| {
+                c.axes(
+                    a,
+                    "motion.max_acceleration",
+                    MIN_ACCELERATION,
+                    MAX_ACCELERATION,
+                    "mm/s²",
+                )
+            })
             .transpose()?,
     };
 
@@ -271,9 +312,12 @@ pub(super) fn validate(raw: RawMachine, c: &Check<'_>) -> Result<Machine> {
             ));
         }
         Some(Switch::Table(p)) => Some(PrimeLine {
-            length: c.positive(
+            length: c.within(
                 c.required(p.length, "prime_line.length", "mm")?,
+                1.0,
+                MAX_TRAVEL,
                 "prime_line.length",
+                "mm",
             )?,
             width: c.within(
                 p.width.unwrap_or(nozzle_diameter * 1.5),

@@ -20,6 +20,7 @@ use crate::limits::Limits;
 use crate::machine::Machine;
 use crate::machine::load::MachineSpec;
 use crate::model::Material;
+use crate::reach::Reach;
 use crate::source::{Location, SourceFile, Span};
 use crate::stage::StageKind;
 
@@ -50,8 +51,8 @@ struct RawPipeline {
     description: Option<String>,
     #[serde(default)]
     plugins: Vec<String>,
-    #[serde(default)]
-    script_dirs: Vec<String>,
+    /// Refused: the command line's `--allow` widens where scripts are read.
+    script_dirs: Option<toml::Value>,
     model: Option<toml::Table>,
     machine: Option<toml::Value>,
     #[serde(default)]
@@ -177,10 +178,13 @@ pub struct Pipeline {
     /// Folder of the pipeline file; relative paths resolve against it.
     pub base_dir: PathBuf,
     pub name: String,
-    /// Dynamic plugin libraries to load, resolved against `base_dir`.
+    /// Where the files the pipeline names may be read from: its folder, and what the
+    /// command line allows besides (never what the pipeline says).
+    pub reach: Reach,
+    /// Dynamic plugin libraries the pipeline needs, resolved against `base_dir`: a
+    /// declaration only, since a pipeline alone cannot make code run. The command line
+    /// loads them (`--plugin`), and a run without them is refused.
     pub plugins: Vec<PathBuf>,
-    /// Folders besides `base_dir` whose Rhai scripts the pipeline may use.
-    pub script_dirs: Vec<PathBuf>,
     pub model: Option<ModelSpec>,
     pub materials: Vec<Material>,
     pub parts: Vec<PartSpec>,
@@ -201,23 +205,48 @@ impl Pipeline {
     pub fn context(&self) -> crate::stage::PipelineContext<'_> {
         crate::stage::PipelineContext {
             machine: self.machine.as_ref(),
+            reach: Some(&self.reach),
             limits: self.limits,
         }
     }
 
-    /// Reads and parses a pipeline file, applying `--set` overrides.
+    /// Reads and parses a pipeline file, applying `--set` overrides; the files it names
+    /// are read from its own folder only.
     pub fn load(path: &Path, overrides: &[Override]) -> Result<Pipeline> {
+        Self::load_allowing(path, overrides, &[] as &[PathBuf])
+    }
+
+    /// [`load`](Self::load), the files it names read from its folder and `allowed`
+    /// (folders or files the command line names).
+    pub fn load_allowing(
+        path: &Path,
+        overrides: &[Override],
+        allowed: &[impl AsRef<Path>],
+    ) -> Result<Pipeline> {
         let file = SourceFile::read(path)?;
         let base_dir = path
             .parent()
             .map(Path::to_path_buf)
             .filter(|p| !p.as_os_str().is_empty())
             .unwrap_or_else(|| PathBuf::from("."));
-        Self::parse(file, base_dir, overrides)
+        let reach = Reach::folder(&base_dir).with(allowed);
+        Self::parse_within(file, base_dir, reach, overrides)
     }
 
-    /// Parses pipeline text; `base_dir` resolves relative paths.
+    /// Parses pipeline text; `base_dir` resolves relative paths, and the files named are
+    /// read from it only.
     pub fn parse(file: Arc<SourceFile>, base_dir: PathBuf, overrides: &[Override]) -> Result<Pipeline> {
+        let reach = Reach::folder(&base_dir);
+        Self::parse_within(file, base_dir, reach, overrides)
+    }
+
+    /// [`parse`](Self::parse), the files named read within `reach`.
+    pub fn parse_within(
+        file: Arc<SourceFile>,
+        base_dir: PathBuf,
+        reach: Reach,
+        overrides: &[Override],
+    ) -> Result<Pipeline> {
         let doc: toml::Table = toml::from_str(&file.text).map_err(|e| toml_error(&file, &e))?;
         let mut root = toml::Value::Table(doc);
         for o in overrides {
@@ -235,6 +264,16 @@ impl Pipeline {
         };
         let root_ref = table_ref(Vec::new(), doc.clone()).with_host_keys(&[]);
         let raw: RawPipeline = root_ref.parse()?;
+        if raw.script_dirs.is_some() {
+            return Err(root_ref
+                .error_at(
+                    "script_dirs",
+                    "a pipeline cannot widen the folders its scripts are read from",
+                )
+                .with_help(
+                    "keep the scripts beside the pipeline, or name their folder on the command line with `--allow <folder>`",
+                ));
+        }
 
         let model = match raw.model {
             Some(t) => {
@@ -265,7 +304,7 @@ impl Pipeline {
                             .with_help(format!("built-in profiles: {}", crate::machine::builtin::names())));
                     }
                 };
-                Some(crate::machine::resolve(&spec, &base_dir)?)
+                Some(crate::machine::resolve(&spec, &base_dir, &reach)?)
             }
         };
 
@@ -405,7 +444,6 @@ impl Pipeline {
                 .unwrap_or_else(|| "pipeline".into())
         });
         let plugins = raw.plugins.iter().map(|p| base_dir.join(p)).collect();
-        let script_dirs = raw.script_dirs.iter().map(|p| base_dir.join(p)).collect();
         let limits = match raw.limits {
             Some(t) => table_ref(vec![key("limits")], t).with_host_keys(&[]).parse()?,
             None => Limits::default(),
@@ -413,9 +451,9 @@ impl Pipeline {
         Ok(Pipeline {
             file,
             base_dir,
+            reach,
             name,
             plugins,
-            script_dirs,
             model,
             materials,
             parts,

@@ -404,6 +404,7 @@ fn handle(request: Request<'static>) -> Result<Response> {
                 table: &table,
                 scripts: &scripts,
                 base_dir: &config.base_dir,
+                reach: &config.reach,
                 machine: machine.as_ref(),
                 limits: config.limits,
             };

@@ -2,7 +2,7 @@
 //! declares; one model source per model table; the checks that need several stages at
 //! once (a part with several materials needs a grader).
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 use super::RunOptions;
 use crate::error::{Error, Result};
@@ -171,12 +171,36 @@ fn kept<T>(errors: &mut Vec<Error>, r: Result<T>) -> Option<T> {
 impl Engine {
     /// Loads plugins and builds every stage of `pipeline`. Scripts are compiled here, so
     /// a pipeline that builds is a pipeline whose configuration is valid.
-    pub fn build(pipeline: Pipeline, mut registry: Registry, options: &RunOptions) -> Result<Engine> {
-        for path in pipeline.plugins.iter().chain(&options.plugins) {
+    pub fn build(mut pipeline: Pipeline, mut registry: Registry, options: &RunOptions) -> Result<Engine> {
+        for path in &options.plugins {
             crate::plugin::load(&mut registry, path)?;
         }
-        let scripts = ScriptHost::new(&pipeline.base_dir, options.script_limits)
-            .with_script_dirs(pipeline.script_dirs.clone());
+        // A pipeline file is data: the libraries it lists run only when the caller
+        // loads them (the command line's `--plugin`).
+        for path in &pipeline.plugins {
+            let same = |p: &PathBuf| match (p.canonicalize(), path.canonicalize()) {
+                (Ok(a), Ok(b)) => a == b,
+                _ => p == path,
+            };
+            if !options.plugins.iter().any(same) {
+                return Err(Error::config(format!(
+                    "{}: `plugins` lists {}, which was not loaded: a pipeline cannot load code by itself",
+                    pipeline.file.path.display(),
+                    path.display()
+                ))
+                .with_help(format!(
+                    "load it on the command line: --plugin {}",
+                    path.display()
+                )));
+            }
+        }
+        // The model file the caller names replaces the pipeline's, and is read wherever
+        // it is.
+        if let Some(model) = &options.model {
+            pipeline.reach.allow(model);
+        }
+        let scripts =
+            ScriptHost::new(&pipeline.base_dir, options.script_limits).with_reach(pipeline.reach.clone());
         let base = pipeline.base_dir.clone();
 
         if options.model.is_some() && pipeline.parts.len() > 1 {

@@ -10,6 +10,7 @@ use rhai::{AST, CallFnOptions, Dynamic, Engine, EvalAltResult, FLOAT, INT, Posit
 
 use crate::error::{Error, Result};
 use crate::model::COMPOSITION_TOLERANCE;
+use crate::reach::Reach;
 use crate::source::{Location, SourceFile};
 
 use super::stop::*;
@@ -20,12 +21,18 @@ use super::*;
 pub(super) struct LocalHost {
     engine: Arc<Engine>,
     base_dir: PathBuf,
-    /// Folders besides `base_dir` whose scripts may be read (the pipeline's
-    /// `script_dirs`).
-    script_dirs: Vec<PathBuf>,
+    /// Where script files may be read from (the pipeline's reach).
+    reach: Reach,
     time_limit: Duration,
     max_functions: usize,
+    /// Script files compiled so far, by their real path: a file that several parts or
+    /// stages name is read and compiled once (compiling is the costly part of a large
+    /// script).
+    compiled: Arc<std::sync::Mutex<std::collections::HashMap<PathBuf, Compiled>>>,
 }
+
+/// A compiled script file.
+type Compiled = (Arc<SourceFile>, Arc<AST>);
 
 /// Largest script file read (bytes).
 pub const MAX_SCRIPT_BYTES: u64 = 1 << 20;
@@ -48,6 +55,7 @@ fn num(v: Dynamic, what: &str) -> std::result::Result<f64, Box<EvalAltResult>> {
 
 impl LocalHost {
     pub(super) fn new(base_dir: impl Into<PathBuf>, limits: ScriptLimits) -> Self {
+        let base_dir = base_dir.into();
         let mut engine = Engine::new();
         engine
             .set_max_operations(limits.max_operations)
@@ -154,44 +162,65 @@ impl LocalHost {
         });
         Self {
             engine: Arc::new(engine),
-            base_dir: base_dir.into(),
-            script_dirs: Vec::new(),
+            reach: Reach::folder(&base_dir),
+            base_dir,
             time_limit: limits.time_limit,
             max_functions: limits.max_functions,
+            compiled: Default::default(),
         }
     }
 
-    pub(super) fn with_script_dirs(mut self, dirs: Vec<PathBuf>) -> Self {
-        self.script_dirs = dirs;
+    pub(super) fn with_reach(mut self, reach: Reach) -> Self {
+        self.reach = reach;
         self
     }
 
-    /// Refuses a script file outside the pipeline's folder and its `script_dirs` (after
-    /// following links: a `.rhai` link to a system file must not be read, and its
-    /// lines must not be quoted in an error) or larger than [`MAX_SCRIPT_BYTES`].
-    fn check_script_path(&self, path: &Path) -> std::result::Result<(), String> {
-        let real = path
-            .canonicalize()
-            .map_err(|e| format!("cannot read script {}: {e}", path.display()))?;
-        let inside = std::iter::once(&self.base_dir)
-            .chain(&self.script_dirs)
-            .filter_map(|d| d.canonicalize().ok())
-            .any(|d| real.starts_with(d));
-        if !inside {
-            return Err(format!(
-                "script {} lies outside the pipeline's folder {}: list its folder in the pipeline's `script_dirs` to allow it",
+    /// Refuses a script file outside the pipeline's reach (after following links: a
+    /// `.rhai` link to a system file must not be read, and its lines must not be
+    /// quoted in an error); its real path otherwise.
+    fn check_script_path(&self, path: &Path) -> std::result::Result<PathBuf, String> {
+        self.reach
+            .check(path)
+            .map_err(|e| format!("cannot read script {}: {e}", path.display()))
+    }
+
+    /// Reads (at most [`MAX_SCRIPT_BYTES`]) and compiles the script at `real`, named
+    /// `path` in messages, or finds it compiled already.
+    fn compiled(&self, path: &Path, real: PathBuf, at: &dyn Fn(String) -> Error) -> Result<Compiled> {
+        let cache = || {
+            self.compiled
+                .lock()
+                .unwrap_or_else(std::sync::PoisonError::into_inner)
+        };
+        if let Some(done) = cache().get(&real) {
+            return Ok(done.clone());
+        }
+        let bytes = crate::source::read_regular(&real, MAX_SCRIPT_BYTES)
+            .map_err(|e| at(format!("cannot read script {}: {e}", path.display())))?;
+        let text = String::from_utf8(bytes)
+            .map_err(|e| at(format!("cannot read script {}: {e}", path.display())))?;
+        let source = SourceFile::new(path, text);
+        // Rhai's parser slows down with the square of the number of functions.
+        let functions = source.text.split_whitespace().filter(|w| *w == "fn").count();
+        if functions > self.max_functions {
+            return Err(at(format!(
+                "{} defines {functions} functions, more than the {} a grading script may have",
                 path.display(),
-                self.base_dir.display()
-            ));
+                self.max_functions
+            )));
         }
-        let size = std::fs::metadata(&real).map(|m| m.len()).unwrap_or(0);
-        if size > MAX_SCRIPT_BYTES {
-            return Err(format!(
-                "script {} has {size} bytes, more than the {MAX_SCRIPT_BYTES} a grading script may have",
-                path.display()
-            ));
-        }
-        Ok(())
+        let ast = self.engine.compile(&source.text).map_err(|e| {
+            script_error(
+                &source,
+                None,
+                e.position(),
+                format!("does not compile: {}", e.err_type()),
+                None,
+            )
+        })?;
+        let done = (source, Arc::new(ast));
+        cache().insert(real, done.clone());
+        Ok(done)
     }
 
     pub(super) fn compile(&self, spec: &str, origin: Option<Location>) -> Result<LocalFn> {
@@ -242,29 +271,8 @@ impl LocalHost {
             Some(o) => Error::config_at(o, message),
             None => Error::config(message),
         };
-        self.check_script_path(path).map_err(at)?;
-        let source = SourceFile::read(path).map_err(|e| match origin.clone() {
-            Some(o) => Error::config_at(o, format!("cannot read script: {e}")),
-            None => e,
-        })?;
-        // Rhai's parser slows down with the square of the number of functions.
-        let functions = source.text.split_whitespace().filter(|w| *w == "fn").count();
-        if functions > self.max_functions {
-            return Err(at(format!(
-                "{} defines {functions} functions, more than the {} a grading script may have",
-                path.display(),
-                self.max_functions
-            )));
-        }
-        let ast = self.engine.compile(&source.text).map_err(|e| {
-            script_error(
-                &source,
-                None,
-                e.position(),
-                format!("does not compile: {}", e.err_type()),
-                None,
-            )
-        })?;
+        let real = self.check_script_path(path).map_err(at)?;
+        let (source, ast) = self.compiled(path, real, &at)?;
         let meta = ast.iter_functions().find(|f| f.name == name).ok_or_else(|| {
             // Sorted: the AST keeps its functions in a hash map.
             let mut names: Vec<_> = ast.iter_functions().map(|f| f.name.to_string()).collect();
@@ -297,7 +305,7 @@ impl LocalHost {
         Ok(LocalFn {
             engine: self.engine.clone(),
             time_limit: self.time_limit,
-            ast: Arc::new(ast),
+            ast,
             function: Some((name.to_string(), params)),
             source,
             base: None,

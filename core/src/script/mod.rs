@@ -12,6 +12,7 @@ mod stop;
 
 pub use stop::CountingAllocator;
 
+use crate::reach::Reach;
 use local::{LocalFn, LocalHost};
 
 use std::path::PathBuf;
@@ -112,10 +113,10 @@ impl ScriptHost {
         Self(HostKind::Remote)
     }
 
-    /// Also lets scripts be read from these folders (the pipeline's `script_dirs`).
-    pub fn with_script_dirs(self, dirs: Vec<PathBuf>) -> Self {
+    /// Reads script files within `reach` (by default, the base folder only).
+    pub fn with_reach(self, reach: Reach) -> Self {
         match self.0 {
-            HostKind::Local(host) => Self(HostKind::Local(host.with_script_dirs(dirs))),
+            HostKind::Local(host) => Self(HostKind::Local(host.with_reach(reach))),
             remote => Self(remote),
         }
     }
@@ -173,7 +174,7 @@ mod tests {
     use super::*;
 
     fn host() -> LocalHost {
-        LocalHost::new(".", ScriptLimits::default()).with_script_dirs(vec![std::env::temp_dir()])
+        LocalHost::new(".", ScriptLimits::default()).with_reach(Reach::folder(&std::env::temp_dir()))
     }
 
     #[test]

@@ -6,28 +6,19 @@
 //! of the moves.
 
 use std::collections::BTreeMap;
-use std::path::Path;
 
 mod support;
 
 use lamina_test_support::Rng;
 use support::{export, layer_plan, run_info};
 
-use lamina_core::machine::load::MachineSpec;
 use lamina_core::machine::{BedPlacement, Machine};
 use lamina_core::{
     BBox2, Composition, LayerPlan, PathKind, Point2, Registry, RunInfo, StageKind, TimedPoint, Toolpath,
 };
 
 fn machine(name: &str) -> Machine {
-    lamina_core::machine::resolve(
-        &MachineSpec::Named {
-            reference: name.into(),
-            at: None,
-        },
-        Path::new("."),
-    )
-    .expect("built-in profile")
+    lamina_core::machine::load::builtin(name).expect("built-in profile")
 }
 
 const PROFILES: [&str; 3] = ["marlin-mixing-2in1", "marlin-toolchanger-2", "rrf-idex-2"];

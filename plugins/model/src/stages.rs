@@ -12,6 +12,9 @@ use crate::extrude::extrude;
 use crate::profile::{GearProfile, polygon};
 use crate::weld::{Soup, weld};
 
+/// Largest `weld` (mm).
+const MAX_WELD: f64 = 1.0;
+
 const WELD: SharedOption = SharedOption::new("1e-5", "vertices closer than this (mm) are merged");
 
 // ---------------------------------------------------------------- file readers
@@ -97,20 +100,25 @@ impl FileSource {
 
 fn build_file(config: &StageConfig<'_>, format: Format) -> Result<AnyStage> {
     let o: FileOptions = config.parse()?;
-    if !(o.weld.is_finite() && o.weld >= 0.0) {
-        return Err(config.error("weld", "must be a non-negative number of mm"));
+    // Welding merges corners closer than this; a millimetre would already close the
+    // gaps a part is made of.
+    if !(o.weld.is_finite() && (0.0..=MAX_WELD).contains(&o.weld)) {
+        return Err(config.error(
+            "weld",
+            format!("must lie in [0, {MAX_WELD}] mm (0 merges only equal corners)"),
+        ));
     }
     // What `run` will read, `check` finds readable: a missing or unreadable model is
     // said before anything runs.
     // A device or a FIFO is refused before it is opened (opening a FIFO waits for a
     // writer).
+    // A pipeline reads models within its reach only (its folder, and what the command
+    // line allows), links followed.
     let path = config.base_dir.join(&o.file);
-    if let Err(e) = lamina_core::source::regular_file(&path) {
-        return Err(config.error("file", format!("cannot read `{}`: {e}", path.display())));
-    }
-    if let Err(e) = std::fs::File::open(&path) {
-        return Err(config.error("file", format!("cannot read `{}`: {e}", path.display())));
-    }
+    let cannot = |e: std::io::Error| config.error("file", format!("cannot read `{}`: {e}", path.display()));
+    let real = config.reach.check(&path).map_err(cannot)?;
+    lamina_core::source::regular_file(&real).map_err(cannot)?;
+    std::fs::File::open(&real).map_err(cannot)?;
     Ok(AnyStage::Model(Box::new(FileSource {
         file: o.file,
         weld: o.weld,
@@ -170,11 +178,15 @@ fn positive(config: &StageConfig<'_>, key: &str, v: f64) -> Result<()> {
     }
 }
 
+/// Most sides of a generated circle: 4096 keep a 10 mm radius within 3 nm of the
+/// circle, and every stage after pays for each side on every layer.
+const MAX_SEGMENTS: usize = 4096;
+
 fn segments_ok(config: &StageConfig<'_>, v: usize) -> Result<()> {
-    if (3..=100_000).contains(&v) {
+    if (3..=MAX_SEGMENTS).contains(&v) {
         Ok(())
     } else {
-        Err(config.error("segments", "must lie in 3..=100000"))
+        Err(config.error("segments", format!("must lie in 3..={MAX_SEGMENTS}")))
     }
 }
 

@@ -242,21 +242,27 @@ impl Grid {
 
     fn key(self, p: &Point3) -> [i64; 3] {
         if self.inv > 0.0 {
-            [
-                round(p.x * self.inv),
-                round(p.y * self.inv),
-                round(p.z * self.inv),
-            ]
-        } else {
-            [p.x.to_bits() as i64, p.y.to_bits() as i64, p.z.to_bits() as i64]
+            let cell = [p.x * self.inv, p.y * self.inv, p.z * self.inv];
+            // A cell finer than the coordinates' own spacing (past 2^52 cells from the
+            // origin) merges nothing that exact equality does not, and past i64 it would
+            // merge everything beyond into one corner (a weld of 1e-18 mm made slivers
+            // of most of a boat). Such a corner is keyed by its exact coordinates: at
+            // least one component is then a float's bits beyond 2^52, which no cell
+            // reaches, so the two kinds of key never meet.
+            if cell.iter().all(|c| c.abs() < EXACT) {
+                return cell.map(round);
+            }
         }
+        [p.x.to_bits() as i64, p.y.to_bits() as i64, p.z.to_bits() as i64]
     }
 }
+
+/// 2^52: from here on every f64 is whole.
+const EXACT: f64 = 4_503_599_627_370_496.0;
 
 /// `x.round() as i64` (half away from zero, saturating) without the call into libm that
 /// `f64::round` makes on baseline x86-64; welding rounds three times per corner.
 fn round(x: f64) -> i64 {
-    const EXACT: f64 = 4_503_599_627_370_496.0; // 2^52: from here on every f64 is whole
     if x.abs() < EXACT {
         let t = x as i64;
         // Exact: `t` is `x` without its fraction. The fraction is as likely to round
@@ -298,6 +304,27 @@ mod tests {
         assert_eq!(mesh.triangles.len(), 2);
         assert_eq!(report.degenerate, 1);
         assert_eq!(mesh.warnings.len(), 1);
+    }
+
+    #[test]
+    fn a_weld_finer_than_the_coordinates_merges_only_equal_corners() {
+        // Corners tens of millimetres out, so that a cell of 1e-18 mm would number
+        // past i64 (and saturate into one) if it were used.
+        let p = |x: f64, y: f64, z: f64| Point3::new(x, y, z);
+        let mut triangles = Vec::new();
+        for i in 0..50 {
+            let x = 20.0 + i as f64 * 0.5;
+            triangles.push([p(x, 30.0, 5.0), p(x + 0.5, 30.0, 5.0), p(x, 31.0, 5.0)]);
+            triangles.push([p(x + 0.5, 30.0, 5.0), p(x + 0.5, 31.0, 5.0), p(x, 31.0, 5.0)]);
+        }
+        let soup = Soup { triangles };
+        let (exact, _) = weld("t", &soup, 0.0);
+        for tolerance in [1e-18, 1e-30, f64::MIN_POSITIVE] {
+            let (mesh, report) = weld("t", &soup, tolerance);
+            assert_eq!(mesh.triangles.len(), 100, "{tolerance}");
+            assert_eq!(mesh.vertices.len(), exact.vertices.len(), "{tolerance}");
+            assert_eq!(report.degenerate, 0, "{tolerance}");
+        }
     }
 
     #[test]

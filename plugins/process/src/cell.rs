@@ -15,6 +15,7 @@
 //! cell lacks, of another kind or size, run beyond its limits, or a path outside the
 //! travel would be refused by the machine, so the run is refused.
 
+use lamina_core::reach::Reach;
 use std::collections::BTreeMap;
 use std::path::Path;
 
@@ -305,25 +306,20 @@ fn placeholders(key: &str, lines: &Lines, allowed: &[&str]) -> std::result::Resu
 }
 
 impl Cell {
-    /// A built-in cell by name, or a file (relative to `base_dir`).
-    pub fn load(reference: &str, base_dir: &Path) -> std::result::Result<Cell, String> {
+    /// A built-in cell by name, or a file (relative to `base_dir`, read within `reach`).
+    pub fn load(reference: &str, base_dir: &Path, reach: &Reach) -> std::result::Result<Cell, String> {
         let (origin, text) = match BUILT_IN.iter().find(|(n, _)| *n == reference) {
             Some((n, text)) => (format!("built-in cell `{n}`"), (*text).to_string()),
             None => {
                 let path = base_dir.join(reference);
                 let names: Vec<&str> = BUILT_IN.iter().map(|(n, _)| *n).collect();
-                let text = lamina_core::source::read_regular(&path, lamina_core::source::MAX_TEXT_BYTES)
-                    .and_then(|b| {
-                        String::from_utf8(b)
-                            .map_err(|e| std::io::Error::new(std::io::ErrorKind::InvalidData, e))
-                    })
-                    .map_err(|e| {
-                        format!(
-                            "`{reference}` is no built-in cell ({}) and {} cannot be read: {e}",
-                            names.join(", "),
-                            path.display()
-                        )
-                    })?;
+                let text = reach.read_text(&path).map_err(|e| {
+                    format!(
+                        "`{reference}` is no built-in cell ({}) and {} cannot be read: {e}",
+                        names.join(", "),
+                        path.display()
+                    )
+                })?;
                 (path.display().to_string(), text)
             }
         };
@@ -563,11 +559,12 @@ mod tests {
     #[test]
     fn every_built_in_cell_loads() {
         for (name, _) in BUILT_IN {
-            let c = Cell::load(name, Path::new(".")).expect("loads");
+            let c = Cell::load(name, Path::new("."), &Reach::anywhere()).expect("loads");
             assert_eq!(&c.name, name);
             assert!(!c.tools.is_empty());
         }
-        let err = Cell::load("nowhere.toml", Path::new(".")).expect_err("no file");
+        let err =
+            Cell::load("nowhere.toml", Path::new("."), &Reach::folder(Path::new("."))).expect_err("no file");
         assert!(err.contains("no built-in cell (cmpm-hybrid"), "{err}");
     }
 

@@ -128,6 +128,7 @@ pub(crate) fn build(
         config: WireConfig {
             table: config.table.to_wire()?,
             base_dir: Cow::Borrowed(config.base_dir),
+            reach: Cow::Borrowed(config.reach),
             machine: config.machine.map(Cow::Borrowed),
             limits: config.limits,
         },

@@ -223,6 +223,7 @@ pub struct WireMesh {
 pub struct WireConfig<'a> {
     pub table: WireTable<'a>,
     pub base_dir: Cow<'a, Path>,
+    pub reach: Cow<'a, crate::reach::Reach>,
     pub machine: Option<Cow<'a, Machine>>,
     pub limits: Limits,
 }
@@ -362,18 +363,13 @@ mod tests {
     use super::*;
     use crate::error::Error;
     use crate::limits::Limit;
-    use crate::machine::load::MachineSpec;
     use crate::source::Location;
 
     /// Every built-in machine travels in a run's facts and reads back the same.
     #[test]
     fn run_facts_with_every_built_in_machine_read_back_the_same() {
         for profile in crate::machine::builtin::PROFILES {
-            let spec = MachineSpec::Named {
-                reference: profile.name.to_string(),
-                at: None,
-            };
-            let machine = crate::machine::resolve(&spec, Path::new(".")).expect("built-in profile");
+            let machine = crate::machine::load::builtin(profile.name).expect("built-in profile");
             let info = RunInfo {
                 base_dir: PathBuf::from("/p"),
                 materials: Vec::new(),

@@ -599,7 +599,7 @@ fn build(config: &StageConfig<'_>) -> Result<AnyStage> {
             ));
         }
         (
-            Cell::load(&options.cell, config.base_dir).map_err(|m| config.error("cell", m))?,
+            Cell::load(&options.cell, config.base_dir, config.reach).map_err(|m| config.error("cell", m))?,
             true,
         )
     };

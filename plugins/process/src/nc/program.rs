@@ -523,7 +523,14 @@ mod tests {
     use super::*;
 
     fn program(cell: &str) -> Program {
-        Program::new(Cell::load(cell, std::path::Path::new(".")).expect("cell"))
+        Program::new(
+            Cell::load(
+                cell,
+                std::path::Path::new("."),
+                &lamina_core::reach::Reach::anywhere(),
+            )
+            .expect("cell"),
+        )
     }
 
     #[test]
