@@ -6,7 +6,7 @@ cd "$(dirname "$0")"
 lamina="${LAMINA:-../target/release/lamina}"
 [ -x "$lamina" ] || (cd .. && cargo build --release --quiet --bin lamina)
 c=corpus
-mkdir -p $c/stl $c/obj $c/threemf $c/pipeline $c/script $c/pipeline_values $c/cli_roundtrip $c/plugin_messages
+mkdir -p $c/stl $c/obj $c/threemf $c/threemf_components $c/pipeline $c/machine $c/script $c/pipeline_values $c/cli_roundtrip $c/plugin_messages
 # The plugin boundary's messages: a sample of each direction, written by a unit test.
 (cd .. && LAMINA_FUZZ_CORPUS="$PWD/fuzz/$c/plugin_messages" cargo test --quiet -p lamina-core --lib sample_messages_read_back >/dev/null)
 for ext in stl obj 3mf; do
@@ -38,6 +38,9 @@ STL
 printf 'solid lying\n' > $c/stl/empty-ascii.stl
 printf 'v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\no a\nf 1 3 2\nf 1 2 4\nf 2 3 4\nf 1 4 3\nvt 0 0\nf -1/1 -2/1 -3/1\n' > $c/obj/negative.obj
 cp ../pipelines/*.toml $c/pipeline/
+# The shipped machine profiles, and one that starts from a built-in profile.
+cp ../profiles/*.toml $c/machine/
+printf 'base = "marlin-mixing-2in1"\nname = "mine"\n[bed]\nmax_height = 100.0\n' > $c/machine/based.toml
 printf '[model]\nuse = "cube"\n[materials.a]\ncolour = [1, 2, 3]\n#set slice.thickness=0.5\n#set output=[{use = "json", path = "p.json"}]\n' > $c/pipeline/set.toml
 cp ../pipelines/gradient.rhai $c/script/
 printf 'sin(r * PI)' > $c/script/expression
