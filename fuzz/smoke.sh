@@ -7,8 +7,9 @@
 # The targets build without AddressSanitizer (FUZZ_SANITIZER=address brings it back):
 # what they feed is safe Rust, so a crash is a panic, an abort, a hang or memory, which
 # libFuzzer sees by itself; without it the build takes a minute less and each target
-# runs several times as many inputs in its budget. Debug information is line tables,
-# enough for a crash's backtrace to name file and line.
+# runs several times as many inputs in its budget. Optimisation level 1 builds in 3.5
+# rather than 6 minutes here and runs the targets about as fast. Debug information is
+# line tables, enough for a crash's backtrace to name file and line.
 set -euo pipefail
 cd "$(dirname "$0")"
 seconds="${FUZZ_SECONDS:-10}"
@@ -24,6 +25,7 @@ else
 fi
 sanitizer="${FUZZ_SANITIZER:-none}"
 export CARGO_PROFILE_RELEASE_DEBUG=line-tables-only
+export CARGO_PROFILE_RELEASE_OPT_LEVEL="${FUZZ_OPT_LEVEL:-1}"
 "${fuzz[@]}" build -O -s "$sanitizer"
 scratch="$(mktemp -d)"
 trap 'rm -rf "$scratch"' EXIT
