@@ -15,6 +15,7 @@
 //! cell lacks, of another kind or size, run beyond its limits, or a path outside the
 //! travel would be refused by the machine, so the run is refused.
 
+use crate::tool;
 use lamina_core::reach::Reach;
 use std::collections::BTreeMap;
 use std::path::Path;
@@ -305,6 +306,10 @@ fn placeholders(key: &str, lines: &Lines, allowed: &[&str]) -> std::result::Resu
     Ok(())
 }
 
+/// A wheel rim's surface speed (m/s); the other ranges are the operations' own
+/// ([`crate::tool`]).
+const RANGE_SURFACE_SPEED: (f64, f64, &str) = (0.01, 500.0, "m/s");
+
 impl Cell {
     /// A built-in cell by name, or a file (relative to `base_dir`, read within `reach`).
     pub fn load(reference: &str, base_dir: &Path, reach: &Reach) -> std::result::Result<Cell, String> {
@@ -345,20 +350,24 @@ impl Cell {
                     t.name
                 ));
             }
-            if !(t.diameter.is_finite() && t.diameter > 0.0) {
-                return Err(format!("tools[{i}] (`{}`): diameter must be positive", t.name));
-            }
-            for (key, v) in [
-                ("feed", t.feed),
-                ("spindle", t.spindle),
-                ("surface_speed", t.surface_speed),
-                ("power", t.power),
-                ("max_feed", t.max_feed),
-                ("max_spindle", t.max_spindle),
-                ("max_power", t.max_power),
-            ] {
-                if v.is_some_and(|v| !(v.is_finite() && v > 0.0)) {
-                    return Err(format!("tools[{i}] (`{}`): {key} must be positive", t.name));
+            // Physical ranges, wider than any tool: a value outside is a mistake, and a
+            // huge one would reach the geometry and the program's words.
+            let ranges = [
+                ("diameter", Some(t.diameter), tool::DIAMETER),
+                ("feed", t.feed, tool::FEED),
+                ("spindle", t.spindle, tool::SPINDLE),
+                ("surface_speed", t.surface_speed, RANGE_SURFACE_SPEED),
+                ("power", t.power, tool::POWER),
+                ("max_feed", t.max_feed, tool::FEED),
+                ("max_spindle", t.max_spindle, tool::SPINDLE),
+                ("max_power", t.max_power, tool::POWER),
+            ];
+            for (key, v, (lo, hi, unit)) in ranges {
+                if v.is_some_and(|v| !(v.is_finite() && (lo..=hi).contains(&v))) {
+                    return Err(format!(
+                        "tools[{i}] (`{}`): {key} must lie in {lo}..={hi} {unit}",
+                        t.name
+                    ));
                 }
             }
             if t.ramp_angle
@@ -399,12 +408,14 @@ impl Cell {
             return Err("feeders.scale must be positive".into());
         }
         let m = self.motion;
-        if m.rapid
-            .iter()
-            .chain(&m.acceleration)
-            .any(|v| !(v.is_finite() && *v > 0.0))
+        let within = |v: &f64, (lo, hi): (f64, f64)| v.is_finite() && (lo..=hi).contains(v);
+        if !m.rapid.iter().all(|v| within(v, (1.0, 1e6)))
+            || !m.acceleration.iter().all(|v| within(v, (1.0, 1e6)))
         {
-            return Err("motion: every rapid speed and acceleration must be positive".into());
+            return Err(
+                "motion: every rapid speed lies in 1..=1000000 mm/min, every acceleration in 1..=1000000 mm/s²"
+                    .into(),
+            );
         }
         if !(m.junction_deviation.is_finite() && m.junction_deviation >= 0.0) {
             return Err("motion.junction_deviation must be zero or a positive number of mm".into());
@@ -566,6 +577,31 @@ mod tests {
         let err =
             Cell::load("nowhere.toml", Path::new("."), &Reach::folder(Path::new("."))).expect_err("no file");
         assert!(err.contains("no built-in cell (cmpm-hybrid"), "{err}");
+    }
+
+    #[test]
+    fn tool_and_motion_values_outside_their_physical_range_are_refused_by_name() {
+        let text = include_str!("../cells/cmpm-hybrid.toml");
+        for (what, change, expected) in [
+            ("a huge mill", "diameter", "diameter must lie in 0.001..=1000 mm"),
+            ("a crawling feed", "feed", "feed must lie in 0.01..=10000 mm/s"),
+        ] {
+            let mut cell: Cell = toml::from_str(text).expect("parses");
+            let tool = &mut cell.tools[0];
+            match change {
+                "diameter" => tool.diameter = 1e300,
+                _ => tool.feed = Some(5e-324),
+            }
+            let err = cell.check().expect_err(what);
+            assert!(err.contains(expected), "{what}: {err}");
+        }
+        let mut cell: Cell = toml::from_str(text).expect("parses");
+        cell.motion.rapid[0] = 1e300;
+        assert!(
+            cell.check()
+                .expect_err("a rapid of 1e300")
+                .contains("1..=1000000 mm/min")
+        );
     }
 
     #[test]
