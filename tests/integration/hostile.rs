@@ -657,6 +657,28 @@ fn inputs_large_in_count_are_handled_in_time() {
     let o = s.run(&p, &["slice.thickness=0.5"]);
     within_budget("20k disjoint triangles", &o);
     assert!(o.stderr.contains("open"), "{}", o.stderr);
+
+    // Large random triangles: tens of thousands of open chains a layer, whose ends
+    // meet within the gap tolerance everywhere, joined through a grid of their ends
+    // (every end against every other took minutes), and told in one line a layer.
+    let s = Scratch::new();
+    let mut stl = vec![0u8; 80];
+    let n: u32 = 80_000;
+    stl.extend_from_slice(&n.to_le_bytes());
+    for _ in 0..n {
+        stl.extend_from_slice(&[0u8; 12]);
+        for _ in 0..3 {
+            for scale in [100.0, 100.0, 10.0] {
+                stl.extend_from_slice(&((next() * scale) as f32).to_le_bytes());
+            }
+        }
+        stl.extend_from_slice(&[0, 0]);
+    }
+    s.write("soup.stl", stl);
+    let p = s.write("p.toml", pipeline_for("soup.stl"));
+    let o = s.run(&p, &[]);
+    within_budget("80k random triangles", &o);
+    assert!(o.stderr.contains("open chains of"), "{}", o.stderr);
 }
 
 #[test]

@@ -293,10 +293,25 @@ impl CutMesh {
             contours.push(lp);
         }
         // The runtime says which layer and part a warning is about.
-        for d in &gaps.dropped {
+        // A few chains are told one by one; a soup's thousands in one line, so that the
+        // warnings do not outweigh the layer.
+        if gaps.dropped.len() <= DROPPED_TOLD {
+            for d in &gaps.dropped {
+                layer.warnings.push(format!(
+                    "dropped an open chain of {} points from ({:.3}, {:.3}) to ({:.3}, {:.3}): gap of {:.3} mm (open mesh?)",
+                    d.points, d.first.x, d.first.y, d.last.x, d.last.y, d.gap
+                ));
+            }
+        } else if let Some(d) = gaps.dropped.iter().max_by(|a, b| a.gap.total_cmp(&b.gap)) {
+            let points: usize = gaps.dropped.iter().map(|d| d.points).sum();
             layer.warnings.push(format!(
-                "dropped an open chain of {} points from ({:.3}, {:.3}) to ({:.3}, {:.3}): gap of {:.3} mm (open mesh?)",
-                d.points, d.first.x, d.first.y, d.last.x, d.last.y, d.gap
+                "dropped {} open chains of {points} points in all (open mesh?), the widest gap {:.3} mm from ({:.3}, {:.3}) to ({:.3}, {:.3})",
+                gaps.dropped.len(),
+                d.gap,
+                d.first.x,
+                d.first.y,
+                d.last.x,
+                d.last.y
             ));
         }
         if let Some((widest, at)) = gaps.widest {
@@ -336,6 +351,9 @@ fn snap_distance(z0: f64, z1: f64) -> f64 {
         0.0
     }
 }
+
+/// Most dropped open chains a layer's warnings name one by one.
+const DROPPED_TOLD: usize = 3;
 
 /// What joining open chains did in one layer.
 #[derive(Default)]
@@ -722,9 +740,23 @@ impl Ends {
 
 /// Joins open chains end to start across gaps smaller than `tolerance`; chains that
 /// still do not close are reported and dropped (stray sheets).
+///
+/// The chains wait in `open` and are taken from its end; a chain's end is joined to the
+/// nearest start (or end, the chain then reversed) of a waiting chain, ties going to the
+/// lowest place in `open` and a start before an end, and a taken chain's place is filled
+/// by the last one (`swap_remove`). The ends are found through a grid of cells of the
+/// tolerance's size, so that a layer of many open chains (a triangle soup gives one per
+/// triangle it cuts) costs time in proportion to their number, not its square.
 fn close_open(mut open: Vec<Vec<Point2>>, tolerance: f64, gaps: &mut Gaps) -> Vec<Contour> {
+    let ends = EndGrid::new(&open, tolerance);
+    // `id[i]`: the chain at place `i` of `open`, by its first place; `place[id]`: back.
+    let mut id: Vec<usize> = (0..open.len()).collect();
+    let mut place: Vec<Option<usize>> = (0..open.len()).map(Some).collect();
     let mut out = Vec::new();
     while let Some(mut chain) = open.pop() {
+        if let Some(c) = id.pop() {
+            place[c] = None;
+        }
         loop {
             let (first, last) = (chain[0], chain[chain.len() - 1]);
             if (last - first).norm() <= tolerance && chain.len() > 2 {
@@ -732,19 +764,29 @@ fn close_open(mut open: Vec<Vec<Point2>>, tolerance: f64, gaps: &mut Gaps) -> Ve
                 out.push(Contour::new(chain));
                 break;
             }
-            // The nearest chain start (or end, reversed) to our end.
-            let mut best: Option<(usize, bool, f64)> = None;
-            for (i, c) in open.iter().enumerate() {
-                for (rev, p) in [(false, c[0]), (true, c[c.len() - 1])] {
-                    let d = (p - last).norm();
-                    if d <= tolerance && best.is_none_or(|b| d < b.2) {
-                        best = Some((i, rev, d));
-                    }
+            // The nearest chain start (or end, reversed) to our end: (distance, place,
+            // reversed), least first.
+            let mut best: Option<(f64, usize, bool)> = None;
+            for (c, rev) in ends.near(last) {
+                let Some(i) = place[c] else { continue };
+                let p = if rev {
+                    open[i][open[i].len() - 1]
+                } else {
+                    open[i][0]
+                };
+                let d = (p - last).norm();
+                if d <= tolerance && best.is_none_or(|b| (d, i, rev) < b) {
+                    best = Some((d, i, rev));
                 }
             }
             match best {
-                Some((i, rev, d)) => {
+                Some((d, i, rev)) => {
                     let mut next = open.swap_remove(i);
+                    let taken = id.swap_remove(i);
+                    place[taken] = None;
+                    if let Some(&moved) = id.get(i) {
+                        place[moved] = Some(i);
+                    }
                     if rev {
                         next.reverse();
                     }
@@ -764,6 +806,53 @@ fn close_open(mut open: Vec<Vec<Point2>>, tolerance: f64, gaps: &mut Gaps) -> Ve
         }
     }
     out
+}
+
+/// The ends of open chains by grid cell: (chain, whether it is the chain's end).
+struct EndGrid {
+    cell: f64,
+    cells: FxHashMap<(i64, i64), Vec<(usize, bool)>>,
+}
+
+impl EndGrid {
+    fn new(open: &[Vec<Point2>], tolerance: f64) -> Self {
+        // A cell no smaller than the coordinates can tell apart; cells saturate far
+        // out, which only puts more candidates in one cell.
+        let cell = if tolerance.is_finite() && tolerance > 0.0 {
+            tolerance.max(1e-9)
+        } else {
+            1e-9
+        };
+        let mut grid = Self {
+            cell,
+            cells: FxHashMap::default(),
+        };
+        for (c, chain) in open.iter().enumerate() {
+            for (rev, p) in [(false, chain[0]), (true, chain[chain.len() - 1])] {
+                grid.cells.entry(grid.key(p)).or_default().push((c, rev));
+            }
+        }
+        grid
+    }
+
+    fn key(&self, p: Point2) -> (i64, i64) {
+        ((p.x / self.cell).floor() as i64, (p.y / self.cell).floor() as i64)
+    }
+
+    /// The ends in the cells around `p`: every end within one cell's size of it, and
+    /// some farther.
+    fn near(&self, p: Point2) -> Vec<(usize, bool)> {
+        let (x, y) = self.key(p);
+        let mut found = Vec::new();
+        for dx in -1..=1i64 {
+            for dy in -1..=1i64 {
+                if let Some(list) = self.cells.get(&(x.saturating_add(dx), y.saturating_add(dy))) {
+                    found.extend_from_slice(list);
+                }
+            }
+        }
+        found
+    }
 }
 
 /// Refuses a layer thickness (option `key`) the pipeline's machine cannot press down.
