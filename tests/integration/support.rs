@@ -149,9 +149,7 @@ pub fn skip(what: &str) {
 /// `../shared/models` (or `LAMINA_MODELS`), when it exists; otherwise the test skips
 /// (or fails under `LAMINA_REQUIRE`).
 pub fn models_dir() -> Option<PathBuf> {
-    let dir = std::env::var_os("LAMINA_MODELS")
-        .map(PathBuf::from)
-        .unwrap_or_else(|| root().join("../shared/models"));
+    let dir = models_path();
     if dir.is_dir() {
         Some(dir.canonicalize().unwrap_or(dir))
     } else {
@@ -163,10 +161,14 @@ pub fn models_dir() -> Option<PathBuf> {
 /// `--allow <models folder>`: a pipeline reads a model outside its own folder only where
 /// the command line allows (the folder need not exist).
 pub fn allow_models() -> [String; 2] {
-    let dir = std::env::var_os("LAMINA_MODELS")
+    ["--allow".into(), models_path().to_string_lossy().into_owned()]
+}
+
+/// `LAMINA_MODELS`, or `../shared/models` beside the repository, whether it exists.
+fn models_path() -> PathBuf {
+    std::env::var_os("LAMINA_MODELS")
         .map(PathBuf::from)
-        .unwrap_or_else(|| root().join("../shared/models"));
-    ["--allow".into(), dir.to_string_lossy().into_owned()]
+        .unwrap_or_else(|| root().join("../shared/models"))
 }
 
 /// A model of `models_dir()`, when it is there; otherwise the test skips (or fails).

@@ -753,6 +753,7 @@ fn close_open(mut open: Vec<Vec<Point2>>, tolerance: f64, gaps: &mut Gaps) -> Ve
     let mut id: Vec<usize> = (0..open.len()).collect();
     let mut place: Vec<Option<usize>> = (0..open.len()).map(Some).collect();
     let mut out = Vec::new();
+    let mut near = Vec::new();
     while let Some(mut chain) = open.pop() {
         if let Some(c) = id.pop() {
             place[c] = None;
@@ -767,7 +768,8 @@ fn close_open(mut open: Vec<Vec<Point2>>, tolerance: f64, gaps: &mut Gaps) -> Ve
             // The nearest chain start (or end, reversed) to our end: (distance, place,
             // reversed), least first.
             let mut best: Option<(f64, usize, bool)> = None;
-            for (c, rev) in ends.near(last) {
+            ends.near(last, &mut near);
+            for &(c, rev) in &near {
                 let Some(i) = place[c] else { continue };
                 let p = if rev {
                     open[i][open[i].len() - 1]
@@ -839,11 +841,11 @@ impl EndGrid {
         ((p.x / self.cell).floor() as i64, (p.y / self.cell).floor() as i64)
     }
 
-    /// The ends in the cells around `p`: every end within one cell's size of it, and
-    /// some farther.
-    fn near(&self, p: Point2) -> Vec<(usize, bool)> {
+    /// The ends in the cells around `p` into `found`: every end within one cell's size
+    /// of it, and some farther.
+    fn near(&self, p: Point2, found: &mut Vec<(usize, bool)>) {
         let (x, y) = self.key(p);
-        let mut found = Vec::new();
+        found.clear();
         for dx in -1..=1i64 {
             for dy in -1..=1i64 {
                 if let Some(list) = self.cells.get(&(x.saturating_add(dx), y.saturating_add(dy))) {
@@ -851,7 +853,6 @@ impl EndGrid {
                 }
             }
         }
-        found
     }
 }
 
