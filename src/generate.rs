@@ -14,7 +14,6 @@ use std::path::{Path, PathBuf};
 
 use lamina_core::output::AtomicOutputs;
 use lamina_core::pipeline::{Override, PathElem, Pipeline};
-use lamina_core::script::ScriptHost;
 use lamina_core::stage::OutputFiles;
 use lamina_core::{AnyStage, Error, Mesh, Registry, Result, SourceFile, StageKind};
 
@@ -156,7 +155,7 @@ pub fn meshes(registry: &Registry, req: &Request) -> Result<Vec<Mesh>> {
     let spec = pipeline
         .model
         .ok_or_else(|| Error::config("no model to generate"))?;
-    let scripts = ScriptHost::new(&base_dir, Default::default());
+    let scripts = lamina_core::script::local(&base_dir, Default::default());
     let AnyStage::Model(source) = registry.build(StageKind::Model, &spec.table, &scripts, &base_dir)? else {
         return Err(Error::config(format!("`{}` is not a model stage", req.model)));
     };

@@ -36,7 +36,7 @@ pub struct Request {
     pub kind: StageKind,
     /// The crate's folder (must not exist).
     pub dir: PathBuf,
-    /// Lamina's source folder (holding `core/` and `test-support/`).
+    /// Lamina's source folder (holding `api/` and `test-support/`).
     pub lamina: PathBuf,
 }
 
@@ -77,7 +77,7 @@ impl Request {
         let lamina = lamina
             .canonicalize()
             .map_err(|e| usage(format!("Lamina's source folder {}: {e}", lamina.display())))?;
-        for part in ["core/Cargo.toml", "test-support/Cargo.toml"] {
+        for part in ["api/Cargo.toml", "test-support/Cargo.toml"] {
             if !lamina.join(part).is_file() {
                 return Err(usage(format!(
                     "{} is not Lamina's source folder (it has no {part})",
@@ -121,7 +121,7 @@ impl Request {
                     std::env::consts::DLL_SUFFIX
                 ),
             )
-            .replace("{{lamina_core}}", &toml_path(self.lamina.join("core")))
+            .replace("{{lamina_api}}", &toml_path(self.lamina.join("api")))
             .replace(
                 "{{lamina_test_support}}",
                 &toml_path(self.lamina.join("test-support")),

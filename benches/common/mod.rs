@@ -39,7 +39,7 @@ pub fn registry() -> Registry {
 /// One stage of `kind` from a TOML snippet, paths relative to `dir`.
 pub fn stage(kind: StageKind, text: &str, dir: &Path) -> AnyStage {
     let table = lamina_core::pipeline::TableRef::parse_snippet(kind.name(), text).expect("snippet");
-    let scripts = lamina_core::script::ScriptHost::new(dir, Default::default());
+    let scripts = lamina_core::script::local(dir, Default::default());
     registry()
         .build(kind, &table, &scripts, dir)
         .expect("stage builds")

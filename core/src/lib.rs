@@ -1,31 +1,32 @@
-//! lamina-core: the model that flows between Lamina's stages, one trait per stage kind,
-//! the registry of named stage factories, pipeline files, Rhai scripting, dynamic plugin
-//! loading, machine profiles and the runtime that drives layers through the stages.
+//! lamina-core: the engine that runs Lamina's pipelines: pipeline files, the registry of
+//! stages, Rhai scripting, dynamic plugin loading, atomic outputs and the runtime that
+//! drives layers through the stages.
 //!
-//! This crate knows no concrete algorithm: slicers, sorters, discretisers, graders,
-//! sequencers, planners and exporters live in plugin crates that depend on this one.
+//! What a stage is written against (the model, the stage traits, options, machine data,
+//! the plugin boundary) is `lamina-api`, re-exported here module by module so that a
+//! program embedding the engine names one crate. This crate knows no concrete
+//! algorithm: slicers, sorters, discretisers, graders, sequencers, planners and
+//! exporters live in plugin crates that depend on lamina-api.
 
-pub mod diagnostic;
-pub mod error;
-pub mod geom;
-pub mod limits;
-pub mod machine;
-pub mod mesh;
-pub mod microstructure;
-pub mod model;
-pub mod options;
 pub mod output;
 pub mod pipeline;
 pub mod plugin;
-pub mod process;
-pub mod reach;
 pub mod registry;
 pub mod runtime;
 pub mod script;
-pub mod source;
-pub mod stage;
-pub mod steps;
-pub mod surface;
+
+pub use lamina_api::{
+    diagnostic, error, geom, limits, mesh, microstructure, model, options, process, reach, source, stage,
+    steps, surface, text,
+};
+pub use lamina_api::{option_type, register_default, register_stage, stage_options};
+
+/// Machine profiles: the data stages read (`lamina_api::machine`) and how profiles are
+/// read and checked (`lamina_machine`).
+pub mod machine {
+    pub use lamina_api::machine::*;
+    pub use lamina_machine::{builtin, load, resolve};
+}
 
 pub use diagnostic::{Diagnostic, Severity};
 pub use error::{Error, Result};
@@ -40,7 +41,8 @@ pub use source::{SourceFile, Span};
 pub use stage::*;
 
 /// Re-exported so plugin crates register stages with the same `inventory` as the host.
-pub use inventory;
+pub use lamina_api::inventory;
 
-/// Version of this crate, compared against the version a dynamic plugin was built with.
-pub const VERSION: &str = env!("CARGO_PKG_VERSION");
+/// Version of the stage API this engine was built with, compared against the version a
+/// dynamic plugin was built with.
+pub const VERSION: &str = lamina_api::VERSION;

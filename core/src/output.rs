@@ -10,6 +10,7 @@ use tempfile::TempPath;
 
 use crate::error::{Error, Result};
 use crate::stage::OutputFiles;
+pub use lamina_api::text::one_line;
 
 /// Temporary outputs are named `.lamina-<pid>-<random>.partial`: the process id tells
 /// a later run which are left over from a run that was killed.
@@ -292,21 +293,6 @@ pub fn check_name(name: &Path) -> std::result::Result<(), String> {
         }
     }
     Ok(())
-}
-
-/// A name as one line of text for a file a machine reads: control characters and
-/// Unicode line breaks become spaces, so that no name (of a pipeline, part or material)
-/// can start a line of its own.
-pub fn one_line(name: &str) -> String {
-    name.chars()
-        .map(|c| {
-            if c.is_control() || matches!(c, '\u{2028}' | '\u{2029}' | '\u{85}') {
-                ' '
-            } else {
-                c
-            }
-        })
-        .collect()
 }
 
 #[cfg(test)]

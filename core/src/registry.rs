@@ -9,50 +9,7 @@ use crate::pipeline::TableRef;
 use crate::script::ScriptHost;
 use crate::stage::{AnyStage, PipelineContext, StageConfig, StageInfo, StageKind};
 
-/// A named stage implementation: its self-description and how to build it from its
-/// pipeline table.
-#[derive(Debug)]
-pub struct StageFactory {
-    pub info: StageInfo,
-    pub build: fn(&StageConfig<'_>) -> Result<AnyStage>,
-}
-
-inventory::collect!(StageFactory);
-
-/// Registers a [`StageFactory`] with the registry of the crate that links this one.
-///
-/// ```ignore
-/// lamina_core::register_stage!(StageFactory { info: INFO, build: build_uniform });
-/// ```
-#[macro_export]
-macro_rules! register_stage {
-    ($factory:expr) => {
-        $crate::inventory::submit! { $factory }
-    };
-}
-
-/// The stage a pipeline gets for a kind every run needs (slice, sort) when it has no
-/// table for that kind. The plugin that provides the stage declares it, so core names
-/// no stage.
-#[derive(Debug)]
-pub struct DefaultStage {
-    pub kind: StageKind,
-    pub name: &'static str,
-}
-
-inventory::collect!(DefaultStage);
-
-/// Declares a linked stage as the default of its kind ([`DefaultStage`]).
-///
-/// ```ignore
-/// lamina_core::register_default!(StageKind::Slice, "uniform");
-/// ```
-#[macro_export]
-macro_rules! register_default {
-    ($kind:expr, $name:literal) => {
-        $crate::inventory::submit! { $crate::registry::DefaultStage { kind: $kind, name: $name } }
-    };
-}
+pub use lamina_api::registry::{DefaultStage, StageFactory};
 
 /// Where a factory came from.
 #[derive(Debug, Clone, PartialEq, Eq)]

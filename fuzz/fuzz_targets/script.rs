@@ -26,7 +26,7 @@ fn host() -> &'static ScriptHost {
             max_operations: 50_000,
             ..ScriptLimits::default()
         };
-        ScriptHost::new(dir(), limits)
+        lamina_core::script::local(dir(), limits)
     })
 }
 

@@ -30,7 +30,6 @@ use lamina_core::pipeline::Pipeline;
 use lamina_core::pipeline::TableRef;
 use lamina_core::registry::Registered;
 use lamina_core::runtime::{Engine, RunOptions, RunReport, Silent};
-use lamina_core::script::ScriptHost;
 use lamina_core::{AnyStage, Registry, SourceFile, StageKind};
 
 // Linked for their registrations.
@@ -57,7 +56,7 @@ pub fn registry() -> Registry {
 /// table holds them without its header), with scripts and files relative to `dir`.
 pub fn try_stage(kind: StageKind, table: &str, dir: &Path) -> lamina_core::Result<AnyStage> {
     let table = TableRef::parse_snippet(kind.name(), table)?;
-    let scripts = ScriptHost::new(dir, Default::default());
+    let scripts = lamina_core::script::local(dir, Default::default());
     registry().build(kind, &table, &scripts, dir)
 }
 
@@ -121,7 +120,7 @@ pub const MODEL: &str = "use = \"tube\"\nheight = 2.0";
 pub fn write_models(dir: &Path) {
     let table =
         lamina_core::pipeline::TableRef::parse_snippet("model", MODEL).unwrap_or_else(|e| panic!("{e}"));
-    let scripts = lamina_core::script::ScriptHost::new(dir, Default::default());
+    let scripts = lamina_core::script::local(dir, Default::default());
     let mesh = match registry().build(StageKind::Model, &table, &scripts, dir) {
         Ok(lamina_core::AnyStage::Model(m)) => m.load(dir).unwrap_or_else(|e| panic!("{e}")).remove(0),
         other => panic!("the tube generator: {other:?}"),

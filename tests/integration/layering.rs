@@ -1,6 +1,8 @@
-//! The crates' layering, read from their manifests: geometry at the bottom, core (the
-//! stage API) on it, plugins on those two and never on each other, so a built-in plugin
-//! is written exactly as a third-party crate would be.
+//! The crates' layering, read from their manifests: geometry at the bottom, the stage
+//! API on it, machine profiles on the API, the engine (core) on those, and plugins on
+//! the API and geometry (and machine profiles, for the exporters that write machine
+//! files), never on the engine or on each other: a built-in plugin is written exactly as
+//! a third-party crate would be, and compiles none of the engine.
 
 use std::path::Path;
 
@@ -25,12 +27,17 @@ fn lamina_dependencies(manifest: &Path) -> Vec<String> {
 }
 
 #[test]
-fn plugins_depend_on_core_and_geom_alone() {
+fn plugins_depend_on_the_stage_api_and_geom_alone() {
     let root = root();
     assert!(lamina_dependencies(&root.join("geom/Cargo.toml")).is_empty());
+    assert_eq!(lamina_dependencies(&root.join("api/Cargo.toml")), ["lamina-geom"]);
+    assert_eq!(
+        lamina_dependencies(&root.join("machine/Cargo.toml")),
+        ["lamina-api"]
+    );
     assert_eq!(
         lamina_dependencies(&root.join("core/Cargo.toml")),
-        ["lamina-geom"]
+        ["lamina-api", "lamina-geom", "lamina-machine"]
     );
     let mut plugins = 0;
     for entry in std::fs::read_dir(root.join("plugins")).expect("plugins/") {
@@ -41,11 +48,27 @@ fn plugins_depend_on_core_and_geom_alone() {
         plugins += 1;
         for dep in lamina_dependencies(&manifest) {
             assert!(
-                dep == "lamina-core" || dep == "lamina-geom",
-                "{} depends on {dep}: plugins depend on lamina-core and lamina-geom only",
+                ["lamina-api", "lamina-geom", "lamina-machine"].contains(&dep.as_str()),
+                "{} depends on {dep}: plugins depend on lamina-api, lamina-geom and lamina-machine only",
                 manifest.display()
             );
         }
     }
     assert!(plugins >= 10, "found {plugins} plugin crates");
+}
+
+/// What a plugin compiles besides its own code: the engine's script engine, library
+/// loader and thread pool stay out of the stage API.
+#[test]
+fn the_stage_api_carries_none_of_the_engine() {
+    let manifest = root().join("api/Cargo.toml");
+    let text = std::fs::read_to_string(&manifest).expect("api/Cargo.toml");
+    let doc: toml::Table = toml::from_str(&text).expect("TOML");
+    let deps = doc
+        .get("dependencies")
+        .and_then(toml::Value::as_table)
+        .expect("[dependencies]");
+    for engine in ["rhai", "libloading", "rayon", "tempfile", "object", "lamina-core"] {
+        assert!(!deps.contains_key(engine), "lamina-api depends on {engine}");
+    }
 }

@@ -259,7 +259,7 @@ fn plugin_whose_boundary_struct_changed_is_refused_before_loading() {
             && err.contains("lays out the boundary's C types differently"),
         "{err}"
     );
-    assert!(err.contains("rebuild it against lamina-core"), "{err}");
+    assert!(err.contains("rebuild it against lamina-api"), "{err}");
 }
 
 /// Runs a two-material tube graded by `grade` (with the dynamic script fixture loaded)

@@ -27,7 +27,6 @@ use i_overlay::core::fill_rule::FillRule;
 use i_overlay::core::overlay_rule::OverlayRule;
 use i_overlay::float::overlay::FloatOverlay;
 use lamina_core::pipeline::TableRef;
-use lamina_core::script::ScriptHost;
 use lamina_core::stage::{Discretiser, FamilyContext};
 use lamina_core::{
     AnyStage, Contour, ContourTree, Family, Layer, LayerSlot, Material, Mesh, PartInfo, Point2, Polygon,
@@ -52,7 +51,7 @@ fn registry() -> &'static Registry {
 /// A stage built from a TOML table, as a pipeline file would give it.
 fn stage(kind: StageKind, text: &str) -> lamina_core::Result<AnyStage> {
     let table = TableRef::parse_snippet(kind.name(), text)?;
-    let scripts = ScriptHost::new(".", Default::default());
+    let scripts = lamina_core::script::local(".", Default::default());
     registry().build(kind, &table, &scripts, Path::new("."))
 }
 

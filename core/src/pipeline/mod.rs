@@ -2,12 +2,11 @@
 //! every error names file, line and column, and `--set` overrides applied on top.
 
 mod overrides;
-mod table;
+use lamina_api::table;
 
 pub use overrides::Override;
 use overrides::paths_touch;
 pub use table::*;
-use table::{key, toml_error};
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -125,9 +124,6 @@ impl Units {
         }
     }
 }
-
-/// Keys of a `[model]` table that the host reads itself.
-pub const MODEL_HOST_KEYS: &[&str] = &["use", "scale", "units", "place"];
 
 /// A part as the pipeline describes it.
 #[derive(Debug, Clone)]
@@ -255,12 +251,9 @@ impl Pipeline {
         let toml::Value::Table(doc) = root else {
             return Err(Error::config("pipeline root is not a table"));
         };
-        let table_ref = |path: Vec<PathElem>, table: toml::Table| TableRef {
-            table,
-            file: file.clone(),
-            overridden: overrides.iter().any(|o| paths_touch(&o.path, &path)),
-            path,
-            host_keys: &["use"],
+        let table_ref = |path: Vec<PathElem>, table: toml::Table| {
+            let overridden = overrides.iter().any(|o| paths_touch(&o.path, &path));
+            TableRef::new(table, file.clone(), path, overridden)
         };
         let root_ref = table_ref(Vec::new(), doc.clone()).with_host_keys(&[]);
         let raw: RawPipeline = root_ref.parse()?;
@@ -431,7 +424,7 @@ impl Pipeline {
             .collect();
         for t in &outputs {
             let t: &TableRef = t;
-            if let Some(path) = t.table.get("path").and_then(|v| v.as_str())
+            if let Some(path) = t.get("path").and_then(|v| v.as_str())
                 && let Err(m) = crate::output::check_name(std::path::Path::new(path))
             {
                 return Err(t.error_at("path", m));

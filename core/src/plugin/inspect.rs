@@ -65,7 +65,7 @@ pub(crate) fn entry_symbol(path: &Path) -> Result<String> {
             return Err(refuse(
                 path,
                 format!(
-                    "not a Lamina plugin: it exports no `{ENTRY_PREFIX}<name>` (use lamina_core::export_plugin!)"
+                    "not a Lamina plugin: it exports no `{ENTRY_PREFIX}<name>` (use lamina_api::export_plugin!)"
                 ),
             ));
         }
@@ -89,7 +89,7 @@ pub(crate) fn entry_symbol(path: &Path) -> Result<String> {
             refuse(
                 path,
                 format!(
-                    "plugin `{name}` carries no ABI note (section `{ABI_SECTION}`): rebuild it against lamina-core {}",
+                    "plugin `{name}` carries no ABI note (section `{ABI_SECTION}`): rebuild it against lamina-api {}",
                     crate::VERSION
                 ),
             )
@@ -127,12 +127,12 @@ fn check(path: &Path, name: &str, d: &Declared<'_>) -> Result<()> {
     let rebuild = |what: String| {
         let built = d
             .core_version
-            .map(|v| format!(" (it was built against lamina-core {v})"))
+            .map(|v| format!(" (it was built against lamina-api {v})"))
             .unwrap_or_default();
         refuse(
             path,
             format!(
-                "plugin `{name}` {what}{built}: rebuild it against lamina-core {}",
+                "plugin `{name}` {what}{built}: rebuild it against lamina-api {}",
                 crate::VERSION
             ),
         )

@@ -200,7 +200,7 @@ impl Engine {
             pipeline.reach.allow(model);
         }
         let scripts =
-            ScriptHost::new(&pipeline.base_dir, options.script_limits).with_reach(pipeline.reach.clone());
+            crate::script::local_within(&pipeline.base_dir, options.script_limits, pipeline.reach.clone());
         let base = pipeline.base_dir.clone();
 
         if options.model.is_some() && pipeline.parts.len() > 1 {

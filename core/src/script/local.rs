@@ -223,7 +223,7 @@ impl LocalHost {
         Ok(done)
     }
 
-    pub(super) fn compile(&self, spec: &str, origin: Option<Location>) -> Result<LocalFn> {
+    pub(super) fn compile_fn(&self, spec: &str, origin: Option<Location>) -> Result<LocalFn> {
         match spec.split_once('#') {
             Some((file, function)) if file.trim_end().ends_with(".rhai") => {
                 self.function(&self.base_dir.join(file.trim()), function.trim(), origin)
@@ -339,10 +339,40 @@ fn find_definition(text: &str, name: &str) -> usize {
         .map_or(0, |(i, _)| i)
 }
 
+impl Compiler for LocalHost {
+    fn compile(&self, spec: &str, origin: Option<Location>) -> Result<ScriptFn> {
+        self.compile_fn(spec, origin).map(ScriptFn::new)
+    }
+}
+
+impl Script for LocalFn {
+    fn number(&self, args: &ScriptArgs<'_>, context: &str) -> Result<f64> {
+        LocalFn::number(self, args, context)
+    }
+
+    fn fractions(&self, args: &ScriptArgs<'_>, n: usize, context: &str) -> Result<Vec<f64>> {
+        LocalFn::fractions(self, args, n, context)
+    }
+}
+
+/// The value of the script variable `name` in a call with `args`.
+fn value(args: &ScriptArgs<'_>, name: &str) -> Option<Dynamic> {
+    Some(match name {
+        "r" => Dynamic::from_float(args.r),
+        "d" => Dynamic::from_float(args.d),
+        "x" => Dynamic::from_float(args.x),
+        "y" => Dynamic::from_float(args.y),
+        "z" => Dynamic::from_float(args.z),
+        "layer" => Dynamic::from_int(args.layer),
+        "part" => Dynamic::from(args.part.to_string()),
+        _ => return None,
+    })
+}
+
 fn script_scope(args: &ScriptArgs<'_>) -> Scope<'static> {
     let mut scope = Scope::new();
     for name in SCRIPT_VARIABLES {
-        if let Some(v) = args.value(name) {
+        if let Some(v) = value(args, name) {
             scope.push_dynamic(*name, v);
         }
     }
@@ -421,7 +451,7 @@ impl LocalFn {
                 self.engine.eval_ast_with_scope::<Dynamic>(&mut scope, &self.ast)
             }
             Some((name, params)) => {
-                let values: Vec<Dynamic> = params.iter().filter_map(|p| args.value(p)).collect();
+                let values: Vec<Dynamic> = params.iter().filter_map(|p| value(args, p)).collect();
                 let mut scope = Scope::new();
                 let options = CallFnOptions::new().eval_ast(false).rewind_scope(true);
                 self.engine

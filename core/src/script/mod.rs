@@ -1,27 +1,19 @@
-//! Rhai scripting for user grading functions: each script compiled once per run, run in
-//! a sandbox (operation, depth, size and time limits; no modules, no files, no network),
-//! and its results checked as volume fractions before anyone uses them.
-//!
-//! A script is either an inline expression of the pipeline (`f = "sin(r * PI)"`) or a
-//! function in a `.rhai` file beside it (`f = "grading.rhai#ceramic"`). Functions receive
-//! their parameters by name from the variables the caller offers (r, d, x, y, z, layer,
-//! part), so `fn f(r)` and `fn f(z, r)` both work.
+//! The host's script engine: Rhai, each script compiled once per run and run in a
+//! sandbox (operation, depth, size and time limits; no modules, no files, no network),
+//! its results checked as volume fractions before anyone uses them. Stages reach it
+//! through `lamina_api::script` ([`ScriptHost`], [`ScriptFn`]).
 
 mod local;
 mod stop;
 
+pub use lamina_api::script::*;
 pub use stop::CountingAllocator;
 
 use crate::reach::Reach;
-use local::{LocalFn, LocalHost};
+use local::LocalHost;
 
 use std::path::PathBuf;
 use std::time::Duration;
-
-use rhai::Dynamic;
-
-use crate::error::Result;
-use crate::source::Location;
 
 /// Sandbox limits of every script call.
 #[derive(Debug, Clone, Copy)]
@@ -56,114 +48,15 @@ impl Default for ScriptLimits {
     }
 }
 
-/// The names a script may read; anything else is refused when the script is compiled.
-pub const SCRIPT_VARIABLES: &[&str] = &["r", "d", "x", "y", "z", "layer", "part"];
-
-/// Values offered to a script call.
-#[derive(Debug, Clone, Copy, Default)]
-pub struct ScriptArgs<'a> {
-    /// Normalised level in [0, 1].
-    pub r: f64,
-    /// A distance (mm), e.g. to a grading source.
-    pub d: f64,
-    pub x: f64,
-    pub y: f64,
-    pub z: f64,
-    pub layer: i64,
-    pub part: &'a str,
+/// The host's scripts for a run whose pipeline lies in `base_dir`: script files are
+/// read there only (see [`local_within`]).
+pub fn local(base_dir: impl Into<PathBuf>, limits: ScriptLimits) -> ScriptHost {
+    ScriptHost::new(LocalHost::new(base_dir, limits))
 }
 
-impl ScriptArgs<'_> {
-    fn value(&self, name: &str) -> Option<Dynamic> {
-        Some(match name {
-            "r" => Dynamic::from_float(self.r),
-            "d" => Dynamic::from_float(self.d),
-            "x" => Dynamic::from_float(self.x),
-            "y" => Dynamic::from_float(self.y),
-            "z" => Dynamic::from_float(self.z),
-            "layer" => Dynamic::from_int(self.layer),
-            "part" => Dynamic::from(self.part.to_string()),
-            _ => return None,
-        })
-    }
-}
-
-/// Compiles scripts for the stages of one run. Cheap to share between threads.
-///
-/// In a dynamic plugin, the host's scripts are reached through the host: a script is
-/// compiled and run by the host's engine under the host's limits, whatever copy of
-/// Rhai the plugin links.
-#[derive(Clone, Debug)]
-pub struct ScriptHost(HostKind);
-
-#[derive(Clone, Debug)]
-enum HostKind {
-    Local(LocalHost),
-    /// In a dynamic plugin: every script goes to the host.
-    Remote,
-}
-
-impl ScriptHost {
-    pub fn new(base_dir: impl Into<PathBuf>, limits: ScriptLimits) -> Self {
-        Self(HostKind::Local(LocalHost::new(base_dir, limits)))
-    }
-
-    /// The scripts of the host that called into this dynamic plugin.
-    pub(crate) fn remote() -> Self {
-        Self(HostKind::Remote)
-    }
-
-    /// Reads script files within `reach` (by default, the base folder only).
-    pub fn with_reach(self, reach: Reach) -> Self {
-        match self.0 {
-            HostKind::Local(host) => Self(HostKind::Local(host.with_reach(reach))),
-            remote => Self(remote),
-        }
-    }
-
-    /// Compiles a script reference from a pipeline: `file.rhai#function` names a
-    /// function in a file beside the pipeline; anything else is an inline expression.
-    /// `origin` is where the reference is written (for error positions).
-    pub fn compile(&self, spec: &str, origin: Option<Location>) -> Result<ScriptFn> {
-        match &self.0 {
-            HostKind::Local(host) => host.compile(spec, origin).map(|f| ScriptFn(FnKind::Local(f))),
-            HostKind::Remote => {
-                crate::plugin::guest::compile(spec, origin).map(|id| ScriptFn(FnKind::Remote(id)))
-            }
-        }
-    }
-}
-
-/// A compiled script: call it as often as needed, from any thread (in a dynamic
-/// plugin: from the threads the host calls the plugin's stages on).
-#[derive(Clone, Debug)]
-pub struct ScriptFn(FnKind);
-
-#[derive(Clone, Debug)]
-enum FnKind {
-    Local(LocalFn),
-    /// A script the host compiled for this dynamic plugin, by the host's number.
-    Remote(u64),
-}
-
-impl ScriptFn {
-    /// Calls the script for a single number (any finite value).
-    pub fn number(&self, args: &ScriptArgs<'_>, context: &str) -> Result<f64> {
-        match &self.0 {
-            FnKind::Local(f) => f.number(args, context),
-            FnKind::Remote(id) => crate::plugin::guest::number(*id, args, context),
-        }
-    }
-
-    /// Calls the script for the volume fractions of `n` materials. A single number `f`
-    /// means `[f, 1 - f]` when `n == 2`; otherwise an array of `n` numbers is expected.
-    /// Every fraction must lie in [0, 1] and they must sum to 1 (1e-9).
-    pub fn fractions(&self, args: &ScriptArgs<'_>, n: usize, context: &str) -> Result<Vec<f64>> {
-        match &self.0 {
-            FnKind::Local(f) => f.fractions(args, n, context),
-            FnKind::Remote(id) => crate::plugin::guest::fractions(*id, args, n, context),
-        }
-    }
+/// The host's scripts, reading script files within `reach`.
+pub fn local_within(base_dir: impl Into<PathBuf>, limits: ScriptLimits, reach: Reach) -> ScriptHost {
+    ScriptHost::new(LocalHost::new(base_dir, limits).with_reach(reach))
 }
 
 #[cfg(test)]

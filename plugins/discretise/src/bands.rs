@@ -10,7 +10,7 @@ use i_overlay::core::overlay::{IntOverlayOptions, Overlay, ShapeType};
 use i_overlay::core::overlay_rule::OverlayRule;
 use i_overlay::core::solver::Solver;
 use i_overlay::i_shape::int::shape::IntShapes;
-use lamina_core::Result;
+use lamina_api::Result;
 
 use crate::inset::{From, Inset, Scratch};
 

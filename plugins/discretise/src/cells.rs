@@ -16,9 +16,9 @@ use i_overlay::core::overlay_rule::OverlayRule;
 use i_overlay::i_float::int::point::IntPoint;
 use i_overlay::string::line::IntLine;
 use i_overlay::string::slice::IntSlice;
-use lamina_core::options::SharedOption;
-use lamina_core::stage::StageConfig;
-use lamina_core::{Contour, Limit, Limits, Point2, Polygon, Result, SubRegion, Vector2};
+use lamina_api::options::SharedOption;
+use lamina_api::stage::StageConfig;
+use lamina_api::{Contour, Limit, Limits, Point2, Polygon, Result, SubRegion, Vector2};
 use lamina_geom::segment_parameter;
 use serde::Deserialize;
 
@@ -54,7 +54,7 @@ pub enum Count {
     Length(f64),
 }
 
-lamina_core::option_type!(Cuts = "string");
+lamina_api::option_type!(Cuts = "string");
 
 /// How the cells are cut.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Deserialize)]
@@ -262,7 +262,7 @@ fn centre(family: &Polygon) -> Point2 {
 /// mm out. Its two straight edges are computed from the angle alone, so neighbouring
 /// sectors share them exactly.
 fn sector(grid: &Grid, centre: Point2, far: f64, m: usize, n: usize) -> Vec<IntPoint<i32>> {
-    let at = |a: f64| grid.point(centre + lamina_core::Vector2::new(a.cos(), a.sin()) * far);
+    let at = |a: f64| grid.point(centre + lamina_api::Vector2::new(a.cos(), a.sin()) * far);
     let (a0, a1) = (
         std::f64::consts::TAU * m as f64 / n as f64,
         std::f64::consts::TAU * (m + 1) as f64 / n as f64,

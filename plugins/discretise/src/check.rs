@@ -9,7 +9,7 @@
 use i_overlay::core::fill_rule::FillRule;
 use i_overlay::core::overlay_rule::OverlayRule;
 use i_overlay::float::single::SingleFloatOverlay;
-use lamina_core::{Contour, Polygon, SubRegion};
+use lamina_api::{Contour, Polygon, SubRegion};
 use lamina_geom::Ring;
 use lamina_geom::ring::{ring_area, ring_of};
 
@@ -146,9 +146,9 @@ pub fn self_crossings(c: &Contour) -> usize {
     meetings(c, true)
 }
 
-type Seg = (lamina_core::Point2, lamina_core::Point2);
+type Seg = (lamina_api::Point2, lamina_api::Point2);
 
-fn orient(p: lamina_core::Point2, q: lamina_core::Point2, r: lamina_core::Point2) -> f64 {
+fn orient(p: lamina_api::Point2, q: lamina_api::Point2, r: lamina_api::Point2) -> f64 {
     (q.x - p.x) * (r.y - p.y) - (q.y - p.y) * (r.x - p.x)
 }
 
@@ -167,7 +167,7 @@ fn meets((a, b): Seg, (c, d): Seg) -> bool {
     if crosses((a, b), (c, d)) {
         return true;
     }
-    let within = |p: lamina_core::Point2, q: lamina_core::Point2, r: lamina_core::Point2| {
+    let within = |p: lamina_api::Point2, q: lamina_api::Point2, r: lamina_api::Point2| {
         r.x >= p.x.min(q.x) && r.x <= p.x.max(q.x) && r.y >= p.y.min(q.y) && r.y <= p.y.max(q.y)
     };
     (orient(a, b, c) == 0.0 && within(a, b, c))
@@ -179,7 +179,7 @@ fn meets((a, b): Seg, (c, d): Seg) -> bool {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use lamina_core::Point2;
+    use lamina_api::Point2;
 
     #[test]
     fn a_bow_tie_crosses_itself() {

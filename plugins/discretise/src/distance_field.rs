@@ -4,11 +4,11 @@
 //! family, bound the sub-regions. With `step`, the levels follow the grading step-width
 //! truncation instead of equal parts.
 
-use lamina_core::mesh::Point3;
-use lamina_core::stage::{AnyStage, Discretiser, FamilyContext, StageConfig, StageInfo, StageKind};
-use lamina_core::steps::Truncation;
-use lamina_core::surface::{FaceSelection, Surface, Surfaces};
-use lamina_core::{Contour, Error, Point2, Polygon, Result, StageFactory, SubRegion};
+use lamina_api::mesh::Point3;
+use lamina_api::stage::{AnyStage, Discretiser, FamilyContext, StageConfig, StageInfo, StageKind};
+use lamina_api::steps::Truncation;
+use lamina_api::surface::{FaceSelection, Surface, Surfaces};
+use lamina_api::{Contour, Error, Point2, Polygon, Result, StageFactory, SubRegion};
 use serde::Deserialize;
 
 use i_overlay::core::fill_rule::FillRule;
@@ -34,7 +34,7 @@ const SIMPLIFY: f64 = 0.1;
 /// Below every level: keeps iso-loops closed at the grid's border.
 const FLOOR: f64 = -1e300;
 
-lamina_core::option_type!(Feature = "string");
+lamina_api::option_type!(Feature = "string");
 
 /// The material feature distances are measured from (r = 0 there).
 #[derive(Debug, Clone, Copy, PartialEq, Deserialize)]
@@ -57,7 +57,7 @@ pub enum Feature {
     Surface,
 }
 
-lamina_core::stage_options! {
+lamina_api::stage_options! {
     #[derive(Debug)]
     struct Options {
         /// where r = 0: `boundary` (signed), `outer`, `holes`, `centre`, `point`, `line`, `polyline` or `surface` (chosen faces of the part's mesh, measured in space)
@@ -170,13 +170,13 @@ pub struct DistanceField {
     /// Z, not only in the layer).
     pub width: Option<f64>,
     /// The run's limits: a grid that `cell_size` makes too fine is refused.
-    pub limits: lamina_core::Limits,
+    pub limits: lamina_api::Limits,
 }
 
 impl DistanceField {
     /// Samples along the longer side of the family's box: `cells`, or what
     /// `cell_size` gives.
-    fn resolution(&self, bbox: &lamina_core::BBox2) -> usize {
+    fn resolution(&self, bbox: &lamina_api::BBox2) -> usize {
         match self.cell_size {
             Some(s) => ((bbox.width().max(bbox.height()) / s).ceil() as usize + 3).clamp(4, 1 << 15),
             None => self.cells,
@@ -308,7 +308,7 @@ impl Discretiser for DistanceField {
             let n = self.resolution(&bbox) as f64;
             let (w, h) = (bbox.width(), bbox.height());
             self.limits.check(
-                lamina_core::Limit::GridCells,
+                lamina_api::Limit::GridCells,
                 n * n * w.min(h) / w.max(h).max(f64::MIN_POSITIVE),
                 &format!(
                     "a distance field of {w:.1} x {h:.1} mm in cells of {} mm",
@@ -350,7 +350,7 @@ impl Discretiser for DistanceField {
         };
         if let Levels::Spacing(s) = self.levels {
             self.limits.check(
-                lamina_core::Limit::Regions,
+                lamina_api::Limit::Regions,
                 (max / s).ceil(),
                 &format!("iso-contours every {s} mm over a largest distance of {max:.3} mm"),
             )?;
@@ -395,7 +395,7 @@ fn build(config: &StageConfig<'_>) -> Result<AnyStage> {
     config
         .limits
         .check(
-            lamina_core::Limit::GridCells,
+            lamina_api::Limit::GridCells,
             (o.cells as f64).powi(2),
             "`cells` squared",
         )
@@ -452,7 +452,7 @@ fn build(config: &StageConfig<'_>) -> Result<AnyStage> {
     })))
 }
 
-lamina_core::register_stage!(StageFactory {
+lamina_api::register_stage!(StageFactory {
     info: StageInfo {
         kind: StageKind::Discretise,
         name: "distance-field",

@@ -4,7 +4,7 @@
 
 use i_overlay::i_float::int::point::IntPoint;
 use i_overlay::i_shape::int::shape::{IntContour, IntShape, IntShapes};
-use lamina_core::{Contour, Error, Point2, Polygon, Result};
+use lamina_api::{Contour, Error, Point2, Polygon, Result};
 
 /// Largest coordinate magnitude put on the grid: far inside the i32 engine's safe range
 /// (2^30), leaving room for offset construction and for areas in i64.

@@ -16,7 +16,7 @@ use i_overlay::i_shape::int::shape::IntShapes;
 use lamina_geom::simplify::simplify_into;
 use serde::Deserialize;
 
-lamina_core::option_type!(From = "string"; Join = "string");
+lamina_api::option_type!(From = "string"; Join = "string");
 
 /// Which boundaries the offsets start from: the grading reference.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Deserialize)]

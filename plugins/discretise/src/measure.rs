@@ -5,8 +5,8 @@
 use std::cmp::Ordering;
 use std::collections::BinaryHeap;
 
-use lamina_core::geom::{closest_on_segment, polygon_centroid, segment_distance};
-use lamina_core::{Contour, Point2, Polygon};
+use lamina_api::geom::{closest_on_segment, polygon_centroid, segment_distance};
+use lamina_api::{Contour, Point2, Polygon};
 use rstar::primitives::Line;
 use rstar::{AABB, PointDistance, RTree};
 

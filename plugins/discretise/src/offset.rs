@@ -7,8 +7,8 @@
 //! band on the outer side and one about each hole. `count` and `spacing` override N_R
 //! and d; a `count` alone spreads the rings over the whole reach.
 
-use lamina_core::stage::{AnyStage, Discretiser, FamilyContext, StageConfig, StageInfo, StageKind};
-use lamina_core::{Polygon, Result, StageFactory, SubRegion};
+use lamina_api::stage::{AnyStage, Discretiser, FamilyContext, StageConfig, StageInfo, StageKind};
+use lamina_api::{Polygon, Result, StageFactory, SubRegion};
 
 use crate::bands::offset_bands;
 use crate::cells::Cells;
@@ -20,7 +20,7 @@ use crate::regions::{from_bands, uniform_level, whole};
 
 const STAGE: &str = "discretise:offset";
 
-lamina_core::stage_options! {
+lamina_api::stage_options! {
     #[derive(Debug)]
     struct Options {
         nozzle: f64 = use crate::options::NOZZLE,
@@ -46,7 +46,7 @@ pub struct Offset {
     pub inset: Inset,
     pub cells: Cells,
     /// The run's limits: a count the geometry implies is checked against them.
-    pub limits: lamina_core::Limits,
+    pub limits: lamina_api::Limits,
 }
 
 /// How deep the offsets can go before they meet: L_s from the outer contour to the
@@ -133,7 +133,7 @@ fn checked(o: &Options, config: &StageConfig<'_>) -> Result<Offset> {
     })
 }
 
-lamina_core::register_stage!(StageFactory {
+lamina_api::register_stage!(StageFactory {
     info: StageInfo {
         kind: StageKind::Discretise,
         name: "offset",

@@ -1,10 +1,10 @@
 //! Options that several discretisers share, with their documentation and checks, so
 //! that `nozzle`, `count`, `join` and `tolerance` read and fail alike everywhere.
 
-use lamina_core::limits::{MAX_COORDINATE, is_coordinate};
-use lamina_core::options::SharedOption;
-use lamina_core::stage::StageConfig;
-use lamina_core::{Limit, Limits, Result};
+use lamina_api::limits::{MAX_COORDINATE, is_coordinate};
+use lamina_api::options::SharedOption;
+use lamina_api::stage::StageConfig;
+use lamina_api::{Limit, Limits, Result};
 
 /// Finest arc-to-chord tolerance (mm): a tenth of a micrometre, far below any
 /// machine's resolution. Finer ones only multiply the vertices of round corners.

@@ -10,8 +10,8 @@
 
 use i_overlay::core::fill_rule::FillRule;
 use i_overlay::core::overlay::ShapeType;
-use lamina_core::stage::{AnyStage, Discretiser, FamilyContext, StageConfig, StageInfo, StageKind};
-use lamina_core::{Contour, Point2, Polygon, Result, StageFactory, SubRegion};
+use lamina_api::stage::{AnyStage, Discretiser, FamilyContext, StageConfig, StageInfo, StageKind};
+use lamina_api::{Contour, Point2, Polygon, Result, StageFactory, SubRegion};
 
 use crate::bands::nested_bands;
 use crate::cells::Cells;
@@ -35,7 +35,7 @@ const MAX_ADDED: usize = 4096;
 /// Angular bins per inner contour for finding where a ray meets it.
 const BINS: usize = 128;
 
-lamina_core::stage_options! {
+lamina_api::stage_options! {
     #[derive(Debug)]
     struct Options {
         nozzle: f64 = use crate::options::NOZZLE,
@@ -50,7 +50,7 @@ struct Radial {
     nozzle: f64,
     count: Option<usize>,
     cells: Cells,
-    limits: lamina_core::Limits,
+    limits: lamina_api::Limits,
 }
 
 /// An inner contour with its centre and its edges binned by the angle they span as
@@ -218,7 +218,7 @@ fn medial_ends(polygon: &Polygon, starts: &[Point2], precision: f64) -> Option<V
         let el = e.norm();
         (el > 0.0).then(|| (e / el, el))
     };
-    let inward = |u: lamina_core::Vector2| lamina_core::Vector2::new(-u.y, u.x);
+    let inward = |u: lamina_api::Vector2| lamina_api::Vector2::new(-u.y, u.x);
     for (index, &v) in starts.iter().enumerate() {
         // The edges through v (one inside an edge, two at a vertex), and the inward
         // normal there: the edge's, or the corner's bisector.
@@ -238,7 +238,7 @@ fn medial_ends(polygon: &Polygon, starts: &[Point2], precision: f64) -> Option<V
         let sum = incident
             .iter()
             .filter_map(|&k| unit(edges[k].0, edges[k].1))
-            .fold(lamina_core::Vector2::zeros(), |s, (u, _)| s + inward(u));
+            .fold(lamina_api::Vector2::zeros(), |s, (u, _)| s + inward(u));
         let norm = sum.norm();
         if incident.is_empty() || norm <= 1e-12 {
             out.push(v);
@@ -329,7 +329,7 @@ struct EdgeGrid {
 
 impl EdgeGrid {
     fn new(edges: &[(Point2, Point2)]) -> Self {
-        let bbox = lamina_core::BBox2::from_points(edges.iter().map(|e| e.0));
+        let bbox = lamina_api::BBox2::from_points(edges.iter().map(|e| e.0));
         let side = ((edges.len() as f64).sqrt().ceil() as usize).clamp(1, 512);
         let extent = bbox.width().max(bbox.height());
         let cell = if extent > 0.0 && extent.is_finite() {
@@ -486,7 +486,7 @@ fn build(config: &StageConfig<'_>) -> Result<AnyStage> {
     })))
 }
 
-lamina_core::register_stage!(StageFactory {
+lamina_api::register_stage!(StageFactory {
     info: StageInfo {
         kind: StageKind::Discretise,
         name: "radial",

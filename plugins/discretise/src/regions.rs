@@ -3,7 +3,7 @@
 //! with a reference point inside it.
 
 use i_overlay::i_shape::int::shape::IntShapes;
-use lamina_core::{FamilyContext, Polygon, SubRegion};
+use lamina_api::{FamilyContext, Polygon, SubRegion};
 
 use crate::grid::Grid;
 use crate::measure::interior_point;

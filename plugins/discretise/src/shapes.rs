@@ -1,7 +1,7 @@
 //! Generated contours for tests and benchmarks, in the short form they are written in
 //! there: circles and rectangles, counter-clockwise.
 
-use lamina_core::{Contour, Point2};
+use lamina_api::{Contour, Point2};
 
 /// A regular `n`-gon inscribed in the circle of radius `r` about `(cx, cy)`.
 pub fn circle(cx: f64, cy: f64, r: f64, n: usize) -> Contour {

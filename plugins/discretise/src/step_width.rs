@@ -3,9 +3,9 @@
 //! f = 0 below t_g / 2 and f = t_g (u + 1) for (u + 1/2) t_g <= f < (u + 3/2) t_g, which
 //! gives N_c = 1 / t_g + 1 homogeneous regions bounded by offsets at the half steps.
 
-use lamina_core::stage::{AnyStage, Discretiser, FamilyContext, StageConfig, StageInfo, StageKind};
-use lamina_core::steps::Truncation;
-use lamina_core::{Polygon, Result, StageFactory, SubRegion};
+use lamina_api::stage::{AnyStage, Discretiser, FamilyContext, StageConfig, StageInfo, StageKind};
+use lamina_api::steps::Truncation;
+use lamina_api::{Polygon, Result, StageFactory, SubRegion};
 
 use crate::bands::offset_bands;
 use crate::cells::Cells;
@@ -17,7 +17,7 @@ use crate::regions::{from_bands, whole};
 
 const STAGE: &str = "discretise:step-width";
 
-lamina_core::stage_options! {
+lamina_api::stage_options! {
     #[derive(Debug)]
     struct Options {
         /// grading step-width t_g in (0, 1]; N_c = int(1 / t_g) + 1 levels, the last one 1
@@ -42,7 +42,7 @@ struct StepWidth {
     width: Option<f64>,
     inset: Inset,
     cells: Cells,
-    limits: lamina_core::Limits,
+    limits: lamina_api::Limits,
 }
 
 /// The largest distance from the reference inside the family, which normalises d:
@@ -127,7 +127,7 @@ fn build(config: &StageConfig<'_>) -> Result<AnyStage> {
     })))
 }
 
-lamina_core::register_stage!(StageFactory {
+lamina_api::register_stage!(StageFactory {
     info: StageInfo {
         kind: StageKind::Discretise,
         name: "step-width",

@@ -16,15 +16,15 @@
 use std::io::Write;
 use std::path::PathBuf;
 
-use lamina_core::microstructure::{CellSpec, Microstructure};
-use lamina_core::stage::{
+use lamina_api::microstructure::{CellSpec, Microstructure};
+use lamina_api::stage::{
     AnyStage, ExportContext, Exporter, LayerSink, OutputFiles, StageConfig, StageInfo, StageKind,
 };
-use lamina_core::{BBox2, Contour, Error, LayerPlan, Limit, Limits, Result, RunInfo, StageFactory};
+use lamina_api::{BBox2, Contour, Error, LayerPlan, Limit, Limits, Result, RunInfo, StageFactory};
 use lamina_geom::lattice::Lattice;
 use std::sync::Arc;
 
-lamina_core::stage_options! {
+lamina_api::stage_options! {
     #[derive(Debug)]
     struct Options {
         /// output name: `<path>.hdr` (one line per layer) and `<path>.dat` (the bitmaps)
@@ -230,8 +230,8 @@ impl Exporter for Bitmap {
              # voids: {}\n\
              # layer z thickness cut_z pixel origin_x origin_y width height offset",
             // A part's name is the pipeline's text: one line, or it would add records.
-            lamina_core::output::one_line(&names.join(", ")),
-            lamina_core::output::one_line(&voids),
+            lamina_api::text::one_line(&names.join(", ")),
+            lamina_api::text::one_line(&voids),
         )
         .map_err(io(&header_path))?;
         Ok(Box::new(Sink {
@@ -383,7 +383,7 @@ fn spheres(config: &StageConfig<'_>, options: &Options) -> Result<Voids> {
     }))
 }
 
-lamina_core::register_stage!(StageFactory {
+lamina_api::register_stage!(StageFactory {
     info: StageInfo {
         kind: StageKind::Export,
         name: "bitmap",
@@ -397,7 +397,7 @@ lamina_core::register_stage!(StageFactory {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use lamina_core::Point2;
+    use lamina_api::Point2;
 
     fn square(x0: f64, y0: f64, s: f64) -> Contour {
         Contour::rectangle(Point2::new(x0, y0), Point2::new(x0 + s, y0 + s))

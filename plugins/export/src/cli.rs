@@ -17,13 +17,13 @@
 use std::io::Write;
 use std::path::PathBuf;
 
-use lamina_core::stage::{
+use lamina_api::stage::{
     AnyStage, ExportContext, Exporter, LayerSink, OutputFiles, StageConfig, StageInfo, StageKind,
 };
-use lamina_core::{Contour, Error, LayerPlan, Result, RunInfo, StageFactory};
+use lamina_api::{Contour, Error, LayerPlan, Result, RunInfo, StageFactory};
 use serde::Deserialize;
 
-lamina_core::option_type!(Format = "string");
+lamina_api::option_type!(Format = "string");
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize)]
 #[serde(rename_all = "lowercase")]
@@ -34,7 +34,7 @@ enum Format {
     Modified,
 }
 
-lamina_core::stage_options! {
+lamina_api::stage_options! {
     #[derive(Debug)]
     struct Options {
         /// output file, relative to the output folder
@@ -141,7 +141,7 @@ impl Exporter for Cli {
             header.push_str(&format!(
                 "$$LABEL/{},{}\n",
                 i + 1,
-                lamina_core::output::one_line(&p.name)
+                lamina_api::text::one_line(&p.name)
             ));
         }
         if self.options.format == Format::Modified {
@@ -150,7 +150,7 @@ impl Exporter for Cli {
                 .info
                 .materials
                 .iter()
-                .map(|m| lamina_core::output::one_line(&m.name).replace("//", "/ /"))
+                .map(|m| lamina_api::text::one_line(&m.name).replace("//", "/ /"))
                 .collect();
             header.push_str(&format!(
                 "//modified CLI: $$MATERIAL/R,G,B then the fractions of the polyline's part materials; materials: {}//\n",
@@ -251,7 +251,7 @@ fn build(config: &StageConfig<'_>) -> Result<AnyStage> {
     Ok(AnyStage::Export(Box::new(Cli { options })))
 }
 
-lamina_core::register_stage!(StageFactory {
+lamina_api::register_stage!(StageFactory {
     info: StageInfo {
         kind: StageKind::Export,
         name: "cli",

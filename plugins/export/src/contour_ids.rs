@@ -14,7 +14,7 @@
 //! is written with the region it bounds: its outer boundary opens ring j (id j + 1),
 //! its holes close it (id j + 2, or 0 for the last ring).
 
-use lamina_core::{BBox2, Contour, PartLayer, SubRegion};
+use lamina_api::{BBox2, Contour, PartLayer, SubRegion};
 
 /// Relative area difference and distance (mm) within which two rings are one contour.
 /// The sub-regions of a family share their vertices exactly (one integer grid), and the
@@ -62,7 +62,7 @@ impl<'a> Ring<'a> {
 /// Whether two rings are the same closed curve: equal areas and bounding boxes, and
 /// sampled vertices of each on the other.
 fn same(a: &Contour, a_area: f64, a_box: &BBox2, b: &Contour, b_area: f64, b_box: &BBox2) -> bool {
-    let close = |p: lamina_core::Point2, q: lamina_core::Point2| (p - q).norm() <= SAME_DISTANCE;
+    let close = |p: lamina_api::Point2, q: lamina_api::Point2| (p - q).norm() <= SAME_DISTANCE;
     if (a_area - b_area).abs() > SAME_AREA * a_area.max(b_area)
         || !close(a_box.min, b_box.min)
         || !close(a_box.max, b_box.max)
@@ -165,7 +165,7 @@ fn family_entries(part: &PartLayer, family: usize) -> Vec<Entry<'_>> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use lamina_core::{ContourTree, Family, Point2, Polygon};
+    use lamina_api::{ContourTree, Family, Point2, Polygon};
 
     fn square(c: f64, h: f64, ccw: bool) -> Contour {
         Contour::square(Point2::new(c, c), h).oriented(ccw)

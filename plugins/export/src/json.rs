@@ -6,16 +6,16 @@ use std::collections::BTreeMap;
 use std::io::Write;
 use std::path::PathBuf;
 
-use lamina_core::stage::{
+use lamina_api::stage::{
     AnyStage, ExportContext, Exporter, LayerSink, OutputFiles, StageConfig, StageInfo, StageKind,
 };
-use lamina_core::{Contour, Error, LayerPlan, Polygon, Result, RunInfo, StageFactory, Toolpath};
+use lamina_api::{Contour, Error, LayerPlan, Polygon, Result, RunInfo, StageFactory, Toolpath};
 use serde::{Deserialize, Serialize};
 
 /// Version of the JSON schema; bumped on incompatible changes.
 pub const SCHEMA_VERSION: u32 = 1;
 
-lamina_core::option_type!(Form = "string");
+lamina_api::option_type!(Form = "string");
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize)]
 #[serde(rename_all = "lowercase")]
@@ -24,7 +24,7 @@ enum Form {
     Lines,
 }
 
-lamina_core::stage_options! {
+lamina_api::stage_options! {
     #[derive(Debug)]
     struct Options {
         /// output file, relative to the output folder
@@ -44,12 +44,12 @@ struct Header<'a> {
     schema: u32,
     pipeline: &'a str,
     layer_count: usize,
-    materials: &'a [lamina_core::Material],
+    materials: &'a [lamina_api::Material],
     parts: Vec<PartHeader<'a>>,
     #[serde(skip_serializing_if = "Option::is_none")]
-    sequence: Option<&'a lamina_core::Sequence>,
+    sequence: Option<&'a lamina_api::Sequence>,
     #[serde(skip_serializing_if = "Option::is_none")]
-    orientation: Option<&'a lamina_core::Orientation>,
+    orientation: Option<&'a lamina_api::Orientation>,
 }
 
 #[derive(Serialize)]
@@ -76,13 +76,13 @@ struct LayerOut<'a> {
     #[serde(skip_serializing_if = "Option::is_none")]
     sequential_time: Option<f64>,
     #[serde(skip_serializing_if = "Option::is_none")]
-    pauses: Option<lamina_core::Pauses>,
+    pauses: Option<lamina_api::Pauses>,
     #[serde(skip_serializing_if = "Option::is_none")]
-    fill: Option<lamina_core::Fill>,
-    #[serde(skip_serializing_if = "<[lamina_core::Operation]>::is_empty")]
-    operations: &'a [lamina_core::Operation],
-    #[serde(skip_serializing_if = "<[lamina_core::Diagnostic]>::is_empty")]
-    diagnostics: &'a [lamina_core::Diagnostic],
+    fill: Option<lamina_api::Fill>,
+    #[serde(skip_serializing_if = "<[lamina_api::Operation]>::is_empty")]
+    operations: &'a [lamina_api::Operation],
+    #[serde(skip_serializing_if = "<[lamina_api::Diagnostic]>::is_empty")]
+    diagnostics: &'a [lamina_api::Diagnostic],
 }
 
 #[derive(Serialize)]
@@ -212,7 +212,7 @@ impl Exporter for Json {
     fn open(&self, ctx: &mut ExportContext<'_>) -> Result<Box<dyn LayerSink>> {
         let mut out = ctx.files.create(&self.options.path)?;
         let header = Header {
-            lamina: lamina_core::VERSION,
+            lamina: lamina_api::VERSION,
             schema: SCHEMA_VERSION,
             pipeline: ctx.pipeline_name,
             layer_count: ctx.layer_count,
@@ -300,7 +300,7 @@ fn build(config: &StageConfig<'_>) -> Result<AnyStage> {
     Ok(AnyStage::Export(Box::new(Json { options })))
 }
 
-lamina_core::register_stage!(StageFactory {
+lamina_api::register_stage!(StageFactory {
     info: StageInfo {
         kind: StageKind::Export,
         name: "json",

@@ -10,14 +10,14 @@ use std::fmt::Write as _;
 use std::io::Write;
 use std::path::PathBuf;
 
-use lamina_core::stage::{
+use lamina_api::stage::{
     AnyStage, ExportContext, Exporter, LayerSink, OutputFiles, StageConfig, StageInfo, StageKind,
 };
-use lamina_core::{Contour, Error, LayerPlan, Polygon, Result, RunInfo, StageFactory};
+use lamina_api::{Contour, Error, LayerPlan, Polygon, Result, RunInfo, StageFactory};
 use zip::ZipWriter;
 use zip::write::{SimpleFileOptions, StreamWriter};
 
-lamina_core::stage_options! {
+lamina_api::stage_options! {
     #[derive(Debug)]
     struct Options {
         /// output file, relative to the output folder
@@ -44,7 +44,7 @@ struct Sink {
 fn xml_escape(s: &str) -> String {
     // XML 1.0 allows no control character but tab and line breaks, not even as a
     // reference, and a name is one line: each becomes a space.
-    lamina_core::output::one_line(s)
+    lamina_api::text::one_line(s)
         .replace('&', "&amp;")
         .replace('<', "&lt;")
         .replace('>', "&gt;")
@@ -161,7 +161,7 @@ impl Exporter for ThreeMf {
             head,
             "<metadata name=\"Title\">{}</metadata>\n<metadata name=\"Application\">Lamina {}</metadata>\n<resources>\n<basematerials id=\"1\">",
             xml_escape(ctx.pipeline_name),
-            lamina_core::VERSION
+            lamina_api::VERSION
         );
         for m in &ctx.info.materials {
             let [r, g, b] = m.colour;
@@ -276,7 +276,7 @@ fn build(config: &StageConfig<'_>) -> Result<AnyStage> {
     Ok(AnyStage::Export(Box::new(ThreeMf { options })))
 }
 
-lamina_core::register_stage!(StageFactory {
+lamina_api::register_stage!(StageFactory {
     info: StageInfo {
         kind: StageKind::Export,
         name: "3mf",

@@ -4,7 +4,7 @@
 //! active and a standby temperature with `G10`, switching between them itself when
 //! tools change.
 
-use lamina_core::machine::{Firmware as Dialect, Flavor};
+use lamina_api::machine::{Firmware as Dialect, Flavor};
 
 use crate::motion::Corner;
 use crate::setup::Setup;

@@ -6,7 +6,7 @@
 //! that it heats and selects a tool before extruding with it whatever a template did,
 //! and so that the time estimate is that of the file itself.
 
-use lamina_core::machine::{Firmware as Dialect, Flavor, Heating};
+use lamina_api::machine::{Firmware as Dialect, Flavor, Heating};
 
 use crate::motion::{Corner, Limits, Planner};
 

@@ -6,8 +6,8 @@
 //! some are negative, in which case they move so that their bounding box starts at
 //! [`UNPLACED_MARGIN`] on both axes, and the header says so.
 
-use lamina_core::machine::{Bed, BedShape};
-use lamina_core::{BBox2, Error, Point2, Result, RunInfo, Vector2};
+use lamina_api::machine::{Bed, BedShape};
+use lamina_api::{BBox2, Error, Point2, Result, RunInfo, Vector2};
 
 use crate::setup::Setup;
 
@@ -314,7 +314,7 @@ mod tests {
     fn prime_lines_stay_on_a_round_bed() {
         let bed = Bed {
             shape: BedShape::Circle { diameter: 200.0 },
-            origin: lamina_core::machine::BedOrigin::Centre,
+            origin: lamina_api::machine::BedOrigin::Centre,
             max_height: 200.0,
         };
         let lines = prime_band(&bed, 80.0, 0.6, 2, false).expect("room");

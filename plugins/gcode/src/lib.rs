@@ -10,7 +10,7 @@
 //! - `reprap-mixing`: RepRapFirmware, a tool defined over several drives with `M563`
 //!   and its mix set with `M567 P<tool> E<r1>:<r2>:...` per sub-region.
 //!
-//! With a machine profile (the pipeline's `machine`, see `lamina_core::machine`) the
+//! With a machine profile (the pipeline's `machine`, see `lamina_api::machine`) the
 //! file homes, heats the bed and the tools, places the parts on the bed, primes each
 //! tool, prints a skirt, lets the part's next beads take the transition after a tool or
 //! mix change where the design allows it and purges the rest on a wipe tower beside the
@@ -43,12 +43,12 @@ pub mod writer;
 use std::collections::BTreeMap;
 use std::path::PathBuf;
 
-use lamina_core::stage::{
+use lamina_api::stage::{
     AnyStage, ExportContext, Exporter, LayerSink, OutputFiles, StageConfig, StageInfo, StageKind,
 };
-use lamina_core::{Error, LayerPlan, Result, RunInfo, StageFactory};
+use lamina_api::{Error, LayerPlan, Result, RunInfo, StageFactory};
 
-pub use lamina_core::machine::Flavor;
+pub use lamina_api::machine::Flavor;
 pub use writer::percentages;
 
 use crate::setup::{OwnOptions, Setup};
@@ -67,7 +67,7 @@ const MACHINE_KEYS: &[(&str, &str)] = &[
     ("channels", "each tool's `material` ([[machine.tools]])"),
 ];
 
-lamina_core::stage_options! {
+lamina_api::stage_options! {
     #[derive(Debug, Clone)]
     struct Options {
         /// output file
@@ -245,7 +245,7 @@ fn build(config: &StageConfig<'_>) -> Result<AnyStage> {
     Ok(AnyStage::Export(Box::new(Gcode(o))))
 }
 
-lamina_core::register_stage!(StageFactory {
+lamina_api::register_stage!(StageFactory {
     info: StageInfo {
         kind: StageKind::Export,
         name: "gcode",

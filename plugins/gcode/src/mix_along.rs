@@ -1,7 +1,7 @@
 //! A mixing head following the gradient along a bead (`mix_along`): the composition at
 //! a point of a sub-region from the compositions its grader gave at points of it.
 
-use lamina_core::{Composition, Point2, Sample, SubRegion};
+use lamina_api::{Composition, Point2, Sample, SubRegion};
 
 /// The composition a bead deposits at `p`, from the samples nearest to it: a
 /// least-squares plane through the eight nearest (exact where the composition varies
@@ -56,7 +56,7 @@ pub(crate) fn composition_at(region: &SubRegion, p: Point2) -> Option<Compositio
 #[cfg(test)]
 mod tests {
     use super::*;
-    use lamina_core::{Contour, Polygon};
+    use lamina_api::{Contour, Polygon};
 
     /// Samples of a linear field on a grid give the field exactly between them and
     /// just beyond, and a region without samples answers with its own composition.

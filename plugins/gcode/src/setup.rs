@@ -6,11 +6,11 @@
 
 use std::collections::BTreeMap;
 
-use lamina_core::machine::{
+use lamina_api::machine::{
     Bed, BedOrigin, Cornering, Fan, Firmware as Dialect, FirstLayerSpeed, Flavor, Machine, PrimeLine,
     Retraction, Skirt, Templates, WipeTower,
 };
-use lamina_core::{Error, Result, RunInfo};
+use lamina_api::{Error, Result, RunInfo};
 
 use crate::motion::{Corner, Limits};
 
@@ -110,7 +110,7 @@ pub struct Setup {
     pub systems: Option<Vec<System>>,
     /// How the heads move around each other, and the margin plans keep beyond their
     /// envelopes.
-    pub kinematics: lamina_core::machine::Kinematics,
+    pub kinematics: lamina_api::machine::Kinematics,
     pub templates: Templates,
     /// Whether the parts are placed by the machine (else moved only off negative
     /// coordinates).
@@ -177,7 +177,7 @@ impl Setup {
         let heads = if m.flavor.is_mixing() {
             // One heater: the hottest channel that carries a material the parts use.
             let used: Vec<usize> = used_slots(info, &slot_of);
-            let hottest = |f: fn(&lamina_core::machine::ToolSlot) -> f64| {
+            let hottest = |f: fn(&lamina_api::machine::ToolSlot) -> f64| {
                 used.iter().map(|&c| f(&m.tools[c])).fold(0.0, f64::max)
             };
             vec![Head {
@@ -240,7 +240,7 @@ impl Setup {
             // Z is one axis both motion systems share: no system may hop it while
             // the other prints.
             retraction: if m.motion_systems > 1 {
-                lamina_core::machine::Retraction {
+                lamina_api::machine::Retraction {
                     z_hop: 0.0,
                     ..m.retraction
                 }

@@ -3,7 +3,7 @@
 //! way lands where the layer is, or will be, deposited, so the travel needs neither a
 //! retraction nor a lift (PrusaSlicer's "only retract when crossing perimeters").
 
-use lamina_core::{LayerPlan, Point2, Vector2};
+use lamina_api::{LayerPlan, Point2, Vector2};
 
 /// Cells of the edge grid along the layer's longer side, at most.
 const CELLS: f64 = 128.0;
@@ -190,7 +190,7 @@ fn crosses(a: Point2, b: Point2, p: Point2, q: Point2) -> bool {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use lamina_core::{Contour, ContourTree, Family, PartLayer};
+    use lamina_api::{Contour, ContourTree, Family, PartLayer};
 
     /// A 20 mm square with a 6 mm square hole in its middle.
     fn layer() -> LayerPlan {

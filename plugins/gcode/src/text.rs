@@ -8,10 +8,7 @@ const MAX_NAME: usize = 80;
 /// characters and Unicode line breaks become spaces, so that a name with a newline can
 /// never start an executable line, and very long names are cut.
 pub fn clean(name: &str) -> String {
-    let mut out: String = lamina_core::output::one_line(name)
-        .chars()
-        .take(MAX_NAME)
-        .collect();
+    let mut out: String = lamina_api::text::one_line(name).chars().take(MAX_NAME).collect();
     if name.chars().count() > MAX_NAME {
         out.push_str("...");
     }

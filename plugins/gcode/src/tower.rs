@@ -8,7 +8,7 @@
 //! sparsely (densely on the first layer, which must hold to the bed) so the next layer
 //! has something to stand on.
 
-use lamina_core::{BBox2, Error, Point2, Result};
+use lamina_api::{BBox2, Error, Point2, Result};
 
 /// Every how many rows a sparse tower layer lays a line.
 const SPARSE_STEP: usize = 6;

@@ -35,7 +35,7 @@ pub enum PurgeInto {
     Tower,
 }
 
-lamina_core::option_type!(PurgeInto = "string");
+lamina_api::option_type!(PurgeInto = "string");
 
 /// The chamber's time constant in mm³ for a head that flushes in `transition` mm³.
 pub fn tau(transition: f64) -> f64 {

@@ -618,7 +618,7 @@ fn options_the_machine_sets_are_refused_at_their_key() {
     let m = machine("marlin-mixing-2in1");
     let registry = Registry::linked().expect("registry");
     let dir = std::env::temp_dir();
-    let scripts = lamina_core::script::ScriptHost::new(&dir, Default::default());
+    let scripts = lamina_core::script::local(&dir, Default::default());
     for key in [
         "flavor = \"tool-change\"",
         "temperature = 200.0",

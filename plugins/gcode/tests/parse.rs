@@ -223,7 +223,7 @@ fn bad_options_are_refused_with_their_key() {
     use lamina_gcode as _;
     let registry = Registry::linked().expect("registry");
     let dir = std::env::temp_dir();
-    let scripts = lamina_core::script::ScriptHost::new(&dir, Default::default());
+    let scripts = lamina_core::script::local(&dir, Default::default());
     for (text, key) in [
         ("use = \"gcode\"\nfilament_diameter = -1.0", "filament_diameter"),
         (

@@ -1,10 +1,10 @@
 //! `constant`: one composition for every region of the part, given as a material name
 //! or as fractions.
 
-use lamina_core::stage::{AnyStage, FamilyContext, Grader, StageConfig, StageInfo, StageKind};
-use lamina_core::{Composition, Error, Result, StageFactory, SubRegion};
+use lamina_api::stage::{AnyStage, FamilyContext, Grader, StageConfig, StageInfo, StageKind};
+use lamina_api::{Composition, Error, Result, StageFactory, SubRegion};
 
-lamina_core::stage_options! {
+lamina_api::stage_options! {
     #[derive(Debug)]
     struct Options {
         /// the single material of the part
@@ -73,7 +73,7 @@ fn build(config: &StageConfig<'_>) -> Result<AnyStage> {
     Ok(AnyStage::Grade(Box::new(Constant(spec))))
 }
 
-lamina_core::register_stage!(StageFactory {
+lamina_api::register_stage!(StageFactory {
     info: StageInfo {
         kind: StageKind::Grade,
         name: "constant",

@@ -3,10 +3,10 @@
 //! level r. With two materials the second fraction is 1 - f; a Rhai function may return
 //! one fraction per material instead, for any number of materials.
 
-use lamina_core::options::SharedOption;
-use lamina_core::script::{ScriptArgs, ScriptFn};
-use lamina_core::stage::{FamilyContext, StageConfig};
-use lamina_core::{Composition, Error, Result, SubRegion};
+use lamina_api::options::SharedOption;
+use lamina_api::script::{ScriptArgs, ScriptFn};
+use lamina_api::stage::{FamilyContext, StageConfig};
+use lamina_api::{Composition, Error, Result, SubRegion};
 use serde::Deserialize;
 
 /// The options every control-function grader takes.

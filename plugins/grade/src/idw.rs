@@ -6,11 +6,11 @@
 //! gives a point on a contour that contour's material alone. With circumferential cells
 //! (each with its own reference point) the composition varies around the family too.
 
-use lamina_core::stage::{AnyStage, FamilyContext, Grader, StageConfig, StageInfo, StageKind};
-use lamina_core::{Composition, Contour, Error, Point2, Result, RunInfo, StageFactory, SubRegion};
+use lamina_api::stage::{AnyStage, FamilyContext, Grader, StageConfig, StageInfo, StageKind};
+use lamina_api::{Composition, Contour, Error, Point2, Result, RunInfo, StageFactory, SubRegion};
 use serde::Deserialize;
 
-lamina_core::option_type!(HolesSpec = "string or array of table");
+lamina_api::option_type!(HolesSpec = "string or array of table");
 
 #[derive(Debug, Deserialize)]
 #[serde(untagged)]
@@ -28,7 +28,7 @@ struct NearSpec {
     material: String,
 }
 
-lamina_core::stage_options! {
+lamina_api::stage_options! {
     #[derive(Debug)]
     struct Options {
         /// material of the family's outer contour
@@ -150,7 +150,7 @@ fn build(config: &StageConfig<'_>) -> Result<AnyStage> {
     })))
 }
 
-lamina_core::register_stage!(StageFactory {
+lamina_api::register_stage!(StageFactory {
     info: StageInfo {
         kind: StageKind::Grade,
         name: "idw",

@@ -2,13 +2,13 @@
 //! sub-region (never per point), with the result checked: each fraction in [0, 1] and
 //! their sum 1.
 
-use lamina_core::script::ScriptFn;
-use lamina_core::stage::{AnyStage, FamilyContext, Grader, StageConfig, StageInfo, StageKind};
-use lamina_core::{Composition, Result, StageFactory, SubRegion};
+use lamina_api::script::ScriptFn;
+use lamina_api::stage::{AnyStage, FamilyContext, Grader, StageConfig, StageInfo, StageKind};
+use lamina_api::{Composition, Result, StageFactory, SubRegion};
 
 use crate::control::region_args;
 
-lamina_core::stage_options! {
+lamina_api::stage_options! {
     #[derive(Debug)]
     struct Options {
         /// an expression (e.g. "sin(r * PI)") or "file.rhai#name"; one number f means [f, 1 - f] for two materials, else an array of one fraction per material
@@ -44,7 +44,7 @@ fn build(config: &StageConfig<'_>) -> Result<AnyStage> {
     Ok(AnyStage::Grade(Box::new(Script { f })))
 }
 
-lamina_core::register_stage!(StageFactory {
+lamina_api::register_stage!(StageFactory {
     info: StageInfo {
         kind: StageKind::Grade,
         name: crate::SCRIPT_STAGE,

@@ -5,14 +5,14 @@
 //! f = 1 - r, puts the part's first material at the outer contour and the second at the
 //! far end, as the paper's green-to-black example does.
 
-use lamina_core::geom::contour_centroid;
-use lamina_core::stage::{AnyStage, FamilyContext, Grader, StageConfig, StageInfo, StageKind};
-use lamina_core::{Composition, Contour, Point2, Polygon, Result, Sample, StageFactory, SubRegion, Vector2};
+use lamina_api::geom::contour_centroid;
+use lamina_api::stage::{AnyStage, FamilyContext, Grader, StageConfig, StageInfo, StageKind};
+use lamina_api::{Composition, Contour, Point2, Polygon, Result, Sample, StageFactory, SubRegion, Vector2};
 use serde::Deserialize;
 
 use crate::control::{Control, ControlOptions, region_args};
 
-lamina_core::option_type!(LevelSource = "string");
+lamina_api::option_type!(LevelSource = "string");
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Deserialize)]
 #[serde(rename_all = "lowercase")]
@@ -30,7 +30,7 @@ enum LevelSource {
     Points,
 }
 
-lamina_core::stage_options! {
+lamina_api::stage_options! {
     #[derive(Debug)]
     struct Options {
         f: Option<String> = use crate::control::F,
@@ -270,7 +270,7 @@ fn build(config: &StageConfig<'_>) -> Result<AnyStage> {
     })))
 }
 
-lamina_core::register_stage!(StageFactory {
+lamina_api::register_stage!(StageFactory {
     info: StageInfo {
         kind: StageKind::Grade,
         name: "xy",
@@ -284,7 +284,7 @@ lamina_core::register_stage!(StageFactory {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use lamina_core::{Contour, ContourTree, Layer, Material, PartInfo, Point2, Polygon, RunInfo};
+    use lamina_api::{Contour, ContourTree, Layer, Material, PartInfo, Point2, Polygon, RunInfo};
 
     fn info() -> RunInfo {
         let mat = |name: &str, colour| Material {
@@ -305,7 +305,7 @@ mod tests {
             }],
             z_min: 0.0,
             z_max: 1.0,
-            xy_bounds: lamina_core::BBox2::EMPTY,
+            xy_bounds: lamina_api::BBox2::EMPTY,
             machine: None,
             model_frame: None,
         }
@@ -497,7 +497,7 @@ mod tests {
         };
         let tree = ContourTree {
             nodes: Vec::new(),
-            families: vec![lamina_core::Family {
+            families: vec![lamina_api::Family {
                 outer: 0,
                 holes: vec![1],
             }],

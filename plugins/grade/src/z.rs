@@ -3,12 +3,12 @@
 //! below the start and 1 above the end, and a control function of r gives the
 //! composition of every region of the layer.
 
-use lamina_core::stage::{AnyStage, FamilyContext, Grader, StageConfig, StageInfo, StageKind};
-use lamina_core::{Result, StageFactory, SubRegion};
+use lamina_api::stage::{AnyStage, FamilyContext, Grader, StageConfig, StageInfo, StageKind};
+use lamina_api::{Result, StageFactory, SubRegion};
 
 use crate::control::{Control, ControlOptions, region_args};
 
-lamina_core::stage_options! {
+lamina_api::stage_options! {
     #[derive(Debug)]
     struct Options {
         f: Option<String> = use crate::control::F,
@@ -130,7 +130,7 @@ fn build(config: &StageConfig<'_>) -> Result<AnyStage> {
     Ok(AnyStage::Grade(Box::new(AlongZ { control, span })))
 }
 
-lamina_core::register_stage!(StageFactory {
+lamina_api::register_stage!(StageFactory {
     info: StageInfo {
         kind: StageKind::Grade,
         name: "z",

@@ -4,14 +4,14 @@
 //! two are combined by the weighted operator of the grading-step-width paper (Eq. 8),
 //! (k_z M_z + k_xy M_xy) / (k_z + k_xy).
 
-use lamina_core::stage::{AnyStage, FamilyContext, Grader, StageConfig, StageInfo, StageKind};
-use lamina_core::{Composition, Error, Result, StageFactory, SubRegion};
+use lamina_api::stage::{AnyStage, FamilyContext, Grader, StageConfig, StageInfo, StageKind};
+use lamina_api::{Composition, Error, Result, StageFactory, SubRegion};
 
 use crate::control::{Control, ControlOptions, region_args};
 use crate::xy::index_level;
 use crate::z::{Span, level, span};
 
-lamina_core::stage_options! {
+lamina_api::stage_options! {
     #[derive(Debug)]
     struct Options {
         /// control function of the layer's level (a built-in name with its defaults, or Rhai): default f = r
@@ -166,7 +166,7 @@ fn pair(config: &StageConfig<'_>, names: Option<Vec<String>>, key: &str) -> Resu
     Ok(names)
 }
 
-lamina_core::register_stage!(StageFactory {
+lamina_api::register_stage!(StageFactory {
     info: StageInfo {
         kind: StageKind::Grade,
         name: "zxy",

@@ -15,7 +15,7 @@
 
 use std::f64::consts::PI;
 
-use lamina_core::{Contour, Mesh, Point2, Point3};
+use lamina_api::{Contour, Mesh, Point2, Point3};
 
 /// A NACA 4-digit section on a unit chord: maximum camber `m` at `p` of the chord and
 /// maximum thickness `t`, all fractions of the chord.
@@ -406,7 +406,7 @@ impl Blade {
 
     fn build(&self, rings: &[Vec<Point2>]) -> Result<Mesh, Invalid> {
         // The root block is centred under the base section's bounding box.
-        let bbox = lamina_core::BBox2::from_points(rings[0].iter().copied());
+        let bbox = lamina_api::BBox2::from_points(rings[0].iter().copied());
         let centre = bbox.center();
         let place = |p: Point2, angle: f64| {
             let (sin, cos) = angle.sin_cos();

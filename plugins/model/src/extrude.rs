@@ -1,7 +1,7 @@
 //! Extrusion of a planar profile into a closed, consistently wound (outward) triangle
 //! mesh: walls from each ring's edges, caps triangulated with earcut.
 
-use lamina_core::{Error, Mesh, Point3, Polygon, Result};
+use lamina_api::{Error, Mesh, Point3, Polygon, Result};
 
 /// Extrudes `profile` from `z0` to `z1` (z1 > z0). The mesh is watertight: every edge
 /// is shared by exactly two triangles.
@@ -12,7 +12,7 @@ pub fn extrude(name: &str, profile: &Polygon, z0: f64, z1: f64) -> Result<Mesh> 
             format!("extrusion height {z0}..{z1} is empty"),
         ));
     }
-    let rings: Vec<&lamina_core::Contour> = profile.contours().collect();
+    let rings: Vec<&lamina_api::Contour> = profile.contours().collect();
     let mut flat: Vec<[f64; 2]> = Vec::new();
     let mut hole_starts: Vec<u32> = Vec::new();
     for (i, ring) in rings.iter().enumerate() {
@@ -86,8 +86,8 @@ pub fn edge_defect(mesh: &Mesh) -> Option<String> {
 mod tests {
     use super::*;
     use crate::profile::polygon;
-    use lamina_core::Contour;
-    use lamina_core::Point2;
+    use lamina_api::Contour;
+    use lamina_api::Point2;
 
     #[test]
     fn extruded_tube_is_watertight_with_the_right_volume() {

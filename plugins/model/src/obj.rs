@@ -4,7 +4,7 @@
 
 use std::path::Path;
 
-use lamina_core::{Error, Mesh, Point3, Result};
+use lamina_api::{Error, Mesh, Point3, Result};
 
 fn model_error(path: &Path, line: usize, message: impl Into<String>) -> Error {
     Error::Model {

@@ -3,7 +3,7 @@
 
 use std::f64::consts::TAU;
 
-use lamina_core::{Contour, Point2, Polygon};
+use lamina_api::{Contour, Point2, Polygon};
 
 /// Parameters of a spur gear profile.
 #[derive(Debug, Clone, Copy, PartialEq)]

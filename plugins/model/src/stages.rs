@@ -2,9 +2,9 @@
 
 use std::path::{Path, PathBuf};
 
-use lamina_core::options::SharedOption;
-use lamina_core::stage::{AnyStage, ModelSource, StageConfig, StageInfo, StageKind};
-use lamina_core::{Contour, Error, Limit, Limits, Mesh, Point2, Result, StageFactory};
+use lamina_api::options::SharedOption;
+use lamina_api::stage::{AnyStage, ModelSource, StageConfig, StageInfo, StageKind};
+use lamina_api::{Contour, Error, Limit, Limits, Mesh, Point2, Result, StageFactory};
 use serde::Deserialize;
 
 use crate::blade::{Blade, Naca};
@@ -19,7 +19,7 @@ const WELD: SharedOption = SharedOption::new("1e-5", "vertices closer than this 
 
 // ---------------------------------------------------------------- file readers
 
-lamina_core::stage_options! {
+lamina_api::stage_options! {
     #[derive(Debug)]
     struct FileOptions {
         /// mesh file, relative to the pipeline file
@@ -45,7 +45,7 @@ struct FileSource {
 /// The file, at most `cap` bytes: a device or a FIFO named as a model is refused
 /// before it is read.
 fn read(path: &Path, cap: u64) -> Result<Vec<u8>> {
-    lamina_core::source::read_regular(path, cap).map_err(|e| Error::io(path, e))
+    lamina_api::source::read_regular(path, cap).map_err(|e| Error::io(path, e))
 }
 
 impl ModelSource for FileSource {
@@ -62,7 +62,7 @@ impl ModelSource for FileSource {
 impl FileSource {
     fn read(&self, path: &Path) -> Result<Vec<Mesh>> {
         let path = path.to_path_buf();
-        let bytes = lamina_core::source::regular_file(&path).map_err(|e| Error::io(&path, e))?;
+        let bytes = lamina_api::source::regular_file(&path).map_err(|e| Error::io(&path, e))?;
         self.limits
             .check(Limit::ModelBytes, bytes as f64, &path.display().to_string())?;
         let soups: Vec<(String, Soup)> = match self.format {
@@ -117,7 +117,7 @@ fn build_file(config: &StageConfig<'_>, format: Format) -> Result<AnyStage> {
     let path = config.base_dir.join(&o.file);
     let cannot = |e: std::io::Error| config.error("file", format!("cannot read `{}`: {e}", path.display()));
     let real = config.reach.check(&path).map_err(cannot)?;
-    lamina_core::source::regular_file(&real).map_err(cannot)?;
+    lamina_api::source::regular_file(&real).map_err(cannot)?;
     std::fs::File::open(&real).map_err(cannot)?;
     Ok(AnyStage::Model(Box::new(FileSource {
         file: o.file,
@@ -127,7 +127,7 @@ fn build_file(config: &StageConfig<'_>, format: Format) -> Result<AnyStage> {
     })))
 }
 
-lamina_core::register_stage!(StageFactory {
+lamina_api::register_stage!(StageFactory {
     info: StageInfo {
         kind: StageKind::Model,
         name: "stl",
@@ -138,7 +138,7 @@ lamina_core::register_stage!(StageFactory {
     build: |c| build_file(c, Format::Stl),
 });
 
-lamina_core::register_stage!(StageFactory {
+lamina_api::register_stage!(StageFactory {
     info: StageInfo {
         kind: StageKind::Model,
         name: "obj",
@@ -149,7 +149,7 @@ lamina_core::register_stage!(StageFactory {
     build: |c| build_file(c, Format::Obj),
 });
 
-lamina_core::register_stage!(StageFactory {
+lamina_api::register_stage!(StageFactory {
     info: StageInfo {
         kind: StageKind::Model,
         name: "3mf",
@@ -190,7 +190,7 @@ fn segments_ok(config: &StageConfig<'_>, v: usize) -> Result<()> {
     }
 }
 
-lamina_core::stage_options! {
+lamina_api::stage_options! {
     #[derive(Debug)]
     struct GearOptions {
         /// number of teeth
@@ -306,7 +306,7 @@ fn build_gear_shaft(config: &StageConfig<'_>) -> Result<AnyStage> {
     Ok(AnyStage::Model(Box::new(Generated(vec![gear, shaft]))))
 }
 
-lamina_core::register_stage!(StageFactory {
+lamina_api::register_stage!(StageFactory {
     info: StageInfo {
         kind: StageKind::Model,
         name: "gear",
@@ -317,7 +317,7 @@ lamina_core::register_stage!(StageFactory {
     build: build_gear,
 });
 
-lamina_core::register_stage!(StageFactory {
+lamina_api::register_stage!(StageFactory {
     info: StageInfo {
         kind: StageKind::Model,
         name: "gear-shaft",
@@ -328,7 +328,7 @@ lamina_core::register_stage!(StageFactory {
     build: build_gear_shaft,
 });
 
-lamina_core::stage_options! {
+lamina_api::stage_options! {
     #[derive(Debug)]
     struct TubeOptions {
         /// outer radius (mm)
@@ -360,7 +360,7 @@ fn build_tube(config: &StageConfig<'_>) -> Result<AnyStage> {
     Ok(AnyStage::Model(Box::new(Generated(vec![mesh]))))
 }
 
-lamina_core::register_stage!(StageFactory {
+lamina_api::register_stage!(StageFactory {
     info: StageInfo {
         kind: StageKind::Model,
         name: "tube",
@@ -371,7 +371,7 @@ lamina_core::register_stage!(StageFactory {
     build: build_tube,
 });
 
-lamina_core::stage_options! {
+lamina_api::stage_options! {
     #[derive(Debug)]
     struct CubeOptions {
         /// edge length (mm)
@@ -388,7 +388,7 @@ fn build_cube(config: &StageConfig<'_>) -> Result<AnyStage> {
     Ok(AnyStage::Model(Box::new(Generated(vec![mesh]))))
 }
 
-lamina_core::register_stage!(StageFactory {
+lamina_api::register_stage!(StageFactory {
     info: StageInfo {
         kind: StageKind::Model,
         name: "cube",
@@ -399,7 +399,7 @@ lamina_core::register_stage!(StageFactory {
     build: build_cube,
 });
 
-lamina_core::option_type!(NacaCode = "string");
+lamina_api::option_type!(NacaCode = "string");
 
 /// A NACA designation as written in TOML: `"2412"`, or `2412` (a code with leading
 /// zeros such as `0012` is no TOML integer and arrives as a string anyway).
@@ -410,7 +410,7 @@ enum NacaCode {
     Number(u32),
 }
 
-lamina_core::stage_options! {
+lamina_api::stage_options! {
     #[derive(Debug)]
     struct BladeOptions {
         /// 4-digit NACA section: camber %, its position in tenths, thickness %; unset: 2412
@@ -486,7 +486,7 @@ fn build_blade(config: &StageConfig<'_>) -> Result<AnyStage> {
     Ok(AnyStage::Model(Box::new(Generated(vec![mesh]))))
 }
 
-lamina_core::register_stage!(StageFactory {
+lamina_api::register_stage!(StageFactory {
     info: StageInfo {
         kind: StageKind::Model,
         name: "blade",
@@ -497,7 +497,7 @@ lamina_core::register_stage!(StageFactory {
     build: build_blade,
 });
 
-lamina_core::stage_options! {
+lamina_api::stage_options! {
     #[derive(Debug)]
     struct BoxOptions {
         /// size along x, y, z (mm)
@@ -515,7 +515,7 @@ fn build_box(config: &StageConfig<'_>) -> Result<AnyStage> {
     Ok(AnyStage::Model(Box::new(Generated(vec![mesh]))))
 }
 
-lamina_core::register_stage!(StageFactory {
+lamina_api::register_stage!(StageFactory {
     info: StageInfo {
         kind: StageKind::Model,
         name: "box",

@@ -5,7 +5,7 @@
 
 use std::path::Path;
 
-use lamina_core::{Error, Mesh, Point3, Result};
+use lamina_api::{Error, Mesh, Point3, Result};
 
 use crate::weld::{MeshWelder, Soup};
 
@@ -238,7 +238,7 @@ fn parse_ascii(path: &Path, bytes: &[u8]) -> Result<Vec<(String, Soup)>> {
 }
 
 /// Writes a mesh as binary STL (used by the generators' `lamina` tooling and tests).
-pub fn write_binary(mesh: &lamina_core::Mesh, out: &mut impl std::io::Write) -> std::io::Result<()> {
+pub fn write_binary(mesh: &lamina_api::Mesh, out: &mut impl std::io::Write) -> std::io::Result<()> {
     let mut header = [0u8; 80];
     let title = format!("lamina binary STL: {}", mesh.name);
     let n = title.len().min(80);

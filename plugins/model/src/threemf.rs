@@ -10,7 +10,7 @@ use std::collections::HashMap;
 use std::io::Read;
 use std::path::Path;
 
-use lamina_core::{Error, Limit, Limits, Mesh, Point3, Result};
+use lamina_api::{Error, Limit, Limits, Mesh, Point3, Result};
 use quick_xml::events::{BytesStart, Event};
 
 /// Deepest component nesting followed.

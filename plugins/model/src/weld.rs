@@ -2,7 +2,7 @@
 //! vertices closer than a tolerance are merged and triangles that collapse are dropped.
 //! Slicing relies on shared vertex indices to chain the cut segments into loops.
 
-use lamina_core::{Mesh, Point3};
+use lamina_api::{Mesh, Point3};
 
 /// Triangles as three corners each, before welding.
 #[derive(Debug, Default, Clone)]

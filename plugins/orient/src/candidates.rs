@@ -10,15 +10,15 @@
 //! go to the lower build height or the smaller surface angle, then to the larger flat
 //! base on the bed, then to the earlier candidate (+z first: no turn at all).
 
-use lamina_core::stage::{AnyStage, Orienter, StageConfig, StageInfo, StageKind};
-use lamina_core::{Error, Mesh, Orientation, OrientationCandidate, Result, StageFactory};
+use lamina_api::stage::{AnyStage, Orienter, StageConfig, StageInfo, StageKind};
+use lamina_api::{Error, Mesh, Orientation, OrientationCandidate, Result, StageFactory};
 use nalgebra::{Rotation3, Unit, Vector3};
 use serde::Deserialize;
 
 use crate::surfaces::{Facet, bed_contact, facets, flat_faces, height, surface_angle};
-use lamina_core::microstructure::{CellSpec, Microstructure};
+use lamina_api::microstructure::{CellSpec, Microstructure};
 
-lamina_core::option_type!(Criterion = "string");
+lamina_api::option_type!(Criterion = "string");
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize)]
 #[serde(rename_all = "kebab-case")]
@@ -38,7 +38,7 @@ impl Criterion {
     }
 }
 
-lamina_core::stage_options! {
+lamina_api::stage_options! {
     #[derive(Debug)]
     struct Options {
         /// what to minimise: "surface-angle" (sum A_i alpha_i over the object's surfaces), "base-cell" (the same over the faces of the microstructure's base cells) or "height"
@@ -148,7 +148,7 @@ impl Orienter for Candidates {
             Some((m, limit)) => {
                 let b = meshes
                     .iter()
-                    .fold(lamina_core::BBox3::EMPTY, |b, m| b.union(&m.bbox()));
+                    .fold(lamina_api::BBox3::EMPTY, |b, m| b.union(&m.bbox()));
                 let (lo, hi) = (b.min.coords, b.max.coords);
                 let cells = m.cells_in([lo.x, lo.y, lo.z], [hi.x, hi.y, hi.z], *limit)?;
                 if cells.is_empty() {
@@ -190,7 +190,7 @@ impl Orienter for Candidates {
         };
         let size = meshes
             .iter()
-            .fold(lamina_core::BBox3::EMPTY, |b, m| b.union(&m.bbox()))
+            .fold(lamina_api::BBox3::EMPTY, |b, m| b.union(&m.bbox()))
             .size()
             .norm();
         let tol = (size * 1e-6).max(1e-9);
@@ -320,7 +320,7 @@ fn build(config: &StageConfig<'_>) -> Result<AnyStage> {
     })))
 }
 
-lamina_core::register_stage!(StageFactory {
+lamina_api::register_stage!(StageFactory {
     info: StageInfo {
         kind: StageKind::Orient,
         name: "candidates",

@@ -3,7 +3,7 @@
 
 use std::collections::HashMap;
 
-use lamina_core::Mesh;
+use lamina_api::Mesh;
 use nalgebra::Vector3;
 
 /// A facet reduced to what the criteria need.
@@ -121,7 +121,7 @@ pub fn bed_contact(meshes: &[&Mesh], d: &Vector3<f64>, tol: f64) -> f64 {
 #[cfg(test)]
 pub(crate) mod tests {
     use super::*;
-    use lamina_core::Point3;
+    use lamina_api::Point3;
 
     /// An axis-aligned box with outward winding.
     pub fn cuboid(x: f64, y: f64, z: f64) -> Mesh {

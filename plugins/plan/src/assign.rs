@@ -9,9 +9,9 @@
 //! each other's way. `dominant` gives each group whole to the tool of its largest
 //! fraction: coarser, but each sub-region is laid by one tool.
 
-use lamina_core::{Composition, RunInfo};
+use lamina_api::{Composition, RunInfo};
 
-lamina_core::option_type!(Assign = "string");
+lamina_api::option_type!(Assign = "string");
 
 /// How the beads of a graded group are shared between single-material tools.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Deserialize)]

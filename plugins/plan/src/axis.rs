@@ -14,7 +14,7 @@
 
 use std::collections::HashMap;
 
-use lamina_core::Point2;
+use lamina_api::Point2;
 use lamina_geom::ring::ring_area;
 use spade::handles::FixedFaceHandle;
 use spade::{ConstrainedDelaunayTriangulation, Triangulation};
@@ -516,7 +516,7 @@ fn bead(points: Vec<Point2>, areas: Vec<f64>, tol: f64) -> Option<Bead> {
                 break;
             }
             let straight = (a + 1..next)
-                .all(|k| lamina_core::geom::segment_distance(points[k], points[a], points[next]) <= tol);
+                .all(|k| lamina_api::geom::segment_distance(points[k], points[a], points[next]) <= tol);
             let w_run = (area + areas[b]) / len;
             let seg_w = |k: usize| areas[k] / (points[k + 1] - points[k]).norm().max(1e-12);
             let even = (a..next).all(|k| (seg_w(k) - w_run).abs() <= 0.15 * w_run + 0.01);

@@ -3,7 +3,7 @@
 //! segments. A segment's width times its length is the area it fills, so a route's
 //! extrusion is the area it was cut to fill.
 
-use lamina_core::Point2;
+use lamina_api::Point2;
 
 #[derive(Debug, Clone, PartialEq)]
 pub struct Bead {

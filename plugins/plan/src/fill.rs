@@ -18,7 +18,7 @@
 use i_overlay::core::fill_rule::FillRule;
 use i_overlay::core::overlay_rule::OverlayRule;
 use i_overlay::float::single::SingleFloatOverlay;
-use lamina_core::{Point2, Polygon};
+use lamina_api::{Point2, Polygon};
 
 use lamina_geom::offset::{round_offset, tidy};
 use lamina_geom::ring::{ring_area, ring_of, ring_perimeter};
@@ -73,7 +73,7 @@ impl Widths {
 
 /// Twice the area over the perimeter: the width of a band, the radius of a disc.
 pub fn mean_width(p: &Polygon) -> f64 {
-    let perimeter: f64 = p.contours().map(lamina_core::Contour::perimeter).sum();
+    let perimeter: f64 = p.contours().map(lamina_api::Contour::perimeter).sum();
     if perimeter > 0.0 {
         2.0 * p.area() / perimeter
     } else {
@@ -88,7 +88,7 @@ pub fn mean_width(p: &Polygon) -> f64 {
 /// than the chord tolerance moves no pass by more than that tolerance.
 /// A region whose outer contour simplifies to a sliver has no shape.
 fn shapes_of(p: &Polygon) -> Shapes {
-    let ring = |c: &lamina_core::Contour| simplify_ring(&ring_of(c), TOLERANCE);
+    let ring = |c: &lamina_api::Contour| simplify_ring(&ring_of(c), TOLERANCE);
     let outer = ring(&p.outer);
     if outer.len() < 3 {
         return Vec::new();
@@ -340,7 +340,7 @@ fn surely_thin(shape: &[Vec<[f64; 2]>], d: f64) -> bool {
             (cx.saturating_sub(1)..=(cx + 1).min(gw - 1)).any(|gx| {
                 bins(gy * gw + gx).iter().any(|&e| {
                     let (a, b) = edges[e as usize];
-                    lamina_core::geom::segment_distance(p, Point2::new(a[0], a[1]), Point2::new(b[0], b[1]))
+                    lamina_api::geom::segment_distance(p, Point2::new(a[0], a[1]), Point2::new(b[0], b[1]))
                         < reach
                 })
             })
@@ -370,7 +370,7 @@ fn surely_thin(shape: &[Vec<[f64; 2]>], d: f64) -> bool {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use lamina_core::Contour;
+    use lamina_api::Contour;
 
     fn square(c: f64, h: f64) -> Contour {
         Contour::square(Point2::new(c, c), h)

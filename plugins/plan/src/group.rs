@@ -12,13 +12,13 @@ use std::collections::BTreeMap;
 
 use i_overlay::core::fill_rule::FillRule;
 use i_overlay::float::simplify::SimplifyShape;
-use lamina_core::{Composition, Contour, Point2, Polygon, SubRegion};
+use lamina_api::{Composition, Contour, Point2, Polygon, SubRegion};
 
 use crate::bead::Bead;
 use crate::fill::{Fill, Widths, fill, mean_width};
 use crate::pieces;
 
-lamina_core::option_type!(Thin = "string");
+lamina_api::option_type!(Thin = "string");
 
 /// What to do with sub-regions too thin for one pass.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Deserialize)]

@@ -23,9 +23,9 @@ pub mod sim;
 
 use std::collections::BTreeMap;
 
-use lamina_core::machine::HeadClass;
-use lamina_core::stage::{AnyStage, Planner, StageConfig, StageInfo, StageKind};
-use lamina_core::{BBox2, Error, LayerPlan, Point2, Result, RunInfo, StageFactory, Toolpath};
+use lamina_api::machine::HeadClass;
+use lamina_api::stage::{AnyStage, Planner, StageConfig, StageInfo, StageKind};
+use lamina_api::{BBox2, Error, LayerPlan, Point2, Result, RunInfo, StageFactory, Toolpath};
 use serde::Deserialize;
 
 use crate::assign::Assign;
@@ -45,7 +45,7 @@ struct ToolOptions {
     envelope: Option<f64>,
 }
 
-lamina_core::stage_options! {
+lamina_api::stage_options! {
     #[derive(Debug, Clone)]
     struct Options {
         /// nominal bead width (mm), by default the machine's nozzle diameter: loops at w/2, 3w/2, ... inside each sub-region, the width bent within `width_range` to fill a band with a whole number of beads; what loops leave is filled by variable-width beads along its centre line
@@ -381,7 +381,7 @@ fn sequential(layer: &Layer, tool_change: f64) -> (Vec<Toolpath>, f64) {
 fn report_fill(o: &Options, plan: &mut LayerPlan) {
     let area: f64 = plan.parts.iter().flat_map(|p| &p.regions).map(|r| r.area()).sum();
     let deposited: f64 = plan.toolpaths.iter().map(Toolpath::bead_area).sum();
-    plan.fill = Some(lamina_core::Fill {
+    plan.fill = Some(lamina_api::Fill {
         area,
         deposited,
         min_ratio: o.min_fill,
@@ -447,7 +447,7 @@ impl Planner for Concurrent {
         };
         let sync = sync_cost(o, info);
         // Each pause ends where the waiting head goes on: a synchronisation.
-        let syncs = |p: &lamina_core::Pauses| (p.by_x_speed + p.forced + p.other) as f64;
+        let syncs = |p: &lamina_api::Pauses| (p.by_x_speed + p.forced + p.other) as f64;
         let (paths, t, pauses) = match sim::concurrent(&busy, &settings, &layer.arena) {
             // Tools that mostly wait for each other can end up slower than taking turns:
             // said, and the concurrent schedule kept unless asked for the faster one
@@ -523,7 +523,7 @@ fn build_concurrent(config: &StageConfig<'_>) -> Result<AnyStage> {
     Ok(AnyStage::Plan(Box::new(Concurrent(o))))
 }
 
-lamina_core::register_stage!(StageFactory {
+lamina_api::register_stage!(StageFactory {
     info: StageInfo {
         kind: StageKind::Plan,
         name: "sequential",
@@ -534,7 +534,7 @@ lamina_core::register_stage!(StageFactory {
     build: build_sequential,
 });
 
-lamina_core::register_stage!(StageFactory {
+lamina_api::register_stage!(StageFactory {
     info: StageInfo {
         kind: StageKind::Plan,
         name: "contour",
@@ -545,7 +545,7 @@ lamina_core::register_stage!(StageFactory {
     build: build_sequential,
 });
 
-lamina_core::register_stage!(StageFactory {
+lamina_api::register_stage!(StageFactory {
     info: StageInfo {
         kind: StageKind::Plan,
         name: "concurrent",

@@ -10,7 +10,7 @@
 //! changes in place, and a tool changer gets each piece to the tool of its dominant
 //! material.
 
-use lamina_core::{BBox2, Composition, Point2, SubRegion, Vector2};
+use lamina_api::{BBox2, Composition, Point2, SubRegion, Vector2};
 
 use crate::bead::Bead;
 
@@ -312,7 +312,7 @@ fn normalised(mut fractions: Vec<f64>) -> Option<Composition> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use lamina_core::{Contour, Polygon};
+    use lamina_api::{Contour, Polygon};
 
     fn cell(x0: f64, x1: f64, y0: f64, y1: f64, f: f64, index: usize) -> SubRegion {
         SubRegion {

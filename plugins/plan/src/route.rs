@@ -2,14 +2,14 @@
 //! the sub-regions, and its route (park, nearest-next contour loops with their seams,
 //! back to park) as a list of moves at the tool's own speeds.
 
-use lamina_core::{BBox2, Composition, LayerPlan, PathKind, Point2, RunInfo, TimedPoint, Toolpath};
+use lamina_api::{BBox2, Composition, LayerPlan, PathKind, Point2, RunInfo, TimedPoint, Toolpath};
 
 use crate::assign::{Assign, Shares};
 use crate::bead::Bead;
 use crate::fill::Widths;
 use crate::group::{Thin, group};
 
-lamina_core::option_type!(Seam = "string");
+lamina_api::option_type!(Seam = "string");
 
 /// Where each loop starts.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Deserialize)]

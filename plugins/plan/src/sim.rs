@@ -27,8 +27,8 @@
 //! should not wait. If side-steps do not resolve the layer, the caller falls back to
 //! sequential deposition.
 
-use lamina_core::geom::segment_distance;
-use lamina_core::{BBox2, PathKind, Pauses, Point2, TimedPoint, Toolpath, Vector2};
+use lamina_api::geom::segment_distance;
+use lamina_api::{BBox2, PathKind, Pauses, Point2, TimedPoint, Toolpath, Vector2};
 
 use crate::route::{Move, ToolSpec, pause, toolpath};
 
@@ -41,7 +41,7 @@ fn push_point(path: &mut Toolpath, m: &Move, seg: usize, p: TimedPoint) {
     path.points.push(p);
 }
 
-lamina_core::option_type!(Priority = "string");
+lamina_api::option_type!(Priority = "string");
 
 /// Which of two tools about to collide keeps going; the other pauses.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Deserialize)]

@@ -19,7 +19,7 @@ fn build(table: &str) -> lamina_core::Result<AnyStage> {
     use lamina_plan as _;
     let registry = Registry::linked().expect("registry");
     let dir = std::env::temp_dir();
-    let scripts = lamina_core::script::ScriptHost::new(&dir, Default::default());
+    let scripts = lamina_core::script::local(&dir, Default::default());
     let table = lamina_core::pipeline::TableRef::parse_snippet("plan", table).expect("table");
     registry.build(StageKind::Plan, &table, &scripts, &dir)
 }

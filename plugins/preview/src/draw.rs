@@ -5,8 +5,8 @@ use std::fmt::Write as _;
 use std::io::Write;
 use std::path::{Path, PathBuf};
 
-use lamina_core::stage::{LayerSink, OutputFiles};
-use lamina_core::{Contour, Error, LayerPlan, Result, RunInfo, SubRegion};
+use lamina_api::stage::{LayerSink, OutputFiles};
+use lamina_api::{Contour, Error, LayerPlan, Result, RunInfo, SubRegion};
 
 /// `#rrggbb` of a region's property colour (grey when ungraded).
 pub fn hex(info: &RunInfo, part: usize, r: &SubRegion) -> String {
@@ -70,7 +70,7 @@ pub fn layer_bounds(plan: &LayerPlan) -> Option<[f64; 4]> {
 pub fn escape(s: &str) -> String {
     // XML 1.0 allows no control character but tab and line breaks, not even as a
     // reference, and a name is one line: each becomes a space.
-    lamina_core::output::one_line(s)
+    lamina_api::text::one_line(s)
         .replace('&', "&amp;")
         .replace('<', "&lt;")
         .replace('>', "&gt;")

@@ -9,10 +9,10 @@
 use std::io::Write;
 use std::path::PathBuf;
 
-use lamina_core::stage::{
+use lamina_api::stage::{
     AnyStage, ExportContext, Exporter, LayerSink, OutputFiles, StageConfig, StageInfo, StageKind,
 };
-use lamina_core::{Contour, Error, LayerPlan, PathKind, Result, RunInfo, StageFactory};
+use lamina_api::{Contour, Error, LayerPlan, PathKind, Result, RunInfo, StageFactory};
 use serde::Serialize;
 
 use crate::draw::{composition_text, escape, hex, round};
@@ -22,7 +22,7 @@ const VIEWER_JS: &str = include_str!("../assets/viewer.js");
 const VIEW3D_JS: &str = include_str!("../assets/view3d.js");
 const VIEWER_CSS: &str = include_str!("../assets/viewer.css");
 
-lamina_core::stage_options! {
+lamina_api::stage_options! {
     #[derive(Debug, Clone)]
     struct Options {
         /// output file, relative to the output folder
@@ -120,7 +120,7 @@ struct OpOut {
 }
 
 /// An operation's kind and pass as the viewer lists them.
-fn op_label(op: &lamina_core::Operation) -> String {
+fn op_label(op: &lamina_api::Operation) -> String {
     if op.pass.is_empty() {
         op.kind.clone()
     } else {
@@ -129,7 +129,7 @@ fn op_label(op: &lamina_core::Operation) -> String {
 }
 
 /// What an operation was planned with, in a line.
-fn op_summary(op: &lamina_core::Operation) -> String {
+fn op_summary(op: &lamina_api::Operation) -> String {
     let mut s = Vec::new();
     if let Some(t) = &op.tool {
         s.push(format!("{} ({} mm)", t.name, round(t.diameter, 3)));
@@ -476,7 +476,7 @@ fn build(config: &StageConfig<'_>) -> Result<AnyStage> {
     Ok(AnyStage::Export(Box::new(Html { options })))
 }
 
-lamina_core::register_stage!(StageFactory {
+lamina_api::register_stage!(StageFactory {
     info: StageInfo {
         kind: StageKind::Export,
         name: "html",

@@ -5,10 +5,10 @@
 
 use std::path::PathBuf;
 
-use lamina_core::stage::{
+use lamina_api::stage::{
     AnyStage, ExportContext, Exporter, LayerSink, OutputFiles, StageConfig, StageInfo, StageKind,
 };
-use lamina_core::{Contour, Error, LayerPlan, PathKind, Result, RunInfo, StageFactory};
+use lamina_api::{Contour, Error, LayerPlan, PathKind, Result, RunInfo, StageFactory};
 use tiny_skia::{Color, FillRule, Paint, PathBuilder, Pixmap, Stroke, Transform};
 
 use crate::draw::{EachLayer, layer_bounds, write_file};
@@ -22,7 +22,7 @@ struct Shape {
     rgb: [u8; 3],
 }
 
-fn colour_of(info: &RunInfo, part: usize, r: &lamina_core::SubRegion) -> [u8; 3] {
+fn colour_of(info: &RunInfo, part: usize, r: &lamina_api::SubRegion) -> [u8; 3] {
     r.composition
         .as_ref()
         .map_or([128; 3], |c| c.colour(&info.part_materials(part)))
@@ -158,7 +158,7 @@ fn encode(pixmap: &Pixmap, name: &std::path::Path) -> Result<Vec<u8>> {
 
 // ---- png: one picture per layer ------------------------------------------------------
 
-lamina_core::stage_options! {
+lamina_api::stage_options! {
     #[derive(Debug, Clone)]
     struct PngOptions {
         /// file stem: layer 7 of 240 is `png/layer-007.png`
@@ -226,7 +226,7 @@ fn build_png(config: &StageConfig<'_>) -> Result<AnyStage> {
     Ok(AnyStage::Export(Box::new(Png { options })))
 }
 
-lamina_core::register_stage!(StageFactory {
+lamina_api::register_stage!(StageFactory {
     info: StageInfo {
         kind: StageKind::Export,
         name: "png",
@@ -239,7 +239,7 @@ lamina_core::register_stage!(StageFactory {
 
 // ---- contact sheet -------------------------------------------------------------------
 
-lamina_core::stage_options! {
+lamina_api::stage_options! {
     #[derive(Debug, Clone)]
     struct SheetOptions {
         /// output file
@@ -347,7 +347,7 @@ fn build_sheet(config: &StageConfig<'_>) -> Result<AnyStage> {
     Ok(AnyStage::Export(Box::new(Sheet { options })))
 }
 
-lamina_core::register_stage!(StageFactory {
+lamina_api::register_stage!(StageFactory {
     info: StageInfo {
         kind: StageKind::Export,
         name: "contact-sheet",
@@ -360,7 +360,7 @@ lamina_core::register_stage!(StageFactory {
 
 // ---- stack: isometric overview -------------------------------------------------------
 
-lamina_core::stage_options! {
+lamina_api::stage_options! {
     #[derive(Debug, Clone)]
     struct StackOptions {
         /// output file
@@ -464,7 +464,7 @@ fn build_stack(config: &StageConfig<'_>) -> Result<AnyStage> {
     Ok(AnyStage::Export(Box::new(Stack { options })))
 }
 
-lamina_core::register_stage!(StageFactory {
+lamina_api::register_stage!(StageFactory {
     info: StageInfo {
         kind: StageKind::Export,
         name: "stack",

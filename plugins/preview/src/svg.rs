@@ -6,12 +6,12 @@
 use std::fmt::Write as _;
 use std::path::PathBuf;
 
-use lamina_core::stage::{AnyStage, ExportContext, Exporter, LayerSink, StageConfig, StageInfo, StageKind};
-use lamina_core::{LayerPlan, PathKind, Result, RunInfo, StageFactory};
+use lamina_api::stage::{AnyStage, ExportContext, Exporter, LayerSink, StageConfig, StageInfo, StageKind};
+use lamina_api::{LayerPlan, PathKind, Result, RunInfo, StageFactory};
 
 use crate::draw::{EachLayer, composition_text, escape, hex, layer_bounds, path_data, round};
 
-lamina_core::stage_options! {
+lamina_api::stage_options! {
     #[derive(Debug, Clone)]
     struct Options {
         /// file stem: layer 7 of 240 is written to `svg/layer-007.svg`
@@ -155,7 +155,7 @@ fn build(config: &StageConfig<'_>) -> Result<AnyStage> {
     Ok(AnyStage::Export(Box::new(Svg { options })))
 }
 
-lamina_core::register_stage!(StageFactory {
+lamina_api::register_stage!(StageFactory {
     info: StageInfo {
         kind: StageKind::Export,
         name: "svg",

@@ -1,7 +1,7 @@
 //! The geometry the operations share: a layer's area, offsets, raster passes over an
 //! area, and the stretches of a boundary that run along another region.
 
-use lamina_core::{LayerPlan, Limit, Limits, OperationPath, Point2, Polygon, Result};
+use lamina_api::{LayerPlan, Limit, Limits, OperationPath, Point2, Polygon, Result};
 use lamina_geom::Shapes;
 use lamina_geom::offset::round_offset;
 use lamina_geom::ring::{polygons_of, shape_of};
@@ -27,7 +27,7 @@ pub fn surface_now(plan: &LayerPlan) -> f64 {
 }
 
 /// The last operation of `kind` on the layer's region so far, if any.
-pub fn last_of<'p>(plan: &'p LayerPlan, kind: &str) -> Option<&'p lamina_core::Operation> {
+pub fn last_of<'p>(plan: &'p LayerPlan, kind: &str) -> Option<&'p lamina_api::Operation> {
     plan.operations
         .iter()
         .rfind(|op| op.kind == kind && op.region == plan.material_region)
@@ -179,7 +179,7 @@ pub fn adjoining_runs(ring: &[Point2], other: &[Polygon], reach: f64, step: f64)
 #[cfg(test)]
 mod tests {
     use super::*;
-    use lamina_core::Contour;
+    use lamina_api::Contour;
 
     fn square(x0: f64, y0: f64, s: f64) -> Polygon {
         Polygon::new(

@@ -16,11 +16,11 @@
 //! travel would be refused by the machine, so the run is refused.
 
 use crate::tool;
-use lamina_core::reach::Reach;
+use lamina_api::reach::Reach;
 use std::collections::BTreeMap;
 use std::path::Path;
 
-use lamina_core::{Error, Operation, Result};
+use lamina_api::{Error, Operation, Result};
 use serde::Deserialize;
 
 /// The cells shipped with Lamina, by name.
@@ -478,7 +478,7 @@ impl Cell {
     /// How the cell runs `tool`: its own data where it gives them, each checked against
     /// its limits. A wheel whose surface speed needs a spindle faster than the cell's
     /// runs at the cell's top speed, and the note says so.
-    pub fn cutting(&self, tool: &lamina_core::OperationTool, notes: &mut Vec<String>) -> Result<Cutting> {
+    pub fn cutting(&self, tool: &lamina_api::OperationTool, notes: &mut Vec<String>) -> Result<Cutting> {
         let fail = |m: String| Err(Error::stage("export:nc", m));
         let own = self.tool(&tool.name);
         let feed = own.and_then(|t| t.feed).unwrap_or(tool.feed);
@@ -624,7 +624,7 @@ mod tests {
         wheel.max_spindle = Some(6000.0);
         wheel.surface_speed = Some(25.0);
         let (name, diameter) = (wheel.name.clone(), wheel.diameter);
-        let tool = lamina_core::OperationTool {
+        let tool = lamina_api::OperationTool {
             name,
             kind: "grinding-wheel".into(),
             diameter,

@@ -1,5 +1,5 @@
 //! `engrave`: step 4 of the process. A periodic microstructure is an array of base
-//! cells, voids on a lattice (cmpm-process-planning 4.3, `lamina_core::microstructure`):
+//! cells, voids on a lattice (cmpm-process-planning 4.3, `lamina_api::microstructure`):
 //! spheres by default, or the `cell` table's shape, size, orientation and inserting
 //! function. The voids the layer's plane cuts (at mid-layer, where the contours are
 //! cut) are engraved by a laser from the surface down through the layer: rings inside
@@ -12,10 +12,10 @@
 use i_overlay::core::fill_rule::FillRule;
 use i_overlay::core::overlay_rule::OverlayRule;
 use i_overlay::float::single::SingleFloatOverlay;
-use lamina_core::microstructure::{CellSpec, Microstructure};
-use lamina_core::pipeline::TableRef;
-use lamina_core::stage::{AnyStage, Process, StageConfig, StageInfo, StageKind};
-use lamina_core::{
+use lamina_api::microstructure::{CellSpec, Microstructure};
+use lamina_api::stage::{AnyStage, Process, StageConfig, StageInfo, StageKind};
+use lamina_api::table::TableRef;
+use lamina_api::{
     Contour, LayerPlan, Limit, Operation, OperationPath, OperationTool, Point2, Polygon, ProcessContext,
     Result, StageFactory,
 };
@@ -27,7 +27,7 @@ use crate::area::{distance_to_area, layer_area, offset, surface_now};
 use crate::regions::selected;
 use crate::tool::{ToolSpec, checked};
 
-lamina_core::stage_options! {
+lamina_api::stage_options! {
     #[derive(Debug)]
     struct Options {
         /// the material regions with the microstructure; default: every layer
@@ -63,7 +63,7 @@ enum Void {
 }
 
 impl Void {
-    fn bbox(&self) -> lamina_core::BBox2 {
+    fn bbox(&self) -> lamina_api::BBox2 {
         match self {
             Void::Whole(c) => c.bbox(),
             Void::Cut(p) => p.bbox(),
@@ -128,13 +128,13 @@ struct Engrave {
     cells: Microstructure,
     tool: OperationTool,
     table: TableRef,
-    limits: lamina_core::Limits,
+    limits: lamina_api::Limits,
 }
 
 impl Engrave {
     /// The voids of the plane at `z` within `area`: whole sections, and the sections
     /// the area's boundary cuts, clipped all at once.
-    fn voids(&self, area: &[Polygon], z: f64, frame: Option<&lamina_core::ModelFrame>) -> Result<Vec<Void>> {
+    fn voids(&self, area: &[Polygon], z: f64, frame: Option<&lamina_api::ModelFrame>) -> Result<Vec<Void>> {
         let Some(bbox) = area.iter().map(Polygon::bbox).reduce(|a, b| a.union(&b)) else {
             return Ok(Vec::new());
         };
@@ -321,7 +321,7 @@ fn build(config: &StageConfig<'_>) -> Result<AnyStage> {
     })))
 }
 
-lamina_core::register_stage!(StageFactory {
+lamina_api::register_stage!(StageFactory {
     info: StageInfo {
         kind: StageKind::Process,
         name: "engrave",

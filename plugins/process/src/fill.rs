@@ -7,15 +7,15 @@
 //! `remove-filler` is not the paper's: an extra operation for a part whose voids must
 //! end empty, melted out or leached once the last layer is done.
 
-use lamina_core::pipeline::TableRef;
-use lamina_core::stage::{AnyStage, Process, StageConfig, StageInfo, StageKind};
-use lamina_core::{LayerPlan, Operation, OperationTool, ProcessContext, Result, StageFactory};
+use lamina_api::stage::{AnyStage, Process, StageConfig, StageInfo, StageKind};
+use lamina_api::table::TableRef;
+use lamina_api::{LayerPlan, Operation, OperationTool, ProcessContext, Result, StageFactory};
 
 use crate::area::{last_of, layer_area, raster, surface_now};
 use crate::regions::selected;
 use crate::tool::{ToolSpec, checked};
 
-lamina_core::stage_options! {
+lamina_api::stage_options! {
     #[derive(Debug)]
     struct Options {
         /// the material regions filled; default: every layer that was engraved
@@ -33,7 +33,7 @@ struct Fill {
     options: Options,
     tool: OperationTool,
     table: TableRef,
-    limits: lamina_core::Limits,
+    limits: lamina_api::Limits,
 }
 
 impl Process for Fill {
@@ -82,7 +82,7 @@ fn build(config: &StageConfig<'_>) -> Result<AnyStage> {
     })))
 }
 
-lamina_core::register_stage!(StageFactory {
+lamina_api::register_stage!(StageFactory {
     info: StageInfo {
         kind: StageKind::Process,
         name: "fill",
@@ -93,7 +93,7 @@ lamina_core::register_stage!(StageFactory {
     build,
 });
 
-lamina_core::stage_options! {
+lamina_api::stage_options! {
     #[derive(Debug)]
     struct RemoveOptions {
         /// how the filler leaves: `melt-out` (heated above its melting point) or `leach` (dissolved)
@@ -133,7 +133,7 @@ fn build_remove(config: &StageConfig<'_>) -> Result<AnyStage> {
     Ok(AnyStage::Process(Box::new(RemoveFiller { options })))
 }
 
-lamina_core::register_stage!(StageFactory {
+lamina_api::register_stage!(StageFactory {
     info: StageInfo {
         kind: StageKind::Process,
         name: "remove-filler",

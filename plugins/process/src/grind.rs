@@ -9,9 +9,9 @@
 //! half a stepover: every point of the area then lies within half a stepover, at most
 //! the wheel's radius, of the centre's path, so the face passes over all of it.
 
-use lamina_core::pipeline::TableRef;
-use lamina_core::stage::{AnyStage, Process, StageConfig, StageInfo, StageKind};
-use lamina_core::{LayerPlan, Operation, OperationTool, ProcessContext, Result, StageFactory};
+use lamina_api::stage::{AnyStage, Process, StageConfig, StageInfo, StageKind};
+use lamina_api::table::TableRef;
+use lamina_api::{LayerPlan, Operation, OperationTool, ProcessContext, Result, StageFactory};
 use serde::Deserialize;
 
 use crate::area::{last_of, layer_area, offset, raster, surface_now};
@@ -25,9 +25,9 @@ enum Pass {
     Finish,
 }
 
-lamina_core::option_type!(Pass = "string");
+lamina_api::option_type!(Pass = "string");
 
-lamina_core::stage_options! {
+lamina_api::stage_options! {
     #[derive(Debug)]
     struct Options {
         /// `rough`: down to the height plus the finish allowance, after spraying; `finish`: down to the design height, where a finish allowance was sprayed
@@ -53,7 +53,7 @@ struct Grind {
     options: Options,
     tool: OperationTool,
     table: TableRef,
-    limits: lamina_core::Limits,
+    limits: lamina_api::Limits,
 }
 
 impl Process for Grind {
@@ -130,7 +130,7 @@ fn build(config: &StageConfig<'_>) -> Result<AnyStage> {
     })))
 }
 
-lamina_core::register_stage!(StageFactory {
+lamina_api::register_stage!(StageFactory {
     info: StageInfo {
         kind: StageKind::Process,
         name: "grind",

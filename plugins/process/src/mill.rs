@@ -4,9 +4,9 @@
 //! the area's boundary along that region, its centre the cutter's radius inside the
 //! boundary, down to the area's surface: the layer then gets its precise boundary.
 
-use lamina_core::pipeline::TableRef;
-use lamina_core::stage::{AnyStage, Process, StageConfig, StageInfo, StageKind};
-use lamina_core::{
+use lamina_api::stage::{AnyStage, Process, StageConfig, StageInfo, StageKind};
+use lamina_api::table::TableRef;
+use lamina_api::{
     LayerPlan, Operation, OperationPath, OperationTool, Polygon, ProcessContext, Result, StageFactory,
 };
 
@@ -14,7 +14,7 @@ use crate::area::{adjoining_runs, layer_area, offset};
 use crate::regions::selected;
 use crate::tool::{ToolSpec, checked, non_negative};
 
-lamina_core::stage_options! {
+lamina_api::stage_options! {
     #[derive(Debug)]
     struct Options {
         /// the material regions milled; default: every layer
@@ -142,7 +142,7 @@ fn build(config: &StageConfig<'_>) -> Result<AnyStage> {
     })))
 }
 
-lamina_core::register_stage!(StageFactory {
+lamina_api::register_stage!(StageFactory {
     info: StageInfo {
         kind: StageKind::Process,
         name: "end-mill",

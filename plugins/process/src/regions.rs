@@ -3,8 +3,8 @@
 
 use std::collections::BTreeMap;
 
-use lamina_core::pipeline::TableRef;
-use lamina_core::{LayerPlan, ProcessContext, Result};
+use lamina_api::table::TableRef;
+use lamina_api::{LayerPlan, ProcessContext, Result};
 
 /// The name of the layer's material region, if the layers follow a sequence.
 pub fn name_of<'a>(ctx: &'a ProcessContext<'_>, plan: &LayerPlan) -> Option<&'a str> {

@@ -11,15 +11,15 @@
 
 use std::collections::BTreeMap;
 
-use lamina_core::pipeline::TableRef;
-use lamina_core::stage::{AnyStage, Process, StageConfig, StageInfo, StageKind};
-use lamina_core::{LayerPlan, Operation, OperationTool, Polygon, ProcessContext, Result, StageFactory};
+use lamina_api::stage::{AnyStage, Process, StageConfig, StageInfo, StageKind};
+use lamina_api::table::TableRef;
+use lamina_api::{LayerPlan, Operation, OperationTool, Polygon, ProcessContext, Result, StageFactory};
 
 use crate::area::raster;
 use crate::regions::{check_names, selected, value_for};
 use crate::tool::{ToolSpec, checked, non_negative};
 
-lamina_core::stage_options! {
+lamina_api::stage_options! {
     #[derive(Debug)]
     struct Options {
         /// the material regions sprayed; default: every layer
@@ -47,7 +47,7 @@ struct Spray {
     options: Options,
     tool: OperationTool,
     table: TableRef,
-    limits: lamina_core::Limits,
+    limits: lamina_api::Limits,
 }
 
 impl Process for Spray {
@@ -184,7 +184,7 @@ fn build(config: &StageConfig<'_>) -> Result<AnyStage> {
     })))
 }
 
-lamina_core::register_stage!(StageFactory {
+lamina_api::register_stage!(StageFactory {
     info: StageInfo {
         kind: StageKind::Process,
         name: "spray",

@@ -1,7 +1,7 @@
 //! The tool an operation stage names in its options, checked once when it is built.
 
-use lamina_core::stage::StageConfig;
-use lamina_core::{OperationTool, Result};
+use lamina_api::stage::StageConfig;
+use lamina_api::{OperationTool, Result};
 
 /// A number as a user typed it: 1e300, not its 301 digits.
 fn shown(v: f64) -> String {

@@ -4,7 +4,7 @@
 //! floating-point millimetres, 0.2, 0.5 and 1.5 have no exact common multiple; in
 //! micrometres (200, 500, 1500) the answer is exactly 3000.
 
-use lamina_core::{Block, CycleStep, Deposit, MaterialRegion, WorkCycle};
+use lamina_api::{Block, CycleStep, Deposit, MaterialRegion, WorkCycle};
 
 /// Greatest common divisor.
 pub fn gcd(mut a: u64, mut b: u64) -> u64 {

@@ -6,14 +6,14 @@
 
 use std::collections::BTreeMap;
 
-use lamina_core::pipeline::TableRef;
-use lamina_core::stage::{AnyStage, Sequencer, StageConfig, StageInfo, StageKind};
-use lamina_core::{Error, MaterialRegion, Result, RunInfo, Sequence, StageFactory};
+use lamina_api::stage::{AnyStage, Sequencer, StageConfig, StageInfo, StageKind};
+use lamina_api::table::TableRef;
+use lamina_api::{Error, MaterialRegion, Result, RunInfo, Sequence, StageFactory};
 use serde::Deserialize;
 
 use crate::cycle::{blocks, mm_to_um};
 
-lamina_core::stage_options! {
+lamina_api::stage_options! {
     #[derive(Debug)]
     struct Options {
         /// layer thickness by part name (mm), or "auto" (from the material: see `cell` and `step`); default: the thinnest `layer_thickness` of the part's materials
@@ -29,8 +29,8 @@ lamina_core::stage_options! {
     }
 }
 
-lamina_core::option_type!(RegionSpec = "table", array "array of table");
-lamina_core::option_type!(Thickness = "float or \"auto\"");
+lamina_api::option_type!(RegionSpec = "table", array "array of table");
+lamina_api::option_type!(Thickness = "float or \"auto\"");
 
 /// A thickness in mm, or `"auto"`.
 #[derive(Debug, Clone, Deserialize)]
@@ -347,7 +347,7 @@ fn build(config: &StageConfig<'_>) -> Result<AnyStage> {
     })))
 }
 
-lamina_core::register_stage!(StageFactory {
+lamina_api::register_stage!(StageFactory {
     info: StageInfo {
         kind: StageKind::Sequence,
         name: "work-cycles",

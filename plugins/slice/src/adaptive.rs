@@ -10,8 +10,8 @@
 
 use std::sync::Arc;
 
-use lamina_core::stage::{AnyStage, MeshSlicer, Slicer, StageConfig, StageInfo, StageKind};
-use lamina_core::{Error, LayerSlot, Mesh, Result, RunInfo, Sequence, StageFactory};
+use lamina_api::stage::{AnyStage, MeshSlicer, Slicer, StageConfig, StageInfo, StageKind};
+use lamina_api::{Error, LayerSlot, Mesh, Result, RunInfo, Sequence, StageFactory};
 use serde::Deserialize;
 
 use crate::cut::{CutMesh, CutOptions, FillRule};
@@ -31,9 +31,9 @@ enum Mode {
     Material,
 }
 
-lamina_core::option_type!(Mode = "string");
+lamina_api::option_type!(Mode = "string");
 
-lamina_core::stage_options! {
+lamina_api::stage_options! {
     #[derive(Debug)]
     struct Options {
         /// "surface" (slope and cusp), "material" (the [sequence]'s work cycles) or "auto" (material when there is a [sequence])
@@ -262,7 +262,7 @@ fn build(config: &StageConfig<'_>) -> Result<AnyStage> {
     })))
 }
 
-lamina_core::register_stage!(StageFactory {
+lamina_api::register_stage!(StageFactory {
     info: StageInfo {
         kind: StageKind::Slice,
         name: "adaptive",

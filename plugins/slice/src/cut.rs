@@ -11,8 +11,8 @@
 
 use std::sync::Arc;
 
-use lamina_core::options::SharedOption;
-use lamina_core::{Contour, Layer, LayerSlot, Mesh, Point2, Result};
+use lamina_api::options::SharedOption;
+use lamina_api::{Contour, Layer, LayerSlot, Mesh, Point2, Result};
 use lamina_geom::ring::{Ring, contour_of, ring_of};
 use lamina_geom::segment_distance;
 use rayon::prelude::*;
@@ -41,7 +41,7 @@ pub struct CutOptions {
     pub fill_rule: FillRule,
 }
 
-lamina_core::option_type!(FillRule = "string");
+lamina_api::option_type!(FillRule = "string");
 
 /// Options every slicer takes, documented once.
 pub(crate) const CLOSE_GAPS: SharedOption = SharedOption::new(
@@ -59,7 +59,7 @@ pub(crate) const MAX_LAYERS: SharedOption =
 impl CutOptions {
     /// The options a slicer's table gives, checked; errors point at the key.
     pub fn from_table(
-        config: &lamina_core::stage::StageConfig<'_>,
+        config: &lamina_api::stage::StageConfig<'_>,
         close_gaps: f64,
         fill_rule: FillRule,
     ) -> Result<Self> {
@@ -215,7 +215,7 @@ impl CutMesh {
         let b = bucket_of(z, self.z0, self.per_bucket, count);
         let snap = self.snap;
         // In the plane (within `snap`) counts as above, as exactly in the plane does.
-        let on = |p: &lamina_core::Point3| (p.z - z).abs() <= snap;
+        let on = |p: &lamina_api::Point3| (p.z - z).abs() <= snap;
         let mut out = Vec::new();
         for &t in self.bucket(b) {
             let (lo, hi) = self.ranges[t as usize];
@@ -257,7 +257,7 @@ impl CutMesh {
             // to edge (lone, i2) with the solid on the left... decided by the normal.
             let n = (pts[1] - pts[0]).cross(&(pts[2] - pts[0])) * self.orientation;
             // Direction z × n has the solid on its left.
-            let want = lamina_core::Vector2::new(-n.y, n.x);
+            let want = lamina_api::Vector2::new(-n.y, n.x);
             let d = pb - pa;
             if d.dot(&want) >= 0.0 {
                 out.push(Segment {
@@ -470,7 +470,7 @@ fn union(loops: &[Contour], options: CutOptions) -> Vec<Contour> {
 fn already_simple(loops: &[Contour]) -> bool {
     let bbox = loops
         .iter()
-        .fold(lamina_core::BBox2::EMPTY, |b, c| b.union(&c.bbox()));
+        .fold(lamina_api::BBox2::EMPTY, |b, c| b.union(&c.bbox()));
     let extent = bbox.width().max(bbox.height());
     if !(extent.is_finite() && extent > 0.0) {
         return false;
@@ -579,7 +579,7 @@ fn already_simple(loops: &[Contour]) -> bool {
     }
     // Loops neither cross nor touch, so one point tells whether a loop lies inside
     // another; the depth must match the winding.
-    let boxes: Vec<lamina_core::BBox2> = loops.iter().map(Contour::bbox).collect();
+    let boxes: Vec<lamina_api::BBox2> = loops.iter().map(Contour::bbox).collect();
     loops.iter().enumerate().all(|(i, c)| {
         let p = c.points[0];
         let depth = loops
@@ -858,10 +858,10 @@ impl EndGrid {
 
 /// Refuses a layer thickness (option `key`) the pipeline's machine cannot press down.
 pub(crate) fn check_layer_height(
-    config: &lamina_core::stage::StageConfig<'_>,
+    config: &lamina_api::stage::StageConfig<'_>,
     key: &str,
     t: f64,
-) -> lamina_core::Result<()> {
+) -> lamina_api::Result<()> {
     match config.machine {
         Some(m) if t > m.max_layer_height + 1e-9 => Err(config.error(
             key,
@@ -877,7 +877,7 @@ pub(crate) fn check_layer_height(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use lamina_core::Point3;
+    use lamina_api::Point3;
 
     /// An axis-aligned box made of 12 outward triangles.
     fn cube(size: f64) -> Mesh {

@@ -2,8 +2,8 @@
 
 use std::sync::Arc;
 
-use lamina_core::stage::{AnyStage, MeshSlicer, Slicer, StageConfig, StageInfo, StageKind};
-use lamina_core::{Error, Layer, LayerSlot, Mesh, Result, RunInfo, Sequence, StageFactory};
+use lamina_api::stage::{AnyStage, MeshSlicer, Slicer, StageConfig, StageInfo, StageKind};
+use lamina_api::{Error, Layer, LayerSlot, Mesh, Result, RunInfo, Sequence, StageFactory};
 use serde::Deserialize;
 
 use crate::cut::{CutMesh, CutOptions};
@@ -36,9 +36,9 @@ impl CutAt {
     }
 }
 
-lamina_core::option_type!(CutAt = "string or float");
+lamina_api::option_type!(CutAt = "string or float");
 
-lamina_core::stage_options! {
+lamina_api::stage_options! {
     #[derive(Debug)]
     struct Options {
         /// layer thickness (mm)
@@ -72,7 +72,7 @@ impl Range {
     /// What a machine's nozzle lays: from 0.175 of its bore (PrusaSlicer's 0.07 mm for
     /// a 0.4 mm nozzle) to its `max_layer_height`; without a machine, half to one and a
     /// half of the layer thickness `t`.
-    pub fn of(machine: Option<&lamina_core::Machine>, t: f64) -> Self {
+    pub fn of(machine: Option<&lamina_api::Machine>, t: f64) -> Self {
         match machine {
             Some(m) => Range {
                 min: (0.175 * m.nozzle_diameter).min(t),
@@ -262,9 +262,9 @@ fn build(config: &StageConfig<'_>) -> Result<AnyStage> {
 }
 
 // A pipeline without a [slice] table gets this stage.
-lamina_core::register_default!(StageKind::Slice, "uniform");
+lamina_api::register_default!(StageKind::Slice, "uniform");
 
-lamina_core::register_stage!(StageFactory {
+lamina_api::register_stage!(StageFactory {
     info: StageInfo {
         kind: StageKind::Slice,
         name: "uniform",

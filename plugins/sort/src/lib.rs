@@ -7,8 +7,8 @@
 //! inside B. Candidate parents come from an R-tree of bounding boxes, which keeps a
 //! layer with thousands of contours far from quadratic.
 
-use lamina_core::stage::{AnyStage, Sorter, StageConfig, StageInfo, StageKind};
-use lamina_core::{Contour, ContourNode, ContourTree, Family, Layer, Point2, Result, StageFactory};
+use lamina_api::stage::{AnyStage, Sorter, StageConfig, StageInfo, StageKind};
+use lamina_api::{Contour, ContourNode, ContourTree, Family, Layer, Point2, Result, StageFactory};
 use rstar::primitives::{GeomWithData, Rectangle};
 use rstar::{AABB, RTree};
 
@@ -96,15 +96,15 @@ impl Sorter for Hierarchy {
     }
 }
 
-lamina_core::stage_options! {
+lamina_api::stage_options! {
     #[derive(Debug)]
     struct Options {}
 }
 
 // A pipeline without a [sort] table gets this stage.
-lamina_core::register_default!(StageKind::Sort, "hierarchy");
+lamina_api::register_default!(StageKind::Sort, "hierarchy");
 
-lamina_core::register_stage!(StageFactory {
+lamina_api::register_stage!(StageFactory {
     info: StageInfo {
         kind: StageKind::Sort,
         name: "hierarchy",

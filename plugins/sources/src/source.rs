@@ -2,8 +2,8 @@
 //! step width and the weight; the step-wise truncation of f and the distance
 //! thresholds where the steps change.
 
-use lamina_core::Point2;
-use lamina_core::steps::Truncation;
+use lamina_api::Point2;
+use lamina_api::steps::Truncation;
 
 /// Where distances are measured from.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -135,7 +135,7 @@ mod tests {
     #[test]
     fn step_width_quarter_truncates_at_half_steps() {
         // The levels and the truncation are the shared step rule's (its own table of
-        // t_g = 0.25 is in lamina-core's steps); the source must use it as it is.
+        // t_g = 0.25 is in lamina-api's steps); the source must use it as it is.
         let s = source(0.25);
         assert_eq!(s.levels(), [0.0, 0.25, 0.5, 0.75, 1.0]);
         for f in (-30..=170).map(|i| f64::from(i) / 100.0) {

@@ -1,10 +1,10 @@
 //! `sources`: the discretiser that cuts each family along the step boundaries of its
 //! grading sources and gives every homogeneous region its composition.
 
-use lamina_core::stage::{AnyStage, Discretiser, FamilyContext, StageConfig, StageInfo, StageKind};
-use lamina_core::steps::Truncation;
-use lamina_core::surface::{FaceSelection, Surfaces};
-use lamina_core::{Composition, Error, Result, StageFactory, SubRegion};
+use lamina_api::stage::{AnyStage, Discretiser, FamilyContext, StageConfig, StageInfo, StageKind};
+use lamina_api::steps::Truncation;
+use lamina_api::surface::{FaceSelection, Surfaces};
+use lamina_api::{Composition, Error, Result, StageFactory, SubRegion};
 use serde::Deserialize;
 
 use lamina_geom::ring::{polygons_of, shape_of};
@@ -31,7 +31,7 @@ enum CompositionSpec {
     Fractions(Vec<f64>),
 }
 
-lamina_core::option_type!(SourceSpec = "table", array "array of table");
+lamina_api::option_type!(SourceSpec = "table", array "array of table");
 
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -74,7 +74,7 @@ fn one() -> f64 {
 fn d_step() -> f64 {
     0.25
 }
-lamina_core::option_type!(Combine = "string");
+lamina_api::option_type!(Combine = "string");
 
 /// Where the sources' compositions are combined by Eq. 8.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Deserialize)]
@@ -91,7 +91,7 @@ enum Combine {
     Everywhere,
 }
 
-lamina_core::stage_options! {
+lamina_api::stage_options! {
     #[derive(Debug)]
     struct Options {
         /// each `{ kind = "point" | "axis" | "plane" | "surface", at = [x, y, z], direction = [x, y, z] (axis direction or plane normal), width (or alpha), k = 1, start, end (material name or fractions), step = 0.25, weight = 1 }`; a `surface` source measures d in space from chosen faces of the part's mesh (Fig. 1d): `faces = { normal = [x, y, z], within = 30.0, groups = ["name"] }` (all faces when absent), or within the layer to the family's boundary with `measure = "layer"`
@@ -183,8 +183,8 @@ impl Discretiser for Sources {
         let z = ctx.layer.z - ctx.layer.thickness / 2.0;
         let mut bbox = family.bbox();
         let margin = bbox.diagonal().max(1.0);
-        bbox.include(lamina_core::Point2::new(bbox.min.x - margin, bbox.min.y - margin));
-        bbox.include(lamina_core::Point2::new(bbox.max.x + margin, bbox.max.y + margin));
+        bbox.include(lamina_api::Point2::new(bbox.min.x - margin, bbox.min.y - margin));
+        bbox.include(lamina_api::Point2::new(bbox.max.x + margin, bbox.max.y + margin));
         let mut sources = Vec::with_capacity(self.sources.len());
         for (i, p) in self.sources.iter().enumerate() {
             let mut s = p.source.clone();
@@ -376,10 +376,10 @@ fn build(config: &StageConfig<'_>) -> Result<AnyStage> {
     let mut faces = Vec::new();
     for (i, s) in o.sources.into_iter().enumerate() {
         let bad = |m: &str| config.error("sources", format!("source {i}: {m}"));
-        if !s.at.iter().all(|&v| lamina_core::limits::is_coordinate(v)) {
+        if !s.at.iter().all(|&v| lamina_api::limits::is_coordinate(v)) {
             return Err(bad(&format!(
                 "`at` must be three numbers within ±{} mm",
-                lamina_core::limits::MAX_COORDINATE
+                lamina_api::limits::MAX_COORDINATE
             )));
         }
         let datum = match s.kind {
@@ -410,10 +410,10 @@ fn build(config: &StageConfig<'_>) -> Result<AnyStage> {
             (None, None) => return Err(bad("give `width` (mm over which f runs from 0 to 1) or `alpha`")),
             _ => return Err(bad("give either `width` (positive) or `alpha`, not both")),
         };
-        if !(alpha.is_finite() && alpha >= 1.0 / lamina_core::limits::MAX_COORDINATE) {
+        if !(alpha.is_finite() && alpha >= 1.0 / lamina_api::limits::MAX_COORDINATE) {
             return Err(bad(&format!(
                 "`alpha` must be at least 1e-6 per mm (a `width` of at most {} mm)",
-                lamina_core::limits::MAX_COORDINATE
+                lamina_api::limits::MAX_COORDINATE
             )));
         }
         if !(s.k.is_finite() && s.k > 0.0) {
@@ -462,7 +462,7 @@ fn build(config: &StageConfig<'_>) -> Result<AnyStage> {
     })))
 }
 
-lamina_core::register_stage!(StageFactory {
+lamina_api::register_stage!(StageFactory {
     info: StageInfo {
         kind: StageKind::Discretise,
         name: "sources",

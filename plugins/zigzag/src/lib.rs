@@ -6,18 +6,18 @@
 //! outline of each layer's solid areas (a step the CMPM process does not have, as a
 //! third party would add one).
 //!
-//! It depends on lamina-core alone, registers its stages with `register_stage!`, and
+//! It depends on lamina-api alone, registers its stages with `register_stage!`, and
 //! exports the entry point with `export_plugin!`; that is all a plugin needs.
 
-use lamina_core::stage::{AnyStage, Planner, Process, StageConfig, StageInfo, StageKind};
-use lamina_core::{
+use lamina_api::stage::{AnyStage, Planner, Process, StageConfig, StageInfo, StageKind};
+use lamina_api::{
     Contour, LayerPlan, Operation, OperationPath, OperationTool, PathKind, Point2, Polygon, ProcessContext,
     Result, RunInfo, StageFactory, TimedPoint, Toolpath,
 };
 
-lamina_core::export_plugin!("zigzag");
+lamina_api::export_plugin!("zigzag");
 
-lamina_core::stage_options! {
+lamina_api::stage_options! {
     #[derive(Debug, Clone)]
     struct Options {
         /// line spacing and extrusion width (mm)
@@ -158,7 +158,7 @@ fn build(config: &StageConfig<'_>) -> Result<AnyStage> {
     Ok(AnyStage::Plan(Box::new(ZigZag(o))))
 }
 
-lamina_core::register_stage!(StageFactory {
+lamina_api::register_stage!(StageFactory {
     info: StageInfo {
         kind: StageKind::Plan,
         name: "zigzag",
@@ -169,7 +169,7 @@ lamina_core::register_stage!(StageFactory {
     build,
 });
 
-lamina_core::stage_options! {
+lamina_api::stage_options! {
     #[derive(Debug, Clone)]
     struct CureOptions {
         /// lamp power (W)
@@ -226,7 +226,7 @@ fn build_cure(config: &StageConfig<'_>) -> Result<AnyStage> {
     Ok(AnyStage::Process(Box::new(Cure(o))))
 }
 
-lamina_core::register_stage!(StageFactory {
+lamina_api::register_stage!(StageFactory {
     info: StageInfo {
         kind: StageKind::Process,
         name: "cure",

@@ -14,7 +14,7 @@ pub use lamina_discretise::shapes::{circle, rect};
 
 pub fn stage(text: &str) -> Box<dyn Discretiser> {
     let table = lamina_core::pipeline::TableRef::parse_snippet("discretise", text).expect("snippet");
-    let scripts = lamina_core::script::ScriptHost::new(".", Default::default());
+    let scripts = lamina_core::script::local(".", Default::default());
     match Registry::linked()
         .expect("registry")
         .build(StageKind::Discretise, &table, &scripts, std::path::Path::new("."))
@@ -27,7 +27,7 @@ pub fn stage(text: &str) -> Box<dyn Discretiser> {
 
 pub fn build_error(text: &str) -> String {
     let table = lamina_core::pipeline::TableRef::parse_snippet("discretise", text).expect("snippet");
-    let scripts = lamina_core::script::ScriptHost::new(".", Default::default());
+    let scripts = lamina_core::script::local(".", Default::default());
     match Registry::linked().expect("registry").build(
         StageKind::Discretise,
         &table,

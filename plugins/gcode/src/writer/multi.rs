@@ -18,8 +18,8 @@
 //! estimate in the file comes from replaying each stream (accelerations, junctions)
 //! and releasing every barrier when the later system reaches it.
 
-use lamina_core::BBox2;
-use lamina_core::machine::{HeadClass, Kinematics};
+use lamina_api::BBox2;
+use lamina_api::machine::{HeadClass, Kinematics};
 
 use super::*;
 use crate::setup::System;
@@ -82,9 +82,9 @@ fn beads(paths: &[&Toolpath]) -> Vec<(f64, f64)> {
 
 /// Distance between segments `a0 a1` and `b0 b1`.
 fn segment_gap(a0: Point2, a1: Point2, b0: Point2, b1: Point2) -> f64 {
-    use lamina_core::geom::segment_distance as d;
+    use lamina_api::geom::segment_distance as d;
     let (da, db) = (a1 - a0, b1 - b0);
-    let cross = |u: lamina_core::Vector2, v: lamina_core::Vector2| u.x * v.y - u.y * v.x;
+    let cross = |u: lamina_api::Vector2, v: lamina_api::Vector2| u.x * v.y - u.y * v.x;
     let den = cross(da, db);
     if den.abs() > 1e-18 {
         let t = cross(b0 - a0, db) / den;
@@ -1078,7 +1078,7 @@ mod tests {
 
     #[test]
     fn a_path_is_cut_at_plan_times() {
-        use lamina_core::TimedPoint;
+        use lamina_api::TimedPoint;
         let path = Toolpath {
             tool: 0,
             kind: PathKind::Extrude,

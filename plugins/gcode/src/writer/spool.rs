@@ -3,7 +3,7 @@
 
 use std::io::Write;
 
-use lamina_core::{Error, LayerPlan, Result};
+use lamina_api::{Error, LayerPlan, Result};
 
 /// Layers waiting to be written, kept in a temporary file (MessagePack, each behind its
 /// length) so that a long wait holds no layer in memory.

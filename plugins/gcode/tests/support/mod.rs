@@ -42,7 +42,7 @@ pub fn export(
     use lamina_gcode as _;
     let registry = Registry::linked().expect("registry");
     let dir = std::env::temp_dir();
-    let scripts = lamina_core::script::ScriptHost::new(&dir, Default::default());
+    let scripts = lamina_core::script::local(&dir, Default::default());
     let table = lamina_core::pipeline::TableRef::parse_snippet("gcode", table).expect("table");
     let AnyStage::Export(exporter) = registry.build_for(
         StageKind::Export,

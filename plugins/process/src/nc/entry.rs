@@ -8,7 +8,7 @@
 //!   wheel's whole face stands clear of the area, and the wheel ramps down to the
 //!   grinding height there, in the air, before it feeds in.
 
-use lamina_core::{Point2, Polygon};
+use lamina_api::{Point2, Polygon};
 
 use crate::area::distance_to_area;
 
@@ -185,7 +185,7 @@ pub fn side_entry(
         .fold(0.0, f64::max)
         + radius
         + margin;
-    let out_from = |p: Point2, dir: lamina_core::Vector2| {
+    let out_from = |p: Point2, dir: lamina_api::Vector2| {
         let mut t = radius + margin;
         while !clear(p + dir * t) && t < reach {
             t += 0.5;
@@ -202,7 +202,7 @@ pub fn side_entry(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use lamina_core::Contour;
+    use lamina_api::Contour;
 
     fn length3(path: &[Point3]) -> f64 {
         path.windows(2)

@@ -32,10 +32,10 @@ use std::collections::BTreeMap;
 use std::io::Write;
 use std::path::PathBuf;
 
-use lamina_core::stage::{
+use lamina_api::stage::{
     AnyStage, ExportContext, Exporter, LayerSink, OutputFiles, StageConfig, StageInfo, StageKind,
 };
-use lamina_core::{
+use lamina_api::{
     Error, LayerPlan, MachineFileReport, Operation, Point2, Polygon, Result, RunInfo, Sequence, StageFactory,
 };
 
@@ -43,7 +43,7 @@ use crate::area::{distance_to_area, layer_area};
 use crate::cell::{Cell, Cutting, RAMP_ANGLE};
 use program::{Program, number};
 
-lamina_core::stage_options! {
+lamina_api::stage_options! {
     #[derive(Debug, Clone)]
     struct Options {
         /// the NC file
@@ -99,7 +99,7 @@ fn io(path: &std::path::Path) -> impl Fn(std::io::Error) -> Error + '_ {
 /// (they start a comment of their own), at most 200 characters (LinuxCNC reads lines of
 /// up to 255).
 pub(crate) fn comment(s: &str) -> String {
-    let text = lamina_core::output::one_line(s)
+    let text = lamina_api::text::one_line(s)
         .replace(['(', ')'], "")
         .replace(';', ",");
     match text.char_indices().nth(200) {
@@ -606,7 +606,7 @@ fn build(config: &StageConfig<'_>) -> Result<AnyStage> {
     Ok(AnyStage::Export(Box::new(Nc { options, cell, named })))
 }
 
-lamina_core::register_stage!(StageFactory {
+lamina_api::register_stage!(StageFactory {
     info: StageInfo {
         kind: StageKind::Export,
         name: "nc",

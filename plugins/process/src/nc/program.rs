@@ -17,7 +17,7 @@
 
 use std::collections::{BTreeMap, BTreeSet};
 
-use lamina_core::{Error, Result};
+use lamina_api::{Error, Result};
 
 use crate::cell::{Cell, render};
 
@@ -527,7 +527,7 @@ mod tests {
             Cell::load(
                 cell,
                 std::path::Path::new("."),
-                &lamina_core::reach::Reach::anywhere(),
+                &lamina_api::reach::Reach::anywhere(),
             )
             .expect("cell"),
         )

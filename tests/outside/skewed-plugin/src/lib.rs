@@ -3,15 +3,15 @@
 //! points), options (parsed with this crate's serde and toml), compositions and scripts
 //! all cross the boundary, and the run must come out as with the host's own copies.
 
-use lamina_core::mesh::{Mesh, Point3};
-use lamina_core::script::{ScriptArgs, ScriptFn};
-use lamina_core::stage::{
+use lamina_api::mesh::{Mesh, Point3};
+use lamina_api::script::{ScriptArgs, ScriptFn};
+use lamina_api::stage::{
     AnyStage, FamilyContext, Grader, ModelSource, OptionSpec, StageConfig, StageInfo, StageKind,
 };
-use lamina_core::{Composition, Result, StageFactory, SubRegion};
+use lamina_api::{Composition, Result, StageFactory, SubRegion};
 use serde::Deserialize;
 
-lamina_core::export_plugin!("skewed");
+lamina_api::export_plugin!("skewed");
 
 #[derive(Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -52,7 +52,7 @@ impl ModelSource for SkewedBox {
     }
 }
 
-lamina_core::register_stage!(StageFactory {
+lamina_api::register_stage!(StageFactory {
     info: StageInfo {
         kind: StageKind::Model,
         name: "skewed-box",
@@ -103,7 +103,7 @@ fn build_grade(config: &StageConfig<'_>) -> Result<AnyStage> {
     Ok(AnyStage::Grade(Box::new(SkewedGrade(f))))
 }
 
-lamina_core::register_stage!(StageFactory {
+lamina_api::register_stage!(StageFactory {
     info: StageInfo {
         kind: StageKind::Grade,
         name: "skewed-z",

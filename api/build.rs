@@ -10,7 +10,7 @@ const WIRE_SOURCES: &[&str] = &[
     "src/diagnostic.rs",
     "../geom/src/shape.rs",
     "src/limits.rs",
-    "src/machine/mod.rs",
+    "src/machine.rs",
     "src/machine/template.rs",
     "src/mesh.rs",
     "src/model.rs",

@@ -86,7 +86,7 @@ pub struct PluginDescriptor {
     pub wire: u64,
     /// The plugin's name (UTF-8, not NUL-terminated).
     pub name: Bytes,
-    /// The lamina-core version the plugin was built against, for messages.
+    /// The lamina-api version the plugin was built against, for messages.
     pub core_version: Bytes,
     /// Handles one request ([`wire::Request`](super::wire::Request)); returns 0 when a
     /// reply was written. `host` is valid for the call only.
@@ -206,7 +206,7 @@ pub const ABI_SECTION: &str = ".lamina_abi";
 
 /// The plugin's ABI, readable from the library file without loading it: the magic, the
 /// ABI major and minor (little-endian `u32`s), the layout and wire fingerprints
-/// (little-endian `u64`s), then the lamina-core version (32 bytes, NUL-padded). The
+/// (little-endian `u64`s), then the lamina-api version (32 bytes, NUL-padded). The
 /// host refuses a mismatch before the dynamic loader runs any of the library's
 /// initialisers.
 pub const fn abi_note() -> [u8; ABI_NOTE_LEN] {

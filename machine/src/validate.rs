@@ -7,7 +7,7 @@ use super::raw::{RawMachine, RawPlacement, RawShape, Switch};
 use super::template::TemplateKind;
 use super::tools::{MAX_BED_TEMPERATURE, check_motion_systems, tools};
 use super::*;
-use crate::error::Result;
+use lamina_api::error::Result;
 
 // The physical ranges of a machine's motion: wider than any machine builds, narrow
 // enough that every value is a number the firmware reads (a speed of 5e-324 mm/s would

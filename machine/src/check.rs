@@ -7,8 +7,8 @@ use super::load::config;
 use super::raw::RawAxes;
 use super::template::{Template, TemplateKind};
 use super::*;
-use crate::error::{Error, Result};
-use crate::source::Location;
+use lamina_api::error::{Error, Result};
+use lamina_api::source::Location;
 
 /// Errors at the place each merged key was written.
 pub(super) struct Check<'a> {

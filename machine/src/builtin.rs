@@ -15,27 +15,27 @@ pub const PROFILES: &[BuiltinProfile] = &[
     BuiltinProfile {
         name: "marlin-mixing-2in1",
         path: "profiles/marlin-mixing-2in1.toml",
-        text: include_str!("../../../profiles/marlin-mixing-2in1.toml"),
+        text: include_str!("../../profiles/marlin-mixing-2in1.toml"),
     },
     BuiltinProfile {
         name: "marlin-toolchanger-2",
         path: "profiles/marlin-toolchanger-2.toml",
-        text: include_str!("../../../profiles/marlin-toolchanger-2.toml"),
+        text: include_str!("../../profiles/marlin-toolchanger-2.toml"),
     },
     BuiltinProfile {
         name: "rrf-dual-gantry-2",
         path: "profiles/rrf-dual-gantry-2.toml",
-        text: include_str!("../../../profiles/rrf-dual-gantry-2.toml"),
+        text: include_str!("../../profiles/rrf-dual-gantry-2.toml"),
     },
     BuiltinProfile {
         name: "rrf-idex-2",
         path: "profiles/rrf-idex-2.toml",
-        text: include_str!("../../../profiles/rrf-idex-2.toml"),
+        text: include_str!("../../profiles/rrf-idex-2.toml"),
     },
     BuiltinProfile {
         name: "rrf-two-systems-2",
         path: "profiles/rrf-two-systems-2.toml",
-        text: include_str!("../../../profiles/rrf-two-systems-2.toml"),
+        text: include_str!("../../profiles/rrf-two-systems-2.toml"),
     },
 ];
 

@@ -19,11 +19,11 @@ use super::guard_call;
 use super::wire::*;
 use crate::error::{Error, Result};
 use crate::mesh::Mesh;
-use crate::pipeline::TableRef;
 use crate::registry::StageFactory;
-use crate::script::{ScriptArgs, ScriptHost};
+use crate::script::{Compiler, Script, ScriptArgs, ScriptFn, ScriptHost};
 use crate::source::Location;
 use crate::stage::*;
+use crate::table::TableRef;
 
 /// A descriptor in a static of the plugin.
 #[derive(Debug)]
@@ -175,8 +175,34 @@ fn host_call(request: &HostRequest<'_>) -> Result<HostResponse> {
     reply.map_err(Error::from)
 }
 
+/// The scripts of the host that called into this plugin: every script is compiled and
+/// run by the host's engine under the host's limits, whatever copy of a script engine
+/// the plugin links.
+#[derive(Debug)]
+struct HostScripts;
+
+/// A script the host compiled for this plugin, by the host's number.
+#[derive(Debug)]
+struct HostScript(u64);
+
+impl Compiler for HostScripts {
+    fn compile(&self, spec: &str, origin: Option<Location>) -> Result<ScriptFn> {
+        compile(spec, origin).map(|id| ScriptFn::new(HostScript(id)))
+    }
+}
+
+impl Script for HostScript {
+    fn number(&self, args: &ScriptArgs<'_>, context: &str) -> Result<f64> {
+        number(self.0, args, context)
+    }
+
+    fn fractions(&self, args: &ScriptArgs<'_>, n: usize, context: &str) -> Result<Vec<f64>> {
+        fractions(self.0, args, n, context)
+    }
+}
+
 /// Compiles a script with the host's engine.
-pub(crate) fn compile(spec: &str, origin: Option<Location>) -> Result<u64> {
+fn compile(spec: &str, origin: Option<Location>) -> Result<u64> {
     match host_call(&HostRequest::Compile {
         spec: Cow::Borrowed(spec),
         origin: origin.as_ref().map(WireLocation::from),
@@ -187,7 +213,7 @@ pub(crate) fn compile(spec: &str, origin: Option<Location>) -> Result<u64> {
 }
 
 /// Runs a host script for a number.
-pub(crate) fn number(script: u64, args: &ScriptArgs<'_>, context: &str) -> Result<f64> {
+fn number(script: u64, args: &ScriptArgs<'_>, context: &str) -> Result<f64> {
     match host_call(&HostRequest::Number {
         script,
         args: args.into(),
@@ -199,7 +225,7 @@ pub(crate) fn number(script: u64, args: &ScriptArgs<'_>, context: &str) -> Resul
 }
 
 /// Runs a host script for fractions.
-pub(crate) fn fractions(script: u64, args: &ScriptArgs<'_>, n: usize, context: &str) -> Result<Vec<f64>> {
+fn fractions(script: u64, args: &ScriptArgs<'_>, n: usize, context: &str) -> Result<Vec<f64>> {
     match host_call(&HostRequest::Fractions {
         script,
         args: args.into(),
@@ -398,7 +424,7 @@ fn handle(request: Request<'static>) -> Result<Response> {
                 )
             })?;
             let table = TableRef::from_wire(config.table)?;
-            let scripts = ScriptHost::remote();
+            let scripts = ScriptHost::new(HostScripts);
             let machine = config.machine.map(Cow::into_owned);
             let stage_config = StageConfig {
                 table: &table,

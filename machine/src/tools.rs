@@ -6,7 +6,7 @@ use std::collections::BTreeSet;
 use super::check::Check;
 use super::raw::RawTool;
 use super::*;
-use crate::error::Result;
+use lamina_api::error::Result;
 
 /// Hotter than any FFF hotend goes (°C).
 pub(super) const MAX_NOZZLE_TEMPERATURE: f64 = 500.0;

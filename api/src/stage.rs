@@ -395,7 +395,7 @@ pub trait LayerSink: Send {
 /// The configuration a stage factory receives: its pipeline table and the services it
 /// may need (scripts compiled by the host).
 pub struct StageConfig<'a> {
-    pub table: &'a crate::pipeline::TableRef,
+    pub table: &'a crate::table::TableRef,
     pub scripts: &'a ScriptHost,
     pub base_dir: &'a Path,
     /// Where the files the stage's options name may be read from (checked with

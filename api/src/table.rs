@@ -11,7 +11,8 @@ use toml::de::{DeTable, DeValue};
 use crate::error::{Error, Result};
 use crate::source::{Location, SourceFile};
 
-use super::MODEL_HOST_KEYS;
+/// Keys of a `[model]` table that the host reads itself.
+pub const MODEL_HOST_KEYS: &[&str] = &["use", "scale", "units", "place"];
 
 /// One step of a path from the document root to a table.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -29,7 +30,8 @@ impl std::fmt::Display for PathElem {
     }
 }
 
-pub(super) fn key(k: &str) -> PathElem {
+/// A step by key.
+pub fn key(k: &str) -> PathElem {
     PathElem::Key(k.to_string())
 }
 
@@ -38,17 +40,43 @@ pub(super) fn key(k: &str) -> PathElem {
 #[derive(Debug, Clone)]
 pub struct TableRef {
     /// The table as it is after `--set` overrides.
-    pub(crate) table: toml::Table,
-    pub(super) file: Arc<SourceFile>,
-    pub(super) path: Vec<PathElem>,
+    table: toml::Table,
+    file: Arc<SourceFile>,
+    path: Vec<PathElem>,
     /// True when an override changed something in this table: spans then no longer
     /// describe the values, and errors name the override instead.
-    pub(super) overridden: bool,
+    overridden: bool,
     /// Keys the host consumes before the stage sees the table (`use`, placement).
-    pub(super) host_keys: &'static [&'static str],
+    host_keys: &'static [&'static str],
 }
 
 impl TableRef {
+    /// A table of a pipeline file read by the host: `table` as it is after the
+    /// overrides, at `path` in `file`; `overridden` when an override changed it.
+    pub fn new(table: toml::Table, file: Arc<SourceFile>, path: Vec<PathElem>, overridden: bool) -> Self {
+        Self {
+            table,
+            file,
+            path,
+            overridden,
+            host_keys: &["use"],
+        }
+    }
+
+    /// The table's values, after `--set` overrides.
+    pub fn values(&self) -> &toml::Table {
+        &self.table
+    }
+
+    /// The table as written in its file, with the places of its keys; `None` when an
+    /// override changed it (the places then no longer describe the values).
+    pub fn written(&self) -> Option<Spanned<DeValue<'_>>> {
+        if self.overridden {
+            return None;
+        }
+        navigate_de(self.file.toml()?, &self.path)
+    }
+
     /// A table that did not come from a file (tests, examples, generated pipelines).
     pub fn detached(name: &str, table: toml::Table) -> Self {
         let text = toml::to_string(&table).unwrap_or_default();
@@ -102,7 +130,8 @@ impl TableRef {
         self.table.get("use").and_then(|v| v.as_str())
     }
 
-    pub(crate) fn get(&self, k: &str) -> Option<&toml::Value> {
+    /// The value of key `k`, after overrides.
+    pub fn get(&self, k: &str) -> Option<&toml::Value> {
         self.table.get(k)
     }
 
@@ -226,7 +255,8 @@ impl TableRef {
     }
 
     /// The table as a message to a dynamic plugin.
-    pub(crate) fn to_wire(&self) -> Result<crate::plugin::wire::WireTable<'_>> {
+    #[doc(hidden)]
+    pub fn to_wire(&self) -> Result<crate::plugin::wire::WireTable<'_>> {
         use crate::plugin::wire::{WireStep, WireTable, file_of};
         Ok(WireTable {
             file: file_of(&self.file),
@@ -246,7 +276,8 @@ impl TableRef {
     }
 
     /// A table a host sent to this dynamic plugin.
-    pub(crate) fn from_wire(w: crate::plugin::wire::WireTable<'_>) -> Result<Self> {
+    #[doc(hidden)]
+    pub fn from_wire(w: crate::plugin::wire::WireTable<'_>) -> Result<Self> {
         use crate::plugin::wire::WireStep;
         let file = SourceFile::new(w.file.path.into_owned(), w.file.text.into_owned());
         let table: toml::Table = toml::from_str(&w.values)
@@ -322,7 +353,7 @@ pub fn plain(message: &str) -> String {
 
 /// The value at `path` in a parsed document, copied out of it (only that value is
 /// copied, not the document).
-pub(crate) fn navigate_de<'i>(doc: &Spanned<DeTable<'i>>, path: &[PathElem]) -> Option<Spanned<DeValue<'i>>> {
+pub fn navigate_de<'i>(doc: &Spanned<DeTable<'i>>, path: &[PathElem]) -> Option<Spanned<DeValue<'i>>> {
     let Some((first, rest)) = path.split_first() else {
         return Some(Spanned::new(doc.span(), DeValue::Table(doc.get_ref().clone())));
     };
@@ -347,7 +378,7 @@ fn find_key<'a, 'i>(t: &'a DeTable<'i>, k: &str) -> Option<&'a Spanned<DeValue<'
 }
 
 /// Converts a TOML syntax or type error of the whole file into a located error.
-pub(super) fn toml_error(file: &Arc<SourceFile>, e: &toml::de::Error) -> Error {
+pub fn toml_error(file: &Arc<SourceFile>, e: &toml::de::Error) -> Error {
     Error::Config {
         location: e.span().map(|s| Location::new(file.clone(), s)),
         message: e.message().trim().to_string(),

@@ -1,31 +1,23 @@
-//! Machine profiles: what a printer is (its bed, firmware, tools, temperatures, motion
-//! limits and G-code templates), so that an exporter can write a file the machine
-//! prints safely, and the runtime can place the parts on its bed and refuse those that
-//! do not fit.
+//! Machine profiles as data: what a printer is (its bed, firmware, tools, temperatures,
+//! motion limits and G-code templates), so that an exporter can write a file the
+//! machine prints safely, a planner can keep its heads apart, and the runtime can place
+//! the parts on its bed and refuse those that do not fit.
 //!
-//! A pipeline names its machine with a top-level `machine` key: the name of a built-in
-//! profile ([`builtin`]), the path of a TOML profile (relative to the pipeline's
-//! folder), or an inline table, which may start from `base = "<name or path>"` and
-//! override it key by key. This module holds the resolved data; [`load`] reads, merges
-//! and validates it with errors that name the file, line and field.
+//! This module holds the resolved, validated description that crosses the plugin
+//! boundary in [`RunInfo`](crate::stage::RunInfo). Reading profiles (built-in ones,
+//! TOML files, inline tables with a `base`) is lamina-machine's, with errors that name
+//! the file, line and field.
 //!
-//! Core knows no G-code: the templates are kept as text with their variables checked
+//! The API knows no G-code: the templates are kept as text with their variables
 //! ([`template`]), and what the commands mean is the exporters' business.
 
-pub mod builtin;
-mod check;
-pub mod load;
-mod raw;
 pub mod template;
-mod tools;
-mod validate;
 
 use serde::{Deserialize, Serialize};
 
 use crate::geom::{BBox2, Point2, Vector2};
 use crate::source::Location;
 
-pub use load::resolve;
 pub use template::Template;
 
 /// A printer, as a machine profile describes it, validated.

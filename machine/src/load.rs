@@ -17,10 +17,10 @@ use super::check::Check;
 use super::raw::RawMachine;
 use super::validate::validate;
 use super::*;
-use crate::error::{Error, Result};
-use crate::pipeline::{PathElem, TableRef};
-use crate::reach::Reach;
-use crate::source::{Location, SourceFile};
+use lamina_api::error::{Error, Result};
+use lamina_api::reach::Reach;
+use lamina_api::source::{Location, SourceFile};
+use lamina_api::table::{PathElem, TableRef};
 
 /// How deep `base` chains may go, which also stops cycles that change names.
 const MAX_BASE_DEPTH: usize = 8;
@@ -204,15 +204,12 @@ fn load_named(reference: &str, dir: &Path, reach: &Reach, at: Option<Location>) 
 fn inline_layer(table: &TableRef, base_dir: &Path) -> Result<Layer> {
     table.parse::<RawMachine>()?;
     let mut locations = BTreeMap::new();
-    if !table.is_overridden()
-        && let Some(doc) = table.file().toml()
-        && let Some(value) = crate::pipeline::navigate_de(doc, table.path())
-    {
+    if let Some(value) = table.written() {
         record(&value, "", table.file(), &mut locations);
     }
     let path: Vec<String> = table.path().iter().map(PathElem::to_string).collect();
     Ok(Layer {
-        table: table.table.clone(),
+        table: table.values().clone(),
         locations,
         root: table.location_of(None),
         label: format!("[{}] of {}", path.join("."), table.file().path.display()),
