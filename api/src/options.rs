@@ -5,7 +5,7 @@
 //! two cannot drift: the documented default is parsed and used as the value.
 //!
 //! ```
-//! use lamina_core::stage_options;
+//! use lamina_api::stage_options;
 //!
 //! stage_options! {
 //!     #[derive(Debug)]

@@ -178,9 +178,11 @@ fn refused_before_loading(crate_name: &str) -> String {
 #[test]
 fn plugin_of_another_abi_is_refused_naming_both_versions() {
     let err = refused_before_loading("lamina-fixture-bad-abi");
-    assert!(err.contains("ABI 99.0"), "{err}");
+    assert!(err.contains("plugin ABI 99.0"), "{err}");
+    let major = lamina_core::plugin::ABI_MAJOR;
     assert!(
-        err.contains(&format!("supports ABI {}.", lamina_core::plugin::ABI_MAJOR)),
+        err.contains("rebuild it against this lamina's lamina-api")
+            && err.contains(&format!("(plugin ABI {major}.0 to {major}.")),
         "{err}"
     );
 }
@@ -259,7 +261,10 @@ fn plugin_whose_boundary_struct_changed_is_refused_before_loading() {
             && err.contains("lays out the boundary's C types differently"),
         "{err}"
     );
-    assert!(err.contains("rebuild it against lamina-api"), "{err}");
+    assert!(
+        err.contains("rebuild it against this lamina's lamina-api"),
+        "{err}"
+    );
 }
 
 /// Runs a two-material tube graded by `grade` (with the dynamic script fixture loaded)
@@ -365,8 +370,66 @@ fn an_endless_script_in_a_dynamic_plugin_is_stopped_within_a_second() {
     }
 }
 
-/// Builds the plugin crate outside the workspace, with its own lock file.
+/// Copies `from` into `to`, file by file, writing only what differs (so that a build
+/// of the copy is incremental).
+fn mirror(from: &Path, to: &Path) {
+    std::fs::create_dir_all(to).expect("mirror folder");
+    for entry in std::fs::read_dir(from).expect("read folder") {
+        let entry = entry.expect("entry");
+        let (src, dst) = (entry.path(), to.join(entry.file_name()));
+        if entry.file_type().expect("file type").is_dir() {
+            if entry.file_name() != "target" {
+                mirror(&src, &dst);
+            }
+        } else {
+            let bytes = std::fs::read(&src).expect("read");
+            if std::fs::read(&dst).ok().as_ref() != Some(&bytes) {
+                std::fs::write(&dst, bytes).expect("write");
+            }
+        }
+    }
+}
+
+/// Lamina's stage API (and geometry) as a later commit of it: a comment and a test
+/// changed, the messages not. What a plugin built against it must not notice.
+fn later_commit_of_the_api() -> PathBuf {
+    let copy = target_dir().join("outside-commit");
+    for dir in ["api", "geom", "tests/outside/skewed-plugin"] {
+        mirror(&root().join(dir), &copy.join(dir));
+    }
+    // The workspace the two crates name their versions and dependencies from.
+    let manifest: toml::Table = std::fs::read_to_string(root().join("Cargo.toml"))
+        .expect("Cargo.toml")
+        .parse()
+        .expect("TOML");
+    let mut workspace = manifest["workspace"].as_table().expect("[workspace]").clone();
+    workspace.insert("members".into(), toml::Value::from(vec!["api", "geom"]));
+    if let Some(deps) = workspace
+        .get_mut("dependencies")
+        .and_then(toml::Value::as_table_mut)
+    {
+        deps.retain(|name, _| name != "lamina-core" && name != "lamina-machine");
+    }
+    let mut root_manifest = toml::Table::new();
+    root_manifest.insert("workspace".into(), toml::Value::Table(workspace));
+    let text = toml::to_string(&root_manifest).expect("manifest");
+    if std::fs::read_to_string(copy.join("Cargo.toml")).ok().as_deref() != Some(text.as_str()) {
+        std::fs::write(copy.join("Cargo.toml"), text).expect("write manifest");
+    }
+    let model = copy.join("api/src/model.rs");
+    let text = std::fs::read_to_string(&model).expect("model.rs");
+    let later = "\n// A later commit's comment.\n#[cfg(test)]\nmod a_later_commits_test {\n    #[test]\n    \
+                 fn holds() {\n        assert!(super::COMPOSITION_TOLERANCE < 1.0);\n    }\n}\n";
+    if !text.ends_with(later) {
+        std::fs::write(&model, text + later).expect("write model.rs");
+    }
+    copy
+}
+
+/// Builds the plugin crate outside the workspace, with its own lock file, against a
+/// later commit of the stage API than the one the host was built from.
 fn outside_library() -> PathBuf {
+    let copy = later_commit_of_the_api();
     let status = cargo_outside(
         root(),
         &[
@@ -374,7 +437,9 @@ fn outside_library() -> PathBuf {
             "--quiet",
             "--locked",
             "--manifest-path",
-            "tests/outside/skewed-plugin/Cargo.toml",
+            copy.join("tests/outside/skewed-plugin/Cargo.toml")
+                .to_str()
+                .expect("UTF-8 path"),
         ],
     )
     .status()
@@ -404,6 +469,8 @@ fn locked_versions(lock: &Path) -> std::collections::BTreeMap<String, String> {
         .collect()
 }
 
+/// Also: the plugin is built against a later commit of lamina-api than the host's (a
+/// comment and a test changed, not the messages), and loads all the same.
 #[test]
 fn a_plugin_resolving_other_releases_of_the_boundarys_dependencies_runs_correctly() {
     let lib = outside_library();

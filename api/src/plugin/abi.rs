@@ -12,12 +12,24 @@ use std::ffi::c_void;
 
 /// `b"LAMINAPL"` as a little-endian integer: marks a Lamina plugin descriptor.
 pub const PLUGIN_MAGIC: u64 = u64::from_le_bytes(*b"LAMINAPL");
-/// Incremented when the descriptor, the C types or the meaning of a message change.
-pub const ABI_MAJOR: u32 = 6;
-/// Incremented for additions: messages and fields an older peer does not know. A
-/// request of a newer minor is never sent to a plugin of an older one, and fields a
-/// side does not know are ignored, so plugins of any minor of the same major load.
-pub const ABI_MINOR: u32 = 0;
+/// Incremented when the descriptor, the C types or the meaning of a message change:
+/// a plugin of another major is refused.
+pub const ABI_MAJOR: u32 = 7;
+/// The messages' schema at each minor version of [`ABI_MAJOR`], oldest first: hashes of
+/// the schema `api/wire-schema.json` records, which `api/tests/wire_schema.rs` traces
+/// from the serde definitions of every type a message carries. Comments, tests and
+/// code that does not change a message leave it alone.
+///
+/// A change to the messages fails that test until it is given a version here: a hash
+/// appended for an addition an older peer can do without (a field with
+/// `#[serde(default)]`, which an older plugin never sees and a newer one finds filled
+/// in; a request only plugins of the new minor are sent), or, for anything else, a new
+/// major whose list starts again with the one hash.
+pub const WIRE_SCHEMAS: &[u64] = &[0x6909_d6b9_0850_2364];
+/// The minor version of this build: a plugin of this major and of this minor or an
+/// older one loads (the host reads every message an older plugin writes, and sends it
+/// only what it knows); a plugin of a newer minor asks for a newer host.
+pub const ABI_MINOR: u32 = (WIRE_SCHEMAS.len() - 1) as u32;
 /// Entry symbols are this prefix and the plugin's name, so that two plugin crates
 /// linked into one program do not clash. The ABI is in the descriptor and the note,
 /// not in the name, so that a plugin of another ABI is found and refused by name.
@@ -175,22 +187,8 @@ pub const LAYOUT_FINGERPRINT: u64 = {
     )
 };
 
-/// A hash of the definitions of every type that travels in a message (model,
-/// geometry, mesh, machine, limits and the messages themselves), comments and
-/// whitespace aside, computed by the build script. Two builds agree on it exactly when
-/// they read and write the same messages.
-pub const WIRE_FINGERPRINT: u64 = {
-    let text = env!("LAMINA_WIRE_FINGERPRINT").as_bytes();
-    let mut value = 0u64;
-    let mut i = 0;
-    while i < text.len() {
-        let d = text[i];
-        let digit = if d >= b'a' { d - b'a' + 10 } else { d - b'0' };
-        value = value << 4 | digit as u64;
-        i += 1;
-    }
-    value
-};
+/// The schema of this build's messages ([`WIRE_SCHEMAS`] at [`ABI_MINOR`]).
+pub const WIRE_FINGERPRINT: u64 = WIRE_SCHEMAS[WIRE_SCHEMAS.len() - 1];
 
 /// Length of the [`abi_note`] a plugin carries in its [`ABI_SECTION`].
 pub const ABI_NOTE_LEN: usize = 128;

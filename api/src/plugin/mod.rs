@@ -16,7 +16,8 @@
 //! toml or nalgebra than the host, runs correctly. What must agree is checked from the
 //! file before anything of the library runs ([`inspect`]): the ABI major, the layout
 //! of the C types ([`abi::LAYOUT_FINGERPRINT`]) and the messages' types
-//! ([`abi::WIRE_FINGERPRINT`]); the loader then checks the descriptor itself again.
+//! ([`abi::WIRE_SCHEMAS`]: a plugin of an older minor of the same major loads); the
+//! loader then checks the descriptor itself again.
 //!
 //! Every request runs under the plugin's own `catch_unwind` ([`guest`]): a panicking
 //! plugin yields an error, not an aborted host. Libraries are never unloaded.

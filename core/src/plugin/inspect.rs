@@ -124,37 +124,49 @@ struct Declared<'a> {
 }
 
 fn check(path: &Path, name: &str, d: &Declared<'_>) -> Result<()> {
-    let rebuild = |what: String| {
+    let ours = format!(
+        "lamina-api {} (plugin ABI {ABI_MAJOR}.0 to {ABI_MAJOR}.{ABI_MINOR})",
+        crate::VERSION
+    );
+    let theirs = || {
         let built = d
             .core_version
-            .map(|v| format!(" (it was built against lamina-api {v})"))
+            .map(|v| format!("lamina-api {v}, "))
             .unwrap_or_default();
+        format!("{built}plugin ABI {}.{}", d.abi_major, d.abi_minor)
+    };
+    let rebuild = |what: String| {
         refuse(
             path,
-            format!(
-                "plugin `{name}` {what}{built}: rebuild it against lamina-api {}",
-                crate::VERSION
-            ),
+            format!("plugin `{name}` {what}: rebuild it against this lamina's {ours}"),
         )
     };
     if d.abi_major != ABI_MAJOR {
         return Err(rebuild(format!(
-            "was built for plugin ABI {}.{}, this lamina {} supports ABI {ABI_MAJOR}.{ABI_MINOR}",
-            d.abi_major,
-            d.abi_minor,
-            crate::VERSION
+            "was built against {}, whose messages and C types this lamina does not read",
+            theirs()
         )));
     }
     if d.layout != LAYOUT_FINGERPRINT {
         return Err(rebuild(format!(
-            "lays out the boundary's C types differently (layout fingerprint {:016x}, this lamina's {LAYOUT_FINGERPRINT:016x})",
-            d.layout
+            "lays out the boundary's C types differently (layout fingerprint {:016x}, this lamina's {LAYOUT_FINGERPRINT:016x}; built against {})",
+            d.layout,
+            theirs()
         )));
     }
-    if d.wire != WIRE_FINGERPRINT {
+    let Some(&schema) = WIRE_SCHEMAS.get(d.abi_minor as usize) else {
+        return Err(refuse(
+            path,
+            format!(
+                "plugin `{name}` was built against {}, newer than this lamina's {ours}: upgrade lamina, or rebuild the plugin against this lamina-api",
+                theirs()
+            ),
+        ));
+    };
+    if d.wire != schema {
         return Err(rebuild(format!(
-            "exchanges other message types (wire fingerprint {:016x}, this lamina's {WIRE_FINGERPRINT:016x})",
-            d.wire
+            "exchanges messages other than those of plugin ABI {}.{} (schema {:016x}, expected {schema:016x}; it was built from a lamina-api whose messages changed without a new version)",
+            d.abi_major, d.abi_minor, d.wire
         )));
     }
     Ok(())
@@ -190,4 +202,57 @@ pub(crate) fn check_descriptor(path: &Path, name: &str, prefix: &DescriptorPrefi
         ));
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn declared(minor: u32, wire: u64) -> Declared<'static> {
+        Declared {
+            abi_major: ABI_MAJOR,
+            abi_minor: minor,
+            layout: LAYOUT_FINGERPRINT,
+            wire,
+            core_version: Some("0.0.9"),
+        }
+    }
+
+    fn refusal(d: &Declared<'_>) -> String {
+        check(Path::new("p.so"), "p", d).expect_err("refused").to_string()
+    }
+
+    #[test]
+    fn a_plugin_of_any_minor_up_to_ours_loads_when_its_messages_are_that_minors() {
+        for (minor, &schema) in WIRE_SCHEMAS.iter().enumerate() {
+            check(Path::new("p.so"), "p", &declared(minor as u32, schema)).expect("loads");
+        }
+    }
+
+    #[test]
+    fn refusals_say_what_differs_and_what_to_do() {
+        let newer = refusal(&declared(ABI_MINOR + 1, 1));
+        assert!(
+            newer.contains(&format!("plugin ABI {ABI_MAJOR}.{}", ABI_MINOR + 1))
+                && newer.contains("newer than this lamina's")
+                && newer.contains("upgrade lamina"),
+            "{newer}"
+        );
+        let changed = refusal(&declared(ABI_MINOR, WIRE_FINGERPRINT ^ 1));
+        assert!(
+            changed.contains("changed without a new version")
+                && changed.contains(&format!("{WIRE_FINGERPRINT:016x}"))
+                && changed.contains("rebuild it against this lamina's lamina-api"),
+            "{changed}"
+        );
+        let older = refusal(&Declared {
+            abi_major: ABI_MAJOR - 1,
+            ..declared(0, WIRE_FINGERPRINT)
+        });
+        assert!(
+            older.contains(&format!("lamina-api 0.0.9, plugin ABI {}.0", ABI_MAJOR - 1))
+                && older.contains(&format!("plugin ABI {ABI_MAJOR}.0 to {ABI_MAJOR}.{ABI_MINOR}")),
+            "{older}"
+        );
+    }
 }
