@@ -20,6 +20,7 @@ pub mod mesh;
 pub mod microstructure;
 pub mod model;
 pub mod options;
+pub mod planned;
 pub mod plugin;
 pub mod process;
 pub mod reach;

@@ -25,7 +25,7 @@ pub const ABI_MAJOR: u32 = 7;
 /// `#[serde(default)]`, which an older plugin never sees and a newer one finds filled
 /// in; a request only plugins of the new minor are sent), or, for anything else, a new
 /// major whose list starts again with the one hash.
-pub const WIRE_SCHEMAS: &[u64] = &[0x6909_d6b9_0850_2364];
+pub const WIRE_SCHEMAS: &[u64] = &[0xe73d_e497_355a_6cea];
 /// The minor version of this build: a plugin of this major and of this minor or an
 /// older one loads (the host reads every message an older plugin writes, and sends it
 /// only what it knows); a plugin of a newer minor asks for a newer host.
@@ -202,11 +202,16 @@ pub const ABI_SECTION: &str = ".lamabi";
 #[cfg(not(any(target_os = "macos", windows)))]
 pub const ABI_SECTION: &str = ".lamina_abi";
 
+/// True when this build unwinds on a panic: the plugin's guard turns its panics into
+/// errors. A plugin built with `panic = "abort"` would end the host at its first panic,
+/// so the host refuses it.
+pub const PANICS_UNWIND: bool = cfg!(panic = "unwind");
+
 /// The plugin's ABI, readable from the library file without loading it: the magic, the
 /// ABI major and minor (little-endian `u32`s), the layout and wire fingerprints
-/// (little-endian `u64`s), then the lamina-api version (32 bytes, NUL-padded). The
-/// host refuses a mismatch before the dynamic loader runs any of the library's
-/// initialisers.
+/// (little-endian `u64`s), the lamina-api version (32 bytes, NUL-padded), then one
+/// byte, 1 when the plugin's panics unwind ([`PANICS_UNWIND`]). The host refuses a
+/// mismatch before the dynamic loader runs any of the library's initialisers.
 pub const fn abi_note() -> [u8; ABI_NOTE_LEN] {
     let mut note = [0u8; ABI_NOTE_LEN];
     let magic = PLUGIN_MAGIC.to_le_bytes();
@@ -233,6 +238,7 @@ pub const fn abi_note() -> [u8; ABI_NOTE_LEN] {
         note[32 + i] = version[i];
         i += 1;
     }
+    note[64] = PANICS_UNWIND as u8;
     note
 }
 
@@ -245,6 +251,8 @@ pub struct AbiNote {
     pub layout: u64,
     pub wire: u64,
     pub core_version: String,
+    /// The plugin's panics unwind (see [`PANICS_UNWIND`]).
+    pub unwinds: bool,
 }
 
 impl AbiNote {
@@ -265,6 +273,7 @@ impl AbiNote {
             layout: u64_at(16),
             wire: u64_at(24),
             core_version: String::from_utf8_lossy(&version[..end]).into_owned(),
+            unwinds: note[64] == 1,
         })
     }
 }
@@ -281,6 +290,7 @@ mod tests {
         assert_eq!(note.layout, LAYOUT_FINGERPRINT);
         assert_eq!(note.wire, WIRE_FINGERPRINT);
         assert_eq!(note.core_version, crate::VERSION);
+        assert!(note.unwinds, "the tests are built to unwind");
     }
 
     #[test]

@@ -19,6 +19,7 @@ use super::guard_call;
 use super::wire::*;
 use crate::error::{Error, Result};
 use crate::mesh::Mesh;
+use crate::planned::PlanDelta;
 use crate::registry::StageFactory;
 use crate::script::{Compiler, Script, ScriptArgs, ScriptFn, ScriptHost};
 use crate::source::Location;
@@ -538,7 +539,11 @@ fn handle(request: Request<'static>) -> Result<Response> {
         Request::Plan { handle, info, plan } => on_stage(handle, "plan", |_, stage, label| match stage {
             AnyStage::Plan(s) => {
                 let mut plan = plan.into_owned();
-                Some(guard_call(label, || s.plan(&info, &mut plan)).map(|()| Response::Plan(plan)))
+                let before = plan.counts();
+                Some(
+                    guard_call(label, || s.plan(&info, &mut plan))
+                        .map(|()| Response::Planned(PlanDelta::taken(&mut plan, before))),
+                )
             }
             _ => None,
         }),
@@ -575,7 +580,11 @@ fn handle(request: Request<'static>) -> Result<Response> {
                     higher: &context.higher,
                     last: context.last,
                 };
-                Some(guard_call(label, || s.process(&ctx, &mut plan)).map(|()| Response::Plan(plan)))
+                let before = plan.counts();
+                Some(
+                    guard_call(label, || s.process(&ctx, &mut plan))
+                        .map(|()| Response::Planned(PlanDelta::taken(&mut plan, before))),
+                )
             }
             _ => None,
         }),

@@ -100,6 +100,12 @@ pub(crate) fn entry_symbol(path: &Path) -> Result<String> {
             format!("plugin `{name}`: its ABI note is not a Lamina plugin's"),
         ));
     }
+    check_note(path, name, &note)?;
+    Ok(symbol)
+}
+
+/// Checks a plugin's ABI note: its versions, and that its panics unwind.
+fn check_note(path: &Path, name: &str, note: &AbiNote) -> Result<()> {
     check(
         path,
         name,
@@ -111,7 +117,16 @@ pub(crate) fn entry_symbol(path: &Path) -> Result<String> {
             core_version: Some(&note.core_version),
         },
     )?;
-    Ok(symbol)
+    if !note.unwinds {
+        return Err(refuse(
+            path,
+            format!(
+                "plugin `{name}` was built with `panic = \"abort\"`: its first panic would end lamina with it; \
+                 build it with panics that unwind (the default: remove `panic = \"abort\"` from its Cargo profile)"
+            ),
+        ));
+    }
+    Ok(())
 }
 
 /// What a plugin declares about its build, from its note or its descriptor.
@@ -227,6 +242,17 @@ mod tests {
         for (minor, &schema) in WIRE_SCHEMAS.iter().enumerate() {
             check(Path::new("p.so"), "p", &declared(minor as u32, schema)).expect("loads");
         }
+    }
+
+    #[test]
+    fn a_plugin_whose_panics_abort_is_refused() {
+        let mut note = AbiNote::parse(&abi_note()).expect("note");
+        check_note(Path::new("p.so"), "p", &note).expect("ours loads");
+        note.unwinds = false;
+        let e = check_note(Path::new("p.so"), "p", &note)
+            .expect_err("refused")
+            .to_string();
+        assert!(e.contains("panic = \"abort\"") && e.contains("plugin `p`"), "{e}");
     }
 
     #[test]

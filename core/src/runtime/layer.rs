@@ -123,6 +123,7 @@ impl Engine {
         };
         if let Some(planner) = &self.planner {
             timings.time(StageKind::Plan, || planner.plan(info, &mut plan))?;
+            checked(&plan, info, StageKind::Plan)?;
         }
         if !self.process.is_empty() {
             self.process_operations(slot, shared, &mut plan)?;
@@ -155,6 +156,7 @@ impl Engine {
             shared
                 .timings
                 .time(StageKind::Process, || stage.process(&ctx, plan))?;
+            checked(plan, shared.info, StageKind::Process)?;
         }
         Ok(())
     }
@@ -299,6 +301,17 @@ fn whole_family(tree: &crate::model::ContourTree, layer: &Layer, f: usize) -> Su
         composition: None,
         samples: Vec::new(),
     }
+}
+
+/// A planned layer that a machine can follow ([`LayerPlan::check`]), whichever stage of
+/// `kind` planned it: a plugin's plan is held to what the built-in planners give.
+fn checked(plan: &LayerPlan, info: &RunInfo, kind: StageKind) -> Result<()> {
+    plan.check(info).map_err(|m| {
+        Error::stage(
+            kind.name(),
+            format!("the {kind} stage left a plan no machine can follow: {m}"),
+        )
+    })
 }
 
 /// A sorter's output must describe the layer it was given.

@@ -178,7 +178,20 @@ impl Engine {
 
         let mut outputs = AtomicOutputs::new(out_dir);
         let mut sinks = Vec::new();
-        for e in &self.exporters {
+        // Exporters run under the panic guard, as every other stage does: a panic in
+        // one is an error naming it, and the run's outputs are removed.
+        let labels: Vec<String> = (0..self.exporters.len())
+            .map(|i| {
+                let name = self
+                    .pipeline
+                    .outputs
+                    .get(i)
+                    .and_then(|t| t.use_name())
+                    .unwrap_or("?");
+                format!("output `{name}`")
+            })
+            .collect();
+        for (e, label) in self.exporters.iter().zip(&labels) {
             let mut ctx = ExportContext {
                 info: &info,
                 sequence: sequence.as_ref(),
@@ -187,7 +200,9 @@ impl Engine {
                 pipeline_name: &self.pipeline.name,
                 files: &mut outputs,
             };
-            sinks.push(timings.time(StageKind::Export, || e.open(&mut ctx))?);
+            sinks.push(timings.time(StageKind::Export, || {
+                crate::plugin::guard_call(label, || e.open(&mut ctx))
+            })?);
         }
 
         let surfaces = match (&sequence, self.process.is_empty()) {
@@ -259,8 +274,10 @@ impl Engine {
                     sum.1 += f.area * plan.thickness;
                     min_fill = min_fill.max(f.min_ratio);
                 }
-                for sink in &mut sinks {
-                    timings.time(StageKind::Export, || sink.layer(&info, &plan, &mut outputs))?;
+                for (sink, label) in sinks.iter_mut().zip(&labels) {
+                    timings.time(StageKind::Export, || {
+                        crate::plugin::guard_call(label, || sink.layer(&info, &plan, &mut outputs))
+                    })?;
                 }
                 observer.layer_done(plan.index);
                 Ok(())
@@ -280,8 +297,10 @@ impl Engine {
                 ),
             ));
         }
-        for sink in sinks {
-            timings.time(StageKind::Export, || sink.finish(&info, &mut outputs))?;
+        for (sink, label) in sinks.into_iter().zip(&labels) {
+            timings.time(StageKind::Export, || {
+                crate::plugin::guard_call(label, || sink.finish(&info, &mut outputs))
+            })?;
         }
         let machine_files = outputs.take_reports();
         for m in &machine_files {

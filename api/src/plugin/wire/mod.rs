@@ -131,7 +131,8 @@ pub enum Response {
     Regions(Vec<SubRegion>),
     Bool(bool),
     Sequence(Sequence),
-    Plan(LayerPlan),
+    /// What a planner or a process stage added to the layer it was sent.
+    Planned(crate::planned::PlanDelta),
     Done,
 }
 

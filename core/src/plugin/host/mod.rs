@@ -157,7 +157,7 @@ fn name_of(r: &Response) -> &'static str {
         Response::Regions(_) => "regions",
         Response::Bool(_) => "a yes or no",
         Response::Sequence(_) => "a sequence",
-        Response::Plan(_) => "a plan",
+        Response::Planned(_) => "a plan",
         Response::Done => "done",
     }
 }

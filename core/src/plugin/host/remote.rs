@@ -336,8 +336,8 @@ impl Planner for Remote {
             info: Cow::Borrowed(info),
             plan: Cow::Borrowed(plan),
         })? {
-            Response::Plan(p) => {
-                *plan = p;
+            Response::Planned(delta) => {
+                delta.apply(plan);
                 Ok(())
             }
             other => Err(self.unexpected(&other)),
@@ -358,8 +358,8 @@ impl Process for Remote {
             },
             plan: Cow::Borrowed(plan),
         })? {
-            Response::Plan(p) => {
-                *plan = p;
+            Response::Planned(delta) => {
+                delta.apply(plan);
                 Ok(())
             }
             other => Err(self.unexpected(&other)),
