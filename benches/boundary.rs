@@ -3,20 +3,25 @@
 //! stages behind handles, scripts and files served by the host), as a dynamic plugin's
 //! stages are. The report gives the wall time of each and the boundary's share.
 //!
+//! A second table times one stage on its own: the `z` grader on the 881 families of
+//! the buildings mesh at 1 mm layers, on one thread, linked and through the boundary
+//! (the grade stage's own time, from the run's timings): what a grader costs as a
+//! dynamic plugin, whose families of a layer travel in one call.
+//!
 //! Run: `cargo bench --bench boundary` (median of 5 after a warm-up; `--quick`: one
-//! run). The Benchy job is skipped with a note when `../shared/models/3DBenchy.stl` is
-//! absent (or `LAMINA_MODELS` names another folder holding it).
+//! run). The Benchy and buildings jobs are skipped with a note when their models are
+//! absent from `../shared/models` (or the folder `LAMINA_MODELS` names).
 
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
-use lamina_core::Registry;
 use lamina_core::pipeline::{Override, Pipeline};
 use lamina_core::runtime::{Engine, RunOptions, Silent};
+use lamina_core::{Registry, SourceFile, StageKind};
 
 #[path = "common/mod.rs"]
 mod common;
-use common::{benchy_dir, median, registry};
+use common::{benchy_dir, median, models_dir, registry};
 
 fn root() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))
@@ -34,6 +39,26 @@ fn time(registry: &Registry, name: &str, overrides: &[Override], out: &Path) -> 
     start.elapsed()
 }
 
+/// The grade stage's time in one single-threaded run of the buildings mesh.
+fn grade_time(registry: &Registry, models: &Path, out: &Path) -> Duration {
+    let text = format!(
+        "[model]\nuse = \"stl\"\nfile = {:?}\n\n[materials.a]\ncolour = [255, 0, 0]\n[materials.b]\ncolour = [0, 0, 255]\n\n\
+         [slice]\nuse = \"uniform\"\nthickness = 1.0\n\n[discretise]\nuse = \"offset\"\ncount = 3\n\n\
+         [grade]\nuse = \"z\"\n\n[[output]]\nuse = \"json\"\npath = \"plan.json\"\n",
+        models.join("openfoam_buildings_400k.stl").display().to_string()
+    );
+    let file = SourceFile::new(out.join("buildings.toml"), text);
+    let reach = lamina_core::reach::Reach::folder(out).with(&[models.to_path_buf()]);
+    let pipeline = Pipeline::parse_within(file, out.to_path_buf(), reach, &[]).expect("pipeline");
+    let options = RunOptions {
+        threads: Some(1),
+        ..RunOptions::default()
+    };
+    let engine = Engine::build(pipeline, registry.clone(), &options).expect("engine");
+    let report = engine.run(&out.join("out"), &Silent).expect("runs");
+    report.timings.get(StageKind::Grade)
+}
+
 fn main() {
     let quick = std::env::args().any(|a| a == "--quick");
     let runs = if quick { 1 } else { 5 };
@@ -41,6 +66,12 @@ fn main() {
     let mut remote = Registry::new();
     lamina_core::plugin::add_linked_through_boundary(&mut remote, "bench")
         .expect("the linked stages as a plugin");
+    // The defaults for kinds a pipeline leaves out are the program's, as in `lamina`.
+    for kind in StageKind::ALL {
+        if let Some(name) = linked.default_for(kind) {
+            remote.set_default(kind, name).expect("one default a kind");
+        }
+    }
     let out = tempfile::tempdir().expect("tempdir");
     let mut jobs: Vec<(&str, Vec<Override>)> = vec![("tube-gradient.toml", Vec::new())];
     match benchy_dir() {
@@ -76,4 +107,29 @@ fn main() {
             b.as_secs_f64() / a.as_secs_f64()
         );
     }
+    let models = models_dir();
+    if !models.join("openfoam_buildings_400k.stl").exists() {
+        println!("note: openfoam_buildings_400k.stl not found; the grader job is skipped");
+        return;
+    }
+    println!(
+        "\n{:<24} {:>12} {:>16} {:>8}",
+        "grade stage", "linked (s)", "boundary (s)", "ratio"
+    );
+    let measure = |registry: &Registry| {
+        grade_time(registry, &models, out.path());
+        median(
+            (0..runs)
+                .map(|_| grade_time(registry, &models, out.path()))
+                .collect(),
+        )
+    };
+    let (a, b) = (measure(&linked), measure(&remote));
+    println!(
+        "{:<24} {:>12.4} {:>16.4} {:>8.2}",
+        "buildings, z grader",
+        a.as_secs_f64(),
+        b.as_secs_f64(),
+        b.as_secs_f64() / a.as_secs_f64()
+    );
 }

@@ -258,8 +258,8 @@ pub struct FamilyContext<'a> {
     pub layer: &'a Layer,
     pub tree: &'a ContourTree,
     /// The part's mesh as it was sliced (placed and oriented), for stages that measure
-    /// in space (distances to chosen faces); `None` where no mesh exists (tests of a
-    /// stage on a drawn family).
+    /// in space (distances to chosen faces) and say so (`reads_mesh`); `None` for the
+    /// others, and where no mesh exists (tests of a stage on a drawn family).
     pub mesh: Option<&'a crate::mesh::Mesh>,
     pub part: usize,
     pub family: usize,
@@ -276,12 +276,63 @@ pub trait Discretiser: Send + Sync {
     fn grades(&self) -> bool {
         false
     }
+
+    /// True when the stage measures the part's mesh ([`FamilyContext::mesh`]): only
+    /// then is the mesh given to it (and, behind the plugin boundary, sent to it).
+    fn reads_mesh(&self) -> bool {
+        false
+    }
+
+    /// The sub-regions of each of `families` of one part's layer, in their order (the
+    /// context's own `family` is not read). This is what the runtime calls: by default
+    /// it discretises the families one by one; a stage behind the plugin boundary is
+    /// asked for them all in one call, the layer sent once.
+    fn discretise_families(
+        &self,
+        ctx: &FamilyContext<'_>,
+        families: &[usize],
+    ) -> Result<Vec<Vec<SubRegion>>> {
+        families
+            .iter()
+            .map(|&family| self.discretise(&FamilyContext { family, ..*ctx }))
+            .collect()
+    }
 }
 
 /// Gives every sub-region of a family its composition.
 pub trait Grader: Send + Sync {
     /// Sets `composition` on every region; fractions are over the part's materials.
     fn grade(&self, ctx: &FamilyContext<'_>, regions: &mut [SubRegion]) -> Result<()>;
+
+    /// True when the stage measures the part's mesh ([`FamilyContext::mesh`]): only
+    /// then is the mesh given to it (and, behind the plugin boundary, sent to it).
+    fn reads_mesh(&self) -> bool {
+        false
+    }
+
+    /// False when the grader reads no contour and no polygon (only the layer's height
+    /// and index, and the regions' levels, references and cells): behind the plugin
+    /// boundary it is then sent the layer without its contours and the regions without
+    /// their polygons, which is most of a call's bytes.
+    fn reads_geometry(&self) -> bool {
+        true
+    }
+
+    /// Grades the regions of each of `families` of one part's layer: `regions[i]` are
+    /// those of `families[i]` (the context's own `family` is not read). This is what
+    /// the runtime calls: by default it grades the families one by one; a stage behind
+    /// the plugin boundary is asked for them all in one call, the layer sent once.
+    fn grade_families(
+        &self,
+        ctx: &FamilyContext<'_>,
+        families: &[usize],
+        regions: &mut [Vec<SubRegion>],
+    ) -> Result<()> {
+        for (&family, regions) in families.iter().zip(regions) {
+            self.grade(&FamilyContext { family, ..*ctx }, regions)?;
+        }
+        Ok(())
+    }
 }
 
 /// Plans the fabrication sequence of the whole object, before slicing.

@@ -387,7 +387,7 @@ fn with_family<T>(
         tree: &family.tree,
         mesh: mesh.as_deref(),
         part: family.part,
-        family: family.family,
+        family: 0,
     };
     f(&ctx)
 }
@@ -503,31 +503,61 @@ fn handle(request: Request<'static>) -> Result<Response> {
             AnyStage::Sort(s) => Some(guard_call(label, || s.sort(&layer)).map(Response::Tree)),
             _ => None,
         }),
-        Request::Discretise { handle, family } => {
-            on_stage(handle, "discretise", |o, stage, label| match stage {
-                AnyStage::Discretise(s) => Some(
-                    with_family(o, family, |ctx| guard_call(label, || s.discretise(ctx)))
-                        .map(Response::Regions),
-                ),
-                _ => None,
-            })
-        }
+        Request::Discretise {
+            handle,
+            family,
+            families,
+        } => on_stage(handle, "discretise", |o, stage, label| match stage {
+            AnyStage::Discretise(s) => Some(
+                with_family(o, family, |ctx| {
+                    guard_call(label, || s.discretise_families(ctx, &families))
+                })
+                .map(Response::RegionSets),
+            ),
+            _ => None,
+        }),
         Request::Grades { handle } => {
             on_stage(handle, "say whether it grades", |_, stage, label| match stage {
                 AnyStage::Discretise(s) => Some(guard_call(label, || Ok(s.grades())).map(Response::Bool)),
                 _ => None,
             })
         }
+        Request::ReadsMesh { handle } => on_stage(
+            handle,
+            "say whether it reads the mesh",
+            |_, stage, label| match stage {
+                AnyStage::Discretise(s) => Some(guard_call(label, || Ok(s.reads_mesh())).map(Response::Bool)),
+                AnyStage::Grade(s) => Some(guard_call(label, || Ok(s.reads_mesh())).map(Response::Bool)),
+                _ => None,
+            },
+        ),
+        Request::ReadsGeometry { handle } => on_stage(
+            handle,
+            "say whether it reads contours",
+            |_, stage, label| match stage {
+                AnyStage::Grade(s) => Some(guard_call(label, || Ok(s.reads_geometry())).map(Response::Bool)),
+                _ => None,
+            },
+        ),
         Request::Grade {
             handle,
             family,
+            families,
             regions,
         } => on_stage(handle, "grade", |o, stage, label| match stage {
             AnyStage::Grade(s) => {
                 let mut regions = regions.into_owned();
                 Some(
-                    with_family(o, family, |ctx| guard_call(label, || s.grade(ctx, &mut regions)))
-                        .map(|()| Response::Regions(regions)),
+                    with_family(o, family, |ctx| {
+                        guard_call(label, || s.grade_families(ctx, &families, &mut regions))
+                    })
+                    .map(|()| {
+                        // The host has the polygons: what comes back is what grading set.
+                        for r in regions.iter_mut().flatten() {
+                            r.polygon = Default::default();
+                        }
+                        Response::RegionSets(regions)
+                    }),
                 )
             }
             _ => None,

@@ -217,29 +217,47 @@ impl Engine {
         let p = &self.parts[pi];
         let n_materials = p.materials.len();
         let mut regions = Vec::new();
-        for &f in families {
-            let ctx = FamilyContext {
-                info,
-                layer,
-                tree,
-                mesh,
-                part: pi,
-                family: f,
-            };
-            let mut family_regions = match &p.discretiser {
-                Some(d) => timings.time(StageKind::Discretise, || d.discretise(&ctx))?,
-                None => vec![whole_family(tree, layer, f)],
-            };
-            match &p.grader {
-                Some(g) => timings.time(StageKind::Grade, || g.grade(&ctx, &mut family_regions))?,
-                None => {
-                    // A discretiser whose regions follow the material (grading sources)
-                    // grades them itself; the rest are the part's first material.
-                    for r in family_regions.iter_mut().filter(|r| r.composition.is_none()) {
-                        r.composition = Some(Composition::pure(0, n_materials));
-                    }
+        if families.is_empty() {
+            return Ok(regions);
+        }
+        // One call a stage for all the part's families of the layer; the mesh only to
+        // the stages that read it.
+        let ctx = |reads_mesh: bool| FamilyContext {
+            info,
+            layer,
+            tree,
+            mesh: mesh.filter(|_| reads_mesh),
+            part: pi,
+            family: families[0],
+        };
+        let mut sets = match &p.discretiser {
+            Some(d) => timings.time(StageKind::Discretise, || {
+                d.discretise_families(&ctx(d.reads_mesh()), families)
+            })?,
+            None => families
+                .iter()
+                .map(|&f| vec![whole_family(tree, layer, f)])
+                .collect(),
+        };
+        if sets.len() != families.len() {
+            return Err(Error::stage(
+                "discretise",
+                format!("{} lists of regions for {} families", sets.len(), families.len()),
+            ));
+        }
+        match &p.grader {
+            Some(g) => timings.time(StageKind::Grade, || {
+                g.grade_families(&ctx(g.reads_mesh()), families, &mut sets)
+            })?,
+            None => {
+                // A discretiser whose regions follow the material (grading sources)
+                // grades them itself; the rest are the part's first material.
+                for r in sets.iter_mut().flatten().filter(|r| r.composition.is_none()) {
+                    r.composition = Some(Composition::pure(0, n_materials));
                 }
             }
+        }
+        for (&f, family_regions) in families.iter().zip(sets) {
             for r in &family_regions {
                 let c = r.composition.as_ref().ok_or_else(|| {
                     Error::stage(

@@ -301,6 +301,11 @@ impl DistanceField {
 }
 
 impl Discretiser for DistanceField {
+    /// A `surface` feature measures in space, from faces of the part's mesh.
+    fn reads_mesh(&self) -> bool {
+        self.feature == Feature::Surface
+    }
+
     fn discretise(&self, ctx: &FamilyContext<'_>) -> Result<Vec<SubRegion>> {
         let polygon = ctx.tree.family_polygon(&ctx.layer.contours, ctx.family);
         if self.cell_size.is_some() {

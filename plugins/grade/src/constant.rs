@@ -22,6 +22,11 @@ enum Spec {
 struct Constant(Spec);
 
 impl Grader for Constant {
+    /// Reads the layer's height and the regions' levels and references only.
+    fn reads_geometry(&self) -> bool {
+        false
+    }
+
     fn grade(&self, ctx: &FamilyContext<'_>, regions: &mut [SubRegion]) -> Result<()> {
         let part = &ctx.info.parts[ctx.part];
         let n = part.materials.len();

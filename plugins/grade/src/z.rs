@@ -62,6 +62,11 @@ pub(crate) fn level(span: Span, index: usize, z: f64, thickness: f64, part: (f64
 }
 
 impl Grader for AlongZ {
+    /// Reads the layer's height and the regions' levels and references only.
+    fn reads_geometry(&self) -> bool {
+        false
+    }
+
     fn grade(&self, ctx: &FamilyContext<'_>, regions: &mut [SubRegion]) -> Result<()> {
         let part = &ctx.info.parts[ctx.part];
         let n = part.materials.len();

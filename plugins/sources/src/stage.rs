@@ -177,6 +177,11 @@ impl Sources {
 }
 
 impl Discretiser for Sources {
+    /// A `surface` source measured in space reads faces of the part's mesh.
+    fn reads_mesh(&self) -> bool {
+        self.faces.iter().any(Option::is_some)
+    }
+
     fn discretise(&self, ctx: &FamilyContext<'_>) -> Result<Vec<SubRegion>> {
         let family = ctx.tree.family_polygon(&ctx.layer.contours, ctx.family);
         let family_area = family.area();

@@ -65,17 +65,32 @@ pub enum Request<'a> {
         handle: u64,
         layer: Cow<'a, Layer>,
     },
+    /// Discretises the families `families` of one part's layer; replies with their
+    /// regions, a list per family.
     Discretise {
         handle: u64,
         family: WireFamily<'a>,
+        families: Cow<'a, [usize]>,
     },
     Grades {
         handle: u64,
     },
+    /// Asks a discretiser or grader whether it reads the part's mesh.
+    ReadsMesh {
+        handle: u64,
+    },
+    /// Asks a grader whether it reads contours and polygons.
+    ReadsGeometry {
+        handle: u64,
+    },
+    /// Grades the regions of the families `families` of one part's layer
+    /// (`regions[i]` those of `families[i]`); replies with them graded, without their
+    /// polygons: the host keeps its own and takes the compositions and samples.
     Grade {
         handle: u64,
         family: WireFamily<'a>,
-        regions: Cow<'a, [SubRegion]>,
+        families: Cow<'a, [usize]>,
+        regions: Cow<'a, [Vec<SubRegion>]>,
     },
     Sequence {
         handle: u64,
@@ -128,7 +143,8 @@ pub enum Response {
     Slots(Vec<LayerSlot>),
     Layer(Layer),
     Tree(ContourTree),
-    Regions(Vec<SubRegion>),
+    /// Regions, a list per family asked for.
+    RegionSets(Vec<Vec<SubRegion>>),
     Bool(bool),
     Sequence(Sequence),
     /// What a planner or a process stage added to the layer it was sent.
@@ -254,8 +270,9 @@ pub enum WireStep {
     Index(usize),
 }
 
-/// What a discretiser or grader knows about a family. The mesh travels once per
-/// stage: later requests name it by `id` only.
+/// What a discretiser or grader knows about the families of a part's layer. The mesh
+/// travels once per stage, and only to a stage that reads it: later requests name it by
+/// `id` only.
 #[derive(Debug, Serialize, Deserialize)]
 pub struct WireFamily<'a> {
     pub info: Cow<'a, RunInfo>,
@@ -263,7 +280,6 @@ pub struct WireFamily<'a> {
     pub tree: Cow<'a, ContourTree>,
     pub mesh: Option<MeshRef<'a>>,
     pub part: usize,
-    pub family: usize,
 }
 
 /// A mesh named by a number, with its data the first time the stage sees it.
@@ -383,7 +399,7 @@ mod tests {
                 .expect_err("too deep")
                 .contains("malformed")
         );
-        let fine: Reply = Ok(Response::Regions(Vec::new()));
+        let fine: Reply = Ok(Response::RegionSets(Vec::new()));
         let bytes = encode(&fine).expect("encodes");
         for cut in 0..bytes.len() {
             assert!(decode::<Reply>(&bytes[..cut]).is_err(), "{cut}");
@@ -454,7 +470,7 @@ mod tests {
             ),
             (
                 "regions",
-                encode(&Ok::<_, WireError>(Response::Regions(vec![region]))).expect("encodes"),
+                encode(&Ok::<_, WireError>(Response::RegionSets(vec![vec![region]]))).expect("encodes"),
             ),
             (
                 "error",

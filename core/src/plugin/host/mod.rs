@@ -154,7 +154,7 @@ fn name_of(r: &Response) -> &'static str {
         Response::Slots(_) => "layer slots",
         Response::Layer(_) => "a layer",
         Response::Tree(_) => "a contour tree",
-        Response::Regions(_) => "regions",
+        Response::RegionSets(_) => "regions",
         Response::Bool(_) => "a yes or no",
         Response::Sequence(_) => "a sequence",
         Response::Planned(_) => "a plan",

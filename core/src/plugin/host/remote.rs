@@ -24,6 +24,12 @@ struct Remote {
     files: Arc<FileTable>,
     /// For a discretiser: whether its regions come graded (asked once, when built).
     grades: bool,
+    /// For a discretiser or grader: whether it reads the part's mesh (asked once, when
+    /// built); the mesh is sent to those only.
+    reads_mesh: bool,
+    /// For a grader: whether it reads contours and polygons (asked once, when built);
+    /// those that do not are sent neither.
+    reads_geometry: bool,
     /// For a process stage: whether it needs the higher regions (asked once, when built);
     /// for a sequencer, whether it needs the parts' gradients.
     needs_higher: bool,
@@ -57,6 +63,14 @@ impl Remote {
         )
     }
 
+    /// A reply that holds `got` of what `asked` were sent for.
+    fn miscounted(&self, what: &str, got: usize, asked: usize, of: &str) -> Error {
+        Error::stage(
+            self.label.to_string(),
+            format!("{what} {got} {of}, it was given {asked}"),
+        )
+    }
+
     /// Another object of the same plugin stage (a prepared mesh, an open output).
     fn child(&self, handle: u64) -> Remote {
         Remote {
@@ -66,6 +80,8 @@ impl Remote {
             scripts: self.scripts.clone(),
             files: self.files.clone(),
             grades: false,
+            reads_mesh: false,
+            reads_geometry: true,
             needs_higher: false,
             meshes_sent: Mutex::new(HashSet::new()),
         }
@@ -95,7 +111,6 @@ impl Remote {
                 tree: Cow::Borrowed(ctx.tree),
                 mesh,
                 part: ctx.part,
-                family: ctx.family,
             },
             sent,
         )
@@ -152,9 +167,23 @@ pub(crate) fn build(
         scripts,
         files,
         grades: false,
+        reads_mesh: false,
+        reads_geometry: true,
         needs_higher: false,
         meshes_sent: Mutex::new(HashSet::new()),
     };
+    if matches!(kind, StageKind::Discretise | StageKind::Grade) {
+        stage.reads_mesh = match stage.request(&Request::ReadsMesh { handle })? {
+            Response::Bool(b) => b,
+            other => return Err(stage.unexpected(&other)),
+        };
+    }
+    if kind == StageKind::Grade {
+        stage.reads_geometry = match stage.request(&Request::ReadsGeometry { handle })? {
+            Response::Bool(b) => b,
+            other => return Err(stage.unexpected(&other)),
+        };
+    }
     if kind == StageKind::Discretise {
         stage.grades = match stage.request(&Request::Grades { handle })? {
             Response::Bool(b) => b,
@@ -273,43 +302,126 @@ impl Sorter for Remote {
 
 impl Discretiser for Remote {
     fn discretise(&self, ctx: &FamilyContext<'_>) -> Result<Vec<SubRegion>> {
-        let (family, sent) = self.family(ctx);
-        match self.request(&Request::Discretise {
-            handle: self.handle,
-            family,
-        })? {
-            Response::Regions(r) => {
-                self.mesh_sent(sent);
-                Ok(r)
-            }
-            other => Err(self.unexpected(&other)),
-        }
+        Ok(self
+            .discretise_families(ctx, &[ctx.family])?
+            .pop()
+            .unwrap_or_default())
     }
 
     fn grades(&self) -> bool {
         self.grades
     }
+
+    fn reads_mesh(&self) -> bool {
+        self.reads_mesh
+    }
+
+    fn discretise_families(
+        &self,
+        ctx: &FamilyContext<'_>,
+        families: &[usize],
+    ) -> Result<Vec<Vec<SubRegion>>> {
+        let (family, sent) = self.family(ctx);
+        match self.request(&Request::Discretise {
+            handle: self.handle,
+            family,
+            families: Cow::Borrowed(families),
+        })? {
+            Response::RegionSets(r) if r.len() == families.len() => {
+                self.mesh_sent(sent);
+                Ok(r)
+            }
+            Response::RegionSets(r) => {
+                Err(self.miscounted("discretised", r.len(), families.len(), "families"))
+            }
+            other => Err(self.unexpected(&other)),
+        }
+    }
 }
 
 impl Grader for Remote {
     fn grade(&self, ctx: &FamilyContext<'_>, regions: &mut [SubRegion]) -> Result<()> {
-        let (family, sent) = self.family(ctx);
+        let mut sets = vec![regions.to_vec()];
+        self.grade_families(ctx, &[ctx.family], &mut sets)?;
+        match sets.pop() {
+            Some(graded) if graded.len() == regions.len() => {
+                regions.clone_from_slice(&graded);
+                Ok(())
+            }
+            _ => Err(self.miscounted("graded", 0, regions.len(), "regions")),
+        }
+    }
+
+    fn reads_mesh(&self) -> bool {
+        self.reads_mesh
+    }
+
+    fn reads_geometry(&self) -> bool {
+        self.reads_geometry
+    }
+
+    fn grade_families(
+        &self,
+        ctx: &FamilyContext<'_>,
+        families: &[usize],
+        regions: &mut [Vec<SubRegion>],
+    ) -> Result<()> {
+        let (mut family, sent) = self.family(ctx);
+        // A grader that reads no geometry is sent none: the layer's height, the
+        // regions' levels and references.
+        let bare: Vec<Vec<SubRegion>>;
+        let sent_regions = if self.reads_geometry {
+            Cow::Borrowed(&*regions)
+        } else {
+            family.layer = Cow::Owned(Layer {
+                index: ctx.layer.index,
+                z: ctx.layer.z,
+                thickness: ctx.layer.thickness,
+                contours: Vec::new(),
+                warnings: Vec::new(),
+            });
+            family.tree = Cow::Owned(ContourTree::default());
+            bare = regions
+                .iter()
+                .map(|set| set.iter().map(without_polygon).collect())
+                .collect();
+            Cow::Owned(bare)
+        };
         match self.request(&Request::Grade {
             handle: self.handle,
             family,
-            regions: Cow::Borrowed(regions),
+            families: Cow::Borrowed(families),
+            regions: sent_regions,
         })? {
-            Response::Regions(r) if r.len() == regions.len() => {
+            Response::RegionSets(r)
+                if r.len() == regions.len()
+                    && r.iter().zip(regions.iter()).all(|(a, b)| a.len() == b.len()) =>
+            {
                 self.mesh_sent(sent);
-                regions.clone_from_slice(&r);
+                for (ours, graded) in regions.iter_mut().flatten().zip(r.into_iter().flatten()) {
+                    ours.composition = graded.composition;
+                    ours.samples = graded.samples;
+                }
                 Ok(())
             }
-            Response::Regions(r) => Err(Error::stage(
-                self.label.to_string(),
-                format!("graded {} regions, it was given {}", r.len(), regions.len()),
+            Response::RegionSets(r) => Err(self.miscounted(
+                "graded",
+                r.iter().map(Vec::len).sum(),
+                regions.iter().map(Vec::len).sum(),
+                "regions",
             )),
             other => Err(self.unexpected(&other)),
         }
+    }
+}
+
+/// A region as a grader that reads no geometry sees it.
+fn without_polygon(r: &SubRegion) -> SubRegion {
+    SubRegion {
+        polygon: crate::geom::Polygon::default(),
+        composition: r.composition.clone(),
+        samples: r.samples.clone(),
+        ..*r
     }
 }
 
