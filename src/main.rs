@@ -161,8 +161,9 @@ enum Command {
         /// The crate's folder (default: the name, in the current directory).
         #[arg(long, value_name = "DIR")]
         dir: Option<PathBuf>,
-        /// Lamina's source folder, which the crate depends on (default: the one this
-        /// lamina was built from).
+        /// A checkout of Lamina's source to take lamina-api and lamina-test-support
+        /// from (a `[patch]` table in the crate's manifest); without it, the crate
+        /// depends on their published releases.
         #[arg(long, value_name = "PATH")]
         lamina: Option<PathBuf>,
     },
@@ -363,6 +364,12 @@ fn execute(cli: Cli) -> Result<(), Failure> {
             println!("{}", request.dir.display());
             for f in files {
                 println!("  {}", f.display());
+            }
+            if request.lamina.is_none() {
+                println!(
+                    "note: it depends on lamina-api {v} from the registry; to take it from a checkout of Lamina, write the crate with --lamina PATH",
+                    v = lamina_core::VERSION
+                );
             }
             println!(
                 "build it with `cargo build` in {}, test it with `cargo test`, and load it with `lamina run pipeline.toml --plugin target/debug/{}{}{}`",

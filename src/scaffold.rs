@@ -1,10 +1,13 @@
 //! `lamina new-plugin`: writes a plugin crate that builds with one `cargo build`, loads
-//! with `--plugin`, and tests its stage with `lamina-test-support`.
+//! with `--plugin`, and tests its stage with `lamina-test-support`, linked and loaded
+//! through the real loader.
 //!
-//! Lamina is not published to a registry, so the crate depends on the Lamina source it
-//! is given (by default the one this binary was built from).
+//! The crate depends on `lamina-api` and `lamina-test-support` by version, with the lock
+//! file Lamina itself is built and tested with. `--lamina PATH` adds a `[patch]` table
+//! that takes them from a local checkout instead (until they are published, that is
+//! how a plugin builds); nothing else names a folder of the machine.
 
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
 use lamina_core::{Error, Result, StageKind};
 
@@ -36,8 +39,9 @@ pub struct Request {
     pub kind: StageKind,
     /// The crate's folder (must not exist).
     pub dir: PathBuf,
-    /// Lamina's source folder (holding `api/` and `test-support/`).
-    pub lamina: PathBuf,
+    /// A checkout of Lamina's source to take its crates from (holding `api/` and
+    /// `test-support/`), if any.
+    pub lamina: Option<PathBuf>,
 }
 
 fn usage(message: impl Into<String>) -> Error {
@@ -72,20 +76,24 @@ impl Request {
                 dir.display()
             )));
         }
-        let built_from = Path::new(env!("CARGO_MANIFEST_DIR"));
-        let lamina = lamina.unwrap_or_else(|| built_from.to_path_buf());
-        let lamina = lamina
-            .canonicalize()
-            .map_err(|e| usage(format!("Lamina's source folder {}: {e}", lamina.display())))?;
-        for part in ["api/Cargo.toml", "test-support/Cargo.toml"] {
-            if !lamina.join(part).is_file() {
-                return Err(usage(format!(
-                    "{} is not Lamina's source folder (it has no {part})",
-                    lamina.display()
-                ))
-                .with_help("give the folder of Lamina's source with --lamina PATH"));
+        let lamina = match lamina {
+            None => None,
+            Some(lamina) => {
+                let lamina = lamina
+                    .canonicalize()
+                    .map_err(|e| usage(format!("Lamina's source folder {}: {e}", lamina.display())))?;
+                for part in ["api/Cargo.toml", "test-support/Cargo.toml"] {
+                    if !lamina.join(part).is_file() {
+                        return Err(usage(format!(
+                            "{} is not Lamina's source folder (it has no {part})",
+                            lamina.display()
+                        ))
+                        .with_help("give the folder of Lamina's source with --lamina PATH"));
+                    }
+                }
+                Some(lamina)
             }
-        }
+        };
         Ok(Self {
             name: name.to_string(),
             kind,
@@ -100,7 +108,6 @@ impl Request {
     }
 
     fn fill(&self, template: &str) -> String {
-        let toml_path = |p: PathBuf| toml::Value::String(p.to_string_lossy().into_owned()).to_string();
         let (_, trait_name, _) = KINDS
             .iter()
             .find(|k| k.0 == self.kind)
@@ -121,11 +128,24 @@ impl Request {
                     std::env::consts::DLL_SUFFIX
                 ),
             )
-            .replace("{{lamina_api}}", &toml_path(self.lamina.join("api")))
-            .replace(
-                "{{lamina_test_support}}",
-                &toml_path(self.lamina.join("test-support")),
-            )
+            .replace("{{version}}", lamina_core::VERSION)
+            .replace("{{patch}}", &self.patch())
+    }
+
+    /// The `[patch]` table that takes Lamina's crates from the checkout `--lamina`
+    /// names; nothing without one.
+    fn patch(&self) -> String {
+        let Some(lamina) = &self.lamina else {
+            return String::new();
+        };
+        let path = |p: &str| toml::Value::String(lamina.join(p).to_string_lossy().into_owned()).to_string();
+        format!(
+            "\n# Lamina's crates from a local checkout (`lamina new-plugin --lamina PATH`) rather than\n\
+             # a registry; remove this table to build against published releases.\n\
+             [patch.crates-io]\nlamina-api = {{ path = {} }}\nlamina-test-support = {{ path = {} }}\n",
+            path("api"),
+            path("test-support")
+        )
     }
 
     /// A pipeline that runs the stage's example on a tube.
@@ -183,6 +203,9 @@ impl Request {
             ),
             ("pipeline.toml", self.pipeline()),
             ("README.md", self.fill(include_str!("scaffold/README.md.in"))),
+            // The releases Lamina is built and tested with: the first build resolves
+            // nothing anew (cargo drops what the crate does not use).
+            ("Cargo.lock", include_str!("../Cargo.lock").to_string()),
             (".gitignore", "/target\n".to_string()),
         ]
     }

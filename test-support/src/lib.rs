@@ -28,7 +28,7 @@ use std::path::{Path, PathBuf};
 
 use lamina_core::pipeline::Pipeline;
 use lamina_core::pipeline::TableRef;
-use lamina_core::registry::Registered;
+use lamina_core::registry::{Origin, Registered};
 use lamina_core::runtime::{Engine, RunOptions, RunReport, Silent};
 use lamina_core::{AnyStage, Registry, SourceFile, StageKind};
 
@@ -341,4 +341,70 @@ pub fn boundary_field(
         around: Default::default(),
         limits: Default::default(),
     }
+}
+
+/// The dynamic library `cargo test` built for the plugin crate whose library is named
+/// `lib` (the crate's name with `_` for `-`), beside the test program: what
+/// `lamina --plugin` loads.
+pub fn plugin_library(lib: &str) -> PathBuf {
+    let exe = std::env::current_exe().unwrap_or_else(|e| panic!("the test program: {e}"));
+    // target/<profile>/deps/<test> -> target/<profile>/<library>
+    let profile = exe
+        .parent()
+        .and_then(Path::parent)
+        .unwrap_or_else(|| panic!("{} lies in no build folder", exe.display()));
+    profile.join(format!(
+        "{}{}{}",
+        std::env::consts::DLL_PREFIX,
+        lib.replace('-', "_"),
+        std::env::consts::DLL_SUFFIX
+    ))
+}
+
+/// Runs the examples of the stages named in `names`, loaded from the plugin library
+/// `library` through Lamina's own loader (the file inspected, its ABI and messages'
+/// schema checked, every call a message across the boundary), with the built-in
+/// stages linked for the rest of each pipeline: a stage that runs linked but not as a
+/// plugin fails here. Panics with every failure.
+pub fn assert_examples_run_through_boundary(library: &Path, names: &[&str]) {
+    let linked = registry();
+    let mut loaded = Registry::new();
+    lamina_core::plugin::load(&mut loaded, library)
+        .unwrap_or_else(|e| panic!("{} does not load: {e}", library.display()));
+    // The built-in stages, and the plugin's from its library only.
+    let mut registry = Registry::new();
+    for e in linked.list(None) {
+        let theirs = loaded.get(e.info().kind, e.info().name).is_some();
+        if !theirs {
+            registry
+                .add(e.factory, e.origin.clone())
+                .unwrap_or_else(|err| panic!("{}: {err}", e.label()));
+        }
+    }
+    lamina_core::plugin::load(&mut registry, library)
+        .unwrap_or_else(|e| panic!("{} does not load: {e}", library.display()));
+    for kind in StageKind::ALL {
+        if let Some(name) = linked.default_for(kind) {
+            registry
+                .set_default(kind, name)
+                .unwrap_or_else(|e| panic!("the default {kind} stage: {e}"));
+        }
+    }
+    let dir = tempfile::tempdir().unwrap_or_else(|e| panic!("a temporary folder: {e}"));
+    write_models(dir.path());
+    let mut failures = Vec::new();
+    for name in names {
+        let Some(entry) = registry
+            .list(None)
+            .into_iter()
+            .find(|e| e.info().name == *name && matches!(e.origin, Origin::Dynamic { .. }))
+        else {
+            failures.push(format!("{} holds no stage named `{name}`", library.display()));
+            continue;
+        };
+        if let Err(e) = check_example(&registry, entry, dir.path()) {
+            failures.push(e);
+        }
+    }
+    assert!(failures.is_empty(), "{}", failures.join("\n\n"));
 }

@@ -6,15 +6,15 @@
 use crate::support::{self, lamina_in, root, target_dir};
 use std::path::{Path, PathBuf};
 
-/// Runs cargo in a scaffolded crate, with the workspace's lock file: the crate
+/// Runs cargo in a scaffolded crate, with the lock file it comes with: the crate
 /// resolves the releases Lamina is built and tested with, not whatever the registry
 /// holds today. The crates scaffolded share one build folder, so their dependencies
 /// are compiled once.
 fn cargo(dir: &Path, args: &[&str]) {
-    let lock = dir.join("Cargo.lock");
-    if !lock.exists() {
-        std::fs::copy(root().join("Cargo.lock"), &lock).expect("the workspace's lock file");
-    }
+    assert!(
+        dir.join("Cargo.lock").is_file(),
+        "the scaffold carries no lock file"
+    );
     let out = support::cargo_outside(dir, args).output().expect("cargo runs");
     assert!(
         out.status.success(),
@@ -37,9 +37,18 @@ fn library(name: &str) -> PathBuf {
 /// Scaffolds, builds and tests a crate of `kind`, then runs its pipeline with the
 /// library loaded; returns the crate's folder and the run's output folder.
 fn scaffold(work: &Path, name: &str, kind: &str) -> (PathBuf, PathBuf) {
-    let out = lamina_in(work, &["new-plugin", name, "--kind", kind]);
+    let checkout = root().to_str().expect("utf-8").to_string();
+    let out = lamina_in(work, &["new-plugin", name, "--kind", kind, "--lamina", &checkout]);
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
     let krate = work.join(name);
+    // Lamina's crates by version, from the checkout named on the command line only.
+    let manifest = std::fs::read_to_string(krate.join("Cargo.toml")).expect("manifest");
+    assert!(
+        manifest.contains(&format!("lamina-api = \"{}\"", lamina_core::VERSION))
+            && manifest.contains("[patch.crates-io]")
+            && manifest.matches(checkout.as_str()).count() == 2,
+        "{manifest}"
+    );
     cargo(&krate, &["build", "--quiet"]);
     cargo(&krate, &["test", "--quiet"]);
     let lib = library(name);
@@ -75,7 +84,7 @@ fn the_plugin_guide_works_from_scaffold_to_a_loaded_plugin() {
     let lib = library("my-grader");
     let lib_name = lib.file_name().expect("name").to_string_lossy().into_owned();
     for step in [
-        "lamina new-plugin my-grader --kind grade".to_string(),
+        "lamina new-plugin my-grader --kind grade --lamina".to_string(),
         "cargo build".to_string(),
         "cargo test".to_string(),
         format!("lamina run pipeline.toml --plugin target/debug/{lib_name} --out out"),
@@ -101,6 +110,15 @@ fn the_plugin_guide_works_from_scaffold_to_a_loaded_plugin() {
             );
         }
     }
+    // Without a checkout, the crate names no folder: it asks the registry.
+    let bare = lamina_in(work.path(), &["new-plugin", "bare-grader"]);
+    assert!(bare.status.success(), "{}", String::from_utf8_lossy(&bare.stderr));
+    let manifest = std::fs::read_to_string(work.path().join("bare-grader/Cargo.toml")).expect("manifest");
+    assert!(
+        !manifest.contains("patch") && !manifest.contains("path ="),
+        "{manifest}"
+    );
+    assert!(String::from_utf8_lossy(&bare.stdout).contains("--lamina PATH"));
     // A second scaffold into the same folder is refused and leaves the first alone.
     let again = lamina_in(work.path(), &["new-plugin", "my-grader"]);
     assert_eq!(again.status.code(), Some(2));
