@@ -29,6 +29,12 @@ const KINDS: &[(StageKind, &str, &str)] = &[
         "ModelSource",
         include_str!("scaffold/model.rs.in"),
     ),
+    (StageKind::Plan, "Planner", include_str!("scaffold/plan.rs.in")),
+    (
+        StageKind::Process,
+        "Process",
+        include_str!("scaffold/process.rs.in"),
+    ),
 ];
 
 /// What to write.
@@ -65,7 +71,7 @@ impl Request {
             .filter(|k| KINDS.iter().any(|t| t.0 == *k))
             .ok_or_else(|| {
                 usage(format!("no plugin template for the stage kind `{kind}`")).with_help(format!(
-                    "templates: {}; plugins/zigzag in Lamina's source is a planner to start from",
+                    "templates: {}; plugins/zigzag in Lamina's source is another planner and process stage to start from",
                     kinds()
                 ))
             })?;
@@ -154,6 +160,8 @@ impl Request {
             StageKind::Grade => format!("use = \"{}\"\nto_z = 2.0", self.name),
             StageKind::Discretise => format!("use = \"{}\"\nlevel = 0.5", self.name),
             StageKind::Export => format!("use = \"{}\"\npath = \"regions.csv\"", self.name),
+            StageKind::Plan => format!("use = \"{}\"\nwidth = 0.45", self.name),
+            StageKind::Process => format!("use = \"{}\"\nfeed = 12.0", self.name),
             _ => format!("use = \"{}\"\nsize = [10.0, 6.0, 2.0]", self.name),
         };
         let mut text = format!(
@@ -178,6 +186,12 @@ impl Request {
             text.push_str(&format!("[grade]\n{example}\n\n"));
         } else {
             text.push_str("[grade]\nuse = \"z\"\nf = \"linear\"\nfrom_layer = 0\nto_layer = 3\n\n");
+        }
+        if self.kind == StageKind::Plan {
+            text.push_str(&format!("[plan]\n{example}\n\n"));
+        }
+        if self.kind == StageKind::Process {
+            text.push_str(&format!("[[process]]\n{example}\n\n"));
         }
         if self.kind == StageKind::Export {
             text.push_str(&format!("[[output]]\n{example}\n"));

@@ -142,6 +142,29 @@ fn every_template_builds_tests_and_runs() {
     let mut lines = csv.lines();
     assert_eq!(lines.next(), Some("layer,z,part,family,region,area,red,green"));
     assert_eq!(lines.count(), 4, "{csv}");
+    // The planner beads every sub-region's outline with its main material's tool.
+    let (_, out) = scaffold(work.path(), "my-beads", "plan");
+    let plan: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(out.join("plan.json")).expect("the plan")).expect("json");
+    for layer in plan["layers"].as_array().expect("layers") {
+        let regions = layer["parts"][0]["families"][0]["regions"]
+            .as_array()
+            .expect("regions");
+        let paths = layer["toolpaths"].as_array().expect("toolpaths");
+        // A tube's sub-region is a ring: a bead outside and one inside.
+        assert_eq!(paths.len(), 2 * regions.len(), "{layer}");
+    }
+    // The process stage probes every layer, the last one twice as `final`.
+    let (_, out) = scaffold(work.path(), "my-probe", "process");
+    let plan: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(out.join("plan.json")).expect("the plan")).expect("json");
+    let layers = plan["layers"].as_array().expect("layers");
+    for (i, layer) in layers.iter().enumerate() {
+        let ops = layer["operations"].as_array().expect("operations");
+        assert_eq!(ops.len(), 1, "{layer}");
+        assert_eq!(ops[0]["kind"], "my-probe");
+        assert_eq!(ops[0]["pass"] == "final", i + 1 == layers.len(), "{layer}");
+    }
     // No template for a kind is a clear refusal.
     let refused = lamina_in(work.path(), &["new-plugin", "my-slicer", "--kind", "slice"]);
     assert_eq!(refused.status.code(), Some(2));
