@@ -48,6 +48,15 @@ pub trait Script: Send + Sync + fmt::Debug {
     fn number(&self, args: &ScriptArgs<'_>, context: &str) -> Result<f64>;
     /// The script's volume fractions of `n` materials, checked.
     fn fractions(&self, args: &ScriptArgs<'_>, n: usize, context: &str) -> Result<Vec<f64>>;
+
+    /// [`fractions`](Self::fractions) for each of `calls` (the values offered and
+    /// what is being computed), in order, stopping at the first error.
+    fn fractions_each(&self, calls: &[(ScriptArgs<'_>, String)], n: usize) -> Result<Vec<Vec<f64>>> {
+        calls
+            .iter()
+            .map(|(args, context)| self.fractions(args, n, context))
+            .collect()
+    }
 }
 
 /// Compiles scripts for the stages of one run. Cheap to clone and share between threads.
@@ -87,5 +96,13 @@ impl ScriptFn {
     /// Every fraction must lie in [0, 1] and they must sum to 1 (1e-9).
     pub fn fractions(&self, args: &ScriptArgs<'_>, n: usize, context: &str) -> Result<Vec<f64>> {
         self.0.fractions(args, n, context)
+    }
+
+    /// [`fractions`](Self::fractions) for each of `calls` (the values offered and what
+    /// is being computed), in order, stopping at the first error. A stage that grades
+    /// many regions at once asks this way: from a dynamic plugin, the calls reach the
+    /// host in one request.
+    pub fn fractions_each(&self, calls: &[(ScriptArgs<'_>, String)], n: usize) -> Result<Vec<Vec<f64>>> {
+        self.0.fractions_each(calls, n)
     }
 }

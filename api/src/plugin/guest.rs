@@ -200,6 +200,22 @@ impl Script for HostScript {
     fn fractions(&self, args: &ScriptArgs<'_>, n: usize, context: &str) -> Result<Vec<f64>> {
         fractions(self.0, args, n, context)
     }
+
+    fn fractions_each(&self, calls: &[(ScriptArgs<'_>, String)], n: usize) -> Result<Vec<Vec<f64>>> {
+        match host_call(&HostRequest::FractionsEach {
+            script: self.0,
+            calls: calls
+                .iter()
+                .map(|(args, context)| (args.into(), Cow::Borrowed(context.as_str())))
+                .collect(),
+            n,
+        })? {
+            HostResponse::FractionSets(v) if v.len() == calls.len() && v.iter().all(|f| f.len() == n) => {
+                Ok(v)
+            }
+            other => Err(unexpected(&other)),
+        }
+    }
 }
 
 /// Compiles a script with the host's engine.

@@ -27,15 +27,46 @@ impl Grader for Script {
     }
 
     fn grade(&self, ctx: &FamilyContext<'_>, regions: &mut [SubRegion]) -> Result<()> {
+        self.grade_sets(ctx, vec![(ctx.family, regions)])
+    }
+
+    fn grade_families(
+        &self,
+        ctx: &FamilyContext<'_>,
+        families: &[usize],
+        regions: &mut [Vec<SubRegion>],
+    ) -> Result<()> {
+        let sets = families
+            .iter()
+            .copied()
+            .zip(regions.iter_mut().map(Vec::as_mut_slice))
+            .collect();
+        self.grade_sets(ctx, sets)
+    }
+}
+
+impl Script {
+    /// Grades the regions of several families with one batch of script calls (one
+    /// request to the host from a dynamic plugin).
+    fn grade_sets(&self, ctx: &FamilyContext<'_>, sets: Vec<(usize, &mut [SubRegion])>) -> Result<()> {
         let part = &ctx.info.parts[ctx.part];
         let n = part.materials.len();
-        for region in regions.iter_mut() {
-            let args = region_args(ctx, region, region.level);
-            let context = format!(
-                "part `{}`, layer {} (z = {:.4}), family {}, region {} (r = {})",
-                part.name, ctx.layer.index, ctx.layer.z, ctx.family, region.index, region.level
-            );
-            let fractions = self.f.fractions(&args, n, &context)?;
+        let mut calls = Vec::with_capacity(sets.iter().map(|(_, r)| r.len()).sum());
+        for (family, regions) in &sets {
+            let fctx = FamilyContext {
+                family: *family,
+                ..*ctx
+            };
+            for region in regions.iter() {
+                let context = format!(
+                    "part `{}`, layer {} (z = {:.4}), family {family}, region {} (r = {})",
+                    part.name, ctx.layer.index, ctx.layer.z, region.index, region.level
+                );
+                calls.push((region_args(&fctx, region, region.level), context));
+            }
+        }
+        let all = self.f.fractions_each(&calls, n)?;
+        for (region, fractions) in sets.into_iter().flat_map(|(_, r)| r.iter_mut()).zip(all) {
             region.composition = Some(Composition::new(fractions)?);
         }
         Ok(())

@@ -177,6 +177,13 @@ pub enum HostRequest<'a> {
         n: usize,
         context: Cow<'a, str>,
     },
+    /// Runs a script for the fractions of `n` materials once for each of `calls` (its
+    /// values and what is being computed), in order, stopping at the first error.
+    FractionsEach {
+        script: u64,
+        calls: Vec<(WireArgs<'a>, Cow<'a, str>)>,
+        n: usize,
+    },
     /// Creates an output file (a name relative to the output folder); replies with
     /// the file's number.
     Create {
@@ -198,6 +205,8 @@ pub enum HostRequest<'a> {
 #[derive(Debug, Serialize, Deserialize)]
 pub enum HostResponse {
     Script(u64),
+    /// The fractions of each call of a [`HostRequest::FractionsEach`].
+    FractionSets(Vec<Vec<f64>>),
     Number(f64),
     Fractions(Vec<f64>),
     File(u64),

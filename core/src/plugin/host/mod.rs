@@ -252,6 +252,14 @@ impl<'a, 'f> HostCtx<'a, 'f> {
                 .get(script)?
                 .fractions(&args.args(), n, &context)
                 .map(HostResponse::Fractions),
+            HostRequest::FractionsEach { script, calls, n } => {
+                let f = self.scripts.get(script)?;
+                calls
+                    .iter()
+                    .map(|(args, context)| f.fractions(&args.args(), n, context))
+                    .collect::<Result<Vec<_>>>()
+                    .map(HostResponse::FractionSets)
+            }
             HostRequest::Create { name } => {
                 let mut creator = self.creator.borrow_mut();
                 let files = creator.as_mut().ok_or_else(|| {
