@@ -66,12 +66,7 @@ fn main() {
     let mut remote = Registry::new();
     lamina_core::plugin::add_linked_through_boundary(&mut remote, "bench")
         .expect("the linked stages as a plugin");
-    // The defaults for kinds a pipeline leaves out are the program's, as in `lamina`.
-    for kind in StageKind::ALL {
-        if let Some(name) = linked.default_for(kind) {
-            remote.set_default(kind, name).expect("one default a kind");
-        }
-    }
+    remote.adopt_defaults(&linked).expect("one default a kind");
     let out = tempfile::tempdir().expect("tempdir");
     let mut jobs: Vec<(&str, Vec<Override>)> = vec![("tube-gradient.toml", Vec::new())];
     match benchy_dir() {

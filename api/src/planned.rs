@@ -34,17 +34,13 @@ impl PlanDelta {
     /// What `plan` holds beyond the first `toolpaths`, `operations` and `diagnostics`
     /// it had before the stage ran, taken out of it.
     pub fn taken(plan: &mut LayerPlan, before: Counts) -> Self {
-        let tail = |v: usize, len: usize| v.min(len);
+        fn tail<T>(v: &mut Vec<T>, from: usize) -> Vec<T> {
+            v.split_off(from.min(v.len()))
+        }
         Self {
-            toolpaths: plan
-                .toolpaths
-                .split_off(tail(before.toolpaths, plan.toolpaths.len())),
-            operations: plan
-                .operations
-                .split_off(tail(before.operations, plan.operations.len())),
-            diagnostics: plan
-                .diagnostics
-                .split_off(tail(before.diagnostics, plan.diagnostics.len())),
+            toolpaths: tail(&mut plan.toolpaths, before.toolpaths),
+            operations: tail(&mut plan.operations, before.operations),
+            diagnostics: tail(&mut plan.diagnostics, before.diagnostics),
             build_time: plan.build_time,
             sequential_time: plan.sequential_time,
             fill: plan.fill,
@@ -88,6 +84,12 @@ impl LayerPlan {
     /// parts and sub-regions that exist, tools the machine has; operations at finite
     /// places with finite tools and values; timings and fill finite.
     pub fn check(&self, info: &RunInfo) -> std::result::Result<(), String> {
+        self.check_since(info, Counts::default())
+    }
+
+    /// [`check`](Self::check) of what a stage added to a plan that held `before`: the
+    /// toolpaths and operations past those, and the timings and fill.
+    pub fn check_since(&self, info: &RunInfo, before: Counts) -> std::result::Result<(), String> {
         let fail = Err;
         let tools = info
             .machine
@@ -96,12 +98,12 @@ impl LayerPlan {
             .unwrap_or(0)
             .max(info.materials.len())
             .max(1);
-        for (i, path) in self.toolpaths.iter().enumerate() {
+        for (i, path) in self.toolpaths.iter().enumerate().skip(before.toolpaths) {
             if let Err(why) = self.check_path(path, info, tools) {
                 return fail(format!("toolpath {i}: {why}"));
             }
         }
-        for (i, op) in self.operations.iter().enumerate() {
+        for (i, op) in self.operations.iter().enumerate().skip(before.operations) {
             if let Err(why) = check_operation(op) {
                 return fail(format!("operation {i} (`{}`): {why}", op.kind));
             }
@@ -334,6 +336,13 @@ mod tests {
         let mut p = bead();
         p.sub_region = Some(0);
         assert!(refused(p).contains("sub-region 0 of 0"));
+        // A later stage is held to what it added, not to what came before it.
+        let mut p = bead();
+        p.tool = 7;
+        let earlier = plan(vec![p]);
+        let before = earlier.counts();
+        earlier.check_since(&info(), before).expect("nothing added");
+        assert!(earlier.check_since(&info(), Counts::default()).is_err());
         let mut bad = plan(vec![bead()]);
         bad.build_time = Some(f64::INFINITY);
         assert!(bad.check(&info()).expect_err("refused").contains("build time"));

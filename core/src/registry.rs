@@ -82,6 +82,16 @@ impl Registry {
         }
     }
 
+    /// Takes `other`'s default stages for the kinds it has one: a registry of loaded
+    /// stages gets the program's defaults for the kinds a pipeline leaves out, as
+    /// `lamina` gives them.
+    pub fn adopt_defaults(&mut self, other: &Registry) -> Result<()> {
+        for &(kind, name) in &other.defaults {
+            self.set_default(kind, name)?;
+        }
+        Ok(())
+    }
+
     /// The default stage of `kind`, if a plugin declared one.
     pub fn default_for(&self, kind: StageKind) -> Option<&'static str> {
         self.defaults.iter().find(|(k, _)| *k == kind).map(|(_, n)| *n)

@@ -361,35 +361,41 @@ pub fn plugin_library(lib: &str) -> PathBuf {
     ))
 }
 
+/// Every linked stage behind the plugin boundary, as if a plugin library named `name`
+/// held them (each call a message, stages behind handles), with the program's
+/// defaults: what a pipeline run with it must give as the linked stages do.
+pub fn registry_through_boundary(name: &'static str) -> Registry {
+    let mut remote = Registry::new();
+    lamina_core::plugin::add_linked_through_boundary(&mut remote, name)
+        .unwrap_or_else(|e| panic!("the linked stages as a plugin: {e}"));
+    remote
+        .adopt_defaults(&registry())
+        .unwrap_or_else(|e| panic!("the default stages: {e}"));
+    remote
+}
+
 /// Runs the examples of the stages named in `names`, loaded from the plugin library
 /// `library` through Lamina's own loader (the file inspected, its ABI and messages'
 /// schema checked, every call a message across the boundary), with the built-in
 /// stages linked for the rest of each pipeline: a stage that runs linked but not as a
 /// plugin fails here. Panics with every failure.
 pub fn assert_examples_run_through_boundary(library: &Path, names: &[&str]) {
-    let linked = registry();
-    let mut loaded = Registry::new();
-    lamina_core::plugin::load(&mut loaded, library)
-        .unwrap_or_else(|e| panic!("{} does not load: {e}", library.display()));
-    // The built-in stages, and the plugin's from its library only.
+    // The plugin's stages from its library only, then the built-in ones it does not
+    // hold (the test program links the plugin crate as well).
     let mut registry = Registry::new();
+    lamina_core::plugin::load(&mut registry, library)
+        .unwrap_or_else(|e| panic!("{} does not load: {e}", library.display()));
+    let linked = self::registry();
     for e in linked.list(None) {
-        let theirs = loaded.get(e.info().kind, e.info().name).is_some();
-        if !theirs {
+        if registry.get(e.info().kind, e.info().name).is_none() {
             registry
                 .add(e.factory, e.origin.clone())
                 .unwrap_or_else(|err| panic!("{}: {err}", e.label()));
         }
     }
-    lamina_core::plugin::load(&mut registry, library)
-        .unwrap_or_else(|e| panic!("{} does not load: {e}", library.display()));
-    for kind in StageKind::ALL {
-        if let Some(name) = linked.default_for(kind) {
-            registry
-                .set_default(kind, name)
-                .unwrap_or_else(|e| panic!("the default {kind} stage: {e}"));
-        }
-    }
+    registry
+        .adopt_defaults(&linked)
+        .unwrap_or_else(|e| panic!("the default stages: {e}"));
     let dir = tempfile::tempdir().unwrap_or_else(|e| panic!("a temporary folder: {e}"));
     write_models(dir.path());
     let mut failures = Vec::new();

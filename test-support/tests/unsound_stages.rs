@@ -104,15 +104,13 @@ fn run(text: &str, registry: Registry) -> (Error, bool) {
 
 /// The linked stages, and the same stages behind the plugin boundary.
 fn registries() -> [(&'static str, Registry); 2] {
-    let linked = lamina_test_support::registry();
-    let mut remote = Registry::new();
-    lamina_core::plugin::add_linked_through_boundary(&mut remote, "loopback").expect("the boundary");
-    for kind in StageKind::ALL {
-        if let Some(name) = linked.default_for(kind) {
-            remote.set_default(kind, name).expect("one default a kind");
-        }
-    }
-    [("linked", linked), ("remote", remote)]
+    [
+        ("linked", lamina_test_support::registry()),
+        (
+            "remote",
+            lamina_test_support::registry_through_boundary("loopback"),
+        ),
+    ]
 }
 
 #[test]

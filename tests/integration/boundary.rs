@@ -33,15 +33,7 @@ fn run(
 #[test]
 fn every_built_in_stage_gives_the_same_output_through_the_boundary() {
     let linked = lamina_test_support::registry();
-    let mut remote = Registry::new();
-    lamina_core::plugin::add_linked_through_boundary(&mut remote, "loopback")
-        .expect("the linked stages as a plugin");
-    // The defaults for kinds a pipeline leaves out are the program's, as in `lamina`.
-    for kind in lamina_core::StageKind::ALL {
-        if let Some(name) = linked.default_for(kind) {
-            remote.set_default(kind, name).expect("one default a kind");
-        }
-    }
+    let remote = lamina_test_support::registry_through_boundary("loopback");
     assert_eq!(remote.list(None).len(), linked.list(None).len());
     assert!(
         remote

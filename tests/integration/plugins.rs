@@ -4,7 +4,7 @@
 //! `LAMINA_PLUGIN_HOST` names another `lamina` binary to load them with (continuous
 //! integration uses the release build).
 
-use crate::support::{cargo, cargo_outside, profile_dir, root, target_dir, write};
+use crate::support::{cargo, cargo_outside, copy_dir, profile_dir, root, target_dir, write};
 use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::sync::OnceLock;
@@ -370,32 +370,12 @@ fn an_endless_script_in_a_dynamic_plugin_is_stopped_within_a_second() {
     }
 }
 
-/// Copies `from` into `to`, file by file, writing only what differs (so that a build
-/// of the copy is incremental).
-fn mirror(from: &Path, to: &Path) {
-    std::fs::create_dir_all(to).expect("mirror folder");
-    for entry in std::fs::read_dir(from).expect("read folder") {
-        let entry = entry.expect("entry");
-        let (src, dst) = (entry.path(), to.join(entry.file_name()));
-        if entry.file_type().expect("file type").is_dir() {
-            if entry.file_name() != "target" {
-                mirror(&src, &dst);
-            }
-        } else {
-            let bytes = std::fs::read(&src).expect("read");
-            if std::fs::read(&dst).ok().as_ref() != Some(&bytes) {
-                std::fs::write(&dst, bytes).expect("write");
-            }
-        }
-    }
-}
-
 /// Lamina's stage API (and geometry) as a later commit of it: a comment and a test
 /// changed, the messages not. What a plugin built against it must not notice.
 fn later_commit_of_the_api() -> PathBuf {
     let copy = target_dir().join("outside-commit");
     for dir in ["api", "geom", "tests/outside/skewed-plugin"] {
-        mirror(&root().join(dir), &copy.join(dir));
+        copy_dir(&root().join(dir), &copy.join(dir));
     }
     // The workspace the two crates name their versions and dependencies from.
     let manifest: toml::Table = std::fs::read_to_string(root().join("Cargo.toml"))

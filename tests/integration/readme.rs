@@ -2,8 +2,7 @@
 //! "A short tour", in a fresh folder holding a copy of `pipelines/`, in order (later
 //! lines read what earlier ones wrote), each succeeding.
 
-use crate::support::{lamina_in, root, text};
-use std::path::Path;
+use crate::support::{copy_dir, lamina_in, root, text};
 
 /// The tour's command lines, comments removed, split into words.
 fn tour() -> Vec<Vec<String>> {
@@ -18,19 +17,6 @@ fn tour() -> Vec<Vec<String>> {
         .filter(|l| !l.is_empty())
         .map(|l| l.split_whitespace().map(str::to_string).collect())
         .collect()
-}
-
-fn copy_dir(from: &Path, to: &Path) {
-    std::fs::create_dir_all(to).expect("folder");
-    for entry in std::fs::read_dir(from).expect("read folder") {
-        let entry = entry.expect("entry");
-        let target = to.join(entry.file_name());
-        if entry.file_type().expect("type").is_dir() {
-            copy_dir(&entry.path(), &target);
-        } else {
-            std::fs::copy(entry.path(), &target).expect("copy");
-        }
-    }
 }
 
 #[test]

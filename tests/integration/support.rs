@@ -207,3 +207,23 @@ pub fn box_stl(min: [f64; 3], max: [f64; 3]) -> String {
     }
     stl + "endsolid box\n"
 }
+
+/// Copies the folder `from` into `to`, leaving out `target` folders and writing only
+/// the files that differ (so that a build of the copy stays incremental).
+pub fn copy_dir(from: &Path, to: &Path) {
+    std::fs::create_dir_all(to).expect("folder");
+    for entry in std::fs::read_dir(from).expect("read folder") {
+        let entry = entry.expect("entry");
+        let (src, dst) = (entry.path(), to.join(entry.file_name()));
+        if entry.file_type().expect("file type").is_dir() {
+            if entry.file_name() != "target" {
+                copy_dir(&src, &dst);
+            }
+        } else {
+            let bytes = std::fs::read(&src).expect("read");
+            if std::fs::read(&dst).ok().as_ref() != Some(&bytes) {
+                std::fs::write(&dst, bytes).expect("write");
+            }
+        }
+    }
+}

@@ -10,6 +10,7 @@ use crate::diagnostic::Diagnostic;
 use crate::error::{Error, Result};
 use crate::mesh::Mesh;
 use crate::model::{Composition, Layer, LayerPlan, LayerSlot, PartLayer, Sequence, SubRegion};
+use crate::planned::Counts;
 use crate::stage::*;
 
 impl Engine {
@@ -123,7 +124,7 @@ impl Engine {
         };
         if let Some(planner) = &self.planner {
             timings.time(StageKind::Plan, || planner.plan(info, &mut plan))?;
-            checked(&plan, info, StageKind::Plan)?;
+            checked(&plan, info, StageKind::Plan, Counts::default())?;
         }
         if !self.process.is_empty() {
             self.process_operations(slot, shared, &mut plan)?;
@@ -153,10 +154,11 @@ impl Engine {
             last: slot.index + 1 == shared.layer_count,
         };
         for stage in &self.process {
+            let before = plan.counts();
             shared
                 .timings
                 .time(StageKind::Process, || stage.process(&ctx, plan))?;
-            checked(plan, shared.info, StageKind::Process)?;
+            checked(plan, shared.info, StageKind::Process, before)?;
         }
         Ok(())
     }
@@ -321,10 +323,11 @@ fn whole_family(tree: &crate::model::ContourTree, layer: &Layer, f: usize) -> Su
     }
 }
 
-/// A planned layer that a machine can follow ([`LayerPlan::check`]), whichever stage of
-/// `kind` planned it: a plugin's plan is held to what the built-in planners give.
-fn checked(plan: &LayerPlan, info: &RunInfo, kind: StageKind) -> Result<()> {
-    plan.check(info).map_err(|m| {
+/// What a stage of `kind` added to a plan that held `before`, one a machine can follow
+/// ([`LayerPlan::check_since`]), whichever stage planned it: a plugin's plan is held to
+/// what the built-in planners give.
+fn checked(plan: &LayerPlan, info: &RunInfo, kind: StageKind, before: Counts) -> Result<()> {
+    plan.check_since(info, before).map_err(|m| {
         Error::stage(
             kind.name(),
             format!("the {kind} stage left a plan no machine can follow: {m}"),

@@ -63,6 +63,14 @@ impl Remote {
         )
     }
 
+    /// The stage's answer to a yes-or-no question about itself.
+    fn ask(&self, question: Request<'_>) -> Result<bool> {
+        match self.request(&question)? {
+            Response::Bool(b) => Ok(b),
+            other => Err(self.unexpected(&other)),
+        }
+    }
+
     /// A reply that holds `got` of what `asked` were sent for.
     fn miscounted(&self, what: &str, got: usize, asked: usize, of: &str) -> Error {
         Error::stage(
@@ -172,35 +180,16 @@ pub(crate) fn build(
         needs_higher: false,
         meshes_sent: Mutex::new(HashSet::new()),
     };
+    // What the stage says about itself once, when built.
     if matches!(kind, StageKind::Discretise | StageKind::Grade) {
-        stage.reads_mesh = match stage.request(&Request::ReadsMesh { handle })? {
-            Response::Bool(b) => b,
-            other => return Err(stage.unexpected(&other)),
-        };
+        stage.reads_mesh = stage.ask(Request::ReadsMesh { handle })?;
     }
-    if kind == StageKind::Grade {
-        stage.reads_geometry = match stage.request(&Request::ReadsGeometry { handle })? {
-            Response::Bool(b) => b,
-            other => return Err(stage.unexpected(&other)),
-        };
-    }
-    if kind == StageKind::Discretise {
-        stage.grades = match stage.request(&Request::Grades { handle })? {
-            Response::Bool(b) => b,
-            other => return Err(stage.unexpected(&other)),
-        };
-    }
-    if kind == StageKind::Sequence {
-        stage.needs_higher = match stage.request(&Request::NeedsGradients { handle })? {
-            Response::Bool(b) => b,
-            other => return Err(stage.unexpected(&other)),
-        };
-    }
-    if kind == StageKind::Process {
-        stage.needs_higher = match stage.request(&Request::NeedsHigher { handle })? {
-            Response::Bool(b) => b,
-            other => return Err(stage.unexpected(&other)),
-        };
+    match kind {
+        StageKind::Grade => stage.reads_geometry = stage.ask(Request::ReadsGeometry { handle })?,
+        StageKind::Discretise => stage.grades = stage.ask(Request::Grades { handle })?,
+        StageKind::Sequence => stage.needs_higher = stage.ask(Request::NeedsGradients { handle })?,
+        StageKind::Process => stage.needs_higher = stage.ask(Request::NeedsHigher { handle })?,
+        _ => {}
     }
     let b = Box::new(stage);
     Ok(match kind {
