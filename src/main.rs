@@ -12,6 +12,7 @@ use std::process::ExitCode;
 
 use clap::{Parser, Subcommand};
 use lamina_core::pipeline::{Override, Pipeline};
+use lamina_core::plugin::{ChildProgram, Isolation};
 use lamina_core::runtime::{Engine, RunOptions};
 use lamina_core::{Registry, StageKind};
 
@@ -70,6 +71,15 @@ struct PipelineArgs {
     /// only in its own folder and the output folder.
     #[arg(long = "allow", value_name = "PATH")]
     allow: Vec<PathBuf>,
+    /// Runs each plugin in a process of its own: a crash or hang of the plugin fails
+    /// the run with its name rather than ending lamina, at the cost of serving its
+    /// calls one at a time. (`lamina check` always does.)
+    #[arg(long)]
+    isolate_plugins: bool,
+    /// With --isolate-plugins: how long a plugin may go without answering before it
+    /// is stopped.
+    #[arg(long, value_name = "SECONDS", default_value_t = 60.0)]
+    plugin_timeout: f64,
 }
 
 impl PipelineArgs {
@@ -78,6 +88,27 @@ impl PipelineArgs {
         let allowed: Vec<PathBuf> = self.allow.iter().cloned().chain(out.map(PathBuf::from)).collect();
         Pipeline::load_allowing(&self.pipeline, &self.set, &allowed)
     }
+
+    /// Where the plugins run: apart when asked, or when `apart` says they must.
+    fn isolation(&self, apart: bool) -> lamina_core::Result<Isolation> {
+        if !(self.isolate_plugins || apart) {
+            return Ok(Isolation::InProcess);
+        }
+        isolated(self.plugin_timeout)
+    }
+}
+
+/// Plugins each in a child process running this program's `plugin-host`.
+fn isolated(timeout: f64) -> lamina_core::Result<Isolation> {
+    if !(timeout.is_finite() && timeout > 0.0 && timeout <= 1e6) {
+        return Err(lamina_core::Error::config(format!(
+            "--plugin-timeout is {timeout}: it must be a number of seconds above 0 and at most 1000000"
+        )));
+    }
+    let mut program =
+        ChildProgram::this(&["plugin-host"]).map_err(|e| lamina_core::Error::io("this program's path", e))?;
+    program.timeout = std::time::Duration::from_secs_f64(timeout);
+    Ok(Isolation::Child(program))
 }
 
 #[derive(Debug, Subcommand)]
@@ -177,10 +208,15 @@ enum Command {
         /// The pipeline reference in Markdown (docs/pipeline-reference.md).
         #[arg(long)]
         markdown: bool,
-        /// Loads a plugin library first (repeatable).
+        /// Loads a plugin library first (repeatable), in a process of its own: listing
+        /// stages runs none of a plugin's code in lamina.
         #[arg(long = "plugin", value_name = "PATH")]
         plugins: Vec<PathBuf>,
     },
+    /// Loads a plugin library and serves its calls over standard input and output,
+    /// for a lamina that runs its plugins apart (`--isolate-plugins`).
+    #[command(hide = true)]
+    PluginHost { library: PathBuf },
 }
 
 /// A failure and whether it lies in what the user asked for (exit code 2) rather than
@@ -204,7 +240,10 @@ static ALLOCATOR: lamina_core::script::CountingAllocator = lamina_core::script::
 
 fn main() -> ExitCode {
     let cli = Cli::parse();
-    remove_outputs_on_signals();
+    // A plugin's process has no outputs of its own to remove.
+    if !matches!(cli.command, Command::PluginHost { .. }) {
+        remove_outputs_on_signals();
+    }
     match execute(cli) {
         Ok(()) => ExitCode::SUCCESS,
         Err(f) => {
@@ -241,6 +280,7 @@ fn engine(
     args: &PipelineArgs,
     out: Option<&std::path::Path>,
     threads: Option<usize>,
+    apart: bool,
 ) -> Result<Engine, Failure> {
     let build = || {
         let pipeline = args.load(out)?;
@@ -248,6 +288,7 @@ fn engine(
             threads,
             model: args.model.clone(),
             plugins: args.plugins.clone(),
+            isolation: args.isolation(apart)?,
             ..RunOptions::default()
         };
         Engine::build(pipeline, Registry::linked()?, &options)
@@ -268,7 +309,7 @@ fn execute(cli: Cli) -> Result<(), Failure> {
             if threads == Some(0) {
                 return Err(lamina_core::Error::config("--threads must be at least 1").into());
             }
-            let engine = engine(&args, Some(&out), threads)?;
+            let engine = engine(&args, Some(&out), threads, false)?;
             let observer = progress::Progress::new(quiet, verbose);
             let report = engine.run(&out, &observer);
             observer.finish();
@@ -294,6 +335,7 @@ fn execute(cli: Cli) -> Result<(), Failure> {
                 let options = RunOptions {
                     plugins: args.plugins.clone(),
                     model: args.model.clone(),
+                    isolation: args.isolation(false)?,
                     ..RunOptions::default()
                 };
                 Engine::build(pipeline, Registry::linked()?, &options)
@@ -326,7 +368,8 @@ fn execute(cli: Cli) -> Result<(), Failure> {
             Ok(())
         }
         Command::Check { args } => {
-            let engine = engine(&args, None, None)?;
+            // Checking runs none of a plugin's code in lamina.
+            let engine = engine(&args, None, None, true)?;
             println!("{}: ok", args.pipeline.display());
             for line in engine.summary() {
                 println!("  {line}");
@@ -387,8 +430,11 @@ fn execute(cli: Cli) -> Result<(), Failure> {
             plugins,
         } => {
             let mut registry = Registry::linked()?;
-            for p in &plugins {
-                lamina_core::plugin::load(&mut registry, p)?;
+            if !plugins.is_empty() {
+                let apart = isolated(ChildProgram::DEFAULT_TIMEOUT.as_secs_f64())?;
+                for p in &plugins {
+                    lamina_core::plugin::load_with(&mut registry, p, &apart)?;
+                }
             }
             let kind = match kind.as_deref() {
                 Some(k) => Some(StageKind::parse(k).ok_or_else(|| {
@@ -406,6 +452,9 @@ fn execute(cli: Cli) -> Result<(), Failure> {
             };
             print!("{text}");
             Ok(())
+        }
+        Command::PluginHost { library } => {
+            std::process::exit(lamina_core::plugin::serve_child(&library));
         }
     }
 }

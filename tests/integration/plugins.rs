@@ -204,6 +204,144 @@ fn panicking_plugin_is_an_error_not_an_abort() {
     assert!(!out_dir.join("plan.json").exists());
 }
 
+/// `lamina run` with the fixture's `grader`, each plugin in a process of its own.
+fn run_apart(dir: &Path, grader: &str, extra: &[&str]) -> (std::process::Output, PathBuf) {
+    let lib = library("lamina-fixture-panic");
+    let pipeline = write_pipeline(dir, &format!("[grade]\nuse = \"{grader}\"\n"));
+    let out_dir = dir.join("out");
+    let mut args = vec![
+        "run",
+        pipeline.to_str().expect("utf-8"),
+        "--plugin",
+        lib.to_str().expect("utf-8"),
+        "--isolate-plugins",
+        "--out",
+        out_dir.to_str().expect("utf-8"),
+    ];
+    args.extend(extra);
+    (lamina(&args), out_dir)
+}
+
+#[test]
+fn a_plugin_that_crashes_apart_fails_the_run_with_its_name() {
+    for (grader, signal) in [("crashes", "SIGSEGV"), ("aborts", "SIGABRT"), ("panics", "")] {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let (out, out_dir) = run_apart(dir.path(), grader, &[]);
+        let err = String::from_utf8_lossy(&out.stderr);
+        // Exit 1, not a signal: lamina itself did not crash.
+        assert_eq!(out.status.code(), Some(1), "{grader}: {err}");
+        assert!(err.contains(&format!("panicking/grade:{grader}")), "{err}");
+        if signal.is_empty() {
+            assert!(err.contains("this grader always panics"), "{err}");
+        } else {
+            assert!(
+                err.contains("plugin `panicking`") && err.contains("crashed") && err.contains(signal),
+                "{err}"
+            );
+        }
+        assert!(!out_dir.join("plan.json").exists(), "{grader}");
+        let left: Vec<_> = std::fs::read_dir(dir.path())
+            .expect("dir")
+            .map(|e| e.expect("entry").file_name())
+            .collect();
+        assert_eq!(left, ["p.toml"], "{grader}: no core file, no partial output");
+    }
+}
+
+#[test]
+fn a_plugin_that_hangs_apart_is_stopped_after_the_timeout() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let start = std::time::Instant::now();
+    let (out, out_dir) = run_apart(dir.path(), "hangs", &["--plugin-timeout", "1"]);
+    let took = start.elapsed();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{err}");
+    assert!(
+        err.contains("plugin `panicking`") && err.contains("did not answer within 1 s"),
+        "{err}"
+    );
+    assert!(took < std::time::Duration::from_secs(30), "{took:?}");
+    assert!(!out_dir.join("plan.json").exists());
+    let pipeline = dir.path().join("p.toml");
+    let pipeline = pipeline.to_str().expect("utf-8");
+    let zero = lamina(&["check", pipeline, "--plugin-timeout", "0"]);
+    assert_eq!(zero.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&zero.stderr).contains("--plugin-timeout"));
+}
+
+#[test]
+fn a_plugin_apart_gives_what_it_gives_in_process_and_its_prints_stay_out_of_the_messages() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let (apart, out_dir) = run_apart(dir.path(), "prints", &[]);
+    let apart_plan = std::fs::read(out_dir.join("plan.json"));
+    let err = String::from_utf8_lossy(&apart.stderr);
+    assert!(apart.status.success(), "{err}");
+    assert!(err.contains("from the plugin's stdout"), "{err}");
+    assert!(!String::from_utf8_lossy(&apart.stdout).contains("from the plugin's stdout"));
+    let lib = library("lamina-fixture-panic");
+    let here = run_with_plugin(&dir.path().join("p.toml"), &lib, &dir.path().join("here"));
+    assert!(here.status.success(), "{}", String::from_utf8_lossy(&here.stderr));
+    let here_plan = std::fs::read(dir.path().join("here/plan.json"));
+    assert_eq!(
+        apart_plan.expect("written apart"),
+        here_plan.expect("written in process")
+    );
+}
+
+/// The ids of the processes that loaded the fixture while `args` ran, and lamina's.
+#[cfg(target_os = "linux")]
+fn loaded_by(args: &[&str]) -> (Vec<u32>, u32) {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let record = dir.path().join("loaded-by");
+    let child = Command::new(host())
+        .args(args)
+        .env("LAMINA_FIXTURE_LOADED_BY", &record)
+        .stdout(std::process::Stdio::null())
+        .spawn()
+        .expect("lamina runs");
+    let pid = child.id();
+    let out = child.wait_with_output().expect("lamina ends");
+    assert!(out.status.success(), "{args:?}");
+    let pids = std::fs::read_to_string(&record)
+        .unwrap_or_default()
+        .lines()
+        .map(|l| l.parse().expect("a process id"))
+        .collect();
+    (pids, pid)
+}
+
+#[cfg(target_os = "linux")]
+#[test]
+fn check_and_plugins_run_no_plugin_code_in_lamina() {
+    let lib = library("lamina-fixture-panic");
+    let lib = lib.to_str().expect("utf-8");
+    let dir = tempfile::tempdir().expect("tempdir");
+    let pipeline = write_pipeline(dir.path(), "[grade]\nuse = \"prints\"\n");
+    let pipeline = pipeline.to_str().expect("utf-8");
+    let out_dir = dir.path().join("out");
+    // A run in process loads it in lamina itself, and the record shows it.
+    let (pids, lamina_pid) = loaded_by(&[
+        "run",
+        pipeline,
+        "--plugin",
+        lib,
+        "--out",
+        out_dir.to_str().expect("utf-8"),
+    ]);
+    assert_eq!(pids, [lamina_pid]);
+    for args in [
+        vec!["check", pipeline, "--plugin", lib],
+        vec!["plugins", "grade", "--plugin", lib],
+    ] {
+        let (pids, lamina_pid) = loaded_by(&args);
+        assert!(!pids.is_empty(), "{args:?}: the plugin was loaded somewhere");
+        assert!(
+            !pids.contains(&lamina_pid),
+            "{args:?}: loaded by lamina itself ({pids:?})"
+        );
+    }
+}
+
 #[test]
 fn a_file_that_is_not_a_plugin_is_refused() {
     let dir = tempfile::tempdir().expect("tempdir");

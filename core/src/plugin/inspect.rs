@@ -12,14 +12,15 @@ use crate::error::Result;
 /// kills the process with SIGBUS), without an entry symbol, or whose ABI note names
 /// another ABI, layout or message set. Nothing of the library runs here.
 pub fn inspect(path: &Path) -> Result<()> {
-    entry_symbol(path).map(drop)
+    entry_symbol(path, false).map(drop)
 }
 
-/// [`inspect`], giving the name of the entry symbol to look up.
 /// Largest plugin library read.
 const MAX_LIBRARY_BYTES: u64 = 1 << 30;
 
-pub(crate) fn entry_symbol(path: &Path) -> Result<String> {
+/// [`inspect`], giving the name of the entry symbol to look up. A library that runs
+/// `apart`, in a process of its own, may abort on panics: that ends its process only.
+pub(crate) fn entry_symbol(path: &Path, apart: bool) -> Result<String> {
     use object::{Object, ObjectSection, ObjectSegment};
     // A plugin library is a regular file; a device or FIFO in its place would be read
     // without end. 1 GiB is far above any plugin.
@@ -100,12 +101,13 @@ pub(crate) fn entry_symbol(path: &Path) -> Result<String> {
             format!("plugin `{name}`: its ABI note is not a Lamina plugin's"),
         ));
     }
-    check_note(path, name, &note)?;
+    check_note(path, name, &note, apart)?;
     Ok(symbol)
 }
 
-/// Checks a plugin's ABI note: its versions, and that its panics unwind.
-fn check_note(path: &Path, name: &str, note: &AbiNote) -> Result<()> {
+/// Checks a plugin's ABI note: its versions, and that its panics unwind unless it runs
+/// `apart`.
+fn check_note(path: &Path, name: &str, note: &AbiNote, apart: bool) -> Result<()> {
     check(
         path,
         name,
@@ -117,12 +119,13 @@ fn check_note(path: &Path, name: &str, note: &AbiNote) -> Result<()> {
             core_version: Some(&note.core_version),
         },
     )?;
-    if !note.unwinds {
+    if !note.unwinds && !apart {
         return Err(refuse(
             path,
             format!(
                 "plugin `{name}` was built with `panic = \"abort\"`: its first panic would end lamina with it; \
-                 build it with panics that unwind (the default: remove `panic = \"abort\"` from its Cargo profile)"
+                 build it with panics that unwind (the default: remove `panic = \"abort\"` from its Cargo profile), \
+                 or run it in a process of its own (--isolate-plugins)"
             ),
         ));
     }
@@ -245,14 +248,16 @@ mod tests {
     }
 
     #[test]
-    fn a_plugin_whose_panics_abort_is_refused() {
+    fn a_plugin_whose_panics_abort_is_refused_unless_it_runs_apart() {
         let mut note = AbiNote::parse(&abi_note()).expect("note");
-        check_note(Path::new("p.so"), "p", &note).expect("ours loads");
+        check_note(Path::new("p.so"), "p", &note, false).expect("ours loads");
         note.unwinds = false;
-        let e = check_note(Path::new("p.so"), "p", &note)
+        let e = check_note(Path::new("p.so"), "p", &note, false)
             .expect_err("refused")
             .to_string();
         assert!(e.contains("panic = \"abort\"") && e.contains("plugin `p`"), "{e}");
+        assert!(e.contains("--isolate-plugins"), "{e}");
+        check_note(Path::new("p.so"), "p", &note, true).expect("loads in a process of its own");
     }
 
     #[test]

@@ -2,25 +2,29 @@
 //! and the proxies that call its stages (`host`). The boundary itself (C types,
 //! messages, the plugin's side) is `lamina_api::plugin`.
 
+mod child;
 pub(crate) mod host;
 mod inspect;
 
 use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex};
 
+pub use child::{ChildProgram, Isolation, serve as serve_child};
 pub use inspect::inspect;
 pub use lamina_api::plugin::*;
 
 use crate::error::{Error, Result};
 use crate::registry::{Origin, Registry, StageFactory};
 
-/// Libraries loaded so far, by canonical path, with their stages. Kept for the life of
-/// the process: nothing is ever unloaded.
+/// Libraries loaded so far, by canonical path and whether they run apart, with their
+/// stages. Kept for the life of the process: nothing is ever unloaded. (A child
+/// process that stopped is started again by the next load.)
 static LOADED: Mutex<Vec<LoadedPlugin>> = Mutex::new(Vec::new());
 
 #[derive(Debug, Clone)]
 struct LoadedPlugin {
     path: PathBuf,
+    apart: bool,
     library: Arc<host::Library>,
     stages: Vec<(&'static StageFactory, host::RemoteFactory)>,
 }
@@ -32,17 +36,27 @@ fn refuse(path: &Path, message: impl Into<String>) -> Error {
     }
 }
 
-/// Loads a plugin library and adds its stages to `registry`. Loading the same file
-/// twice adds its stages once per registry.
+/// Loads a plugin library into this process and adds its stages to `registry`.
+/// Loading the same file twice adds its stages once per registry.
 pub fn load(registry: &mut Registry, path: &Path) -> Result<String> {
+    load_with(registry, path, &Isolation::InProcess)
+}
+
+/// [`load`], with the library's code running where `isolation` says.
+pub fn load_with(registry: &mut Registry, path: &Path, isolation: &Isolation) -> Result<String> {
     let canonical = path
         .canonicalize()
         .map_err(|e| refuse(path, format!("cannot open: {e}")))?;
+    let apart = matches!(isolation, Isolation::Child(_));
     let mut loaded = LOADED.lock().unwrap_or_else(|e| e.into_inner());
-    let plugin = match loaded.iter().find(|p| p.path == canonical) {
+    loaded.retain(|p| p.library.stopped().is_none());
+    let plugin = match loaded.iter().find(|p| p.path == canonical && p.apart == apart) {
         Some(p) => p.clone(),
         None => {
-            let p = open(&canonical)?;
+            let p = match isolation {
+                Isolation::InProcess => open(&canonical)?,
+                Isolation::Child(program) => open_apart(&canonical, program)?,
+            };
             loaded.push(p.clone());
             p
         }
@@ -76,7 +90,35 @@ fn chain(e: &dyn std::error::Error) -> String {
 }
 
 fn open(path: &Path) -> Result<LoadedPlugin> {
-    let entry_symbol = inspect::entry_symbol(path)?;
+    let library = open_library(path, false)?;
+    let stages = library.describe()?;
+    Ok(LoadedPlugin {
+        path: path.to_path_buf(),
+        apart: false,
+        library,
+        stages,
+    })
+}
+
+/// Starts a child process that loads the library, after the same inspection: a file
+/// that is no plugin of this host is refused before any process runs it.
+fn open_apart(path: &Path, program: &ChildProgram) -> Result<LoadedPlugin> {
+    inspect::entry_symbol(path, true)?;
+    let (link, name) = child::Link::spawn(program, path)?;
+    let library = Arc::new(host::Library::child(path, name, link));
+    let stages = library.describe()?;
+    Ok(LoadedPlugin {
+        path: path.to_path_buf(),
+        apart: true,
+        library,
+        stages,
+    })
+}
+
+/// Loads a library into this process once its file, entry and descriptor check out.
+/// One that runs `apart` (in a child process serving a host) may abort on panics.
+fn open_library(path: &Path, apart: bool) -> Result<Arc<host::Library>> {
+    let entry_symbol = inspect::entry_symbol(path, apart)?;
     // SAFETY: loading a library runs its initialisers; plugins are code the user chose
     // to run, like the pipeline that names them, and the file was inspected first.
     let lib = unsafe { libloading::Library::new(path) }
@@ -100,12 +142,7 @@ fn open(path: &Path) -> Result<LoadedPlugin> {
     let library = Arc::new(unsafe { host::Library::new(path, ptr) }?);
     // Never unloaded: the descriptor's functions are the library's code.
     std::mem::forget(lib);
-    let stages = library.describe()?;
-    Ok(LoadedPlugin {
-        path: path.to_path_buf(),
-        library,
-        stages,
-    })
+    Ok(library)
 }
 
 /// Adds the stages linked into this program to `registry` as if a plugin library named

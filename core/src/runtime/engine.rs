@@ -173,7 +173,7 @@ impl Engine {
     /// a pipeline that builds is a pipeline whose configuration is valid.
     pub fn build(mut pipeline: Pipeline, mut registry: Registry, options: &RunOptions) -> Result<Engine> {
         for path in &options.plugins {
-            crate::plugin::load(&mut registry, path)?;
+            crate::plugin::load_with(&mut registry, path, &options.isolation)?;
         }
         // A pipeline file is data: the libraries it lists run only when the caller
         // loads them (the command line's `--plugin`).

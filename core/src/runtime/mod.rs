@@ -49,6 +49,8 @@ pub struct RunOptions {
     pub model: Option<PathBuf>,
     /// Dynamic plugins to load in addition to the pipeline's `plugins`.
     pub plugins: Vec<PathBuf>,
+    /// Where the plugins' code runs: in this process, or each in a child process.
+    pub isolation: crate::plugin::Isolation,
     /// Limits applied to every Rhai script.
     pub script_limits: ScriptLimits,
 }

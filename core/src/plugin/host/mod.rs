@@ -19,6 +19,7 @@ use std::sync::{Arc, Mutex, RwLock};
 use std::thread::ThreadId;
 
 use super::abi::*;
+use super::child::{Answer, Link};
 use super::wire::*;
 use super::{copy_reply, refuse};
 use crate::error::{Error, Result};
@@ -26,14 +27,25 @@ use crate::registry::StageFactory;
 use crate::script::{ScriptFn, ScriptHost};
 use crate::stage::*;
 
-/// A loaded plugin library: its two functions. Never unloaded, since a library's
-/// thread-local destructors and statics may run until the process ends.
+/// A loaded plugin library. Never unloaded, since a library's thread-local
+/// destructors and statics may run until the process ends.
 #[derive(Debug)]
 pub struct Library {
     pub path: PathBuf,
     pub name: String,
-    call: unsafe extern "C" fn(Bytes, *const HostApi, *const ReplySink) -> i32,
-    release: unsafe extern "C" fn(u64),
+    transport: Transport,
+}
+
+/// How requests reach a library.
+#[derive(Debug)]
+enum Transport {
+    /// Its two functions, in this process.
+    InProcess {
+        call: unsafe extern "C" fn(Bytes, *const HostApi, *const ReplySink) -> i32,
+        release: unsafe extern "C" fn(u64),
+    },
+    /// A child process that loaded it.
+    Child(Link),
 }
 
 /// A stage of a loaded library, by its number in the library's description.
@@ -57,35 +69,87 @@ impl Library {
         Ok(Self {
             path: path.to_path_buf(),
             name,
-            call: d.call,
-            release: d.release,
+            transport: Transport::InProcess {
+                call: d.call,
+                release: d.release,
+            },
         })
+    }
+
+    /// A library that a child process loaded, reached through `link`.
+    pub(crate) fn child(path: &Path, name: String, link: Link) -> Self {
+        Self {
+            path: path.to_path_buf(),
+            name,
+            transport: Transport::Child(link),
+        }
+    }
+
+    /// Why the library's child process is no longer served, if it is not.
+    pub(crate) fn stopped(&self) -> Option<String> {
+        match &self.transport {
+            Transport::InProcess { .. } => None,
+            Transport::Child(link) => link.stopped(),
+        }
+    }
+
+    /// Calls an in-process library with request bytes and the host functions `api`,
+    /// giving its reply bytes, or `None` if it failed without a reply. (A child
+    /// process relays its host's frames with this.)
+    pub(crate) fn call_raw(&self, request: &[u8], api: &HostApi) -> Option<Vec<u8>> {
+        let Transport::InProcess { call, .. } = &self.transport else {
+            return None;
+        };
+        let mut reply: Vec<u8> = Vec::new();
+        let sink = ReplySink {
+            ctx: (&raw mut reply).cast(),
+            write: copy_reply,
+        };
+        // SAFETY: `call` is the plugin's entry, checked to have this ABI and layout;
+        // the request bytes, `api` (and the context it points to) and the sink all
+        // outlive the call, and the plugin copies nothing of them past it.
+        let status = unsafe { call(Bytes::of(request), api, &sink) };
+        (status == 0).then_some(reply)
+    }
+
+    /// Tells the library that the host no longer needs `handle`.
+    pub(crate) fn release_raw(&self, handle: u64) {
+        match &self.transport {
+            // SAFETY: `release` is the plugin's, checked with its descriptor; releasing a
+            // handle the plugin already dropped (a finished output) does nothing.
+            Transport::InProcess { release, .. } => unsafe { release(handle) },
+            Transport::Child(link) => link.release(handle),
+        }
     }
 
     fn error(&self, message: impl Into<String>) -> Error {
         refuse(&self.path, format!("plugin `{}`: {}", self.name, message.into()))
     }
 
-    /// Sends one request and waits for its reply, serving the plugin's service
-    /// requests with `ctx` meanwhile.
-    fn request(&self, request: &Request<'_>, ctx: &HostCtx<'_, '_>) -> Result<Response> {
+    /// Sends one request for the stage `label` and waits for its reply, serving the
+    /// plugin's service requests with `ctx` meanwhile.
+    fn request(&self, label: &str, request: &Request<'_>, ctx: &HostCtx<'_, '_>) -> Result<Response> {
         let bytes = encode(request).map_err(|m| self.error(m))?;
-        let mut reply: Vec<u8> = Vec::new();
-        let sink = ReplySink {
-            ctx: (&raw mut reply).cast(),
-            write: copy_reply,
+        let reply = match &self.transport {
+            Transport::InProcess { .. } => {
+                let api = HostApi {
+                    ctx: std::ptr::from_ref(ctx).cast(),
+                    call: host_call,
+                };
+                self.call_raw(&bytes, &api)
+            }
+            Transport::Child(link) => match link.call(&bytes, &mut |b| answer(ctx, b).unwrap_or_default()) {
+                Ok(Answer::Reply(r)) => Some(r),
+                Ok(Answer::Failed) => None,
+                Err(reason) => {
+                    return Err(Error::stage(
+                        label,
+                        format!("plugin `{}` ({}) {reason}", self.name, self.path.display()),
+                    ));
+                }
+            },
         };
-        let api = HostApi {
-            ctx: std::ptr::from_ref(ctx).cast(),
-            call: host_call,
-        };
-        // SAFETY: `call` is the plugin's entry, checked to have this ABI and layout;
-        // the request bytes, `api` (and the context it points to) and the sink all
-        // outlive the call, and the plugin copies nothing of them past it.
-        let status = unsafe { (self.call)(Bytes::of(&bytes), &api, &sink) };
-        if status != 0 {
-            return Err(self.error("failed without a reply (it could not encode one)"));
-        }
+        let reply = reply.ok_or_else(|| self.error("failed without a reply (it could not encode one)"))?;
         let reply: Reply = decode(&reply).map_err(|m| self.error(m))?;
         reply.map_err(Error::from)
     }
@@ -94,7 +158,11 @@ impl Library {
     pub(crate) fn describe(self: &Arc<Self>) -> Result<Vec<(&'static StageFactory, RemoteFactory)>> {
         let scripts = ScriptTable::new(None);
         let files = FileTable::default();
-        let stages = match self.request(&Request::Describe, &HostCtx::new(&scripts, &files, None))? {
+        let stages = match self.request(
+            "plugin",
+            &Request::Describe,
+            &HostCtx::new(&scripts, &files, None),
+        )? {
             Response::Stages(s) => s,
             other => return Err(self.error(format!("answered {} to a description request", name_of(&other)))),
         };
@@ -314,27 +382,32 @@ fn no_file(file: u64) -> Error {
     )
 }
 
+/// The encoded answer to a plugin's encoded service request, or `None` if it cannot
+/// be encoded.
+fn answer(ctx: &HostCtx<'_, '_>, bytes: &[u8]) -> Option<Vec<u8>> {
+    let result = if std::thread::current().id() != ctx.thread {
+        Err(Error::stage(
+            "plugin",
+            "asked for a host service from a thread of its own; scripts and output files are served on the thread that called the stage",
+        ))
+    } else {
+        decode::<HostRequest<'static>>(bytes)
+            .map_err(|m| Error::stage("plugin", m))
+            .and_then(|r| ctx.serve(r))
+    };
+    let reply: HostReply = result.map_err(|e| WireError::from(&e));
+    encode(&reply).ok()
+}
+
 /// Serves a plugin's service request ([`HostApi::call`]).
 unsafe extern "C" fn host_call(ctx: *const c_void, request: Bytes, reply: *const ReplySink) -> i32 {
     let answer = catch_unwind(AssertUnwindSafe(|| {
-        // SAFETY: `ctx` is the `HostCtx` of the request in progress on this thread
-        // (checked next before it is used otherwise): `Library::request` made it and
-        // outlives the plugin's call.
+        // SAFETY: `ctx` is the `HostCtx` of the request in progress: `Library::request`
+        // made it and outlives the plugin's call (`answer` checks the thread before
+        // the context is used otherwise).
         let ctx = unsafe { &*ctx.cast::<HostCtx<'_, '_>>() };
-        let result = if std::thread::current().id() != ctx.thread {
-            Err(Error::stage(
-                "plugin",
-                "asked for a host service from a thread of its own; scripts and output files are served on the thread that called the stage",
-            ))
-        } else {
-            // SAFETY: the plugin lends the request bytes for the length of the call.
-            let bytes = unsafe { request.as_slice() };
-            decode::<HostRequest<'static>>(bytes)
-                .map_err(|m| Error::stage("plugin", m))
-                .and_then(|r| ctx.serve(r))
-        };
-        let reply: HostReply = result.map_err(|e| WireError::from(&e));
-        encode(&reply).ok()
+        // SAFETY: the plugin lends the request bytes for the length of the call.
+        answer(ctx, unsafe { request.as_slice() })
     }));
     match answer {
         Ok(Some(bytes)) if !reply.is_null() => {

@@ -40,9 +40,7 @@ struct Remote {
 
 impl Drop for Remote {
     fn drop(&mut self) {
-        // SAFETY: `release` is the plugin's, checked with its descriptor; releasing a
-        // handle the plugin already dropped (a finished output) does nothing.
-        unsafe { (self.library.release)(self.handle) };
+        self.library.release_raw(self.handle);
     }
 }
 
@@ -53,7 +51,7 @@ impl Remote {
 
     fn request_with(&self, request: &Request<'_>, files: Option<&mut dyn OutputFiles>) -> Result<Response> {
         let ctx = HostCtx::new(&self.scripts, &self.files, files);
-        self.library.request(request, &ctx)
+        self.library.request(&self.label, request, &ctx)
     }
 
     fn unexpected(&self, r: &Response) -> Error {
@@ -158,7 +156,7 @@ pub(crate) fn build(
     };
     let handle = match remote
         .library
-        .request(&request, &HostCtx::new(&scripts, &files, None))?
+        .request(label, &request, &HostCtx::new(&scripts, &files, None))?
     {
         Response::Handle(h) => h,
         other => {
