@@ -52,7 +52,11 @@ pub fn text(registry: &Registry, kind: Option<StageKind>) -> String {
                 None if o.required => " (required)".into(),
                 None => " (optional)".into(),
             };
-            let _ = writeln!(out, "      {} : {}{default}  {}", o.name, o.ty, o.doc);
+            let range = o
+                .range
+                .map(|r| format!(", {}", lamina_core::options::range_text(r)))
+                .unwrap_or_default();
+            let _ = writeln!(out, "      {} : {}{default}{range}  {}", o.name, o.ty, o.doc);
         }
     }
     if kind.is_none() {
@@ -129,11 +133,11 @@ pub fn markdown(registry: &Registry, kind: Option<StageKind>) -> String {
             default_mark(registry, r)
         );
         if !info.options.is_empty() {
-            out.push_str("\n| option | type | default | meaning |\n|---|---|---|---|\n");
+            out.push_str("\n| option | type | default | range | meaning |\n|---|---|---|---|---|\n");
             for o in info.options {
                 let _ = writeln!(
                     out,
-                    "| `{}` | {} | {} | {} |",
+                    "| `{}` | {} | {} | {} | {} |",
                     o.name,
                     o.ty,
                     match o.default {
@@ -141,6 +145,7 @@ pub fn markdown(registry: &Registry, kind: Option<StageKind>) -> String {
                         None if o.required => "required".into(),
                         None => "none".into(),
                     },
+                    o.range.map(lamina_core::options::range_text).unwrap_or_default(),
                     o.doc.replace('|', "\\|")
                 );
             }

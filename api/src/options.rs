@@ -33,6 +33,25 @@
 //! - `name: T = use PATH`: an option several stages share, whose default and doc are
 //!   the [`SharedOption`] at `PATH`.
 //!
+//! A field may carry a physical range, `#[range(min, max)]` after its doc comment
+//! (both ends included; a shared option carries its own): every number of the value,
+//! given or default, must lie in it, and one outside is refused with the key, the value
+//! and the range, at the value's place in the file.
+//!
+//! ```
+//! lamina_api::stage_options! {
+//!     #[derive(Debug)]
+//!     struct Options {
+//!         /// layer thickness (mm)
+//!         #[range(0.001, 100.0)]
+//!         thickness: f64 = "0.2",
+//!     }
+//! }
+//! assert_eq!(Options::SPECS[0].range, Some((0.001, 100.0)));
+//! let e = toml::from_str::<Options>("thickness = 1e-4").unwrap_err();
+//! assert!(e.message().contains("`thickness` = 0.0001 is outside its range 0.001 to 100"));
+//! ```
+//!
 //! The TOML type shown in the documentation comes from [`OptionType`], implemented
 //! here for the usual Rust types; a plugin's own types implement it with
 //! [`option_type!`](crate::option_type).
@@ -52,6 +71,12 @@ pub trait OptionType {
     const TOML: &'static str;
     /// True for `Option<T>`: absent means no value rather than an error.
     const OPTIONAL: bool = false;
+
+    /// The first number of the value outside `min..=max`, if any. Types without
+    /// numbers have none.
+    fn out_of_range(&self, _min: f64, _max: f64) -> Option<f64> {
+        None
+    }
 }
 
 /// A type whose `Vec` is an option: names the TOML type of that array.
@@ -63,10 +88,18 @@ pub trait ArrayItem {
 impl<T: OptionType> OptionType for Option<T> {
     const TOML: &'static str = T::TOML;
     const OPTIONAL: bool = true;
+
+    fn out_of_range(&self, min: f64, max: f64) -> Option<f64> {
+        self.as_ref().and_then(|v| v.out_of_range(min, max))
+    }
 }
 
-impl<T: ArrayItem> OptionType for Vec<T> {
+impl<T: ArrayItem + OptionType> OptionType for Vec<T> {
     const TOML: &'static str = T::ARRAY;
+
+    fn out_of_range(&self, min: f64, max: f64) -> Option<f64> {
+        self.iter().find_map(|v| v.out_of_range(min, max))
+    }
 }
 
 impl<K, V> OptionType for BTreeMap<K, V> {
@@ -79,6 +112,10 @@ impl<K, V, S> OptionType for HashMap<K, V, S> {
 
 impl<const N: usize> OptionType for [f64; N] {
     const TOML: &'static str = "array of float";
+
+    fn out_of_range(&self, min: f64, max: f64) -> Option<f64> {
+        self.iter().find_map(|v| v.out_of_range(min, max))
+    }
 }
 
 impl<const N: usize> ArrayItem for [f64; N] {
@@ -108,7 +145,27 @@ macro_rules! option_type {
     };
 }
 
-option_type! {
+/// Numbers: their value is checked against a declared range.
+macro_rules! numeric_option {
+    ($($t:ty = $toml:literal, array $array:literal);+ $(;)?) => {
+        $(
+            impl OptionType for $t {
+                const TOML: &'static str = $toml;
+
+                #[allow(clippy::cast_lossless, clippy::cast_precision_loss)]
+                fn out_of_range(&self, min: f64, max: f64) -> Option<f64> {
+                    let v = *self as f64;
+                    (!(min..=max).contains(&v)).then_some(v)
+                }
+            }
+            impl ArrayItem for $t {
+                const ARRAY: &'static str = $array;
+            }
+        )+
+    };
+}
+
+numeric_option! {
     f64 = "float", array "array of float";
     f32 = "float", array "array of float";
     usize = "integer", array "array of integer";
@@ -118,6 +175,9 @@ option_type! {
     u8 = "integer", array "array of integer";
     i64 = "integer", array "array of integer";
     i32 = "integer", array "array of integer";
+}
+
+option_type! {
     bool = "bool", array "array of bool";
     String = "string", array "array of string";
     PathBuf = "string", array "array of string";
@@ -127,11 +187,13 @@ option_type! {
 
 /// Default and doc of an option that several stages accept alike; each stage names
 /// it in its [`stage_options!`](crate::stage_options) with `name: T = use PATH`.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, PartialEq)]
 pub struct SharedOption {
     /// The default as a TOML literal; `None` when the option has none.
     pub default: Option<&'static str>,
     pub doc: &'static str,
+    /// The physical range of its numbers, both ends included.
+    pub range: Option<(f64, f64)>,
 }
 
 impl SharedOption {
@@ -140,12 +202,25 @@ impl SharedOption {
         Self {
             default: Some(default),
             doc,
+            range: None,
         }
     }
 
     /// An option without a default: required, or absent when its type is an `Option`.
     pub const fn without_default(doc: &'static str) -> Self {
-        Self { default: None, doc }
+        Self {
+            default: None,
+            doc,
+            range: None,
+        }
+    }
+
+    /// The option, its numbers held to `min..=max`.
+    pub const fn within(self, min: f64, max: f64) -> Self {
+        Self {
+            range: Some((min, max)),
+            ..self
+        }
     }
 }
 
@@ -193,6 +268,62 @@ pub fn resolve<T: DeserializeOwned, E: de::Error>(
     }
 }
 
+/// A field's name and declared range, for [`Checked`]: `stage_options!` makes one
+/// for each field.
+#[doc(hidden)]
+pub trait Bounds {
+    const NAME: &'static str;
+    const RANGE: Option<(f64, f64)>;
+}
+
+/// An option's value as the table gave it, its range checked while it is read, so
+/// that an error points at the value.
+#[doc(hidden)]
+pub struct Checked<T, B>(pub Option<T>, PhantomData<B>);
+
+impl<T, B> Default for Checked<T, B> {
+    fn default() -> Self {
+        Self(None, PhantomData)
+    }
+}
+
+impl<'de, T: OptionType + serde::Deserialize<'de>, B: Bounds> serde::Deserialize<'de> for Checked<T, B> {
+    fn deserialize<D: serde::Deserializer<'de>>(deserializer: D) -> Result<Self, D::Error> {
+        let v = T::deserialize(deserializer)?;
+        check_range::<T, B>(&v).map_err(de::Error::custom)?;
+        Ok(Self(Some(v), PhantomData))
+    }
+}
+
+/// Refuses a value with a number outside the range `B` declares.
+#[doc(hidden)]
+pub fn check_range<T: OptionType, B: Bounds>(v: &T) -> Result<(), String> {
+    match B::RANGE.and_then(|(min, max)| v.out_of_range(min, max).map(|got| (got, min, max))) {
+        Some((got, min, max)) => Err(format!(
+            "`{}` = {} is outside its range {}",
+            B::NAME,
+            number(got),
+            range_text((min, max))
+        )),
+        None => Ok(()),
+    }
+}
+
+/// A range as messages and documentation write it: `0.001 to 100`.
+pub fn range_text((min, max): (f64, f64)) -> String {
+    format!("{} to {}", number(min), number(max))
+}
+
+/// A number as a user would write it: `0.25`, `100`, `1e300`, `5e-324`.
+fn number(v: f64) -> String {
+    let a = v.abs();
+    if a != 0.0 && !(1e-4..1e9).contains(&a) {
+        format!("{v:e}")
+    } else {
+        format!("{v}")
+    }
+}
+
 /// Deserialises an option that is absent: `None` for an `Option`, else the error a
 /// derived struct gives for a missing field.
 struct Absent<E>(&'static str, PhantomData<E>);
@@ -230,40 +361,47 @@ macro_rules! stage_options {
         $crate::stage_options!(@field [$(#[$attr])*] [$vis] $name [] $($body)*);
     };
 
-    // An option shared with other stages: its default and doc are elsewhere.
+    // An option shared with other stages: its default, doc and range are elsewhere.
     (@field $attrs:tt $vis:tt $name:ident [$($done:tt)*]
         $(#[doc = $doc:literal])* $fvis:vis $field:ident : $ty:ty = use $shared:path
         $(, $($rest:tt)*)?
     ) => {
         $crate::stage_options!(@field $attrs $vis $name [$($done)*
-            { [$fvis] $field [$ty] [$shared.default] [$shared.doc] }
+            { [$fvis] $field [$ty] [$shared.default] [$shared.doc] [$shared.range] }
         ] $($($rest)*)?);
     };
 
     // A default written as a TOML literal.
     (@field $attrs:tt $vis:tt $name:ident [$($done:tt)*]
-        $(#[doc = $doc:literal])* $fvis:vis $field:ident : $ty:ty = $default:literal
+        $(#[doc = $doc:literal])* $(#[range($min:expr, $max:expr)])?
+        $fvis:vis $field:ident : $ty:ty = $default:literal
         $(, $($rest:tt)*)?
     ) => {
         $crate::stage_options!(@field $attrs $vis $name [$($done)*
             { [$fvis] $field [$ty] [::core::option::Option::Some($default)]
-              [$crate::options::doc_text(::core::concat!($($doc),*))] }
+              [$crate::options::doc_text(::core::concat!($($doc),*))]
+              [$crate::stage_options!(@range $($min, $max)?)] }
         ] $($($rest)*)?);
     };
 
     // No default: required, or absent when the type is an `Option`.
     (@field $attrs:tt $vis:tt $name:ident [$($done:tt)*]
-        $(#[doc = $doc:literal])* $fvis:vis $field:ident : $ty:ty
+        $(#[doc = $doc:literal])* $(#[range($min:expr, $max:expr)])?
+        $fvis:vis $field:ident : $ty:ty
         $(, $($rest:tt)*)?
     ) => {
         $crate::stage_options!(@field $attrs $vis $name [$($done)*
             { [$fvis] $field [$ty] [::core::option::Option::None]
-              [$crate::options::doc_text(::core::concat!($($doc),*))] }
+              [$crate::options::doc_text(::core::concat!($($doc),*))]
+              [$crate::stage_options!(@range $($min, $max)?)] }
         ] $($($rest)*)?);
     };
 
+    (@range) => { ::core::option::Option::None };
+    (@range $min:expr, $max:expr) => { ::core::option::Option::Some(($min as f64, $max as f64)) };
+
     (@field [$($attr:tt)*] [$vis:vis] $name:ident [$(
-        { [$fvis:vis] $field:ident [$ty:ty] [$default:expr] [$doc:expr] }
+        { [$fvis:vis] $field:ident [$ty:ty] [$default:expr] [$doc:expr] [$range:expr] }
     )*]) => {
         $($attr)*
         $vis struct $name {
@@ -272,7 +410,7 @@ macro_rules! stage_options {
 
         impl $name {
             /// The options as the stage's `StageInfo::options` documents them.
-            #[allow(dead_code)]
+            #[allow(dead_code, clippy::unnecessary_cast)]
             pub const SPECS: &'static [$crate::options::OptionSpec] = &[$(
                 $crate::options::OptionSpec {
                     name: ::core::stringify!($field),
@@ -280,17 +418,30 @@ macro_rules! stage_options {
                     default: $default,
                     doc: $doc,
                     required: $crate::options::required::<$ty>($default),
+                    range: $range,
                 },
             )*];
         }
 
         const _: () = {
+            // One type a field, naming it and its range for `Checked`.
+            $(
+                #[allow(non_camel_case_types)]
+                struct $field {}
+
+                #[allow(clippy::unnecessary_cast)]
+                impl $crate::options::Bounds for $field {
+                    const NAME: &'static str = ::core::stringify!($field);
+                    const RANGE: ::core::option::Option<(f64, f64)> = $range;
+                }
+            )*
+
             #[derive(::serde::Deserialize)]
             #[serde(deny_unknown_fields)]
             struct Given {
                 $(
                     #[serde(default)]
-                    $field: ::core::option::Option<$ty>,
+                    $field: $crate::options::Checked<$ty, $field>,
                 )*
             }
 
@@ -300,11 +451,17 @@ macro_rules! stage_options {
                 ) -> ::core::result::Result<Self, D::Error> {
                     let given = <Given as ::serde::Deserialize<'de>>::deserialize(deserializer)?;
                     ::core::result::Result::Ok($name {
-                        $($field: $crate::options::resolve(
-                            given.$field,
-                            ::core::stringify!($field),
-                            $default,
-                        )?,)*
+                        $($field: {
+                            let value: $ty = $crate::options::resolve(
+                                given.$field.0,
+                                ::core::stringify!($field),
+                                $default,
+                            )?;
+                            // A default outside its range is refused too.
+                            $crate::options::check_range::<$ty, $field>(&value)
+                                .map_err(<D::Error as ::serde::de::Error>::custom)?;
+                            value
+                        },)*
                     })
                 }
             }

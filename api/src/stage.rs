@@ -77,7 +77,7 @@ impl fmt::Display for StageKind {
 }
 
 /// One option a stage accepts, for documentation and validation.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
 pub struct OptionSpec {
     pub name: &'static str,
     /// The TOML type, e.g. `float`, `integer`, `string`, `bool`, `array of float`.
@@ -88,6 +88,9 @@ pub struct OptionSpec {
     /// True when the user must give the option; one without a default that is not
     /// required has no value when absent (its doc says what that means).
     pub required: bool,
+    /// The physical range every number of the value lies in, both ends included; a
+    /// value outside it is refused naming the key and the range.
+    pub range: Option<(f64, f64)>,
 }
 
 impl OptionSpec {
@@ -99,6 +102,7 @@ impl OptionSpec {
             default: None,
             doc,
             required: true,
+            range: None,
         }
     }
 
@@ -110,6 +114,7 @@ impl OptionSpec {
             default: None,
             doc,
             required: false,
+            range: None,
         }
     }
 
@@ -121,13 +126,22 @@ impl OptionSpec {
             default: Some(default),
             doc,
             required: false,
+            range: None,
+        }
+    }
+
+    /// The option, its numbers held to `min..=max`.
+    pub const fn within(self, min: f64, max: f64) -> Self {
+        Self {
+            range: Some((min, max)),
+            ..self
         }
     }
 }
 
 /// What a stage implementation says about itself: shown by `lamina plugins` and used
 /// to generate the pipeline reference.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
 pub struct StageInfo {
     pub kind: StageKind,
     pub name: &'static str,

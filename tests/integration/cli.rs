@@ -531,6 +531,34 @@ fn overridden_values_are_reported_at_their_key_in_plain_words() {
     assert!(!err.contains("f64"), "{err}");
 }
 
+/// A number outside its option's physical range is refused at the value, naming the key
+/// and the range, whether the file or a `--set` gave it; a default is never refused.
+#[test]
+fn a_number_outside_its_range_is_refused_at_its_value() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let text_of = "[model]\nuse = \"tube\"\nheight = 1.0\n\
+        [materials.a]\ncolour = [255, 0, 0]\n\
+        [slice]\nuse = \"uniform\"\nthickness = 1e-4\n\
+        [discretise]\nuse = \"offset\"\nnozzle = 1e300\n";
+    let p = write(dir.path(), "p.toml", text_of);
+    let err = refused(&p);
+    assert!(
+        err.contains("p.toml:8:") && err.contains("`thickness` = 0.0001 is outside its range 0.001 to 100"),
+        "{err}"
+    );
+    assert!(
+        err.contains("p.toml:11:") && err.contains("`nozzle` = 1e300 is outside its range 0.01 to 50"),
+        "{err}"
+    );
+    let fine = write(dir.path(), "q.toml", &text_of.replace("1e-4", "0.2").replace("1e300", "0.4"));
+    let o = lamina(&["check", fine.to_str().expect("utf-8"), "--set", "slice.max_layers=0"]);
+    let err = text(&o.stderr);
+    assert_eq!(o.status.code(), Some(2), "{err}");
+    assert!(err.contains("`max_layers` = 0 is outside its range 1 to 10000000"), "{err}");
+    let o = lamina(&["check", fine.to_str().expect("utf-8")]);
+    assert!(o.status.success(), "{}", text(&o.stderr));
+}
+
 /// `lamina check` reports every wrong stage of a pipeline at once, each at its own
 /// line, as a compiler does: here a bad slice thickness, an unknown discretiser option,
 /// a script that does not compile and an output of no known kind.

@@ -109,3 +109,37 @@ fn every_documented_default_is_toml_the_stage_accepts() {
     }
     assert!(failures.is_empty(), "{}", failures.join("\n\n"));
 }
+
+/// The TOML types whose every number a declared range holds.
+const NUMERIC: [&str; 5] = [
+    "float",
+    "integer",
+    "array of float",
+    "array of integer",
+    "array of array of float",
+];
+
+#[test]
+fn every_number_option_has_a_physical_range() {
+    let mut failures = Vec::new();
+    for entry in registry().list(None) {
+        let label = entry.label();
+        for o in entry.info().options {
+            let numeric = NUMERIC.contains(&o.ty);
+            match o.range {
+                None if numeric => {
+                    failures.push(format!("{label}: `{}` ({}) declares no range", o.name, o.ty))
+                }
+                Some(_) if !numeric => failures.push(format!(
+                    "{label}: `{}` is a {}, which a range does not check",
+                    o.name, o.ty
+                )),
+                Some((min, max)) if !(min.is_finite() && max.is_finite() && min < max) => {
+                    failures.push(format!("{label}: `{}` has the range {min} to {max}", o.name))
+                }
+                _ => {}
+            }
+        }
+    }
+    assert!(failures.is_empty(), "{}", failures.join("\n"));
+}

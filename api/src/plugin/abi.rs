@@ -25,7 +25,11 @@ pub const ABI_MAJOR: u32 = 7;
 /// `#[serde(default)]`, which an older plugin never sees and a newer one finds filled
 /// in; a request only plugins of the new minor are sent), or, for anything else, a new
 /// major whose list starts again with the one hash.
-pub const WIRE_SCHEMAS: &[u64] = &[0xc0eb_8b22_9dd3_ce19];
+pub const WIRE_SCHEMAS: &[u64] = &[
+    0xc0eb_8b22_9dd3_ce19,
+    // 7.1: options carry their physical range (`WireOption::range`).
+    0x4406_817e_a6d0_9d30,
+];
 /// The minor version of this build: a plugin of this major and of this minor or an
 /// older one loads (the host reads every message an older plugin writes, and sends it
 /// only what it knows); a plugin of a newer minor asks for a newer host.

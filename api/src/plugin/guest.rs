@@ -427,6 +427,7 @@ fn handle(request: Request<'static>) -> Result<Response> {
                             default: o.default.map(ToString::to_string),
                             doc: o.doc.to_string(),
                             required: o.required,
+                            range: o.range,
                         })
                         .collect(),
                     example: f.info.example.to_string(),

@@ -32,7 +32,8 @@ pub const MAX_CELLS: usize = 1000;
 
 pub const AROUND_OPTION: SharedOption = SharedOption::without_default(
     "split every sub-region into this many circumferential cells of equal arc length along its outer contour",
-);
+)
+.within(1.0, 1e5);
 
 pub const CUTS_OPTION: SharedOption = SharedOption::new(
     "\"arc\"",
@@ -41,7 +42,8 @@ pub const CUTS_OPTION: SharedOption = SharedOption::new(
 
 pub const LENGTH_OPTION: SharedOption = SharedOption::without_default(
     "split every sub-region into circumferential cells of equal arc length about this long (mm, along its middle)",
-);
+)
+.within(0.001, 1e6);
 
 /// How many cells a sub-region is split into.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]

@@ -63,22 +63,30 @@ lamina_api::stage_options! {
         /// where r = 0: `boundary` (signed), `outer`, `holes`, `centre`, `point`, `line`, `polyline` or `surface` (chosen faces of the part's mesh, measured in space)
         feature: Feature = r#""boundary""#,
         /// [x, y] (mm) of the feature `point`
+        #[range(-1e6, 1e6)]
         point: Option<[f64; 2]>,
         /// [[x, y], ...] (mm): two points of the feature `line`, or the points of the `polyline`
+        #[range(-1e6, 1e6)]
         points: Option<Vec<[f64; 2]>>,
         /// the faces of the feature `surface`: `{ normal = [x, y, z], within = 30.0 }` (outward normal within that many degrees) and/or `{ groups = ["name"] }` (named face groups of a 3MF)
         faces: Option<FaceSelection>,
         /// number of equal parts of r; each part's level is Eq. 2's d / max(d) where it starts: k / count
+        #[range(1, 1e6)]
         count: usize = "10",
         /// grading step-width t_g: levels 0, t_g, ..., 1 at half steps
+        #[range(0.001, 1.0)]
         step: Option<f64>,
         /// iso-contours every `spacing` mm of distance (Fig. 7) instead of `count` parts of r; levels d / max(d) (Eq. 2)
+        #[range(0.001, 1e6)]
         spacing: Option<f64>,
         /// distance (mm) that r = 1 stands for (farther is r = 1); default each family's largest distance (Eq. 2's max(d_ij))
+        #[range(0.001, 1e6)]
         width: Option<f64>,
         /// samples along the family's longer side
+        #[range(8, 65536)]
         cells: usize = "256",
         /// sample spacing (mm) instead of `cells`
+        #[range(0.0001, 1e6)]
         cell_size: Option<f64>,
         cells_around: Option<usize> = use crate::cells::AROUND_OPTION,
         cell_length: Option<f64> = use crate::cells::LENGTH_OPTION,

@@ -26,6 +26,7 @@ lamina_api::stage_options! {
         nozzle: f64 = use crate::options::NOZZLE,
         count: Option<usize> = use crate::options::COUNT,
         /// offset distance d (mm); default D_N (the nozzle), or reach / count when only `count` is given
+        #[range(0.001, 1e6)]
         spacing: Option<f64>,
         /// grading reference: `outer` (the paper's: the outer contour moves toward the holes, reach L_s) or `all` (outer and holes move together and meet halfway, reach L_s / 2, a band on each side per index)
         from: From = r#""outer""#,

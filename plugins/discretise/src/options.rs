@@ -11,10 +11,10 @@ use lamina_api::{Limit, Limits, Result};
 pub const MIN_TOLERANCE: f64 = 1e-4;
 
 pub const NOZZLE: SharedOption =
-    SharedOption::new("0.4", "nozzle diameter D_N (mm) for N_R = int(L_s / D_N)");
+    SharedOption::new("0.4", "nozzle diameter D_N (mm) for N_R = int(L_s / D_N)").within(0.01, 50.0);
 
 pub const COUNT: SharedOption =
-    SharedOption::without_default("number of sub-regions N_R instead of the nozzle rule");
+    SharedOption::without_default("number of sub-regions N_R instead of the nozzle rule").within(1.0, 1e6);
 
 pub const JOIN: SharedOption = SharedOption::new(
     "\"round\"",
@@ -22,7 +22,8 @@ pub const JOIN: SharedOption = SharedOption::new(
 );
 
 pub const TOLERANCE: SharedOption =
-    SharedOption::new("0.005", "largest arc-to-chord distance of round corners (mm)");
+    SharedOption::new("0.005", "largest arc-to-chord distance of round corners (mm)")
+        .within(MIN_TOLERANCE, 10.0);
 
 /// `v` when it is a positive number of millimetres, at most a kilometre.
 pub fn positive_mm(config: &StageConfig<'_>, key: &str, v: f64) -> Result<f64> {

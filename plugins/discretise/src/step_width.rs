@@ -21,10 +21,13 @@ lamina_api::stage_options! {
     #[derive(Debug)]
     struct Options {
         /// grading step-width t_g in (0, 1]; N_c = int(1 / t_g) + 1 levels, the last one 1
+        #[range(0.001, 1.0)]
         step: f64 = "0.25",
         /// f(d) = (d / width)^power, the grading function of the distance
+        #[range(0.01, 100.0)]
         power: f64 = "1.0",
         /// grading width (mm): f = 1 beyond it; default the family's deepest point from the reference
+        #[range(0.001, 1e6)]
         width: Option<f64>,
         /// distance reference: `all` boundaries or the `outer` contour
         from: From = r#""all""#,

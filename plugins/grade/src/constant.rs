@@ -10,6 +10,7 @@ lamina_api::stage_options! {
         /// the single material of the part
         material: Option<String>,
         /// fractions over the part's materials, summing to 1
+        #[range(0, 1)]
         fractions: Option<Vec<f64>>,
     }
 }

@@ -36,6 +36,7 @@ lamina_api::stage_options! {
         /// material of every hole (unset: the outer's material), or `[{ near = [x, y], material = "m" }, ...]`: each hole takes the material of the nearest listed point
         holes: Option<HolesSpec>,
         /// exponent of the distances (1 in the paper)
+        #[range(0.01, 100.0)]
         power: f64 = "1.0",
     }
 }

@@ -35,14 +35,17 @@ lamina_api::stage_options! {
     struct Options {
         f: Option<String> = use crate::control::F,
         /// unset: linear: -1 (f = 1 - r, the first material outside); constant: 1; wave: 1
+        #[range(-1000, 1000)]
         mu: Option<f64>,
         /// unset: linear: 1; wave: pi
+        #[range(-1000, 1000)]
         lambda: Option<f64>,
         alpha: Option<f64> = use crate::control::ALPHA,
         k: Option<f64> = use crate::control::K,
         /// "index" (j / (N_R - 1), Eq. 21), "level" (the discretiser's distance ratio) or "points" (Eq. 18 at the points of a grid in each region, x and y given to the function, the mean composition; the points are kept, so that a mixing head with the gcode exporter's `mix_along` follows Eq. 18 along its beads)
         r: LevelSource = r#""index""#,
         /// spacing (mm) of the points of `r = "points"`
+        #[range(0.01, 1e6)]
         grid: f64 = "0.5",
     }
 }

@@ -17,12 +17,16 @@ lamina_api::stage_options! {
         alpha: Option<f64> = use crate::control::ALPHA,
         k: Option<f64> = use crate::control::K,
         /// layer index (from 0) where r = 0
+        #[range(0, 1e7)]
         from_layer: Option<usize>,
         /// layer index where r = 1
+        #[range(0, 1e7)]
         to_layer: Option<usize>,
         /// height (mm) where r = 0, compared with the layer's top; default: the part's bottom (mid-layer)
+        #[range(-1e6, 1e6)]
         from_z: Option<f64>,
         /// height (mm) where r = 1; default: the part's top
+        #[range(-1e6, 1e6)]
         to_z: Option<f64>,
     }
 }

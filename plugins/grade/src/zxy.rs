@@ -19,14 +19,19 @@ lamina_api::stage_options! {
         /// control function of the region's level: default f = 1 - r (first material outside)
         xy_f: String = r#""linear""#,
         /// layer index where r_z = 0
+        #[range(0, 1e7)]
         from_layer: Option<usize>,
         /// layer index where r_z = 1
+        #[range(0, 1e7)]
         to_layer: Option<usize>,
         /// height (mm) where r_z = 0
+        #[range(-1e6, 1e6)]
         from_z: Option<f64>,
         /// height (mm) where r_z = 1
+        #[range(-1e6, 1e6)]
         to_z: Option<f64>,
         /// k_z and k_xy of Eq. 8
+        #[range(0, 1e6)]
         weights: [f64; 2] = "[1.0, 1.0]",
         /// use the discretiser's level for r_xy instead of j / (N_R - 1)
         xy_level: bool = "false",

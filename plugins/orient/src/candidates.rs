@@ -46,14 +46,19 @@ lamina_api::stage_options! {
         /// the base cell for "base-cell", in the model's own coordinates (as `engrave` and `bitmap` read theirs: the cells turn with the model): `{ shape = "box" | "cylinder", size, aspect, turn, lean, insert, period, origin, tilt }`
         cell: Option<CellSpec>,
         /// most cells weighed for "base-cell" (every n-th inserting point in the model's box beyond that)
+        #[range(1, 1e6)]
         cells: usize = "2000",
         /// directions sampled evenly over the sphere
+        #[range(0, MAX_SAMPLES)]
         samples: usize = "64",
         /// the largest flat faces whose normals are candidates (both ways)
+        #[range(0, 1000)]
         faces: usize = "8",
         /// share of the area, largest flat faces first, that the surface angle counts
+        #[range(0.001, 1.0)]
         main_surfaces: f64 = "1.0",
         /// more candidate directions
+        #[range(-1e6, 1e6)]
         directions: Vec<[f64; 3]> = "[]",
     }
 }
@@ -264,22 +269,13 @@ impl Orienter for Candidates {
     }
 }
 
-/// Most directions sampled.
+/// Most directions sampled: each is measured over every triangle, and 4096 directions
+/// lie about 3 degrees apart, finer than any criterion here tells apart.
 const MAX_SAMPLES: usize = 4096;
 
 fn build(config: &StageConfig<'_>) -> Result<AnyStage> {
+    // `samples` and `main_surfaces` are held to their declared ranges as they are read.
     let o: Options = config.parse()?;
-    // Each direction is measured over every triangle: 4096 directions lie about 3
-    // degrees apart, finer than any criterion here tells apart.
-    if o.samples > MAX_SAMPLES {
-        return Err(config.error(
-            "samples",
-            format!("at most {MAX_SAMPLES} directions (about 3 degrees apart)"),
-        ));
-    }
-    if !(o.main_surfaces > 0.0 && o.main_surfaces <= 1.0) {
-        return Err(config.error("main_surfaces", "must be a share of the area in (0, 1]"));
-    }
     let mut directions = Vec::new();
     for d in &o.directions {
         let v = Vector3::new(d[0], d[1], d[2]);

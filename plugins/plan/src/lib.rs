@@ -49,10 +49,13 @@ lamina_api::stage_options! {
     #[derive(Debug, Clone)]
     struct Options {
         /// nominal bead width (mm), by default the machine's nozzle diameter: loops at w/2, 3w/2, ... inside each sub-region, the width bent within `width_range` to fill a band with a whole number of beads; what loops leave is filled by variable-width beads along its centre line
+        #[range(MIN_WIDTH, MAX_WIDTH)]
         width: f64 = "0.4",
         /// narrowest and widest bead as fractions of `width`; sub-regions narrower than the narrowest merge with their neighbours (`thin`)
+        #[range(0.05, 10.0)]
         width_range: [f64; 2] = "[0.6, 1.5]",
         /// least share of the sub-regions' volume the beads must deposit over the run; below it the run fails
+        #[range(0.0, 1.0)]
         min_fill: f64 = "0.98",
         /// where loops start: `nearest` (to the tool) or `aligned` (largest x)
         seam: Seam = r#""nearest""#,
@@ -63,26 +66,33 @@ lamina_api::stage_options! {
         /// sub-regions narrower than the narrowest bead: `merge` (deposited with the next levels of their family, mean composition) or `skip` (left out); either way they are reported
         thin: Thin = r#""merge""#,
         /// deposition speed (mm/s)
+        #[range(0.01, MAX_SPEED)]
         speed: f64 = "30.0",
         /// travel speed (mm/s)
+        #[range(0.01, MAX_SPEED)]
         travel_speed: f64 = "120.0",
         /// tool envelope radius (mm); tools park outside each other's envelopes; the machine's head envelope plus 1 mm when it gives one (and at least the envelope)
+        #[range(0.001, 1e4)]
         envelope: f64 = "5.0",
         /// seconds to change tools between two tools' turns (sequential); 0 by default on a machine whose heads are on motion systems of their own
+        #[range(0.0, 3600.0)]
         tool_change: f64 = "5.0",
         /// per-tool `speed`, `travel_speed`, `envelope`, keyed by material name (or `mixer`)
         tools: BTreeMap<String, ToolOptions> = "{}",
         // The concurrent planner's own options, after the COMMON_OPTIONS every planner
         // documents.
         /// seconds between collision checks
+        #[range(1e-4, 10.0)]
         step: f64 = "0.01",
         /// add a note to each layer with the sequential build time
         compare: bool = "false",
         /// who keeps going when two tools are about to collide: `x-speed` (the paper's rule: the tool faster along X at the check, the X component of its velocity, goes on and the other pauses; on a tie the first tool goes on; a tool whose pausing would not clear the conflict is never the one paused), `clearing` (a tool whose pausing alone clears the conflict pauses, else one already paused stays paused, else one returning from a side-step gives way, else `x-speed`), `returning` (a tool returning from a side-step gives way, else one already paused stays paused, else `x-speed`) `waiting` (one already paused stays paused, else `x-speed`) or `busiest` (a tool whose pausing alone clears the conflict pauses, else the one with less of its route left: the layer ends when the busiest tool is done); the run counts the pauses each rule decided
         priority: Priority = r#""x-speed""#,
         /// seconds ahead a collision is looked for: one in prospect within half of it pauses a tool now, where its pausing alone keeps the tools apart (when either would, the priority decides), until none is in prospect within the whole of it, and a paused tool goes on once its way is clear for half of it; tools meeting head-on then wait before the way narrows instead of one stepping aside, and a tool following another pauses seldom and for longer, cutting its bead (and making both heads stop at a synchronisation point) less often. 0 (up to `step`) checks only the next step, as the paper does
+        #[range(0.0, 60.0)]
         look_ahead: f64 = "0.5",
         /// room (mm) beyond the envelopes that looking ahead keeps between two tools: one following another hangs back this much more, pausing less often and for longer (on a machine with two motion systems, far fewer synchronisation points, each of which stops both nozzles with their filament pulled back); the envelopes themselves are kept either way
+        #[range(0.0, 1e3)]
         room: f64 = "0.0",
         /// deposit a layer one tool at a time when that is faster than the concurrent schedule, each synchronisation of the heads counted at what it costs the machine (a stop, and a retraction, on a machine with two motion systems); a note says which and why. `false` keeps the concurrent schedule (with a warning when it is slower). A layer whose tools stay blocked falls back to one tool at a time regardless
         keep_faster: bool = "true",
@@ -122,22 +132,11 @@ impl Options {
                 "must be [min, max] fractions of `width` with 0.05 <= min <= 1 <= max <= 10",
             ));
         }
-        if !(self.min_fill.is_finite() && (0.0..=1.0).contains(&self.min_fill)) {
-            return Err(config.error("min_fill", "must be a share between 0 and 1"));
-        }
-        within("speed", self.speed, 0.01, MAX_SPEED, "mm/s")?;
-        within("travel_speed", self.travel_speed, 0.01, MAX_SPEED, "mm/s")?;
-        within("envelope", self.envelope, 1e-3, 1e4, "mm")?;
-        if !(self.tool_change.is_finite() && self.tool_change >= 0.0) {
-            return Err(config.error("tool_change", "must be zero or more seconds"));
-        }
-        // `step`, `compare`, `priority` and `keep_faster` mean nothing to the sequential
-        // planner but are accepted, so that `--set plan.use=sequential` compares a
-        // concurrent pipeline.
+        // `min_fill`, the speeds, `envelope`, `tool_change`, `step`, `look_ahead` and
+        // `room` are held to their declared ranges as they are read. `step`, `compare`,
+        // `priority` and `keep_faster` mean nothing to the sequential planner but are
+        // accepted, so that `--set plan.use=sequential` compares a concurrent pipeline.
         let _ = concurrent;
-        within("step", self.step, 1e-4, 10.0, "s")?;
-        within("look_ahead", self.look_ahead, 0.0, 60.0, "s")?;
-        within("room", self.room, 0.0, 1e3, "mm")?;
         for (name, t) in &self.tools {
             for (k, v) in [
                 ("speed", t.speed),

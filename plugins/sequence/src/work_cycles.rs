@@ -23,8 +23,10 @@ lamina_api::stage_options! {
         /// base-cell dimension (mm) by part or region name: an "auto" thickness there is a microstructure's, 1/10 to 1/20 of the cell
         cell: BTreeMap<String, f64> = "{}",
         /// largest change of a material's fraction one layer may hold: an "auto" thickness elsewhere is this over the composition's gradient along z (sampled from the grading), within 0.5 to 2 mm
+        #[range(0.001, 1.0)]
         step: f64 = "0.1",
         /// thickness (mm) of parts that neither `thickness` nor their materials give one
+        #[range(0.001, 100.0)]
         default_thickness: Option<f64>,
     }
 }

@@ -39,12 +39,16 @@ lamina_api::stage_options! {
         /// "surface" (slope and cusp), "material" (the [sequence]'s work cycles) or "auto" (material when there is a [sequence])
         mode: Mode = r#""auto""#,
         /// thinnest layer (mm, surface mode)
+        #[range(0.001, 100.0)]
         min_thickness: f64 = "0.05",
         /// thickest layer (mm, surface mode)
+        #[range(0.001, 100.0)]
         max_thickness: f64 = "0.3",
         /// thickness of the first layer (mm, surface mode); unset: the machine's `first_layer.height`, else from the surface
+        #[range(0.001, 100.0)]
         first_layer: Option<f64>,
         /// largest stair-step height allowed on sloped surfaces (mm)
+        #[range(0.0001, 10.0)]
         cusp: f64 = "0.05",
         close_gaps: f64 = use crate::cut::CLOSE_GAPS,
         fill_rule: FillRule = use crate::cut::FILL_RULE,

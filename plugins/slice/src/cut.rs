@@ -47,14 +47,15 @@ lamina_api::option_type!(FillRule = "string");
 pub(crate) const CLOSE_GAPS: SharedOption = SharedOption::new(
     "0.05",
     "open chains whose ends are closer than this (mm) are joined",
-);
+)
+.within(0.0, 10.0);
 pub(crate) const FILL_RULE: SharedOption = SharedOption::new(
     "\"nonzero\"",
     "how overlapping loops combine: \"nonzero\" (shells merge) or \"evenodd\" (winding ignored)",
 );
 /// Upper bound on the layer count, against a mistyped thickness.
 pub(crate) const MAX_LAYERS: SharedOption =
-    SharedOption::new("1000000", "refuse to make more layers than this");
+    SharedOption::new("100000", "refuse to make more layers than this").within(1.0, 1e7);
 
 impl CutOptions {
     /// The options a slicer's table gives, checked; errors point at the key.

@@ -42,8 +42,10 @@ lamina_api::stage_options! {
     #[derive(Debug)]
     struct Options {
         /// layer thickness (mm)
+        #[range(0.001, 100.0)]
         thickness: f64 = "0.2",
         /// thickness of the first layer (mm); unset: the machine's `first_layer.height`, else `thickness`
+        #[range(0.001, 100.0)]
         first_layer: Option<f64>,
         /// where a layer is cut: "bottom", "mid", "top" or a fraction of its thickness
         cut: CutAt = r#""mid""#,

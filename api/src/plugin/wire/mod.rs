@@ -234,6 +234,9 @@ pub struct WireOption {
     pub default: Option<String>,
     pub doc: String,
     pub required: bool,
+    /// The physical range of its numbers (ABI 7.1; absent from older plugins).
+    #[serde(default)]
+    pub range: Option<(f64, f64)>,
 }
 
 /// A mesh a model stage made, with what its reader repaired.

@@ -180,6 +180,7 @@ impl Library {
                         default: o.default.map(leak),
                         doc: leak(o.doc),
                         required: o.required,
+                        range: o.range,
                     })
                     .collect();
                 let factory: &'static StageFactory = Box::leak(Box::new(StageFactory {
