@@ -550,11 +550,23 @@ fn a_number_outside_its_range_is_refused_at_its_value() {
         err.contains("p.toml:11:") && err.contains("`nozzle` = 1e300 is outside its range 0.01 to 50"),
         "{err}"
     );
-    let fine = write(dir.path(), "q.toml", &text_of.replace("1e-4", "0.2").replace("1e300", "0.4"));
-    let o = lamina(&["check", fine.to_str().expect("utf-8"), "--set", "slice.max_layers=0"]);
+    let fine = write(
+        dir.path(),
+        "q.toml",
+        &text_of.replace("1e-4", "0.2").replace("1e300", "0.4"),
+    );
+    let o = lamina(&[
+        "check",
+        fine.to_str().expect("utf-8"),
+        "--set",
+        "slice.max_layers=0",
+    ]);
     let err = text(&o.stderr);
     assert_eq!(o.status.code(), Some(2), "{err}");
-    assert!(err.contains("`max_layers` = 0 is outside its range 1 to 10000000"), "{err}");
+    assert!(
+        err.contains("`max_layers` = 0 is outside its range 1 to 10000000"),
+        "{err}"
+    );
     let o = lamina(&["check", fine.to_str().expect("utf-8")]);
     assert!(o.status.success(), "{}", text(&o.stderr));
 }

@@ -868,7 +868,7 @@ fn options_that_would_exhaust_the_machine_stop_at_the_grid_limit() {
     assert_ne!(fine, pipe);
     let err = text(&try_run_text(dir.path(), &fine).stderr);
     assert!(
-        err.contains("diameter: must lie between 0.001 and 1000 mm, not 1e-9"),
+        err.contains("`diameter` = 1e-9 is outside its range 0.001 to 1000"),
         "{err}"
     );
     // A lattice a micrometre apart over the pipe's layers.
@@ -1035,17 +1035,17 @@ fn tool_numbers_beyond_any_machine_are_refused_at_their_key_with_the_range() {
         (
             "use = \"end-mill\"\ndiameter = 0.8",
             "use = \"end-mill\"\ndiameter = 1e300",
-            "must lie between 0.001 and 1000 mm, not 1e300",
+            "`diameter` = 1e300 is outside its range 0.001 to 1000",
         ),
         (
             "rough_allowance = 0.1\n",
             "rough_allowance = 0.1\nfeed = 5e-324\n",
-            "must lie between 0.01 and 10000 mm/s, not 5e-324",
+            "`feed` = 5e-324 is outside its range 0.01 to 10000",
         ),
         (
             "pass = \"rough\"\n",
             "pass = \"rough\"\nspindle = 1e9\n",
-            "must lie between 1 and 200000 rev/min",
+            "`spindle` = 1e9 is outside its range 1 to 200000",
         ),
     ] {
         let dir = tempfile::tempdir().expect("tempdir");

@@ -32,12 +32,16 @@ lamina_api::stage_options! {
         /// the microstructure parts; default: all
         parts: Vec<String> = "[]",
         /// pixel size (mm)
+        #[range(1e-4, 100.0)]
         pixel: f64 = "0.05",
         /// lattice spacing in x, y, z (mm)
+        #[range(0.001, 1000.0)]
         period: [f64; 3] = "[1.0, 1.0, 1.0]",
         /// one inserting point of the lattice (mm)
+        #[range(-1e4, 1e4)]
         origin: [f64; 3] = "[0.0, 0.0, 0.0]",
         /// radius of the spherical void at each inserting point (mm)
+        #[range(0.0, 1000.0)]
         void_radius: f64 = "0.3",
         /// the base cell instead of spheres: `{ shape = "sphere" | "box" | "cylinder", size, aspect, turn, lean, insert, period, origin, tilt }`, sizes and angles numbers or Rhai expressions of x, y, z
         cell: Option<CellSpec>,

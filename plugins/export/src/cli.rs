@@ -42,6 +42,7 @@ lamina_api::stage_options! {
         /// "ascii", "binary" (long commands, little-endian) or "modified" (sub-regions with material data)
         format: Format = r#""ascii""#,
         /// mm per coordinate unit ($$UNITS)
+        #[range(MIN_UNITS, MAX_UNITS)]
         units: f64 = "0.001",
     }
 }

@@ -75,20 +75,25 @@ lamina_api::stage_options! {
         /// without a machine: `tool-change` (T0, T1, ...), `marlin-mixing` (M163/M164 or M165) or `reprap-mixing` (M563/M567)
         flavor: Flavor = r#""tool-change""#,
         /// without a machine: filament diameter (mm); E = length x width x height / cross-section
+        #[range(0.1, 10.0)]
         filament_diameter: f64 = "1.75",
         /// relative extrusion (M83) instead of absolute (M82)
         relative_e: bool = "false",
         /// marlin-mixing: one M165 per mix instead of M163 per channel and M164
         direct_mixing: bool = "false",
         /// marlin-mixing: the virtual tool M164 stores the mix in
+        #[range(0, 255)]
         virtual_tool: u32 = "0",
         /// without a machine: nozzle temperature (°C)
+        #[range(1.0, 500.0)]
         temperature: f64 = "210.0",
         /// without a machine, tool-change: temperature per material name
         temperatures: BTreeMap<String, f64> = "{}",
         /// without a machine: retraction before travel and tool changes (mm of filament; 0: none)
+        #[range(0.0, 100.0)]
         retract: f64 = "1.0",
         /// without a machine: retraction speed (mm/s)
+        #[range(0.1, 1000.0)]
         retract_speed: f64 = "35.0",
         /// without a machine, mixing flavours: material of each channel, in channel order; unset: the pipeline's materials
         channels: Option<Vec<String>>,

@@ -40,22 +40,14 @@ pub const F: SharedOption = SharedOption::new(
     "\"linear\"",
     "\"linear\" (mu r + lambda), \"constant\" (mu), \"wave\" (mu sin(lambda r)), \"power\" ((alpha r)^k), or a Rhai expression / \"file.rhai#fn\" of r, x, y, z, layer, part",
 );
-pub const MU: SharedOption = SharedOption::without_default(
-    "unset: linear: 1
-.within(-1000.0, 1000.0); constant: 1; wave: 1",
-);
-pub const LAMBDA: SharedOption = SharedOption::without_default(
-    "unset: linear: 0
-.within(-1000.0, 1000.0); wave: pi",
-);
-pub const ALPHA: SharedOption = SharedOption::without_default(
-    "power: scale of r, in (0, 1]
-.within(0.0001, 1.0); unset: 1.0",
-);
-pub const K: SharedOption = SharedOption::without_default(
-    "power: exponent, positive
-.within(0.001, 1000.0); unset: 1.0",
-);
+pub const MU: SharedOption =
+    SharedOption::without_default("unset: linear: 1; constant: 1; wave: 1").within(-1000.0, 1000.0);
+pub const LAMBDA: SharedOption =
+    SharedOption::without_default("unset: linear: 0; wave: pi").within(-1000.0, 1000.0);
+pub const ALPHA: SharedOption =
+    SharedOption::without_default("power: scale of r, in (0, 1]; unset: 1.0").within(0.0001, 1.0);
+pub const K: SharedOption =
+    SharedOption::without_default("power: exponent, positive; unset: 1.0").within(0.001, 1000.0);
 
 impl Control {
     /// Builds the control function from a stage's options; `default_linear` gives the

@@ -15,7 +15,8 @@ use crate::weld::{Soup, weld};
 /// Largest `weld` (mm).
 const MAX_WELD: f64 = 1.0;
 
-const WELD: SharedOption = SharedOption::new("1e-5", "vertices closer than this (mm) are merged");
+const WELD: SharedOption =
+    SharedOption::new("1e-5", "vertices closer than this (mm) are merged").within(0.0, MAX_WELD);
 
 // ---------------------------------------------------------------- file readers
 
@@ -162,6 +163,13 @@ lamina_api::register_stage!(StageFactory {
 
 // ---------------------------------------------------------------- generators
 
+/// Shortest length of a generated model: a micrometre, or a millimetre of a part given
+/// in metres.
+const MIN_LENGTH: f64 = 1e-3;
+/// Longest length of a generated model: 100 m, or 100 mm of a part given in
+/// micrometres (with `scale = 0.001`).
+const MAX_LENGTH: f64 = 1e5;
+
 struct Generated(Vec<Mesh>);
 
 impl ModelSource for Generated {
@@ -194,25 +202,35 @@ lamina_api::stage_options! {
     #[derive(Debug)]
     struct GearOptions {
         /// number of teeth
+        #[range(3, 10_000)]
         teeth: usize = "20",
         /// radius of the tooth tips (mm)
+        #[range(MIN_LENGTH, MAX_LENGTH)]
         tip_radius: f64 = "20.0",
         /// radius of the tooth roots (mm)
+        #[range(MIN_LENGTH, MAX_LENGTH)]
         root_radius: f64 = "16.0",
         /// radius of the central bore (mm); 0 for none (`gear-shaft`: the shaft fills it)
+        #[range(0.0, MAX_LENGTH)]
         bore: f64 = "5.0",
         /// thickness of the gear (mm)
+        #[range(MIN_LENGTH, MAX_LENGTH)]
         height: f64 = "8.0",
         /// share of the pitch a tooth takes at its tip
+        #[range(0.0, 1.0)]
         tip_share: f64 = "0.3",
         /// share of the pitch a tooth takes at its root
+        #[range(0.0, 1.0)]
         root_share: f64 = "0.55",
         /// vertices per tip or root land
+        #[range(1, 1000)]
         arc_segments: usize = "4",
         // `gear-shaft` only, after the GEAR_OPTIONS that `gear` documents.
         /// length of the shaft from the bed (mm); unset: 2 * height
+        #[range(MIN_LENGTH, MAX_LENGTH)]
         shaft_length: Option<f64>,
         /// radial gap between shaft and bore (mm)
+        #[range(0.0, MAX_LENGTH)]
         clearance: f64 = "0.2",
     }
 }
@@ -332,12 +350,16 @@ lamina_api::stage_options! {
     #[derive(Debug)]
     struct TubeOptions {
         /// outer radius (mm)
+        #[range(MIN_LENGTH, MAX_LENGTH)]
         outer_radius: f64 = "10.0",
         /// inner radius (mm); 0 makes a rod
+        #[range(0.0, MAX_LENGTH)]
         inner_radius: f64 = "7.0",
         /// height (mm)
+        #[range(MIN_LENGTH, MAX_LENGTH)]
         height: f64 = "20.0",
         /// vertices per circle
+        #[range(3, MAX_SEGMENTS)]
         segments: usize = "128",
     }
 }
@@ -375,6 +397,7 @@ lamina_api::stage_options! {
     #[derive(Debug)]
     struct CubeOptions {
         /// edge length (mm)
+        #[range(MIN_LENGTH, MAX_LENGTH)]
         size: f64 = "20.0",
     }
 }
@@ -416,30 +439,43 @@ lamina_api::stage_options! {
         /// 4-digit NACA section: camber %, its position in tenths, thickness %; unset: 2412
         naca: Option<NacaCode>,
         /// maximum camber (fraction of the chord); overrides naca's first digit; unset: from naca
+        #[range(0.0, 0.1)]
         max_camber: Option<f64>,
         /// chordwise position of the maximum camber (fraction); overrides naca's second digit; unset: from naca
+        #[range(0.0, 1.0)]
         camber_position: Option<f64>,
         /// maximum thickness (fraction of the chord); overrides naca's last two digits; unset: from naca
+        #[range(0.001, 0.4)]
         thickness: Option<f64>,
         /// chord length (mm)
+        #[range(MIN_LENGTH, MAX_LENGTH)]
         chord: f64 = "40.0",
         /// height of the airfoil above the root (mm); unset: 1.5 * chord
+        #[range(MIN_LENGTH, MAX_LENGTH)]
         span: Option<f64>,
         /// rotation of the tip against the base (degrees, about the quarter-chord line), linear along the span
+        #[range(-90.0, 90.0)]
         twist: f64 = "20.0",
         /// airfoil sections along the span, both ends included
+        #[range(2, 10_000)]
         sections: usize = "21",
         /// vertices per airfoil surface, cosine spaced
+        #[range(4, 10_000)]
         points: usize = "48",
         /// root block size along x and y (mm), centred under the airfoil; unset: [1.25 * chord, 0.5 * chord]
+        #[range(MIN_LENGTH, MAX_LENGTH)]
         root_size: Option<[f64; 2]>,
         /// root block height (mm); 0 for a bare airfoil; unset: 0.25 * chord
+        #[range(0.0, MAX_LENGTH)]
         root_height: Option<f64>,
         /// cooling cavities: 0, 1 or 2
+        #[range(0, 2)]
         cavities: usize = "0",
         /// skin thickness around the cavities (mm); unset: 0.03 * chord
+        #[range(MIN_LENGTH, MAX_LENGTH)]
         wall: Option<f64>,
         /// rib thickness between two cavities (mm); unset: `wall`
+        #[range(MIN_LENGTH, MAX_LENGTH)]
         rib: Option<f64>,
     }
 }
@@ -501,6 +537,7 @@ lamina_api::stage_options! {
     #[derive(Debug)]
     struct BoxOptions {
         /// size along x, y, z (mm)
+        #[range(MIN_LENGTH, MAX_LENGTH)]
         size: [f64; 3] = "[20.0, 20.0, 10.0]",
     }
 }

@@ -8,6 +8,10 @@ use std::path::{Path, PathBuf};
 use lamina_api::stage::{LayerSink, OutputFiles};
 use lamina_api::{Contour, Error, LayerPlan, Result, RunInfo, SubRegion};
 
+/// Highest layer number (and layer step) an option names: a slicer makes at most
+/// ten million layers (its `max_layers`).
+pub const MAX_LAYER: usize = 10_000_000;
+
 /// `#rrggbb` of a region's property colour (grey when ungraded).
 pub fn hex(info: &RunInfo, part: usize, r: &SubRegion) -> String {
     let [red, green, blue] = r

@@ -15,7 +15,7 @@ use lamina_api::stage::{
 use lamina_api::{Contour, Error, LayerPlan, PathKind, Result, RunInfo, StageFactory};
 use serde::Serialize;
 
-use crate::draw::{composition_text, escape, hex, round};
+use crate::draw::{MAX_LAYER, composition_text, escape, hex, round};
 use crate::pack::Packer;
 
 const VIEWER_JS: &str = include_str!("../assets/viewer.js");
@@ -28,8 +28,10 @@ lamina_api::stage_options! {
         /// output file, relative to the output folder
         path: PathBuf = r#""viewer.html""#,
         /// keep every n-th layer (large models)
+        #[range(1, MAX_LAYER)]
         every: usize = "1",
         /// decimals kept of the coordinates (mm): the grid the geometry is packed on
+        #[range(0, 9)]
         digits: i32 = "2",
         /// include the planned toolpaths
         toolpaths: bool = "true",

@@ -11,7 +11,7 @@ use lamina_api::stage::{
 use lamina_api::{Contour, Error, LayerPlan, PathKind, Result, RunInfo, StageFactory};
 use tiny_skia::{Color, FillRule, Paint, PathBuilder, Pixmap, Stroke, Transform};
 
-use crate::draw::{EachLayer, layer_bounds, write_file};
+use crate::draw::{EachLayer, MAX_LAYER, layer_bounds, write_file};
 
 /// Most pixels on a picture's longer side.
 const MAX_SIZE: u32 = 8192;
@@ -164,10 +164,13 @@ lamina_api::stage_options! {
         /// file stem: layer 7 of 240 is `png/layer-007.png`
         path: PathBuf = r#""png/layer""#,
         /// write every n-th layer
+        #[range(1, MAX_LAYER)]
         every: usize = "1",
         /// only these layers (indices from 0)
+        #[range(0, MAX_LAYER)]
         layers: Vec<usize> = "[]",
         /// pixels on the longer side
+        #[range(16, MAX_SIZE)]
         size: u32 = "800",
         /// draw the planned extrusion paths
         toolpaths: bool = "true",
@@ -245,12 +248,16 @@ lamina_api::stage_options! {
         /// output file
         path: PathBuf = r#""contact-sheet.png""#,
         /// the layers to show; default: `count` spread evenly
+        #[range(0, MAX_LAYER)]
         layers: Vec<usize> = "[]",
         /// how many layers, first and last included
+        #[range(1, 10_000)]
         count: usize = "12",
         /// tiles per row
+        #[range(1, 256)]
         columns: usize = "4",
         /// tile size in pixels
+        #[range(32, 2048)]
         tile: u32 = "256",
     }
 }
@@ -366,8 +373,10 @@ lamina_api::stage_options! {
         /// output file
         path: PathBuf = r#""stack.png""#,
         /// pixels on the longer side
+        #[range(64, MAX_SIZE)]
         size: u32 = "800",
         /// draw at most this many layers (every n-th beyond), which bounds the memory kept
+        #[range(1, 100_000)]
         max_layers: usize = "400",
     }
 }

@@ -9,7 +9,7 @@ use std::path::PathBuf;
 use lamina_api::stage::{AnyStage, ExportContext, Exporter, LayerSink, StageConfig, StageInfo, StageKind};
 use lamina_api::{LayerPlan, PathKind, Result, RunInfo, StageFactory};
 
-use crate::draw::{EachLayer, composition_text, escape, hex, layer_bounds, path_data, round};
+use crate::draw::{EachLayer, MAX_LAYER, composition_text, escape, hex, layer_bounds, path_data, round};
 
 lamina_api::stage_options! {
     #[derive(Debug, Clone)]
@@ -17,12 +17,15 @@ lamina_api::stage_options! {
         /// file stem: layer 7 of 240 is written to `svg/layer-007.svg`
         path: PathBuf = r#""svg/layer""#,
         /// write every n-th layer
+        #[range(1, MAX_LAYER)]
         every: usize = "1",
         /// only these layers (indices from 0)
+        #[range(0, MAX_LAYER)]
         layers: Vec<usize> = "[]",
         /// draw the planned toolpaths
         toolpaths: bool = "true",
         /// size of the longer side in pixels
+        #[range(16.0, 20_000.0)]
         size: f64 = "800.0",
     }
 }

@@ -25,7 +25,7 @@ use lamina_geom::ring::{polygons_of, ring_of, shape_of};
 
 use crate::area::{distance_to_area, layer_area, offset, surface_now};
 use crate::regions::selected;
-use crate::tool::{ToolSpec, checked};
+use crate::tool::{DIAMETER, FEED, LENGTH, POWER, ToolSpec, checked};
 
 lamina_api::stage_options! {
     #[derive(Debug)]
@@ -33,24 +33,32 @@ lamina_api::stage_options! {
         /// the material regions with the microstructure; default: every layer
         regions: Vec<String> = "[]",
         /// lattice spacing in x, y, z (mm)
+        #[range(0.001, LENGTH)]
         period: [f64; 3] = "[1.0, 1.0, 1.0]",
         /// one inserting point of the lattice (mm)
+        #[range(-1e4, 1e4)]
         origin: [f64; 3] = "[0.0, 0.0, 0.0]",
         /// radius of the spherical void at each inserting point (mm)
+        #[range(0.001, LENGTH)]
         void_radius: f64 = "0.3",
         /// the base cell instead of spheres: `{ shape = "sphere" | "box" | "cylinder", size, aspect, turn, lean, insert, period, origin, tilt }`, sizes and angles numbers or Rhai expressions of x, y, z
         cell: Option<CellSpec>,
         /// the laser's name
         tool: String = r#""laser""#,
         /// spot diameter (mm)
+        #[range(DIAMETER.0, DIAMETER.1)]
         diameter: f64 = "0.05",
         /// share of a ring the next one covers again
+        #[range(0.0, 0.9)]
         overlap: f64 = "0.2",
         /// scan speed (mm/s)
+        #[range(FEED.0, FEED.1)]
         feed: f64 = "50.0",
         /// laser power (W)
+        #[range(POWER.0, POWER.1)]
         power: f64 = "20.0",
         /// depth one pass of the laser takes off (mm): the rings are repeated, each pass focused on the floor it leaves, down to the layer's bottom
+        #[range(0.001, 100.0)]
         depth_per_pass: f64 = "0.1",
     }
 }

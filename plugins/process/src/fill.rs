@@ -13,7 +13,7 @@ use lamina_api::{LayerPlan, Operation, OperationTool, ProcessContext, Result, St
 
 use crate::area::{last_of, layer_area, raster, surface_now};
 use crate::regions::selected;
-use crate::tool::{ToolSpec, checked};
+use crate::tool::{DIAMETER, FEED, ToolSpec, checked};
 
 lamina_api::stage_options! {
     #[derive(Debug)]
@@ -23,8 +23,10 @@ lamina_api::stage_options! {
         /// the filler nozzle's name
         tool: String = r#""filler""#,
         /// width of the filler's track (mm)
+        #[range(DIAMETER.0, DIAMETER.1)]
         diameter: f64 = "1.0",
         /// travel speed while filling (mm/s)
+        #[range(FEED.0, FEED.1)]
         feed: f64 = "30.0",
     }
 }
@@ -99,6 +101,7 @@ lamina_api::stage_options! {
         /// how the filler leaves: `melt-out` (heated above its melting point) or `leach` (dissolved)
         method: String = r#""melt-out""#,
         /// temperature of a melt-out (°C)
+        #[range(1.0, 2000.0)]
         temperature: f64 = "350.0",
     }
 }

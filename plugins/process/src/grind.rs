@@ -16,7 +16,7 @@ use serde::Deserialize;
 
 use crate::area::{last_of, layer_area, offset, raster, surface_now};
 use crate::regions::selected;
-use crate::tool::{ToolSpec, checked};
+use crate::tool::{DIAMETER, FEED, SPINDLE, ToolSpec, checked};
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize)]
 #[serde(rename_all = "lowercase")]
@@ -37,14 +37,19 @@ lamina_api::stage_options! {
         /// the wheel's name
         tool: String = r#""cup-wheel""#,
         /// outer diameter of the wheel's grinding face (mm)
+        #[range(DIAMETER.0, DIAMETER.1)]
         diameter: f64 = "20.0",
         /// distance between the wheel's passes, as a share of its diameter
+        #[range(0.01, 1.0)]
         stepover: f64 = "0.5",
         /// table feed (mm/s)
+        #[range(FEED.0, FEED.1)]
         feed: f64 = "20.0",
         /// speed of the wheel's rim (m/s): vitrified wheels want 20-35; the spindle speed follows from the diameter
+        #[range(0.01, 500.0)]
         surface_speed: f64 = "25.0",
         /// wheel speed (rev/min), instead of `surface_speed`
+        #[range(SPINDLE.0, SPINDLE.1)]
         spindle: Option<f64>,
     }
 }

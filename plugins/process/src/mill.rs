@@ -12,7 +12,7 @@ use lamina_api::{
 
 use crate::area::{adjoining_runs, layer_area, offset};
 use crate::regions::selected;
-use crate::tool::{ToolSpec, checked, non_negative};
+use crate::tool::{DIAMETER, FEED, LENGTH, SPINDLE, ToolSpec, checked, non_negative};
 
 lamina_api::stage_options! {
     #[derive(Debug)]
@@ -22,16 +22,22 @@ lamina_api::stage_options! {
         /// the cutter's name
         tool: String = r#""end-mill""#,
         /// cutter diameter (mm)
+        #[range(DIAMETER.0, DIAMETER.1)]
         diameter: f64 = "2.0",
         /// contour passes along the boundary, each further in by `stepover`
+        #[range(1, 100)]
         passes: usize = "1",
         /// distance between passes, as a share of the diameter
+        #[range(0.01, 1.0)]
         stepover: f64 = "0.5",
         /// widest gap between two regions that still counts as adjoining (mm)
+        #[range(0.0, LENGTH)]
         gap: f64 = "0.1",
         /// feed (mm/s)
+        #[range(FEED.0, FEED.1)]
         feed: f64 = "10.0",
         /// spindle speed (rev/min)
+        #[range(SPINDLE.0, SPINDLE.1)]
         spindle: f64 = "12000.0",
     }
 }

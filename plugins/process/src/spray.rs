@@ -17,7 +17,7 @@ use lamina_api::{LayerPlan, Operation, OperationTool, Polygon, ProcessContext, R
 
 use crate::area::raster;
 use crate::regions::{check_names, selected, value_for};
-use crate::tool::{ToolSpec, checked, non_negative};
+use crate::tool::{DIAMETER, FEED, LENGTH, POWER, ToolSpec, checked, non_negative};
 
 lamina_api::stage_options! {
     #[derive(Debug)]
@@ -25,6 +25,7 @@ lamina_api::stage_options! {
         /// the material regions sprayed; default: every layer
         regions: Vec<String> = "[]",
         /// thickness added for the rough grind (mm), on every region
+        #[range(0.0, LENGTH)]
         rough_allowance: f64 = "0.1",
         /// thickness added for the finish grind (mm), by region name (the microstructure regions)
         finish_allowance: BTreeMap<String, f64> = "{}",
@@ -33,12 +34,16 @@ lamina_api::stage_options! {
         /// the spray gun's name
         tool: String = r#""spray-gun""#,
         /// width of the sprayed track (mm)
+        #[range(DIAMETER.0, DIAMETER.1)]
         diameter: f64 = "3.0",
         /// share of a track the next one covers again
+        #[range(0.0, 0.9)]
         overlap: f64 = "0.25",
         /// travel speed of the gun while spraying (mm/s)
+        #[range(FEED.0, FEED.1)]
         feed: f64 = "100.0",
         /// torch power (W), if the gun takes one
+        #[range(POWER.0, POWER.1)]
         power: Option<f64>,
     }
 }

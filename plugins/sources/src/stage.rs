@@ -97,8 +97,10 @@ lamina_api::stage_options! {
         /// each `{ kind = "point" | "axis" | "plane" | "surface", at = [x, y, z], direction = [x, y, z] (axis direction or plane normal), width (or alpha), k = 1, start, end (material name or fractions), step = 0.25, weight = 1 }`; a `surface` source measures d in space from chosen faces of the part's mesh (Fig. 1d): `faces = { normal = [x, y, z], within = 30.0, groups = ["name"] }` (all faces when absent), or within the layer to the family's boundary with `measure = "layer"`
         sources: Vec<SourceSpec>,
         /// samples along a family's longer side where the distance in space to a `surface` source's faces is sampled
+        #[range(8, 4096)]
         surface_cells: usize = "256",
         /// largest chord error of curved step boundaries (mm)
+        #[range(0.0001, 10.0)]
         tolerance: f64 = "0.001",
         /// where Eq. 8 blends: `intersection` (the paper's regularised booleans: only where effective grading regions 0 <= f <= 1 overlap; a source alone keeps its own composition) or `everywhere` (every source at every point)
         combine: Combine = r#""intersection""#,

@@ -21,14 +21,18 @@ lamina_api::stage_options! {
     #[derive(Debug, Clone)]
     struct Options {
         /// line spacing and extrusion width (mm)
+        #[range(0.01, 50.0)]
         width: f64 = "0.4",
         /// line direction (degrees from x)
+        #[range(-360.0, 360.0)]
         angle: f64 = "45.0",
         /// turn the lines by 90 degrees every other layer
         alternate: bool = "true",
         /// deposition speed (mm/s)
+        #[range(0.01, 10_000.0)]
         speed: f64 = "40.0",
         /// travel speed (mm/s)
+        #[range(0.01, 10_000.0)]
         travel_speed: f64 = "150.0",
     }
 }
@@ -173,10 +177,13 @@ lamina_api::stage_options! {
     #[derive(Debug, Clone)]
     struct CureOptions {
         /// lamp power (W)
+        #[range(0.001, 100_000.0)]
         power: f64 = "100.0",
         /// speed of the lamp over the outline (mm/s)
+        #[range(0.01, 10_000.0)]
         feed: f64 = "20.0",
         /// height of the lamp above the layer (mm)
+        #[range(0.001, 1000.0)]
         height: f64 = "5.0",
     }
 }

@@ -41,6 +41,7 @@ use lamina_api::{
 
 use crate::area::{distance_to_area, layer_area};
 use crate::cell::{Cell, Cutting, RAMP_ANGLE};
+use crate::tool::LENGTH;
 use program::{Program, number};
 
 lamina_api::stage_options! {
@@ -53,16 +54,22 @@ lamina_api::stage_options! {
         /// tool numbers by tool name, without a cell; tools not listed get the next free number
         tools: BTreeMap<String, u32> = "{}",
         /// height above the highest surface so far at which tools travel between operations (mm)
+        #[range(0.0, LENGTH)]
         clearance: f64 = "5.0",
         /// height above the highest surface so far from which cutters ramp in and at which they move between passes (mm)
+        #[range(0.0, LENGTH)]
         approach: f64 = "1.0",
         /// room between a cup wheel's face and the part where it is lowered beside it (mm)
+        #[range(0.0, LENGTH)]
         wheel_margin: f64 = "1.0",
         /// height of the spray gun above the surface it sprays (mm)
+        #[range(0.0, LENGTH)]
         spray_standoff: f64 = "80.0",
         /// height of the filler nozzle above the surface (mm)
+        #[range(0.0, LENGTH)]
         fill_standoff: f64 = "1.0",
         /// feed of a cutter's ramp into the work, as a share of its feed
+        #[range(0.01, 1.0)]
         plunge: f64 = "0.3",
     }
 }
