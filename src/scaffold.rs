@@ -35,6 +35,11 @@ const KINDS: &[(StageKind, &str, &str)] = &[
         "Process",
         include_str!("scaffold/process.rs.in"),
     ),
+    (
+        StageKind::Orient,
+        "Orienter",
+        include_str!("scaffold/orient.rs.in"),
+    ),
 ];
 
 /// What to write.
@@ -162,6 +167,7 @@ impl Request {
             StageKind::Export => format!("use = \"{}\"\npath = \"regions.csv\"", self.name),
             StageKind::Plan => format!("use = \"{}\"\nwidth = 0.45", self.name),
             StageKind::Process => format!("use = \"{}\"\nfeed = 12.0", self.name),
+            StageKind::Orient => format!("use = \"{}\"", self.name),
             _ => format!("use = \"{}\"\nsize = [10.0, 6.0, 2.0]", self.name),
         };
         let mut text = format!(
@@ -171,14 +177,18 @@ impl Request {
             lib = self.lib(),
             suffix = std::env::consts::DLL_SUFFIX
         );
-        let model = if self.kind == StageKind::Model {
-            example.clone()
-        } else {
-            "use = \"tube\"\nheight = 2.0".to_string()
+        let model = match self.kind {
+            StageKind::Model => example.clone(),
+            // A box standing on its end, for the orienter to lay down.
+            StageKind::Orient => "use = \"box\"\nsize = [2.0, 6.0, 10.0]".to_string(),
+            _ => "use = \"tube\"\nheight = 2.0".to_string(),
         };
         text.push_str(&format!(
             "[model]\n{model}\n\n[materials.red]\ncolour = [255, 0, 0]\n[materials.green]\ncolour = [0, 255, 0]\n\n[slice]\nuse = \"uniform\"\nthickness = 0.5\n\n"
         ));
+        if self.kind == StageKind::Orient {
+            text.push_str(&format!("[orient]\n{example}\n\n"));
+        }
         if self.kind == StageKind::Discretise {
             text.push_str(&format!("[discretise]\n{example}\n\n"));
         }

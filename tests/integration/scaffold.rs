@@ -165,6 +165,12 @@ fn every_template_builds_tests_and_runs() {
         assert_eq!(ops[0]["kind"], "my-probe");
         assert_eq!(ops[0]["pass"] == "final", i + 1 == layers.len(), "{layer}");
     }
+    // The orienter lays the box standing on its end (2 x 6 x 10 mm) down along x: 4
+    // layers of 0.5 mm instead of 20.
+    let (_, out) = scaffold(work.path(), "my-orient", "orient");
+    let plan: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(out.join("plan.json")).expect("the plan")).expect("json");
+    assert_eq!(plan["layers"].as_array().expect("layers").len(), 4);
     // No template for a kind is a clear refusal.
     let refused = lamina_in(work.path(), &["new-plugin", "my-slicer", "--kind", "slice"]);
     assert_eq!(refused.status.code(), Some(2));
