@@ -40,6 +40,7 @@ const KINDS: &[(StageKind, &str, &str)] = &[
         "Orienter",
         include_str!("scaffold/orient.rs.in"),
     ),
+    (StageKind::Sort, "Sorter", include_str!("scaffold/sort.rs.in")),
 ];
 
 /// What to write.
@@ -167,7 +168,7 @@ impl Request {
             StageKind::Export => format!("use = \"{}\"\npath = \"regions.csv\"", self.name),
             StageKind::Plan => format!("use = \"{}\"\nwidth = 0.45", self.name),
             StageKind::Process => format!("use = \"{}\"\nfeed = 12.0", self.name),
-            StageKind::Orient => format!("use = \"{}\"", self.name),
+            StageKind::Orient | StageKind::Sort => format!("use = \"{}\"", self.name),
             _ => format!("use = \"{}\"\nsize = [10.0, 6.0, 2.0]", self.name),
         };
         let mut text = format!(
@@ -186,8 +187,8 @@ impl Request {
         text.push_str(&format!(
             "[model]\n{model}\n\n[materials.red]\ncolour = [255, 0, 0]\n[materials.green]\ncolour = [0, 255, 0]\n\n[slice]\nuse = \"uniform\"\nthickness = 0.5\n\n"
         ));
-        if self.kind == StageKind::Orient {
-            text.push_str(&format!("[orient]\n{example}\n\n"));
+        if matches!(self.kind, StageKind::Orient | StageKind::Sort) {
+            text.push_str(&format!("[{}]\n{example}\n\n", self.kind));
         }
         if self.kind == StageKind::Discretise {
             text.push_str(&format!("[discretise]\n{example}\n\n"));

@@ -171,6 +171,32 @@ fn every_template_builds_tests_and_runs() {
     let plan: serde_json::Value =
         serde_json::from_slice(&std::fs::read(out.join("plan.json")).expect("the plan")).expect("json");
     assert_eq!(plan["layers"].as_array().expect("layers").len(), 4);
+    // The sorter finds the tube's hole and gives the families the built-in one gives.
+    let (krate, out) = scaffold(work.path(), "my-sort", "sort");
+    let built_in = lamina_in(
+        &krate,
+        &[
+            "run",
+            "pipeline.toml",
+            "--set",
+            "sort.use=\"hierarchy\"",
+            "--out",
+            "built-in",
+            "-q",
+        ],
+    );
+    assert!(
+        built_in.status.success(),
+        "{}",
+        String::from_utf8_lossy(&built_in.stderr)
+    );
+    let read = |dir: &Path| -> serde_json::Value {
+        serde_json::from_slice(&std::fs::read(dir.join("plan.json")).expect("the plan")).expect("json")
+    };
+    let (ours, theirs) = (read(&out), read(&krate.join("built-in")));
+    assert_eq!(ours["layers"], theirs["layers"]);
+    let family = &ours["layers"][0]["parts"][0]["families"][0];
+    assert_eq!(family["holes"].as_array().map(Vec::len), Some(1), "{family}");
     // No template for a kind is a clear refusal.
     let refused = lamina_in(work.path(), &["new-plugin", "my-slicer", "--kind", "slice"]);
     assert_eq!(refused.status.code(), Some(2));
