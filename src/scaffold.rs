@@ -41,6 +41,7 @@ const KINDS: &[(StageKind, &str, &str)] = &[
         include_str!("scaffold/orient.rs.in"),
     ),
     (StageKind::Sort, "Sorter", include_str!("scaffold/sort.rs.in")),
+    (StageKind::Slice, "Slicer", include_str!("scaffold/slice.rs.in")),
 ];
 
 /// What to write.
@@ -169,6 +170,7 @@ impl Request {
             StageKind::Plan => format!("use = \"{}\"\nwidth = 0.45", self.name),
             StageKind::Process => format!("use = \"{}\"\nfeed = 12.0", self.name),
             StageKind::Orient | StageKind::Sort => format!("use = \"{}\"", self.name),
+            StageKind::Slice => format!("use = \"{}\"\nthickness = 0.5", self.name),
             _ => format!("use = \"{}\"\nsize = [10.0, 6.0, 2.0]", self.name),
         };
         let mut text = format!(
@@ -184,8 +186,13 @@ impl Request {
             StageKind::Orient => "use = \"box\"\nsize = [2.0, 6.0, 10.0]".to_string(),
             _ => "use = \"tube\"\nheight = 2.0".to_string(),
         };
+        let slice = if self.kind == StageKind::Slice {
+            example.clone()
+        } else {
+            "use = \"uniform\"\nthickness = 0.5".to_string()
+        };
         text.push_str(&format!(
-            "[model]\n{model}\n\n[materials.red]\ncolour = [255, 0, 0]\n[materials.green]\ncolour = [0, 255, 0]\n\n[slice]\nuse = \"uniform\"\nthickness = 0.5\n\n"
+            "[model]\n{model}\n\n[materials.red]\ncolour = [255, 0, 0]\n[materials.green]\ncolour = [0, 255, 0]\n\n[slice]\n{slice}\n\n"
         ));
         if matches!(self.kind, StageKind::Orient | StageKind::Sort) {
             text.push_str(&format!("[{}]\n{example}\n\n", self.kind));

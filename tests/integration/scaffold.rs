@@ -49,6 +49,13 @@ fn scaffold(work: &Path, name: &str, kind: &str) -> (PathBuf, PathBuf) {
             && manifest.matches(checkout.as_str()).count() == 2,
         "{manifest}"
     );
+    // What a plugin author starts from is formatted as `cargo fmt` would.
+    let fmt = std::process::Command::new(std::env::var_os("CARGO").unwrap_or_else(|| "cargo".into()))
+        .args(["fmt", "--check"])
+        .current_dir(&krate)
+        .output()
+        .expect("cargo fmt runs");
+    assert!(fmt.status.success(), "{}", String::from_utf8_lossy(&fmt.stdout));
     cargo(&krate, &["build", "--quiet"]);
     cargo(&krate, &["test", "--quiet"]);
     let lib = library(name);
@@ -197,13 +204,47 @@ fn every_template_builds_tests_and_runs() {
     assert_eq!(ours["layers"], theirs["layers"]);
     let family = &ours["layers"][0]["parts"][0]["families"][0];
     assert_eq!(family["holes"].as_array().map(Vec::len), Some(1), "{family}");
+    // The slicer cuts the tube as the built-in one does: the same layers, the same
+    // areas.
+    let (krate, out) = scaffold(work.path(), "my-slicer", "slice");
+    let built_in = lamina_in(
+        &krate,
+        &[
+            "run",
+            "pipeline.toml",
+            "--set",
+            "slice.use=\"uniform\"",
+            "--out",
+            "built-in",
+            "-q",
+        ],
+    );
+    assert!(
+        built_in.status.success(),
+        "{}",
+        String::from_utf8_lossy(&built_in.stderr)
+    );
+    let (ours, theirs) = (read(&out), read(&krate.join("built-in")));
+    let layers = |plan: &serde_json::Value| plan["layers"].as_array().expect("layers").clone();
+    assert_eq!(layers(&ours).len(), 4);
+    assert_eq!(layers(&ours).len(), layers(&theirs).len());
+    for (a, b) in layers(&ours).iter().zip(layers(&theirs).iter()) {
+        assert_eq!(a["z"], b["z"]);
+        let area = |l: &serde_json::Value| l["parts"][0]["families"][0]["area"].as_f64().expect("area");
+        assert!(
+            (area(a) - area(b)).abs() < 1e-9 * area(b),
+            "{} against {}",
+            area(a),
+            area(b)
+        );
+    }
     // No template for a kind is a clear refusal.
-    let refused = lamina_in(work.path(), &["new-plugin", "my-slicer", "--kind", "slice"]);
+    let refused = lamina_in(work.path(), &["new-plugin", "my-cycles", "--kind", "sequence"]);
     assert_eq!(refused.status.code(), Some(2));
     let err = String::from_utf8_lossy(&refused.stderr);
     assert!(
         err.contains("no plugin template") && err.contains("zigzag"),
         "{err}"
     );
-    assert!(!work.path().join("my-slicer").exists());
+    assert!(!work.path().join("my-cycles").exists());
 }
