@@ -186,7 +186,7 @@ enum Command {
     NewPlugin {
         /// The stage's name, also the crate's (lower case, digits, `-`, `_`).
         name: String,
-        /// The stage kind: grade, discretise, export, model, plan, process, orient, sort or slice.
+        /// The stage kind: grade, discretise, export, model, plan, process, orient, sort, slice or sequence.
         #[arg(long, default_value = "grade")]
         kind: String,
         /// The crate's folder (default: the name, in the current directory).

@@ -42,6 +42,11 @@ const KINDS: &[(StageKind, &str, &str)] = &[
     ),
     (StageKind::Sort, "Sorter", include_str!("scaffold/sort.rs.in")),
     (StageKind::Slice, "Slicer", include_str!("scaffold/slice.rs.in")),
+    (
+        StageKind::Sequence,
+        "Sequencer",
+        include_str!("scaffold/sequence.rs.in"),
+    ),
 ];
 
 /// What to write.
@@ -77,8 +82,8 @@ impl Request {
         let kind = StageKind::parse(kind)
             .filter(|k| KINDS.iter().any(|t| t.0 == *k))
             .ok_or_else(|| {
-                usage(format!("no plugin template for the stage kind `{kind}`")).with_help(format!(
-                    "templates: {}; plugins/zigzag in Lamina's source is another planner and process stage to start from",
+                usage(format!("no plugin template for `{kind}`: it is not a stage kind")).with_help(format!(
+                    "kinds: {}; plugins/zigzag in Lamina's source is another planner and process stage to start from",
                     kinds()
                 ))
             })?;
@@ -171,6 +176,7 @@ impl Request {
             StageKind::Process => format!("use = \"{}\"\nfeed = 12.0", self.name),
             StageKind::Orient | StageKind::Sort => format!("use = \"{}\"", self.name),
             StageKind::Slice => format!("use = \"{}\"\nthickness = 0.5", self.name),
+            StageKind::Sequence => format!("use = \"{}\"\ndefault_thickness = 0.5", self.name),
             _ => format!("use = \"{}\"\nsize = [10.0, 6.0, 2.0]", self.name),
         };
         let mut text = format!(
@@ -186,15 +192,19 @@ impl Request {
             StageKind::Orient => "use = \"box\"\nsize = [2.0, 6.0, 10.0]".to_string(),
             _ => "use = \"tube\"\nheight = 2.0".to_string(),
         };
-        let slice = if self.kind == StageKind::Slice {
-            example.clone()
-        } else {
-            "use = \"uniform\"\nthickness = 0.5".to_string()
+        let slice = match self.kind {
+            StageKind::Slice => example.clone(),
+            // Layers where the sequence puts them.
+            StageKind::Sequence => "use = \"adaptive\"".to_string(),
+            _ => "use = \"uniform\"\nthickness = 0.5".to_string(),
         };
         text.push_str(&format!(
             "[model]\n{model}\n\n[materials.red]\ncolour = [255, 0, 0]\n[materials.green]\ncolour = [0, 255, 0]\n\n[slice]\n{slice}\n\n"
         ));
-        if matches!(self.kind, StageKind::Orient | StageKind::Sort) {
+        if matches!(
+            self.kind,
+            StageKind::Orient | StageKind::Sort | StageKind::Sequence
+        ) {
             text.push_str(&format!("[{}]\n{example}\n\n", self.kind));
         }
         if self.kind == StageKind::Discretise {

@@ -238,13 +238,62 @@ fn every_template_builds_tests_and_runs() {
             area(b)
         );
     }
-    // No template for a kind is a clear refusal.
-    let refused = lamina_in(work.path(), &["new-plugin", "my-cycles", "--kind", "sequence"]);
+    // The sequencer gives the paper's pipe (0.2, 0.5 and 1.5 mm layers: an 18-step
+    // work cycle) the layers the built-in work cycles give.
+    let (krate, out) = scaffold(work.path(), "my-cycles", "sequence");
+    assert!(out.join("plan.json").is_file());
+    let pipe = std::fs::read_to_string(root().join("pipelines/pipe-work-cycles.toml")).expect("pipe");
+    let mine = pipe.replace("use = \"work-cycles\"", "use = \"my-cycles\"");
+    assert_ne!(mine, pipe);
+    let lib = library("my-cycles");
+    for (name, text, plugin) in [("mine", mine.as_str(), true), ("theirs", pipe.as_str(), false)] {
+        let file = format!("{name}.toml");
+        std::fs::write(krate.join(&file), text).expect("write");
+        let mut args = vec!["run", file.as_str(), "--out", name, "-q"];
+        if plugin {
+            args.extend(["--plugin", lib.to_str().expect("utf-8")]);
+        }
+        let run = lamina_in(&krate, &args);
+        assert!(
+            run.status.success(),
+            "{name}: {}",
+            String::from_utf8_lossy(&run.stderr)
+        );
+    }
+    let cycles = |dir: &str| -> serde_json::Value {
+        let plan = std::fs::read(krate.join(dir).join("pipe-work-cycles.json")).expect("the plan");
+        serde_json::from_slice(&plan).expect("json")
+    };
+    let (ours, theirs) = (cycles("mine"), cycles("theirs"));
+    assert_eq!(ours["layer_count"], 46, "{}", ours["sequence"]);
+    assert_eq!(ours["sequence"], theirs["sequence"]);
+    assert_eq!(ours["layers"], theirs["layers"]);
+    // Every stage kind has a template; anything else is a clear refusal.
+    for kind in lamina_core::StageKind::ALL {
+        let dir = work.path().join(format!("any-{kind}"));
+        let written = lamina_in(
+            work.path(),
+            &[
+                "new-plugin",
+                "any",
+                "--kind",
+                kind.name(),
+                "--dir",
+                dir.to_str().expect("utf-8"),
+            ],
+        );
+        assert!(
+            written.status.success(),
+            "{kind}: {}",
+            String::from_utf8_lossy(&written.stderr)
+        );
+    }
+    let refused = lamina_in(work.path(), &["new-plugin", "my-mesh", "--kind", "mesh"]);
     assert_eq!(refused.status.code(), Some(2));
     let err = String::from_utf8_lossy(&refused.stderr);
     assert!(
-        err.contains("no plugin template") && err.contains("zigzag"),
+        err.contains("no plugin template for `mesh`") && err.contains("sequence"),
         "{err}"
     );
-    assert!(!work.path().join("my-cycles").exists());
+    assert!(!work.path().join("my-mesh").exists());
 }
