@@ -39,7 +39,7 @@ printf 'solid lying\n' > $c/stl/empty-ascii.stl
 printf 'v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\no a\nf 1 3 2\nf 1 2 4\nf 2 3 4\nf 1 4 3\nvt 0 0\nf -1/1 -2/1 -3/1\n' > $c/obj/negative.obj
 cp ../pipelines/*.toml $c/pipeline/
 # The shipped machine profiles, and one that starts from a built-in profile.
-cp ../profiles/*.toml $c/machine/
+cp ../machine/profiles/*.toml $c/machine/
 printf 'base = "marlin-mixing-2in1"\nname = "mine"\n[bed]\nmax_height = 100.0\n' > $c/machine/based.toml
 printf '[model]\nuse = "cube"\n[materials.a]\ncolour = [1, 2, 3]\n#set slice.thickness=0.5\n#set output=[{use = "json", path = "p.json"}]\n' > $c/pipeline/set.toml
 cp ../pipelines/gradient.rhai $c/script/

@@ -1,5 +1,6 @@
-//! The machine profiles shipped with Lamina (`profiles/` at the repository root),
-//! embedded so that a pipeline names them without knowing where Lamina is installed.
+//! The machine profiles shipped with Lamina (`machine/profiles/`, inside the crate so
+//! that it packages), embedded so that a pipeline names them without knowing where
+//! Lamina is installed.
 
 /// A shipped profile: the name a pipeline uses and the profile's text.
 #[derive(Debug, Clone, Copy)]
@@ -14,28 +15,28 @@ pub struct BuiltinProfile {
 pub const PROFILES: &[BuiltinProfile] = &[
     BuiltinProfile {
         name: "marlin-mixing-2in1",
-        path: "profiles/marlin-mixing-2in1.toml",
-        text: include_str!("../../profiles/marlin-mixing-2in1.toml"),
+        path: "machine/profiles/marlin-mixing-2in1.toml",
+        text: include_str!("../profiles/marlin-mixing-2in1.toml"),
     },
     BuiltinProfile {
         name: "marlin-toolchanger-2",
-        path: "profiles/marlin-toolchanger-2.toml",
-        text: include_str!("../../profiles/marlin-toolchanger-2.toml"),
+        path: "machine/profiles/marlin-toolchanger-2.toml",
+        text: include_str!("../profiles/marlin-toolchanger-2.toml"),
     },
     BuiltinProfile {
         name: "rrf-dual-gantry-2",
-        path: "profiles/rrf-dual-gantry-2.toml",
-        text: include_str!("../../profiles/rrf-dual-gantry-2.toml"),
+        path: "machine/profiles/rrf-dual-gantry-2.toml",
+        text: include_str!("../profiles/rrf-dual-gantry-2.toml"),
     },
     BuiltinProfile {
         name: "rrf-idex-2",
-        path: "profiles/rrf-idex-2.toml",
-        text: include_str!("../../profiles/rrf-idex-2.toml"),
+        path: "machine/profiles/rrf-idex-2.toml",
+        text: include_str!("../profiles/rrf-idex-2.toml"),
     },
     BuiltinProfile {
         name: "rrf-two-systems-2",
-        path: "profiles/rrf-two-systems-2.toml",
-        text: include_str!("../../profiles/rrf-two-systems-2.toml"),
+        path: "machine/profiles/rrf-two-systems-2.toml",
+        text: include_str!("../profiles/rrf-two-systems-2.toml"),
     },
 ];
 

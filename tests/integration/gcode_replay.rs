@@ -71,7 +71,7 @@ fn profile(name: &str, pipeline: &Path) -> toml::Table {
     let file = if name.ends_with(".toml") {
         pipeline.parent().expect("a folder").join(name)
     } else {
-        root().join("profiles").join(format!("{name}.toml"))
+        root().join("machine/profiles").join(format!("{name}.toml"))
     };
     toml::from_str(&std::fs::read_to_string(&file).expect("profile")).expect("profile TOML")
 }

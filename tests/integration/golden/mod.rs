@@ -259,8 +259,8 @@ benchy! {
 
 #[test]
 fn every_shipped_machine_profile_has_a_benchy_golden_test() {
-    let mut profiles: Vec<String> = std::fs::read_dir(root().join("profiles"))
-        .expect("profiles/")
+    let mut profiles: Vec<String> = std::fs::read_dir(root().join("machine/profiles"))
+        .expect("machine/profiles/")
         .filter_map(|e| e.ok().map(|e| e.path()))
         .filter(|p| p.extension().is_some_and(|x| x == "toml"))
         .filter_map(|p| Some(p.file_stem()?.to_str()?.to_string()))
@@ -273,5 +273,8 @@ fn every_shipped_machine_profile_has_a_benchy_golden_test() {
         "rrf-idex-2",
         "rrf-two-systems-2",
     ];
-    assert_eq!(profiles, tested, "profiles/ against the benchy golden tests");
+    assert_eq!(
+        profiles, tested,
+        "machine/profiles/ against the benchy golden tests"
+    );
 }
