@@ -564,4 +564,131 @@ mod tests {
         assert!(super::parse_default::<f64>("x", "none").is_err());
         assert_eq!(super::parse_default::<f64>("x", "1e-5"), Ok(1e-5));
     }
+
+    const SPACING: SharedOption = SharedOption::new("0.5", "spacing (mm)").within(0.01, 10.0);
+
+    crate::stage_options! {
+        #[derive(Debug)]
+        struct Ranged {
+            /// a length (mm)
+            #[range(0.001, 100.0)]
+            length: f64 = "0.2",
+            /// a count
+            #[range(1, 64)]
+            count: usize = "4",
+            /// an optional share
+            #[range(0.0, 1.0)]
+            share: Option<f64>,
+            /// weights
+            #[range(0.0, 10.0)]
+            weights: Vec<f64> = "[]",
+            /// a point
+            #[range(-5.0, 5.0)]
+            point: [f64; 2] = "[0.0, 0.0]",
+            /// points
+            #[range(-5.0, 5.0)]
+            points: Vec<[f64; 2]> = "[]",
+            spacing: f64 = use SPACING,
+            /// no range
+            name: String = "\"a\"",
+        }
+    }
+
+    fn refusal(text: &str) -> String {
+        toml::from_str::<Ranged>(text)
+            .err()
+            .map(|e| e.message().to_string())
+            .unwrap_or_else(|| panic!("{text} accepted"))
+    }
+
+    #[test]
+    fn ranges_are_declared_in_the_specs() {
+        let ranges: Vec<_> = Ranged::SPECS.iter().map(|o| o.range).collect();
+        assert_eq!(
+            ranges,
+            [
+                Some((0.001, 100.0)),
+                Some((1.0, 64.0)),
+                Some((0.0, 1.0)),
+                Some((0.0, 10.0)),
+                Some((-5.0, 5.0)),
+                Some((-5.0, 5.0)),
+                Some((0.01, 10.0)),
+                None
+            ]
+        );
+    }
+
+    #[test]
+    fn every_number_inside_its_range_is_accepted_ends_included() {
+        let o: Ranged = toml::from_str("").unwrap();
+        assert_eq!((o.length, o.count, o.share, o.spacing), (0.2, 4, None, 0.5));
+        let o: Ranged = toml::from_str(
+            "length = 100.0\ncount = 1\nshare = 0.0\nweights = [0.0, 10.0]\npoint = [-5.0, 5.0]\n\
+             points = [[5.0, -5.0]]\nspacing = 0.01",
+        )
+        .unwrap();
+        assert_eq!((o.length, o.count, o.share), (100.0, 1, Some(0.0)));
+        assert_eq!(
+            (o.weights, o.point, o.points),
+            (vec![0.0, 10.0], [-5.0, 5.0], vec![[5.0, -5.0]])
+        );
+    }
+
+    #[test]
+    fn a_number_outside_its_range_is_refused_with_the_key_the_value_and_the_range() {
+        for (text, message) in [
+            (
+                "length = 1e-4",
+                "`length` = 0.0001 is outside its range 0.001 to 100",
+            ),
+            (
+                "length = 100.5",
+                "`length` = 100.5 is outside its range 0.001 to 100",
+            ),
+            ("length = nan", "`length` = NaN is outside its range 0.001 to 100"),
+            ("count = 0", "`count` = 0 is outside its range 1 to 64"),
+            ("count = 65", "`count` = 65 is outside its range 1 to 64"),
+            ("share = 1.5", "`share` = 1.5 is outside its range 0 to 1"),
+            (
+                "weights = [1.0, -1.0]",
+                "`weights` = -1 is outside its range 0 to 10",
+            ),
+            (
+                "point = [0.0, 1e300]",
+                "`point` = 1e300 is outside its range -5 to 5",
+            ),
+            (
+                "points = [[0.0, 0.0], [5e-324, -6.0]]",
+                "`points` = -6 is outside its range -5 to 5",
+            ),
+            ("spacing = 0.0", "`spacing` = 0 is outside its range 0.01 to 10"),
+        ] {
+            let e = refusal(text);
+            assert!(e.contains(message), "{text}: {e}");
+        }
+    }
+
+    #[test]
+    fn a_default_outside_its_range_is_refused() {
+        const TIGHT: SharedOption = SharedOption::new("5.0", "a bad default").within(0.0, 1.0);
+        crate::stage_options! {
+            #[derive(Debug)]
+            struct Bad {
+                v: f64 = use TIGHT,
+            }
+        }
+        let e = toml::from_str::<Bad>("").unwrap_err();
+        assert!(e.message().contains("`v` = 5 is outside its range 0 to 1"), "{e}");
+        assert!(toml::from_str::<Bad>("v = 0.5").is_ok());
+    }
+
+    #[test]
+    fn numbers_are_written_as_a_user_would() {
+        assert_eq!(super::range_text((0.001, 100.0)), "0.001 to 100");
+        assert_eq!(super::range_text((1e-6, 1e9)), "1e-6 to 1e9");
+        assert_eq!(super::range_text((-1e300, 0.0)), "-1e300 to 0");
+        assert_eq!(super::range_text((0.0001, 999_999_999.0)), "0.0001 to 999999999");
+        assert_eq!(super::range_text((5e-324, 0.5)), "5e-324 to 0.5");
+    }
 }
