@@ -623,6 +623,7 @@ mod tests {
     fn every_number_inside_its_range_is_accepted_ends_included() {
         let o: Ranged = toml::from_str("").unwrap();
         assert_eq!((o.length, o.count, o.share, o.spacing), (0.2, 4, None, 0.5));
+        assert_eq!(o.name, "a");
         let o: Ranged = toml::from_str(
             "length = 100.0\ncount = 1\nshare = 0.0\nweights = [0.0, 10.0]\npoint = [-5.0, 5.0]\n\
              points = [[5.0, -5.0]]\nspacing = 0.01",
