@@ -685,6 +685,19 @@ mod tests {
     }
 
     #[test]
+    fn a_range_on_a_value_without_numbers_refuses_nothing() {
+        crate::stage_options! {
+            #[derive(Debug)]
+            struct Words {
+                #[range(0.0, 1.0)]
+                word: String = "\"five\"",
+            }
+        }
+        assert_eq!(toml::from_str::<Words>("word = \"ten\"").unwrap().word, "ten");
+        assert_eq!(toml::from_str::<Words>("").unwrap().word, "five");
+    }
+
+    #[test]
     fn numbers_are_written_as_a_user_would() {
         assert_eq!(super::range_text((0.001, 100.0)), "0.001 to 100");
         assert_eq!(super::range_text((1e-6, 1e9)), "1e-6 to 1e9");
