@@ -370,8 +370,13 @@ fn execute(cli: Cli) -> Result<(), Failure> {
         Command::Check { args } => {
             // Checking runs none of a plugin's code in lamina.
             let engine = engine(&args, None, None, true)?;
+            // The model is read as a run reads it: a file that does not parse, a part
+            // off the bed or in the wrong units fails here, not in the run.
+            let parts = engine
+                .check_models()
+                .map_err(|error| Failure { error, usage: true })?;
             println!("{}: ok", args.pipeline.display());
-            for line in engine.summary() {
+            for line in engine.summary().into_iter().chain(parts) {
                 println!("  {line}");
             }
             Ok(())

@@ -531,6 +531,46 @@ fn overridden_values_are_reported_at_their_key_in_plain_words() {
     assert!(!err.contains("f64"), "{err}");
 }
 
+/// `lamina check` reads the model as `run` will: a mesh that does not parse or a part
+/// off the machine's bed is refused by `check` (exit 2), not found by the run.
+#[test]
+fn check_reads_the_model_as_the_run_will() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    std::fs::write(
+        dir.path().join("bad.stl"),
+        "solid x\nfacet normal 0 0 1\nouter loop\nvertex 0 0 0\nendloop\nendfacet\n",
+    )
+    .expect("write");
+    let text_of = |file: &str| {
+        format!(
+            "[model]\nuse = \"stl\"\nfile = \"{file}\"\n[materials.a]\ncolour = [255, 0, 0]\n\
+             [slice]\nuse = \"uniform\"\nthickness = 0.5\n"
+        )
+    };
+    let bad = write(dir.path(), "bad.toml", &text_of("bad.stl"));
+    let err = refused(&bad);
+    assert!(err.contains("bad.stl: line 5"), "{err}");
+    // The gear, fine on its own, is checked against the bed once scaled up.
+    let gear = pipelines().join("gear-mixing-gcode.toml");
+    let o = lamina(&["check", gear.to_str().expect("utf-8")]);
+    assert!(o.status.success(), "{}", text(&o.stderr));
+    assert!(
+        text(&o.stdout).contains("part `gear`: 1536 triangles, 40 x 40 x 5 mm"),
+        "{}",
+        text(&o.stdout)
+    );
+    let o = lamina(&[
+        "check",
+        gear.to_str().expect("utf-8"),
+        "--set",
+        "model.tip_radius=400",
+        "--set",
+        "model.root_radius=380",
+    ]);
+    assert_eq!(o.status.code(), Some(2), "{}", text(&o.stdout));
+    assert!(text(&o.stderr).contains("does not fit"), "{}", text(&o.stderr));
+}
+
 /// A number outside its option's physical range is refused at the value, naming the key
 /// and the range, whether the file or a `--set` gave it; a default is never refused.
 #[test]

@@ -2,10 +2,12 @@
 //! on the bed, turned by an orienter, merged per part, and checked against the
 //! machine's bed.
 
+use std::sync::Arc;
+
 use crate::error::{Error, Result};
-use crate::geom::{Point2, Vector2};
+use crate::geom::{BBox2, Point2, Vector2};
 use crate::mesh::{BBox3, Mesh, Vector3};
-use crate::model::{ModelFrame, Orientation};
+use crate::model::{ModelFrame, Orientation, PartInfo};
 use crate::pipeline::{ModelSpec, Placement};
 use crate::stage::{Orienter, StageKind};
 
@@ -46,6 +48,147 @@ impl Engine {
             out.push(meshes);
         }
         Ok(out)
+    }
+}
+
+/// The meshes a run slices, loaded, oriented, made once per part and checked against
+/// the machine's bed.
+pub(super) struct PartMeshes {
+    pub meshes: Vec<Arc<Mesh>>,
+    /// Each part's mesh, by index into `meshes`.
+    pub part_mesh: Vec<usize>,
+    pub parts_info: Vec<PartInfo>,
+    pub bbox: BBox3,
+    pub xy_bounds: BBox2,
+    pub orientation: Option<Orientation>,
+    pub model_frame: Option<ModelFrame>,
+    /// What the readers repaired, for the run's diagnostics.
+    pub warnings: Vec<String>,
+}
+
+impl Engine {
+    /// Every part's mesh as the run slices it: what `run` starts with and what `check`
+    /// reads of the model.
+    pub(super) fn part_meshes(&self, timings: &Timings) -> Result<PartMeshes> {
+        let mut loaded = self.load_models(timings)?;
+        let (orientation, model_frame) = match &self.orienter {
+            Some(o) => {
+                let (orientation, frame) =
+                    timings.time(StageKind::Orient, || orient(o.as_ref(), &mut loaded))?;
+                (Some(orientation), frame)
+            }
+            None => (None, None),
+        };
+        let warnings: Vec<String> = loaded
+            .iter()
+            .flatten()
+            .flat_map(|m| m.warnings.iter().cloned())
+            .collect();
+        // Parts taking the same mesh of the same model (told apart by `family_at`)
+        // share it: it is cut once per layer. Each distinct mesh is made once, moved out
+        // of the loaded models when nothing else needs it, and the loaded models are
+        // dropped: a run holds each mesh once.
+        let mut mesh_keys: Vec<(usize, Option<usize>)> = Vec::new();
+        for p in &self.parts {
+            let model = &loaded[p.model];
+            if let Some(i) = p.mesh
+                && i >= model.len()
+            {
+                return Err(Error::config(format!(
+                    "part `{}` asks for mesh {i}, but its model holds {} meshes",
+                    p.name,
+                    model.len()
+                )));
+            }
+            if !mesh_keys.contains(&(p.model, p.mesh)) {
+                mesh_keys.push((p.model, p.mesh));
+            }
+        }
+        let meshes: Vec<Arc<Mesh>> = (0..mesh_keys.len())
+            .map(|k| {
+                let (m, which) = mesh_keys[k];
+                // Another key still to be made that reads this model's meshes.
+                let needed_later = mesh_keys[k + 1..].iter().any(|&(o, _)| o == m);
+                let mesh = match which {
+                    Some(i) if needed_later => loaded[m][i].clone(),
+                    Some(i) => std::mem::take(&mut loaded[m][i]),
+                    None if needed_later => merge(&loaded[m], &self.models[m].label),
+                    None => merge_owned(std::mem::take(&mut loaded[m]), &self.models[m].label),
+                };
+                Arc::new(mesh)
+            })
+            .collect();
+        drop(loaded);
+        let mut part_mesh = Vec::new();
+        let mut parts_info = Vec::new();
+        for p in &self.parts {
+            let idx = mesh_keys
+                .iter()
+                .position(|&k| k == (p.model, p.mesh))
+                .unwrap_or_default();
+            let bb = meshes[idx].bbox();
+            part_mesh.push(idx);
+            parts_info.push(PartInfo {
+                name: p.name.clone(),
+                materials: p.materials.clone(),
+                mesh: idx,
+                z_min: bb.min.z,
+                z_max: bb.max.z,
+                z_gradient: None,
+            });
+        }
+        let bbox = meshes.iter().fold(BBox3::EMPTY, |b, m| b.union(&m.bbox()));
+        let xy_bounds = if bbox.is_empty() {
+            crate::geom::BBox2::EMPTY
+        } else {
+            crate::geom::BBox2::from_points([
+                Point2::new(bbox.min.x, bbox.min.y),
+                Point2::new(bbox.max.x, bbox.max.y),
+            ])
+        };
+        if let Some(machine) = &self.pipeline.machine {
+            for (p, &mi) in self.parts.iter().zip(&part_mesh) {
+                check_on_bed(machine, &p.name, &meshes[mi], &xy_bounds)?;
+            }
+        }
+        Ok(PartMeshes {
+            meshes,
+            part_mesh,
+            parts_info,
+            bbox,
+            xy_bounds,
+            orientation,
+            model_frame,
+            warnings,
+        })
+    }
+
+    /// Reads the model as a run would (every file parsed, the meshes placed, oriented
+    /// and checked against the machine's bed) without slicing: `lamina check`'s view of
+    /// the parts, a line each.
+    pub fn check_models(&self) -> Result<Vec<String>> {
+        let m = self.part_meshes(&Timings::default())?;
+        let mut lines: Vec<String> = m
+            .parts_info
+            .iter()
+            .zip(&m.part_mesh)
+            .map(|(p, &i)| {
+                let mesh = &m.meshes[i];
+                let size = mesh.bbox().size();
+                format!(
+                    "part `{}`: {} triangles, {} x {} x {} mm",
+                    p.name,
+                    mesh.triangles.len(),
+                    short(size.x),
+                    short(size.y),
+                    short(size.z)
+                )
+            })
+            .collect();
+        if !m.warnings.is_empty() {
+            lines.push(format!("model repairs: {}", m.warnings.join("; ")));
+        }
+        Ok(lines)
     }
 }
 

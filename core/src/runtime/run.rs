@@ -2,7 +2,6 @@
 //! each finished layer streamed to the exporters in build order.
 
 use std::path::Path;
-use std::sync::Arc;
 use std::sync::atomic::Ordering;
 use std::time::Instant;
 
@@ -10,13 +9,10 @@ use rayon::prelude::*;
 
 use super::engine::Engine;
 use super::layer::LayerShared;
-use super::meshes::{check_on_bed, merge, merge_owned, orient, short};
+use super::meshes::{PartMeshes, short};
 use super::report::{Observer, RunReport, Timings};
 use crate::diagnostic::Diagnostic;
 use crate::error::{Error, Result};
-use crate::geom::Point2;
-use crate::mesh::{BBox3, Mesh};
-use crate::model::PartInfo;
 use crate::output::AtomicOutputs;
 use crate::stage::*;
 
@@ -38,91 +34,23 @@ impl Engine {
             .map_err(|e| Error::config(format!("cannot start worker threads: {e}")))?;
 
         // Meshes: one per part (a part takes one mesh of its model, or all merged).
-        let mut loaded = self.load_models(&timings)?;
-        let (orientation, model_frame) = match &self.orienter {
-            Some(o) => {
-                let (orientation, frame) =
-                    timings.time(StageKind::Orient, || orient(o.as_ref(), &mut loaded))?;
-                (Some(orientation), frame)
-            }
-            None => (None, None),
-        };
+        let PartMeshes {
+            meshes,
+            part_mesh,
+            parts_info,
+            bbox,
+            xy_bounds,
+            orientation,
+            model_frame,
+            warnings,
+        } = self.part_meshes(&timings)?;
         let mut diagnostics = Vec::new();
         let mut say = |d: Diagnostic| {
             observer.diagnostic(&d);
             diagnostics.push(d);
         };
-        for mesh in loaded.iter().flatten() {
-            for w in &mesh.warnings {
-                say(Diagnostic::warning(StageKind::Model, w.as_str()));
-            }
-        }
-        // Parts taking the same mesh of the same model (told apart by `family_at`)
-        // share it: it is cut once per layer. Each distinct mesh is made once, moved out
-        // of the loaded models when nothing else needs it, and the loaded models are
-        // dropped: a run holds each mesh once.
-        let mut mesh_keys: Vec<(usize, Option<usize>)> = Vec::new();
-        for p in &self.parts {
-            let model = &loaded[p.model];
-            if let Some(i) = p.mesh
-                && i >= model.len()
-            {
-                return Err(Error::config(format!(
-                    "part `{}` asks for mesh {i}, but its model holds {} meshes",
-                    p.name,
-                    model.len()
-                )));
-            }
-            if !mesh_keys.contains(&(p.model, p.mesh)) {
-                mesh_keys.push((p.model, p.mesh));
-            }
-        }
-        let meshes: Vec<Arc<Mesh>> = (0..mesh_keys.len())
-            .map(|k| {
-                let (m, which) = mesh_keys[k];
-                // Another key still to be made that reads this model's meshes.
-                let needed_later = mesh_keys[k + 1..].iter().any(|&(o, _)| o == m);
-                let mesh = match which {
-                    Some(i) if needed_later => loaded[m][i].clone(),
-                    Some(i) => std::mem::take(&mut loaded[m][i]),
-                    None if needed_later => merge(&loaded[m], &self.models[m].label),
-                    None => merge_owned(std::mem::take(&mut loaded[m]), &self.models[m].label),
-                };
-                Arc::new(mesh)
-            })
-            .collect();
-        drop(loaded);
-        let mut part_mesh = Vec::new();
-        let mut parts_info = Vec::new();
-        for p in &self.parts {
-            let idx = mesh_keys
-                .iter()
-                .position(|&k| k == (p.model, p.mesh))
-                .unwrap_or_default();
-            let bb = meshes[idx].bbox();
-            part_mesh.push(idx);
-            parts_info.push(PartInfo {
-                name: p.name.clone(),
-                materials: p.materials.clone(),
-                mesh: idx,
-                z_min: bb.min.z,
-                z_max: bb.max.z,
-                z_gradient: None,
-            });
-        }
-        let bbox = meshes.iter().fold(BBox3::EMPTY, |b, m| b.union(&m.bbox()));
-        let xy_bounds = if bbox.is_empty() {
-            crate::geom::BBox2::EMPTY
-        } else {
-            crate::geom::BBox2::from_points([
-                Point2::new(bbox.min.x, bbox.min.y),
-                Point2::new(bbox.max.x, bbox.max.y),
-            ])
-        };
-        if let Some(machine) = &self.pipeline.machine {
-            for (p, &mi) in self.parts.iter().zip(&part_mesh) {
-                check_on_bed(machine, &p.name, &meshes[mi], &xy_bounds)?;
-            }
+        for w in &warnings {
+            say(Diagnostic::warning(StageKind::Model, w.as_str()));
         }
         let info = RunInfo {
             base_dir: self.pipeline.base_dir.clone(),
