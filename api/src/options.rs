@@ -452,14 +452,18 @@ macro_rules! stage_options {
                     let given = <Given as ::serde::Deserialize<'de>>::deserialize(deserializer)?;
                     ::core::result::Result::Ok($name {
                         $($field: {
+                            let defaulted = given.$field.0.is_none();
                             let value: $ty = $crate::options::resolve(
                                 given.$field.0,
                                 ::core::stringify!($field),
                                 $default,
                             )?;
-                            // A default outside its range is refused too.
-                            $crate::options::check_range::<$ty, $field>(&value)
-                                .map_err(<D::Error as ::serde::de::Error>::custom)?;
+                            // A given value was checked as it was read; a default
+                            // outside its range is refused here.
+                            if defaulted {
+                                $crate::options::check_range::<$ty, $field>(&value)
+                                    .map_err(<D::Error as ::serde::de::Error>::custom)?;
+                            }
                             value
                         },)*
                     })

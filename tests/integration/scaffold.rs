@@ -85,6 +85,22 @@ fn scaffold(work: &Path, name: &str, kind: &str) -> (PathBuf, PathBuf) {
     (krate.clone(), krate.join("out"))
 }
 
+/// The JSON plan `file` a run wrote into `dir`.
+fn plan_in(dir: &Path, file: &str) -> serde_json::Value {
+    serde_json::from_slice(&std::fs::read(dir.join(file)).expect("the plan")).expect("json")
+}
+
+/// The plan of the crate's pipeline with the built-in stage `set` names in place of the
+/// template's.
+fn built_in_plan(krate: &Path, set: &str) -> serde_json::Value {
+    let run = lamina_in(
+        krate,
+        &["run", "pipeline.toml", "--set", set, "--out", "built-in", "-q"],
+    );
+    assert!(run.status.success(), "{}", String::from_utf8_lossy(&run.stderr));
+    plan_in(&krate.join("built-in"), "plan.json")
+}
+
 #[test]
 fn the_plugin_guide_works_from_scaffold_to_a_loaded_plugin() {
     let guide = std::fs::read_to_string(root().join("docs/plugins.md")).expect("the guide");
@@ -102,8 +118,7 @@ fn the_plugin_guide_works_from_scaffold_to_a_loaded_plugin() {
     let work = tempfile::tempdir().expect("tempdir");
     let (_, out) = scaffold(work.path(), "my-grader", "grade");
     // The template blends red into green between z = 0 and 2 mm.
-    let plan: serde_json::Value =
-        serde_json::from_slice(&std::fs::read(out.join("plan.json")).expect("the plan")).expect("json");
+    let plan = plan_in(&out, "plan.json");
     for layer in plan["layers"].as_array().expect("layers") {
         let z = layer["z"].as_f64().expect("z");
         for region in layer["parts"][0]["families"][0]["regions"]
@@ -138,8 +153,7 @@ fn every_template_builds_tests_and_runs() {
     let (_, out) = scaffold(work.path(), "my-regions", "discretise");
     assert!(out.join("plan.json").is_file());
     let (_, out) = scaffold(work.path(), "my-box", "model");
-    let plan: serde_json::Value =
-        serde_json::from_slice(&std::fs::read(out.join("plan.json")).expect("the plan")).expect("json");
+    let plan = plan_in(&out, "plan.json");
     for layer in plan["layers"].as_array().expect("layers") {
         let area: f64 = layer["parts"][0]["families"][0]["area"].as_f64().expect("area");
         assert!((area - 60.0).abs() < 1e-9, "{area}");
@@ -151,8 +165,7 @@ fn every_template_builds_tests_and_runs() {
     assert_eq!(lines.count(), 4, "{csv}");
     // The planner beads every sub-region's outline with its main material's tool.
     let (_, out) = scaffold(work.path(), "my-beads", "plan");
-    let plan: serde_json::Value =
-        serde_json::from_slice(&std::fs::read(out.join("plan.json")).expect("the plan")).expect("json");
+    let plan = plan_in(&out, "plan.json");
     for layer in plan["layers"].as_array().expect("layers") {
         let regions = layer["parts"][0]["families"][0]["regions"]
             .as_array()
@@ -163,8 +176,7 @@ fn every_template_builds_tests_and_runs() {
     }
     // The process stage probes every layer, the last one twice as `final`.
     let (_, out) = scaffold(work.path(), "my-probe", "process");
-    let plan: serde_json::Value =
-        serde_json::from_slice(&std::fs::read(out.join("plan.json")).expect("the plan")).expect("json");
+    let plan = plan_in(&out, "plan.json");
     let layers = plan["layers"].as_array().expect("layers");
     for (i, layer) in layers.iter().enumerate() {
         let ops = layer["operations"].as_array().expect("operations");
@@ -175,56 +187,20 @@ fn every_template_builds_tests_and_runs() {
     // The orienter lays the box standing on its end (2 x 6 x 10 mm) down along x: 4
     // layers of 0.5 mm instead of 20.
     let (_, out) = scaffold(work.path(), "my-orient", "orient");
-    let plan: serde_json::Value =
-        serde_json::from_slice(&std::fs::read(out.join("plan.json")).expect("the plan")).expect("json");
+    let plan = plan_in(&out, "plan.json");
     assert_eq!(plan["layers"].as_array().expect("layers").len(), 4);
     // The sorter finds the tube's hole and gives the families the built-in one gives.
     let (krate, out) = scaffold(work.path(), "my-sort", "sort");
-    let built_in = lamina_in(
-        &krate,
-        &[
-            "run",
-            "pipeline.toml",
-            "--set",
-            "sort.use=\"hierarchy\"",
-            "--out",
-            "built-in",
-            "-q",
-        ],
-    );
-    assert!(
-        built_in.status.success(),
-        "{}",
-        String::from_utf8_lossy(&built_in.stderr)
-    );
-    let read = |dir: &Path| -> serde_json::Value {
-        serde_json::from_slice(&std::fs::read(dir.join("plan.json")).expect("the plan")).expect("json")
-    };
-    let (ours, theirs) = (read(&out), read(&krate.join("built-in")));
+    let ours = plan_in(&out, "plan.json");
+    let theirs = built_in_plan(&krate, "sort.use=\"hierarchy\"");
     assert_eq!(ours["layers"], theirs["layers"]);
     let family = &ours["layers"][0]["parts"][0]["families"][0];
     assert_eq!(family["holes"].as_array().map(Vec::len), Some(1), "{family}");
     // The slicer cuts the tube as the built-in one does: the same layers, the same
     // areas.
     let (krate, out) = scaffold(work.path(), "my-slicer", "slice");
-    let built_in = lamina_in(
-        &krate,
-        &[
-            "run",
-            "pipeline.toml",
-            "--set",
-            "slice.use=\"uniform\"",
-            "--out",
-            "built-in",
-            "-q",
-        ],
-    );
-    assert!(
-        built_in.status.success(),
-        "{}",
-        String::from_utf8_lossy(&built_in.stderr)
-    );
-    let (ours, theirs) = (read(&out), read(&krate.join("built-in")));
+    let ours = plan_in(&out, "plan.json");
+    let theirs = built_in_plan(&krate, "slice.use=\"uniform\"");
     let layers = |plan: &serde_json::Value| plan["layers"].as_array().expect("layers").clone();
     assert_eq!(layers(&ours).len(), 4);
     assert_eq!(layers(&ours).len(), layers(&theirs).len());
@@ -260,10 +236,7 @@ fn every_template_builds_tests_and_runs() {
             String::from_utf8_lossy(&run.stderr)
         );
     }
-    let cycles = |dir: &str| -> serde_json::Value {
-        let plan = std::fs::read(krate.join(dir).join("pipe-work-cycles.json")).expect("the plan");
-        serde_json::from_slice(&plan).expect("json")
-    };
+    let cycles = |dir: &str| plan_in(&krate.join(dir), "pipe-work-cycles.json");
     let (ours, theirs) = (cycles("mine"), cycles("theirs"));
     assert_eq!(ours["layer_count"], 46, "{}", ours["sequence"]);
     assert_eq!(ours["sequence"], theirs["sequence"]);
