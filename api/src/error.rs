@@ -103,6 +103,22 @@ fn context_suffix(context: &Option<String>) -> String {
 }
 
 impl Error {
+    /// This error, if a script's, as having happened while computing `context` (a
+    /// batch of script calls describes only the call that failed); any other error is
+    /// returned as it is.
+    pub fn in_context(self, context: String) -> Error {
+        match self {
+            Error::Script {
+                location, message, ..
+            } => Error::Script {
+                location,
+                message,
+                context: Some(context),
+            },
+            other => other,
+        }
+    }
+
     /// `errors` as one error: the error itself when there is one, [`Error::Several`]
     /// when there are more; `None` when there are none.
     /// Errors with a place come first, in the order of their places in the files.

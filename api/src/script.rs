@@ -14,7 +14,7 @@
 use std::fmt;
 use std::sync::Arc;
 
-use crate::error::Result;
+use crate::error::{Error, Result};
 use crate::source::Location;
 
 /// The names a script may read; anything else is refused when the script is compiled.
@@ -49,12 +49,19 @@ pub trait Script: Send + Sync + fmt::Debug {
     /// The script's volume fractions of `n` materials, checked.
     fn fractions(&self, args: &ScriptArgs<'_>, n: usize, context: &str) -> Result<Vec<f64>>;
 
-    /// [`fractions`](Self::fractions) for each of `calls` (the values offered and
-    /// what is being computed), in order, stopping at the first error.
-    fn fractions_each(&self, calls: &[(ScriptArgs<'_>, String)], n: usize) -> Result<Vec<Vec<f64>>> {
+    /// [`fractions`](Self::fractions) for each of `calls`, in order, stopping at the
+    /// first error, which comes with the number of the call that failed (`calls.len()`
+    /// for an error of no call) and without a context: the caller describes that one
+    /// call ([`ScriptFn::fractions_each`]).
+    fn fractions_batch(
+        &self,
+        calls: &[ScriptArgs<'_>],
+        n: usize,
+    ) -> std::result::Result<Vec<Vec<f64>>, (usize, Error)> {
         calls
             .iter()
-            .map(|(args, context)| self.fractions(args, n, context))
+            .enumerate()
+            .map(|(i, args)| self.fractions(args, n, "").map_err(|e| (i, e)))
             .collect()
     }
 }
@@ -98,11 +105,35 @@ impl ScriptFn {
         self.0.fractions(args, n, context)
     }
 
-    /// [`fractions`](Self::fractions) for each of `calls` (the values offered and what
-    /// is being computed), in order, stopping at the first error. A stage that grades
-    /// many regions at once asks this way: from a dynamic plugin, the calls reach the
-    /// host in one request.
-    pub fn fractions_each(&self, calls: &[(ScriptArgs<'_>, String)], n: usize) -> Result<Vec<Vec<f64>>> {
-        self.0.fractions_each(calls, n)
+    /// [`fractions`](Self::fractions) for each of `calls`, in order, stopping at the
+    /// first error. A stage that grades many regions at once asks this way: from a
+    /// dynamic plugin, the calls reach the host in one request. `context(i)` says what
+    /// call `i` computes; it is asked only for a call that fails, since describing
+    /// every call costs more than most scripts take to run.
+    pub fn fractions_each(
+        &self,
+        calls: &[ScriptArgs<'_>],
+        n: usize,
+        context: impl FnOnce(usize) -> String,
+    ) -> Result<Vec<Vec<f64>>> {
+        self.0.fractions_batch(calls, n).map_err(|(i, e)| {
+            if i < calls.len() {
+                e.in_context(context(i))
+            } else {
+                e
+            }
+        })
+    }
+
+    /// [`fractions_each`](Self::fractions_each) for a caller that reports which call
+    /// failed rather than what it computed (the host serving a plugin's batch): the
+    /// error comes with the call's number (`calls.len()` for an error of no call) and
+    /// no context.
+    pub fn fractions_batch(
+        &self,
+        calls: &[ScriptArgs<'_>],
+        n: usize,
+    ) -> std::result::Result<Vec<Vec<f64>>, (usize, Error)> {
+        self.0.fractions_batch(calls, n)
     }
 }

@@ -65,3 +65,28 @@ fn every_built_in_stage_gives_the_same_output_through_the_boundary() {
         }
     }
 }
+
+/// A plugin of ABI 7.1 is sent what it knows: graders that read no geometry get the
+/// regions whole, polygons emptied (`Grade`), not their facts (`GradeFacts`, 7.2). Every
+/// grader's example gives what the linked grader gives either way.
+#[test]
+fn graders_give_the_same_output_as_plugins_of_an_older_minor() {
+    let linked = lamina_test_support::registry();
+    let mut older = lamina_core::Registry::new();
+    lamina_core::plugin::add_linked_through_boundary_as(&mut older, "older", 1).expect("the linked stages");
+    older.adopt_defaults(&linked).expect("the default stages");
+    let dir = tempfile::tempdir().expect("tempdir");
+    lamina_test_support::write_models(dir.path());
+    let graders = linked.list(Some(lamina_core::stage::StageKind::Grade));
+    assert!(graders.len() >= 5, "{}", graders.len());
+    for entry in graders {
+        let info = entry.info();
+        let text = lamina_test_support::pipeline_for(info.kind, info.example);
+        let label = entry.label().replace(':', "-");
+        let [direct, through] = [(&linked, "linked"), (&older, "older")].map(|(registry, folder)| {
+            run(registry, &text, dir.path(), &dir.path().join(folder).join(&label))
+                .unwrap_or_else(|e| panic!("{label} ({folder}): {e}"))
+        });
+        assert_eq!(direct, through, "{label}");
+    }
+}

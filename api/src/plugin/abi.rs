@@ -29,6 +29,10 @@ pub const WIRE_SCHEMAS: &[u64] = &[
     0xc0eb_8b22_9dd3_ce19,
     // 7.1: options carry their physical range (`WireOption::range`).
     0x4406_817e_a6d0_9d30,
+    // 7.2: graders that read no geometry are sent regions' facts (`GradeFacts`), and
+    // answer with compositions only (`Graded`); script batches carry no contexts
+    // (`FractionsBatch`, `FailedAt`).
+    0xc68b_340e_c503_2918,
 ];
 /// The minor version of this build: a plugin of this major and of this minor or an
 /// older one loads (the host reads every message an older plugin writes, and sends it

@@ -19,6 +19,7 @@ use super::guard_call;
 use super::wire::*;
 use crate::error::{Error, Result};
 use crate::mesh::Mesh;
+use crate::model::SubRegion;
 use crate::planned::PlanDelta;
 use crate::registry::StageFactory;
 use crate::script::{Compiler, Script, ScriptArgs, ScriptFn, ScriptHost};
@@ -201,19 +202,44 @@ impl Script for HostScript {
         fractions(self.0, args, n, context)
     }
 
-    fn fractions_each(&self, calls: &[(ScriptArgs<'_>, String)], n: usize) -> Result<Vec<Vec<f64>>> {
-        match host_call(&HostRequest::FractionsEach {
+    fn fractions_batch(
+        &self,
+        calls: &[ScriptArgs<'_>],
+        n: usize,
+    ) -> std::result::Result<Vec<Vec<f64>>, (usize, Error)> {
+        // Parts are named once each; the calls refer to them by number.
+        let mut parts: Vec<Cow<'_, str>> = Vec::new();
+        let calls_sent = calls
+            .iter()
+            .map(|a| {
+                let part = match parts.iter().rposition(|p| p == a.part) {
+                    Some(i) => i,
+                    None => {
+                        parts.push(Cow::Borrowed(a.part));
+                        parts.len() - 1
+                    }
+                };
+                WireCall(a.r, a.d, a.x, a.y, a.z, a.layer, part)
+            })
+            .collect();
+        // An error that is no call's (the host unreachable, a reply out of place)
+        // names no call.
+        let nowhere = |e: Error| (calls.len(), e);
+        match host_call(&HostRequest::FractionsBatch {
             script: self.0,
-            calls: calls
-                .iter()
-                .map(|(args, context)| (args.into(), Cow::Borrowed(context.as_str())))
-                .collect(),
+            parts,
+            calls: calls_sent,
             n,
-        })? {
+        })
+        .map_err(nowhere)?
+        {
             HostResponse::FractionSets(v) if v.len() == calls.len() && v.iter().all(|f| f.len() == n) => {
                 Ok(v)
             }
-            other => Err(unexpected(&other)),
+            HostResponse::FailedAt { index, error } if index < calls.len() => {
+                Err((index, Error::from(error)))
+            }
+            other => Err(nowhere(unexpected(&other))),
         }
     }
 }
@@ -362,6 +388,36 @@ fn on_stage<T>(
         Object::Stage { stage, label, .. } => f(&o, stage, label).unwrap_or_else(|| Err(wrong(&o, what))),
         other => Err(wrong(other, what)),
     }
+}
+
+/// Grades `regions` (a list per family of `families`) with the grader behind `handle`;
+/// the reply holds what grading set, since the host has the rest.
+fn grade(
+    handle: u64,
+    family: WireFamily<'static>,
+    families: &[usize],
+    mut regions: Vec<Vec<SubRegion>>,
+) -> Result<Response> {
+    on_stage(handle, "grade", |o, stage, label| match stage {
+        AnyStage::Grade(s) => Some(
+            with_family(o, family, |ctx| {
+                guard_call(label, || s.grade_families(ctx, families, &mut regions))
+            })
+            .map(|()| {
+                Response::Graded(
+                    regions
+                        .into_iter()
+                        .map(|set| {
+                            set.into_iter()
+                                .map(|r| Graded(r.composition, r.samples))
+                                .collect()
+                        })
+                        .collect(),
+                )
+            }),
+        ),
+        _ => None,
+    })
 }
 
 /// Rebuilds a family's context from its message and calls `f` with it.
@@ -561,24 +617,20 @@ fn handle(request: Request<'static>) -> Result<Response> {
             family,
             families,
             regions,
-        } => on_stage(handle, "grade", |o, stage, label| match stage {
-            AnyStage::Grade(s) => {
-                let mut regions = regions.into_owned();
-                Some(
-                    with_family(o, family, |ctx| {
-                        guard_call(label, || s.grade_families(ctx, &families, &mut regions))
-                    })
-                    .map(|()| {
-                        // The host has the polygons: what comes back is what grading set.
-                        for r in regions.iter_mut().flatten() {
-                            r.polygon = Default::default();
-                        }
-                        Response::RegionSets(regions)
-                    }),
-                )
-            }
-            _ => None,
-        }),
+        } => grade(handle, family, &families, regions.into_owned()),
+        Request::GradeFacts {
+            handle,
+            family,
+            families,
+            regions,
+        } => {
+            let regions = regions
+                .into_iter()
+                .zip(families.iter())
+                .map(|(facts, &f)| facts.into_iter().map(|r| r.region(f)).collect())
+                .collect();
+            grade(handle, family, &families, regions)
+        }
         Request::Sequence { handle, info } => on_stage(handle, "sequence", |_, stage, label| match stage {
             AnyStage::Sequence(s) => Some(guard_call(label, || s.sequence(&info)).map(Response::Sequence)),
             _ => None,

@@ -15,12 +15,18 @@ pub fn inspect(path: &Path) -> Result<()> {
     entry_symbol(path, false).map(drop)
 }
 
+/// A plugin library's entry symbol and the ABI minor version its note declares.
+pub(crate) struct Entry {
+    pub symbol: String,
+    pub minor: u32,
+}
+
 /// Largest plugin library read.
 const MAX_LIBRARY_BYTES: u64 = 1 << 30;
 
-/// [`inspect`], giving the name of the entry symbol to look up. A library that runs
-/// `apart`, in a process of its own, may abort on panics: that ends its process only.
-pub(crate) fn entry_symbol(path: &Path, apart: bool) -> Result<String> {
+/// [`inspect`], giving the entry symbol to look up. A library that runs `apart`, in a
+/// process of its own, may abort on panics: that ends its process only.
+pub(crate) fn entry_symbol(path: &Path, apart: bool) -> Result<Entry> {
     use object::{Object, ObjectSection, ObjectSegment};
     // A plugin library is a regular file; a device or FIFO in its place would be read
     // without end. 1 GiB is far above any plugin.
@@ -102,7 +108,10 @@ pub(crate) fn entry_symbol(path: &Path, apart: bool) -> Result<String> {
         ));
     }
     check_note(path, name, &note, apart)?;
-    Ok(symbol)
+    Ok(Entry {
+        minor: note.abi_minor,
+        symbol,
+    })
 }
 
 /// Checks a plugin's ABI note: its versions, and that its panics unwind unless it runs

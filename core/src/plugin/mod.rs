@@ -103,9 +103,9 @@ fn open(path: &Path) -> Result<LoadedPlugin> {
 /// Starts a child process that loads the library, after the same inspection: a file
 /// that is no plugin of this host is refused before any process runs it.
 fn open_apart(path: &Path, program: &ChildProgram) -> Result<LoadedPlugin> {
-    inspect::entry_symbol(path, true)?;
+    let entry = inspect::entry_symbol(path, true)?;
     let (link, name) = child::Link::spawn(program, path)?;
-    let library = Arc::new(host::Library::child(path, name, link));
+    let library = Arc::new(host::Library::child(path, name, entry.minor, link));
     let stages = library.describe()?;
     Ok(LoadedPlugin {
         path: path.to_path_buf(),
@@ -118,7 +118,7 @@ fn open_apart(path: &Path, program: &ChildProgram) -> Result<LoadedPlugin> {
 /// Loads a library into this process once its file, entry and descriptor check out.
 /// One that runs `apart` (in a child process serving a host) may abort on panics.
 fn open_library(path: &Path, apart: bool) -> Result<Arc<host::Library>> {
-    let entry_symbol = inspect::entry_symbol(path, apart)?;
+    let entry_symbol = inspect::entry_symbol(path, apart)?.symbol;
     // SAFETY: loading a library runs its initialisers; plugins are code the user chose
     // to run, like the pipeline that names them, and the file was inspected first.
     let lib = unsafe { libloading::Library::new(path) }
@@ -150,10 +150,19 @@ fn open_library(path: &Path, apart: bool) -> Result<Arc<host::Library>> {
 /// host's services) without a library file. For tests of the boundary: a pipeline run
 /// this way must give what the linked stages give.
 pub fn add_linked_through_boundary(registry: &mut Registry, name: &'static str) -> Result<()> {
+    add_linked_through_boundary_as(registry, name, abi::ABI_MINOR)
+}
+
+/// [`add_linked_through_boundary`], the host taking the plugin for one of ABI minor
+/// `minor`: it is sent only the requests of that minor, as an older plugin would be.
+#[doc(hidden)]
+pub fn add_linked_through_boundary_as(registry: &mut Registry, name: &'static str, minor: u32) -> Result<()> {
     let descriptor: &'static StaticDescriptor = Box::leak(Box::new(StaticDescriptor::new(name)));
     let path = PathBuf::from(format!("<{name}>"));
     // SAFETY: the descriptor is this copy's own, leaked for the life of the process.
-    let library = Arc::new(unsafe { host::Library::new(&path, descriptor.get()) }?);
+    let mut library = unsafe { host::Library::new(&path, descriptor.get()) }?;
+    library.minor = minor.min(library.minor);
+    let library = Arc::new(library);
     for (factory, remote) in library.describe()? {
         registry.add_dynamic(
             factory,

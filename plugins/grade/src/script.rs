@@ -51,21 +51,27 @@ impl Script {
     fn grade_sets(&self, ctx: &FamilyContext<'_>, sets: Vec<(usize, &mut [SubRegion])>) -> Result<()> {
         let part = &ctx.info.parts[ctx.part];
         let n = part.materials.len();
-        let mut calls = Vec::with_capacity(sets.iter().map(|(_, r)| r.len()).sum());
+        let count = sets.iter().map(|(_, r)| r.len()).sum();
+        let mut calls = Vec::with_capacity(count);
+        // Which family and region each call grades, for the message of one that fails.
+        let mut whose = Vec::with_capacity(count);
         for (family, regions) in &sets {
             let fctx = FamilyContext {
                 family: *family,
                 ..*ctx
             };
             for region in regions.iter() {
-                let context = format!(
-                    "part `{}`, layer {} (z = {:.4}), family {family}, region {} (r = {})",
-                    part.name, ctx.layer.index, ctx.layer.z, region.index, region.level
-                );
-                calls.push((region_args(&fctx, region, region.level), context));
+                calls.push(region_args(&fctx, region, region.level));
+                whose.push((*family, region.index, region.level));
             }
         }
-        let all = self.f.fractions_each(&calls, n)?;
+        let all = self.f.fractions_each(&calls, n, |i| {
+            let (family, index, level) = whose[i];
+            format!(
+                "part `{}`, layer {} (z = {:.4}), family {family}, region {index} (r = {level})",
+                part.name, ctx.layer.index, ctx.layer.z
+            )
+        })?;
         for (region, fractions) in sets.into_iter().flat_map(|(_, r)| r.iter_mut()).zip(all) {
             region.composition = Some(Composition::new(fractions)?);
         }

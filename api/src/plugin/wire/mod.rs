@@ -131,7 +131,70 @@ pub enum Request<'a> {
         handle: u64,
         info: Cow<'a, RunInfo>,
     },
+    /// (ABI 7.2) [`Request::Grade`] for a grader that reads no geometry: each region
+    /// as its facts, the family's layer without contours. Replies with
+    /// [`Response::Graded`].
+    GradeFacts {
+        handle: u64,
+        family: WireFamily<'a>,
+        families: Cow<'a, [usize]>,
+        regions: Vec<Vec<RegionFacts>>,
+    },
 }
+
+/// (ABI 7.2) What a grader that reads no geometry knows of a sub-region: all but its
+/// polygon and family (the request's list says that). A tuple on the wire: graders
+/// are sent thousands of these a layer, and field names would be most of the bytes.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct RegionFacts(
+    /// [`SubRegion::index`]
+    pub usize,
+    /// [`SubRegion::count`]
+    pub usize,
+    /// [`SubRegion::level`]
+    pub f64,
+    /// [`SubRegion::cell`]
+    pub Option<usize>,
+    /// [`SubRegion::reference`]
+    pub crate::geom::Point2,
+    /// [`SubRegion::composition`]
+    pub Option<Composition>,
+    /// [`SubRegion::samples`]
+    pub Vec<Sample>,
+);
+
+impl RegionFacts {
+    pub fn of(r: &SubRegion) -> Self {
+        Self(
+            r.index,
+            r.count,
+            r.level,
+            r.cell,
+            r.reference,
+            r.composition.clone(),
+            r.samples.clone(),
+        )
+    }
+
+    /// The region of family `family` these are the facts of, without a polygon.
+    pub fn region(self, family: usize) -> SubRegion {
+        SubRegion {
+            family,
+            index: self.0,
+            count: self.1,
+            level: self.2,
+            polygon: Default::default(),
+            cell: self.3,
+            reference: self.4,
+            composition: self.5,
+            samples: self.6,
+        }
+    }
+}
+
+/// (ABI 7.2) What grading gave a sub-region: its composition and samples.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct Graded(pub Option<Composition>, pub Vec<Sample>);
 
 /// A plugin's answer to a [`Request`].
 #[derive(Debug, Serialize, Deserialize)]
@@ -150,6 +213,9 @@ pub enum Response {
     /// What a planner or a process stage added to the layer it was sent.
     Planned(crate::planned::PlanDelta),
     Done,
+    /// (ABI 7.2) The answer to [`Request::Grade`] and [`Request::GradeFacts`]: what
+    /// grading set in each region, a list per family asked for, in order.
+    Graded(Vec<Vec<Graded>>),
 }
 
 /// What a plugin writes back for every request.
@@ -199,7 +265,22 @@ pub enum HostRequest<'a> {
     Close {
         file: u64,
     },
+    /// (ABI 7.2) [`HostRequest::FractionsEach`] without the contexts: replies with
+    /// [`HostResponse::FractionSets`], or with [`HostResponse::FailedAt`] naming the
+    /// call that failed, for the plugin to describe.
+    FractionsBatch {
+        script: u64,
+        /// The parts' names the calls refer to.
+        parts: Vec<Cow<'a, str>>,
+        calls: Vec<WireCall>,
+        n: usize,
+    },
 }
+
+/// (ABI 7.2) One call of a [`HostRequest::FractionsBatch`]: `r`, `d`, `x`, `y`, `z`,
+/// `layer` and the number of its part in the request's list.
+#[derive(Debug, Clone, Copy, Serialize, Deserialize)]
+pub struct WireCall(pub f64, pub f64, pub f64, pub f64, pub f64, pub i64, pub usize);
 
 /// The host's answer to a [`HostRequest`].
 #[derive(Debug, Serialize, Deserialize)]
@@ -211,6 +292,11 @@ pub enum HostResponse {
     Fractions(Vec<f64>),
     File(u64),
     Done,
+    /// (ABI 7.2) Call `index` of a [`HostRequest::FractionsBatch`] failed with `error`.
+    FailedAt {
+        index: usize,
+        error: WireError,
+    },
 }
 
 /// What the host writes back for every host request.

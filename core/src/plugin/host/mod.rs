@@ -24,7 +24,7 @@ use super::wire::*;
 use super::{copy_reply, refuse};
 use crate::error::{Error, Result};
 use crate::registry::StageFactory;
-use crate::script::{ScriptFn, ScriptHost};
+use crate::script::{ScriptArgs, ScriptFn, ScriptHost};
 use crate::stage::*;
 
 /// A loaded plugin library. Never unloaded, since a library's thread-local
@@ -33,6 +33,8 @@ use crate::stage::*;
 pub struct Library {
     pub path: PathBuf,
     pub name: String,
+    /// The plugin's ABI minor version: it is sent only requests of that minor or older.
+    pub minor: u32,
     transport: Transport,
 }
 
@@ -69,6 +71,7 @@ impl Library {
         Ok(Self {
             path: path.to_path_buf(),
             name,
+            minor: d.abi_minor,
             transport: Transport::InProcess {
                 call: d.call,
                 release: d.release,
@@ -77,10 +80,11 @@ impl Library {
     }
 
     /// A library that a child process loaded, reached through `link`.
-    pub(crate) fn child(path: &Path, name: String, link: Link) -> Self {
+    pub(crate) fn child(path: &Path, name: String, minor: u32, link: Link) -> Self {
         Self {
             path: path.to_path_buf(),
             name,
+            minor,
             transport: Transport::Child(link),
         }
     }
@@ -228,6 +232,7 @@ fn name_of(r: &Response) -> &'static str {
         Response::Sequence(_) => "a sequence",
         Response::Planned(_) => "a plan",
         Response::Done => "done",
+        Response::Graded(_) => "compositions",
     }
 }
 
@@ -329,6 +334,42 @@ impl<'a, 'f> HostCtx<'a, 'f> {
                     .collect::<Result<Vec<_>>>()
                     .map(HostResponse::FractionSets)
             }
+            HostRequest::FractionsBatch {
+                script,
+                parts,
+                calls,
+                n,
+            } => {
+                let f = self.scripts.get(script)?;
+                let args = calls
+                    .iter()
+                    .map(|c| {
+                        let part = parts.get(c.6).ok_or_else(|| {
+                            Error::stage(
+                                "plugin",
+                                format!("named part {} of a script call, of {} sent", c.6, parts.len()),
+                            )
+                        })?;
+                        Ok(ScriptArgs {
+                            r: c.0,
+                            d: c.1,
+                            x: c.2,
+                            y: c.3,
+                            z: c.4,
+                            layer: c.5,
+                            part,
+                        })
+                    })
+                    .collect::<Result<Vec<_>>>()?;
+                Ok(match f.fractions_batch(&args, n) {
+                    Ok(sets) => HostResponse::FractionSets(sets),
+                    Err((index, e)) if index < args.len() => HostResponse::FailedAt {
+                        index,
+                        error: WireError::from(&e),
+                    },
+                    Err((_, e)) => return Err(e),
+                })
+            }
             HostRequest::Create { name } => {
                 let mut creator = self.creator.borrow_mut();
                 let files = creator.as_mut().ok_or_else(|| {
@@ -418,5 +459,105 @@ unsafe extern "C" fn host_call(ctx: *const c_void, request: Bytes, reply: *const
             0
         }
         _ => 1,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::script::ScriptLimits;
+    use std::borrow::Cow;
+
+    /// The host's answer to a plugin's service request, as the bytes a plugin reads.
+    fn served(request: &HostRequest<'_>) -> HostReply {
+        let scripts = ScriptTable::new(Some(crate::script::local(".", ScriptLimits::default())));
+        let files = FileTable::default();
+        let ctx = HostCtx::new(&scripts, &files, None);
+        // What `Compile` gives the script the calls name.
+        let compile = HostRequest::Compile {
+            spec: Cow::Borrowed("if r > 0.75 { 2.0 } else { r }"),
+            origin: None,
+        };
+        let reply: HostReply =
+            decode(&answer(&ctx, &encode(&compile).expect("encodes")).expect("a reply")).expect("decodes");
+        assert!(matches!(reply, Ok(HostResponse::Script(0))), "{reply:?}");
+        decode(&answer(&ctx, &encode(request).expect("encodes")).expect("a reply")).expect("decodes")
+    }
+
+    fn call(r: f64, part: usize) -> WireCall {
+        WireCall(r, 0.0, 1.0, 2.0, 3.0, 4, part)
+    }
+
+    /// A batch without contexts answers each call, or names the call that failed so
+    /// that the plugin describes it; the parts are named once.
+    #[test]
+    fn a_batch_names_the_call_that_failed() {
+        let parts = vec![Cow::Borrowed("a"), Cow::Borrowed("b")];
+        let batch = |calls| HostRequest::FractionsBatch {
+            script: 0,
+            parts: parts.clone(),
+            calls,
+            n: 2,
+        };
+        match served(&batch(vec![call(0.25, 0), call(0.5, 1)])) {
+            Ok(HostResponse::FractionSets(sets)) => assert_eq!(sets, vec![vec![0.25, 0.75], vec![0.5, 0.5]]),
+            other => panic!("{other:?}"),
+        }
+        match served(&batch(vec![
+            call(0.25, 0),
+            call(0.5, 1),
+            call(1.0, 0),
+            call(0.0, 0),
+        ])) {
+            Ok(HostResponse::FailedAt { index, error }) => {
+                assert_eq!(index, 2);
+                let e = Error::from(error);
+                assert!(e.to_string().contains("outside [0, 1]"), "{e}");
+                // The plugin says what the call computed.
+                assert!(
+                    e.in_context("region 7".into())
+                        .to_string()
+                        .contains("(while grading region 7)"),
+                );
+            }
+            other => panic!("{other:?}"),
+        }
+        // A call naming a part that was not sent is the plugin's error.
+        let e = served(&batch(vec![call(0.25, 2)])).expect_err("refused");
+        assert!(
+            Error::from(e)
+                .to_string()
+                .contains("named part 2 of a script call, of 2 sent")
+        );
+    }
+
+    /// A plugin of ABI 7.0 or 7.1 asks with a context for each call: it is still
+    /// served, and its errors carry the context it gave.
+    #[test]
+    fn an_older_plugins_batch_with_contexts_is_served() {
+        let args = |r| WireArgs {
+            r,
+            d: 0.0,
+            x: 0.0,
+            y: 0.0,
+            z: 0.0,
+            layer: 0,
+            part: Cow::Borrowed("p"),
+        };
+        let each = |calls| HostRequest::FractionsEach {
+            script: 0,
+            calls,
+            n: 2,
+        };
+        match served(&each(vec![(args(0.5), Cow::Borrowed("one"))])) {
+            Ok(HostResponse::FractionSets(sets)) => assert_eq!(sets, vec![vec![0.5, 0.5]]),
+            other => panic!("{other:?}"),
+        }
+        let e = served(&each(vec![
+            (args(0.5), Cow::Borrowed("one")),
+            (args(0.9), Cow::Borrowed("two")),
+        ]))
+        .expect_err("fails");
+        assert!(Error::from(e).to_string().contains("(while grading two)"));
     }
 }

@@ -354,12 +354,16 @@ impl Grader for Remote {
         regions: &mut [Vec<SubRegion>],
     ) -> Result<()> {
         let (mut family, sent) = self.family(ctx);
-        // A grader that reads no geometry is sent none: the layer's height, the
-        // regions' levels and references.
-        let bare: Vec<Vec<SubRegion>>;
-        let sent_regions = if self.reads_geometry {
-            Cow::Borrowed(&*regions)
+        let request = if self.reads_geometry {
+            Request::Grade {
+                handle: self.handle,
+                family,
+                families: Cow::Borrowed(families),
+                regions: Cow::Borrowed(&*regions),
+            }
         } else {
+            // A grader that reads no geometry is sent none: the layer's height, the
+            // regions' levels and references.
             family.layer = Cow::Owned(Layer {
                 index: ctx.layer.index,
                 z: ctx.layer.z,
@@ -368,37 +372,60 @@ impl Grader for Remote {
                 warnings: Vec::new(),
             });
             family.tree = Cow::Owned(ContourTree::default());
-            bare = regions
-                .iter()
-                .map(|set| set.iter().map(without_polygon).collect())
-                .collect();
-            Cow::Owned(bare)
-        };
-        match self.request(&Request::Grade {
-            handle: self.handle,
-            family,
-            families: Cow::Borrowed(families),
-            regions: sent_regions,
-        })? {
-            Response::RegionSets(r)
-                if r.len() == regions.len()
-                    && r.iter().zip(regions.iter()).all(|(a, b)| a.len() == b.len()) =>
-            {
-                self.mesh_sent(sent);
-                for (ours, graded) in regions.iter_mut().flatten().zip(r.into_iter().flatten()) {
-                    ours.composition = graded.composition;
-                    ours.samples = graded.samples;
+            if self.library.minor >= 2 {
+                Request::GradeFacts {
+                    handle: self.handle,
+                    family,
+                    families: Cow::Borrowed(families),
+                    regions: regions
+                        .iter()
+                        .map(|set| set.iter().map(RegionFacts::of).collect())
+                        .collect(),
                 }
-                Ok(())
+            } else {
+                Request::Grade {
+                    handle: self.handle,
+                    family,
+                    families: Cow::Borrowed(families),
+                    regions: Cow::Owned(
+                        regions
+                            .iter()
+                            .map(|set| set.iter().map(without_polygon).collect())
+                            .collect(),
+                    ),
+                }
             }
-            Response::RegionSets(r) => Err(self.miscounted(
+        };
+        let graded: Vec<Vec<Graded>> = match self.request(&request)? {
+            Response::Graded(g) => g,
+            // Plugins of ABI 7.0 and 7.1 send the regions back.
+            Response::RegionSets(r) => r
+                .into_iter()
+                .map(|set| {
+                    set.into_iter()
+                        .map(|r| Graded(r.composition, r.samples))
+                        .collect()
+                })
+                .collect(),
+            other => return Err(self.unexpected(&other)),
+        };
+        if graded.len() != regions.len() || graded.iter().zip(regions.iter()).any(|(a, b)| a.len() != b.len())
+        {
+            return Err(self.miscounted(
                 "graded",
-                r.iter().map(Vec::len).sum(),
+                graded.iter().map(Vec::len).sum(),
                 regions.iter().map(Vec::len).sum(),
                 "regions",
-            )),
-            other => Err(self.unexpected(&other)),
+            ));
         }
+        self.mesh_sent(sent);
+        for (ours, Graded(composition, samples)) in
+            regions.iter_mut().flatten().zip(graded.into_iter().flatten())
+        {
+            ours.composition = composition;
+            ours.samples = samples;
+        }
+        Ok(())
     }
 }
 
