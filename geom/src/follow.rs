@@ -30,31 +30,79 @@ impl Area {
     }
 }
 
+/// What following needs of one layer once its polygons are gone: a point inside each
+/// area, and for each area the areas of the layer above that it overlaps. A few numbers
+/// per area, so that the layers of a whole part can be held at once.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct LayerLinks {
+    /// [`Area::inside`] of each area.
+    pub inside: Vec<Point2>,
+    /// For each area, the areas of the next layer up it overlaps (empty on the top
+    /// layer), in increasing order.
+    pub up: Vec<Vec<usize>>,
+}
+
+impl LayerLinks {
+    /// The links of `lower` to `upper`, the layer above (`None` on the top layer).
+    pub fn new(lower: &[Area], upper: Option<&[Area]>) -> Self {
+        Self {
+            inside: lower.iter().map(|a| a.inside).collect(),
+            up: lower
+                .iter()
+                .map(|a| match upper {
+                    Some(upper) => (0..upper.len()).filter(|&f| a.overlaps(&upper[f])).collect(),
+                    None => Vec::new(),
+                })
+                .collect(),
+        }
+    }
+}
+
 /// Per layer, the indices of the areas connected to the one holding `point` in layer
 /// `start`. `None` when no area of that layer holds the point.
 pub fn follow(layers: &[Vec<Area>], start: usize, point: Point2) -> Option<Vec<Vec<usize>>> {
-    let first: Vec<usize> = (0..layers.get(start)?.len())
-        .filter(|&f| layers[start][f].polygon.contains(point))
-        .collect();
+    let first = holding(layers.get(start)?, point);
     if first.is_empty() {
         return None;
     }
-    let mut selected: Vec<Vec<usize>> = vec![Vec::new(); layers.len()];
-    selected[start] = first;
-    for k in start + 1..layers.len() {
-        selected[k] = next(&layers[k - 1], &selected[k - 1], &layers[k]);
-    }
-    for k in (0..start).rev() {
-        selected[k] = next(&layers[k + 1], &selected[k + 1], &layers[k]);
-    }
-    Some(selected)
+    let links: Vec<LayerLinks> = (0..layers.len())
+        .map(|k| LayerLinks::new(&layers[k], layers.get(k + 1).map(Vec::as_slice)))
+        .collect();
+    Some(follow_links(&links, start, first))
 }
 
-/// Areas of `next` overlapping the `selected` areas of `prev`.
-fn next(prev: &[Area], selected: &[usize], next: &[Area]) -> Vec<usize> {
-    (0..next.len())
-        .filter(|&f| selected.iter().any(|&s| prev[s].overlaps(&next[f])))
+/// The areas of `areas` that hold `point`.
+pub fn holding(areas: &[Area], point: Point2) -> Vec<usize> {
+    (0..areas.len())
+        .filter(|&f| areas[f].polygon.contains(point))
         .collect()
+}
+
+/// Per layer, the indices of the areas connected to `first`, areas of layer `start`,
+/// through the overlaps `layers` records: upward, the areas the selected ones overlap;
+/// downward, the areas that overlap a selected one.
+pub fn follow_links(layers: &[LayerLinks], start: usize, first: Vec<usize>) -> Vec<Vec<usize>> {
+    let mut selected: Vec<Vec<usize>> = vec![Vec::new(); layers.len()];
+    if start >= layers.len() {
+        return selected;
+    }
+    selected[start] = first;
+    for k in start..layers.len() - 1 {
+        let mut reached = vec![false; layers[k + 1].inside.len()];
+        for &s in &selected[k] {
+            for &f in &layers[k].up[s] {
+                reached[f] = true;
+            }
+        }
+        selected[k + 1] = (0..reached.len()).filter(|&f| reached[f]).collect();
+    }
+    for k in (0..start).rev() {
+        let above = &selected[k + 1];
+        selected[k] = (0..layers[k].up.len())
+            .filter(|&f| layers[k].up[f].iter().any(|u| above.contains(u)))
+            .collect();
+    }
+    selected
 }
 
 #[cfg(test)]

@@ -357,6 +357,45 @@ fn family_at_splits_one_mesh_into_parts_followed_through_the_layers() {
     );
 }
 
+/// A part picked with `family_at` whose layers' cuts exceed what the pre-pass keeps
+/// (200 layers of 8,192 points, about 26 MB against 16 MB): the layers it did not keep
+/// are cut again, and the plan is the one the part gives without `family_at`, which
+/// has the tube's one solid anyway.
+#[test]
+fn family_at_gives_the_same_part_whether_a_layer_was_kept_or_cut_again() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let pipeline = |pick: &str| {
+        format!(
+            "[model]\nuse = \"tube\"\nouter_radius = 10.0\ninner_radius = 7.0\nheight = 10.0\nsegments = 4096\n\
+             [materials.a]\ncolour = [255, 0, 0]\n[materials.b]\ncolour = [0, 0, 255]\n\
+             [[parts]]\nname = \"tube\"\n{pick}\n\
+             [slice]\nuse = \"uniform\"\nthickness = 0.05\n[grade]\nuse = \"z\"\n[[output]]\nuse = \"json\"\n"
+        )
+    };
+    let plans = ["family_at = [8.5, 0.0, 5.0]", ""].map(|pick| {
+        let folder = dir.path().join(if pick.is_empty() { "all" } else { "picked" });
+        std::fs::create_dir_all(&folder).expect("folder");
+        let p = write(&folder, "p.toml", &pipeline(pick));
+        let out = lamina(&[
+            "run",
+            p.to_str().expect("utf-8"),
+            "--out",
+            folder.join("out").to_str().expect("utf-8"),
+            "-q",
+        ]);
+        assert!(out.status.success(), "{}", text(&out.stderr));
+        std::fs::read(folder.join("out/plan.json")).expect("the plan")
+    });
+    let layers = serde_json::from_slice::<serde_json::Value>(&plans[0]).expect("json")["layers"]
+        .as_array()
+        .map_or(0, Vec::len);
+    assert_eq!(layers, 200);
+    assert!(
+        plans[0] == plans[1],
+        "the picked part differs from the whole mesh's"
+    );
+}
+
 #[test]
 fn view_writes_a_viewer_even_when_the_pipeline_has_none() {
     let dir = tempfile::tempdir().expect("tempdir");
