@@ -30,11 +30,31 @@ export CARGO_PROFILE_RELEASE_OPT_LEVEL="${FUZZ_OPT_LEVEL:-1}"
 scratch="$(mktemp -d)"
 trap 'rm -rf "$scratch"' EXIT
 targets="stl obj threemf threemf_components pipeline machine script cli_roundtrip pipeline_values plugin_messages"
-for t in $targets; do
+# Each target is one process on one core: FUZZ_JOBS of them run at once (default: the
+# machine's cores), and each one's report is printed when all are done.
+jobs_max="${FUZZ_JOBS:-$(nproc)}"
+fuzz_one() {
+    local t="$1"
     mkdir -p "$scratch/$t"
-    echo "== fuzz $t (${seconds} s)"
-    "${fuzz[@]}" run -O -s "$sanitizer" "$t" "$scratch/$t" "corpus/$t" -- \
+    if "${fuzz[@]}" run -O -s "$sanitizer" "$t" "$scratch/$t" "corpus/$t" -- \
         -max_total_time="$seconds" -timeout=30 -rss_limit_mb=2048 -print_final_stats=1 \
-        2>"$scratch/$t.log" || { tail -n 60 "$scratch/$t.log"; echo "fuzz target $t failed"; exit 1; }
+        2>"$scratch/$t.log"; then
+        echo ok >"$scratch/$t.status"
+    else
+        echo failed >"$scratch/$t.status"
+    fi
+}
+for t in $targets; do
+    while [ "$(jobs -rp | wc -l)" -ge "$jobs_max" ]; do wait -n; done
+    fuzz_one "$t" &
+done
+wait
+for t in $targets; do
+    echo "== fuzz $t (${seconds} s)"
+    if [ "$(cat "$scratch/$t.status" 2>/dev/null)" != ok ]; then
+        tail -n 60 "$scratch/$t.log"
+        echo "fuzz target $t failed"
+        exit 1
+    fi
     grep -E "^stat::number_of_executed_units" "$scratch/$t.log" | sed "s/^/  $t: /"
 done
