@@ -247,9 +247,21 @@ fn ogc_errors(p: &lamina_core::Polygon) -> Vec<String> {
             errors.push(InvalidPolygon::TooFewPointsInRing(role));
         }
         let lines: Vec<geo::Line> = r.lines().collect();
-        if geo::algorithm::sweep::Intersections::from_iter(lines.iter())
-            .any(|(a, b, _)| a.start != b.end && a.end != b.start)
-        {
+        // The sweep sorts by x, which a coordinate that is no number breaks: such a
+        // ring is tested pair by pair, as geo does.
+        let crossing = |a: &geo::Line, b: &geo::Line| a.start != b.end && a.end != b.start;
+        let self_intersects = if r.0.iter().all(|c| c.x.is_finite() && c.y.is_finite()) {
+            geo::algorithm::sweep::Intersections::from_iter(lines.iter()).any(|(a, b, _)| crossing(a, b))
+        } else {
+            use geo::Intersects;
+            lines.iter().enumerate().any(|(i, a)| {
+                lines
+                    .iter()
+                    .enumerate()
+                    .any(|(j, b)| i != j && a.intersects(b) && crossing(a, b))
+            })
+        };
+        if self_intersects {
             errors.push(InvalidPolygon::SelfIntersection(role));
         }
         for (k, c) in r.0.iter().enumerate() {

@@ -45,6 +45,7 @@ impl Engine {
             timings,
             surfaces: &[],
             layer_count: SAMPLES,
+            slots: &[],
         };
         (0..self.parts.len())
             .map(|pi| {

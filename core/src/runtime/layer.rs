@@ -5,6 +5,7 @@ use std::sync::Arc;
 
 use super::engine::Engine;
 use super::families::Selections;
+use super::mend::mend_empty;
 use super::report::Timings;
 use crate::diagnostic::Diagnostic;
 use crate::error::{Error, Result};
@@ -23,7 +24,8 @@ impl Engine {
             part_mesh,
             selections,
             timings,
-            meshes: _,
+            meshes,
+            slots,
             surfaces: _,
             layer_count: _,
         } = *shared;
@@ -71,7 +73,13 @@ impl Engine {
                     Some(made) => made,
                     None => {
                         let layer = timings
-                            .time(StageKind::Slice, || prepared[mi].slice(slot))
+                            .time(StageKind::Slice, || {
+                                let layer = prepared[mi].slice(slot)?;
+                                match slots.iter().position(|s| s.index == slot.index) {
+                                    Some(at) => mend_empty(layer, &meshes[mi], &*prepared[mi], slots, at),
+                                    None => Ok(layer),
+                                }
+                            })
                             .map_err(|e| e.in_part(&p.name))?;
                         let tree = timings
                             .time(StageKind::Sort, || self.sorter.sort(&layer))
@@ -301,6 +309,9 @@ pub(super) struct LayerShared<'a> {
     pub(super) surfaces: &'a [Vec<Option<f64>>],
     /// Number of layers of the run: the last one takes what ends the job.
     pub(super) layer_count: usize,
+    /// The run's layers in build order, for a layer an open mesh leaves empty to take
+    /// the contours of its neighbours (none: such a layer stays empty).
+    pub(super) slots: &'a [LayerSlot],
 }
 
 /// The single region of a family that is not discretised.

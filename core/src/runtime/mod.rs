@@ -31,6 +31,7 @@ mod engine;
 mod families;
 mod gradient;
 mod layer;
+mod mend;
 mod meshes;
 mod report;
 mod run;

@@ -142,6 +142,7 @@ impl Engine {
         let shared = LayerShared {
             surfaces: &surfaces,
             layer_count: slots.len(),
+            slots: &slots,
             info: &info,
             meshes: &meshes,
             sequence: sequence.as_ref(),
