@@ -145,6 +145,7 @@ mod tests {
         assert_eq!(s.truncate(0.375), 0.5);
         let d: Vec<f64> = s.thresholds();
         let want = [1.25, 3.75, 6.25, 8.75];
+        assert_eq!(d.len(), want.len());
         for (a, b) in d.iter().zip(want) {
             assert!((a - b).abs() < 1e-12);
         }
@@ -162,6 +163,42 @@ mod tests {
         assert_eq!(s.composition(0.25), [0.75, 0.25]);
         let m = combine(&[(1.0, vec![1.0, 0.0]), (3.0, vec![0.0, 1.0])]);
         assert_eq!(m, [0.25, 0.75]);
+    }
+
+    /// f(d) = (alpha d)^k, alpha d behind a plane, and its inverse, with alpha and k
+    /// other than 1; the distances to data placed off the origin and turned off the
+    /// axes, worked by hand.
+    #[test]
+    fn f_its_inverse_and_distances_away_from_the_origin() {
+        let s = Source {
+            alpha: 0.2,
+            k: 2.0,
+            ..source(0.25)
+        };
+        assert!((s.f(3.0) - 0.36).abs() < 1e-12);
+        assert!((s.f(-2.0) + 0.4).abs() < 1e-12);
+        assert!((s.d_at(0.36) - 3.0).abs() < 1e-12);
+        // Thresholds where f = 0.125, 0.375, 0.625, 0.875: d = sqrt(t) / 0.2.
+        for (d, t) in s.thresholds().iter().zip([0.125f64, 0.375, 0.625, 0.875]) {
+            assert!((d - t.sqrt() / 0.2).abs() < 1e-12, "{d}");
+        }
+        let at = |datum| Source { datum, ..source(0.5) };
+        let p = Point2::new(4.0, 2.0);
+        // (3, 4, 3) from the point.
+        let d = at(Datum::Point([1.0, -2.0, 0.5])).distance(p, 3.5);
+        assert!((d - 34f64.sqrt()).abs() < 1e-12, "{d}");
+        // w = (2, 3, 1) from (1, 1, 1); along (2, 1, 2)/3 it runs 3: 14 - 9 = 5.
+        let axis = at(Datum::Axis {
+            at: [1.0, 1.0, 1.0],
+            direction: [2.0 / 3.0, 1.0 / 3.0, 2.0 / 3.0],
+        });
+        assert!((axis.distance(Point2::new(3.0, 4.0), 2.0) - 5f64.sqrt()).abs() < 1e-12);
+        // (3, 4, 2) from (1, 2, 3) along (2, 3, 6)/7: 30/7.
+        let plane = at(Datum::Plane {
+            at: [1.0, 2.0, 3.0],
+            normal: [2.0 / 7.0, 3.0 / 7.0, 6.0 / 7.0],
+        });
+        assert!((plane.distance(Point2::new(4.0, 6.0), 5.0) - 30.0 / 7.0).abs() < 1e-12);
     }
 
     #[test]
