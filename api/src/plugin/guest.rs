@@ -403,18 +403,7 @@ fn grade(
             with_family(o, family, |ctx| {
                 guard_call(label, || s.grade_families(ctx, families, &mut regions))
             })
-            .map(|()| {
-                Response::Graded(
-                    regions
-                        .into_iter()
-                        .map(|set| {
-                            set.into_iter()
-                                .map(|r| Graded(r.composition, r.samples))
-                                .collect()
-                        })
-                        .collect(),
-                )
-            }),
+            .map(|()| Response::Graded(Graded::of_sets(regions))),
         ),
         _ => None,
     })

@@ -9,8 +9,11 @@ use rayon::prelude::*;
 
 use super::engine::Engine;
 use super::layer::check_tree;
+use super::mend::slice_mended;
 use super::report::Timings;
 use crate::error::{Error, Result};
+use crate::mesh::Mesh;
+use std::sync::Arc;
 use std::sync::Mutex;
 use std::sync::atomic::{AtomicUsize, Ordering};
 
@@ -114,6 +117,7 @@ impl Engine {
     pub(super) fn select_families(
         &self,
         slots: &[LayerSlot],
+        meshes: &[Arc<Mesh>],
         prepared: &[Box<dyn MeshSlicer>],
         part_mesh: &[usize],
         pool: &rayon::ThreadPool,
@@ -128,7 +132,9 @@ impl Engine {
         // The solid areas of a layer of mesh `mi`, cut and sorted; the cut goes into
         // `keep` if the budget allows (and the slot's index is its place).
         let areas = |mi: usize, k: usize, keep: Option<&Mutex<Option<Cut>>>| -> Result<Vec<Area>> {
-            let layer = timings.time(StageKind::Slice, || prepared[mi].slice(&slots[k]))?;
+            let layer = timings.time(StageKind::Slice, || {
+                slice_mended(&*prepared[mi], &meshes[mi], slots, k)
+            })?;
             let tree = timings.time(StageKind::Sort, || self.sorter.sort(&layer))?;
             check_tree(&layer, &tree)?;
             let areas = (0..tree.families.len())

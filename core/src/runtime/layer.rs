@@ -5,7 +5,7 @@ use std::sync::Arc;
 
 use super::engine::Engine;
 use super::families::Selections;
-use super::mend::mend_empty;
+use super::mend::slice_mended;
 use super::report::Timings;
 use crate::diagnostic::Diagnostic;
 use crate::error::{Error, Result};
@@ -74,10 +74,9 @@ impl Engine {
                     None => {
                         let layer = timings
                             .time(StageKind::Slice, || {
-                                let layer = prepared[mi].slice(slot)?;
                                 match slots.iter().position(|s| s.index == slot.index) {
-                                    Some(at) => mend_empty(layer, &meshes[mi], &*prepared[mi], slots, at),
-                                    None => Ok(layer),
+                                    Some(at) => slice_mended(&*prepared[mi], &meshes[mi], slots, at),
+                                    None => prepared[mi].slice(slot),
                                 }
                             })
                             .map_err(|e| e.in_part(&p.name))?;

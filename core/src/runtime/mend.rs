@@ -15,9 +15,20 @@ use crate::stage::MeshSlicer;
 /// from: a hole the height of a few layers is mended, a missing wall is not.
 pub(super) const MEND_REACH: usize = 32;
 
+/// The cut of `mesh` for `slots[at]` by `slicer`, mended as [`mend_empty`] says: how
+/// every pass of a run cuts a layer, so that a layer is the same whichever pass cut it.
+pub(super) fn slice_mended(
+    slicer: &dyn MeshSlicer,
+    mesh: &Mesh,
+    slots: &[LayerSlot],
+    at: usize,
+) -> Result<Layer> {
+    mend_empty(slicer.slice(&slots[at])?, mesh, slicer, slots, at)
+}
+
 /// `layer`, the cut of `mesh` for `slots[at]`, with the contours of its nearest
 /// layer that has some if the mesh crosses it yet it holds none.
-pub(super) fn mend_empty(
+fn mend_empty(
     mut layer: Layer,
     mesh: &Mesh,
     slicer: &dyn MeshSlicer,

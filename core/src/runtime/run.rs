@@ -102,7 +102,7 @@ impl Engine {
             }
         }
 
-        let selections = self.select_families(&slots, &prepared, &part_mesh, &pool, &timings)?;
+        let selections = self.select_families(&slots, &meshes, &prepared, &part_mesh, &pool, &timings)?;
 
         let mut outputs = AtomicOutputs::new(out_dir);
         let mut sinks = Vec::new();

@@ -196,6 +196,19 @@ impl RegionFacts {
 #[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct Graded(pub Option<Composition>, pub Vec<Sample>);
 
+impl Graded {
+    /// What grading set in each region of `sets`, a list per family as they came.
+    pub fn of_sets(sets: Vec<Vec<SubRegion>>) -> Vec<Vec<Graded>> {
+        sets.into_iter()
+            .map(|set| {
+                set.into_iter()
+                    .map(|r| Graded(r.composition, r.samples))
+                    .collect()
+            })
+            .collect()
+    }
+}
+
 /// A plugin's answer to a [`Request`].
 #[derive(Debug, Serialize, Deserialize)]
 pub enum Response {

@@ -399,14 +399,7 @@ impl Grader for Remote {
         let graded: Vec<Vec<Graded>> = match self.request(&request)? {
             Response::Graded(g) => g,
             // Plugins of ABI 7.0 and 7.1 send the regions back.
-            Response::RegionSets(r) => r
-                .into_iter()
-                .map(|set| {
-                    set.into_iter()
-                        .map(|r| Graded(r.composition, r.samples))
-                        .collect()
-                })
-                .collect(),
+            Response::RegionSets(r) => Graded::of_sets(r),
             other => return Err(self.unexpected(&other)),
         };
         if graded.len() != regions.len() || graded.iter().zip(regions.iter()).any(|(a, b)| a.len() != b.len())
