@@ -15,7 +15,7 @@ use std::path::{Path, PathBuf};
 use lamina_core::output::AtomicOutputs;
 use lamina_core::pipeline::{Override, PathElem, Pipeline};
 use lamina_core::stage::OutputFiles;
-use lamina_core::{AnyStage, Error, Mesh, Registry, Result, SourceFile, StageKind};
+use lamina_core::{Error, Mesh, ModelSource, Registry, Result, SourceFile};
 
 /// The file formats `generate` writes.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -156,9 +156,7 @@ pub fn meshes(registry: &Registry, req: &Request) -> Result<Vec<Mesh>> {
         .model
         .ok_or_else(|| Error::config("no model to generate"))?;
     let scripts = lamina_core::script::local(&base_dir, Default::default());
-    let AnyStage::Model(source) = registry.build(StageKind::Model, &spec.table, &scripts, &base_dir)? else {
-        return Err(Error::config(format!("`{}` is not a model stage", req.model)));
-    };
+    let source = registry.build::<dyn ModelSource>(&spec.table, &scripts, &base_dir)?;
     let mut meshes = source.load(&base_dir)?;
     if meshes.iter().all(|m| m.triangles.is_empty()) {
         return Err(Error::stage(&req.model, "the model has no triangles"));

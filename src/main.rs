@@ -7,7 +7,7 @@ mod progress;
 mod report;
 mod scaffold;
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
 use clap::{Parser, Subcommand};
@@ -321,52 +321,7 @@ fn execute(cli: Cli) -> Result<(), Failure> {
             }
             Ok(())
         }
-        Command::View { args, out, no_open } => {
-            let build = || {
-                let mut pipeline = args.load(Some(&out))?;
-                if !pipeline.outputs.iter().any(|o| o.use_name() == Some("html")) {
-                    let mut table = toml::Table::new();
-                    table.insert("use".into(), "html".into());
-                    table.insert("path".into(), format!("{}.html", pipeline.name).into());
-                    pipeline
-                        .outputs
-                        .push(lamina_core::pipeline::TableRef::detached("output", table));
-                }
-                let options = RunOptions {
-                    plugins: args.plugins.clone(),
-                    model: args.model.clone(),
-                    isolation: args.isolation(false)?,
-                    ..RunOptions::default()
-                };
-                Engine::build(pipeline, Registry::linked()?, &options)
-            };
-            let engine = build().map_err(|error| Failure { error, usage: true })?;
-            let observer = progress::Progress::new(false, false);
-            let report = engine.run(&out, &observer);
-            observer.finish();
-            let report = report?;
-            let page = report
-                .files
-                .iter()
-                .find(|f| f.extension().is_some_and(|e| e == "html"))
-                .cloned()
-                .ok_or_else(|| lamina_core::Error::config("the run wrote no HTML viewer"))?;
-            println!("{}", page.display());
-            if !no_open {
-                // Absolute, so that an output folder named `-x` is not read as an option.
-                let page = std::path::absolute(&page).unwrap_or(page);
-                let opened = std::process::Command::new("xdg-open")
-                    .arg(&page)
-                    .stdout(std::process::Stdio::null())
-                    .stderr(std::process::Stdio::null())
-                    .status()
-                    .is_ok_and(|s| s.success());
-                if !opened {
-                    eprintln!("open {} in a browser (it needs no network)", page.display());
-                }
-            }
-            Ok(())
-        }
+        Command::View { args, out, no_open } => view(&args, &out, no_open),
         Command::Check { args } => {
             // Checking runs none of a plugin's code in lamina.
             let engine = engine(&args, None, None, true)?;
@@ -405,61 +360,117 @@ fn execute(cli: Cli) -> Result<(), Failure> {
             kind,
             dir,
             lamina,
-        } => {
-            let request = scaffold::Request::new(&name, &kind, dir, lamina)
-                .map_err(|error| Failure { error, usage: true })?;
-            let files = request.write()?;
-            println!("{}", request.dir.display());
-            for f in files {
-                println!("  {}", f.display());
-            }
-            if request.lamina.is_none() {
-                println!(
-                    "note: it depends on lamina-api {v} from the registry; to take it from a checkout of Lamina, write the crate with --lamina PATH",
-                    v = lamina_core::VERSION
-                );
-            }
-            println!(
-                "build it with `cargo build` in {}, test it with `cargo test`, and load it with `lamina run pipeline.toml --plugin target/debug/{}{}{}`",
-                request.dir.display(),
-                std::env::consts::DLL_PREFIX,
-                name.replace('-', "_"),
-                std::env::consts::DLL_SUFFIX
-            );
-            Ok(())
-        }
+        } => new_plugin(&name, &kind, dir, lamina),
         Command::Plugins {
             kind,
             json,
             markdown,
             plugins,
-        } => {
-            let mut registry = Registry::linked()?;
-            if !plugins.is_empty() {
-                let apart = isolated(ChildProgram::DEFAULT_TIMEOUT.as_secs_f64())?;
-                for p in &plugins {
-                    lamina_core::plugin::load_with(&mut registry, p, &apart)?;
-                }
-            }
-            let kind = match kind.as_deref() {
-                Some(k) => Some(StageKind::parse(k).ok_or_else(|| {
-                    lamina_core::Error::config(format!("no stage kind `{k}`"))
-                        .with_help(format!("kinds: {}", StageKind::ALL.map(|k| k.name()).join(", ")))
-                })?),
-                None => None,
-            };
-            let text = if json {
-                catalogue::json(&registry, kind)
-            } else if markdown {
-                catalogue::markdown(&registry, kind)
-            } else {
-                catalogue::text(&registry, kind)
-            };
-            print!("{text}");
-            Ok(())
-        }
+        } => list_plugins(kind.as_deref(), json, markdown, &plugins),
         Command::PluginHost { library } => {
             std::process::exit(lamina_core::plugin::serve_child(&library));
         }
     }
+}
+
+/// `lamina view`: a run with the HTML viewer among its outputs, opened in a browser.
+fn view(args: &PipelineArgs, out: &Path, no_open: bool) -> Result<(), Failure> {
+    let build = || {
+        let mut pipeline = args.load(Some(out))?;
+        if !pipeline.outputs.iter().any(|o| o.use_name() == Some("html")) {
+            let mut table = toml::Table::new();
+            table.insert("use".into(), "html".into());
+            table.insert("path".into(), format!("{}.html", pipeline.name).into());
+            pipeline
+                .outputs
+                .push(lamina_core::pipeline::TableRef::detached("output", table));
+        }
+        let options = RunOptions {
+            plugins: args.plugins.clone(),
+            model: args.model.clone(),
+            isolation: args.isolation(false)?,
+            ..RunOptions::default()
+        };
+        Engine::build(pipeline, Registry::linked()?, &options)
+    };
+    let engine = build().map_err(|error| Failure { error, usage: true })?;
+    let observer = progress::Progress::new(false, false);
+    let report = engine.run(out, &observer);
+    observer.finish();
+    let report = report?;
+    let page = report
+        .files
+        .iter()
+        .find(|f| f.extension().is_some_and(|e| e == "html"))
+        .cloned()
+        .ok_or_else(|| lamina_core::Error::config("the run wrote no HTML viewer"))?;
+    println!("{}", page.display());
+    if !no_open {
+        // Absolute, so that an output folder named `-x` is not read as an option.
+        let page = std::path::absolute(&page).unwrap_or(page);
+        let opened = std::process::Command::new("xdg-open")
+            .arg(&page)
+            .stdout(std::process::Stdio::null())
+            .stderr(std::process::Stdio::null())
+            .status()
+            .is_ok_and(|s| s.success());
+        if !opened {
+            eprintln!("open {} in a browser (it needs no network)", page.display());
+        }
+    }
+    Ok(())
+}
+
+/// `lamina new-plugin`: a plugin crate written from the template of its kind, and how
+/// to build and load it.
+fn new_plugin(name: &str, kind: &str, dir: Option<PathBuf>, lamina: Option<PathBuf>) -> Result<(), Failure> {
+    let request =
+        scaffold::Request::new(name, kind, dir, lamina).map_err(|error| Failure { error, usage: true })?;
+    let files = request.write()?;
+    println!("{}", request.dir.display());
+    for f in files {
+        println!("  {}", f.display());
+    }
+    if request.lamina.is_none() {
+        println!(
+            "note: it depends on lamina-api {v} from the registry; to take it from a checkout of Lamina, write the crate with --lamina PATH",
+            v = lamina_core::VERSION
+        );
+    }
+    println!(
+        "build it with `cargo build` in {}, test it with `cargo test`, and load it with `lamina run pipeline.toml --plugin target/debug/{}{}{}`",
+        request.dir.display(),
+        std::env::consts::DLL_PREFIX,
+        name.replace('-', "_"),
+        std::env::consts::DLL_SUFFIX
+    );
+    Ok(())
+}
+
+/// `lamina plugins`: the stages the program and the given libraries (loaded apart)
+/// provide, as text, JSON or Markdown.
+fn list_plugins(kind: Option<&str>, json: bool, markdown: bool, plugins: &[PathBuf]) -> Result<(), Failure> {
+    let mut registry = Registry::linked()?;
+    if !plugins.is_empty() {
+        let apart = isolated(ChildProgram::DEFAULT_TIMEOUT.as_secs_f64())?;
+        for p in plugins {
+            lamina_core::plugin::load_with(&mut registry, p, &apart)?;
+        }
+    }
+    let kind = match kind {
+        Some(k) => Some(StageKind::parse(k).ok_or_else(|| {
+            lamina_core::Error::config(format!("no stage kind `{k}`"))
+                .with_help(format!("kinds: {}", StageKind::ALL.map(|k| k.name()).join(", ")))
+        })?),
+        None => None,
+    };
+    let text = if json {
+        catalogue::json(&registry, kind)
+    } else if markdown {
+        catalogue::markdown(&registry, kind)
+    } else {
+        catalogue::text(&registry, kind)
+    };
+    print!("{text}");
+    Ok(())
 }

@@ -14,10 +14,10 @@
 pub mod diagnostic;
 pub mod error;
 pub mod geom;
+pub mod kind;
 pub mod limits;
 pub mod machine;
 pub mod mesh;
-pub mod microstructure;
 pub mod model;
 pub mod options;
 pub mod planned;
@@ -28,8 +28,6 @@ pub mod registry;
 pub mod script;
 pub mod source;
 pub mod stage;
-pub mod steps;
-pub mod surface;
 pub mod table;
 pub mod text;
 

@@ -7,7 +7,7 @@ use serde::{Deserialize, Serialize};
 use crate::diagnostic::{Diagnostic, Severity};
 use crate::error::{Error, Result};
 use crate::geom::{Contour, Point2, Polygon};
-use crate::stage::StageKind;
+use crate::kind::StageKind;
 
 /// Where and how thick one layer is, before it is cut.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]

@@ -181,7 +181,6 @@ option_type! {
     bool = "bool", array "array of bool";
     String = "string", array "array of string";
     PathBuf = "string", array "array of string";
-    crate::surface::FaceSelection = "table", array "array of table";
     crate::machine::Flavor = "string";
 }
 

@@ -15,7 +15,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::geom::{Point2, Polygon};
 use crate::model::Sequence;
-use crate::stage::RunInfo;
+pub use crate::stage::ProcessContext;
 
 /// One operation of a layer, in the order the machine does them.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -120,22 +120,6 @@ pub struct RegionOutline {
     /// Its surface height when the layer begins (mm).
     pub surface: f64,
     pub polygons: Vec<Polygon>,
-}
-
-/// What a process stage knows about the layer it plans.
-#[derive(Debug, Clone, Copy)]
-pub struct ProcessContext<'a> {
-    pub info: &'a RunInfo,
-    /// The fabrication sequence, when the layers follow one.
-    pub sequence: Option<&'a Sequence>,
-    /// The surface height of every material region when this layer begins (finished
-    /// layers end at their design height); `None` for a region not begun yet.
-    pub surfaces: &'a [Option<f64>],
-    /// The other regions that stand higher than this layer's base, cut at the layer's
-    /// height; filled only when some process stage asks for them.
-    pub higher: &'a [RegionOutline],
-    /// True for the job's last layer, where what ends the job goes.
-    pub last: bool,
 }
 
 /// The surface heights of the material regions before each layer of `slots`, from

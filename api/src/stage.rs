@@ -9,72 +9,14 @@ use std::sync::Arc;
 
 use serde::{Deserialize, Serialize};
 
+pub use crate::kind::StageKind;
+
 use crate::error::Result;
 use crate::geom::BBox2;
 use crate::machine::Machine;
 use crate::mesh::Mesh;
 use crate::model::*;
 use crate::script::ScriptHost;
-
-/// The kinds of stage a pipeline is made of, in the order data flows.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize, Deserialize)]
-#[serde(rename_all = "lowercase")]
-pub enum StageKind {
-    /// Produces meshes: file readers and model generators.
-    Model,
-    /// Chooses the build direction of the whole object.
-    Orient,
-    Slice,
-    Sort,
-    Discretise,
-    Grade,
-    Sequence,
-    Plan,
-    /// Operations of a hybrid process on each layer (spray, mill, grind, engrave, ...).
-    Process,
-    Export,
-}
-
-impl StageKind {
-    pub const ALL: [StageKind; 10] = [
-        StageKind::Model,
-        StageKind::Orient,
-        StageKind::Slice,
-        StageKind::Sort,
-        StageKind::Discretise,
-        StageKind::Grade,
-        StageKind::Sequence,
-        StageKind::Plan,
-        StageKind::Process,
-        StageKind::Export,
-    ];
-
-    /// The pipeline table that configures a stage of this kind.
-    pub fn name(self) -> &'static str {
-        match self {
-            StageKind::Model => "model",
-            StageKind::Orient => "orient",
-            StageKind::Slice => "slice",
-            StageKind::Sort => "sort",
-            StageKind::Discretise => "discretise",
-            StageKind::Grade => "grade",
-            StageKind::Sequence => "sequence",
-            StageKind::Plan => "plan",
-            StageKind::Process => "process",
-            StageKind::Export => "export",
-        }
-    }
-
-    pub fn parse(s: &str) -> Option<StageKind> {
-        StageKind::ALL.into_iter().find(|k| k.name() == s)
-    }
-}
-
-impl fmt::Display for StageKind {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        f.write_str(self.name())
-    }
-}
 
 /// One option a stage accepts, for documentation and validation.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize)]
@@ -184,10 +126,73 @@ impl AnyStage {
     }
 }
 
+/// A stage trait as a registry builds it, by type: `registry.build::<dyn Grader>(..)`
+/// gives a `Box<dyn Grader>`, with no match on [`AnyStage`] at the call.
+pub trait StageType {
+    const KIND: StageKind;
+    /// The stage inside `stage`, or `stage` back when it is of another kind.
+    fn from_any(stage: AnyStage) -> std::result::Result<Box<Self>, AnyStage>;
+}
+
+impl AnyStage {
+    /// The stage as its trait, or an error naming both kinds.
+    pub fn into_type<S: StageType + ?Sized>(self) -> Result<Box<S>> {
+        S::from_any(self).map_err(|other| {
+            crate::error::Error::stage(
+                S::KIND.name(),
+                format!("expected a {} stage, got {}", S::KIND, other.kind()),
+            )
+        })
+    }
+}
+
+macro_rules! stage_types {
+    ($($variant:ident => $trait:ident),* $(,)?) => {$(
+        impl StageType for dyn $trait {
+            const KIND: StageKind = StageKind::$variant;
+            fn from_any(stage: AnyStage) -> std::result::Result<Box<Self>, AnyStage> {
+                match stage {
+                    AnyStage::$variant(s) => Ok(s),
+                    other => Err(other),
+                }
+            }
+        }
+    )*};
+}
+
+stage_types! {
+    Model => ModelSource,
+    Orient => Orienter,
+    Slice => Slicer,
+    Sort => Sorter,
+    Discretise => Discretiser,
+    Grade => Grader,
+    Sequence => Sequencer,
+    Plan => Planner,
+    Process => Process,
+    Export => Exporter,
+}
+
 impl fmt::Debug for AnyStage {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         write!(f, "AnyStage({})", self.kind())
     }
+}
+
+/// What a process stage knows about the layer it plans.
+#[derive(Debug, Clone, Copy)]
+pub struct ProcessContext<'a> {
+    pub info: &'a RunInfo,
+    /// The fabrication sequence, when the layers follow one.
+    pub sequence: Option<&'a Sequence>,
+    /// The surface height of every material region when this layer begins (finished
+    /// layers end at their design height); `None` for a region not begun yet.
+    pub surfaces: &'a [Option<f64>],
+    /// The other regions that stand higher than this layer's base, cut at the layer's
+    /// height; filled only when some process stage asks for them.
+    pub higher: &'a [crate::process::RegionOutline],
+    /// True for the job's last layer, where what ends the job goes.
+    pub last: bool,
 }
 
 /// Read-only facts about the run every stage may consult.
@@ -370,7 +375,7 @@ pub trait Planner: Send + Sync {
 /// Plans one kind of operation of a hybrid process on each layer (`[[process]]`
 /// tables, run in their order after the planner): appends to `plan.operations`.
 pub trait Process: Send + Sync {
-    fn process(&self, ctx: &crate::process::ProcessContext<'_>, plan: &mut LayerPlan) -> Result<()>;
+    fn process(&self, ctx: &ProcessContext<'_>, plan: &mut LayerPlan) -> Result<()>;
 
     /// True when the stage needs the outlines of the higher regions around the layer
     /// (`ProcessContext::higher`), which costs a cut of their meshes.

@@ -41,7 +41,7 @@ pub fn stage(kind: StageKind, text: &str, dir: &Path) -> AnyStage {
     let table = lamina_core::pipeline::TableRef::parse_snippet(kind.name(), text).expect("snippet");
     let scripts = lamina_core::script::local(dir, Default::default());
     registry()
-        .build(kind, &table, &scripts, dir)
+        .build_any(kind, &table, &scripts, dir)
         .expect("stage builds")
 }
 

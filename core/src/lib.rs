@@ -16,8 +16,7 @@ pub mod runtime;
 pub mod script;
 
 pub use lamina_api::{
-    diagnostic, error, geom, limits, mesh, microstructure, model, options, planned, process, reach, source,
-    stage, steps, surface, text,
+    diagnostic, error, geom, limits, mesh, model, options, planned, process, reach, source, stage, text,
 };
 pub use lamina_api::{option_type, register_default, register_stage, stage_options};
 

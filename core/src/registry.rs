@@ -7,7 +7,7 @@ use std::path::{Path, PathBuf};
 use crate::error::{Error, Result};
 use crate::pipeline::TableRef;
 use crate::script::ScriptHost;
-use crate::stage::{AnyStage, PipelineContext, StageConfig, StageInfo, StageKind};
+use crate::stage::{AnyStage, PipelineContext, StageConfig, StageInfo, StageKind, StageType};
 
 pub use lamina_api::registry::{DefaultStage, StageFactory};
 
@@ -169,20 +169,44 @@ impl Registry {
             .join(", ")
     }
 
-    /// Builds the stage a table names with `use = "..."`.
-    pub fn build(
+    /// Builds the stage a table names with `use = "..."`, as its trait:
+    /// `registry.build::<dyn Grader>(..)`.
+    pub fn build<S: StageType + ?Sized>(
+        &self,
+        table: &TableRef,
+        scripts: &ScriptHost,
+        base_dir: &Path,
+    ) -> Result<Box<S>> {
+        self.build_for::<S>(table, scripts, base_dir, PipelineContext::default())
+    }
+
+    /// [`Registry::build`] for a pipeline whose machine and limits the stage may consult
+    /// (and check its options against).
+    pub fn build_for<S: StageType + ?Sized>(
+        &self,
+        table: &TableRef,
+        scripts: &ScriptHost,
+        base_dir: &Path,
+        context: PipelineContext<'_>,
+    ) -> Result<Box<S>> {
+        self.build_any_for(S::KIND, table, scripts, base_dir, context)?
+            .into_type()
+    }
+
+    /// Builds the stage of kind `kind` a table names with `use = "..."`, whatever its
+    /// kind: for callers that choose the kind at run time.
+    pub fn build_any(
         &self,
         kind: StageKind,
         table: &TableRef,
         scripts: &ScriptHost,
         base_dir: &Path,
     ) -> Result<AnyStage> {
-        self.build_for(kind, table, scripts, base_dir, PipelineContext::default())
+        self.build_any_for(kind, table, scripts, base_dir, PipelineContext::default())
     }
 
-    /// Builds the stage a table names for a pipeline whose machine and limits the
-    /// stage may consult (and check its options against).
-    pub fn build_for(
+    /// [`Registry::build_any`] for a pipeline's context.
+    pub fn build_any_for(
         &self,
         kind: StageKind,
         table: &TableRef,

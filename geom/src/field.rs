@@ -108,20 +108,27 @@ impl Field {
 
     fn distance_with(&mut self, contours: &[&Contour], wanted: Option<&[bool]>, scratch: &mut Scratch) {
         let n = self.nx * self.ny;
-        let (nx, ny) = (self.nx, self.ny);
         let Scratch { near, from_row } = scratch;
         // Boundary points of the seeds: read only where a seed was measured in this
         // call, so what an earlier call left there needs no clearing.
         near.resize(n, [0.0; 2]);
         // The seeds' squared distances go straight into `values`, which every other
         // sample overwrites below: infinite marks a sample that is not a seed.
+        self.values.clear();
+        self.values.resize(n, f64::INFINITY);
+        self.measure_seeds(contours, near);
+        self.nearest_seed_rows(from_row);
+        self.measure_from_seeds(near, from_row, wanted);
+    }
+
+    /// Seeds are the samples within a cell of the boundary: a thin band keeps the
+    /// nearest seed's boundary point close to the true nearest boundary point. Each
+    /// segment visits, column by column, the samples of its cell-wide neighbourhood
+    /// and measures them exactly: a seed's squared distance into `values`, and its
+    /// nearest boundary point into `near`.
+    fn measure_seeds(&mut self, contours: &[&Contour], near: &mut [[f64; 2]]) {
+        let (nx, ny) = (self.nx, self.ny);
         let values = &mut self.values;
-        values.clear();
-        values.resize(n, f64::INFINITY);
-        // Seeds are the samples within a cell of the boundary: a thin band keeps the
-        // nearest seed's boundary point close to the true nearest boundary point. Each
-        // segment visits, column by column, the samples of its cell-wide neighbourhood
-        // and measures them exactly.
         let h = self.h;
         let h2 = h * h;
         let (ox, oy) = (self.origin.x, self.origin.y);
@@ -157,13 +164,18 @@ impl Field {
                 }
             }
         }
-        // Column pass: the row of the nearest seed in each sample's column, by a sweep
-        // up and a sweep down over whole rows (the seeds are all at 0, so the nearest
-        // in a column is the nearest below or above).
+    }
+
+    /// Column pass: the row of the nearest seed in each sample's column, by a sweep
+    /// up and a sweep down over whole rows (the seeds are all at 0, so the nearest
+    /// in a column is the nearest below or above).
+    fn nearest_seed_rows(&self, from_row: &mut Vec<u32>) {
+        let (nx, ny) = (self.nx, self.ny);
+        let values = &self.values;
         // Every entry is written by the upward sweep, which leaves a seed's own row on
         // the seeds and an earlier row (or none) on the others: the downward sweep
         // tells the seeds by that.
-        from_row.resize(n, u32::MAX);
+        from_row.resize(nx * ny, u32::MAX);
         let mut last = vec![u32::MAX; nx];
         for j in 0..ny {
             let row = j * nx..(j + 1) * nx;
@@ -186,14 +198,21 @@ impl Field {
                 }
             }
         }
-        // Row pass: over the column results (squared distances in samples, made row by
-        // row); the argmin names the column, whose column pass names the row of the
-        // nearest seed. Seeds are kept as (row << 16) | column (grids stay below 2^16
-        // samples a side), so that comparing them needs no division. Every sample
-        // then measures its nearest seed's boundary point (seeds keep their own,
-        // exact), squared until the end.
+    }
+
+    /// Row pass: over the column results (squared distances in samples, made row by
+    /// row); the argmin names the column, whose column pass names the row of the
+    /// nearest seed. Seeds are kept as (row << 16) | column (grids stay below 2^16
+    /// samples a side), so that comparing them needs no division. Every sample
+    /// then measures its nearest seed's boundary point (seeds keep their own,
+    /// exact), squared until the end; samples `wanted` leaves out (seeds aside) stay
+    /// at infinity.
+    fn measure_from_seeds(&mut self, near: &[[f64; 2]], from_row: &[u32], wanted: Option<&[bool]>) {
+        let (nx, ny) = (self.nx, self.ny);
+        let values = &mut self.values;
+        let h = self.h;
+        let (ox, oy) = (self.origin.x, self.origin.y);
         let mut envelope = Envelope::new(nx);
-        let near = &near[..];
         let d2 = |p: Point2, s: u32| {
             if s == u32::MAX {
                 f64::INFINITY

@@ -3,7 +3,6 @@
 
 use std::collections::BTreeMap;
 
-use super::load::config;
 use super::raw::RawAxes;
 use super::template::{Template, TemplateKind};
 use super::*;
@@ -76,5 +75,14 @@ impl Check<'_> {
         let t = Template::new(text.unwrap_or_default());
         t.check(kind, tools).map_err(|e| self.err(path, e.message))?;
         Ok(t)
+    }
+}
+
+/// A configuration error at `location`, or placed nowhere when no file wrote it.
+pub(super) fn config(location: Option<Location>, message: String) -> Error {
+    Error::Config {
+        location,
+        message,
+        help: None,
     }
 }

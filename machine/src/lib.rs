@@ -11,6 +11,7 @@
 
 pub mod builtin;
 mod check;
+mod limits;
 pub mod load;
 mod raw;
 mod tools;

@@ -13,7 +13,7 @@ use serde::Deserialize;
 use toml::Spanned;
 use toml::de::{DeTable, DeValue};
 
-use super::check::Check;
+use super::check::{Check, config};
 use super::raw::RawMachine;
 use super::validate::validate;
 use super::*;
@@ -123,14 +123,6 @@ impl Layer {
     fn error(&self, key: &str, message: impl Into<String>) -> Error {
         let location = self.locations.get(key).cloned().or_else(|| self.root.clone());
         config(location, format!("{}: {key}: {}", self.label, message.into()))
-    }
-}
-
-pub(super) fn config(location: Option<Location>, message: String) -> Error {
-    Error::Config {
-        location,
-        message,
-        help: None,
     }
 }
 

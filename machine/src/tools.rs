@@ -4,13 +4,10 @@
 use std::collections::BTreeSet;
 
 use super::check::Check;
+use super::limits::{MAX_NOZZLE_TEMPERATURE, MAX_TRAVEL};
 use super::raw::RawTool;
 use super::*;
 use lamina_api::error::Result;
-
-/// Hotter than any FFF hotend goes (°C).
-pub(super) const MAX_NOZZLE_TEMPERATURE: f64 = 500.0;
-pub(super) const MAX_BED_TEMPERATURE: f64 = 200.0;
 
 /// The `[[tools]]` of a profile, checked.
 pub(super) fn tools(raw_tools: Option<Vec<RawTool>>, flavor: Flavor, c: &Check<'_>) -> Result<Vec<ToolSlot>> {
@@ -84,7 +81,7 @@ pub(super) fn tools(raw_tools: Option<Vec<RawTool>>, flavor: Flavor, c: &Check<'
             .envelope
             .map(|e| c.within(e, 0.1, 1_000.0, &p("envelope"), "mm"))
             .transpose()?;
-        let travel = super::validate::MAX_TRAVEL;
+        let travel = MAX_TRAVEL;
         let home = match t.home {
             Some([x, y]) if [x, y].iter().all(|v| v.abs() <= travel) => Some([x, y]),
             Some(_) => {

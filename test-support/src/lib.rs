@@ -57,7 +57,7 @@ pub fn registry() -> Registry {
 pub fn try_stage(kind: StageKind, table: &str, dir: &Path) -> lamina_core::Result<AnyStage> {
     let table = TableRef::parse_snippet(kind.name(), table)?;
     let scripts = lamina_core::script::local(dir, Default::default());
-    registry().build(kind, &table, &scripts, dir)
+    registry().build_any(kind, &table, &scripts, dir)
 }
 
 /// [`try_stage`], which must build.
@@ -69,10 +69,9 @@ macro_rules! typed_stage {
     ($(#[$doc:meta])* $name:ident, $kind:ident, $trait:ident) => {
         $(#[$doc])*
         pub fn $name(table: &str) -> Box<dyn lamina_core::stage::$trait> {
-            match stage(StageKind::$kind, table, Path::new(".")) {
-                AnyStage::$kind(s) => s,
-                other => panic!("[{}] {table:?} built a {} stage", StageKind::$kind, other.kind()),
-            }
+            stage(StageKind::$kind, table, Path::new("."))
+                .into_type()
+                .unwrap_or_else(|e| panic!("[{}] {table:?}: {e}", StageKind::$kind))
         }
     };
 }
@@ -121,9 +120,9 @@ pub fn write_models(dir: &Path) {
     let table =
         lamina_core::pipeline::TableRef::parse_snippet("model", MODEL).unwrap_or_else(|e| panic!("{e}"));
     let scripts = lamina_core::script::local(dir, Default::default());
-    let mesh = match registry().build(StageKind::Model, &table, &scripts, dir) {
-        Ok(lamina_core::AnyStage::Model(m)) => m.load(dir).unwrap_or_else(|e| panic!("{e}")).remove(0),
-        other => panic!("the tube generator: {other:?}"),
+    let mesh = match registry().build::<dyn lamina_core::ModelSource>(&table, &scripts, dir) {
+        Ok(m) => m.load(dir).unwrap_or_else(|e| panic!("{e}")).remove(0),
+        Err(e) => panic!("the tube generator: {e}"),
     };
     let mut stl = Vec::new();
     lamina_model::stl::write_binary(&mesh, &mut stl).unwrap_or_else(|e| panic!("{e}"));

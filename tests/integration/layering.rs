@@ -1,7 +1,8 @@
 //! The crates' layering, read from their manifests: geometry at the bottom, the stage
-//! API on it, machine profiles on the API, the engine (core) on those, and plugins on
-//! the API and geometry (and machine profiles, for the exporters that write machine
-//! files), never on the engine or on each other: a built-in plugin is written exactly as
+//! API on it, the papers' shared methods and machine profiles on the API, the engine
+//! (core) on the API, geometry and profiles, and plugins on the API, geometry and shared
+//! methods (and machine profiles, for the exporters that write machine files), never on
+//! the engine or on each other: a built-in plugin is written exactly as
 //! a third-party crate would be, and compiles none of the engine.
 
 use std::path::Path;
@@ -32,6 +33,10 @@ fn plugins_depend_on_the_stage_api_and_geom_alone() {
     assert!(lamina_dependencies(&root.join("geom/Cargo.toml")).is_empty());
     assert_eq!(lamina_dependencies(&root.join("api/Cargo.toml")), ["lamina-geom"]);
     assert_eq!(
+        lamina_dependencies(&root.join("fgm/Cargo.toml")),
+        ["lamina-api", "lamina-geom"]
+    );
+    assert_eq!(
         lamina_dependencies(&root.join("machine/Cargo.toml")),
         ["lamina-api"]
     );
@@ -48,8 +53,8 @@ fn plugins_depend_on_the_stage_api_and_geom_alone() {
         plugins += 1;
         for dep in lamina_dependencies(&manifest) {
             assert!(
-                ["lamina-api", "lamina-geom", "lamina-machine"].contains(&dep.as_str()),
-                "{} depends on {dep}: plugins depend on lamina-api, lamina-geom and lamina-machine only",
+                ["lamina-api", "lamina-fgm", "lamina-geom", "lamina-machine"].contains(&dep.as_str()),
+                "{} depends on {dep}: plugins depend on lamina-api, lamina-fgm, lamina-geom and lamina-machine only",
                 manifest.display()
             );
         }

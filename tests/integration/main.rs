@@ -14,6 +14,7 @@ mod acceptance_grading;
 mod boundary;
 mod cli;
 mod cli_files;
+mod code_shape;
 mod docs;
 mod gcode_replay;
 mod generate;

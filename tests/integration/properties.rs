@@ -52,7 +52,7 @@ fn registry() -> &'static Registry {
 fn stage(kind: StageKind, text: &str) -> lamina_core::Result<AnyStage> {
     let table = TableRef::parse_snippet(kind.name(), text)?;
     let scripts = lamina_core::script::local(".", Default::default());
-    registry().build(kind, &table, &scripts, Path::new("."))
+    registry().build_any(kind, &table, &scripts, Path::new("."))
 }
 
 /// The default number of cases, or PROPTEST_CASES when it is set.

@@ -19,7 +19,7 @@ use super::guard_call;
 use super::wire::*;
 use crate::error::{Error, Result};
 use crate::mesh::Mesh;
-use crate::model::SubRegion;
+use crate::model::{LayerPlan, SubRegion};
 use crate::planned::PlanDelta;
 use crate::registry::StageFactory;
 use crate::script::{Compiler, Script, ScriptArgs, ScriptFn, ScriptHost};
@@ -455,55 +455,8 @@ fn with_family<T>(
 
 fn handle(request: Request<'static>) -> Result<Response> {
     match request {
-        Request::Describe => Ok(Response::Stages(
-            stages()
-                .iter()
-                .map(|f| WireStage {
-                    kind: f.info.kind,
-                    name: f.info.name.to_string(),
-                    doc: f.info.doc.to_string(),
-                    options: f
-                        .info
-                        .options
-                        .iter()
-                        .map(|o| WireOption {
-                            name: o.name.to_string(),
-                            ty: o.ty.to_string(),
-                            default: o.default.map(ToString::to_string),
-                            doc: o.doc.to_string(),
-                            required: o.required,
-                            range: o.range,
-                        })
-                        .collect(),
-                    example: f.info.example.to_string(),
-                })
-                .collect(),
-        )),
-        Request::Build { stage, label, config } => {
-            let factory = stages().get(stage).ok_or_else(|| {
-                Error::stage(
-                    label.to_string(),
-                    format!("the plugin has no stage number {stage}"),
-                )
-            })?;
-            let table = TableRef::from_wire(config.table)?;
-            let scripts = ScriptHost::new(HostScripts);
-            let machine = config.machine.map(Cow::into_owned);
-            let stage_config = StageConfig {
-                table: &table,
-                scripts: &scripts,
-                base_dir: &config.base_dir,
-                reach: &config.reach,
-                machine: machine.as_ref(),
-                limits: config.limits,
-            };
-            let stage = guard_call(&label, || (factory.build)(&stage_config))?;
-            Ok(Response::Handle(keep(Object::Stage {
-                label: label.into(),
-                stage,
-                meshes: Mutex::new(BTreeMap::new()),
-            })))
-        }
+        Request::Describe => Ok(describe()),
+        Request::Build { stage, label, config } => build(stage, label, config),
         Request::Load { handle, base_dir } => {
             on_stage(handle, "load a model", |_, stage, label| match stage {
                 AnyStage::Model(s) => Some(guard_call(label, || s.load(&base_dir)).map(|meshes| {
@@ -539,19 +492,7 @@ fn handle(request: Request<'static>) -> Result<Response> {
             }
             _ => None,
         }),
-        Request::Prepare { handle, mesh } => {
-            on_stage(handle, "prepare a mesh", |_, stage, label| match stage {
-                AnyStage::Slice(s) => Some(guard_call(label, || s.prepare(Arc::new(mesh.into_owned()))).map(
-                    |slicer| {
-                        Response::Handle(keep(Object::MeshSlicer {
-                            label: label.clone(),
-                            slicer,
-                        }))
-                    },
-                )),
-                _ => None,
-            })
-        }
+        Request::Prepare { handle, mesh } => prepare(handle, mesh.into_owned()),
         Request::Slice { handle, slot } => {
             let o = object(handle)?;
             match &*o {
@@ -578,29 +519,6 @@ fn handle(request: Request<'static>) -> Result<Response> {
             ),
             _ => None,
         }),
-        Request::Grades { handle } => {
-            on_stage(handle, "say whether it grades", |_, stage, label| match stage {
-                AnyStage::Discretise(s) => Some(guard_call(label, || Ok(s.grades())).map(Response::Bool)),
-                _ => None,
-            })
-        }
-        Request::ReadsMesh { handle } => on_stage(
-            handle,
-            "say whether it reads the mesh",
-            |_, stage, label| match stage {
-                AnyStage::Discretise(s) => Some(guard_call(label, || Ok(s.reads_mesh())).map(Response::Bool)),
-                AnyStage::Grade(s) => Some(guard_call(label, || Ok(s.reads_mesh())).map(Response::Bool)),
-                _ => None,
-            },
-        ),
-        Request::ReadsGeometry { handle } => on_stage(
-            handle,
-            "say whether it reads contours",
-            |_, stage, label| match stage {
-                AnyStage::Grade(s) => Some(guard_call(label, || Ok(s.reads_geometry())).map(Response::Bool)),
-                _ => None,
-            },
-        ),
         Request::Grade {
             handle,
             family,
@@ -635,96 +553,204 @@ fn handle(request: Request<'static>) -> Result<Response> {
             }
             _ => None,
         }),
-        Request::NeedsGradients { handle } => on_stage(
-            handle,
-            "say whether it needs the gradients",
-            |_, stage, label| match stage {
-                AnyStage::Sequence(s) => {
-                    Some(guard_call(label, || Ok(s.needs_gradients())).map(Response::Bool))
-                }
-                _ => None,
-            },
-        ),
-        Request::NeedsHigher { handle } => on_stage(
-            handle,
-            "say whether it needs the higher regions",
-            |_, stage, label| match stage {
-                AnyStage::Process(s) => Some(guard_call(label, || Ok(s.needs_higher())).map(Response::Bool)),
-                _ => None,
-            },
-        ),
         Request::Process {
             handle,
             info,
             context,
             plan,
-        } => on_stage(handle, "plan its operations", |_, stage, label| match stage {
-            AnyStage::Process(s) => {
-                let mut plan = plan.into_owned();
-                let ctx = crate::process::ProcessContext {
-                    info: &info,
-                    sequence: context.sequence.as_deref(),
-                    surfaces: &context.surfaces,
-                    higher: &context.higher,
-                    last: context.last,
-                };
-                let before = plan.counts();
-                Some(
-                    guard_call(label, || s.process(&ctx, &mut plan))
-                        .map(|()| Response::Planned(PlanDelta::taken(&mut plan, before))),
-                )
-            }
+        } => process(handle, &info, &context, plan.into_owned()),
+        Request::Open { handle, export } => open(handle, &export),
+        Request::Layer { handle, info, plan } => write_layer(handle, &info, &plan),
+        Request::Finish { handle, info } => finish(handle, &info),
+        Request::Grades { handle } => answer(handle, "say whether it grades", |stage| match stage {
+            AnyStage::Discretise(s) => Some(s.grades()),
             _ => None,
         }),
-        Request::Open { handle, export } => {
-            on_stage(handle, "open an output", |_, stage, label| match stage {
-                AnyStage::Export(s) => {
-                    let mut files = HostFiles;
-                    let mut ctx = ExportContext {
-                        info: &export.info,
-                        sequence: export.sequence.as_deref(),
-                        orientation: export.orientation.as_deref(),
-                        layer_count: export.layer_count,
-                        pipeline_name: &export.pipeline_name,
-                        files: &mut files,
-                    };
-                    Some(guard_call(label, || s.open(&mut ctx)).map(|sink| {
-                        Response::Handle(keep(Object::Sink {
-                            label: label.clone(),
-                            sink: Mutex::new(Some(sink)),
-                        }))
-                    }))
-                }
+        Request::ReadsMesh { handle } => {
+            answer(handle, "say whether it reads the mesh", |stage| match stage {
+                AnyStage::Discretise(s) => Some(s.reads_mesh()),
+                AnyStage::Grade(s) => Some(s.reads_mesh()),
                 _ => None,
             })
         }
-        Request::Layer { handle, info, plan } => {
-            let o = object(handle)?;
-            match &*o {
-                Object::Sink { label, sink } => {
-                    let mut sink = sink.lock().unwrap_or_else(|e| e.into_inner());
-                    let sink = sink
-                        .as_mut()
-                        .ok_or_else(|| Error::stage(label.to_string(), "output already finished"))?;
-                    guard_call(label, || sink.layer(&info, &plan, &mut HostFiles))?;
-                    Ok(Response::Done)
-                }
-                o => Err(wrong(o, "write a layer")),
-            }
+        Request::ReadsGeometry { handle } => {
+            answer(handle, "say whether it reads contours", |stage| match stage {
+                AnyStage::Grade(s) => Some(s.reads_geometry()),
+                _ => None,
+            })
         }
-        Request::Finish { handle, info } => {
-            let o = object(handle)?;
-            let result = match &*o {
-                Object::Sink { label, sink } => {
-                    let taken = sink.lock().unwrap_or_else(|e| e.into_inner()).take();
-                    let sink =
-                        taken.ok_or_else(|| Error::stage(label.to_string(), "output already finished"))?;
-                    guard_call(label, || sink.finish(&info, &mut HostFiles)).map(|()| Response::Done)
-                }
-                o => Err(wrong(o, "finish an output")),
-            };
-            OBJECTS.lock().unwrap_or_else(|e| e.into_inner()).remove(&handle);
-            result
+        Request::NeedsGradients { handle } => {
+            answer(
+                handle,
+                "say whether it needs the gradients",
+                |stage| match stage {
+                    AnyStage::Sequence(s) => Some(s.needs_gradients()),
+                    _ => None,
+                },
+            )
         }
+        Request::NeedsHigher { handle } => answer(
+            handle,
+            "say whether it needs the higher regions",
+            |stage| match stage {
+                AnyStage::Process(s) => Some(s.needs_higher()),
+                _ => None,
+            },
+        ),
     }
+}
+
+/// The plugin's stages as the host lists them: names, documentation, options.
+fn describe() -> Response {
+    Response::Stages(
+        stages()
+            .iter()
+            .map(|f| WireStage {
+                kind: f.info.kind,
+                name: f.info.name.to_string(),
+                doc: f.info.doc.to_string(),
+                options: f
+                    .info
+                    .options
+                    .iter()
+                    .map(|o| WireOption {
+                        name: o.name.to_string(),
+                        ty: o.ty.to_string(),
+                        default: o.default.map(ToString::to_string),
+                        doc: o.doc.to_string(),
+                        required: o.required,
+                        range: o.range,
+                    })
+                    .collect(),
+                example: f.info.example.to_string(),
+            })
+            .collect(),
+    )
+}
+
+/// Builds stage number `stage` from its pipeline table; its scripts compile in the host.
+fn build(stage: usize, label: Cow<'static, str>, config: WireConfig<'static>) -> Result<Response> {
+    let factory = stages().get(stage).ok_or_else(|| {
+        Error::stage(
+            label.to_string(),
+            format!("the plugin has no stage number {stage}"),
+        )
+    })?;
+    let table = TableRef::from_wire(config.table)?;
+    let scripts = ScriptHost::new(HostScripts);
+    let machine = config.machine.map(Cow::into_owned);
+    let stage_config = StageConfig {
+        table: &table,
+        scripts: &scripts,
+        base_dir: &config.base_dir,
+        reach: &config.reach,
+        machine: machine.as_ref(),
+        limits: config.limits,
+    };
+    let stage = guard_call(&label, || (factory.build)(&stage_config))?;
+    Ok(Response::Handle(keep(Object::Stage {
+        label: label.into(),
+        stage,
+        meshes: Mutex::new(BTreeMap::new()),
+    })))
+}
+
+/// A slicer's mesh prepared once; the host slices it layer by layer through the handle.
+fn prepare(handle: u64, mesh: Mesh) -> Result<Response> {
+    on_stage(handle, "prepare a mesh", |_, stage, label| match stage {
+        AnyStage::Slice(s) => Some(guard_call(label, || s.prepare(Arc::new(mesh))).map(|slicer| {
+            Response::Handle(keep(Object::MeshSlicer {
+                label: label.clone(),
+                slicer,
+            }))
+        })),
+        _ => None,
+    })
+}
+
+/// A question a host asks a stage once, before a run (what it reads and needs); `ask`
+/// answers `None` when the stage is not of the kind the question is for.
+fn answer(handle: u64, what: &str, ask: impl FnOnce(&AnyStage) -> Option<bool>) -> Result<Response> {
+    on_stage(handle, what, |_, stage, label| {
+        match guard_call(label, || Ok(ask(stage))) {
+            Ok(reply) => reply.map(|b| Ok(Response::Bool(b))),
+            Err(e) => Some(Err(e)),
+        }
+    })
+}
+
+/// A process stage's operations on one layer, sent back as what it added.
+fn process(handle: u64, info: &RunInfo, context: &WireProcess<'_>, mut plan: LayerPlan) -> Result<Response> {
+    on_stage(handle, "plan its operations", |_, stage, label| match stage {
+        AnyStage::Process(s) => {
+            let ctx = ProcessContext {
+                info,
+                sequence: context.sequence.as_deref(),
+                surfaces: &context.surfaces,
+                higher: &context.higher,
+                last: context.last,
+            };
+            let before = plan.counts();
+            Some(
+                guard_call(label, || s.process(&ctx, &mut plan))
+                    .map(|()| Response::Planned(PlanDelta::taken(&mut plan, before))),
+            )
+        }
+        _ => None,
+    })
+}
+
+/// Opens an exporter's output; its files are written through the host.
+fn open(handle: u64, export: &WireExport<'_>) -> Result<Response> {
+    on_stage(handle, "open an output", |_, stage, label| match stage {
+        AnyStage::Export(s) => {
+            let mut files = HostFiles;
+            let mut ctx = ExportContext {
+                info: &export.info,
+                sequence: export.sequence.as_deref(),
+                orientation: export.orientation.as_deref(),
+                layer_count: export.layer_count,
+                pipeline_name: &export.pipeline_name,
+                files: &mut files,
+            };
+            Some(guard_call(label, || s.open(&mut ctx)).map(|sink| {
+                Response::Handle(keep(Object::Sink {
+                    label: label.clone(),
+                    sink: Mutex::new(Some(sink)),
+                }))
+            }))
+        }
+        _ => None,
+    })
+}
+
+/// One layer written to an open output.
+fn write_layer(handle: u64, info: &RunInfo, plan: &LayerPlan) -> Result<Response> {
+    let o = object(handle)?;
+    match &*o {
+        Object::Sink { label, sink } => {
+            let mut sink = sink.lock().unwrap_or_else(|e| e.into_inner());
+            let sink = sink
+                .as_mut()
+                .ok_or_else(|| Error::stage(label.to_string(), "output already finished"))?;
+            guard_call(label, || sink.layer(info, plan, &mut HostFiles))?;
+            Ok(Response::Done)
+        }
+        o => Err(wrong(o, "write a layer")),
+    }
+}
+
+/// Finishes an output and forgets its handle, whether it finished or failed.
+fn finish(handle: u64, info: &RunInfo) -> Result<Response> {
+    let o = object(handle)?;
+    let result = match &*o {
+        Object::Sink { label, sink } => {
+            let taken = sink.lock().unwrap_or_else(|e| e.into_inner()).take();
+            let sink = taken.ok_or_else(|| Error::stage(label.to_string(), "output already finished"))?;
+            guard_call(label, || sink.finish(info, &mut HostFiles)).map(|()| Response::Done)
+        }
+        o => Err(wrong(o, "finish an output")),
+    };
+    OBJECTS.lock().unwrap_or_else(|e| e.into_inner()).remove(&handle);
+    result
 }

@@ -2,10 +2,10 @@
 //! every error names file, line and column, and `--set` overrides applied on top.
 
 mod overrides;
+mod read;
 use lamina_api::table;
 
 pub use overrides::Override;
-use overrides::paths_touch;
 pub use table::*;
 
 use std::collections::BTreeMap;
@@ -14,81 +14,13 @@ use std::sync::Arc;
 
 use serde::Deserialize;
 
-use crate::error::{Error, Result};
+use crate::error::Result;
 use crate::limits::Limits;
 use crate::machine::Machine;
-use crate::machine::load::MachineSpec;
 use crate::model::Material;
 use crate::reach::Reach;
-use crate::source::{Location, SourceFile, Span};
+use crate::source::SourceFile;
 use crate::stage::StageKind;
-
-/// A material colour: `[r, g, b]` or `"#rrggbb"`.
-#[derive(Debug, Clone, Deserialize)]
-#[serde(untagged)]
-enum RawColour {
-    Rgb([u8; 3]),
-    Hex(String),
-}
-
-#[derive(Debug, Deserialize)]
-#[serde(deny_unknown_fields)]
-struct RawMaterial {
-    colour: RawColour,
-    layer_thickness: Option<f64>,
-    #[serde(default)]
-    #[expect(dead_code, reason = "documentation for the reader of the pipeline")]
-    description: Option<String>,
-}
-
-#[derive(Debug, Deserialize)]
-#[serde(deny_unknown_fields)]
-struct RawPipeline {
-    name: Option<String>,
-    #[serde(default)]
-    #[expect(dead_code, reason = "documentation for the reader of the pipeline")]
-    description: Option<String>,
-    #[serde(default)]
-    plugins: Vec<String>,
-    /// Refused: the command line's `--allow` widens where scripts are read.
-    script_dirs: Option<toml::Value>,
-    model: Option<toml::Table>,
-    machine: Option<toml::Value>,
-    #[serde(default)]
-    materials: toml::Table,
-    #[serde(default)]
-    parts: Vec<toml::Table>,
-    orient: Option<toml::Table>,
-    slice: Option<toml::Table>,
-    sort: Option<toml::Table>,
-    discretise: Option<toml::Table>,
-    grade: Option<toml::Table>,
-    sequence: Option<toml::Table>,
-    plan: Option<toml::Table>,
-    #[serde(default)]
-    process: Vec<toml::Table>,
-    #[serde(default)]
-    output: Vec<toml::Table>,
-    limits: Option<toml::Table>,
-}
-
-#[derive(Debug, Deserialize)]
-#[serde(deny_unknown_fields)]
-struct RawPart {
-    name: Option<String>,
-    materials: Option<Vec<String>>,
-    mesh: Option<usize>,
-    family_at: Option<[f64; 3]>,
-    #[serde(default)]
-    #[expect(dead_code, reason = "read through its TableRef")]
-    model: Option<toml::Table>,
-    #[serde(default)]
-    #[expect(dead_code, reason = "read through its TableRef")]
-    discretise: Option<toml::Table>,
-    #[serde(default)]
-    #[expect(dead_code, reason = "read through its TableRef")]
-    grade: Option<toml::Table>,
-}
 
 /// How the `[model]` table places meshes on the bed; consumed by the host.
 #[derive(Debug, Clone, Copy, PartialEq, Deserialize, Default)]
@@ -235,228 +167,6 @@ impl Pipeline {
         let reach = Reach::folder(&base_dir);
         Self::parse_within(file, base_dir, reach, overrides)
     }
-
-    /// [`parse`](Self::parse), the files named read within `reach`.
-    pub fn parse_within(
-        file: Arc<SourceFile>,
-        base_dir: PathBuf,
-        reach: Reach,
-        overrides: &[Override],
-    ) -> Result<Pipeline> {
-        let doc: toml::Table = toml::from_str(&file.text).map_err(|e| toml_error(&file, &e))?;
-        let mut root = toml::Value::Table(doc);
-        for o in overrides {
-            o.apply(&mut root)?;
-        }
-        let toml::Value::Table(doc) = root else {
-            return Err(Error::config("pipeline root is not a table"));
-        };
-        let table_ref = |path: Vec<PathElem>, table: toml::Table| {
-            let overridden = overrides.iter().any(|o| paths_touch(&o.path, &path));
-            TableRef::new(table, file.clone(), path, overridden)
-        };
-        let root_ref = table_ref(Vec::new(), doc.clone()).with_host_keys(&[]);
-        let raw: RawPipeline = root_ref.parse()?;
-        if raw.script_dirs.is_some() {
-            return Err(root_ref
-                .error_at(
-                    "script_dirs",
-                    "a pipeline cannot widen the folders its scripts are read from",
-                )
-                .with_help(
-                    "keep the scripts beside the pipeline, or name their folder on the command line with `--allow <folder>`",
-                ));
-        }
-
-        let model = match raw.model {
-            Some(t) => {
-                let tr = table_ref(vec![key("model")], t).with_host_keys(MODEL_HOST_KEYS);
-                Some(model_spec(tr)?)
-            }
-            None => None,
-        };
-
-        let machine = match raw.machine {
-            None => None,
-            Some(value) => {
-                let machine_path = vec![key("machine")];
-                let spec = match value {
-                    toml::Value::String(reference) => MachineSpec::Named {
-                        reference,
-                        at: root_ref.location_of(Some("machine")),
-                    },
-                    toml::Value::Table(t) => {
-                        MachineSpec::Inline(table_ref(machine_path, t).with_host_keys(&[]))
-                    }
-                    _ => {
-                        return Err(root_ref
-                            .error_at(
-                                "machine",
-                                "must name a built-in profile, a `.toml` profile file, or be a table",
-                            )
-                            .with_help(format!("built-in profiles: {}", crate::machine::builtin::names())));
-                    }
-                };
-                Some(crate::machine::resolve(&spec, &base_dir, &reach)?)
-            }
-        };
-
-        let mut materials = Vec::new();
-        for (name, _) in &raw.materials {
-            let tr = table_ref(
-                vec![key("materials"), key(name)],
-                raw.materials
-                    .get(name)
-                    .and_then(|v| v.as_table())
-                    .cloned()
-                    .ok_or_else(|| root_ref.error_at("materials", format!("`{name}` must be a table")))?,
-            )
-            .with_host_keys(&[]);
-            let m: RawMaterial = tr.parse()?;
-            let colour = match m.colour {
-                RawColour::Rgb(c) => c,
-                RawColour::Hex(h) => {
-                    parse_hex(&h).ok_or_else(|| tr.error_at("colour", format!("`{h}` is not #rrggbb")))?
-                }
-            };
-            if let Some(t) = m.layer_thickness
-                && !(t.is_finite() && t > 0.0)
-            {
-                return Err(tr.error_at("layer_thickness", "must be a positive number of mm"));
-            }
-            materials.push(Material {
-                name: name.clone(),
-                colour,
-                layer_thickness: m.layer_thickness,
-            });
-        }
-
-        let mut parts = Vec::new();
-        for (i, t) in raw.parts.iter().enumerate() {
-            let path = vec![key("parts"), PathElem::Index(i)];
-            let tr = table_ref(path.clone(), t.clone()).with_host_keys(&[]);
-            let p: RawPart = tr.parse()?;
-            let sub = |k: &str, host: &'static [&'static str]| {
-                t.get(k).and_then(|v| v.as_table()).map(|st| {
-                    let mut p = path.clone();
-                    p.push(key(k));
-                    table_ref(p, st.clone()).with_host_keys(host)
-                })
-            };
-            let part_materials = match &p.materials {
-                Some(names) => names
-                    .iter()
-                    .map(|n| {
-                        materials.iter().position(|m| &m.name == n).ok_or_else(|| {
-                            tr.error_at("materials", format!("no material named `{n}` in [materials]"))
-                        })
-                    })
-                    .collect::<Result<Vec<_>>>()?,
-                None => (0..materials.len()).collect(),
-            };
-            if part_materials.is_empty() {
-                return Err(tr.error_at("materials", "a part needs at least one material"));
-            }
-            parts.push(PartSpec {
-                name: p.name.unwrap_or_else(|| format!("part{i}")),
-                materials: part_materials,
-                model: sub("model", MODEL_HOST_KEYS).map(model_spec).transpose()?,
-                mesh: p.mesh,
-                family_at: match p.family_at {
-                    Some(at) if at.iter().all(|v| v.is_finite()) => Some(at),
-                    Some(_) => return Err(tr.error_at("family_at", "must be three finite numbers [x, y, z]")),
-                    None => None,
-                },
-                discretise: sub("discretise", &["use"]),
-                grade: sub("grade", &["use"]),
-                table: Some(tr),
-            });
-        }
-        if materials.is_empty() {
-            return Err(root_ref
-                .error_at("materials", "the pipeline names no materials")
-                .with_help("add e.g. [materials.red] colour = [255, 0, 0]"));
-        }
-        if parts.is_empty() {
-            parts.push(PartSpec {
-                name: "part".into(),
-                materials: (0..materials.len()).collect(),
-                model: None,
-                mesh: None,
-                family_at: None,
-                discretise: None,
-                grade: None,
-                table: None,
-            });
-        }
-        if model.is_none() && parts.iter().any(|p| p.model.is_none()) {
-            return Err(Error::config_at(
-                Location::new(file.clone(), Span::default()),
-                "no [model] table, and a part has no model of its own",
-            ));
-        }
-
-        let mut stages = BTreeMap::new();
-        for (kind, t) in [
-            (StageKind::Orient, raw.orient),
-            (StageKind::Slice, raw.slice),
-            (StageKind::Sort, raw.sort),
-            (StageKind::Discretise, raw.discretise),
-            (StageKind::Grade, raw.grade),
-            (StageKind::Sequence, raw.sequence),
-            (StageKind::Plan, raw.plan),
-        ] {
-            if let Some(t) = t {
-                stages.insert(kind, table_ref(vec![key(kind.name())], t));
-            }
-        }
-        let process = raw
-            .process
-            .into_iter()
-            .enumerate()
-            .map(|(i, t)| table_ref(vec![key("process"), PathElem::Index(i)], t))
-            .collect();
-        let outputs = raw
-            .output
-            .into_iter()
-            .enumerate()
-            .map(|(i, t)| table_ref(vec![key("output"), PathElem::Index(i)], t))
-            .collect();
-        for t in &outputs {
-            let t: &TableRef = t;
-            if let Some(path) = t.get("path").and_then(|v| v.as_str())
-                && let Err(m) = crate::output::check_name(std::path::Path::new(path))
-            {
-                return Err(t.error_at("path", m));
-            }
-        }
-        let name = raw.name.unwrap_or_else(|| {
-            file.path
-                .file_stem()
-                .map(|s| s.to_string_lossy().into_owned())
-                .unwrap_or_else(|| "pipeline".into())
-        });
-        let plugins = raw.plugins.iter().map(|p| base_dir.join(p)).collect();
-        let limits = match raw.limits {
-            Some(t) => table_ref(vec![key("limits")], t).with_host_keys(&[]).parse()?,
-            None => Limits::default(),
-        };
-        Ok(Pipeline {
-            file,
-            base_dir,
-            reach,
-            name,
-            plugins,
-            model,
-            materials,
-            parts,
-            stages,
-            process,
-            outputs,
-            machine,
-            limits,
-        })
-    }
 }
 
 /// Reads the host's placement keys of a model table (`scale`, `units`, `place`), each
@@ -491,15 +201,6 @@ pub fn model_spec(table: TableRef) -> Result<ModelSpec> {
         units,
         place,
     })
-}
-
-fn parse_hex(h: &str) -> Option<[u8; 3]> {
-    let h = h.strip_prefix('#')?;
-    if h.len() != 6 || !h.is_ascii() {
-        return None;
-    }
-    let c = |i: usize| u8::from_str_radix(&h[i..i + 2], 16).ok();
-    Some([c(0)?, c(2)?, c(4)?])
 }
 
 #[cfg(test)]

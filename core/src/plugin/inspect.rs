@@ -4,7 +4,7 @@
 use std::path::Path;
 
 use super::abi::*;
-use super::refuse;
+use super::refusal::refuse;
 use crate::error::Result;
 
 /// Refuses a file that is not a loadable plugin of this host: not a library of this

@@ -5,6 +5,8 @@
 mod child;
 pub(crate) mod host;
 mod inspect;
+mod library;
+mod refusal;
 
 use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex};
@@ -13,8 +15,10 @@ pub use child::{ChildProgram, Isolation, serve as serve_child};
 pub use inspect::inspect;
 pub use lamina_api::plugin::*;
 
-use crate::error::{Error, Result};
+use crate::error::Result;
 use crate::registry::{Origin, Registry, StageFactory};
+use library::open_library;
+use refusal::refuse;
 
 /// Libraries loaded so far, by canonical path and whether they run apart, with their
 /// stages. Kept for the life of the process: nothing is ever unloaded. (A child
@@ -27,13 +31,6 @@ struct LoadedPlugin {
     apart: bool,
     library: Arc<host::Library>,
     stages: Vec<(&'static StageFactory, host::RemoteFactory)>,
-}
-
-fn refuse(path: &Path, message: impl Into<String>) -> Error {
-    Error::Plugin {
-        path: path.to_path_buf(),
-        message: message.into(),
-    }
 }
 
 /// Loads a plugin library into this process and adds its stages to `registry`.
@@ -75,20 +72,6 @@ pub fn load_with(registry: &mut Registry, path: &Path, isolation: &Isolation) ->
     Ok(plugin.library.name.clone())
 }
 
-/// An error and its sources, `a: b: c`: the loader's own reason is in the source.
-fn chain(e: &dyn std::error::Error) -> String {
-    let mut out = e.to_string();
-    let mut cur = e.source();
-    while let Some(s) = cur {
-        let s_text = s.to_string();
-        if !out.contains(&s_text) {
-            out = format!("{out}: {s_text}");
-        }
-        cur = s.source();
-    }
-    out
-}
-
 fn open(path: &Path) -> Result<LoadedPlugin> {
     let library = open_library(path, false)?;
     let stages = library.describe()?;
@@ -113,36 +96,6 @@ fn open_apart(path: &Path, program: &ChildProgram) -> Result<LoadedPlugin> {
         library,
         stages,
     })
-}
-
-/// Loads a library into this process once its file, entry and descriptor check out.
-/// One that runs `apart` (in a child process serving a host) may abort on panics.
-fn open_library(path: &Path, apart: bool) -> Result<Arc<host::Library>> {
-    let entry_symbol = inspect::entry_symbol(path, apart)?.symbol;
-    // SAFETY: loading a library runs its initialisers; plugins are code the user chose
-    // to run, like the pipeline that names them, and the file was inspected first.
-    let lib = unsafe { libloading::Library::new(path) }
-        .map_err(|e| refuse(path, format!("cannot load library: {}", chain(&e))))?;
-    let symbol = format!("{entry_symbol}\0");
-    // SAFETY: the symbol has the signature `export_plugin!` gives it, as the ABI note
-    // the file carries says.
-    let entry: abi::EntryFn = unsafe { lib.get::<abi::EntryFn>(symbol.as_bytes()) }
-        .map(|s| *s)
-        .map_err(|e| refuse(path, format!("cannot find `{entry_symbol}`: {}", chain(&e))))?;
-    // SAFETY: the entry only returns the address of a static.
-    let ptr = unsafe { entry() };
-    if ptr.is_null() {
-        return Err(refuse(path, "the plugin's entry point returned no descriptor"));
-    }
-    // SAFETY: every Lamina descriptor starts with the frozen prefix.
-    let prefix = unsafe { std::ptr::read(ptr.cast::<abi::DescriptorPrefix>()) };
-    inspect::check_descriptor(path, &entry_symbol[ENTRY_PREFIX.len()..], &prefix)?;
-    // SAFETY: magic, ABI, size and layout checked: the full descriptor is there, in a
-    // static of a library that is never unloaded.
-    let library = Arc::new(unsafe { host::Library::new(path, ptr) }?);
-    // Never unloaded: the descriptor's functions are the library's code.
-    std::mem::forget(lib);
-    Ok(library)
 }
 
 /// Adds the stages linked into this program to `registry` as if a plugin library named

@@ -57,16 +57,16 @@ impl std::fmt::Debug for Engine {
     }
 }
 
-/// Builds the `kind` stage from its table, or the default its plugin declares when
-/// the pipeline has none.
-fn build_default(
+/// Builds the stage of type `S` from its table, or the default its plugin declares
+/// when the pipeline has none.
+fn build_default<S: StageType + ?Sized>(
     registry: &Registry,
-    kind: StageKind,
     pipeline: &Pipeline,
     scripts: &ScriptHost,
-) -> Result<AnyStage> {
+) -> Result<Box<S>> {
+    let kind = S::KIND;
     if let Some(t) = pipeline.stages.get(&kind) {
-        return registry.build_for(kind, t, scripts, &pipeline.base_dir, pipeline.context());
+        return registry.build_for::<S>(t, scripts, &pipeline.base_dir, pipeline.context());
     }
     let default = registry.default_for(kind).ok_or_else(|| {
         Error::config(format!(
@@ -80,7 +80,7 @@ fn build_default(
     table.insert("use".into(), toml::Value::String(default.into()));
     let t = TableRef::detached(kind.name(), table);
     registry
-        .build_for(kind, &t, scripts, &pipeline.base_dir, pipeline.context())
+        .build_for::<S>(&t, scripts, &pipeline.base_dir, pipeline.context())
         .map_err(|e| {
             Error::config(format!(
                 "the pipeline has no [{kind}] table and the default {kind} stage \
@@ -89,30 +89,16 @@ fn build_default(
         })
 }
 
-fn build_optional(
+/// Builds the stage of type `S` from `table`, when there is one.
+fn build_optional<S: StageType + ?Sized>(
     registry: &Registry,
-    kind: StageKind,
     table: Option<&TableRef>,
     scripts: &ScriptHost,
     pipeline: &Pipeline,
-) -> Result<Option<AnyStage>> {
+) -> Result<Option<Box<S>>> {
     table
-        .map(|t| registry.build_for(kind, t, scripts, &pipeline.base_dir, pipeline.context()))
+        .map(|t| registry.build_for::<S>(t, scripts, &pipeline.base_dir, pipeline.context()))
         .transpose()
-}
-
-macro_rules! expect_kind {
-    ($stage:expr, $variant:ident) => {
-        match $stage {
-            AnyStage::$variant(s) => s,
-            other => {
-                return Err(Error::stage(
-                    stringify!($variant),
-                    format!("expected a {} stage, got {}", stringify!($variant), other.kind()),
-                ));
-            }
-        }
-    };
 }
 
 /// Builds the model source a model table names: `use = "..."`, or a reader chosen by
@@ -125,26 +111,26 @@ fn build_model(
     context: PipelineContext<'_>,
 ) -> Result<Box<dyn ModelSource>> {
     let table = &spec.table;
-    let stage = if table.get("use").is_some() {
-        registry.build_for(StageKind::Model, table, scripts, base_dir, context)?
-    } else {
-        let file = table.get("file").and_then(|v| v.as_str()).ok_or_else(|| {
-            table
-                .error_at("use", "a model table needs `use = \"...\"` or `file = \"...\"`")
-                .with_help("e.g. file = \"part.stl\", or use = \"gear\" for a generated model")
-        })?;
-        let ext = Path::new(file)
-            .extension()
-            .map(|e| e.to_string_lossy().to_ascii_lowercase())
-            .unwrap_or_default();
-        let entry = registry.get(StageKind::Model, &ext).ok_or_else(|| {
-            table
-                .error_at("file", format!("no model reader for `.{ext}` files"))
-                .with_help("name the reader with `use = \"...\"`; see `lamina plugins model`")
-        })?;
-        registry.build_entry_for(entry, table, scripts, base_dir, context)?
-    };
-    Ok(expect_kind!(stage, Model))
+    if table.get("use").is_some() {
+        return registry.build_for::<dyn ModelSource>(table, scripts, base_dir, context);
+    }
+    let file = table.get("file").and_then(|v| v.as_str()).ok_or_else(|| {
+        table
+            .error_at("use", "a model table needs `use = \"...\"` or `file = \"...\"`")
+            .with_help("e.g. file = \"part.stl\", or use = \"gear\" for a generated model")
+    })?;
+    let ext = Path::new(file)
+        .extension()
+        .map(|e| e.to_string_lossy().to_ascii_lowercase())
+        .unwrap_or_default();
+    let entry = registry.get(StageKind::Model, &ext).ok_or_else(|| {
+        table
+            .error_at("file", format!("no model reader for `.{ext}` files"))
+            .with_help("name the reader with `use = \"...\"`; see `lamina plugins model`")
+    })?;
+    registry
+        .build_entry_for(entry, table, scripts, base_dir, context)?
+        .into_type()
 }
 
 /// A model spec whose file is replaced by `path` (the `--model` option).
@@ -163,9 +149,174 @@ fn replace_model_file(spec: &ModelSpec, path: &Path) -> Result<ModelSpec> {
     })
 }
 
-/// The value of `r`, or `None` with its error added to `errors`.
-fn kept<T>(errors: &mut Vec<Error>, r: Result<T>) -> Option<T> {
-    r.map_err(|e| errors.push(e)).ok()
+/// A pipeline's libraries are data: those it lists run only when the caller loads them
+/// (the command line's `--plugin`), so each must be among the loaded ones.
+fn check_plugins_loaded(pipeline: &Pipeline, options: &RunOptions) -> Result<()> {
+    for path in &pipeline.plugins {
+        let same = |p: &PathBuf| match (p.canonicalize(), path.canonicalize()) {
+            (Ok(a), Ok(b)) => a == b,
+            _ => p == path,
+        };
+        if !options.plugins.iter().any(same) {
+            return Err(Error::config(format!(
+                "{}: `plugins` lists {}, which was not loaded: a pipeline cannot load code by itself",
+                pipeline.file.path.display(),
+                path.display()
+            ))
+            .with_help(format!(
+                "load it on the command line: --plugin {}",
+                path.display()
+            )));
+        }
+    }
+    Ok(())
+}
+
+/// The stages of a pipeline as they are built. Every stage is built even when an
+/// earlier one failed, so that one pass reports every wrong table (`lamina check`
+/// prints them all, as a compiler does): errors are gathered, not returned.
+struct Builder<'a> {
+    registry: &'a Registry,
+    pipeline: &'a Pipeline,
+    scripts: &'a ScriptHost,
+    options: &'a RunOptions,
+    errors: Vec<Error>,
+    models: Vec<ModelStage>,
+}
+
+impl Builder<'_> {
+    /// The value of `r`, or `None` with its error gathered.
+    fn kept<T>(&mut self, r: Result<T>) -> Option<T> {
+        r.map_err(|e| self.errors.push(e)).ok()
+    }
+
+    /// A kind a pipeline may leave out, from its top-level table.
+    fn optional<S: StageType + ?Sized>(&self) -> Result<Option<Box<S>>> {
+        let table = self.pipeline.stages.get(&S::KIND);
+        build_optional::<S>(self.registry, table, self.scripts, self.pipeline)
+    }
+
+    /// A stage for each of `tables` (`[[process]]`, `[[output]]`), in their order.
+    fn each<S: StageType + ?Sized>(&mut self, tables: &[TableRef]) -> Vec<Box<S>> {
+        let mut stages = Vec::new();
+        for t in tables {
+            let stage = self.registry.build_for::<S>(
+                t,
+                self.scripts,
+                &self.pipeline.base_dir,
+                self.pipeline.context(),
+            );
+            stages.extend(self.kept(stage));
+        }
+        stages
+    }
+
+    /// A model table (the pipeline's or a part's) built, with `--model` applied; its
+    /// index in `models`.
+    fn model(&mut self, spec: &ModelSpec) -> Result<usize> {
+        let spec = match &self.options.model {
+            Some(p) => replace_model_file(spec, p)?,
+            None => spec.clone(),
+        };
+        let source = build_model(
+            self.registry,
+            &spec,
+            self.scripts,
+            &self.pipeline.base_dir,
+            self.pipeline.context(),
+        )?;
+        self.models.push(ModelStage {
+            source,
+            label: describe_model(&spec),
+            spec,
+        });
+        Ok(self.models.len() - 1)
+    }
+
+    /// Every part's stages: its model (its own or the pipeline's), discretiser and
+    /// grader.
+    fn parts(&mut self) -> Vec<PartStages> {
+        let pipeline = self.pipeline;
+        let global = pipeline.model.as_ref().map(|spec| self.model(spec)).transpose();
+        let global_failed = global.is_err();
+        let global = self.kept(global).flatten();
+        let mut parts = Vec::new();
+        for part in &pipeline.parts {
+            let model = match &part.model {
+                Some(spec) => self.model(spec).map(Some),
+                None if global_failed => Ok(None),
+                None => global
+                    .map(Some)
+                    .ok_or_else(|| Error::config(format!("part `{}` has no model", part.name))),
+            };
+            let model = self.kept(model).flatten();
+            if let Some(stages) = self.part(part, model) {
+                parts.push(stages);
+            }
+        }
+        parts
+    }
+
+    /// One part's discretiser and grader, checked together: a part of several
+    /// materials needs something that mixes them.
+    fn part(&mut self, part: &crate::pipeline::PartSpec, model: Option<usize>) -> Option<PartStages> {
+        let pipeline = self.pipeline;
+        let discretise_table = part
+            .discretise
+            .as_ref()
+            .or(pipeline.stages.get(&StageKind::Discretise));
+        let discretiser =
+            build_optional::<dyn Discretiser>(self.registry, discretise_table, self.scripts, pipeline);
+        let grade_table = part.grade.as_ref().or(pipeline.stages.get(&StageKind::Grade));
+        let grader = build_optional::<dyn Grader>(self.registry, grade_table, self.scripts, pipeline);
+        let (discretiser, grader) = match (discretiser, grader) {
+            (Ok(d), Ok(g)) => (d, g),
+            (d, g) => {
+                self.errors.extend([d.err(), g.err()].into_iter().flatten());
+                return None;
+            }
+        };
+        let discretiser_grades = discretiser.as_ref().is_some_and(|d| d.grades());
+        if grader.is_none() && !discretiser_grades && part.materials.len() > 1 {
+            self.errors.push(no_grader(pipeline, part));
+            return None;
+        }
+        Some(PartStages {
+            name: part.name.clone(),
+            family_at: part.family_at,
+            family_at_location: part.table.as_ref().and_then(|t| t.location_of(Some("family_at"))),
+            materials: part.materials.clone(),
+            model: model?,
+            mesh: part.mesh,
+            discretiser,
+            grader,
+        })
+    }
+}
+
+/// The error of a part with several materials and nothing to mix them, placed at its
+/// `materials` when the part has a table.
+fn no_grader(pipeline: &Pipeline, part: &crate::pipeline::PartSpec) -> Error {
+    let names: Vec<_> = part
+        .materials
+        .iter()
+        .map(|&m| pipeline.materials[m].name.as_str())
+        .collect();
+    let err = Error::config(format!(
+        "part `{}` has {} materials ({}) but no [grade] table says how to mix them",
+        part.name,
+        names.len(),
+        names.join(", ")
+    ))
+    .with_help("add a [grade] table, or give the part a single material with `materials = [\"...\"]`");
+    match part.table.as_ref().and_then(|t| t.location_of(Some("materials"))) {
+        Some(loc) => Error::Config {
+            location: Some(loc),
+            message: err.to_string(),
+            help: err.help().map(str::to_string),
+        },
+        None => err,
+    }
 }
 
 impl Engine {
@@ -175,34 +326,12 @@ impl Engine {
         for path in &options.plugins {
             crate::plugin::load_with(&mut registry, path, &options.isolation)?;
         }
-        // A pipeline file is data: the libraries it lists run only when the caller
-        // loads them (the command line's `--plugin`).
-        for path in &pipeline.plugins {
-            let same = |p: &PathBuf| match (p.canonicalize(), path.canonicalize()) {
-                (Ok(a), Ok(b)) => a == b,
-                _ => p == path,
-            };
-            if !options.plugins.iter().any(same) {
-                return Err(Error::config(format!(
-                    "{}: `plugins` lists {}, which was not loaded: a pipeline cannot load code by itself",
-                    pipeline.file.path.display(),
-                    path.display()
-                ))
-                .with_help(format!(
-                    "load it on the command line: --plugin {}",
-                    path.display()
-                )));
-            }
-        }
+        check_plugins_loaded(&pipeline, options)?;
         // The model file the caller names replaces the pipeline's, and is read wherever
         // it is.
         if let Some(model) = &options.model {
             pipeline.reach.allow(model);
         }
-        let scripts =
-            crate::script::local_within(&pipeline.base_dir, options.script_limits, pipeline.reach.clone());
-        let base = pipeline.base_dir.clone();
-
         if options.model.is_some() && pipeline.parts.len() > 1 {
             return Err(Error::config(format!(
                 "--model replaces the model of a single-part pipeline, and `{}` has {} parts",
@@ -210,181 +339,32 @@ impl Engine {
                 pipeline.parts.len()
             )));
         }
-
-        // Every stage is built even when an earlier one failed, so that one pass
-        // reports every wrong table (`lamina check` prints them all, as a compiler does).
-        let mut errors = Vec::new();
-        let mut models = Vec::new();
-        // A model table (the pipeline's or a part's) built, with `--model` applied.
-        let mut add_model = |spec: &ModelSpec| -> Result<usize> {
-            let spec = match &options.model {
-                Some(p) => replace_model_file(spec, p)?,
-                None => spec.clone(),
-            };
-            models.push(ModelStage {
-                source: build_model(&registry, &spec, &scripts, &base, pipeline.context())?,
-                label: describe_model(&spec),
-                spec,
-            });
-            Ok(models.len() - 1)
+        let scripts =
+            crate::script::local_within(&pipeline.base_dir, options.script_limits, pipeline.reach.clone());
+        let mut builder = Builder {
+            registry: &registry,
+            pipeline: &pipeline,
+            scripts: &scripts,
+            options,
+            errors: Vec::new(),
+            models: Vec::new(),
         };
-        let mut global_failed = false;
-        let global_model = match pipeline.model.as_ref().map(&mut add_model).transpose() {
-            Ok(m) => m,
-            Err(e) => {
-                global_failed = true;
-                errors.push(e);
-                None
-            }
-        };
-
-        let mut parts = Vec::new();
-        for part in &pipeline.parts {
-            let model = match &part.model {
-                Some(spec) => add_model(spec).map(Some),
-                None if global_failed => Ok(None),
-                None => global_model
-                    .map(Some)
-                    .ok_or_else(|| Error::config(format!("part `{}` has no model", part.name))),
-            };
-            let model = model.unwrap_or_else(|e| {
-                errors.push(e);
-                None
-            });
-            let discretise_table = part
-                .discretise
-                .as_ref()
-                .or(pipeline.stages.get(&StageKind::Discretise));
-            let discretiser = (|| -> Result<_> {
-                build_optional(
-                    &registry,
-                    StageKind::Discretise,
-                    discretise_table,
-                    &scripts,
-                    &pipeline,
-                )?
-                .map(|s| -> Result<_> { Ok(expect_kind!(s, Discretise)) })
-                .transpose()
-            })();
-            let grade_table = part.grade.as_ref().or(pipeline.stages.get(&StageKind::Grade));
-            let grader = (|| -> Result<_> {
-                build_optional(&registry, StageKind::Grade, grade_table, &scripts, &pipeline)?
-                    .map(|s| -> Result<_> { Ok(expect_kind!(s, Grade)) })
-                    .transpose()
-            })();
-            let (discretiser, grader) = match (discretiser, grader) {
-                (Ok(d), Ok(g)) => (d, g),
-                (d, g) => {
-                    for e in [d.err(), g.err()].into_iter().flatten() {
-                        errors.push(e);
-                    }
-                    continue;
-                }
-            };
-            let discretiser_grades = discretiser.as_ref().is_some_and(|d| d.grades());
-            if grader.is_none() && !discretiser_grades && part.materials.len() > 1 {
-                let names: Vec<_> = part
-                    .materials
-                    .iter()
-                    .map(|&m| pipeline.materials[m].name.as_str())
-                    .collect();
-                let err = Error::config(format!(
-                    "part `{}` has {} materials ({}) but no [grade] table says how to mix them",
-                    part.name,
-                    names.len(),
-                    names.join(", ")
-                ))
-                .with_help(
-                    "add a [grade] table, or give the part a single material with `materials = [\"...\"]`",
-                );
-                errors.push(
-                    match part.table.as_ref().and_then(|t| t.location_of(Some("materials"))) {
-                        Some(loc) => Error::Config {
-                            location: Some(loc),
-                            message: err.to_string(),
-                            help: err.help().map(str::to_string),
-                        },
-                        None => err,
-                    },
-                );
-                continue;
-            }
-            let Some(model) = model else { continue };
-            parts.push(PartStages {
-                name: part.name.clone(),
-                family_at: part.family_at,
-                family_at_location: part.table.as_ref().and_then(|t| t.location_of(Some("family_at"))),
-                materials: part.materials.clone(),
-                model,
-                mesh: part.mesh,
-                discretiser,
-                grader,
-            });
-        }
-
-        let slicer = (|| -> Result<_> {
-            Ok(expect_kind!(
-                build_default(&registry, StageKind::Slice, &pipeline, &scripts)?,
-                Slice
-            ))
-        })();
-        let sorter = (|| -> Result<_> {
-            Ok(expect_kind!(
-                build_default(&registry, StageKind::Sort, &pipeline, &scripts)?,
-                Sort
-            ))
-        })();
-        // The kinds a pipeline may leave out, each from its top-level table.
-        macro_rules! optional {
-            ($kind:ident) => {
-                (|| -> Result<_> {
-                    build_optional(
-                        &registry,
-                        StageKind::$kind,
-                        pipeline.stages.get(&StageKind::$kind),
-                        &scripts,
-                        &pipeline,
-                    )?
-                    .map(|s| -> Result<_> { Ok(expect_kind!(s, $kind)) })
-                    .transpose()
-                })()
-            };
-        }
-        let orienter = optional!(Orient);
-        let sequencer = optional!(Sequence);
-        let planner = optional!(Plan);
-        let mut process = Vec::new();
-        for t in &pipeline.process {
-            let stage = (|| -> Result<_> {
-                Ok(expect_kind!(
-                    registry.build_for(StageKind::Process, t, &scripts, &base, pipeline.context())?,
-                    Process
-                ))
-            })();
-            match stage {
-                Ok(s) => process.push(s),
-                Err(e) => errors.push(e),
-            }
-        }
-        let mut exporters = Vec::new();
-        for t in &pipeline.outputs {
-            let exporter = (|| -> Result<_> {
-                Ok(expect_kind!(
-                    registry.build_for(StageKind::Export, t, &scripts, &base, pipeline.context())?,
-                    Export
-                ))
-            })();
-            match exporter {
-                Ok(e) => exporters.push(e),
-                Err(e) => errors.push(e),
-            }
-        }
-        let (slicer, sorter) = (kept(&mut errors, slicer), kept(&mut errors, sorter));
+        let parts = builder.parts();
+        let slicer = build_default::<dyn Slicer>(&registry, &pipeline, &scripts);
+        let sorter = build_default::<dyn Sorter>(&registry, &pipeline, &scripts);
+        let orienter = builder.optional::<dyn Orienter>();
+        let sequencer = builder.optional::<dyn Sequencer>();
+        let planner = builder.optional::<dyn Planner>();
+        let process = builder.each::<dyn Process>(&pipeline.process);
+        let exporters = builder.each::<dyn Exporter>(&pipeline.outputs);
+        // Errors in the order `lamina check` has always listed them.
+        let (slicer, sorter) = (builder.kept(slicer), builder.kept(sorter));
         let (orienter, sequencer, planner) = (
-            kept(&mut errors, orienter),
-            kept(&mut errors, sequencer),
-            kept(&mut errors, planner),
+            builder.kept(orienter),
+            builder.kept(sequencer),
+            builder.kept(planner),
         );
+        let Builder { errors, models, .. } = builder;
         if let Some(e) = Error::gathered(errors) {
             return Err(e);
         }
@@ -396,7 +376,6 @@ impl Engine {
             sequencer.ok_or_else(built)?,
             planner.ok_or_else(built)?,
         );
-
         Ok(Engine {
             threads: options.threads,
             pipeline,

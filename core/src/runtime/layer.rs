@@ -316,10 +316,7 @@ pub(super) struct LayerShared<'a> {
 /// The single region of a family that is not discretised.
 fn whole_family(tree: &crate::model::ContourTree, layer: &Layer, f: usize) -> SubRegion {
     let polygon = tree.family_polygon(&layer.contours, f);
-    let reference = polygon
-        .outer
-        .interior_point()
-        .unwrap_or_else(|| polygon.bbox().center());
+    let reference = lamina_geom::reference::reference_point(&polygon);
     SubRegion {
         family: f,
         index: 0,

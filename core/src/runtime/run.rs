@@ -13,11 +13,111 @@ use super::meshes::{PartMeshes, short};
 use super::report::{Observer, RunReport, Timings};
 use crate::diagnostic::Diagnostic;
 use crate::error::{Error, Result};
+use crate::model::{LayerPlan, LayerSlot, Orientation, Sequence};
 use crate::output::AtomicOutputs;
 use crate::stage::*;
 
 /// Stack of each worker thread (bytes).
 const WORKER_STACK: usize = 64 << 20;
+
+/// What the layers add up to, tallied as each is handed to the exporters.
+#[derive(Default)]
+struct Tally {
+    regions: usize,
+    build_time: Option<f64>,
+    sequential_time: Option<f64>,
+    pauses: Option<crate::Pauses>,
+    /// Deposited and filled volume (mm³).
+    fill: Option<(f64, f64)>,
+    /// The largest share of its volume any layer's planner was asked to fill.
+    min_fill: f64,
+    operations: std::collections::BTreeMap<String, usize>,
+}
+
+impl Tally {
+    fn add(&mut self, plan: &LayerPlan) {
+        self.regions += plan.parts.iter().map(|p| p.regions.len()).sum::<usize>();
+        for op in &plan.operations {
+            *self.operations.entry(op.kind.clone()).or_default() += 1;
+        }
+        if let Some(t) = plan.build_time {
+            *self.build_time.get_or_insert(0.0) += t;
+        }
+        if let Some(t) = plan.sequential_time {
+            *self.sequential_time.get_or_insert(0.0) += t;
+        }
+        if let Some(p) = &plan.pauses {
+            self.pauses.get_or_insert_default().add(p);
+        }
+        if let Some(f) = plan.fill {
+            let sum = self.fill.get_or_insert((0.0, 0.0));
+            sum.0 += f.deposited * plan.thickness;
+            sum.1 += f.area * plan.thickness;
+            self.min_fill = self.min_fill.max(f.min_ratio);
+        }
+    }
+
+    /// A part whose toolpaths deposit less than the planner was asked to fill is an
+    /// error: written, it would be printed short.
+    fn check_fill(&self) -> Result<()> {
+        if let Some((deposited, volume)) = self.fill
+            && volume > 0.0
+            && deposited < self.min_fill * volume
+        {
+            return Err(Error::stage(
+                "plan",
+                format!(
+                    "the toolpaths deposit {deposited:.1} mm³ of the {volume:.1} mm³ to fill ({:.1} %, \
+                     below the {:.1} % asked by `min_fill`); see the layers' warnings for what is left out",
+                    100.0 * deposited / volume,
+                    100.0 * self.min_fill
+                ),
+            ));
+        }
+        Ok(())
+    }
+}
+
+/// The run's layers laid out before any is computed: the parts' meshes prepared for
+/// slicing, the sequence, the layer slots and what every stage may consult.
+struct Layout {
+    meshes: Vec<std::sync::Arc<crate::mesh::Mesh>>,
+    part_mesh: Vec<usize>,
+    info: RunInfo,
+    orientation: Option<Orientation>,
+    prepared: Vec<Box<dyn MeshSlicer>>,
+    sequence: Option<Sequence>,
+    slots: Vec<LayerSlot>,
+}
+
+/// Worker threads for the layers.
+fn worker_pool(threads: Option<usize>) -> Result<rayon::ThreadPool> {
+    rayon::ThreadPoolBuilder::new()
+        .num_threads(threads.unwrap_or(0))
+        // Scripts recurse within their depth limits on these threads: room for the
+        // deepest the limits allow, reserved, not touched.
+        .stack_size(WORKER_STACK)
+        .build()
+        .map_err(|e| Error::config(format!("cannot start worker threads: {e}")))
+}
+
+/// A part thinner than the thinnest layer is most likely scaled wrong: it is planned,
+/// but said.
+fn thin_parts(info: &RunInfo, slots: &[LayerSlot]) -> Vec<Diagnostic> {
+    let thinnest = slots.iter().map(|s| s.thickness).fold(f64::INFINITY, f64::min);
+    info.parts
+        .iter()
+        .filter(|p| p.z_max - p.z_min < thinnest)
+        .map(|p| {
+            let message = format!(
+                "{} mm tall, thinner than a layer ({} mm): is its scale right?",
+                short(p.z_max - p.z_min),
+                short(thinnest)
+            );
+            Diagnostic::warning(StageKind::Slice, message).in_part(&p.name)
+        })
+        .collect()
+}
 
 impl Engine {
     /// Runs the pipeline, writing the outputs into `out_dir`. Outputs appear only when
@@ -25,87 +125,25 @@ impl Engine {
     pub fn run(&self, out_dir: &Path, observer: &dyn Observer) -> Result<RunReport> {
         let started = Instant::now();
         let timings = Timings::default();
-        let pool = rayon::ThreadPoolBuilder::new()
-            .num_threads(self.threads.unwrap_or(0))
-            // Scripts recurse within their depth limits on these threads: room for
-            // the deepest the limits allow, reserved, not touched.
-            .stack_size(WORKER_STACK)
-            .build()
-            .map_err(|e| Error::config(format!("cannot start worker threads: {e}")))?;
-
-        // Meshes: one per part (a part takes one mesh of its model, or all merged).
-        let PartMeshes {
-            meshes,
-            part_mesh,
-            parts_info,
-            bbox,
-            xy_bounds,
-            orientation,
-            model_frame,
-            warnings,
-        } = self.part_meshes(&timings)?;
+        let pool = worker_pool(self.threads)?;
         let mut diagnostics = Vec::new();
         let mut say = |d: Diagnostic| {
             observer.diagnostic(&d);
             diagnostics.push(d);
         };
-        for w in &warnings {
-            say(Diagnostic::warning(StageKind::Model, w.as_str()));
-        }
-        let info = RunInfo {
-            base_dir: self.pipeline.base_dir.clone(),
-            materials: self.pipeline.materials.clone(),
-            parts: parts_info,
-            z_min: bbox.min.z,
-            z_max: bbox.max.z,
-            xy_bounds,
-            machine: self.pipeline.machine.clone(),
-            model_frame,
-        };
-
-        let prepared: Vec<Box<dyn MeshSlicer>> = pool.install(|| {
-            meshes
-                .par_iter()
-                .map(|m| timings.time(StageKind::Slice, || self.slicer.prepare(m.clone())))
-                .collect::<Result<Vec<_>>>()
-        })?;
-        let mut info = info;
-        let sequence = match &self.sequencer {
-            Some(s) => {
-                if s.needs_gradients() {
-                    let gradients =
-                        pool.install(|| self.z_gradients(&info, &meshes, &prepared, &part_mesh, &timings))?;
-                    for (p, g) in info.parts.iter_mut().zip(gradients) {
-                        p.z_gradient = g;
-                    }
-                }
-                Some(timings.time(StageKind::Sequence, || s.sequence(&info))?)
-            }
-            None => None,
-        };
-        let info = info;
-        let slots = timings.time(StageKind::Slice, || {
-            self.slicer.layers(&meshes, &info, sequence.as_ref())
-        })?;
-        // A part thinner than the thinnest layer is most likely scaled wrong: it is
-        // planned, but said.
-        let thinnest = slots.iter().map(|s| s.thickness).fold(f64::INFINITY, f64::min);
-        for p in &info.parts {
-            let tall = p.z_max - p.z_min;
-            if tall < thinnest {
-                let message = format!(
-                    "{} mm tall, thinner than a layer ({} mm): is its scale right?",
-                    short(tall),
-                    short(thinnest)
-                );
-                say(Diagnostic::warning(StageKind::Slice, message).in_part(&p.name));
-            }
-        }
-
-        let selections = self.select_families(&slots, &meshes, &prepared, &part_mesh, &pool, &timings)?;
+        let layout = self.lay_out(&pool, &timings, &mut say)?;
+        let Layout {
+            meshes,
+            part_mesh,
+            info,
+            prepared,
+            sequence,
+            slots,
+            ..
+        } = &layout;
+        let selections = self.select_families(slots, meshes, prepared, part_mesh, &pool, &timings)?;
 
         let mut outputs = AtomicOutputs::new(out_dir);
-        let mut sinks = Vec::new();
         // Exporters run under the panic guard, as every other stage does: a panic in
         // one is an error naming it, and the run's outputs are removed.
         let labels: Vec<String> = (0..self.exporters.len())
@@ -119,35 +157,22 @@ impl Engine {
                 format!("output `{name}`")
             })
             .collect();
-        for (e, label) in self.exporters.iter().zip(&labels) {
-            let mut ctx = ExportContext {
-                info: &info,
-                sequence: sequence.as_ref(),
-                orientation: orientation.as_ref(),
-                layer_count: slots.len(),
-                pipeline_name: &self.pipeline.name,
-                files: &mut outputs,
-            };
-            sinks.push(timings.time(StageKind::Export, || {
-                crate::plugin::guard_call(label, || e.open(&mut ctx))
-            })?);
-        }
+        let mut sinks = self.open_outputs(&layout, &labels, &mut outputs, &timings)?;
 
-        let surfaces = match (&sequence, self.process.is_empty()) {
-            (Some(seq), false) => crate::process::surfaces_before(&slots, seq.regions.len()),
+        let surfaces = match (sequence, self.process.is_empty()) {
+            (Some(seq), false) => crate::process::surfaces_before(slots, seq.regions.len()),
             _ => Vec::new(),
         };
         let mut surface_check = crate::process::SurfaceCheck::new(sequence.as_ref());
-        let mut operations = std::collections::BTreeMap::<String, usize>::new();
         let shared = LayerShared {
             surfaces: &surfaces,
             layer_count: slots.len(),
-            slots: &slots,
-            info: &info,
-            meshes: &meshes,
+            slots,
+            info,
+            meshes,
             sequence: sequence.as_ref(),
-            prepared: &prepared,
-            part_mesh: &part_mesh,
+            prepared,
+            part_mesh,
             selections: &selections,
             timings: &timings,
         };
@@ -155,12 +180,7 @@ impl Engine {
         // Layers computed ahead of the exporters: a few per thread keeps every worker
         // busy while bounding what memory holds.
         let ahead = pool.current_num_threads().max(1) * 4;
-        let mut regions = 0;
-        let mut build_time: Option<f64> = None;
-        let mut sequential_time: Option<f64> = None;
-        let mut pauses: Option<crate::Pauses> = None;
-        let mut fill: Option<(f64, f64)> = None;
-        let mut min_fill = 0.0f64;
+        let mut tally = Tally::default();
         // The pool computes the layers while this thread hands each finished one, in
         // build order, to the exporters.
         super::stream::ordered(
@@ -179,64 +199,34 @@ impl Engine {
                 for d in &plan.diagnostics {
                     say(d.clone());
                 }
-                regions += plan.parts.iter().map(|p| p.regions.len()).sum::<usize>();
                 if !self.process.is_empty() {
                     surface_check
                         .layer(&plan)
                         .map_err(|m| Error::stage("process", m).in_layer(plan.index, plan.z))?;
                 }
-                for op in &plan.operations {
-                    *operations.entry(op.kind.clone()).or_default() += 1;
-                }
-                if let Some(t) = plan.build_time {
-                    *build_time.get_or_insert(0.0) += t;
-                }
-                if let Some(t) = plan.sequential_time {
-                    *sequential_time.get_or_insert(0.0) += t;
-                }
-                if let Some(p) = &plan.pauses {
-                    pauses.get_or_insert_default().add(p);
-                }
-                if let Some(f) = plan.fill {
-                    let sum = fill.get_or_insert((0.0, 0.0));
-                    sum.0 += f.deposited * plan.thickness;
-                    sum.1 += f.area * plan.thickness;
-                    min_fill = min_fill.max(f.min_ratio);
-                }
+                tally.add(&plan);
                 for (sink, label) in sinks.iter_mut().zip(&labels) {
                     timings.time(StageKind::Export, || {
-                        crate::plugin::guard_call(label, || sink.layer(&info, &plan, &mut outputs))
+                        crate::plugin::guard_call(label, || sink.layer(info, &plan, &mut outputs))
                     })?;
                 }
                 observer.layer_done(plan.index);
                 Ok(())
             },
         )?;
-        if let Some((deposited, volume)) = fill
-            && volume > 0.0
-            && deposited < min_fill * volume
-        {
-            return Err(Error::stage(
-                "plan",
-                format!(
-                    "the toolpaths deposit {deposited:.1} mm³ of the {volume:.1} mm³ to fill ({:.1} %, \
-                     below the {:.1} % asked by `min_fill`); see the layers' warnings for what is left out",
-                    100.0 * deposited / volume,
-                    100.0 * min_fill
-                ),
-            ));
-        }
+        tally.check_fill()?;
         for (sink, label) in sinks.into_iter().zip(&labels) {
             timings.time(StageKind::Export, || {
-                crate::plugin::guard_call(label, || sink.finish(&info, &mut outputs))
+                crate::plugin::guard_call(label, || sink.finish(info, &mut outputs))
             })?;
         }
         let machine_files = outputs.take_reports();
         for m in &machine_files {
             for note in &m.notes {
-                let d = Diagnostic::warning(StageKind::Export, format!("{}: {note}", m.file.display()));
-                observer.diagnostic(&d);
-                diagnostics.push(d);
+                say(Diagnostic::warning(
+                    StageKind::Export,
+                    format!("{}: {note}", m.file.display()),
+                ));
             }
         }
         let files = outputs.commit()?;
@@ -245,17 +235,110 @@ impl Engine {
             .store(started.elapsed().as_nanos() as u64, Ordering::Relaxed);
         Ok(RunReport {
             layers: slots.len(),
-            regions,
+            regions: tally.regions,
             files,
             diagnostics,
             timings,
-            build_time,
-            sequential_time,
-            pauses,
-            fill,
-            orientation,
-            operations,
+            build_time: tally.build_time,
+            sequential_time: tally.sequential_time,
+            pauses: tally.pauses,
+            fill: tally.fill,
+            orientation: layout.orientation,
+            operations: tally.operations,
             machine_files,
         })
+    }
+
+    /// The parts' meshes (a part takes one mesh of its model, or all merged), prepared
+    /// for slicing; their gradients along z when the sequencer needs them; the
+    /// sequence; and the layer slots.
+    fn lay_out(
+        &self,
+        pool: &rayon::ThreadPool,
+        timings: &Timings,
+        say: &mut dyn FnMut(Diagnostic),
+    ) -> Result<Layout> {
+        let PartMeshes {
+            meshes,
+            part_mesh,
+            parts_info,
+            bbox,
+            xy_bounds,
+            orientation,
+            model_frame,
+            warnings,
+        } = self.part_meshes(timings)?;
+        for w in &warnings {
+            say(Diagnostic::warning(StageKind::Model, w.as_str()));
+        }
+        let mut info = RunInfo {
+            base_dir: self.pipeline.base_dir.clone(),
+            materials: self.pipeline.materials.clone(),
+            parts: parts_info,
+            z_min: bbox.min.z,
+            z_max: bbox.max.z,
+            xy_bounds,
+            machine: self.pipeline.machine.clone(),
+            model_frame,
+        };
+        let prepared: Vec<Box<dyn MeshSlicer>> = pool.install(|| {
+            meshes
+                .par_iter()
+                .map(|m| timings.time(StageKind::Slice, || self.slicer.prepare(m.clone())))
+                .collect::<Result<Vec<_>>>()
+        })?;
+        let sequence = match &self.sequencer {
+            Some(s) => {
+                if s.needs_gradients() {
+                    let gradients =
+                        pool.install(|| self.z_gradients(&info, &meshes, &prepared, &part_mesh, timings))?;
+                    for (p, g) in info.parts.iter_mut().zip(gradients) {
+                        p.z_gradient = g;
+                    }
+                }
+                Some(timings.time(StageKind::Sequence, || s.sequence(&info))?)
+            }
+            None => None,
+        };
+        let slots = timings.time(StageKind::Slice, || {
+            self.slicer.layers(&meshes, &info, sequence.as_ref())
+        })?;
+        for d in thin_parts(&info, &slots) {
+            say(d);
+        }
+        Ok(Layout {
+            meshes,
+            part_mesh,
+            info,
+            orientation,
+            prepared,
+            sequence,
+            slots,
+        })
+    }
+
+    /// Every exporter's output opened, each under the panic guard with its label.
+    fn open_outputs(
+        &self,
+        layout: &Layout,
+        labels: &[String],
+        outputs: &mut AtomicOutputs,
+        timings: &Timings,
+    ) -> Result<Vec<Box<dyn LayerSink>>> {
+        let mut sinks = Vec::new();
+        for (e, label) in self.exporters.iter().zip(labels) {
+            let mut ctx = ExportContext {
+                info: &layout.info,
+                sequence: layout.sequence.as_ref(),
+                orientation: layout.orientation.as_ref(),
+                layer_count: layout.slots.len(),
+                pipeline_name: &self.pipeline.name,
+                files: outputs,
+            };
+            sinks.push(timings.time(StageKind::Export, || {
+                crate::plugin::guard_call(label, || e.open(&mut ctx))
+            })?);
+        }
+        Ok(sinks)
     }
 }

@@ -6,9 +6,9 @@
 
 use lamina_api::mesh::Point3;
 use lamina_api::stage::{AnyStage, Discretiser, FamilyContext, StageConfig, StageInfo, StageKind};
-use lamina_api::steps::Truncation;
-use lamina_api::surface::{FaceSelection, Surface, Surfaces};
 use lamina_api::{Contour, Error, Point2, Polygon, Result, StageFactory, SubRegion};
+use lamina_fgm::steps::Truncation;
+use lamina_fgm::surface::{FaceSelection, Surface, Surfaces};
 use serde::Deserialize;
 
 use i_overlay::core::fill_rule::FillRule;

@@ -5,8 +5,9 @@
 use std::cmp::Ordering;
 use std::collections::BinaryHeap;
 
-use lamina_api::geom::{closest_on_segment, polygon_centroid, segment_distance};
+use lamina_api::geom::segment_distance;
 use lamina_api::{Contour, Point2, Polygon};
+pub use lamina_geom::reference::{cell_centre, interior_point};
 use rstar::primitives::Line;
 use rstar::{AABB, PointDistance, RTree};
 
@@ -187,66 +188,6 @@ pub fn pole(polygon: &Polygon, precision: f64) -> Option<(Point2, f64)> {
     (best.d > 0.0).then_some((best.c, best.d))
 }
 
-/// A point inside the polygon, central across its width: the midpoint of the widest
-/// inside interval of a few horizontal scan lines. Cheap (no distance queries); `None`
-/// when no scan line finds an inside.
-pub fn interior_point(polygon: &Polygon) -> Option<Point2> {
-    let bbox = polygon.bbox();
-    let mut best: Option<(f64, Point2)> = None;
-    let mut xs = Vec::new();
-    // Odd fractions avoid scanning exactly through vertices of axis-aligned shapes.
-    for f in [0.5013, 0.2507, 0.7493, 0.1249, 0.3751, 0.6249, 0.8751] {
-        let y = bbox.min.y + f * bbox.height();
-        xs.clear();
-        for c in polygon.contours() {
-            for (a, b) in c.edges() {
-                if (a.y <= y) != (b.y <= y) {
-                    xs.push(a.x + (y - a.y) / (b.y - a.y) * (b.x - a.x));
-                }
-            }
-        }
-        xs.sort_unstable_by(f64::total_cmp);
-        for pair in xs.chunks_exact(2) {
-            let width = pair[1] - pair[0];
-            if width > best.map_or(0.0, |b| b.0) {
-                best = Some((width, Point2::new(0.5 * (pair[0] + pair[1]), y)));
-            }
-        }
-        if best.is_some() && f < 0.5 {
-            // One line through the middle and one more are enough for a reference.
-            break;
-        }
-    }
-    best.map(|b| b.1)
-}
-
-/// The reference point of a circumferential cell: its centre, as the paper locates it
-/// (topological-hierarchy Fig. 14), that is the centroid of its area. A cell that
-/// wraps around a corner of its ring (an L) has its centroid outside it; a composition
-/// is the cell's own only at a point of the cell, so it takes the point of the cell
-/// nearest its centroid (a hair inside the boundary), and a central point inside it
-/// ([`interior_point`]) should that fail.
-pub fn cell_centre(polygon: &Polygon) -> Option<Point2> {
-    let c = polygon_centroid(polygon)?;
-    if polygon.contains(c) {
-        return Some(c);
-    }
-    let q = polygon
-        .contours()
-        .flat_map(|r| r.edges())
-        .map(|(a, b)| closest_on_segment(c, a, b))
-        .min_by(|p, q| (p - c).norm_squared().total_cmp(&(q - c).norm_squared()));
-    // From outside, the way to the nearest boundary point goes on into the cell.
-    let hair = 1e-6 * polygon.bbox().diagonal().max(1e-3);
-    q.and_then(|q| {
-        let d = q - c;
-        let n = d.norm();
-        (n > 0.0).then(|| q + d * (hair / n))
-    })
-    .filter(|&p| polygon.contains(p))
-    .or_else(|| interior_point(polygon))
-}
-
 /// Distance from `p` to the nearest of `contours`.
 pub fn distance_to(contours: &[&Contour], p: Point2) -> f64 {
     contours
@@ -262,44 +203,6 @@ mod tests {
     use crate::shapes::{circle, rect};
 
     #[test]
-    fn centroid_of_a_ring_and_the_centre_of_an_l() {
-        // A 10 x 10 square less a 2 x 2 hole off centre (1..3): centroid by moments.
-        let hole = rect(1.0, 1.0, 2.0, 2.0);
-        let ring = Polygon::new(rect(0.0, 0.0, 10.0, 10.0), vec![hole]);
-        let c = polygon_centroid(&ring).expect("an area");
-        let want = (100.0 * 5.0 - 4.0 * 2.0) / 96.0;
-        assert!((c.x - want).abs() < 1e-12 && (c.y - want).abs() < 1e-12, "{c:?}");
-        // Inside: the centroid itself.
-        assert_eq!(cell_centre(&ring), Some(c));
-        // An L (4 x 1 and 1 x 4 legs): its centroid (19/14, 19/14) lies in the notch,
-        // outside; the centre is the point of the L nearest to it, on one of the
-        // inner edges, 5/14 mm away.
-        let l = Polygon::new(
-            Contour::new(
-                [
-                    (0.0, 0.0),
-                    (4.0, 0.0),
-                    (4.0, 1.0),
-                    (1.0, 1.0),
-                    (1.0, 4.0),
-                    (0.0, 4.0),
-                ]
-                .map(|(x, y)| Point2::new(x, y))
-                .to_vec(),
-            ),
-            vec![],
-        );
-        let c = polygon_centroid(&l).expect("an area");
-        let want = (4.0 * 2.0 + 3.0 * 0.5) / 7.0;
-        assert!((c.x - want).abs() < 1e-12 && (c.y - want).abs() < 1e-12, "{c:?}");
-        assert!(!l.contains(c));
-        let p = cell_centre(&l).expect("a point");
-        assert!(l.contains(p));
-        assert!(((p - c).norm() - 5.0 / 14.0).abs() < 1e-4, "{p:?}");
-        assert!((p.x - 1.0).abs() < 1e-4 || (p.y - 1.0).abs() < 1e-4, "{p:?}");
-    }
-
-    #[test]
     fn tube_distance_and_pole() {
         let tube = Polygon::new(
             circle(0.0, 0.0, 10.0, 256),
@@ -309,7 +212,5 @@ mod tests {
         assert!((ls - 5.0).abs() < 0.01, "{ls}");
         let (_, r) = pole(&Polygon::new(rect(0.0, 0.0, 10.0, 4.0), vec![]), 1e-3).expect("pole");
         assert!((r - 2.0).abs() < 2e-3, "{r}");
-        let p = interior_point(&tube).expect("inside");
-        assert!(tube.contains(p));
     }
 }

@@ -4,8 +4,8 @@
 //! gives N_c = 1 / t_g + 1 homogeneous regions bounded by offsets at the half steps.
 
 use lamina_api::stage::{AnyStage, Discretiser, FamilyContext, StageConfig, StageInfo, StageKind};
-use lamina_api::steps::Truncation;
 use lamina_api::{Polygon, Result, StageFactory, SubRegion};
+use lamina_fgm::steps::Truncation;
 
 use crate::bands::offset_bands;
 use crate::cells::Cells;

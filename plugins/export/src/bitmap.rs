@@ -16,11 +16,11 @@
 use std::io::Write;
 use std::path::PathBuf;
 
-use lamina_api::microstructure::{CellSpec, Microstructure};
 use lamina_api::stage::{
     AnyStage, ExportContext, Exporter, LayerSink, OutputFiles, StageConfig, StageInfo, StageKind,
 };
 use lamina_api::{BBox2, Contour, Error, LayerPlan, Limit, Limits, Result, RunInfo, StageFactory};
+use lamina_fgm::microstructure::{CellSpec, Microstructure};
 use lamina_geom::lattice::Lattice;
 use std::sync::Arc;
 

@@ -9,7 +9,9 @@ use lamina_api::machine::{Firmware as Dialect, Flavor};
 use crate::motion::Corner;
 use crate::setup::Setup;
 use crate::text::num;
-use crate::writer::M165_AXES;
+
+/// The axis letters of `M165`, one per mixing channel, in Marlin's order.
+pub const M165_AXES: [char; 6] = ['A', 'B', 'C', 'D', 'H', 'I'];
 
 /// The print and travel accelerations (`M204`). RepRapFirmware 3.5 keeps them per
 /// motion system: a job on two writes them again in each system's stream.

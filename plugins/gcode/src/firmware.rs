@@ -217,42 +217,9 @@ impl Firmware {
                 self.planner.dwell(seconds);
             }
             "G10" | "M568" if self.dialect == Dialect::RepRapFirmware => {
-                if let Some(p) = get('P').map(|p| p as usize)
-                    && p < self.rrf.len()
-                {
-                    if let Some(s) = get('S') {
-                        self.rrf[p].active = s;
-                    }
-                    if let Some(r) = get('R') {
-                        self.rrf[p].standby = r;
-                    }
-                    if command == "M568"
-                        && let Some(a) = get('A')
-                    {
-                        self.rrf[p].forced = Some(a.clamp(0.0, 2.0) as u8);
-                    }
-                    self.rrf_heater_follows(p);
-                }
+                self.rrf_tool_temperatures(command, &get)
             }
-            "G28" => {
-                self.planner.stop();
-                // `G28` homes every axis; `G28 X` (or `G28 X0 Y0`) only those named,
-                // with or without a value.
-                let named: Vec<char> = code
-                    .split_whitespace()
-                    .skip(1)
-                    .filter_map(|w| w.chars().next())
-                    .map(|c| c.to_ascii_uppercase())
-                    .filter(|c| "XYZ".contains(*c))
-                    .collect();
-                let all = named.is_empty();
-                for (a, letter) in ['X', 'Y', 'Z'].into_iter().enumerate() {
-                    if all || named.contains(&letter) {
-                        self.position[a] = 0.0;
-                        self.homed[a] = true;
-                    }
-                }
-            }
+            "G28" => self.home(code),
             "G29" | "M400" => self.planner.stop(),
             "G90" => {
                 self.absolute = true;
@@ -275,70 +242,9 @@ impl Firmware {
                     }
                 }
             }
-            "M104" | "M109" => {
-                let heater = self.heater_of(get('T'));
-                if let (Some(h), Some(t)) = (heater, get('S').or(get('R'))) {
-                    if self.dialect == Dialect::RepRapFirmware {
-                        self.rrf[h].active = t;
-                    }
-                    let now = self.planner.elapsed();
-                    self.heaters[h].set(t, now);
-                    if command == "M109" {
-                        // `S` waits only to heat, `R` either way; Marlin lets the
-                        // heater settle once it had to move.
-                        let both = get('R').is_some();
-                        let residency = self.thermal.heating.residency;
-                        self.wait_for(|f, now| {
-                            f.heaters[h].wait_time(now, TEMPERATURE_WINDOW, both, residency)
-                        });
-                        let now = self.planner.elapsed();
-                        self.heaters[h].wait(now);
-                    }
-                }
-            }
-            "M116" => {
-                let tolerance = get('S').unwrap_or(M116_TOLERANCE);
-                let residency = self.thermal.heating.residency;
-                let which: Vec<usize> = match get('P').map(|p| p as usize) {
-                    Some(p) if p < self.heaters.len() => vec![p],
-                    Some(_) => Vec::new(),
-                    None => (0..self.heaters.len()).collect(),
-                };
-                let bed = get('P').is_none();
-                let bed_residency = self.thermal.heating.bed_residency;
-                self.wait_for(|f, now| {
-                    let nozzles = which
-                        .iter()
-                        .map(|&h| f.heaters[h].wait_time(now, tolerance, true, residency))
-                        .fold(0.0, f64::max);
-                    let bed = if bed {
-                        f.bed.wait_time(now, tolerance, true, bed_residency)
-                    } else {
-                        0.0
-                    };
-                    nozzles.max(bed)
-                });
-                let now = self.planner.elapsed();
-                for h in which {
-                    self.heaters[h].wait(now);
-                }
-                if bed {
-                    self.bed.wait(now);
-                }
-            }
-            "M140" | "M190" => {
-                if let Some(t) = get('S').or(get('R')) {
-                    let now = self.planner.elapsed();
-                    self.bed.set(t, now);
-                }
-                if command == "M190" {
-                    let both = get('R').is_some();
-                    let residency = self.thermal.heating.bed_residency;
-                    self.wait_for(|f, now| f.bed.wait_time(now, TEMPERATURE_WINDOW, both, residency));
-                    let now = self.planner.elapsed();
-                    self.bed.wait(now);
-                }
-            }
+            "M104" | "M109" => self.nozzle_temperature(command, &get),
+            "M116" => self.wait_for_temperatures(&get),
+            "M140" | "M190" => self.bed_temperature(command, &get),
             "M106" => {
                 let s = get('S').unwrap_or(255.0);
                 // Marlin counts to 255; RepRapFirmware takes either a fraction or 0..255.
@@ -354,6 +260,117 @@ impl Firmware {
             _ => {}
         }
         self.params = params;
+    }
+
+    /// `G10 P<tool> S<active> R<standby>` or `M568` (which may also set the heater's
+    /// state, `A`): a RepRapFirmware tool's two temperatures, its heater following them.
+    fn rrf_tool_temperatures(&mut self, command: &str, get: &dyn Fn(char) -> Option<f64>) {
+        if let Some(p) = get('P').map(|p| p as usize)
+            && p < self.rrf.len()
+        {
+            if let Some(s) = get('S') {
+                self.rrf[p].active = s;
+            }
+            if let Some(r) = get('R') {
+                self.rrf[p].standby = r;
+            }
+            if command == "M568"
+                && let Some(a) = get('A')
+            {
+                self.rrf[p].forced = Some(a.clamp(0.0, 2.0) as u8);
+            }
+            self.rrf_heater_follows(p);
+        }
+    }
+
+    /// `G28`: the machine stops, and the axes it homes are at zero.
+    fn home(&mut self, code: &str) {
+        self.planner.stop();
+        // `G28` homes every axis; `G28 X` (or `G28 X0 Y0`) only those named,
+        // with or without a value.
+        let named: Vec<char> = code
+            .split_whitespace()
+            .skip(1)
+            .filter_map(|w| w.chars().next())
+            .map(|c| c.to_ascii_uppercase())
+            .filter(|c| "XYZ".contains(*c))
+            .collect();
+        let all = named.is_empty();
+        for (a, letter) in ['X', 'Y', 'Z'].into_iter().enumerate() {
+            if all || named.contains(&letter) {
+                self.position[a] = 0.0;
+                self.homed[a] = true;
+            }
+        }
+    }
+
+    /// `M104` sets a nozzle's temperature, `M109` also waits for it.
+    fn nozzle_temperature(&mut self, command: &str, get: &dyn Fn(char) -> Option<f64>) {
+        let heater = self.heater_of(get('T'));
+        if let (Some(h), Some(t)) = (heater, get('S').or(get('R'))) {
+            if self.dialect == Dialect::RepRapFirmware {
+                self.rrf[h].active = t;
+            }
+            let now = self.planner.elapsed();
+            self.heaters[h].set(t, now);
+            if command == "M109" {
+                // `S` waits only to heat, `R` either way; Marlin lets the
+                // heater settle once it had to move.
+                let both = get('R').is_some();
+                let residency = self.thermal.heating.residency;
+                self.wait_for(|f, now| f.heaters[h].wait_time(now, TEMPERATURE_WINDOW, both, residency));
+                let now = self.planner.elapsed();
+                self.heaters[h].wait(now);
+            }
+        }
+    }
+
+    /// `M116`: waits for the nozzles' heaters (or the one `P` names) and the bed, within
+    /// `S` degrees.
+    fn wait_for_temperatures(&mut self, get: &dyn Fn(char) -> Option<f64>) {
+        let tolerance = get('S').unwrap_or(M116_TOLERANCE);
+        let residency = self.thermal.heating.residency;
+        let which: Vec<usize> = match get('P').map(|p| p as usize) {
+            Some(p) if p < self.heaters.len() => vec![p],
+            Some(_) => Vec::new(),
+            None => (0..self.heaters.len()).collect(),
+        };
+        let bed = get('P').is_none();
+        let bed_residency = self.thermal.heating.bed_residency;
+        self.wait_for(|f, now| {
+            let nozzles = which
+                .iter()
+                .map(|&h| f.heaters[h].wait_time(now, tolerance, true, residency))
+                .fold(0.0, f64::max);
+            let bed = if bed {
+                f.bed.wait_time(now, tolerance, true, bed_residency)
+            } else {
+                0.0
+            };
+            nozzles.max(bed)
+        });
+        let now = self.planner.elapsed();
+        for h in which {
+            self.heaters[h].wait(now);
+        }
+        if bed {
+            self.bed.wait(now);
+        }
+    }
+
+    /// `M140` sets the bed's temperature, `M190` also waits for it.
+    fn bed_temperature(&mut self, command: &str, get: &dyn Fn(char) -> Option<f64>) {
+        if let Some(t) = get('S').or(get('R')) {
+            let now = self.planner.elapsed();
+            self.bed.set(t, now);
+        }
+        if command == "M190" {
+            let both = get('R').is_some();
+            let residency = self.thermal.heating.bed_residency;
+            self.wait_for(|f, now| f.bed.wait_time(now, TEMPERATURE_WINDOW, both, residency));
+            let now = self.planner.elapsed();
+            self.bed.wait(now);
+        }
     }
 
     fn linear(&mut self, get: &dyn Fn(char) -> Option<f64>, line: &str) {

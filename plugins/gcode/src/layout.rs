@@ -6,10 +6,11 @@
 //! some are negative, in which case they move so that their bounding box starts at
 //! [`UNPLACED_MARGIN`] on both axes, and the header says so.
 
-use lamina_api::machine::{Bed, BedShape};
+use lamina_api::machine::{Bed, BedShape, PrimeLine, Skirt, WipeTower};
 use lamina_api::{BBox2, Error, Point2, Result, RunInfo, Vector2};
 
 use crate::setup::Setup;
+use crate::text::clean;
 
 /// Without a machine, negative plans move here (mm from the origin on X and Y).
 pub const UNPLACED_MARGIN: f64 = 10.0;
@@ -78,31 +79,7 @@ pub fn plan(
 ) -> Result<Layout> {
     let bounds = info.xy_bounds;
     let Some(bed) = setup.bed.filter(|_| setup.placed) else {
-        // No machine: keep the plan's coordinates unless they would be negative.
-        let offset = if bounds.is_empty() || (bounds.min.x >= 0.0 && bounds.min.y >= 0.0) {
-            Vector2::zeros()
-        } else {
-            Vector2::new(
-                (UNPLACED_MARGIN - bounds.min.x).max(0.0),
-                (UNPLACED_MARGIN - bounds.min.y).max(0.0),
-            )
-        };
-        let note = if offset == Vector2::zeros() {
-            "the plan's coordinates (no machine profile)".to_string()
-        } else {
-            format!(
-                "the plan's coordinates moved by X{:+.3} Y{:+.3} so that none is negative (no machine profile)",
-                offset.x, offset.y
-            )
-        };
-        return Ok(Layout {
-            offset,
-            parts: moved(&bounds, offset),
-            tower: None,
-            skirt: Vec::new(),
-            prime_lines: Vec::new(),
-            note,
-        });
+        return Ok(unplaced(bounds));
     };
     let machine = setup.machine.as_deref().unwrap_or("?");
     let offset = match &info.machine {
@@ -112,34 +89,17 @@ pub fn plan(
     let parts = moved(&bounds, offset);
     let w = setup.line_width();
     let skirt_reach = setup.skirt.map_or(0.0, |s| s.distance + s.loops as f64 * w);
+    let room = Room {
+        bed: &bed,
+        parts,
+        skirt_reach,
+        machine_error,
+    };
 
     // Prime lines first: along the front edge, or the back one if the parts are there.
     let prime_lines = match setup.prime_line.filter(|_| primed > 0) {
         None => Vec::new(),
-        Some(p) => {
-            let keep_clear = grow(&parts, skirt_reach + CLEARANCE);
-            let front = prime_band(&bed, p.length, p.width, primed, false);
-            let back = prime_band(&bed, p.length, p.width, primed, true);
-            let fits = |lines: &Option<Vec<(Point2, Point2)>>| {
-                lines.as_ref().is_some_and(|l| {
-                    !band_box(l, p.width).overlaps(&keep_clear)
-                        && l.iter()
-                            .all(|(a, b)| bed.contains(*a, 0.0) && bed.contains(*b, 0.0))
-                })
-            };
-            if fits(&front) {
-                front.unwrap_or_default()
-            } else if fits(&back) {
-                back.unwrap_or_default()
-            } else {
-                return Err(machine_error(format!(
-                    "no room for the prime lines along the front or back of the {} bed, the parts take {}: \
-                     switch them off with `prime_line = false` in [machine]",
-                    bed.describe(),
-                    describe(&parts)
-                )));
-            }
-        }
+        Some(p) => room.prime_lines(p, primed)?,
     };
     let prime_box = (!prime_lines.is_empty()).then(|| {
         grow(
@@ -150,54 +110,7 @@ pub fn plan(
 
     let tower_box = match setup.wipe_tower.filter(|_| tower) {
         None => None,
-        Some(t) => {
-            let [tw, td] = t.size;
-            let inside = |b: &BBox2| {
-                bed.contains_box(&grow(b, skirt_reach), 0.0)
-                    && prime_box.is_none_or(|p| !grow(b, skirt_reach).overlaps(&p))
-            };
-            match t.position {
-                Some([x, y]) => {
-                    let b = BBox2 {
-                        min: Point2::new(x, y),
-                        max: Point2::new(x + tw, y + td),
-                    };
-                    if b.overlaps(&grow(&parts, CLEARANCE)) {
-                        return Err(machine_error(format!(
-                            "the wipe tower at {} overlaps the parts placed at {}: move wipe_tower.position, \
-                             or leave it out to place the tower beside the parts",
-                            describe(&b),
-                            describe(&parts)
-                        )));
-                    }
-                    Some(b)
-                }
-                None => {
-                    let c = parts.center();
-                    let candidates = [
-                        Point2::new(parts.max.x + TOWER_GAP, c.y - td / 2.0),
-                        Point2::new(c.x - tw / 2.0, parts.max.y + TOWER_GAP),
-                        Point2::new(parts.min.x - TOWER_GAP - tw, c.y - td / 2.0),
-                        Point2::new(c.x - tw / 2.0, parts.min.y - TOWER_GAP - td),
-                    ];
-                    let found = candidates
-                        .iter()
-                        .map(|p| BBox2 {
-                            min: *p,
-                            max: *p + Vector2::new(tw, td),
-                        })
-                        .find(|b| inside(b));
-                    Some(found.ok_or_else(|| {
-                        machine_error(format!(
-                            "no room for the {tw} x {td} mm wipe tower beside the parts ({}) on the {} bed: \
-                             give wipe_tower.position, make the tower smaller, or place the parts elsewhere",
-                            describe(&parts),
-                            bed.describe()
-                        ))
-                    })?)
-                }
-            }
-        }
+        Some(t) => Some(room.tower(t, prime_box)?),
     };
 
     let mut around = parts;
@@ -206,18 +119,7 @@ pub fn plan(
     }
     let skirt: Vec<Vec<Point2>> = match setup.skirt {
         None => Vec::new(),
-        Some(s) => (0..s.loops)
-            .map(|i| {
-                let b = grow(&around, s.distance + (i as f64 + 0.5) * w);
-                vec![
-                    b.min,
-                    Point2::new(b.max.x, b.min.y),
-                    b.max,
-                    Point2::new(b.min.x, b.max.y),
-                    b.min,
-                ]
-            })
-            .collect(),
+        Some(s) => skirt_loops(s, &around, w),
     };
     if let Some(outer) = skirt.last() {
         let b = BBox2::from_points(outer.iter().copied());
@@ -247,11 +149,150 @@ pub fn plan(
         prime_lines,
         note: format!(
             "placed on the bed of machine `{}` by X{:+.3} Y{:+.3}",
-            crate::text::clean(machine),
+            clean(machine),
             offset.x,
             offset.y
         ),
     })
+}
+
+/// Without a machine: the plan's coordinates, moved only off negative ones.
+fn unplaced(bounds: BBox2) -> Layout {
+    let offset = if bounds.is_empty() || (bounds.min.x >= 0.0 && bounds.min.y >= 0.0) {
+        Vector2::zeros()
+    } else {
+        Vector2::new(
+            (UNPLACED_MARGIN - bounds.min.x).max(0.0),
+            (UNPLACED_MARGIN - bounds.min.y).max(0.0),
+        )
+    };
+    let note = if offset == Vector2::zeros() {
+        "the plan's coordinates (no machine profile)".to_string()
+    } else {
+        format!(
+            "the plan's coordinates moved by X{:+.3} Y{:+.3} so that none is negative (no machine profile)",
+            offset.x, offset.y
+        )
+    };
+    Layout {
+        offset,
+        parts: moved(&bounds, offset),
+        tower: None,
+        skirt: Vec::new(),
+        prime_lines: Vec::new(),
+        note,
+    }
+}
+
+/// The bed with the parts placed on it: what the prime lines and the tower are fitted
+/// around, and how a misfit is reported.
+struct Room<'a> {
+    bed: &'a Bed,
+    /// The parts' bounding box, placed.
+    parts: BBox2,
+    /// How far the skirt reaches beyond what it surrounds (mm).
+    skirt_reach: f64,
+    machine_error: &'a dyn Fn(String) -> Error,
+}
+
+impl Room<'_> {
+    /// A prime line per primed head, along the front edge, or the back one if the parts
+    /// (and their skirt) take the front.
+    fn prime_lines(&self, p: PrimeLine, primed: usize) -> Result<Vec<(Point2, Point2)>> {
+        let (bed, parts) = (self.bed, &self.parts);
+        let keep_clear = grow(parts, self.skirt_reach + CLEARANCE);
+        let front = prime_band(bed, p.length, p.width, primed, false);
+        let back = prime_band(bed, p.length, p.width, primed, true);
+        let fits = |lines: &Option<Vec<(Point2, Point2)>>| {
+            lines.as_ref().is_some_and(|l| {
+                !band_box(l, p.width).overlaps(&keep_clear)
+                    && l.iter()
+                        .all(|(a, b)| bed.contains(*a, 0.0) && bed.contains(*b, 0.0))
+            })
+        };
+        if fits(&front) {
+            Ok(front.unwrap_or_default())
+        } else if fits(&back) {
+            Ok(back.unwrap_or_default())
+        } else {
+            Err((self.machine_error)(format!(
+                "no room for the prime lines along the front or back of the {} bed, the parts take {}: \
+                 switch them off with `prime_line = false` in [machine]",
+                bed.describe(),
+                describe(parts)
+            )))
+        }
+    }
+
+    /// The wipe tower's footprint: where the profile puts it (clear of the parts), or
+    /// the first side of the parts where it fits on the bed, with its skirt, clear of
+    /// the prime lines (`prime_box`).
+    fn tower(&self, t: WipeTower, prime_box: Option<BBox2>) -> Result<BBox2> {
+        let (bed, parts, skirt_reach) = (self.bed, &self.parts, self.skirt_reach);
+        let [tw, td] = t.size;
+        let inside = |b: &BBox2| {
+            bed.contains_box(&grow(b, skirt_reach), 0.0)
+                && prime_box.is_none_or(|p| !grow(b, skirt_reach).overlaps(&p))
+        };
+        match t.position {
+            Some([x, y]) => {
+                let b = BBox2 {
+                    min: Point2::new(x, y),
+                    max: Point2::new(x + tw, y + td),
+                };
+                if b.overlaps(&grow(parts, CLEARANCE)) {
+                    return Err((self.machine_error)(format!(
+                        "the wipe tower at {} overlaps the parts placed at {}: move wipe_tower.position, \
+                         or leave it out to place the tower beside the parts",
+                        describe(&b),
+                        describe(parts)
+                    )));
+                }
+                Ok(b)
+            }
+            None => {
+                let c = parts.center();
+                let candidates = [
+                    Point2::new(parts.max.x + TOWER_GAP, c.y - td / 2.0),
+                    Point2::new(c.x - tw / 2.0, parts.max.y + TOWER_GAP),
+                    Point2::new(parts.min.x - TOWER_GAP - tw, c.y - td / 2.0),
+                    Point2::new(c.x - tw / 2.0, parts.min.y - TOWER_GAP - td),
+                ];
+                let found = candidates
+                    .iter()
+                    .map(|p| BBox2 {
+                        min: *p,
+                        max: *p + Vector2::new(tw, td),
+                    })
+                    .find(|b| inside(b));
+                found.ok_or_else(|| {
+                    (self.machine_error)(format!(
+                        "no room for the {tw} x {td} mm wipe tower beside the parts ({}) on the {} bed: \
+                         give wipe_tower.position, make the tower smaller, or place the parts elsewhere",
+                        describe(parts),
+                        bed.describe()
+                    ))
+                })
+            }
+        }
+    }
+}
+
+/// The skirt's loops around `around` (the parts and the tower), innermost first, each
+/// closed, a line width `w` apart.
+fn skirt_loops(s: Skirt, around: &BBox2, w: f64) -> Vec<Vec<Point2>> {
+    (0..s.loops)
+        .map(|i| {
+            let b = grow(around, s.distance + (i as f64 + 0.5) * w);
+            vec![
+                b.min,
+                Point2::new(b.max.x, b.min.y),
+                b.max,
+                Point2::new(b.min.x, b.max.y),
+                b.min,
+            ]
+        })
+        .collect()
 }
 
 fn moved(b: &BBox2, offset: Vector2) -> BBox2 {

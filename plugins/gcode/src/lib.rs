@@ -35,6 +35,7 @@ mod mix_along;
 pub mod motion;
 pub mod setup;
 mod solid;
+mod stage_name;
 pub mod text;
 pub mod tower;
 pub mod transition;
@@ -51,10 +52,12 @@ use lamina_api::{Error, LayerPlan, Result, RunInfo, StageFactory};
 pub use lamina_api::machine::Flavor;
 pub use writer::percentages;
 
+use crate::commands::M165_AXES;
 use crate::setup::{OwnOptions, Setup};
-use crate::writer::{Header, M165_AXES, Writer};
+use crate::writer::{Header, Writer};
 
-const STAGE: &str = "gcode";
+// Every file of the crate names its errors after the stage as `crate::STAGE`.
+use stage_name::STAGE;
 
 /// Options a machine profile sets: a pipeline with a machine may not set them here.
 const MACHINE_KEYS: &[(&str, &str)] = &[

@@ -13,6 +13,7 @@ use lamina_api::machine::{
 use lamina_api::{Error, Result, RunInfo};
 
 use crate::motion::{Corner, Limits};
+use crate::text::clean;
 
 /// A heater-and-nozzle the firmware selects: a tool of a tool changer, or the one
 /// nozzle of a mixing head.
@@ -135,90 +136,15 @@ impl Setup {
             .enumerate()
             .map(|(i, mat)| m.tool_of(&mat.name, i))
             .collect();
-        check_materials_carried(info, &slot_of, || {
-            let carried: Vec<String> = m
-                .tools
-                .iter()
-                .enumerate()
-                .map(|(i, t)| match &t.material {
-                    Some(name) => format!("tool {i}: {name}"),
-                    None => format!(
-                        "tool {i}: {}",
-                        info.materials.get(i).map_or("nothing", |mat| mat.name.as_str())
-                    ),
-                })
-                .collect();
-            format!(
-                "the machine `{}` has {} {} ({})",
-                m.name,
-                m.tools.len(),
-                if m.flavor.is_mixing() {
-                    "mixing channels"
-                } else {
-                    "tools"
-                },
-                carried.join(", ")
-            )
-        })
-        .map_err(|e| m.error(e))?;
-        let label_of = |i: usize| -> String {
-            let t = &m.tools[i];
-            let material = t
-                .material
-                .clone()
-                .or_else(|| info.materials.get(i).map(|x| x.name.clone()));
-            match (material, &t.name) {
-                (Some(mat), Some(name)) => format!("{mat} ({name} head)"),
-                (Some(mat), None) => mat,
-                (None, Some(name)) => format!("nothing ({name} head)"),
-                (None, None) => "nothing".into(),
-            }
-        };
-        let heads = if m.flavor.is_mixing() {
-            // One heater: the hottest channel that carries a material the parts use.
-            let used: Vec<usize> = used_slots(info, &slot_of);
-            let hottest = |f: fn(&lamina_api::machine::ToolSlot) -> f64| {
-                used.iter().map(|&c| f(&m.tools[c])).fold(0.0, f64::max)
-            };
-            vec![Head {
-                index: mixing_tool(m.firmware, virtual_tool),
-                label: "mixing head".into(),
-                nozzle_temperature: hottest(|t| t.nozzle_temperature),
-                first_layer_temperature: hottest(|t| t.first_layer_temperature),
-                standby_temperature: None,
-            }]
-        } else {
-            (0..m.tools.len())
-                .map(|i| Head {
-                    index: i,
-                    label: label_of(i),
-                    nozzle_temperature: m.tools[i].nozzle_temperature,
-                    first_layer_temperature: m.tools[i].first_layer_temperature,
-                    standby_temperature: m.tools[i].standby_temperature,
-                })
-                .collect()
-        };
+        check_materials_carried(info, &slot_of, || carried(m, info)).map_err(|e| m.error(e))?;
+        let heads = machine_heads(m, info, &slot_of, virtual_tool);
         let channel_names = if m.flavor.is_mixing() {
-            (0..m.tools.len()).map(label_of).collect()
+            (0..m.tools.len()).map(|i| tool_label(m, info, i)).collect()
         } else {
             Vec::new()
         };
         let mo = &m.motion;
-        let limits = Limits {
-            print: mo.print_acceleration,
-            travel: mo.travel_acceleration,
-            retract: if m.firmware == Dialect::RepRapFirmware {
-                mo.print_acceleration
-            } else {
-                mo.retract_acceleration
-            },
-            corner: match mo.cornering {
-                Cornering::JunctionDeviation(d) => Corner::JunctionDeviation(d),
-                Cornering::Jerk(j) => Corner::Jerk(j.as_array()),
-            },
-            max_speed: mo.max_speed.map_or([f64::INFINITY; 4], |a| a.as_array()),
-            max_acceleration: mo.max_acceleration.map_or([f64::INFINITY; 4], |a| a.as_array()),
-        };
+        let limits = machine_limits(m);
         Ok(Setup {
             flavor: m.flavor,
             dialect: m.firmware,
@@ -432,6 +358,100 @@ impl Setup {
     }
 }
 
+/// What the machine's tools or mixing channels carry, for the error that names a
+/// material none carries.
+fn carried(m: &Machine, info: &RunInfo) -> String {
+    let carried: Vec<String> = m
+        .tools
+        .iter()
+        .enumerate()
+        .map(|(i, t)| match &t.material {
+            Some(name) => format!("tool {i}: {name}"),
+            None => format!(
+                "tool {i}: {}",
+                info.materials.get(i).map_or("nothing", |mat| mat.name.as_str())
+            ),
+        })
+        .collect();
+    format!(
+        "the machine `{}` has {} {} ({})",
+        m.name,
+        m.tools.len(),
+        if m.flavor.is_mixing() {
+            "mixing channels"
+        } else {
+            "tools"
+        },
+        carried.join(", ")
+    )
+}
+
+/// For comments: the material tool `i` carries (its own, or the pipeline's material of
+/// the same number), and the head's name on the machine.
+fn tool_label(m: &Machine, info: &RunInfo, i: usize) -> String {
+    let t = &m.tools[i];
+    let material = t
+        .material
+        .clone()
+        .or_else(|| info.materials.get(i).map(|x| x.name.clone()));
+    match (material, &t.name) {
+        (Some(mat), Some(name)) => format!("{mat} ({name} head)"),
+        (Some(mat), None) => mat,
+        (None, Some(name)) => format!("nothing ({name} head)"),
+        (None, None) => "nothing".into(),
+    }
+}
+
+/// The heads the firmware selects: a tool changer's tools, or a mixing head's one
+/// nozzle, heated for the hottest channel the parts use.
+fn machine_heads(m: &Machine, info: &RunInfo, slot_of: &[Option<usize>], virtual_tool: u32) -> Vec<Head> {
+    if m.flavor.is_mixing() {
+        // One heater: the hottest channel that carries a material the parts use.
+        let used: Vec<usize> = used_slots(info, slot_of);
+        let hottest = |f: fn(&lamina_api::machine::ToolSlot) -> f64| {
+            used.iter().map(|&c| f(&m.tools[c])).fold(0.0, f64::max)
+        };
+        vec![Head {
+            index: mixing_tool(m.firmware, virtual_tool),
+            label: "mixing head".into(),
+            nozzle_temperature: hottest(|t| t.nozzle_temperature),
+            first_layer_temperature: hottest(|t| t.first_layer_temperature),
+            standby_temperature: None,
+        }]
+    } else {
+        (0..m.tools.len())
+            .map(|i| Head {
+                index: i,
+                label: tool_label(m, info, i),
+                nozzle_temperature: m.tools[i].nozzle_temperature,
+                first_layer_temperature: m.tools[i].first_layer_temperature,
+                standby_temperature: m.tools[i].standby_temperature,
+            })
+            .collect()
+    }
+}
+
+/// The motion settings of the profile, as the file sets them and the time estimate
+/// uses them: RepRapFirmware retracts at the print acceleration.
+fn machine_limits(m: &Machine) -> Limits {
+    let mo = &m.motion;
+    Limits {
+        print: mo.print_acceleration,
+        travel: mo.travel_acceleration,
+        retract: if m.firmware == Dialect::RepRapFirmware {
+            mo.print_acceleration
+        } else {
+            mo.retract_acceleration
+        },
+        corner: match mo.cornering {
+            Cornering::JunctionDeviation(d) => Corner::JunctionDeviation(d),
+            Cornering::Jerk(j) => Corner::Jerk(j.as_array()),
+        },
+        max_speed: mo.max_speed.map_or([f64::INFINITY; 4], |a| a.as_array()),
+        max_acceleration: mo.max_acceleration.map_or([f64::INFINITY; 4], |a| a.as_array()),
+    }
+}
+
 /// The firmware tool of a mixing head: Marlin stores mixes in a virtual tool, a
 /// RepRapFirmware mixing tool is the tool 0 the exporter defines with `M563`.
 fn mixing_tool(dialect: Dialect, virtual_tool: u32) -> usize {
@@ -468,7 +488,7 @@ fn check_materials_carried(
                 let name = info.materials.get(m).map_or("?", |x| x.name.as_str());
                 return Err(format!(
                     "part `{}` uses material `{name}`, which no tool carries: {}",
-                    crate::text::clean(&p.name),
+                    clean(&p.name),
                     describe()
                 ));
             }

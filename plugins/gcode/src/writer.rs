@@ -24,6 +24,8 @@ use crate::text::{clean, num, push_num};
 use crate::tower::{Feature, Stroke, Tower};
 use crate::transition::PurgeInto;
 
+pub use crate::commands::M165_AXES;
+
 mod multi;
 mod spool;
 
@@ -52,9 +54,6 @@ const PARK_CLEARANCE: f64 = 10.0;
 /// Along a bead (`mix_along`) the mix changes only once some channel would move by
 /// this many percent.
 const MIX_DEAD_BAND: u32 = 2;
-
-/// The axis letters of `M165`, one per mixing channel, in Marlin's order.
-pub const M165_AXES: [char; 6] = ['A', 'B', 'C', 'D', 'H', 'I'];
 
 /// Fractions as whole percentages summing to 100 (largest remainders), so that
 /// firmwares that normalise or reject sums other than 1 agree on the mix.

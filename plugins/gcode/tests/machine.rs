@@ -13,9 +13,7 @@ use lamina_test_support::Rng;
 use support::{export, layer_plan, run_info};
 
 use lamina_core::machine::{BedPlacement, Machine};
-use lamina_core::{
-    BBox2, Composition, LayerPlan, PathKind, Point2, Registry, RunInfo, StageKind, TimedPoint, Toolpath,
-};
+use lamina_core::{BBox2, Composition, LayerPlan, PathKind, Point2, Registry, RunInfo, TimedPoint, Toolpath};
 
 fn machine(name: &str) -> Machine {
     lamina_core::machine::load::builtin(name).expect("built-in profile")
@@ -627,8 +625,7 @@ fn options_the_machine_sets_are_refused_at_their_key() {
         let text = format!("use = \"gcode\"\n{key}");
         let table = lamina_core::pipeline::TableRef::parse_snippet("gcode", &text).expect("table");
         let err = registry
-            .build_for(
-                StageKind::Export,
+            .build_for::<dyn lamina_core::Exporter>(
                 &table,
                 &scripts,
                 &dir,

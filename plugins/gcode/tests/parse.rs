@@ -6,9 +6,7 @@ mod support;
 
 use lamina_test_support::Rng;
 
-use lamina_core::{
-    Composition, LayerPlan, PathKind, Point2, Registry, RunInfo, StageKind, TimedPoint, Toolpath,
-};
+use lamina_core::{Composition, LayerPlan, PathKind, Point2, Registry, RunInfo, TimedPoint, Toolpath};
 
 fn info() -> RunInfo {
     support::run_info(["red", "green"], "p".into(), lamina_core::BBox2::EMPTY, None)
@@ -234,7 +232,7 @@ fn bad_options_are_refused_with_their_key() {
     ] {
         let table = lamina_core::pipeline::TableRef::parse_snippet("gcode", text).expect("table");
         let err = registry
-            .build(StageKind::Export, &table, &scripts, &dir)
+            .build::<dyn lamina_core::Exporter>(&table, &scripts, &dir)
             .err()
             .unwrap_or_else(|| panic!("{text} accepted"));
         assert!(

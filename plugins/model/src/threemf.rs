@@ -144,217 +144,337 @@ fn unit_scale(unit: &str) -> Option<f64> {
 
 fn parse_model(path: &Path, part: &str, text: &str, limits: &Limits) -> Result<Vec<Mesh>> {
     let mut reader = quick_xml::Reader::from_str(text);
-    let line_of = |pos: u64| {
-        text.as_bytes()[..(pos as usize).min(text.len())]
-            .iter()
-            .filter(|&&b| b == b'\n')
-            .count()
-            + 1
-    };
-    let mut scale = 1.0;
-    let mut objects: HashMap<u32, Object> = HashMap::new();
-    let mut current: Option<(u32, Object)> = None;
-    let mut base_groups: HashMap<u32, Vec<String>> = HashMap::new();
-    let mut current_group: Option<(u32, Vec<String>)> = None;
-    let mut items: Vec<(u32, Transform)> = Vec::new();
-    let mut vertices = 0usize;
+    let mut doc = Document::new(path, limits);
     loop {
-        let pos = reader.buffer_position();
+        let site = Site {
+            path,
+            part,
+            text,
+            pos: reader.buffer_position(),
+        };
         let event = reader
             .read_event()
-            .map_err(|e| err(path, format!("{part} line {}: malformed XML: {e}", line_of(pos))))?;
-        let at = |m: String| err(path, format!("{part} line {}: {m}", line_of(pos)));
+            .map_err(|e| site.error(format!("malformed XML: {e}")))?;
         match event {
             Event::Start(e) | Event::Empty(e) => {
-                let attrs = attributes(&e).map_err(&at)?;
-                let num = |k: &str| -> Result<f64> {
-                    let v = attrs
-                        .get(k)
-                        .ok_or_else(|| at(format!("missing attribute `{k}`")))?;
-                    let f: f64 = v
-                        .trim()
-                        .parse()
-                        .map_err(|_| at(format!("`{k}` = `{v}` is not a number")))?;
-                    if f.is_finite() {
-                        Ok(f)
-                    } else {
-                        Err(at(format!("`{k}` is not finite")))
-                    }
-                };
-                let id = |k: &str| -> Result<u32> {
-                    let v = attrs
-                        .get(k)
-                        .ok_or_else(|| at(format!("missing attribute `{k}`")))?;
-                    v.trim()
-                        .parse()
-                        .map_err(|_| at(format!("`{k}` = `{v}` is not an index")))
-                };
-                let transform = || -> Result<Transform> {
-                    match attrs.get("transform") {
-                        None => Ok(IDENTITY),
-                        Some(t) => {
-                            let v: Vec<f64> = t
-                                .split_ascii_whitespace()
-                                .filter_map(|x| x.parse().ok())
-                                .collect();
-                            if v.len() != 12 || v.iter().any(|x| !x.is_finite()) {
-                                return Err(at(format!("transform `{t}` is not 12 finite numbers")));
-                            }
-                            let mut m = [0.0; 12];
-                            m.copy_from_slice(&v);
-                            Ok(m)
-                        }
-                    }
-                };
-                match e.local_name().as_ref() {
-                    "model" => {
-                        if let Some(u) = attrs.get("unit") {
-                            scale = unit_scale(u).ok_or_else(|| at(format!("unknown unit `{u}`")))?;
-                        }
-                    }
-                    "basematerials" => current_group = Some((id("id")?, Vec::new())),
-                    "base" => {
-                        if let Some((_, names)) = &mut current_group {
-                            names.push(
-                                attrs
-                                    .get("name")
-                                    .cloned()
-                                    .unwrap_or_else(|| format!("material {}", names.len())),
-                            );
-                        }
-                    }
-                    "object" => {
-                        let mut o = Object {
-                            name: attrs.get("name").cloned(),
-                            ..Object::default()
-                        };
-                        if attrs.contains_key("pid") {
-                            o.default_property =
-                                Some((id("pid")?, attrs.get("pindex").map_or(Ok(0), |_| id("pindex"))?));
-                        }
-                        current = Some((id("id")?, o));
-                    }
-                    "vertex" => {
-                        let (_, o) = current
-                            .as_mut()
-                            .ok_or_else(|| at("vertex outside an object".into()))?;
-                        o.vertices.push(Point3::new(num("x")?, num("y")?, num("z")?));
-                        // More vertices than the allowed triangles could use are
-                        // refused as they come, before they take the memory.
-                        vertices += 1;
-                        if vertices.is_multiple_of(65_536) {
-                            vertex_cap(path, vertices, limits)?;
-                        }
-                    }
-                    "triangle" => {
-                        let (_, o) = current
-                            .as_mut()
-                            .ok_or_else(|| at("triangle outside an object".into()))?;
-                        let t = [id("v1")?, id("v2")?, id("v3")?];
-                        if t.iter().any(|&v| v as usize >= o.vertices.len()) {
-                            return Err(at(format!(
-                                "triangle {t:?} names a vertex beyond the {} read",
-                                o.vertices.len()
-                            )));
-                        }
-                        o.triangles.push(t);
-                        let prop = if attrs.contains_key("pid") || attrs.contains_key("p1") {
-                            let pid = match attrs.get("pid") {
-                                Some(_) => id("pid")?,
-                                None => o.default_property.map_or(0, |d| d.0),
-                            };
-                            Some((pid, id("p1")?))
-                        } else {
-                            o.default_property
-                        };
-                        o.properties.push(prop);
-                    }
-                    "component" => {
-                        let (_, o) = current
-                            .as_mut()
-                            .ok_or_else(|| at("component outside an object".into()))?;
-                        o.components.push((id("objectid")?, transform()?));
-                    }
-                    "item" => items.push((id("objectid")?, transform()?)),
-                    _ => {}
-                }
+                let attrs = attributes(&e).map_err(|m| site.error(m))?;
+                doc.start(e.local_name().as_ref(), &Element { attrs, site })?;
             }
-            Event::End(e) => match e.local_name().as_ref() {
-                "object" => {
-                    if let Some((id, o)) = current.take() {
-                        objects.insert(id, o);
-                    }
-                }
-                "basematerials" => {
-                    if let Some((id, names)) = current_group.take() {
-                        base_groups.insert(id, names);
-                    }
-                }
-                _ => {}
-            },
+            Event::End(e) => doc.end(e.local_name().as_ref()),
             Event::Eof => break,
             _ => {}
         }
     }
-    if items.is_empty() {
-        return Err(err(path, format!("{part}: the build has no items")));
+    doc.into_meshes(part)
+}
+
+/// Where an element of the model part starts, for messages that name its line.
+#[derive(Clone, Copy)]
+struct Site<'a> {
+    path: &'a Path,
+    part: &'a str,
+    text: &'a str,
+    /// Byte offset into `text`.
+    pos: u64,
+}
+
+impl Site<'_> {
+    /// `message` at this place. The line is counted only for a message: counting it
+    /// for every element would read the part again and again.
+    fn error(&self, message: String) -> Error {
+        let line = self.text.as_bytes()[..(self.pos as usize).min(self.text.len())]
+            .iter()
+            .filter(|&&b| b == b'\n')
+            .count()
+            + 1;
+        err(self.path, format!("{} line {line}: {message}", self.part))
     }
-    // All base materials, numbered across groups in id order.
-    let mut group_ids: Vec<u32> = base_groups.keys().copied().collect();
-    group_ids.sort_unstable();
-    let mut material_names = Vec::new();
-    let mut group_offset = HashMap::new();
-    for g in group_ids {
-        group_offset.insert(g, material_names.len() as u32);
-        material_names.extend(base_groups[&g].iter().cloned());
+}
+
+/// An element's attributes, with where it starts.
+struct Element<'a> {
+    attrs: HashMap<String, String>,
+    site: Site<'a>,
+}
+
+impl Element<'_> {
+    /// `message` at the element.
+    fn at(&self, message: String) -> Error {
+        self.site.error(message)
     }
-    vertex_cap(path, vertices, limits)?;
-    // Each instance copies its object's vertices: only those its triangles use are
-    // kept, so that what the build expands to is bounded by its triangles.
-    for o in objects.values_mut() {
-        o.compact();
+
+    fn get(&self, k: &str) -> Option<&String> {
+        self.attrs.get(k)
     }
-    let units: Transform = [scale, 0.0, 0.0, 0.0, scale, 0.0, 0.0, 0.0, scale, 0.0, 0.0, 0.0];
-    let mut expanded = HashMap::new();
-    let mut total = 0.0;
-    for (object, _) in &items {
-        total += expanded_triangles(path, &objects, *object, 0, &mut expanded)?;
+
+    fn has(&self, k: &str) -> bool {
+        self.attrs.contains_key(k)
     }
-    limits.check(
-        Limit::Triangles,
-        total,
-        &format!(
-            "{} (its build items with every component instance)",
-            path.display()
-        ),
-    )?;
-    let mut meshes = Vec::new();
-    for (n, (object, transform)) in items.iter().enumerate() {
-        let mut mesh = Mesh::new(format!("item {n}"), Vec::new(), Vec::new());
-        let mut any_material = false;
-        let mut tri_materials = Vec::new();
-        collect(
+
+    /// Attribute `k`, which must be present.
+    fn required(&self, k: &str) -> Result<&String> {
+        self.get(k)
+            .ok_or_else(|| self.at(format!("missing attribute `{k}`")))
+    }
+
+    /// Attribute `k` as a finite number.
+    fn num(&self, k: &str) -> Result<f64> {
+        let v = self.required(k)?;
+        let f: f64 = v
+            .trim()
+            .parse()
+            .map_err(|_| self.at(format!("`{k}` = `{v}` is not a number")))?;
+        if f.is_finite() {
+            Ok(f)
+        } else {
+            Err(self.at(format!("`{k}` is not finite")))
+        }
+    }
+
+    /// Attribute `k` as an id or index.
+    fn id(&self, k: &str) -> Result<u32> {
+        let v = self.required(k)?;
+        v.trim()
+            .parse()
+            .map_err(|_| self.at(format!("`{k}` = `{v}` is not an index")))
+    }
+
+    /// The `transform` attribute, the identity when absent.
+    fn transform(&self) -> Result<Transform> {
+        match self.get("transform") {
+            None => Ok(IDENTITY),
+            Some(t) => {
+                let v: Vec<f64> = t
+                    .split_ascii_whitespace()
+                    .filter_map(|x| x.parse().ok())
+                    .collect();
+                if v.len() != 12 || v.iter().any(|x| !x.is_finite()) {
+                    return Err(self.at(format!("transform `{t}` is not 12 finite numbers")));
+                }
+                let mut m = [0.0; 12];
+                m.copy_from_slice(&v);
+                Ok(m)
+            }
+        }
+    }
+}
+
+/// What the model part declares, gathered as its elements are read.
+struct Document<'a> {
+    path: &'a Path,
+    limits: &'a Limits,
+    /// Millimetres per model unit.
+    scale: f64,
+    objects: HashMap<u32, Object>,
+    /// The object being read.
+    current: Option<(u32, Object)>,
+    base_groups: HashMap<u32, Vec<String>>,
+    /// The base materials group being read.
+    current_group: Option<(u32, Vec<String>)>,
+    items: Vec<(u32, Transform)>,
+    /// Vertices read so far, over every object.
+    vertices: usize,
+}
+
+impl<'a> Document<'a> {
+    fn new(path: &'a Path, limits: &'a Limits) -> Self {
+        Document {
             path,
-            &objects,
-            *object,
-            &compose(transform, &units),
-            0,
-            &mut mesh,
-            &mut tri_materials,
-            &group_offset,
-            &base_groups,
-            &mut any_material,
-        )?;
-        if let Some(name) = objects.get(object).and_then(|o| o.name.clone()) {
-            mesh.name = name;
+            limits,
+            scale: 1.0,
+            objects: HashMap::new(),
+            current: None,
+            base_groups: HashMap::new(),
+            current_group: None,
+            items: Vec::new(),
+            vertices: 0,
         }
-        if any_material {
-            mesh.triangle_materials = tri_materials;
-            mesh.material_names = material_names.clone();
-        }
-        meshes.push(mesh);
     }
-    Ok(meshes)
+
+    /// Reads the start of element `name` (or an empty one).
+    fn start(&mut self, name: &str, el: &Element<'_>) -> Result<()> {
+        match name {
+            "model" => {
+                if let Some(u) = el.get("unit") {
+                    self.scale = unit_scale(u).ok_or_else(|| el.at(format!("unknown unit `{u}`")))?;
+                }
+            }
+            "basematerials" => self.current_group = Some((el.id("id")?, Vec::new())),
+            "base" => {
+                if let Some((_, names)) = &mut self.current_group {
+                    names.push(
+                        el.get("name")
+                            .cloned()
+                            .unwrap_or_else(|| format!("material {}", names.len())),
+                    );
+                }
+            }
+            "object" => {
+                let mut o = Object {
+                    name: el.get("name").cloned(),
+                    ..Object::default()
+                };
+                if el.has("pid") {
+                    o.default_property = Some((
+                        el.id("pid")?,
+                        el.get("pindex").map_or(Ok(0), |_| el.id("pindex"))?,
+                    ));
+                }
+                self.current = Some((el.id("id")?, o));
+            }
+            "vertex" => self.vertex(el)?,
+            "triangle" => self.triangle(el)?,
+            "component" => {
+                let (_, o) = self
+                    .current
+                    .as_mut()
+                    .ok_or_else(|| el.at("component outside an object".into()))?;
+                o.components.push((el.id("objectid")?, el.transform()?));
+            }
+            "item" => self.items.push((el.id("objectid")?, el.transform()?)),
+            _ => {}
+        }
+        Ok(())
+    }
+
+    /// A vertex of the object being read.
+    fn vertex(&mut self, el: &Element<'_>) -> Result<()> {
+        let (_, o) = self
+            .current
+            .as_mut()
+            .ok_or_else(|| el.at("vertex outside an object".into()))?;
+        o.vertices
+            .push(Point3::new(el.num("x")?, el.num("y")?, el.num("z")?));
+        // More vertices than the allowed triangles could use are refused as they
+        // come, before they take the memory.
+        self.vertices += 1;
+        if self.vertices.is_multiple_of(65_536) {
+            vertex_cap(self.path, self.vertices, self.limits)?;
+        }
+        Ok(())
+    }
+
+    /// A triangle of the object being read, with its property (its own, or the
+    /// object's default).
+    fn triangle(&mut self, el: &Element<'_>) -> Result<()> {
+        let (_, o) = self
+            .current
+            .as_mut()
+            .ok_or_else(|| el.at("triangle outside an object".into()))?;
+        let t = [el.id("v1")?, el.id("v2")?, el.id("v3")?];
+        if t.iter().any(|&v| v as usize >= o.vertices.len()) {
+            return Err(el.at(format!(
+                "triangle {t:?} names a vertex beyond the {} read",
+                o.vertices.len()
+            )));
+        }
+        o.triangles.push(t);
+        let prop = if el.has("pid") || el.has("p1") {
+            let pid = match el.get("pid") {
+                Some(_) => el.id("pid")?,
+                None => o.default_property.map_or(0, |d| d.0),
+            };
+            Some((pid, el.id("p1")?))
+        } else {
+            o.default_property
+        };
+        o.properties.push(prop);
+        Ok(())
+    }
+
+    /// Reads the end of element `name`: an object or a materials group is complete.
+    fn end(&mut self, name: &str) {
+        match name {
+            "object" => {
+                if let Some((id, o)) = self.current.take() {
+                    self.objects.insert(id, o);
+                }
+            }
+            "basematerials" => {
+                if let Some((id, names)) = self.current_group.take() {
+                    self.base_groups.insert(id, names);
+                }
+            }
+            _ => {}
+        }
+    }
+
+    /// All base materials, numbered across groups in id order, and the number of each
+    /// group's first.
+    fn material_numbers(&self) -> (Vec<String>, HashMap<u32, u32>) {
+        let mut group_ids: Vec<u32> = self.base_groups.keys().copied().collect();
+        group_ids.sort_unstable();
+        let mut material_names = Vec::new();
+        let mut group_offset = HashMap::new();
+        for g in group_ids {
+            group_offset.insert(g, material_names.len() as u32);
+            material_names.extend(self.base_groups[&g].iter().cloned());
+        }
+        (material_names, group_offset)
+    }
+
+    /// Refuses a build that expands (with every component instance) to more triangles
+    /// than allowed, before any is copied.
+    fn check_expansion(&self) -> Result<()> {
+        let mut expanded = HashMap::new();
+        let mut total = 0.0;
+        for (object, _) in &self.items {
+            total += expanded_triangles(self.path, &self.objects, *object, 0, &mut expanded)?;
+        }
+        self.limits.check(
+            Limit::Triangles,
+            total,
+            &format!(
+                "{} (its build items with every component instance)",
+                self.path.display()
+            ),
+        )
+    }
+
+    /// One mesh per build item of the model part `part`, in millimetres.
+    fn into_meshes(mut self, part: &str) -> Result<Vec<Mesh>> {
+        let path = self.path;
+        if self.items.is_empty() {
+            return Err(err(path, format!("{part}: the build has no items")));
+        }
+        let (material_names, group_offset) = self.material_numbers();
+        vertex_cap(path, self.vertices, self.limits)?;
+        // Each instance copies its object's vertices: only those its triangles use are
+        // kept, so that what the build expands to is bounded by its triangles.
+        for o in self.objects.values_mut() {
+            o.compact();
+        }
+        let scale = self.scale;
+        let units: Transform = [scale, 0.0, 0.0, 0.0, scale, 0.0, 0.0, 0.0, scale, 0.0, 0.0, 0.0];
+        self.check_expansion()?;
+        let mut meshes = Vec::new();
+        for (n, (object, transform)) in self.items.iter().enumerate() {
+            let mut mesh = Mesh::new(format!("item {n}"), Vec::new(), Vec::new());
+            let mut any_material = false;
+            let mut tri_materials = Vec::new();
+            collect(
+                path,
+                &self.objects,
+                *object,
+                &compose(transform, &units),
+                0,
+                &mut mesh,
+                &mut tri_materials,
+                &group_offset,
+                &self.base_groups,
+                &mut any_material,
+            )?;
+            if let Some(name) = self.objects.get(object).and_then(|o| o.name.clone()) {
+                mesh.name = name;
+            }
+            if any_material {
+                mesh.triangle_materials = tri_materials;
+                mesh.material_names = material_names.clone();
+            }
+            meshes.push(mesh);
+        }
+        Ok(meshes)
+    }
 }
 
 /// Refuses more vertices than three per allowed triangle: no mesh within the

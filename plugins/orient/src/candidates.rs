@@ -16,7 +16,7 @@ use nalgebra::{Rotation3, Unit, Vector3};
 use serde::Deserialize;
 
 use crate::surfaces::{Facet, bed_contact, facets, flat_faces, height, surface_angle};
-use lamina_api::microstructure::{CellSpec, Microstructure};
+use lamina_fgm::microstructure::{CellSpec, Microstructure};
 
 lamina_api::option_type!(Criterion = "string");
 

@@ -62,58 +62,115 @@ impl Grouping {
 
 /// Groups the sub-regions of one part for filling with beads of `widths`.
 pub fn group(regions: &[SubRegion], widths: &Widths, thin: Thin) -> Grouping {
-    // A region whose mean width is below the narrowest bead cannot be laid alone.
-    let width = widths.min;
-    // Levels of each family and cell, in level order.
-    let mut buckets: BTreeMap<(usize, Option<usize>), BTreeMap<usize, Vec<usize>>> = BTreeMap::new();
-    // Thin circumferential cells of each family: their levels' cells need not line up,
-    // so they are filled as one wall and the material read back along the beads.
-    let mut walls: BTreeMap<usize, Vec<usize>> = BTreeMap::new();
-    for (i, r) in regions.iter().enumerate() {
-        if r.cell.is_some() && thin == Thin::Merge && mean_width(&r.polygon) < width {
-            walls.entry(r.family).or_default().push(i);
-            continue;
-        }
-        buckets
-            .entry((r.family, r.cell))
-            .or_default()
-            .entry(r.index)
-            .or_default()
-            .push(i);
-    }
+    let grouper = Grouper {
+        regions,
+        widths,
+        // A region whose mean width is below the narrowest bead cannot be laid alone.
+        width: widths.min,
+        thin,
+    };
+    let (buckets, walls) = grouper.sort();
     let mut out = Grouping::default();
     // Per family, the regions still too thin after merging within their cell.
     let mut leftover: BTreeMap<usize, Vec<usize>> = BTreeMap::new();
-    // Unions are always taken of the regions as cut: a union's output is rounded to
-    // its own grid, and a second union against it would find the shared edges a
-    // rounding apart.
-    let fill_union = |members: &[usize]| -> Vec<Bead> {
-        union(members.iter().map(|&m| &regions[m].polygon))
+    for levels in buckets.values() {
+        grouper.family(levels, &mut out, &mut leftover);
+    }
+    grouper.merge_across_cells(leftover, &mut out);
+    for members in walls.into_values() {
+        wall(regions, &members, widths, &mut out);
+    }
+    for g in &mut out.groups {
+        if g.members.len() > 1 && g.composition.is_none() {
+            g.composition = mean_composition(regions, &g.members);
+        }
+    }
+    out
+}
+
+/// Levels of each family and cell, in level order: per (family, cell), per level, the
+/// indices of its regions.
+type Buckets = BTreeMap<(usize, Option<usize>), BTreeMap<usize, Vec<usize>>>;
+
+/// The sub-regions of one part and the beads that fill them: what every grouping
+/// decision reads.
+struct Grouper<'a> {
+    regions: &'a [SubRegion],
+    widths: &'a Widths,
+    /// The narrowest bead's width.
+    width: f64,
+    thin: Thin,
+}
+
+impl Grouper<'_> {
+    /// The regions by family, cell and level, and apart from them, per family, the
+    /// thin circumferential cells: their levels' cells need not line up, so they are
+    /// filled as one wall and the material read back along the beads.
+    fn sort(&self) -> (Buckets, BTreeMap<usize, Vec<usize>>) {
+        let mut buckets = Buckets::new();
+        let mut walls: BTreeMap<usize, Vec<usize>> = BTreeMap::new();
+        for (i, r) in self.regions.iter().enumerate() {
+            if r.cell.is_some() && self.thin == Thin::Merge && mean_width(&r.polygon) < self.width {
+                walls.entry(r.family).or_default().push(i);
+                continue;
+            }
+            buckets
+                .entry((r.family, r.cell))
+                .or_default()
+                .entry(r.index)
+                .or_default()
+                .push(i);
+        }
+        (buckets, walls)
+    }
+
+    /// The beads filling the union of `members`. Unions are always taken of the
+    /// regions as cut: a union's output is rounded to its own grid, and a second union
+    /// against it would find the shared edges a rounding apart.
+    fn fill_union(&self, members: &[usize]) -> Vec<Bead> {
+        union(members.iter().map(|&m| &self.regions[m].polygon))
             .iter()
-            .flat_map(|q| fill(q, widths))
+            .flat_map(|q| fill(q, self.widths))
             .collect()
-    };
-    // The fills of the union when every piece of it takes a bead (merged levels of a
-    // cell that do not touch stay as thin as they were) and it lays any.
-    let fills_if_wide = |members: &[usize]| -> Option<Fills> {
-        let pieces = union(members.iter().map(|&m| &regions[m].polygon));
-        if pieces.iter().all(|q| mean_width(q) >= width) {
-            Fills::of(pieces.iter().filter_map(|q| Fill::start(q, widths)).collect())
+    }
+
+    /// The fills of the union of `members` when every piece of it takes a bead (merged
+    /// levels of a cell that do not touch stay as thin as they were) and it lays any.
+    fn fills_if_wide(&self, members: &[usize]) -> Option<Fills> {
+        let pieces = union(members.iter().map(|&m| &self.regions[m].polygon));
+        if pieces.iter().all(|q| mean_width(q) >= self.width) {
+            Fills::of(
+                pieces
+                    .iter()
+                    .filter_map(|q| Fill::start(q, self.widths))
+                    .collect(),
+            )
         } else {
             None
         }
-    };
-    // Half the perimeter of a level: the length of a band along its family, so that
-    // area / length is the band's mean width.
-    let length = |members: &[usize]| -> f64 {
+    }
+
+    /// Half the perimeter of a level: the length of a band along its family, so that
+    /// area / length is the band's mean width.
+    fn length(&self, members: &[usize]) -> f64 {
         members
             .iter()
-            .flat_map(|&m| regions[m].polygon.contours())
+            .flat_map(|&m| self.regions[m].polygon.contours())
             .map(Contour::perimeter)
             .sum::<f64>()
             / 2.0
-    };
-    for levels in buckets.values() {
+    }
+
+    /// Groups the levels of one family and cell: each level wide enough on its own,
+    /// and the thinner ones merged with the next until the band takes a pass. What
+    /// stays too thin goes to `leftover`, by family.
+    fn family(
+        &self,
+        levels: &BTreeMap<usize, Vec<usize>>,
+        out: &mut Grouping,
+        leftover: &mut BTreeMap<usize, Vec<usize>>,
+    ) {
+        let (regions, width) = (self.regions, self.width);
         let first = out.groups.len();
         // The groups of this family whose beads are not laid out yet. The last group
         // takes the innermost levels when they are too thin on their own, and is then
@@ -133,7 +190,7 @@ pub fn group(regions: &[SubRegion], widths: &Widths, thin: Thin) -> Grouping {
             if pending.is_empty() {
                 for &m in members {
                     let fills = if mean_width(&regions[m].polygon) >= width {
-                        Fill::start(&regions[m].polygon, widths).and_then(|f| Fills::of(vec![f]))
+                        Fill::start(&regions[m].polygon, self.widths).and_then(|f| Fills::of(vec![f]))
                     } else {
                         None
                     };
@@ -143,33 +200,33 @@ pub fn group(regions: &[SubRegion], widths: &Widths, thin: Thin) -> Grouping {
                             passes: Vec::new(),
                             composition: regions[m].composition.clone(),
                         };
-                        push(&mut out, group, fills);
-                    } else if thin == Thin::Skip {
+                        push(out, group, fills);
+                    } else if self.thin == Thin::Skip {
                         out.thin.push((m, regions[m].area()));
                     } else {
                         pending.push(m);
                         area += regions[m].area();
-                        along = along.max(length(&[m]));
+                        along = along.max(self.length(&[m]));
                     }
                 }
                 continue;
             }
             pending.extend_from_slice(members);
             area += members.iter().map(|&m| regions[m].area()).sum::<f64>();
-            along = along.max(length(members));
+            along = along.max(self.length(members));
             // Nested bands share their sides, so the merged band is about as long as
             // its longest level and as wide as their areas add up to: no union is
             // tried before that width nears one pass.
             if area < width * along {
                 continue;
             }
-            if let Some(fills) = fills_if_wide(&pending) {
+            if let Some(fills) = self.fills_if_wide(&pending) {
                 let group = Group {
                     members: std::mem::take(&mut pending),
                     passes: Vec::new(),
                     composition: None,
                 };
-                push(&mut out, group, fills);
+                push(out, group, fills);
                 (area, along) = (0.0, 0.0);
             }
         }
@@ -181,16 +238,16 @@ pub fn group(regions: &[SubRegion], widths: &Widths, thin: Thin) -> Grouping {
             later.retain(|(g, _)| *g != last);
             let last = &mut out.groups[last];
             last.members.append(&mut pending);
-            last.passes = fill_union(&last.members);
+            last.passes = self.fill_union(&last.members);
         }
         for (g, fills) in later {
             out.groups[g].passes = fills.into_iter().flat_map(Fill::beads).collect();
         }
         if pending.is_empty() {
-            continue;
+            return;
         }
         let fills = if area >= width * along {
-            fills_if_wide(&pending)
+            self.fills_if_wide(&pending)
         } else {
             None
         };
@@ -206,36 +263,31 @@ pub fn group(regions: &[SubRegion], widths: &Widths, thin: Thin) -> Grouping {
             }),
         }
     }
-    // What stayed too thin within its cell (cells of neighbouring levels need not
-    // line up, so a cell's levels can be scattered slivers) is merged across the
-    // cells of its family: each connected piece of their union that takes a bead is
-    // filled, with the mean composition of the slivers it holds.
-    for members in leftover.into_values() {
-        for piece in union(members.iter().map(|&m| &regions[m].polygon)) {
-            let inside = inside(regions, &members, &piece);
-            let Some(&first) = inside.first() else {
-                continue;
-            };
-            if mean_width(&piece) >= width {
-                out.groups.push(Group {
-                    members: inside,
-                    passes: fill(&piece, widths),
-                    composition: None,
-                });
-            } else {
-                out.thin.push((first, piece.area()));
+
+    /// What stayed too thin within its cell (cells of neighbouring levels need not
+    /// line up, so a cell's levels can be scattered slivers) is merged across the
+    /// cells of its family: each connected piece of their union that takes a bead is
+    /// filled, with the mean composition of the slivers it holds.
+    fn merge_across_cells(&self, leftover: BTreeMap<usize, Vec<usize>>, out: &mut Grouping) {
+        let regions = self.regions;
+        for members in leftover.into_values() {
+            for piece in union(members.iter().map(|&m| &regions[m].polygon)) {
+                let inside = inside(regions, &members, &piece);
+                let Some(&first) = inside.first() else {
+                    continue;
+                };
+                if mean_width(&piece) >= self.width {
+                    out.groups.push(Group {
+                        members: inside,
+                        passes: fill(&piece, self.widths),
+                        composition: None,
+                    });
+                } else {
+                    out.thin.push((first, piece.area()));
+                }
             }
         }
     }
-    for members in walls.into_values() {
-        wall(regions, &members, widths, &mut out);
-    }
-    for g in &mut out.groups {
-        if g.members.len() > 1 && g.composition.is_none() {
-            g.composition = mean_composition(regions, &g.members);
-        }
-    }
-    out
 }
 
 /// The fills of a group known to lay beads: laid out already, or begun with one that

@@ -579,131 +579,170 @@ pub fn concurrent(
     settings: &Settings,
     arena: &BBox2,
 ) -> Result<Schedule, Stuck> {
-    let Settings {
-        step,
-        budget,
-        max_side_steps,
-        priority,
-        look_ahead,
-        separation,
-        ..
-    } = *settings;
-    let anticipate = look_ahead > step * 1.5;
-    let mut agents: Vec<Agent<'_>> = tools
-        .iter()
-        .map(|(spec, route)| {
-            let pos = route.first().map(|m| m.points[0]).unwrap_or_default();
-            let open = route
-                .first()
-                .map(|m| toolpath(spec.index, m, vec![TimedPoint { p: pos, t: 0.0 }]));
-            Agent {
-                spec,
-                done: route.is_empty(),
-                route: route.clone(),
-                at: Cursor {
-                    mv: 0,
-                    seg: 0,
-                    along: 0.0,
-                },
-                pos,
-                open,
-                out: Vec::new(),
-            }
-        })
-        .collect();
-    let n = agents.len();
-    let clear = |a: &Agent<'_>, b: &Agent<'_>| {
-        a.spec.envelope + b.spec.envelope + (a.spec.max_speed() + b.spec.max_speed()) * step / 2.0
-    };
-    let mut t = 0.0;
-    let mut side_steps = 0;
-    // Per tool: its speed along X at the check, and the timed points of its motion
-    // during the step.
-    let mut along_x: Vec<f64> = vec![0.0; n];
-    let mut tracks: Vec<Track> = vec![Vec::new(); n];
-    let mut ahead: Vec<Track> = vec![Vec::new(); n];
-    // Per tool: whether it paused at the last check.
-    let mut waited = vec![false; n];
-    let mut moving = vec![false; n];
-    // Per tool: why it was first held at this check.
-    let mut why: Vec<Option<Why>> = vec![None; n];
-    // Per tool: how its pause under way is counted.
-    let mut counted: Vec<Why> = vec![Why::Other; n];
-    let mut pauses = Pauses::default();
-    while agents.iter().any(|a| !a.done) {
-        if t > budget {
-            return Err(Stuck::Timeout(budget));
+    let mut run = Run::start(tools, settings, arena);
+    while run.agents.iter().any(|a| !a.done) {
+        if run.t > settings.budget {
+            return Err(Stuck::Timeout(settings.budget));
         }
-        why.fill(None);
-        for (i, a) in agents.iter_mut().enumerate() {
-            moving[i] = !a.done;
-            along_x[i] = if a.done {
-                0.0
-            } else if anticipate {
-                a.walk(look_ahead, t, false, Some(&mut ahead[i]));
-                truncate(&ahead[i], step, &mut tracks[i]);
-                speed_along_x(&tracks[i])
-            } else {
-                a.walk(step, t, false, Some(&mut tracks[i]));
-                speed_along_x(&tracks[i])
-            };
-        }
-        if anticipate {
+        run.why.fill(None);
+        run.look_along_routes();
+        if run.anticipate {
             anticipate_holds(
-                &agents,
-                &ahead,
-                &along_x,
-                &mut moving,
-                &mut why,
-                &waited,
+                &run.agents,
+                &run.ahead,
+                &run.along_x,
+                &mut run.moving,
+                &mut run.why,
+                &run.waited,
                 settings,
             );
         }
-        // Whether tools i and j, moving or held, keep their envelopes apart for the
-        // whole step: their closest approach along the two timed motions, exactly.
-        let safe = |i: usize, j: usize, mi: bool, mj: bool| {
-            let (a, b) = (&agents[i], &agents[j]);
-            let still = |p: Point2| [(0.0, p), (step, p)];
-            let (si, sj) = (still(a.pos), still(b.pos));
-            let ti: &[(f64, Point2)] = if mi { &tracks[i] } else { &si };
-            let tj: &[(f64, Point2)] = if mj { &tracks[j] } else { &sj };
-            separation.apart(a.spec, b.spec, ti, tj, a.spec.envelope + b.spec.envelope)
-        };
-        // Hold the lower-priority tool of each predicted collision until none is left;
-        // held tools stay where they are, which was clear one step ago.
+        run.hold_colliding();
+        if run.anticipate {
+            run.keep_waiting();
+        }
+        if !run.moving.iter().any(|&m| m) {
+            if !run.step_aside()? {
+                break;
+            }
+            continue;
+        }
+        run.take_step();
+    }
+    Ok(run.finish())
+}
+
+/// The room two tools need between their centres when both may move for a step of
+/// `step` seconds: their envelopes, and half a step at their top speeds.
+fn clearance(a: &Agent<'_>, b: &Agent<'_>, step: f64) -> f64 {
+    a.spec.envelope + b.spec.envelope + (a.spec.max_speed() + b.spec.max_speed()) * step / 2.0
+}
+
+/// What the checks of a concurrent schedule share: the tools, the clock, and per tool
+/// what the check under way has found.
+struct Run<'a> {
+    agents: Vec<Agent<'a>>,
+    settings: Settings,
+    arena: &'a BBox2,
+    /// Whether checks look along the routes beyond the next step.
+    anticipate: bool,
+    t: f64,
+    side_steps: usize,
+    /// Per tool: its speed along X at the check, and the timed points of its motion
+    /// during the step and over the look-ahead.
+    along_x: Vec<f64>,
+    tracks: Vec<Track>,
+    ahead: Vec<Track>,
+    /// Per tool: whether it paused at the last check.
+    waited: Vec<bool>,
+    /// Per tool: whether it moves on at this check.
+    moving: Vec<bool>,
+    /// Per tool: why it was first held at this check.
+    why: Vec<Option<Why>>,
+    /// Per tool: how its pause under way is counted.
+    counted: Vec<Why>,
+    pauses: Pauses,
+}
+
+impl<'a> Run<'a> {
+    /// Every tool at the start of its route at time 0, none paused.
+    fn start(tools: &'a [(&'a ToolSpec, Vec<Move>)], settings: &Settings, arena: &'a BBox2) -> Self {
+        let agents: Vec<Agent<'a>> = tools
+            .iter()
+            .map(|(spec, route)| {
+                let pos = route.first().map(|m| m.points[0]).unwrap_or_default();
+                let open = route
+                    .first()
+                    .map(|m| toolpath(spec.index, m, vec![TimedPoint { p: pos, t: 0.0 }]));
+                Agent {
+                    spec,
+                    done: route.is_empty(),
+                    route: route.clone(),
+                    at: Cursor {
+                        mv: 0,
+                        seg: 0,
+                        along: 0.0,
+                    },
+                    pos,
+                    open,
+                    out: Vec::new(),
+                }
+            })
+            .collect();
+        let n = agents.len();
+        Run {
+            agents,
+            settings: *settings,
+            arena,
+            anticipate: settings.look_ahead > settings.step * 1.5,
+            t: 0.0,
+            side_steps: 0,
+            along_x: vec![0.0; n],
+            tracks: vec![Vec::new(); n],
+            ahead: vec![Vec::new(); n],
+            waited: vec![false; n],
+            moving: vec![false; n],
+            why: vec![None; n],
+            counted: vec![Why::Other; n],
+            pauses: Pauses::default(),
+        }
+    }
+
+    /// Where each unfinished tool's route takes it over the next step (and, looking
+    /// ahead, over the look-ahead), and its speed along X; every unfinished tool starts
+    /// the check moving.
+    fn look_along_routes(&mut self) {
+        let Settings { step, look_ahead, .. } = self.settings;
+        let t = self.t;
+        for (i, a) in self.agents.iter_mut().enumerate() {
+            self.moving[i] = !a.done;
+            self.along_x[i] = if a.done {
+                0.0
+            } else if self.anticipate {
+                a.walk(look_ahead, t, false, Some(&mut self.ahead[i]));
+                truncate(&self.ahead[i], step, &mut self.tracks[i]);
+                speed_along_x(&self.tracks[i])
+            } else {
+                a.walk(step, t, false, Some(&mut self.tracks[i]));
+                speed_along_x(&self.tracks[i])
+            };
+        }
+    }
+
+    /// Whether tools i and j, moving or held, keep their envelopes apart for the
+    /// whole step: their closest approach along the two timed motions, exactly.
+    fn safe(&self, i: usize, j: usize, mi: bool, mj: bool) -> bool {
+        let step = self.settings.step;
+        let (a, b) = (&self.agents[i], &self.agents[j]);
+        let still = |p: Point2| [(0.0, p), (step, p)];
+        let (si, sj) = (still(a.pos), still(b.pos));
+        let ti: &[(f64, Point2)] = if mi { &self.tracks[i] } else { &si };
+        let tj: &[(f64, Point2)] = if mj { &self.tracks[j] } else { &sj };
+        self.settings
+            .separation
+            .apart(a.spec, b.spec, ti, tj, a.spec.envelope + b.spec.envelope)
+    }
+
+    /// Holds the lower-priority tool of each predicted collision until none is left;
+    /// held tools stay where they are, which was clear one step ago.
+    fn hold_colliding(&mut self) {
+        let n = self.agents.len();
         loop {
             let mut change = false;
             for i in 0..n {
                 for j in i + 1..n {
-                    if !(moving[i] || moving[j]) || safe(i, j, moving[i], moving[j]) {
+                    let (mi, mj) = (self.moving[i], self.moving[j]);
+                    if !(mi || mj) || self.safe(i, j, mi, mj) {
                         continue;
                     }
-                    let (loser, reason) = match (moving[i], moving[j]) {
-                        (true, true) => {
-                            // Whether holding i alone, and j alone, clears the other's
-                            // next position: a tool moving away from the one behind it
-                            // is not the one to hold.
-                            let clears = (safe(i, j, false, true), safe(i, j, true, false));
-                            let ruled = ruled_loser(priority, &agents, i, j, &along_x);
-                            let loser = match (priority, clears) {
-                                (
-                                    Priority::XSpeed | Priority::Clearing | Priority::Busiest,
-                                    (true, false),
-                                ) => i,
-                                (
-                                    Priority::XSpeed | Priority::Clearing | Priority::Busiest,
-                                    (false, true),
-                                ) => j,
-                                _ => ruled,
-                            };
-                            (loser, Why::of(loser, i, j, clears, &along_x))
-                        }
+                    let (loser, reason) = match (mi, mj) {
+                        (true, true) => self.pair_loser(i, j),
                         // The other is held where it is: only this one's pause helps.
                         (true, false) => (i, Why::Forced),
                         _ => (j, Why::Forced),
                     };
-                    why[loser].get_or_insert(reason);
-                    moving[loser] = false;
+                    self.why[loser].get_or_insert(reason);
+                    self.moving[loser] = false;
                     change = true;
                 }
             }
@@ -711,101 +750,146 @@ pub fn concurrent(
                 break;
             }
         }
-        if anticipate {
-            // A tool that waited at the last check goes on only when its way is clear
-            // for half the look-ahead; else it waits on (where it is clear for the next
-            // step), so that it does not go on for a step and pause again.
-            let half = look_ahead / 2.0;
-            for i in 0..n {
-                if !(moving[i] && waited[i]) {
-                    continue;
+    }
+
+    /// Which of two moving tools about to collide pauses, and why.
+    fn pair_loser(&self, i: usize, j: usize) -> (usize, Why) {
+        let priority = self.settings.priority;
+        // Whether holding i alone, and j alone, clears the other's next position: a
+        // tool moving away from the one behind it is not the one to hold.
+        let clears = (self.safe(i, j, false, true), self.safe(i, j, true, false));
+        let ruled = ruled_loser(priority, &self.agents, i, j, &self.along_x);
+        let loser = match (priority, clears) {
+            (Priority::XSpeed | Priority::Clearing | Priority::Busiest, (true, false)) => i,
+            (Priority::XSpeed | Priority::Clearing | Priority::Busiest, (false, true)) => j,
+            _ => ruled,
+        };
+        (loser, Why::of(loser, i, j, clears, &self.along_x))
+    }
+
+    /// A tool that waited at the last check goes on only when its way is clear for
+    /// half the look-ahead; else it waits on (where it is clear for the next step), so
+    /// that it does not go on for a step and pause again.
+    fn keep_waiting(&mut self) {
+        let Settings {
+            look_ahead,
+            separation,
+            room,
+            ..
+        } = self.settings;
+        let half = look_ahead / 2.0;
+        let n = self.agents.len();
+        for i in 0..n {
+            if !(self.moving[i] && self.waited[i]) {
+                continue;
+            }
+            let agents = &self.agents;
+            let blocked = (0..n).any(|j| {
+                j != i && !agents[j].done && {
+                    let e = agents[i].spec.envelope + agents[j].spec.envelope + room;
+                    let still = [(0.0, agents[j].pos), (half, agents[j].pos)];
+                    let other: &[(f64, Point2)] = if self.moving[j] { &self.ahead[j] } else { &still };
+                    !separation.apart_until(agents[i].spec, agents[j].spec, &self.ahead[i], other, half, e)
                 }
-                let blocked = (0..n).any(|j| {
-                    j != i && !agents[j].done && {
-                        let e = agents[i].spec.envelope + agents[j].spec.envelope + settings.room;
-                        let still = [(0.0, agents[j].pos), (half, agents[j].pos)];
-                        let other: &[(f64, Point2)] = if moving[j] { &ahead[j] } else { &still };
-                        !separation.apart_until(agents[i].spec, agents[j].spec, &ahead[i], other, half, e)
-                    }
-                });
-                let others_move = (0..n).any(|j| j != i && moving[j]);
-                // Staying put is what the one-step check calls safe for a held tool.
-                let stay_safe = (0..n).all(|j| j == i || safe(i, j, false, moving[j]));
-                if blocked && others_move && stay_safe {
-                    moving[i] = false;
-                }
+            });
+            let others_move = (0..n).any(|j| j != i && self.moving[j]);
+            // Staying put is what the one-step check calls safe for a held tool.
+            let stay_safe = (0..n).all(|j| j == i || self.safe(i, j, false, self.moving[j]));
+            if blocked && others_move && stay_safe {
+                self.moving[i] = false;
             }
         }
-        if !moving.iter().any(|&m| m) {
-            // Every unfinished tool waits for another: the one with the least work left
-            // steps aside, since the layer ends when the busiest tool is done.
-            side_steps += 1;
-            if side_steps > max_side_steps {
-                return Err(Stuck::Deadlock(max_side_steps));
-            }
-            let Some(k) = (0..n)
-                .filter(|&i| !agents[i].done)
-                .map(|i| (i, agents[i].remaining()))
-                .min_by(|a, b| a.1.total_cmp(&b.1).then(b.0.cmp(&a.0)))
-                .map(|(i, _)| i)
-            else {
-                break;
-            };
-            let to = match separation {
-                Separation::Discs => aside(&agents, k, &clear, arena),
-                // On gantries the only way out of another's way is back toward the
-                // tool's own side of the bed.
-                Separation::OrderedY => {
-                    let reach = (0..n)
-                        .filter(|&j| j != k)
-                        .map(|j| clear(&agents[k], &agents[j]))
-                        .fold(0.0, f64::max);
-                    let dir = if agents[k].spec.rear { 1.0 } else { -1.0 };
-                    agents[k].pos + Vector2::new(0.0, dir * 2.0 * reach)
-                }
-            };
-            agents[k].side_step(to);
-            continue;
+    }
+
+    /// Every unfinished tool waits for another: the one with the least work left steps
+    /// aside, since the layer ends when the busiest tool is done. `false` when no tool
+    /// is left to step aside; an error once the side-steps run out.
+    fn step_aside(&mut self) -> Result<bool, Stuck> {
+        let Settings {
+            step,
+            max_side_steps,
+            separation,
+            ..
+        } = self.settings;
+        self.side_steps += 1;
+        if self.side_steps > max_side_steps {
+            return Err(Stuck::Deadlock(max_side_steps));
         }
-        for (i, a) in agents.iter_mut().enumerate() {
-            if !moving[i] && !a.done {
-                if !waited[i] {
+        let agents = &self.agents;
+        let n = agents.len();
+        let Some(k) = (0..n)
+            .filter(|&i| !agents[i].done)
+            .map(|i| (i, agents[i].remaining()))
+            .min_by(|a, b| a.1.total_cmp(&b.1).then(b.0.cmp(&a.0)))
+            .map(|(i, _)| i)
+        else {
+            return Ok(false);
+        };
+        let clear = |a: &Agent<'_>, b: &Agent<'_>| clearance(a, b, step);
+        let to = match separation {
+            Separation::Discs => aside(agents, k, &clear, self.arena),
+            // On gantries the only way out of another's way is back toward the
+            // tool's own side of the bed.
+            Separation::OrderedY => {
+                let reach = (0..n)
+                    .filter(|&j| j != k)
+                    .map(|j| clear(&agents[k], &agents[j]))
+                    .fold(0.0, f64::max);
+                let dir = if agents[k].spec.rear { 1.0 } else { -1.0 };
+                agents[k].pos + Vector2::new(0.0, dir * 2.0 * reach)
+            }
+        };
+        self.agents[k].side_step(to);
+        Ok(true)
+    }
+
+    /// Counts the pauses this check starts, moves the moving tools on by a step and
+    /// holds the others where they are.
+    fn take_step(&mut self) {
+        let (t, step) = (self.t, self.settings.step);
+        for (i, a) in self.agents.iter_mut().enumerate() {
+            if !self.moving[i] && !a.done {
+                if !self.waited[i] {
                     // A pause starts: counted once, by what started it.
-                    counted[i] = why[i].unwrap_or(Why::Other);
-                    tally(&mut pauses, counted[i], 1);
-                } else if why[i] == Some(Why::Other) && counted[i] != Why::Other {
+                    self.counted[i] = self.why[i].unwrap_or(Why::Other);
+                    tally(&mut self.pauses, self.counted[i], 1);
+                } else if self.why[i] == Some(Why::Other) && self.counted[i] != Why::Other {
                     // A pause goes on by another rule than speed along X (one
                     // already paused stays paused where the faster should): it breaks
                     // the rule after all.
-                    tally(&mut pauses, counted[i], -1);
-                    counted[i] = Why::Other;
-                    tally(&mut pauses, Why::Other, 1);
+                    tally(&mut self.pauses, self.counted[i], -1);
+                    self.counted[i] = Why::Other;
+                    tally(&mut self.pauses, Why::Other, 1);
                 }
             }
-            waited[i] = !moving[i] && !a.done;
-            if moving[i] {
+            self.waited[i] = !self.moving[i] && !a.done;
+            if self.moving[i] {
                 a.advance(t, step);
             } else if !a.done {
                 a.hold(t, step);
             }
         }
-        t += step;
+        self.t += step;
     }
-    let mut out = Vec::new();
-    let mut end = 0.0f64;
-    for a in agents {
-        for p in &a.out {
-            if let Some(q) = p.points.last() {
-                end = end.max(q.t);
+
+    /// Every tool's toolpaths in tool order, and the time the last tool parks.
+    fn finish(self) -> Schedule {
+        let mut out = Vec::new();
+        let mut end = 0.0f64;
+        for a in self.agents {
+            for p in &a.out {
+                if let Some(q) = p.points.last() {
+                    end = end.max(q.t);
+                }
             }
+            out.extend(a.out);
         }
-        out.extend(a.out);
+        Schedule {
+            paths: out,
+            end,
+            pauses: self.pauses,
+        }
     }
-    Ok(Schedule {
-        paths: out,
-        end,
-        pauses,
-    })
 }
 
 /// Which of two moving tools `priority` pauses, feasibility aside (for

@@ -6,29 +6,26 @@
 
 use std::path::PathBuf;
 
-use lamina_core::stage::{AnyStage, Planner};
+use lamina_core::stage::Planner;
 use lamina_core::{
     BBox2, Composition, Contour, ContourTree, LayerPlan, Material, PartInfo, PartLayer, PathKind, Point2,
-    Polygon, Registry, RunInfo, StageKind, SubRegion, Toolpath,
+    Polygon, Registry, RunInfo, SubRegion, Toolpath,
 };
 use lamina_plan::route::{Move, ToolSpec};
 use lamina_plan::sim::{self, Priority, Settings};
 use lamina_test_support::Rng;
 
-fn build(table: &str) -> lamina_core::Result<AnyStage> {
+fn build(table: &str) -> lamina_core::Result<Box<dyn Planner>> {
     use lamina_plan as _;
     let registry = Registry::linked().expect("registry");
     let dir = std::env::temp_dir();
     let scripts = lamina_core::script::local(&dir, Default::default());
     let table = lamina_core::pipeline::TableRef::parse_snippet("plan", table).expect("table");
-    registry.build(StageKind::Plan, &table, &scripts, &dir)
+    registry.build::<dyn Planner>(&table, &scripts, &dir)
 }
 
 fn planner(table: &str) -> Box<dyn Planner> {
-    match build(table).expect("builds") {
-        AnyStage::Plan(p) => p,
-        _ => panic!("not a planner"),
-    }
+    build(table).expect("builds")
 }
 
 fn disc(c: Point2, r: f64, n: usize) -> Contour {

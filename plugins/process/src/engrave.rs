@@ -1,5 +1,5 @@
 //! `engrave`: step 4 of the process. A periodic microstructure is an array of base
-//! cells, voids on a lattice (cmpm-process-planning 4.3, `lamina_api::microstructure`):
+//! cells, voids on a lattice (cmpm-process-planning 4.3, `lamina_fgm::microstructure`):
 //! spheres by default, or the `cell` table's shape, size, orientation and inserting
 //! function. The voids the layer's plane cuts (at mid-layer, where the contours are
 //! cut) are engraved by a laser from the surface down through the layer: rings inside
@@ -12,13 +12,13 @@
 use i_overlay::core::fill_rule::FillRule;
 use i_overlay::core::overlay_rule::OverlayRule;
 use i_overlay::float::single::SingleFloatOverlay;
-use lamina_api::microstructure::{CellSpec, Microstructure};
 use lamina_api::stage::{AnyStage, Process, StageConfig, StageInfo, StageKind};
 use lamina_api::table::TableRef;
 use lamina_api::{
     Contour, LayerPlan, Limit, Operation, OperationPath, OperationTool, Point2, Polygon, ProcessContext,
     Result, StageFactory,
 };
+use lamina_fgm::microstructure::{CellSpec, Microstructure};
 use lamina_geom::Shapes;
 use lamina_geom::cell::inset_convex;
 use lamina_geom::ring::{polygons_of, ring_of, shape_of};

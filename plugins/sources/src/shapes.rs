@@ -7,9 +7,9 @@ use i_overlay::core::overlay_rule::OverlayRule;
 use i_overlay::core::solver::Solver;
 use i_overlay::float::overlay::{FloatOverlay, OverlayOptions};
 use i_overlay::float::simplify::SimplifyShape;
+use lamina_api::BBox2;
 use lamina_api::mesh::Point3;
-use lamina_api::surface::Surface;
-use lamina_api::{BBox2, Point2, Polygon};
+use lamina_fgm::surface::Surface;
 use lamina_geom::field::Field;
 use lamina_geom::iso::iso_loops;
 use lamina_geom::offset::round_outline;
@@ -359,44 +359,10 @@ impl SurfaceField {
     }
 }
 
-/// A point inside the polygon (not in a hole), for graders that vary with position:
-/// the centroid when it is inside, else the middle of the widest inside span of a few
-/// horizontal lines.
-pub fn inside_point(p: &Polygon) -> Point2 {
-    let pts = &p.outer.points;
-    let n = pts.len() as f64;
-    let centroid = Point2::new(
-        pts.iter().map(|q| q.x).sum::<f64>() / n,
-        pts.iter().map(|q| q.y).sum::<f64>() / n,
-    );
-    if p.contains(centroid) && p.boundary_distance(centroid) > 0.0 {
-        return centroid;
-    }
-    let b = p.bbox();
-    let mut best = (f64::NEG_INFINITY, centroid);
-    for k in 1..8 {
-        let y = b.min.y + (b.max.y - b.min.y) * k as f64 / 8.0;
-        let mut xs: Vec<f64> = Vec::new();
-        for c in p.contours() {
-            for (a, q) in c.edges() {
-                if (a.y <= y) != (q.y <= y) {
-                    xs.push(a.x + (y - a.y) * (q.x - a.x) / (q.y - a.y));
-                }
-            }
-        }
-        xs.sort_by(f64::total_cmp);
-        for w in xs.chunks_exact(2) {
-            if w[1] - w[0] > best.0 {
-                best = (w[1] - w[0], Point2::new((w[0] + w[1]) / 2.0, y));
-            }
-        }
-    }
-    best.1
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
+    use lamina_api::{Point2, Polygon};
     use lamina_geom::ring::polygons_of;
 
     fn area(s: &Shapes) -> f64 {
@@ -432,7 +398,7 @@ mod tests {
         let want = std::f64::consts::PI * 2.0 * 2.0 / s;
         assert!((area(&e) - want).abs() < 1e-3 * want);
         // Centred where the axis crosses z = 1: x = 1.
-        let c = inside_point(&polygons_of(&e)[0]);
+        let c = lamina_geom::centroid::polygon_centroid(&polygons_of(&e)[0]).expect("an area");
         assert!((c.x - 1.0).abs() < 1e-6 && c.y.abs() < 1e-6, "{c:?}");
     }
 

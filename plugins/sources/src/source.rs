@@ -3,7 +3,7 @@
 //! thresholds where the steps change.
 
 use lamina_api::Point2;
-use lamina_api::steps::Truncation;
+use lamina_fgm::steps::Truncation;
 
 /// Where distances are measured from.
 #[derive(Debug, Clone, Copy, PartialEq)]

@@ -2,14 +2,14 @@
 //! grading sources and gives every homogeneous region its composition.
 
 use lamina_api::stage::{AnyStage, Discretiser, FamilyContext, StageConfig, StageInfo, StageKind};
-use lamina_api::steps::Truncation;
-use lamina_api::surface::{FaceSelection, Surfaces};
-use lamina_api::{Composition, Error, Result, StageFactory, SubRegion};
+use lamina_api::{Composition, Error, Polygon, Result, StageFactory, SubRegion};
+use lamina_fgm::steps::Truncation;
+use lamina_fgm::surface::{FaceSelection, Surfaces};
 use serde::Deserialize;
 
 use lamina_geom::ring::{polygons_of, shape_of};
 
-use crate::shapes::{Set, Shapes, SurfaceField, clean, closer_than, inside_point, union};
+use crate::shapes::{Set, Shapes, SurfaceField, clean, closer_than, union};
 use crate::source::{Datum, Source, combine};
 
 /// The stage's name in errors.
@@ -192,13 +192,7 @@ impl Discretiser for Sources {
         let margin = bbox.diagonal().max(1.0);
         bbox.include(lamina_api::Point2::new(bbox.min.x - margin, bbox.min.y - margin));
         bbox.include(lamina_api::Point2::new(bbox.max.x + margin, bbox.max.y + margin));
-        let mut sources = Vec::with_capacity(self.sources.len());
-        for (i, p) in self.sources.iter().enumerate() {
-            let mut s = p.source.clone();
-            s.start = self.resolve(ctx, &p.start, i)?;
-            s.end = self.resolve(ctx, &p.end, i)?;
-            sources.push(s);
-        }
+        let sources = self.resolved_sources(ctx)?;
         // Cells of the overlay: a piece of the family, the step of each source and
         // whether it is in that source's effective grading region.
         let family_shapes = clean(&vec![shape_of(&family)]);
@@ -207,7 +201,58 @@ impl Discretiser for Sources {
             steps: Vec::new(),
             effective: Vec::new(),
         }];
-        // The outer surfaces in space, sampled once per source over the family.
+        let fields = self.surface_fields(ctx, &sources, &family, z)?;
+        let closer = |i: usize, d: f64| match &fields[i] {
+            Some(field) => field.closer_than(d, &family_shapes),
+            None => closer_than(&sources[i].datum, d, z, &bbox, self.tolerance, &family_shapes),
+        };
+        for (i, s) in sources.iter().enumerate() {
+            let sets: Vec<_> = s.thresholds().iter().map(|&d| closer(i, d)).collect();
+            // The effective region 0 <= f <= 1: within the grading width, and in front
+            // of a plane.
+            let (within, behind) = match self.combine {
+                Combine::Everywhere => (Set::Whole, Set::Empty),
+                Combine::Intersection => (
+                    closer(i, s.d_at(1.0)),
+                    match s.datum {
+                        Datum::Plane { .. } => closer(i, 0.0),
+                        _ => Set::Empty,
+                    },
+                ),
+            };
+            cells = cut_cells(cells, &sets, &within, &behind);
+        }
+        let pieces = homogeneous_pieces(&sources, cells);
+        sub_regions(pieces, family_area, ctx.family)
+    }
+
+    fn grades(&self) -> bool {
+        true
+    }
+}
+
+impl Sources {
+    /// The sources with their compositions resolved over the part's materials.
+    fn resolved_sources(&self, ctx: &FamilyContext<'_>) -> Result<Vec<Source>> {
+        let mut sources = Vec::with_capacity(self.sources.len());
+        for (i, p) in self.sources.iter().enumerate() {
+            let mut s = p.source.clone();
+            s.start = self.resolve(ctx, &p.start, i)?;
+            s.end = self.resolve(ctx, &p.end, i)?;
+            sources.push(s);
+        }
+        Ok(sources)
+    }
+
+    /// Per source, the distance in space to its outer surface, sampled once over the
+    /// family at height `z`; `None` for a source measured otherwise.
+    fn surface_fields(
+        &self,
+        ctx: &FamilyContext<'_>,
+        sources: &[Source],
+        family: &Polygon,
+        z: f64,
+    ) -> Result<Vec<Option<SurfaceField>>> {
         let mut fields = Vec::with_capacity(sources.len());
         for (i, s) in sources.iter().enumerate() {
             fields.push(match &self.faces[i] {
@@ -242,125 +287,123 @@ impl Discretiser for Sources {
                 None => None,
             });
         }
-        let closer = |i: usize, d: f64| match &fields[i] {
-            Some(field) => field.closer_than(d, &family_shapes),
-            None => closer_than(&sources[i].datum, d, z, &bbox, self.tolerance, &family_shapes),
-        };
-        for (i, s) in sources.iter().enumerate() {
-            let sets: Vec<_> = s.thresholds().iter().map(|&d| closer(i, d)).collect();
-            // The effective region 0 <= f <= 1: within the grading width, and in front
-            // of a plane.
-            let (within, behind) = match self.combine {
-                Combine::Everywhere => (Set::Whole, Set::Empty),
-                Combine::Intersection => (
-                    closer(i, s.d_at(1.0)),
-                    match s.datum {
-                        Datum::Plane { .. } => closer(i, 0.0),
-                        _ => Set::Empty,
-                    },
-                ),
-            };
-            let mut next = Vec::new();
-            for cell in cells {
-                let mut stepped = Vec::new();
-                let mut rest = cell.shapes;
-                for (u, set) in sets.iter().enumerate() {
-                    let inside = set.intersect(&rest);
-                    if !inside.is_empty() {
-                        stepped.push((inside, u));
-                    }
-                    rest = set.subtract_from(&rest);
-                    if rest.is_empty() {
-                        break;
-                    }
-                }
-                if !rest.is_empty() {
-                    stepped.push((rest, sets.len()));
-                }
-                for (shapes, u) in stepped {
-                    for (shapes, w) in split(shapes, &within) {
-                        for (shapes, b) in split(shapes, &behind) {
-                            next.push(Cell {
-                                shapes,
-                                steps: [cell.steps.as_slice(), &[u]].concat(),
-                                effective: [cell.effective.as_slice(), &[w && !b]].concat(),
-                            });
-                        }
-                    }
-                }
-            }
-            cells = next;
-        }
-        // Each cell's composition (Eq. 2 per source, Eq. 8 over the sources that grade
-        // it); cells of equal steps and composition are one homogeneous region.
-        let mut pieces: Vec<(Shapes, Vec<usize>, Vec<f64>, f64)> = Vec::new();
-        for cell in cells {
-            let levels: Vec<f64> = sources
-                .iter()
-                .zip(&cell.steps)
-                .map(|(s, &u)| s.steps.level(u))
-                .collect();
-            let any = cell.effective.iter().any(|&e| e);
-            let counted: Vec<usize> = (0..sources.len())
-                .filter(|&i| !any || cell.effective[i])
-                .collect();
-            let parts: Vec<(f64, Vec<f64>)> = counted
-                .iter()
-                .map(|&i| (sources[i].weight, sources[i].composition(levels[i])))
-                .collect();
-            let mut fractions = combine(&parts);
-            // Clear the rounding of the blend so the sum check sees exactly 1.
-            for f in &mut fractions {
-                *f = f.clamp(0.0, 1.0);
-            }
-            let sum: f64 = fractions.iter().sum();
-            fractions.iter_mut().for_each(|f| *f /= sum);
-            let weight: f64 = counted.iter().map(|&i| sources[i].weight).sum();
-            let level = counted
-                .iter()
-                .map(|&i| sources[i].weight * levels[i])
-                .sum::<f64>()
-                / weight;
-            match pieces.iter_mut().find(|p| p.1 == cell.steps && p.2 == fractions) {
-                Some(p) => p.0 = union(&p.0, &cell.shapes),
-                None => pieces.push((cell.shapes, cell.steps, fractions, level)),
-            }
-        }
-        let sliver = family_area.abs() * 1e-12;
-        let pieces: Vec<_> = pieces
-            .into_iter()
-            .filter_map(|(shapes, _, fractions, level)| {
-                let polygons: Vec<_> = polygons_of(&shapes)
-                    .into_iter()
-                    .filter(|p| p.area() > sliver)
-                    .collect();
-                (!polygons.is_empty()).then_some((polygons, fractions, level))
-            })
-            .collect();
-        let count = pieces.len();
-        let mut regions = Vec::new();
-        for (index, (polygons, fractions, level)) in pieces.into_iter().enumerate() {
-            let composition = Composition::new(fractions)?;
-            for polygon in polygons {
-                regions.push(SubRegion {
-                    family: ctx.family,
-                    index,
-                    count,
-                    level,
-                    reference: inside_point(&polygon),
-                    polygon,
-                    cell: None,
-                    composition: Some(composition.clone()),
-                    samples: Vec::new(),
-                });
-            }
-        }
-        Ok(regions)
+        Ok(fields)
     }
+}
 
-    fn grades(&self) -> bool {
-        true
+/// `cells` cut by one more source: by the sets closer than each of its step
+/// thresholds (nearest first), then by its effective region, `within` it and not
+/// `behind` its plane. Each piece keeps its cell's steps and flags, with this source's
+/// appended.
+fn cut_cells(cells: Vec<Cell>, sets: &[Set], within: &Set, behind: &Set) -> Vec<Cell> {
+    let mut next = Vec::new();
+    for cell in cells {
+        let mut stepped = Vec::new();
+        let mut rest = cell.shapes;
+        for (u, set) in sets.iter().enumerate() {
+            let inside = set.intersect(&rest);
+            if !inside.is_empty() {
+                stepped.push((inside, u));
+            }
+            rest = set.subtract_from(&rest);
+            if rest.is_empty() {
+                break;
+            }
+        }
+        if !rest.is_empty() {
+            stepped.push((rest, sets.len()));
+        }
+        for (shapes, u) in stepped {
+            for (shapes, w) in split(shapes, within) {
+                for (shapes, b) in split(shapes, behind) {
+                    next.push(Cell {
+                        shapes,
+                        steps: [cell.steps.as_slice(), &[u]].concat(),
+                        effective: [cell.effective.as_slice(), &[w && !b]].concat(),
+                    });
+                }
+            }
+        }
     }
+    next
+}
+
+/// A homogeneous region in the making: its shapes, the step of each source, its
+/// composition's fractions and its level.
+type Piece = (Shapes, Vec<usize>, Vec<f64>, f64);
+
+/// Each cell's composition (Eq. 2 per source, Eq. 8 over the sources that grade it);
+/// cells of equal steps and composition are one homogeneous region.
+fn homogeneous_pieces(sources: &[Source], cells: Vec<Cell>) -> Vec<Piece> {
+    let mut pieces: Vec<Piece> = Vec::new();
+    for cell in cells {
+        let levels: Vec<f64> = sources
+            .iter()
+            .zip(&cell.steps)
+            .map(|(s, &u)| s.steps.level(u))
+            .collect();
+        let any = cell.effective.iter().any(|&e| e);
+        let counted: Vec<usize> = (0..sources.len())
+            .filter(|&i| !any || cell.effective[i])
+            .collect();
+        let parts: Vec<(f64, Vec<f64>)> = counted
+            .iter()
+            .map(|&i| (sources[i].weight, sources[i].composition(levels[i])))
+            .collect();
+        let mut fractions = combine(&parts);
+        // Clear the rounding of the blend so the sum check sees exactly 1.
+        for f in &mut fractions {
+            *f = f.clamp(0.0, 1.0);
+        }
+        let sum: f64 = fractions.iter().sum();
+        fractions.iter_mut().for_each(|f| *f /= sum);
+        let weight: f64 = counted.iter().map(|&i| sources[i].weight).sum();
+        let level = counted
+            .iter()
+            .map(|&i| sources[i].weight * levels[i])
+            .sum::<f64>()
+            / weight;
+        match pieces.iter_mut().find(|p| p.1 == cell.steps && p.2 == fractions) {
+            Some(p) => p.0 = union(&p.0, &cell.shapes),
+            None => pieces.push((cell.shapes, cell.steps, fractions, level)),
+        }
+    }
+    pieces
+}
+
+/// The sub-regions of family `family` (of area `family_area`), one index per piece;
+/// slivers a rounding of the family's area are dropped.
+fn sub_regions(pieces: Vec<Piece>, family_area: f64, family: usize) -> Result<Vec<SubRegion>> {
+    let sliver = family_area.abs() * 1e-12;
+    let pieces: Vec<_> = pieces
+        .into_iter()
+        .filter_map(|(shapes, _, fractions, level)| {
+            let polygons: Vec<_> = polygons_of(&shapes)
+                .into_iter()
+                .filter(|p| p.area() > sliver)
+                .collect();
+            (!polygons.is_empty()).then_some((polygons, fractions, level))
+        })
+        .collect();
+    let count = pieces.len();
+    let mut regions = Vec::new();
+    for (index, (polygons, fractions, level)) in pieces.into_iter().enumerate() {
+        let composition = Composition::new(fractions)?;
+        for polygon in polygons {
+            regions.push(SubRegion {
+                family,
+                index,
+                count,
+                level,
+                reference: lamina_geom::reference::reference_point(&polygon),
+                polygon,
+                cell: None,
+                composition: Some(composition.clone()),
+                samples: Vec::new(),
+            });
+        }
+    }
+    Ok(regions)
 }
 
 fn unit(v: [f64; 3]) -> Option<[f64; 3]> {

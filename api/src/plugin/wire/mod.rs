@@ -10,6 +10,7 @@
 //! them into owned values.
 
 mod error;
+mod table;
 
 pub use error::{WireError, WireLocation};
 

@@ -18,7 +18,7 @@ use std::sync::Mutex;
 use std::sync::mpsc::{Receiver, RecvTimeoutError, channel};
 use std::time::{Duration, Instant};
 
-use super::refuse;
+use super::refusal::refuse;
 use crate::error::Result;
 
 /// Where a plugin library's code runs.
@@ -159,12 +159,12 @@ impl Link {
     }
 
     /// Sends a request and waits for its reply, answering the plugin's service
-    /// requests with `serve` meanwhile. An error is why the child is no longer
+    /// requests with `service` meanwhile. An error is why the child is no longer
     /// served: it crashed, hung, or broke the protocol.
     pub(crate) fn call(
         &self,
         request: &[u8],
-        serve: &mut dyn FnMut(&[u8]) -> Vec<u8>,
+        service: &mut dyn FnMut(&[u8]) -> Vec<u8>,
     ) -> std::result::Result<Answer, String> {
         let mut state = self.lock();
         self.send(&mut state, frame::CALL, request)?;
@@ -173,7 +173,7 @@ impl Link {
                 (frame::REPLY, bytes) => return Ok(Answer::Reply(bytes)),
                 (frame::FAILED, _) => return Ok(Answer::Failed),
                 (frame::SERVICE, bytes) => {
-                    let answer = serve(&bytes);
+                    let answer = service(&bytes);
                     self.send(&mut state, frame::SERVICE_REPLY, &answer)?;
                 }
                 (kind, _) => {

@@ -42,7 +42,7 @@ pub fn serve(path: &Path) -> i32 {
         input: BufReader::new(input),
         output: BufWriter::new(output),
     });
-    let library = match crate::plugin::open_library(path, true) {
+    let library = match crate::plugin::library::open_library(path, true) {
         Ok(library) => library,
         Err(e) => {
             let reason = match &e {

@@ -20,8 +20,9 @@ use std::thread::ThreadId;
 
 use super::abi::*;
 use super::child::{Answer, Link};
+use super::copy_reply;
+use super::refusal::refuse;
 use super::wire::*;
-use super::{copy_reply, refuse};
 use crate::error::{Error, Result};
 use crate::registry::StageFactory;
 use crate::script::{ScriptArgs, ScriptFn, ScriptHost};

@@ -4,10 +4,7 @@
 #![allow(dead_code)]
 
 use lamina_core::stage::{Discretiser, FamilyContext};
-use lamina_core::{
-    AnyStage, Contour, ContourNode, ContourTree, Family, Layer, Polygon, Registry, RunInfo, StageKind,
-    SubRegion,
-};
+use lamina_core::{Contour, ContourNode, ContourTree, Family, Layer, Polygon, Registry, RunInfo, SubRegion};
 use lamina_discretise::check::tiling;
 
 pub use lamina_discretise::shapes::{circle, rect};
@@ -15,21 +12,16 @@ pub use lamina_discretise::shapes::{circle, rect};
 pub fn stage(text: &str) -> Box<dyn Discretiser> {
     let table = lamina_core::pipeline::TableRef::parse_snippet("discretise", text).expect("snippet");
     let scripts = lamina_core::script::local(".", Default::default());
-    match Registry::linked()
+    Registry::linked()
         .expect("registry")
-        .build(StageKind::Discretise, &table, &scripts, std::path::Path::new("."))
+        .build::<dyn Discretiser>(&table, &scripts, std::path::Path::new("."))
         .unwrap_or_else(|e| panic!("{text}: {e}"))
-    {
-        AnyStage::Discretise(d) => d,
-        _ => panic!("not a discretiser"),
-    }
 }
 
 pub fn build_error(text: &str) -> String {
     let table = lamina_core::pipeline::TableRef::parse_snippet("discretise", text).expect("snippet");
     let scripts = lamina_core::script::local(".", Default::default());
-    match Registry::linked().expect("registry").build(
-        StageKind::Discretise,
+    match Registry::linked().expect("registry").build::<dyn Discretiser>(
         &table,
         &scripts,
         std::path::Path::new("."),

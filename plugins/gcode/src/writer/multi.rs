@@ -18,11 +18,16 @@
 //! estimate in the file comes from replaying each stream (accelerations, junctions)
 //! and releasing every barrier when the later system reaches it.
 
-use lamina_api::BBox2;
-use lamina_api::machine::{HeadClass, Kinematics};
+use std::fmt::Write as _;
 
-use super::*;
+use lamina_api::machine::{FirstLayerSpeed, HeadClass, Kinematics};
+use lamina_api::{BBox2, Error, LayerPlan, PathKind, Point2, Result, Toolpath};
+
+use super::{DEFAULT_PRINT_SPEED, PARK_CLEARANCE, PRIME_SPEED, RETRACT_MIN_TRAVEL, Writer};
+use crate::firmware::Firmware;
 use crate::setup::System;
+use crate::text::num;
+use crate::tower::Feature;
 
 /// Seconds: plan times closer than this are one instant.
 const SAME_TIME: f64 = 1e-6;
@@ -201,6 +206,50 @@ fn safe_times(first: Course<'_>, second: Course<'_>, fixed: &[f64], keep: Keep, 
         i += 1;
     }
     out
+}
+
+/// The barriers of a layer in plan time: where a head's wait in the plan ends and,
+/// for two heads, where their paths come close ([`safe_times`]); the last at the
+/// layer's end.
+fn barrier_times(paths: &[Vec<&Toolpath>], tracks: &[Vec<(f64, Point2)>], keep: Keep) -> Vec<f64> {
+    let end = paths
+        .iter()
+        .flatten()
+        .filter_map(|p| p.points.last().map(|q| q.t))
+        .fold(0.0, f64::max);
+    let mut times: Vec<f64> = Vec::new();
+    for list in paths {
+        // A head idle from the layer's start waits too.
+        let mut busy_until = 0.0f64;
+        for p in list {
+            let (t0, t1) = (p.points[0].t, p.points[p.points.len() - 1].t);
+            if p.kind == PathKind::Pause {
+                times.push(t1);
+            } else if t0 > busy_until + SAME_TIME {
+                times.push(t0);
+            }
+            busy_until = busy_until.max(t1);
+        }
+    }
+    // Between barriers each stream runs on its own, and the firmware's
+    // accelerations let one fall behind the plan more than the other: barriers
+    // also go where the heads' paths come close ([`safe_times`]).
+    times.retain(|&t| t > SAME_TIME && t < end - SAME_TIME);
+    if paths.len() == 2 {
+        let (ba, bb) = (beads(&paths[0]), beads(&paths[1]));
+        let course = |track, beads| Course { track, beads };
+        times = safe_times(
+            course(&tracks[0], &ba),
+            course(&tracks[1], &bb),
+            &times,
+            keep,
+            end,
+        );
+    }
+    times.push(end);
+    times.sort_by(f64::total_cmp);
+    times.dedup_by(|a, b| (*a - *b).abs() <= SAME_TIME);
+    times
 }
 
 /// The stretches of path a head swept since the last barrier, filed in a grid of
@@ -678,7 +727,60 @@ impl Writer {
             self.fork(plan)?;
         }
         let n = self.s.heads.len();
-        // Each head's paths, by the plan's tool (the concurrent plan times tools).
+        let paths = self.head_paths(plan);
+        let tracks: Vec<Vec<(f64, Point2)>> = paths.iter().map(|l| track(l)).collect();
+        let keep = self.multi.as_ref().map_or(
+            Keep {
+                distance: 0.0,
+                front: None,
+            },
+            Multi::keep,
+        );
+        let times = barrier_times(&paths, &tracks, keep);
+
+        // Each head to where its route starts, one at a time, in an order where the
+        // moving head passes clear of the standing one; then the layer change: system
+        // 0 moves the shared Z while the other waits.
+        self.barrier();
+        if n == 2 {
+            self.go_to_starts(plan, &tracks, keep);
+        }
+        self.change_layer_multi(plan);
+
+        let mut from = 0.0;
+        for &to in &times {
+            for (h, list) in paths.iter().enumerate() {
+                let pieces: Vec<Piece> = list
+                    .iter()
+                    .filter(|p| p.kind != PathKind::Pause)
+                    .filter_map(|p| clip(p, from, to))
+                    .collect();
+                if pieces.is_empty() {
+                    continue;
+                }
+                self.select_stream(h);
+                self.mark_layer(plan);
+                for piece in pieces {
+                    self.write_piece(h, piece, plan)?;
+                }
+            }
+            // Either system may get to the barrier first and wait there for the
+            // other: with its nozzle pulled back, never oozing onto the part.
+            self.retract_streams();
+            if let Some(m) = self.multi.as_mut() {
+                m.retracted_barriers += 1;
+            }
+            self.barrier_at(Some(to));
+            from = to;
+        }
+        Ok(())
+    }
+
+    /// Each head's paths of the layer, by the plan's tool (the concurrent plan times
+    /// tools), in time order; their volume counts towards what each head is planned to
+    /// lay.
+    fn head_paths<'p>(&mut self, plan: &'p LayerPlan) -> Vec<Vec<&'p Toolpath>> {
+        let n = self.s.heads.len();
         let mut paths: Vec<Vec<&Toolpath>> = vec![Vec::new(); n];
         for p in &plan.toolpaths {
             if p.points.len() < 2 {
@@ -701,90 +803,48 @@ impl Writer {
                 m.planned[h] += volume;
             }
         }
-        // The barriers: where a head's wait in the plan ends.
-        let end = paths
-            .iter()
-            .flatten()
-            .filter_map(|p| p.points.last().map(|q| q.t))
-            .fold(0.0, f64::max);
-        let mut times: Vec<f64> = Vec::new();
-        for list in &paths {
-            // A head idle from the layer's start waits too.
-            let mut busy_until = 0.0f64;
-            for p in list {
-                let (t0, t1) = (p.points[0].t, p.points[p.points.len() - 1].t);
-                if p.kind == PathKind::Pause {
-                    times.push(t1);
-                } else if t0 > busy_until + SAME_TIME {
-                    times.push(t0);
-                }
-                busy_until = busy_until.max(t1);
-            }
-        }
-        // Between barriers each stream runs on its own, and the firmware's
-        // accelerations let one fall behind the plan more than the other: barriers
-        // also go where the heads' paths come close ([`safe_times`]).
-        times.retain(|&t| t > SAME_TIME && t < end - SAME_TIME);
-        let tracks: Vec<Vec<(f64, Point2)>> = paths.iter().map(|l| track(l)).collect();
-        let keep = self.multi.as_ref().map_or(
-            Keep {
-                distance: 0.0,
-                front: None,
-            },
-            Multi::keep,
-        );
-        if n == 2 {
-            let (ba, bb) = (beads(&paths[0]), beads(&paths[1]));
-            let course = |track, beads| Course { track, beads };
-            times = safe_times(
-                course(&tracks[0], &ba),
-                course(&tracks[1], &bb),
-                &times,
-                keep,
-                end,
-            );
-        }
-        times.push(end);
-        times.sort_by(f64::total_cmp);
-        times.dedup_by(|a, b| (*a - *b).abs() <= SAME_TIME);
+        paths
+    }
 
-        // Each head to where its route starts, one at a time, in an order where the
-        // moving head passes clear of the standing one; then the layer change: system
-        // 0 moves the shared Z while the other waits.
-        self.barrier();
+    /// Takes the two heads to where their routes start (`tracks`), one at a time: the
+    /// one whose move passes clear of the other standing first.
+    fn go_to_starts(&mut self, plan: &LayerPlan, tracks: &[Vec<(f64, Point2)>], keep: Keep) {
         let offset = self.layout.offset;
-        if n == 2 {
-            let starts: Vec<Option<Point2>> =
-                tracks.iter().map(|t| t.first().map(|q| q.1 + offset)).collect();
-            let now = [self.stream_position(0), self.stream_position(1)];
-            // Head `p` moving first, then `q`: each sweep is clear of the other head
-            // where it stands.
-            let clear = |p: usize, q: usize| {
-                let (p0, p1) = (now[p], starts[p].unwrap_or(now[p]));
-                let q1 = starts[q].unwrap_or(now[q]);
-                let pair = |mp: (Point2, Point2), mq: (Point2, Point2)| {
-                    if p == 0 {
-                        keep.apart(mp, mq)
-                    } else {
-                        keep.apart(mq, mp)
-                    }
-                };
-                pair((p0, p1), (now[q], now[q])) && pair((p1, p1), (now[q], q1))
-            };
-            let order = if clear(0, 1) || !clear(1, 0) {
-                [0, 1]
-            } else {
-                [1, 0]
-            };
-            for h in order {
-                if let Some(p) = starts[h] {
-                    self.select_stream(h);
-                    self.mark_layer(plan);
-                    self.travel(p);
-                    self.barrier();
+        let starts: Vec<Option<Point2>> = tracks.iter().map(|t| t.first().map(|q| q.1 + offset)).collect();
+        let now = [self.stream_position(0), self.stream_position(1)];
+        // Head `p` moving first, then `q`: each sweep is clear of the other head
+        // where it stands.
+        let clear = |p: usize, q: usize| {
+            let (p0, p1) = (now[p], starts[p].unwrap_or(now[p]));
+            let q1 = starts[q].unwrap_or(now[q]);
+            let pair = |mp: (Point2, Point2), mq: (Point2, Point2)| {
+                if p == 0 {
+                    keep.apart(mp, mq)
+                } else {
+                    keep.apart(mq, mp)
                 }
+            };
+            pair((p0, p1), (now[q], now[q])) && pair((p1, p1), (now[q], q1))
+        };
+        let order = if clear(0, 1) || !clear(1, 0) {
+            [0, 1]
+        } else {
+            [1, 0]
+        };
+        for h in order {
+            if let Some(p) = starts[h] {
+                self.select_stream(h);
+                self.mark_layer(plan);
+                self.travel(p);
+                self.barrier();
             }
         }
+    }
+
+    /// The layer change: Z is shared, so system 0 moves it while the other waits at a
+    /// barrier; each head's fan is set for the new layer in its own system.
+    fn change_layer_multi(&mut self, plan: &LayerPlan) {
+        let n = self.s.heads.len();
         self.select_stream(0);
         self.mark_layer(plan);
         self.feature = None;
@@ -811,71 +871,51 @@ impl Writer {
                 st.fw.assume_z(plan.z);
             }
         }
+    }
 
-        let mut from = 0.0;
-        for &to in &times {
-            for (h, list) in paths.iter().enumerate() {
-                let pieces: Vec<Piece> = list
-                    .iter()
-                    .filter(|p| p.kind != PathKind::Pause)
-                    .filter_map(|p| clip(p, from, to))
-                    .collect();
-                if pieces.is_empty() {
-                    continue;
-                }
-                self.select_stream(h);
-                self.mark_layer(plan);
-                for piece in pieces {
-                    let points: Vec<Point2> = piece.points.iter().map(|p| p + offset).collect();
-                    let length: f64 = points.windows(2).map(|w| (w[1] - w[0]).norm()).sum();
-                    let speed = if piece.t1 > piece.t0 && length > 0.0 {
-                        length / (piece.t1 - piece.t0)
-                    } else {
-                        DEFAULT_PRINT_SPEED
-                    };
-                    match piece.kind {
-                        PathKind::Extrude => {
-                            let widths = piece.widths;
-                            self.extrude(
-                                h,
-                                &points,
-                                &|i| widths.get(i).copied().unwrap_or(0.0),
-                                plan.thickness,
-                                speed,
-                                Feature::Part,
-                            )?;
-                        }
-                        _ => {
-                            self.ready(h)?;
-                            // The first layer's slow-down stretches the plan's timeline
-                            // as a whole, travel included, so the heads stay in step.
-                            let speed = match (self.layers, self.s.first_layer_speed) {
-                                (0, Some(FirstLayerSpeed::Factor(f))) => speed * f,
-                                _ => speed,
-                            };
-                            for (k, &p) in points[1..].iter().enumerate() {
-                                // Pulled back where a long planned travel starts, even
-                                // when a barrier cuts it into pieces too short to
-                                // retract for on their own: the nozzle would ooze on
-                                // its way otherwise.
-                                if piece.spans.get(k).is_some_and(|&l| l > RETRACT_MIN_TRAVEL) {
-                                    self.retract(self.s.retraction.length);
-                                    self.lift();
-                                }
-                                self.travel_at(p, speed);
-                            }
-                        }
+    /// Writes one piece of head `h`'s path, at the speed that keeps it to the plan's
+    /// timeline: a bead extruded, or a travel.
+    fn write_piece(&mut self, h: usize, piece: Piece, plan: &LayerPlan) -> Result<()> {
+        let offset = self.layout.offset;
+        let points: Vec<Point2> = piece.points.iter().map(|p| p + offset).collect();
+        let length: f64 = points.windows(2).map(|w| (w[1] - w[0]).norm()).sum();
+        let speed = if piece.t1 > piece.t0 && length > 0.0 {
+            length / (piece.t1 - piece.t0)
+        } else {
+            DEFAULT_PRINT_SPEED
+        };
+        match piece.kind {
+            PathKind::Extrude => {
+                let widths = piece.widths;
+                self.extrude(
+                    h,
+                    &points,
+                    &|i| widths.get(i).copied().unwrap_or(0.0),
+                    plan.thickness,
+                    speed,
+                    Feature::Part,
+                )?;
+            }
+            _ => {
+                self.ready(h)?;
+                // The first layer's slow-down stretches the plan's timeline
+                // as a whole, travel included, so the heads stay in step.
+                let speed = match (self.layers, self.s.first_layer_speed) {
+                    (0, Some(FirstLayerSpeed::Factor(f))) => speed * f,
+                    _ => speed,
+                };
+                for (k, &p) in points[1..].iter().enumerate() {
+                    // Pulled back where a long planned travel starts, even
+                    // when a barrier cuts it into pieces too short to
+                    // retract for on their own: the nozzle would ooze on
+                    // its way otherwise.
+                    if piece.spans.get(k).is_some_and(|&l| l > RETRACT_MIN_TRAVEL) {
+                        self.retract(self.s.retraction.length);
+                        self.lift();
                     }
+                    self.travel_at(p, speed);
                 }
             }
-            // Either system may get to the barrier first and wait there for the
-            // other: with its nozzle pulled back, never oozing onto the part.
-            self.retract_streams();
-            if let Some(m) = self.multi.as_mut() {
-                m.retracted_barriers += 1;
-            }
-            self.barrier_at(Some(to));
-            from = to;
         }
         Ok(())
     }
@@ -962,8 +1002,7 @@ impl Writer {
         self.barrier();
         self.select_stream(0);
         self.feature = None;
-        let park =
-            (self.z_max + super::PARK_CLEARANCE).min(self.s.bed.map_or(f64::INFINITY, |b| b.max_height));
+        let park = (self.z_max + PARK_CLEARANCE).min(self.s.bed.map_or(f64::INFINITY, |b| b.max_height));
         if self.fw.position()[2] < park - 1e-9 {
             let f = self.z_feed();
             self.line(format!("G1 Z{} F{} ; clear of the part", num(park, 3), num(f, 0)));

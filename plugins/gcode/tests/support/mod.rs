@@ -6,8 +6,8 @@ use std::path::Path;
 use std::sync::{Arc, Mutex};
 
 use lamina_core::machine::Machine;
-use lamina_core::stage::{AnyStage, ExportContext, OutputFiles};
-use lamina_core::{BBox2, LayerPlan, Material, PartInfo, Registry, RunInfo, StageKind, Toolpath};
+use lamina_core::stage::{ExportContext, OutputFiles};
+use lamina_core::{BBox2, LayerPlan, Material, PartInfo, Registry, RunInfo, Toolpath};
 
 /// One in-memory file every output of the exporter writes into.
 #[derive(Clone, Default)]
@@ -44,8 +44,7 @@ pub fn export(
     let dir = std::env::temp_dir();
     let scripts = lamina_core::script::local(&dir, Default::default());
     let table = lamina_core::pipeline::TableRef::parse_snippet("gcode", table).expect("table");
-    let AnyStage::Export(exporter) = registry.build_for(
-        StageKind::Export,
+    let exporter = registry.build_for::<dyn lamina_core::Exporter>(
         &table,
         &scripts,
         &dir,
@@ -53,10 +52,7 @@ pub fn export(
             machine: info.machine.as_ref(),
             ..Default::default()
         },
-    )?
-    else {
-        panic!("not an exporter")
-    };
+    )?;
     let buffer = Buffer::default();
     let mut files = Files(buffer.clone());
     let mut ctx = ExportContext {

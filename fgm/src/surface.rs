@@ -7,7 +7,7 @@ use std::sync::{Arc, Mutex};
 
 use serde::Deserialize;
 
-use crate::mesh::{Mesh, Point3, Vector3};
+use lamina_api::mesh::{Mesh, Point3, Vector3};
 
 /// Which faces of the mesh form the surface.
 #[derive(Debug, Clone, PartialEq, Deserialize, Default)]

@@ -9,12 +9,12 @@
 use nalgebra::{Matrix3, Rotation3, Vector3};
 use serde::Deserialize;
 
-use crate::error::{Error, Result};
-use crate::geom::{BBox2, Contour};
-use crate::limits::{Limit, Limits};
-use crate::model::ModelFrame;
-use crate::script::{ScriptArgs, ScriptFn};
-use crate::stage::StageConfig;
+use lamina_api::error::{Error, Result};
+use lamina_api::geom::{BBox2, Contour};
+use lamina_api::limits::{Limit, Limits};
+use lamina_api::model::ModelFrame;
+use lamina_api::script::{ScriptArgs, ScriptFn};
+use lamina_api::stage::StageConfig;
 use lamina_geom::cell::{CellArray, CellShape, PlacedCell};
 
 /// A number, or a Rhai expression of `x`, `y` and `z` (mm) evaluated at each
@@ -70,7 +70,7 @@ fn ones() -> [f64; 3] {
     [1.0; 3]
 }
 
-crate::option_type!(CellSpec = "table");
+lamina_api::option_type!(CellSpec = "table");
 
 enum Value {
     Number(f64),
