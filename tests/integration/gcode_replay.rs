@@ -536,38 +536,46 @@ fn benchy_replays_on_every_machine() {
         return;
     };
     let file = format!("model.file=\"{}\"", benchy.display());
+    let sequential = "plan.use=\"sequential\"";
+    // Each machine's run and replay is a process of its own: they run at once, and
+    // what they say is checked in order below.
+    let jobs: [(Option<&str>, Vec<&str>, usize); 7] = [
+        (None, vec![&file], 10),
+        (Some("rrf-idex-2"), vec![&file], 10),
+        (Some("marlin-mixing-2in1"), vec![&file, "plan.mixing=true"], 10),
+        (Some("rrf-two-systems-2"), vec![&file], 10),
+        (Some("rrf-two-systems-2"), vec![&file, sequential], 20),
+        (Some("rrf-dual-gantry-2"), vec![&file], 20),
+        (Some("rrf-dual-gantry-2"), vec![&file, sequential], 40),
+    ];
+    let mut reports: Vec<Vec<serde_json::Value>> = std::thread::scope(|scope| {
+        let handles: Vec<_> = jobs
+            .iter()
+            .map(|(machine, overrides, every)| {
+                scope.spawn(move || replay("pipelines/benchy-two-tools.toml", *machine, overrides, *every))
+            })
+            .collect();
+        handles
+            .into_iter()
+            .map(|h| h.join().unwrap_or_else(|e| std::panic::resume_unwind(e)))
+            .collect::<Vec<_>>()
+    })
+    .into_iter()
+    .rev()
+    .collect();
+    let mut next = || reports.pop().expect("a report per machine");
     // On the tool changer, each tool's own beads take its prime after a change.
-    for r in replay("pipelines/benchy-two-tools.toml", None, &[&file], 10) {
+    for r in next() {
         let waste = waste_share(&r);
         eprintln!("3DBenchy on marlin-toolchanger-2: waste {waste:.4} of all deposition");
         assert!(waste <= 0.15, "waste {waste:.3}");
     }
-    replay(
-        "pipelines/benchy-two-tools.toml",
-        Some("rrf-idex-2"),
-        &[&file],
-        10,
-    );
-    replay(
-        "pipelines/benchy-two-tools.toml",
-        Some("marlin-mixing-2in1"),
-        &[&file, "plan.mixing=true"],
-        10,
-    );
+    next();
+    next();
     // Both heads at once, on two motion systems, against the same machine taking
     // the tools one at a time.
-    let concurrent = replay(
-        "pipelines/benchy-two-tools.toml",
-        Some("rrf-two-systems-2"),
-        &[&file],
-        10,
-    );
-    let sequential = replay(
-        "pipelines/benchy-two-tools.toml",
-        Some("rrf-two-systems-2"),
-        &[&file, "plan.use=\"sequential\""],
-        20,
-    );
+    let concurrent = next();
+    let sequential = next();
     if let (Some(c), Some(s)) = (concurrent.first(), sequential.first()) {
         let time = |r: &serde_json::Value| r["time"]["replayed_s"].as_f64().expect("replayed time");
         let bound = s["time"]["layers_busiest_s"].as_f64().expect("per-layer bound");
@@ -601,18 +609,8 @@ fn benchy_replays_on_every_machine() {
     }
     // On two gantries with 15 mm heads the boat, 31 mm deep, leaves the heads little
     // to do at once: the file is never slower than one head at a time.
-    let concurrent = replay(
-        "pipelines/benchy-two-tools.toml",
-        Some("rrf-dual-gantry-2"),
-        &[&file],
-        20,
-    );
-    let sequential = replay(
-        "pipelines/benchy-two-tools.toml",
-        Some("rrf-dual-gantry-2"),
-        &[&file, "plan.use=\"sequential\""],
-        40,
-    );
+    let concurrent = next();
+    let sequential = next();
     if let (Some(c), Some(s)) = (concurrent.first(), sequential.first()) {
         let time = |r: &serde_json::Value| r["time"]["replayed_s"].as_f64().expect("replayed time");
         eprintln!(
