@@ -691,3 +691,38 @@ fn the_import_reader_finds_a_circle_through_aliases_globs_and_paths() {
     assert_eq!(found.len(), 1);
     assert_eq!(found[0].len(), 3);
 }
+
+/// The length reader counts a function from `fn` to its closing brace, in impls and
+/// traits too, and leaves tests out.
+#[test]
+fn the_length_reader_counts_functions_outside_tests() {
+    // `fn` line, body, closing brace: one line over the limit, and one at it.
+    let body = "    let _ = 1;\n".repeat(MAX_FUNCTION_LINES - 1);
+    let long = format!("fn long() {{\n{body}}}\n");
+    let at_limit = format!(
+        "fn short() {{\n{}}}\n",
+        "    let _ = 1;\n".repeat(MAX_FUNCTION_LINES - 2)
+    );
+    let text = format!(
+        "{long}{at_limit}\
+         struct S;\nimpl S {{\n    {}\n}}\n\
+         trait T {{\n    {}\n}}\n\
+         #[test]\n{}\
+         #[cfg(test)]\nmod tests {{\n{}}}\n",
+        long.replace("fn long", "fn method"),
+        long.replace("fn long", "fn provided"),
+        long.replace("fn long", "fn a_test"),
+        long.replace("fn long", "fn in_tests"),
+    );
+    let mut functions = Functions::default();
+    functions.visit_file(&syn::parse_file(&text).expect("Rust"));
+    let names: Vec<&str> = functions
+        .long
+        .iter()
+        .map(|(lines, name)| {
+            assert_eq!(*lines, MAX_FUNCTION_LINES + 1, "{name}");
+            name.split(' ').next().expect("a name")
+        })
+        .collect();
+    assert_eq!(names, ["long", "method", "provided"]);
+}
