@@ -138,6 +138,40 @@ mod tests {
     }
 
     #[test]
+    fn scan_lines_cross_slanted_edges_where_they_are() {
+        // A right triangle with legs of 4, its right angle at (0, 1): the middle line
+        // crosses from the vertical leg at x = 0 to the hypotenuse at x = 5 - y; the
+        // line a quarter up is wider, and its middle is taken.
+        let t = Polygon::new(
+            Contour::new(vec![
+                Point2::new(0.0, 1.0),
+                Point2::new(4.0, 1.0),
+                Point2::new(0.0, 5.0),
+            ]),
+            vec![],
+        );
+        let y = 1.0 + 4.0 * 0.2507;
+        let p = interior_point(&t).expect("inside");
+        assert!(
+            (p.y - y).abs() < 1e-12 && (p.x - 0.5 * (5.0 - y)).abs() < 1e-12,
+            "{p:?}"
+        );
+        // Turned upside down, the widest line is the middle one after all: a line a
+        // quarter up is narrower, and the middle line stands.
+        let v = Polygon::new(
+            Contour::new(vec![
+                Point2::new(0.0, 0.0),
+                Point2::new(4.0, 4.0),
+                Point2::new(0.0, 4.0),
+            ]),
+            vec![],
+        );
+        let y = 4.0 * 0.5013;
+        let p = interior_point(&v).expect("inside");
+        assert!((p.y - y).abs() < 1e-12 && (p.x - 0.5 * y).abs() < 1e-12, "{p:?}");
+    }
+
+    #[test]
     fn the_interior_point_is_central_across_the_widest_span() {
         // A tube (r 10 and 5): the middle line crosses walls 5 mm wide; the second line,
         // a quarter up, grazes the hole and finds a wider inside, from the hole's
