@@ -24,8 +24,9 @@ use serde::Deserialize;
 
 use crate::bands::{options, solver};
 use crate::grid::Grid;
-use crate::measure::{cell_centre, interior_point, pole};
+use crate::measure::pole;
 use crate::regions::region;
+use lamina_geom::reference::{cell_centre, reference_point};
 
 /// More cells around one region than anyone could deposit: a guard against typos.
 pub const MAX_CELLS: usize = 1000;
@@ -229,12 +230,7 @@ impl Cells {
                 .polygons(&pieces)
                 .into_iter()
                 .filter(|p| p.outer.len() >= 3)
-                .map(|p| {
-                    (
-                        walk.position(interior_point(&p).unwrap_or_else(|| p.bbox().center())),
-                        p,
-                    )
-                })
+                .map(|p| (walk.position(reference_point(&p)), p))
                 .collect();
             // Numbered along the contour from the first cut.
             cells.sort_by(|a, b| a.0.total_cmp(&b.0));

@@ -1,13 +1,13 @@
 //! Measures of a family that decide how it is divided: the minimum distance between its
-//! contours (L_s of Eq. 14), its inradius (how deep an inward offset can go), and a
-//! point well inside a polygon for a region's reference.
+//! contours (L_s of Eq. 14) and its inradius (how deep an inward offset can go). A
+//! region's reference point is `lamina_geom::reference`.
 
 use std::cmp::Ordering;
 use std::collections::BinaryHeap;
 
 use lamina_api::geom::segment_distance;
 use lamina_api::{Contour, Point2, Polygon};
-pub use lamina_geom::reference::{cell_centre, interior_point};
+use lamina_geom::reference::interior_point;
 use rstar::primitives::Line;
 use rstar::{AABB, PointDistance, RTree};
 

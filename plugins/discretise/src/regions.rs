@@ -6,7 +6,7 @@ use i_overlay::i_shape::int::shape::IntShapes;
 use lamina_api::{FamilyContext, Polygon, SubRegion};
 
 use crate::grid::Grid;
-use crate::measure::interior_point;
+use lamina_geom::reference::reference_point;
 
 /// Regions from bands (outermost first) with the given levels (one per band).
 pub fn from_bands(
@@ -31,7 +31,7 @@ pub fn from_bands(
 /// One region with its reference point (a central point of its widest scan interval,
 /// the bounding-box centre if no scan line finds an inside).
 pub fn region(family: usize, index: usize, count: usize, level: f64, polygon: Polygon) -> SubRegion {
-    let reference = interior_point(&polygon).unwrap_or_else(|| polygon.bbox().center());
+    let reference = reference_point(&polygon);
     SubRegion {
         family,
         index,
