@@ -1,6 +1,6 @@
 //! Progress and summaries on the terminal: a progress bar when stderr is a terminal,
-//! nothing otherwise; diagnostics grouped by what they say, one line a group, once the
-//! run ends (`--verbose`: each as it comes, above the bar).
+//! nothing otherwise; diagnostics grouped by their code, one line a group, once the run
+//! ends (`--verbose`: each as it comes, above the bar).
 
 use std::io::IsTerminal;
 
@@ -13,19 +13,46 @@ pub struct Progress {
     quiet: bool,
     /// Every diagnostic printed as it comes, rather than grouped at the end.
     verbose: bool,
-    /// Diagnostics grouped by what they say: one line each at the end.
+    /// Diagnostics grouped by kind: one line each at the end.
     groups: std::sync::Mutex<Vec<Group>>,
 }
 
-/// Diagnostics that say the same thing (same severity, stage and part, and the same
-/// words once their numbers are left out) on different layers.
+/// Diagnostics of one kind (same severity, stage, part and code) on different layers.
+/// A diagnostic without a code (from a plugin older than ABI 7.3) is grouped with
+/// those of the same words once their numbers are left out.
 struct Group {
-    key: (Severity, StageKind, Option<String>, String),
+    key: (Severity, StageKind, Option<String>, Kind),
     first: Diagnostic,
     layers: Vec<usize>,
     count: usize,
     /// Whether every one said exactly the first one's words.
     identical: bool,
+}
+
+/// What a group's diagnostics have in common besides their place.
+#[derive(PartialEq, Eq)]
+enum Kind {
+    Code(String),
+    Words(String),
+}
+
+impl Kind {
+    fn of(d: &Diagnostic) -> Kind {
+        if d.code.is_empty() {
+            Kind::Words(shape(&d.message))
+        } else {
+            Kind::Code(d.code.clone())
+        }
+    }
+}
+
+/// `warning[slice.gaps-closed]`: the severity, and the stage and code when there is one.
+fn heading(d: &Diagnostic) -> String {
+    if d.code.is_empty() {
+        d.severity.name().to_string()
+    } else {
+        format!("{}[{}.{}]", d.severity.name(), d.stage.name(), d.code)
+    }
 }
 
 /// A message with its numbers left out: the same message about another place.
@@ -75,7 +102,7 @@ impl Group {
     fn line(&self) -> String {
         let d = &self.first;
         if self.count == 1 {
-            return format!("{}: {d}", d.severity.name());
+            return format!("{}: {d}", heading(d));
         }
         let mut place = Vec::new();
         if !self.layers.is_empty() {
@@ -93,7 +120,7 @@ impl Group {
         };
         format!(
             "{}: {} ({} times{first}): {}",
-            d.severity.name(),
+            heading(d),
             place.join(", "),
             self.count,
             d.message
@@ -167,13 +194,13 @@ impl Observer for Progress {
     /// they are grouped and printed at the end.
     fn diagnostic(&self, d: &Diagnostic) {
         if self.verbose {
-            self.print(&crate::report::visible(&format!("{}: {d}", d.severity.name())));
+            self.print(&crate::report::visible(&format!("{}: {d}", heading(d))));
             return;
         }
         let Ok(mut groups) = self.groups.lock() else {
             return;
         };
-        let key = (d.severity, d.stage, d.part.clone(), shape(&d.message));
+        let key = (d.severity, d.stage, d.part.clone(), Kind::of(d));
         match groups.iter_mut().find(|g| g.key == key) {
             Some(g) => {
                 g.count += 1;
@@ -322,4 +349,63 @@ pub fn timings(report: &RunReport) {
         println!("{:<12} {:.4}", kind.name(), d.as_secs_f64());
     }
     println!("{:<12} {:.4}", "wall", report.timings.wall().as_secs_f64());
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn lines(said: &[Diagnostic]) -> Vec<String> {
+        let p = Progress::new(true, false);
+        for d in said {
+            p.diagnostic(d);
+        }
+        let groups = p.groups.lock().expect("groups");
+        groups.iter().map(Group::line).collect()
+    }
+
+    #[test]
+    fn diagnostics_are_grouped_by_their_code_whatever_their_words() {
+        let d = |code: &str, layer: usize, message: &str| {
+            Diagnostic::warning(StageKind::Slice, code, message).at_layer(layer, 0.2 * layer as f64)
+        };
+        let got = lines(&[
+            d("open-chains-dropped", 3, "dropped an open chain of 4 points"),
+            d(
+                "open-chains-dropped",
+                4,
+                "dropped 120 open chains of 900 points in all",
+            ),
+            d("gaps-closed", 4, "dropped an open chain of 4 points"),
+            d("open-chains-dropped", 5, "dropped an open chain of 7 points"),
+        ]);
+        assert_eq!(got.len(), 2, "{got:?}");
+        assert_eq!(
+            got[0],
+            "warning[slice.open-chains-dropped]: layers 3-5 (3 times, as on layer 3): dropped an open chain of 4 points"
+        );
+        assert!(
+            got[1].starts_with("warning[slice.gaps-closed]: layer 4 (z = 0.8000 mm): "),
+            "{}",
+            got[1]
+        );
+    }
+
+    #[test]
+    fn diagnostics_without_a_code_are_grouped_by_their_words_less_their_numbers() {
+        let d = |layer: usize, message: &str| {
+            Diagnostic::warning(StageKind::Plan, "", message).at_layer(layer, 1.0)
+        };
+        let got = lines(&[
+            d(1, "2 sub-regions left out"),
+            d(2, "5 sub-regions left out"),
+            d(2, "the schedule gave up"),
+        ]);
+        assert_eq!(got.len(), 2, "{got:?}");
+        assert_eq!(
+            got[0],
+            "warning: layers 1-2 (2 times, as on layer 1): 2 sub-regions left out"
+        );
+        assert!(got[1].starts_with("warning: layer 2"), "{}", got[1]);
+    }
 }

@@ -31,7 +31,7 @@ pub mod stage;
 pub mod table;
 pub mod text;
 
-pub use diagnostic::{Diagnostic, Severity};
+pub use diagnostic::{Diagnostic, Severity, Warning};
 pub use error::{Error, Result};
 pub use geom::{BBox2, Contour, Point2, Polygon, Vector2};
 pub use limits::{Limit, Limits};

@@ -20,7 +20,7 @@ pub struct Mesh {
     pub material_names: Vec<String>,
     /// What the reader repaired (welded, dropped), for the user.
     #[serde(skip)]
-    pub warnings: Vec<String>,
+    pub warnings: Vec<crate::diagnostic::Warning>,
 }
 
 impl Mesh {

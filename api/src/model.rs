@@ -49,7 +49,7 @@ pub struct Layer {
     pub contours: Vec<Contour>,
     /// What the slicer repaired or dropped in this layer, for the user.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
-    pub warnings: Vec<String>,
+    pub warnings: Vec<crate::diagnostic::Warning>,
 }
 
 impl Layer {
@@ -424,6 +424,8 @@ pub enum PathKind {
 /// One continuous move of one tool in a layer.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Toolpath {
+    /// The tool that moves: an index into the planner's tools (one per material on a
+    /// tool changer or independent heads; the one tool of a mixing head).
     pub tool: usize,
     pub kind: PathKind,
     pub points: Vec<TimedPoint>,
@@ -439,11 +441,19 @@ pub struct Toolpath {
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub composition: Option<Composition>,
     /// Part and sub-region (index into the part layer's `regions`) the path fills, if
-    /// any; the sub-region is written `region` in files.
+    /// any. The sub-region keeps the name `region` on the wire, which plugins of ABI
+    /// 7.0 to 7.2 read; files write `sub_region`.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub part: Option<usize>,
     #[serde(default, rename = "region", skip_serializing_if = "Option::is_none")]
     pub sub_region: Option<usize>,
+    /// The run's material (index into `RunInfo::materials`) that the path's tool
+    /// carries, when it is a single-material tool: the machine moves the head loaded
+    /// with it, whatever the planner numbered its tools. `None` for a mixing head
+    /// (`composition` says what it lays) and from planners older than ABI 7.3, whose
+    /// tool `i` carried material `i`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub material: Option<usize>,
 }
 
 impl Toolpath {
@@ -516,18 +526,19 @@ pub struct LayerPlan {
 }
 
 impl LayerPlan {
-    /// Records a warning of `stage` about this layer.
-    pub fn warn(&mut self, stage: StageKind, message: impl Into<String>) {
-        self.say(Severity::Warning, stage, message);
+    /// Records a warning of `stage` about this layer, of kind `code` (see
+    /// [`Diagnostic::code`]).
+    pub fn warn(&mut self, stage: StageKind, code: &str, message: impl Into<String>) {
+        self.say(Severity::Warning, stage, code, message);
     }
 
     /// Records a note of `stage` about this layer: information, nothing wrong.
-    pub fn note(&mut self, stage: StageKind, message: impl Into<String>) {
-        self.say(Severity::Note, stage, message);
+    pub fn note(&mut self, stage: StageKind, code: &str, message: impl Into<String>) {
+        self.say(Severity::Note, stage, code, message);
     }
 
-    fn say(&mut self, severity: Severity, stage: StageKind, message: impl Into<String>) {
-        let d = Diagnostic::new(severity, stage, message).at_layer(self.index, self.z);
+    fn say(&mut self, severity: Severity, stage: StageKind, code: &str, message: impl Into<String>) {
+        let d = Diagnostic::new(severity, stage, code, message).at_layer(self.index, self.z);
         self.diagnostics.push(d);
     }
 }

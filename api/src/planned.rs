@@ -132,6 +132,11 @@ impl LayerPlan {
         if path.tool >= tools {
             return Err(format!("tool {} of {tools}", path.tool));
         }
+        if let Some(m) = path.material
+            && m >= info.materials.len()
+        {
+            return Err(format!("material {m} of {}", info.materials.len()));
+        }
         let mut last_t = f64::NEG_INFINITY;
         for (j, p) in path.points.iter().enumerate() {
             if !(is_coordinate(p.p.x) && is_coordinate(p.p.y)) {
@@ -260,6 +265,7 @@ mod tests {
     fn bead() -> Toolpath {
         Toolpath {
             tool: 1,
+            material: None,
             kind: PathKind::Extrude,
             points: [(0.0, 0.0, 0.0), (10.0, 0.0, 0.5), (10.0, 5.0, 0.75)]
                 .map(|(x, y, t)| TimedPoint {
@@ -316,6 +322,11 @@ mod tests {
         let mut p = bead();
         p.tool = 2;
         assert!(refused(p).contains("tool 2 of 2"));
+        let mut p = bead();
+        p.material = Some(1);
+        plan(vec![p.clone()]).check(&info()).expect("the second material");
+        p.material = Some(2);
+        assert!(refused(p).contains("material 2 of 2"));
         let mut p = bead();
         p.widths = vec![0.4];
         assert!(refused(p).contains("1 widths for 2 segments"));

@@ -430,9 +430,9 @@ pub struct MachineFileReport {
     /// Of `time`: what it is spent on (s), by operation, where the file knows (an NC
     /// program's spraying, grinding, tool changes).
     pub shares: Vec<(String, f64)>,
-    /// What the machine will do otherwise than the plan asks, in the user's words (a
-    /// wheel that cannot reach its surface speed); the run prints them as warnings.
-    pub notes: Vec<String>,
+    /// What the machine will do otherwise than the plan asks (a wheel that cannot
+    /// reach its surface speed); the run prints them as warnings of the export stage.
+    pub notes: Vec<crate::diagnostic::Warning>,
 }
 
 impl MachineFileReport {

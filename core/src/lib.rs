@@ -27,7 +27,7 @@ pub mod machine {
     pub use lamina_machine::{builtin, load, resolve};
 }
 
-pub use diagnostic::{Diagnostic, Severity};
+pub use diagnostic::{Diagnostic, Severity, Warning};
 pub use error::{Error, Result};
 pub use geom::{BBox2, Contour, Point2, Polygon, Vector2};
 pub use limits::{Limit, Limits};

@@ -19,6 +19,7 @@ impl Planner for NanPlanner {
     fn plan(&self, _info: &RunInfo, plan: &mut LayerPlan) -> Result<()> {
         plan.toolpaths.push(Toolpath {
             tool: 0,
+            material: None,
             kind: PathKind::Extrude,
             points: vec![
                 TimedPoint {

@@ -61,7 +61,7 @@ fn check(file: &str, plan: &serde_json::Value) -> usize {
             for family in part["families"].as_array().expect("families") {
                 let area = family["area"].as_f64().expect("area");
                 let mut sum = 0.0;
-                for r in family["regions"].as_array().expect("regions") {
+                for r in family["sub_regions"].as_array().expect("regions") {
                     regions += 1;
                     sum += r["area"].as_f64().expect("region area");
                     let fractions: Vec<f64> = r["composition"]

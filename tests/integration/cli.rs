@@ -469,7 +469,8 @@ fn quiet_runs_still_print_warnings_one_line_for_every_kind() {
     assert!(o.status.success(), "{}", text(&o.stderr));
     let err = text(&o.stderr);
     assert!(
-        err.contains("warning:") && err.contains("narrower than the narrowest bead"),
+        err.contains("warning[plan.thin-sub-regions-merged]:")
+            && err.contains("narrower than the narrowest bead"),
         "{err}"
     );
     assert!(!err.contains("layers,"), "no summary when quiet: {err}");
@@ -480,7 +481,7 @@ fn quiet_runs_still_print_warnings_one_line_for_every_kind() {
         .collect();
     assert_eq!(lines.len(), 1, "{err}");
 
-    // The JSON plan carries each one as data: severity, stage, layer, message.
+    // The JSON plan carries each one as data: severity, stage, code, layer, message.
     let plan: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(out.join("blade-idw.json")).expect("the JSON plan"))
             .expect("JSON");
@@ -498,8 +499,9 @@ fn quiet_runs_still_print_warnings_one_line_for_every_kind() {
     assert!(said.len() >= 2, "{said:?}");
     let layers: Vec<u64> = said.iter().map(|d| d["layer"].as_u64().expect("layer")).collect();
     assert!(
-        said.iter()
-            .all(|d| d["severity"] == "warning" && d["stage"] == "plan"),
+        said.iter().all(|d| d["severity"] == "warning"
+            && d["stage"] == "plan"
+            && d["code"] == "thin-sub-regions-merged"),
         "{said:?}"
     );
     let first = layers.iter().min().expect("one");
@@ -528,7 +530,9 @@ fn verbose_runs_print_every_warning_with_its_layer() {
     let layers: Vec<usize> = lines
         .iter()
         .map(|l| {
-            let rest = l.strip_prefix("warning: layer ").expect(l);
+            let rest = l
+                .strip_prefix("warning[plan.thin-sub-regions-merged]: layer ")
+                .expect(l);
             assert!(rest.contains(" (z = "), "{l}");
             rest.split(' ').next().and_then(|n| n.parse().ok()).expect(l)
         })

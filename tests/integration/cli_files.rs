@@ -342,7 +342,7 @@ fn check_modified_layer(
                 .iter()
                 .map(|h| Ring::new(&points(h)))
                 .collect();
-            let regions = family["regions"].as_array().expect("regions");
+            let regions = family["sub_regions"].as_array().expect("regions");
             // (ring, region index, count, is outer, fractions)
             let mut rings = Vec::new();
             for r in regions {
@@ -466,7 +466,7 @@ const TUBE: &str = "use = \"tube\"\nouter_radius = 10.0\ninner_radius = 5.0\nhei
 fn modified_cli_carries_contour_ids_colours_and_fractions() {
     let (file, plan, _dir) = modified("use = \"offset\"\ncount = 10", TUBE);
     assert_eq!(file.layers.len(), 2);
-    let regions = plan["layers"][0]["parts"][0]["families"][0]["regions"]
+    let regions = plan["layers"][0]["parts"][0]["families"][0]["sub_regions"]
         .as_array()
         .expect("regions");
     assert!(regions.iter().all(|r| r["count"] == 10));
@@ -547,7 +547,7 @@ fn modified_cli_with_cells_and_islands() {
         "use = \"blade\"\ncavities = 2\nspan = 1.5\nroot_height = 0.5",
     );
     let last = plan["layers"].as_array().expect("layers").len() - 1;
-    let regions = plan["layers"][last]["parts"][0]["families"][0]["regions"]
+    let regions = plan["layers"][last]["parts"][0]["families"][0]["sub_regions"]
         .as_array()
         .expect("regions");
     let islands = (0..8)

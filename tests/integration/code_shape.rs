@@ -62,7 +62,7 @@ fn crate_roots() -> Vec<PathBuf> {
 }
 
 /// Whether attributes mark test-only code: `#[test]` or `#[cfg(test)]`.
-fn is_test(attrs: &[syn::Attribute]) -> bool {
+pub(crate) fn is_test(attrs: &[syn::Attribute]) -> bool {
     attrs.iter().any(|a| {
         a.path().is_ident("test")
             || (a.path().is_ident("cfg")
@@ -541,7 +541,7 @@ impl Functions {
 }
 
 /// Every `.rs` file under the crate roots' `src` folders.
-fn source_files() -> Vec<PathBuf> {
+pub(crate) fn source_files() -> Vec<PathBuf> {
     let mut files = Vec::new();
     for krate in crate_roots() {
         let src = krate.parent().expect("src/").to_path_buf();

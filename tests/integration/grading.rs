@@ -23,7 +23,7 @@ fn gear_layers(plan: &serde_json::Value) -> Vec<(u64, Vec<Shade>)> {
             let regions = gear["families"]
                 .as_array()?
                 .iter()
-                .flat_map(|f| f["regions"].as_array().into_iter().flatten())
+                .flat_map(|f| f["sub_regions"].as_array().into_iter().flatten())
                 .map(|r| {
                     let c = &r["colour"];
                     let rgb = [0, 1, 2].map(|i| c[i].as_u64().unwrap_or(999) as u8);
@@ -60,7 +60,7 @@ fn gear_graded_along_z_gives_the_papers_colour_table() {
         for p in l["parts"].as_array().expect("parts") {
             if p["part"] == "shaft" {
                 for f in p["families"].as_array().expect("families") {
-                    for r in f["regions"].as_array().expect("regions") {
+                    for r in f["sub_regions"].as_array().expect("regions") {
                         assert_eq!(r["colour"], serde_json::json!([0, 0, 255]));
                         assert_eq!(r["composition"]["blue"], 1.0);
                     }
@@ -116,7 +116,7 @@ fn blade_graded_along_z_and_across_at_once() {
     for layer in plan["layers"].as_array().expect("layers") {
         let ri = (layer["index"].as_f64().expect("index") / 69.0).min(1.0);
         for f in layer["parts"][0]["families"].as_array().expect("families") {
-            for r in f["regions"].as_array().expect("regions") {
+            for r in f["sub_regions"].as_array().expect("regions") {
                 let count = r["count"].as_f64().expect("count");
                 let rj = if count > 1.0 {
                     r["index"].as_f64().expect("index") / (count - 1.0)
@@ -229,7 +229,7 @@ fn blade_idw_gives_every_cell_eq_23_of_its_cavities_materials_at_its_centre() {
                 contours.push((h, m));
             }
             assert_ne!(contours[1].1, contours[2].1, "each cavity its own material");
-            for r in f["regions"].as_array().expect("regions") {
+            for r in f["sub_regions"].as_array().expect("regions") {
                 let reference = [
                     r["reference"][0].as_f64().expect("x"),
                     r["reference"][1].as_f64().expect("y"),

@@ -493,7 +493,7 @@ fn a_third_party_parser_runs_the_nc_program_as_a_machinist_would_and_finds_the_p
             .expect("parts")
             .iter()
             .flat_map(|p| p["families"].as_array().expect("families"))
-            .flat_map(|fam| fam["regions"].as_array().expect("regions"))
+            .flat_map(|fam| fam["sub_regions"].as_array().expect("regions"))
             .collect();
         assert_eq!(
             sprays.len(),

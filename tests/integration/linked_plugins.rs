@@ -56,7 +56,7 @@ fn two_plugin_crates_linked_into_one_program_run_in_one_pipeline() {
     assert_eq!(layers.len(), 2);
     for layer in layers {
         assert!(!layer["toolpaths"].as_array().expect("toolpaths").is_empty());
-        let regions = layer["parts"][0]["families"][0]["regions"]
+        let regions = layer["parts"][0]["families"][0]["sub_regions"]
             .as_array()
             .expect("regions");
         assert_eq!(regions.len(), 2);

@@ -617,7 +617,7 @@ fn a_plugin_resolving_other_releases_of_the_boundarys_dependencies_runs_correctl
     assert_eq!(layers.len(), 4);
     for layer in &layers {
         let z = layer["z"].as_f64().expect("z");
-        let regions = layer["parts"][0]["families"][0]["regions"]
+        let regions = layer["parts"][0]["families"][0]["sub_regions"]
             .as_array()
             .expect("regions");
         let area: f64 = regions.iter().map(|r| r["area"].as_f64().expect("area")).sum();

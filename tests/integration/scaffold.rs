@@ -121,7 +121,7 @@ fn the_plugin_guide_works_from_scaffold_to_a_loaded_plugin() {
     let plan = plan_in(&out, "plan.json");
     for layer in plan["layers"].as_array().expect("layers") {
         let z = layer["z"].as_f64().expect("z");
-        for region in layer["parts"][0]["families"][0]["regions"]
+        for region in layer["parts"][0]["families"][0]["sub_regions"]
             .as_array()
             .expect("regions")
         {
@@ -167,7 +167,7 @@ fn every_template_builds_tests_and_runs() {
     let (_, out) = scaffold(work.path(), "my-beads", "plan");
     let plan = plan_in(&out, "plan.json");
     for layer in plan["layers"].as_array().expect("layers") {
-        let regions = layer["parts"][0]["families"][0]["regions"]
+        let regions = layer["parts"][0]["families"][0]["sub_regions"]
             .as_array()
             .expect("regions");
         let paths = layer["toolpaths"].as_array().expect("toolpaths");

@@ -22,7 +22,7 @@ fn regions(layer: &serde_json::Value) -> Vec<&serde_json::Value> {
         .as_array()
         .expect("families")
         .iter()
-        .flat_map(|f| f["regions"].as_array().expect("regions"))
+        .flat_map(|f| f["sub_regions"].as_array().expect("regions"))
         .collect()
 }
 

@@ -276,7 +276,7 @@ fn graded_rings_are_shared_between_single_material_tools_by_their_fractions() {
                     continue;
                 }
                 for family in part["families"].as_array().expect("families") {
-                    for r in family["regions"].as_array().expect("regions") {
+                    for r in family["sub_regions"].as_array().expect("regions") {
                         let area = r["area"].as_f64().expect("area");
                         design += area;
                         design_bronze += area * r["composition"]["bronze"].as_f64().unwrap_or(0.0);
@@ -285,10 +285,15 @@ fn graded_rings_are_shared_between_single_material_tools_by_their_fractions() {
             }
             let (mut laid, mut laid_bronze) = (0.0, 0.0);
             for path in layer["toolpaths"].as_array().into_iter().flatten() {
+                // Every path, travel too, names the material its tool carries: the
+                // machine loads heads by material, not by the planner's numbering.
+                let tool = path["tool"].as_u64().expect("tool");
+                let material = path["material"].as_u64().expect("the path names its material");
+                let name = &plan["materials"][material as usize]["name"];
+                assert_eq!(name, ["bronze", "steel"][tool as usize], "tool {tool}: {path}");
                 if path["kind"] != "extrude" {
                     continue;
                 }
-                let tool = path["tool"].as_u64().expect("tool");
                 let composition: Vec<f64> = path["composition"]
                     .as_array()
                     .expect("composition")

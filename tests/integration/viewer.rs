@@ -20,7 +20,7 @@ fn run(dir: &Path) -> serde_json::Value {
 }
 
 fn regions(layer: &serde_json::Value) -> &Vec<serde_json::Value> {
-    layer["parts"][0]["families"][0]["regions"]
+    layer["parts"][0]["families"][0]["sub_regions"]
         .as_array()
         .expect("regions")
 }
@@ -252,7 +252,7 @@ fn contact_sheet_tiles_share_one_scale_and_carry_captions() {
             .expect("parts")
             .iter()
             .flat_map(|p| p["families"].as_array().expect("families"))
-            .flat_map(|f| f["regions"].as_array().expect("regions"))
+            .flat_map(|f| f["sub_regions"].as_array().expect("regions"))
             .map(|r| r["area"].as_f64().expect("area"))
             .sum();
         per_mm2.push(drawn / area);

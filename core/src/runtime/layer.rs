@@ -88,7 +88,7 @@ impl Engine {
                     }
                 };
                 diagnostics.extend(layer.warnings.iter().map(|w| {
-                    Diagnostic::warning(StageKind::Slice, w.as_str())
+                    Diagnostic::from_warning(StageKind::Slice, w)
                         .at_layer(slot.index, slot.z)
                         .in_part(&p.name)
                 }));

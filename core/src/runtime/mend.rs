@@ -6,6 +6,7 @@
 //! fails naming the layer. A layer that no triangle crosses (a gap between two bodies)
 //! stays empty.
 
+use crate::diagnostic::Warning;
 use crate::error::{Error, Result};
 use crate::mesh::Mesh;
 use crate::model::{Layer, LayerSlot};
@@ -45,9 +46,12 @@ fn mend_empty(
             let other = slicer.slice(&slots[k])?;
             if !other.contours.is_empty() {
                 layer.contours = other.contours;
-                layer.warnings.push(format!(
-                    "the mesh crosses this layer but its cut closes no area (an open mesh): filled with the contours of layer {} (z = {:.4} mm)",
-                    slots[k].index, slots[k].z
+                layer.warnings.push(Warning::new(
+                    "empty-layer-filled",
+                    format!(
+                        "the mesh crosses this layer but its cut closes no area (an open mesh): filled with the contours of layer {} (z = {:.4} mm)",
+                        slots[k].index, slots[k].z
+                    ),
                 ));
                 return Ok(layer);
             }
@@ -153,7 +157,10 @@ mod tests {
             let layer = mended(&empty, 10, at, 100.0).expect("mended");
             assert_eq!(source(&layer), from, "layer {at}");
             assert!(
-                layer.warnings[0].contains(&format!("contours of layer {from}")),
+                layer.warnings[0].code == "empty-layer-filled"
+                    && layer.warnings[0]
+                        .message
+                        .contains(&format!("contours of layer {from}")),
                 "{:?}",
                 layer.warnings
             );

@@ -4,6 +4,7 @@
 
 use std::sync::Arc;
 
+use crate::diagnostic::Warning;
 use crate::error::{Error, Result};
 use crate::geom::{BBox2, Point2, Vector2};
 use crate::mesh::{BBox3, Mesh, Vector3};
@@ -63,7 +64,7 @@ pub(super) struct PartMeshes {
     pub orientation: Option<Orientation>,
     pub model_frame: Option<ModelFrame>,
     /// What the readers repaired, for the run's diagnostics.
-    pub warnings: Vec<String>,
+    pub warnings: Vec<Warning>,
 }
 
 impl Engine {
@@ -79,7 +80,7 @@ impl Engine {
             }
             None => (None, None),
         };
-        let warnings: Vec<String> = loaded
+        let warnings: Vec<Warning> = loaded
             .iter()
             .flatten()
             .flat_map(|m| m.warnings.iter().cloned())
@@ -186,7 +187,8 @@ impl Engine {
             })
             .collect();
         if !m.warnings.is_empty() {
-            lines.push(format!("model repairs: {}", m.warnings.join("; ")));
+            let said: Vec<&str> = m.warnings.iter().map(|w| w.message.as_str()).collect();
+            lines.push(format!("model repairs: {}", said.join("; ")));
         }
         Ok(lines)
     }

@@ -114,7 +114,7 @@ fn thin_parts(info: &RunInfo, slots: &[LayerSlot]) -> Vec<Diagnostic> {
                 short(p.z_max - p.z_min),
                 short(thinnest)
             );
-            Diagnostic::warning(StageKind::Slice, message).in_part(&p.name)
+            Diagnostic::warning(StageKind::Slice, "part-thinner-than-layer", message).in_part(&p.name)
         })
         .collect()
 }
@@ -225,7 +225,8 @@ impl Engine {
             for note in &m.notes {
                 say(Diagnostic::warning(
                     StageKind::Export,
-                    format!("{}: {note}", m.file.display()),
+                    note.code.as_str(),
+                    format!("{}: {}", m.file.display(), note.message),
                 ));
             }
         }
@@ -269,7 +270,7 @@ impl Engine {
             warnings,
         } = self.part_meshes(timings)?;
         for w in &warnings {
-            say(Diagnostic::warning(StageKind::Model, w.as_str()));
+            say(Diagnostic::from_warning(StageKind::Model, w));
         }
         let mut info = RunInfo {
             base_dir: self.pipeline.base_dir.clone(),

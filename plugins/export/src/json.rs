@@ -12,8 +12,11 @@ use lamina_api::stage::{
 use lamina_api::{Contour, Error, LayerPlan, Polygon, Result, RunInfo, StageFactory, Toolpath};
 use serde::{Deserialize, Serialize};
 
-/// Version of the JSON schema; bumped on incompatible changes.
-pub const SCHEMA_VERSION: u32 = 1;
+/// Version of the JSON schema; bumped on incompatible changes. 2: a family's
+/// sub-regions are `sub_regions` and a toolpath's is `sub_region` (`region` is only ever
+/// a sequence region), toolpaths name the material their tool carries, and diagnostics
+/// their code.
+pub const SCHEMA_VERSION: u32 = 2;
 
 lamina_api::option_type!(Form = "string");
 
@@ -70,7 +73,7 @@ struct LayerOut<'a> {
     region: Option<usize>,
     parts: Vec<PartOut<'a>>,
     #[serde(skip_serializing_if = "Option::is_none")]
-    toolpaths: Option<&'a [Toolpath]>,
+    toolpaths: Option<Vec<ToolpathOut<'a>>>,
     #[serde(skip_serializing_if = "Option::is_none")]
     build_time: Option<f64>,
     #[serde(skip_serializing_if = "Option::is_none")]
@@ -98,7 +101,42 @@ struct FamilyOut<'a> {
     outer: &'a Contour,
     holes: Vec<&'a Contour>,
     area: f64,
-    regions: Vec<RegionOut<'a>>,
+    sub_regions: Vec<RegionOut<'a>>,
+}
+
+/// A toolpath as files write it: the wire's `region` is `sub_region` here.
+#[derive(Serialize)]
+struct ToolpathOut<'a> {
+    tool: usize,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    material: Option<usize>,
+    kind: lamina_api::PathKind,
+    points: &'a [lamina_api::TimedPoint],
+    width: f64,
+    #[serde(skip_serializing_if = "<[f64]>::is_empty")]
+    widths: &'a [f64],
+    #[serde(skip_serializing_if = "Option::is_none")]
+    composition: Option<&'a lamina_api::Composition>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    part: Option<usize>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    sub_region: Option<usize>,
+}
+
+impl<'a> From<&'a Toolpath> for ToolpathOut<'a> {
+    fn from(t: &'a Toolpath) -> Self {
+        ToolpathOut {
+            tool: t.tool,
+            material: t.material,
+            kind: t.kind,
+            points: &t.points,
+            width: t.width,
+            widths: &t.widths,
+            composition: t.composition.as_ref(),
+            part: t.part,
+            sub_region: t.sub_region,
+        }
+    }
 }
 
 #[derive(Serialize)]
@@ -161,7 +199,7 @@ fn layer_out<'a>(info: &'a RunInfo, plan: &'a LayerPlan, toolpaths: bool) -> Lay
                         outer: &pl.contours[fam.outer],
                         holes: fam.holes.iter().map(|&h| &pl.contours[h]).collect(),
                         area: pl.tree.family_polygon(&pl.contours, f).area(),
-                        regions,
+                        sub_regions: regions,
                     }
                 })
                 .collect();
@@ -177,7 +215,8 @@ fn layer_out<'a>(info: &'a RunInfo, plan: &'a LayerPlan, toolpaths: bool) -> Lay
         thickness: plan.thickness,
         region: plan.material_region,
         parts,
-        toolpaths: (toolpaths && !plan.toolpaths.is_empty()).then_some(plan.toolpaths.as_slice()),
+        toolpaths: (toolpaths && !plan.toolpaths.is_empty())
+            .then(|| plan.toolpaths.iter().map(ToolpathOut::from).collect()),
         build_time: plan.build_time,
         sequential_time: plan.sequential_time,
         pauses: plan.pauses,

@@ -1196,18 +1196,20 @@ impl Writer {
         out
     }
 
-    /// The head of a path on a tool changer: the one carrying its dominant material
-    /// (the planner's tool when it plans one tool per material).
+    /// The head of a path on a tool changer: the one carrying the material its tool
+    /// carries, else its dominant material; from a planner that names neither, the
+    /// material numbered as its tool.
     fn head_of(&self, info: &RunInfo, path: &Toolpath) -> usize {
-        let material = match (&path.composition, path.part.and_then(|p| info.parts.get(p))) {
+        let dominant = || match (&path.composition, path.part.and_then(|p| info.parts.get(p))) {
             (Some(c), Some(part)) if c.fractions.len() == part.materials.len() => c
                 .fractions
                 .iter()
                 .enumerate()
                 .max_by(|a, b| a.1.total_cmp(b.1).then(b.0.cmp(&a.0)))
-                .map_or(path.tool, |(i, _)| part.materials[i]),
-            _ => path.tool,
+                .map(|(i, _)| part.materials[i]),
+            _ => None,
         };
+        let material = path.material.or_else(dominant).unwrap_or(path.tool);
         self.s.slot_of.get(material).copied().flatten().unwrap_or(0)
     }
 

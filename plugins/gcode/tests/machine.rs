@@ -57,6 +57,7 @@ fn layers(seed: u64) -> Vec<LayerPlan> {
                         .collect();
                     Toolpath {
                         tool: usize::from(f < 0.5),
+                        material: None,
                         kind: PathKind::Extrude,
                         points,
                         width: 0.45,
@@ -732,6 +733,7 @@ fn rings(step: u32, volume: f64) -> Vec<LayerPlan> {
                     .collect();
                 toolpaths.push(Toolpath {
                     tool: 0,
+                    material: None,
                     kind: PathKind::Extrude,
                     points,
                     width: 0.45,

@@ -36,6 +36,7 @@ fn layers(seed: u64) -> Vec<LayerPlan> {
                 };
                 toolpaths.push(Toolpath {
                     tool,
+                    material: None,
                     kind,
                     points: points.clone(),
                     width: if kind == PathKind::Extrude {
@@ -53,6 +54,7 @@ fn layers(seed: u64) -> Vec<LayerPlan> {
                     let p = points[points.len() - 1].p;
                     toolpaths.push(Toolpath {
                         tool,
+                        material: None,
                         kind: PathKind::Pause,
                         points: vec![TimedPoint { p, t }, TimedPoint { p, t: t + 1.0 }],
                         width: 0.0,

@@ -2,7 +2,7 @@
 //! vertices closer than a tolerance are merged and triangles that collapse are dropped.
 //! Slicing relies on shared vertex indices to chain the cut segments into loops.
 
-use lamina_api::{Mesh, Point3};
+use lamina_api::{Mesh, Point3, Warning};
 
 /// Triangles as three corners each, before welding.
 #[derive(Debug, Default, Clone)]
@@ -116,9 +116,12 @@ impl MeshWelder {
         };
         let mut mesh = Mesh::new(name, vertices, self.triangles);
         if degenerate > 0 {
-            mesh.warnings.push(format!(
-                "{name}: dropped {degenerate} degenerate triangle(s) (corners closer than {} mm)",
-                self.tolerance
+            mesh.warnings.push(Warning::new(
+                "degenerate-triangles-dropped",
+                format!(
+                    "{name}: dropped {degenerate} degenerate triangle(s) (corners closer than {} mm)",
+                    self.tolerance
+                ),
             ));
         }
         (mesh, report, self.dropped)

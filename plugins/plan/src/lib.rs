@@ -309,6 +309,7 @@ fn prepare(o: &Options, info: &RunInfo, plan: &mut LayerPlan, step: f64) -> Resu
         let more = thin.len().saturating_sub(5);
         plan.warn(
             StageKind::Plan,
+            "thin-sub-regions-left-out",
             format!(
                 "{} sub-region(s) narrower than the narrowest bead ({:.3} mm){} are not deposited: {}{}",
                 thin.len(),
@@ -327,7 +328,7 @@ fn prepare(o: &Options, info: &RunInfo, plan: &mut LayerPlan, step: f64) -> Resu
         );
     }
     if work.merged > 0 {
-        plan.warn(StageKind::Plan, format!(
+        plan.warn(StageKind::Plan, "thin-sub-regions-merged", format!(
             "{} sub-region(s) narrower than the narrowest bead ({:.3} mm) are deposited together with their neighbours, \
              with the area-weighted mean composition (`thin = \"skip\"` leaves them out)",
             work.merged, widths.min
@@ -376,6 +377,19 @@ fn sequential(layer: &Layer, tool_change: f64) -> (Vec<Toolpath>, f64) {
     (out, t)
 }
 
+/// Adds this planner's `paths` to the plan, each path of a single-material tool
+/// naming the material the tool carries: tool `i` carries the run's material `i` (see
+/// `Options::tools`); the mixing head lays the composition on its paths.
+fn lay(o: &Options, plan: &mut LayerPlan, paths: Vec<Toolpath>) {
+    let start = plan.toolpaths.len();
+    plan.toolpaths.extend(paths);
+    if !o.mixing {
+        for p in &mut plan.toolpaths[start..] {
+            p.material = Some(p.tool);
+        }
+    }
+}
+
 /// Records how much of the layer's sub-regions the toolpaths fill.
 fn report_fill(o: &Options, plan: &mut LayerPlan) {
     let area: f64 = plan.parts.iter().flat_map(|p| &p.regions).map(|r| r.area()).sum();
@@ -394,7 +408,7 @@ impl Planner for Sequential {
     fn plan(&self, info: &RunInfo, plan: &mut LayerPlan) -> Result<()> {
         let layer = prepare(&self.0, info, plan, self.0.step())?;
         let (paths, t) = sequential(&layer, self.0.tool_change);
-        plan.toolpaths.extend(paths);
+        lay(&self.0, plan, paths);
         plan.build_time = Some(plan.build_time.unwrap_or(0.0) + t);
         report_fill(&self.0, plan);
         Ok(())
@@ -412,9 +426,10 @@ impl Planner for Concurrent {
             // own at once.
             plan.note(
                 StageKind::Plan,
+                "shared-beam-one-at-a-time",
                 "the heads share one beam (kinematics `shared-beam`): deposited one tool at a time",
             );
-            plan.toolpaths.extend(seq_paths);
+            lay(o, plan, seq_paths);
             plan.build_time = Some(plan.build_time.unwrap_or(0.0) + seq_time);
             plan.sequential_time = Some(plan.sequential_time.unwrap_or(0.0) + seq_time);
             report_fill(o, plan);
@@ -472,12 +487,14 @@ impl Planner for Concurrent {
                 if o.keep_faster {
                     plan.note(
                         StageKind::Plan,
+                        "concurrent-slower",
                         format!("{what}: this layer is deposited one tool at a time"),
                     );
                     (seq_paths, seq_time, None)
                 } else {
                     plan.warn(
                         StageKind::Plan,
+                        "concurrent-slower-kept",
                         format!("{what}; it is kept (`keep_faster = false`)"),
                     );
                     (paths, t, Some(pauses))
@@ -487,6 +504,7 @@ impl Planner for Concurrent {
             Err(e) => {
                 plan.warn(
                     StageKind::Plan,
+                    "concurrent-gave-up",
                     format!("concurrent planning gave up ({e}); this layer is deposited one tool at a time"),
                 );
                 (seq_paths, seq_time, None)
@@ -496,13 +514,14 @@ impl Planner for Concurrent {
         if o.compare {
             plan.note(
                 StageKind::Plan,
+                "build-times-compared",
                 format!(
                     "build time {t:.2} s concurrent, {seq_time:.2} s sequential (ratio {:.3})",
                     if seq_time > 0.0 { t / seq_time } else { 1.0 }
                 ),
             );
         }
-        plan.toolpaths.extend(paths);
+        lay(o, plan, paths);
         plan.build_time = Some(plan.build_time.unwrap_or(0.0) + t);
         plan.sequential_time = Some(plan.sequential_time.unwrap_or(0.0) + seq_time);
         report_fill(o, plan);

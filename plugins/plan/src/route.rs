@@ -370,6 +370,7 @@ pub fn timed(tool: usize, moves: &[Move], t0: f64) -> (Vec<Toolpath>, f64) {
 pub fn toolpath(tool: usize, m: &Move, points: Vec<TimedPoint>) -> Toolpath {
     Toolpath {
         tool,
+        material: None,
         kind: m.kind,
         widths: if m.widths.is_empty() {
             Vec::new()
@@ -388,6 +389,7 @@ pub fn toolpath(tool: usize, m: &Move, points: Vec<TimedPoint>) -> Toolpath {
 pub fn pause(tool: usize, p: Point2, t0: f64, t1: f64) -> Toolpath {
     Toolpath {
         tool,
+        material: None,
         kind: PathKind::Pause,
         points: vec![TimedPoint { p, t: t0 }, TimedPoint { p, t: t1 }],
         width: 0.0,

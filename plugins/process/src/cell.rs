@@ -20,7 +20,7 @@ use lamina_api::reach::Reach;
 use std::collections::BTreeMap;
 use std::path::Path;
 
-use lamina_api::{Error, Operation, Result};
+use lamina_api::{Error, Operation, Result, Warning};
 use serde::Deserialize;
 
 /// The cells shipped with Lamina, by name.
@@ -478,7 +478,7 @@ impl Cell {
     /// How the cell runs `tool`: its own data where it gives them, each checked against
     /// its limits. A wheel whose surface speed needs a spindle faster than the cell's
     /// runs at the cell's top speed, and the note says so.
-    pub fn cutting(&self, tool: &lamina_api::OperationTool, notes: &mut Vec<String>) -> Result<Cutting> {
+    pub fn cutting(&self, tool: &lamina_api::OperationTool, notes: &mut Vec<Warning>) -> Result<Cutting> {
         let fail = |m: String| Err(Error::stage("export:nc", m));
         let own = self.tool(&tool.name);
         let feed = own.and_then(|t| t.feed).unwrap_or(tool.feed);
@@ -492,9 +492,12 @@ impl Cell {
             let top = t.max_spindle.unwrap_or(f64::INFINITY);
             if wanted > top {
                 let reached = top * std::f64::consts::PI * t.diameter / 60_000.0;
-                let note = format!(
-                    "`{}` turns at most {top} rev/min: {reached:.1} m/s on its {} mm rim, below the {v} m/s it wants ({wanted:.0} rev/min)",
-                    t.name, t.diameter
+                let note = Warning::new(
+                    "surface-speed-unreached",
+                    format!(
+                        "`{}` turns at most {top} rev/min: {reached:.1} m/s on its {} mm rim, below the {v} m/s it wants ({wanted:.0} rev/min)",
+                        t.name, t.diameter
+                    ),
                 );
                 if !notes.contains(&note) {
                     notes.push(note);
@@ -637,7 +640,9 @@ mod tests {
         assert_eq!(c.spindle, Some(6000.0));
         assert_eq!(notes.len(), 1, "{notes:?}");
         assert!(
-            notes[0].contains("6.3 m/s") && notes[0].contains("below the 25 m/s"),
+            notes[0].code == "surface-speed-unreached"
+                && notes[0].message.contains("6.3 m/s")
+                && notes[0].message.contains("below the 25 m/s"),
             "{}",
             notes[0]
         );

@@ -243,6 +243,7 @@ impl Process for Engrave {
         if narrow > 0 {
             plan.warn(
                 StageKind::Process,
+                "voids-narrower-than-spot",
                 format!(
                     "engrave: {narrow} of {} voids are narrower than the {spot} mm laser spot and get no ring",
                     voids.len()

@@ -102,6 +102,7 @@ impl Process for EndMill {
             if adjoins {
                 plan.warn(
                     StageKind::Process,
+                    "cutter-fits-nowhere",
                     format!(
                         "end-mill: a higher region adjoins the layer's area, but the {} mm cutter fits \
                          nowhere along it; what was sprayed over the boundary stays",

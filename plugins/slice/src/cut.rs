@@ -12,7 +12,10 @@
 use std::sync::Arc;
 
 use lamina_api::options::SharedOption;
-use lamina_api::{Contour, Layer, LayerSlot, Mesh, Point2, Result};
+use lamina_api::{Contour, Layer, LayerSlot, Mesh, Point2, Result, Warning};
+
+/// The code of the warnings about open chains a layer drops.
+const OPEN_CHAINS_DROPPED: &str = "open-chains-dropped";
 use lamina_geom::ring::{Ring, contour_of, ring_of};
 use lamina_geom::segment_distance;
 use rayon::prelude::*;
@@ -298,27 +301,36 @@ impl CutMesh {
         // warnings do not outweigh the layer.
         if gaps.dropped.len() <= DROPPED_TOLD {
             for d in &gaps.dropped {
-                layer.warnings.push(format!(
-                    "dropped an open chain of {} points from ({:.3}, {:.3}) to ({:.3}, {:.3}): gap of {:.3} mm (open mesh?)",
-                    d.points, d.first.x, d.first.y, d.last.x, d.last.y, d.gap
+                layer.warnings.push(Warning::new(
+                    OPEN_CHAINS_DROPPED,
+                    format!(
+                        "dropped an open chain of {} points from ({:.3}, {:.3}) to ({:.3}, {:.3}): gap of {:.3} mm (open mesh?)",
+                        d.points, d.first.x, d.first.y, d.last.x, d.last.y, d.gap
+                    ),
                 ));
             }
         } else if let Some(d) = gaps.dropped.iter().max_by(|a, b| a.gap.total_cmp(&b.gap)) {
             let points: usize = gaps.dropped.iter().map(|d| d.points).sum();
-            layer.warnings.push(format!(
-                "dropped {} open chains of {points} points in all (open mesh?), the widest gap {:.3} mm from ({:.3}, {:.3}) to ({:.3}, {:.3})",
-                gaps.dropped.len(),
-                d.gap,
-                d.first.x,
-                d.first.y,
-                d.last.x,
-                d.last.y
+            layer.warnings.push(Warning::new(
+                OPEN_CHAINS_DROPPED,
+                format!(
+                    "dropped {} open chains of {points} points in all (open mesh?), the widest gap {:.3} mm from ({:.3}, {:.3}) to ({:.3}, {:.3})",
+                    gaps.dropped.len(),
+                    d.gap,
+                    d.first.x,
+                    d.first.y,
+                    d.last.x,
+                    d.last.y
+                ),
             ));
         }
         if let Some((widest, at)) = gaps.widest {
-            layer.warnings.push(format!(
-                "closed {} gap(s) below {} mm, the widest ({widest:.2e} mm) at ({:.3}, {:.3})",
-                gaps.closed, self.options.close_gaps, at.x, at.y
+            layer.warnings.push(Warning::new(
+                "gaps-closed",
+                format!(
+                    "closed {} gap(s) below {} mm, the widest ({widest:.2e} mm) at ({:.3}, {:.3})",
+                    gaps.closed, self.options.close_gaps, at.x, at.y
+                ),
             ));
         }
         layer.contours = simple_contours(&contours, self.options);
@@ -995,8 +1007,9 @@ mod tests {
         assert!(l.contours.is_empty());
         assert_eq!(l.warnings.len(), 1, "{:?}", l.warnings);
         let w = &l.warnings[0];
-        assert!(w.starts_with("dropped an open chain"), "{w}");
-        assert!(w.contains("gap of 1.000 mm"), "{w}");
+        assert_eq!(w.code, OPEN_CHAINS_DROPPED);
+        assert!(w.message.starts_with("dropped an open chain"), "{w}");
+        assert!(w.message.contains("gap of 1.000 mm"), "{w}");
     }
 
     fn square(x: f64, y: f64, half: f64, ccw: bool) -> Contour {

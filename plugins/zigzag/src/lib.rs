@@ -113,6 +113,7 @@ impl Planner for ZigZag {
                         let dt = (a - p).norm() / o.travel_speed;
                         paths.push(Toolpath {
                             tool: 0,
+                            material: None,
                             kind: PathKind::Travel,
                             points: vec![TimedPoint { p, t }, TimedPoint { p: a, t: t + dt }],
                             width: 0.0,
@@ -126,6 +127,7 @@ impl Planner for ZigZag {
                     let dt = (b - a).norm() / o.speed;
                     paths.push(Toolpath {
                         tool: 0,
+                        material: None,
                         kind: PathKind::Extrude,
                         points: vec![TimedPoint { p: a, t }, TimedPoint { p: b, t: t + dt }],
                         width: o.width,

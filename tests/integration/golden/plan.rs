@@ -172,7 +172,7 @@ fn part_summary(s: &mut String, part: &Value) {
             - family["holes"]
                 .as_array()
                 .map_or(0.0, |h| h.iter().map(ring_area).sum::<f64>());
-        for region in family["regions"].as_array().map_or(&[][..], Vec::as_slice) {
+        for region in family["sub_regions"].as_array().map_or(&[][..], Vec::as_slice) {
             regions += 1;
             let area = polygon_area(&region["polygon"]);
             region_area += area;

@@ -343,7 +343,7 @@ pub struct WireOption {
 #[derive(Debug, Serialize, Deserialize)]
 pub struct WireMesh {
     pub mesh: Mesh,
-    pub warnings: Vec<String>,
+    pub warnings: Vec<crate::diagnostic::Warning>,
 }
 
 /// A stage's configuration: its table (as the file has it and as overrides left it),

@@ -776,9 +776,10 @@ impl Writer {
         Ok(())
     }
 
-    /// Each head's paths of the layer, by the plan's tool (the concurrent plan times
-    /// tools), in time order; their volume counts towards what each head is planned to
-    /// lay.
+    /// Each head's paths of the layer, by the material the plan's tool carries (the
+    /// concurrent plan times tools; from a planner that names no material, the one
+    /// numbered as the tool), in time order; their volume counts towards what each head
+    /// is planned to lay.
     fn head_paths<'p>(&mut self, plan: &'p LayerPlan) -> Vec<Vec<&'p Toolpath>> {
         let n = self.s.heads.len();
         let mut paths: Vec<Vec<&Toolpath>> = vec![Vec::new(); n];
@@ -789,7 +790,7 @@ impl Writer {
             let h = self
                 .s
                 .slot_of
-                .get(p.tool)
+                .get(p.material.unwrap_or(p.tool))
                 .copied()
                 .flatten()
                 .unwrap_or(0)
@@ -1120,6 +1121,7 @@ mod tests {
         use lamina_api::TimedPoint;
         let path = Toolpath {
             tool: 0,
+            material: None,
             kind: PathKind::Extrude,
             points: [(0.0, 0.0), (10.0, 1.0), (20.0, 2.0)]
                 .iter()

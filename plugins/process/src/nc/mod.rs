@@ -37,6 +37,7 @@ use lamina_api::stage::{
 };
 use lamina_api::{
     Error, LayerPlan, MachineFileReport, Operation, Point2, Polygon, Result, RunInfo, Sequence, StageFactory,
+    Warning,
 };
 
 use crate::area::{distance_to_area, layer_area};
@@ -94,7 +95,7 @@ struct Sink {
     program: Program,
     /// Highest surface so far (mm).
     top: f64,
-    notes: Vec<String>,
+    notes: Vec<Warning>,
     title: String,
 }
 
