@@ -50,6 +50,14 @@ pub struct Layer {
     /// What the slicer repaired or dropped in this layer, for the user.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub warnings: Vec<crate::diagnostic::Warning>,
+    /// The area (mm²) the layer should hold, when the slicer measures it: its
+    /// contours' and that of the open chains it dropped (the area each sweeps about a
+    /// fixed point, by Green's theorem, whether or not it closes). The run compares the
+    /// contours' area with it and fails when a part's layers hold too little of its
+    /// volume (an open mesh whose cut could not be closed). ABI 7.3; `None` from older
+    /// slicers, whose layers are not checked.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub section_area: Option<f64>,
 }
 
 impl Layer {
@@ -60,6 +68,7 @@ impl Layer {
             thickness: slot.thickness,
             contours: Vec::new(),
             warnings: Vec::new(),
+            section_area: None,
         }
     }
 }

@@ -778,3 +778,53 @@ fn the_summary_tells_the_machine_files_own_time_and_waste() {
     assert!(!summary.contains("planned build time:"), "{summary}");
     assert!(summary.contains("the plan's build time"), "{summary}");
 }
+
+/// A part of two boxes, one of which misses a triangle of a side wall: every layer cuts
+/// that box into an open chain wider than the slicer closes, and drops it, while the
+/// other box's loop keeps the layer from looking empty. The run fails naming the part,
+/// what its layers hold of the volume its mesh encloses and where, and leaves no
+/// output, rather than exit 0 with a plan of a part and a half.
+#[test]
+fn a_part_its_layers_do_not_hold_fails_the_run_naming_where() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let solid = |stl: String| stl.replace("endsolid box\n", "").replace("solid box\n", "");
+    let big = solid(box_stl([0.0, 0.0, 0.0], [10.0, 10.0, 2.0]));
+    let small = solid(box_stl([20.0, 0.0, 0.0], [24.0, 4.0, 2.0]));
+    let whole = format!("solid two\n{big}{small}endsolid two\n");
+    // The facets of the small box's wall at y = 0 are its fifth and sixth: drop the
+    // fifth.
+    let facets: Vec<&str> = small.split_inclusive("endfacet\n").collect();
+    let holed: String = facets
+        .iter()
+        .enumerate()
+        .filter(|&(i, _)| i != 4)
+        .map(|(_, f)| *f)
+        .collect();
+    let open = format!("solid two\n{big}{holed}endsolid two\n");
+    assert!(open.len() < whole.len());
+    let run = |stl: &str, name: &str| {
+        let model = write(dir.path(), name, stl);
+        let out_dir = dir.path().join(format!("out-{name}"));
+        let out = lamina(&[
+            "run",
+            pipelines().join("tube-gradient.toml").to_str().expect("utf-8"),
+            "--model",
+            model.to_str().expect("utf-8"),
+            "--out",
+            out_dir.to_str().expect("utf-8"),
+            "--quiet",
+        ]);
+        (out, out_dir)
+    };
+    let (out, _) = run(&whole, "whole.stl");
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let (out, out_dir) = run(&open, "open.stl");
+    let err = text(&out.stderr);
+    assert!(!out.status.success(), "{err}");
+    assert!(
+        err.contains("part `part`: the layers hold 200.0 mm³ of the")
+            && err.contains("short on layers 0-3 (z 0.000-2.000 mm)"),
+        "{err}"
+    );
+    assert!(!out_dir.exists() || std::fs::read_dir(&out_dir).expect("folder").next().is_none());
+}

@@ -214,6 +214,7 @@ impl RandomFamily {
             thickness: 0.2,
             contours,
             warnings: Vec::new(),
+            section_area: None,
         }
     }
 }

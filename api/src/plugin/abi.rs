@@ -33,10 +33,11 @@ pub const WIRE_SCHEMAS: &[u64] = &[
     // answer with compositions only (`Graded`); script batches carry no contexts
     // (`FractionsBatch`, `FailedAt`).
     0xc68b_340e_c503_2918,
-    // 7.3: diagnostics carry a code (`Diagnostic::code`), and toolpaths the material
-    // their tool carries (`Toolpath::material`). Warnings of meshes, layers and machine
-    // files carry theirs inside the string an older plugin reads (`Warning`).
-    0x6abb_413d_369b_ec37,
+    // 7.3: diagnostics carry a code (`Diagnostic::code`), toolpaths the material their
+    // tool carries (`Toolpath::material`), and layers the area they should hold
+    // (`Layer::section_area`). Warnings of meshes, layers and machine files carry
+    // their code inside the string an older plugin reads (`Warning`).
+    0xd3fc_00ea_dc1e_9a83,
 ];
 /// The minor version of this build: a plugin of this major and of this minor or an
 /// older one loads (the host reads every message an older plugin writes, and sends it

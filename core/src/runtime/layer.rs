@@ -14,9 +14,25 @@ use crate::model::{Composition, Layer, LayerPlan, LayerSlot, PartLayer, Sequence
 use crate::planned::Counts;
 use crate::stage::*;
 
+/// What the cut of one mesh in one layer enclosed and what its contours kept (mm²), for
+/// the run to check that each part's layers hold its volume.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(super) struct Kept {
+    pub(super) mesh: usize,
+    /// [`Layer::section_area`].
+    pub(super) section: f64,
+    /// The contours' area, holes less.
+    pub(super) kept: f64,
+}
+
 impl Engine {
-    /// Slices, sorts, discretises, grades and plans one layer.
-    pub(super) fn process_layer(&self, slot: &LayerSlot, shared: &LayerShared<'_>) -> Result<LayerPlan> {
+    /// Slices, sorts, discretises, grades and plans one layer; with the plan, what each
+    /// mesh's cut kept of its section (from slicers that measure it).
+    pub(super) fn process_layer(
+        &self,
+        slot: &LayerSlot,
+        shared: &LayerShared<'_>,
+    ) -> Result<(LayerPlan, Vec<Kept>)> {
         let LayerShared {
             info,
             sequence,
@@ -34,6 +50,7 @@ impl Engine {
             (0..prepared.len()).map(|_| None).collect();
         let mut diagnostics = Vec::new();
         let mut parts = Vec::new();
+        let mut kept = Vec::new();
         // A layer of a material region deposits only that region's parts.
         let region_parts = match (slot.material_region, sequence) {
             (Some(r), Some(seq)) => {
@@ -92,6 +109,13 @@ impl Engine {
                         .at_layer(slot.index, slot.z)
                         .in_part(&p.name)
                 }));
+                if let Some(section) = layer.section_area {
+                    kept.push(Kept {
+                        mesh: mi,
+                        section,
+                        kept: layer.contours.iter().map(|c| c.signed_area()).sum(),
+                    });
+                }
                 cut[mi] = Some((layer, tree));
             }
             let Some((layer, tree)) = &cut[mi] else { continue };
@@ -136,7 +160,7 @@ impl Engine {
         if !self.process.is_empty() {
             self.process_operations(slot, shared, &mut plan)?;
         }
-        Ok(plan)
+        Ok((plan, kept))
     }
 
     /// Runs the `[[process]]` stages on a planned layer, in their order.

@@ -104,6 +104,7 @@ mod tests {
                 thickness: slot.thickness,
                 contours,
                 warnings: Vec::new(),
+                section_area: None,
             })
         }
     }

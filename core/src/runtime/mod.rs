@@ -36,6 +36,7 @@ mod meshes;
 mod report;
 mod run;
 mod stream;
+mod volume;
 
 pub use engine::Engine;
 pub use meshes::place;

@@ -32,6 +32,8 @@ struct Tally {
     /// The largest share of its volume any layer's planner was asked to fill.
     min_fill: f64,
     operations: std::collections::BTreeMap<String, usize>,
+    /// What the meshes' cuts enclosed and their contours kept.
+    volumes: super::volume::Volumes,
 }
 
 impl Tally {
@@ -194,8 +196,9 @@ impl Engine {
                 crate::plugin::guard_call("a layer's stages", || self.process_layer(slot, &shared))
                     .map_err(|e| e.in_layer(slot.index, slot.z))
             },
-            |_, plan| {
-                let plan = plan?;
+            |_, done| {
+                let (plan, kept) = done?;
+                tally.volumes.add(plan.index, plan.z, plan.thickness, &kept);
                 for d in &plan.diagnostics {
                     say(d.clone());
                 }
@@ -215,6 +218,14 @@ impl Engine {
             },
         )?;
         tally.check_fill()?;
+        tally.volumes.check(|mesh| {
+            let parts: Vec<String> = (0..info.parts.len())
+                .filter(|&p| part_mesh[p] == mesh)
+                .map(|p| format!("`{}`", info.parts[p].name))
+                .collect();
+            let word = if parts.len() == 1 { "part" } else { "parts" };
+            format!("{word} {}", parts.join(", "))
+        })?;
         for (sink, label) in sinks.into_iter().zip(&labels) {
             timings.time(StageKind::Export, || {
                 crate::plugin::guard_call(label, || sink.finish(info, &mut outputs))

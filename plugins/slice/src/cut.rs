@@ -108,6 +108,10 @@ pub struct CutMesh {
     starts: Vec<u32>,
     entries: Vec<u32>,
     options: CutOptions,
+    /// The middle of the mesh's box in x and y: the point the section's area is summed
+    /// about, so that a segment missing from an open cut changes the sum by no more
+    /// than the thin triangle it makes with this point.
+    centre: Point2,
 }
 
 /// One cut segment: its two ends, each an edge key and a point, and the direction the
@@ -116,6 +120,19 @@ pub struct CutMesh {
 struct Segment {
     keys: [u64; 2],
     points: [Point2; 2],
+}
+
+/// The area a chain of points, each step with the solid on its left, sweeps about
+/// `centre`: the sum of the triangles its steps make with it (Green's theorem). A
+/// closed chain's own area; an open one's, less the triangle of its gap with `centre`.
+fn swept_area(chain: &[Point2], centre: Point2) -> f64 {
+    chain
+        .windows(2)
+        .map(|w| {
+            let (a, b) = (w[0] - centre, w[1] - centre);
+            0.5 * (a.x * b.y - a.y * b.x)
+        })
+        .sum()
 }
 
 fn edge_key(a: u32, b: u32) -> u64 {
@@ -185,7 +202,13 @@ impl CutMesh {
             }
         }
         let orientation = if volume < 0.0 { -1.0 } else { 1.0 };
+        let centre = if bb.is_empty() {
+            Point2::origin()
+        } else {
+            Point2::new(0.5 * (bb.min.x + bb.max.x), 0.5 * (bb.min.y + bb.max.y))
+        };
         Self {
+            centre,
             mesh,
             orientation,
             ranges,
@@ -285,7 +308,7 @@ impl CutMesh {
         let (loops, open) = chain(&segments);
         let mut contours = Vec::new();
         let mut gaps = Gaps::default();
-        let closed = close_open(open, self.options.close_gaps, &mut gaps);
+        let closed = close_open(open, self.options.close_gaps, self.centre, &mut gaps);
         for mut lp in loops.into_iter().chain(closed) {
             lp.points.dedup_by(|a, b| (*a - *b).norm() <= 1e-12);
             while lp.points.len() > 1 && (lp.points[0] - lp.points[lp.points.len() - 1]).norm() <= 1e-12 {
@@ -334,6 +357,10 @@ impl CutMesh {
             ));
         }
         layer.contours = simple_contours(&contours, self.options);
+        // What the layer should hold: its contours, and the chains it dropped. Not the
+        // sum over every segment, which counts twice where closed shells overlap.
+        let kept: f64 = layer.contours.iter().map(Contour::signed_area).sum();
+        layer.section_area = Some(kept + gaps.dropped.iter().map(|d| d.area).sum::<f64>());
         Ok(layer)
     }
 }
@@ -392,6 +419,9 @@ struct Dropped {
     first: Point2,
     last: Point2,
     gap: f64,
+    /// The area it sweeps about the mesh's middle ([`swept_area`]): about what the
+    /// layer loses with it.
+    area: f64,
 }
 
 /// Resolves the loops into simple, non-crossing contours (outer counter-clockwise,
@@ -760,7 +790,7 @@ impl Ends {
 /// by the last one (`swap_remove`). The ends are found through a grid of cells of the
 /// tolerance's size, so that a layer of many open chains (a triangle soup gives one per
 /// triangle it cuts) costs time in proportion to their number, not its square.
-fn close_open(mut open: Vec<Vec<Point2>>, tolerance: f64, gaps: &mut Gaps) -> Vec<Contour> {
+fn close_open(mut open: Vec<Vec<Point2>>, tolerance: f64, centre: Point2, gaps: &mut Gaps) -> Vec<Contour> {
     let ends = EndGrid::new(&open, tolerance);
     // `id[i]`: the chain at place `i` of `open`, by its first place; `place[id]`: back.
     let mut id: Vec<usize> = (0..open.len()).collect();
@@ -814,6 +844,7 @@ fn close_open(mut open: Vec<Vec<Point2>>, tolerance: f64, gaps: &mut Gaps) -> Ve
                         first,
                         last,
                         gap: (last - first).norm(),
+                        area: swept_area(&chain, centre),
                     });
                     break;
                 }
@@ -995,6 +1026,31 @@ mod tests {
         let c = CutMesh::new(Arc::new(m), CutOptions::default());
         let l = c.cut(&slot(0.5)).expect("cut");
         assert!(l.contours[0].is_ccw());
+        // The section is the cut's area whichever way the mesh winds.
+        let section = l.section_area.expect("measured");
+        assert!((section - 1.0).abs() < 1e-12, "{section}");
+    }
+
+    #[test]
+    fn overlapping_shells_are_measured_once() {
+        // Two unit cubes, the second moved half a side along x: the cut is their
+        // union, 1.5 mm², and so is the area the layer should hold.
+        let mut m = cube(1.0);
+        let shifted = cube(1.0);
+        let base = m.vertices.len() as u32;
+        m.vertices
+            .extend(shifted.vertices.iter().map(|p| Point3::new(p.x + 0.5, p.y, p.z)));
+        m.triangles
+            .extend(shifted.triangles.iter().map(|t| t.map(|i| i + base)));
+        let l = CutMesh::new(Arc::new(m), CutOptions::default())
+            .cut(&slot(0.5))
+            .expect("cut");
+        let kept: f64 = l.contours.iter().map(Contour::signed_area).sum();
+        let section = l.section_area.expect("measured");
+        assert!(
+            (kept - 1.5).abs() < 1e-9 && (section - 1.5).abs() < 1e-9,
+            "{kept} {section}"
+        );
     }
 
     #[test]
@@ -1005,6 +1061,10 @@ mod tests {
         let c = CutMesh::new(Arc::new(m), CutOptions::default());
         let l = c.cut(&slot(0.5)).expect("cut");
         assert!(l.contours.is_empty());
+        // The three sides left enclose, with the box's middle, three quarters of the
+        // square: the area the run finds missing.
+        let section = l.section_area.expect("measured");
+        assert!((section - 0.75).abs() < 1e-12, "{section}");
         assert_eq!(l.warnings.len(), 1, "{:?}", l.warnings);
         let w = &l.warnings[0];
         assert_eq!(w.code, OPEN_CHAINS_DROPPED);

@@ -557,6 +557,7 @@ mod tests {
             thickness: 0.25,
             contours: vec![square.clone()],
             warnings: Vec::new(),
+            section_area: None,
         };
         let region = SubRegion {
             family: 0,

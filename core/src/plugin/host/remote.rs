@@ -370,6 +370,7 @@ impl Grader for Remote {
                 thickness: ctx.layer.thickness,
                 contours: Vec::new(),
                 warnings: Vec::new(),
+                section_area: None,
             });
             family.tree = Cow::Owned(ContourTree::default());
             if self.library.minor >= 2 {

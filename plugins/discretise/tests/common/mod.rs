@@ -82,6 +82,7 @@ impl OneFamily {
                 thickness: 0.2,
                 contours,
                 warnings: vec![],
+                section_area: None,
             },
             tree: ContourTree {
                 nodes,
