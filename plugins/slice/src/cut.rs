@@ -357,10 +357,17 @@ impl CutMesh {
             ));
         }
         layer.contours = simple_contours(&contours, self.options);
-        // What the layer should hold: its contours, and the chains it dropped. Not the
-        // sum over every segment, which counts twice where closed shells overlap.
+        // What the layer should hold: its contours, and the dropped chains that are
+        // loops missing a piece. Not the sum over every segment, which counts twice
+        // where closed shells overlap.
         let kept: f64 = layer.contours.iter().map(Contour::signed_area).sum();
-        layer.section_area = Some(kept + gaps.dropped.iter().map(|d| d.area).sum::<f64>());
+        let lost: f64 = gaps
+            .dropped
+            .iter()
+            .filter(|d| d.is_broken_loop())
+            .map(|d| d.area)
+            .sum();
+        layer.section_area = Some(kept + lost);
         Ok(layer)
     }
 }
@@ -422,6 +429,19 @@ struct Dropped {
     /// The area it sweeps about the mesh's middle ([`swept_area`]): about what the
     /// layer loses with it.
     area: f64,
+    /// Its length along its points (mm).
+    length: f64,
+}
+
+impl Dropped {
+    /// Whether the chain is a loop missing a piece (a wall with a hole in it), whose
+    /// area the layer loses, rather than a stray sheet standing in or beside the part
+    /// (an arc, a fin), which encloses nothing: its gap is under a third of its length.
+    /// A square missing most of a side is a loop; an arc of less than about 290
+    /// degrees is a sheet.
+    fn is_broken_loop(&self) -> bool {
+        self.gap <= self.length / 3.0
+    }
 }
 
 /// Resolves the loops into simple, non-crossing contours (outer counter-clockwise,
@@ -845,6 +865,7 @@ fn close_open(mut open: Vec<Vec<Point2>>, tolerance: f64, centre: Point2, gaps: 
                         last,
                         gap: (last - first).norm(),
                         area: swept_area(&chain, centre),
+                        length: chain.windows(2).map(|w| (w[1] - w[0]).norm()).sum(),
                     });
                     break;
                 }
@@ -1051,6 +1072,24 @@ mod tests {
             (kept - 1.5).abs() < 1e-9 && (section - 1.5).abs() < 1e-9,
             "{kept} {section}"
         );
+    }
+
+    #[test]
+    fn a_loop_missing_a_piece_is_lost_area_and_a_stray_arc_is_not() {
+        let dropped = |gap: f64, length: f64| Dropped {
+            points: 2,
+            first: Point2::origin(),
+            last: Point2::origin(),
+            gap,
+            area: 0.0,
+            length,
+        };
+        // A 4 mm square missing 3.5 mm of a side; a wall missing a triangle's width.
+        assert!(dropped(3.5, 12.5).is_broken_loop());
+        assert!(dropped(0.086, 120.0).is_broken_loop());
+        // A stray sheet of radius 20 cut into a 219 degree arc; a flat fin.
+        assert!(!dropped(37.8, 76.4).is_broken_loop());
+        assert!(!dropped(10.0, 10.0).is_broken_loop());
     }
 
     #[test]
