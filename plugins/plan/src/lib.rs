@@ -327,6 +327,18 @@ fn prepare(o: &Options, info: &RunInfo, plan: &mut LayerPlan, step: f64) -> Resu
             ),
         );
     }
+    for (part, families) in &work.collapsed {
+        plan.warn(
+            StageKind::Plan,
+            "gradient-collapsed",
+            format!(
+                "part `{part}`: the gradient collapsed to one mix in {families} graded solid area(s): \
+                 its sub-regions are too narrow for beads of their own (the narrowest is {:.3} mm), so all are deposited as one; \
+                 use fewer, wider sub-regions (fewer offsets or rings) or a smaller nozzle",
+                widths.min
+            ),
+        );
+    }
     if work.merged > 0 {
         plan.warn(StageKind::Plan, "thin-sub-regions-merged", format!(
             "{} sub-region(s) narrower than the narrowest bead ({:.3} mm) are deposited together with their neighbours, \

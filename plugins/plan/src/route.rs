@@ -2,12 +2,12 @@
 //! the sub-regions, and its route (park, nearest-next contour loops with their seams,
 //! back to park) as a list of moves at the tool's own speeds.
 
-use lamina_api::{BBox2, Composition, LayerPlan, PathKind, Point2, RunInfo, TimedPoint, Toolpath};
+use lamina_api::{BBox2, Composition, LayerPlan, PathKind, Point2, RunInfo, SubRegion, TimedPoint, Toolpath};
 
 use crate::assign::{Assign, Shares};
 use crate::bead::Bead;
 use crate::fill::Widths;
-use crate::group::{Thin, group};
+use crate::group::{Group, Thin, group};
 
 lamina_api::option_type!(Seam = "string");
 
@@ -112,6 +112,9 @@ pub struct Work {
     pub thin: Vec<(String, usize, f64)>,
     /// Sub-regions deposited together with their neighbours.
     pub merged: usize,
+    /// (part name, families) whose graded sub-regions (three or more compositions)
+    /// all went into one group: the gradient became one mix.
+    pub collapsed: Vec<(String, usize)>,
     /// Bounding box of everything deposited in the layer.
     pub bbox: BBox2,
 }
@@ -137,6 +140,15 @@ pub fn distribute(
     for part in &plan.parts {
         let grouping = group(&part.regions, widths, thin);
         work.merged += grouping.merged();
+        let collapsed = collapsed_families(&part.regions, &grouping.groups);
+        if collapsed > 0 {
+            let name = info
+                .parts
+                .get(part.part)
+                .map(|p| p.name.clone())
+                .unwrap_or_default();
+            work.collapsed.push((name, collapsed));
+        }
         if !grouping.thin.is_empty() {
             let name = info
                 .parts
@@ -174,6 +186,29 @@ pub fn distribute(
         }
     }
     work
+}
+
+/// How many families of `regions` were graded (three or more distinct compositions)
+/// and had every sub-region filled in one group: their gradient is one mix.
+fn collapsed_families(regions: &[SubRegion], groups: &[Group]) -> usize {
+    let mut families: Vec<usize> = regions.iter().map(|r| r.family).collect();
+    families.sort_unstable();
+    families.dedup();
+    families
+        .into_iter()
+        .filter(|&f| {
+            let members: Vec<usize> = (0..regions.len()).filter(|&i| regions[i].family == f).collect();
+            let mut mixes: Vec<&Composition> = members
+                .iter()
+                .filter_map(|&i| regions[i].composition.as_ref())
+                .collect();
+            mixes.dedup();
+            mixes.len() >= 3
+                && groups
+                    .iter()
+                    .any(|g| members.iter().all(|m| g.members.contains(m)))
+        })
+        .count()
 }
 
 /// Where tools wait: a row below the layer, at least `spacing` apart, and the row just
@@ -403,6 +438,43 @@ pub fn pause(tool: usize, p: Point2, t0: f64, t1: f64) -> Toolpath {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_family_whose_graded_sub_regions_all_share_one_group_has_collapsed() {
+        let region = |family: usize, f: f64| SubRegion {
+            family,
+            index: 0,
+            count: 1,
+            level: f,
+            polygon: lamina_api::Polygon::default(),
+            cell: None,
+            reference: Point2::origin(),
+            composition: Some(Composition::binary(f).expect("valid")),
+            samples: Vec::new(),
+        };
+        let group = |members: Vec<usize>| Group {
+            members,
+            passes: Vec::new(),
+            composition: None,
+        };
+        // Family 0 graded over three mixes, family 1 over two.
+        let regions = [0.0, 0.5, 1.0]
+            .map(|f| region(0, f))
+            .into_iter()
+            .chain([region(1, 0.0), region(1, 1.0)]);
+        let regions: Vec<SubRegion> = regions.collect();
+        assert_eq!(
+            collapsed_families(&regions, &[group(vec![0, 1, 2]), group(vec![3, 4])]),
+            1
+        );
+        assert_eq!(
+            collapsed_families(&regions, &[group(vec![0, 1]), group(vec![2]), group(vec![3, 4])]),
+            0
+        );
+        // Three sub-regions of one mix are no gradient.
+        let flat: Vec<SubRegion> = (0..3).map(|_| region(0, 0.5)).collect();
+        assert_eq!(collapsed_families(&flat, &[group(vec![0, 1, 2])]), 0);
+    }
 
     fn bbox(x0: f64, x1: f64) -> BBox2 {
         BBox2::from_points([Point2::new(x0, 10.0), Point2::new(x1, 30.0)])
