@@ -6,35 +6,16 @@
 
 use i_overlay::core::extract::BooleanExtractionBuffer;
 use i_overlay::core::fill_rule::FillRule;
-use i_overlay::core::overlay::{IntOverlayOptions, Overlay, ShapeType};
+use i_overlay::core::overlay::{Overlay, ShapeType};
 use i_overlay::core::overlay_rule::OverlayRule;
-use i_overlay::core::solver::Solver;
 use i_overlay::i_shape::int::shape::IntShapes;
 use lamina_api::Result;
+use lamina_geom::offset::Scratch;
+/// The offset engine's overlay settings (OGC-valid output, rounding slivers dropped, on
+/// the caller's thread), which every overlay of a family shares.
+pub use lamina_geom::offset::{overlay_options as options, solver};
 
-use crate::inset::{From, Inset, Scratch};
-
-/// Pieces smaller than this many square grid units (about 4 um by 4 um at the finest
-/// scale) are rounding slivers, not sub-regions.
-const MIN_AREA: u64 = 64;
-
-/// OGC-valid output (holes touch their outer at most at single points, every ring
-/// simple), slivers dropped.
-pub fn options() -> IntOverlayOptions<u64> {
-    IntOverlayOptions {
-        ogc: true,
-        min_output_area: MIN_AREA,
-        ..IntOverlayOptions::default()
-    }
-}
-
-/// The runtime runs layers in parallel already: the overlay stays on the caller's thread.
-pub fn solver() -> Solver {
-    Solver {
-        multithreading: None,
-        ..Solver::default()
-    }
-}
+use crate::inset::{From, Inset};
 
 /// Resolves arbitrary contours (self-touching, slightly crossing, any orientation)
 /// into valid shapes under the non-zero rule.
@@ -106,11 +87,12 @@ pub fn offset_bands(
     depth: impl Fn(usize) -> f64,
 ) -> Result<Vec<IntShapes<i32>>> {
     let mut scratch = Scratch::default();
+    let raw = inset.raw();
     let holes = base.iter().any(|s| s.len() > 1);
     if inset.from == From::All || !holes {
         return nested_bands(base, count, FillRule::Positive, |k, current, overlay| {
             let step = depth(k) - depth(k - 1);
-            Ok(inset.add_raw(overlay, current, false, step, scale, &mut scratch))
+            Ok(raw.add_loops(overlay, current, -step, scale, &mut scratch))
         });
     }
     let mut outer: IntShapes<i32> = base
@@ -122,7 +104,7 @@ pub fn offset_bands(
     nested_bands(base, count, FillRule::Positive, |k, _, overlay| {
         resolve.clear();
         let step = depth(k) - depth(k - 1);
-        if !inset.add_raw(&mut resolve, &outer, false, step, scale, &mut scratch) {
+        if !raw.add_loops(&mut resolve, &outer, -step, scale, &mut scratch) {
             return Ok(false);
         }
         outer = resolve.overlay(OverlayRule::Clip, FillRule::Positive);

@@ -5,10 +5,7 @@
 use i_overlay::i_float::int::point::IntPoint;
 use i_overlay::i_shape::int::shape::{IntContour, IntShape, IntShapes};
 use lamina_api::{Contour, Error, Point2, Polygon, Result};
-
-/// Largest coordinate magnitude put on the grid: far inside the i32 engine's safe range
-/// (2^30), leaving room for offset construction and for areas in i64.
-const HALF_RANGE: f64 = (1u64 << 26) as f64;
+use lamina_geom::offset::grid_scale;
 
 /// Maps the family's plane to i32 grid points: `(p - origin) * scale`, rounded.
 #[derive(Debug, Clone, Copy)]
@@ -19,7 +16,8 @@ pub struct Grid {
 
 impl Grid {
     /// The grid for a polygon: origin at its bounding-box centre, the largest
-    /// power-of-two scale that keeps the polygon (and offsets inside it) in range.
+    /// power-of-two scale that keeps the polygon (and offsets inside it) in range, by
+    /// the offset engine's rule ([`grid_scale`]).
     /// Refuses non-finite or zero-extent geometry.
     pub fn for_polygon(polygon: &Polygon, stage: &str) -> Result<Self> {
         let bbox = polygon.bbox();
@@ -34,7 +32,7 @@ impl Grid {
         if half <= 0.0 {
             return Err(Error::stage(stage, "family has zero extent"));
         }
-        let scale = 2f64.powi((HALF_RANGE / half).log2().floor() as i32);
+        let scale = grid_scale(half);
         Ok(Self {
             origin: bbox.center(),
             scale,
@@ -119,6 +117,7 @@ impl Grid {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use lamina_geom::offset::HALF_RANGE;
 
     #[test]
     fn round_trip_is_within_half_a_unit() {

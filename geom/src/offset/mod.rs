@@ -1,0 +1,206 @@
+//! Offsets of shapes in or out. The discretisers work on their family's integer grid
+//! and add the raw loops of [`raw`] for each step to overlays of their own
+//! ([`RawOffset::add_loops`], resolved under the positive fill rule). The float
+//! [`round_outline`] and [`round_offset`] (bead loops, machining passes, distance
+//! sources) turn a chord tolerance into the outline engine's join step and tidy what it
+//! returns.
+
+pub mod raw;
+
+pub use raw::{Join, RawOffset, Scratch, fits};
+
+use i_overlay::core::overlay::IntOverlayOptions;
+use i_overlay::core::solver::Solver;
+use i_overlay::mesh::float::outline::offset::OutlineOffset;
+use i_overlay::mesh::float::style::{LineJoin, OutlineStyle};
+
+use crate::{Shapes, simplify_ring};
+
+/// Largest coordinate magnitude put on a grid: far inside the i32 engine's safe range
+/// (2^30), leaving room for offset construction and for areas in i64.
+pub const HALF_RANGE: f64 = (1u64 << 26) as f64;
+
+/// Pieces smaller than this many square grid units (about 4 um by 4 um at the finest
+/// scale of a discretiser's family) are rounding slivers, not areas.
+pub const MIN_AREA: u64 = 64;
+
+/// The largest power-of-two scale (grid units per mm) that keeps coordinates up to
+/// `half` mm from the grid's origin within [`HALF_RANGE`]. Powers of two make the
+/// scaling exact both ways.
+pub fn grid_scale(half: f64) -> f64 {
+    2f64.powi((HALF_RANGE / half).log2().floor() as i32)
+}
+
+/// OGC-valid output (holes touch their outer at most at single points, every ring
+/// simple), slivers dropped.
+pub fn overlay_options() -> IntOverlayOptions<u64> {
+    IntOverlayOptions {
+        ogc: true,
+        min_output_area: MIN_AREA,
+        ..IntOverlayOptions::default()
+    }
+}
+
+/// The runtime runs layers in parallel already: the overlay stays on the caller's thread.
+pub fn solver() -> Solver {
+    Solver {
+        multithreading: None,
+        ..Solver::default()
+    }
+}
+
+/// The angle (radians) between the chords of a round join of radius `d` whose
+/// chords stray at most `tolerance` from the arc; never below 0.01, which bounds the
+/// vertices a join can take.
+pub fn join_step(d: f64, tolerance: f64) -> f64 {
+    let step = 2.0 * (1.0 - (tolerance / d.abs()).min(1.0)).acos();
+    step.max(0.01)
+}
+
+/// `shapes` offset by `d` (negative: inward) with round joins straying at most
+/// `tolerance` from the arcs, as the engine returns them (rings in the engine's
+/// orientation, holes the other way round).
+pub fn round_outline(shapes: &Shapes, d: f64, tolerance: f64) -> Shapes {
+    if shapes.is_empty() || d == 0.0 {
+        return shapes.clone();
+    }
+    let style = OutlineStyle::new(d).line_join(LineJoin::Round(join_step(d, tolerance)));
+    shapes.outline(&style)
+}
+
+/// [`round_outline`] with each ring simplified within `tolerance` and what
+/// simplifies away dropped: offsets of offsets would otherwise multiply the arc
+/// vertices pass after pass.
+pub fn round_offset(shapes: &Shapes, d: f64, tolerance: f64) -> Shapes {
+    if shapes.is_empty() || d == 0.0 {
+        return shapes.clone();
+    }
+    tidy(round_outline(shapes, d, tolerance), tolerance)
+}
+
+/// Every ring simplified within `tolerance`; rings and shapes left with nothing
+/// dropped.
+pub fn tidy(shapes: Shapes, tolerance: f64) -> Shapes {
+    shapes
+        .into_iter()
+        .map(|shape| {
+            shape
+                .into_iter()
+                .map(|c| simplify_ring(&c, tolerance))
+                .filter(|c| c.len() >= 3)
+                .collect::<Vec<_>>()
+        })
+        .filter(|s| !s.is_empty())
+        .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use std::f64::consts::PI;
+
+    use i_overlay::core::fill_rule::FillRule;
+    use i_overlay::core::overlay::Overlay;
+    use i_overlay::core::overlay_rule::OverlayRule;
+    use i_overlay::i_float::int::point::IntPoint;
+    use i_overlay::i_shape::int::shape::IntShapes;
+
+    use super::*;
+    use crate::ring::ring_area;
+
+    fn square(s: f64) -> Shapes {
+        vec![vec![rect(0.0, 0.0, s, s)]]
+    }
+
+    /// The rectangle from `(x0, y0)` to `(x1, y1)`, counter-clockwise.
+    fn rect(x0: f64, y0: f64, x1: f64, y1: f64) -> Vec<[f64; 2]> {
+        vec![[x0, y0], [x1, y0], [x1, y1], [x0, y1]]
+    }
+
+    #[test]
+    fn a_square_moves_in_and_out_by_the_distance() {
+        // Inward: a smaller square, its sides 2 d shorter.
+        let inner = round_offset(&square(10.0), -1.0, 0.005);
+        let a: f64 = inner[0].iter().map(|r| ring_area(r).abs()).sum();
+        assert!((a - 64.0).abs() < 1e-6, "{a}");
+        // Outward: the square, four strips and four quarter discs (round joins),
+        // within the chord tolerance.
+        let outer = round_offset(&square(10.0), 1.0, 0.005);
+        let a = ring_area(&outer[0][0]).abs();
+        let exact = 100.0 + 40.0 + PI;
+        assert!((a - exact).abs() < 0.05, "{a} against {exact}");
+        // Nothing to offset, or no distance: as given.
+        assert!(round_offset(&Vec::new(), 1.0, 0.005).is_empty());
+        assert_eq!(round_offset(&square(1.0), 0.0, 0.005), square(1.0));
+        // Too far in: nothing left.
+        assert!(round_offset(&square(1.0), -1.0, 0.005).is_empty());
+    }
+
+    #[test]
+    fn the_join_step_keeps_chords_within_the_tolerance() {
+        let (r, tol) = (2.0, 0.01);
+        let step = join_step(r, tol);
+        // A chord spanning `step` strays r (1 - cos(step / 2)) from its arc.
+        assert!((r * (1.0 - (step / 2.0).cos()) - tol).abs() < 1e-12);
+        // A tolerance beyond the radius: a half turn per chord.
+        assert_eq!(join_step(0.001, 1.0), PI);
+    }
+
+    /// `shapes` on a grid of 1000 units per mm.
+    fn on_grid(shapes: &Shapes) -> IntShapes<i32> {
+        let unit =
+            |p: &[f64; 2]| IntPoint::new((p[0] * 1000.0).round() as i32, (p[1] * 1000.0).round() as i32);
+        shapes
+            .iter()
+            .map(|s| s.iter().map(|r| r.iter().map(unit).collect()).collect())
+            .collect()
+    }
+
+    /// The raw loops of `shapes` (holes clockwise) on a grid of 1000 units per mm,
+    /// resolved: the area of the offset.
+    fn resolved(join: Join, shapes: &Shapes, d: f64) -> f64 {
+        let mut overlay = Overlay::new_custom(0, overlay_options(), solver());
+        let offset = RawOffset {
+            join,
+            tolerance: 1e-4,
+        };
+        assert!(offset.add_loops(&mut overlay, &on_grid(shapes), d, 1000.0, &mut Scratch::default()));
+        let out = overlay.overlay(OverlayRule::Clip, FillRule::Positive);
+        out.iter()
+            .flatten()
+            .map(|c| {
+                ring_area(
+                    &c.iter()
+                        .map(|p| [f64::from(p.x) / 1e3, f64::from(p.y) / 1e3])
+                        .collect::<Vec<_>>(),
+                )
+            })
+            .sum()
+    }
+
+    #[test]
+    fn joins_fill_where_offset_edges_part() {
+        let mut hole = rect(3.0, 3.0, 7.0, 7.0);
+        hole.reverse();
+        let plate = vec![vec![rect(0.0, 0.0, 10.0, 10.0), hole]];
+        // Inward the hole's corners part the offset edges: a miter keeps the hole
+        // square, a bevel cuts each corner by half a unit square.
+        let close = |a: f64, b: f64| (a - b).abs() < 1e-4;
+        assert!(close(resolved(Join::Miter, &plate, -1.0), 64.0 - 36.0));
+        assert!(close(resolved(Join::Bevel, &plate, -1.0), 64.0 - 34.0));
+        assert!(close(resolved(Join::Miter, &plate, 1.0), 144.0 - 4.0));
+        assert!(close(resolved(Join::Bevel, &plate, 1.0), 142.0 - 4.0));
+        // Far enough in, nothing is left: no loop at all.
+        let mut overlay = Overlay::new_custom(0, overlay_options(), solver());
+        let offset = RawOffset {
+            join: Join::Round,
+            tolerance: 1e-4,
+        };
+        assert!(!offset.add_loops(
+            &mut overlay,
+            &on_grid(&plate),
+            -5.0,
+            1000.0,
+            &mut Scratch::default()
+        ));
+    }
+}
