@@ -10,12 +10,8 @@
 # runs several times as many inputs in its budget. Optimisation level 1 builds in 3.5
 # rather than 6 minutes here and runs the targets about as fast. Debug information is
 # line tables, enough for a crash's backtrace to name file and line.
-#
-# `smoke.sh build` only builds the targets and `smoke.sh run` only runs them (building
-# what is missing), so that CI can build them while its tests leave cores idle.
 set -euo pipefail
 cd "$(dirname "$0")"
-mode="${1:-all}"
 seconds="${FUZZ_SECONDS:-10}"
 command -v cargo-fuzz >/dev/null 2>&1 || cargo install cargo-fuzz --locked --quiet
 # The sanitizer flags need a nightly compiler; without one, the stable compiler is
@@ -30,12 +26,7 @@ fi
 sanitizer="${FUZZ_SANITIZER:-none}"
 export CARGO_PROFILE_RELEASE_DEBUG=line-tables-only
 export CARGO_PROFILE_RELEASE_OPT_LEVEL="${FUZZ_OPT_LEVEL:-1}"
-if [ "$mode" != run ]; then
-    "${fuzz[@]}" build -O -s "$sanitizer"
-fi
-if [ "$mode" = build ]; then
-    exit 0
-fi
+"${fuzz[@]}" build -O -s "$sanitizer"
 scratch="$(mktemp -d)"
 trap 'rm -rf "$scratch"' EXIT
 targets="stl obj threemf threemf_components pipeline machine script cli_roundtrip pipeline_values plugin_messages"
