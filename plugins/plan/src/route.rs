@@ -191,23 +191,34 @@ pub fn distribute(
 /// How many families of `regions` were graded (three or more distinct compositions)
 /// and had every sub-region filled in one group: their gradient is one mix.
 fn collapsed_families(regions: &[SubRegion], groups: &[Group]) -> usize {
-    let mut families: Vec<usize> = regions.iter().map(|r| r.family).collect();
-    families.sort_unstable();
-    families.dedup();
+    // Each sub-region's group, found once: a family has collapsed when all its
+    // sub-regions share one.
+    let mut group_of = vec![None; regions.len()];
+    for (g, group) in groups.iter().enumerate() {
+        for &m in &group.members {
+            if let Some(slot) = group_of.get_mut(m) {
+                *slot = Some(g);
+            }
+        }
+    }
+    // Per family (in order): its one group so far (`None` once two differ or one is
+    // missing), and its mixes, consecutive repeats counted once.
+    let mut families: std::collections::BTreeMap<usize, (Option<usize>, Vec<&Composition>)> =
+        std::collections::BTreeMap::new();
+    for (r, region) in regions.iter().enumerate() {
+        let (group, mixes) = families.entry(region.family).or_insert((group_of[r], Vec::new()));
+        if *group != group_of[r] {
+            *group = None;
+        }
+        if let Some(c) = region.composition.as_ref()
+            && mixes.last() != Some(&c)
+        {
+            mixes.push(c);
+        }
+    }
     families
-        .into_iter()
-        .filter(|&f| {
-            let members: Vec<usize> = (0..regions.len()).filter(|&i| regions[i].family == f).collect();
-            let mut mixes: Vec<&Composition> = members
-                .iter()
-                .filter_map(|&i| regions[i].composition.as_ref())
-                .collect();
-            mixes.dedup();
-            mixes.len() >= 3
-                && groups
-                    .iter()
-                    .any(|g| members.iter().all(|m| g.members.contains(m)))
-        })
+        .values()
+        .filter(|(group, mixes)| group.is_some() && mixes.len() >= 3)
         .count()
 }
 
