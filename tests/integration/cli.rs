@@ -779,29 +779,33 @@ fn the_summary_tells_the_machine_files_own_time_and_waste() {
     assert!(summary.contains("the plan's build time"), "{summary}");
 }
 
-/// A part of two boxes, one of which misses a triangle of a side wall: every layer cuts
-/// that box into an open chain wider than the slicer closes, and drops it, while the
-/// other box's loop keeps the layer from looking empty. The run fails naming the part,
-/// what its layers hold of the volume its mesh encloses and where, and leaves no
-/// output, rather than exit 0 with a plan of a part and a half.
+/// A part of two boxes. When the smaller misses a triangle of a side wall, every layer
+/// cuts it into a chain that stops at the hole, 4 mm wide at the bottom: the slicer
+/// closes it across the hole, and the part is made whole, as from the whole mesh. When
+/// the smaller is only a fence (three walls, no floor, roof or fourth wall), its cut
+/// stops at the fence's open side and nothing says it encloses anything: the run fails
+/// naming the part, what its layers hold of the volume its mesh encloses and where, and
+/// leaves no output, rather than exit 0 with a plan of a part and a half.
 #[test]
-fn a_part_its_layers_do_not_hold_fails_the_run_naming_where() {
+fn a_holed_wall_is_closed_and_a_part_its_layers_do_not_hold_fails_the_run_naming_where() {
     let dir = tempfile::tempdir().expect("tempdir");
     let solid = |stl: String| stl.replace("endsolid box\n", "").replace("solid box\n", "");
     let big = solid(box_stl([0.0, 0.0, 0.0], [10.0, 10.0, 2.0]));
-    let small = solid(box_stl([20.0, 0.0, 0.0], [24.0, 4.0, 2.0]));
+    let small = solid(box_stl([20.0, 0.0, 0.0], [24.0, 6.0, 2.0]));
     let whole = format!("solid two\n{big}{small}endsolid two\n");
-    // The facets of the small box's wall at y = 0 are its fifth and sixth: drop the
-    // fifth.
+    // The facets of a box: bottom, top, then the walls at y = 0, y = 6, x = 20 and
+    // x = 24, two each.
     let facets: Vec<&str> = small.split_inclusive("endfacet\n").collect();
-    let holed: String = facets
-        .iter()
-        .enumerate()
-        .filter(|&(i, _)| i != 4)
-        .map(|(_, f)| *f)
-        .collect();
-    let open = format!("solid two\n{big}{holed}endsolid two\n");
-    assert!(open.len() < whole.len());
+    let without = |drop: &[usize]| -> String {
+        facets
+            .iter()
+            .enumerate()
+            .filter(|(i, _)| !drop.contains(i))
+            .map(|(_, f)| *f)
+            .collect()
+    };
+    let holed = format!("solid two\n{big}{}endsolid two\n", without(&[4]));
+    let fence = format!("solid two\n{big}{}endsolid two\n", without(&[0, 1, 2, 3, 4, 5]));
     let run = |stl: &str, name: &str| {
         let model = write(dir.path(), name, stl);
         let out_dir = dir.path().join(format!("out-{name}"));
@@ -812,13 +816,48 @@ fn a_part_its_layers_do_not_hold_fails_the_run_naming_where() {
             model.to_str().expect("utf-8"),
             "--out",
             out_dir.to_str().expect("utf-8"),
-            "--quiet",
         ]);
         (out, out_dir)
     };
-    let (out, _) = run(&whole, "whole.stl");
+    let plan = |out_dir: &Path| -> serde_json::Value {
+        let file = std::fs::read_dir(out_dir)
+            .expect("outputs")
+            .map(|e| e.expect("entry").path())
+            .find(|p| p.extension().is_some_and(|e| e == "json"))
+            .expect("a JSON plan");
+        serde_json::from_slice(&std::fs::read(file).expect("plan")).expect("JSON")
+    };
+    let areas = |plan: &serde_json::Value| -> Vec<f64> {
+        plan["layers"]
+            .as_array()
+            .expect("layers")
+            .iter()
+            .map(|l| {
+                l["parts"][0]["families"]
+                    .as_array()
+                    .expect("families")
+                    .iter()
+                    .map(|f| f["area"].as_f64().expect("area"))
+                    .sum()
+            })
+            .collect()
+    };
+    let (out, whole_dir) = run(&whole, "whole.stl");
     assert!(out.status.success(), "{}", text(&out.stderr));
-    let (out, out_dir) = run(&open, "open.stl");
+    let (out, holed_dir) = run(&holed, "holed.stl");
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let said = text(&out.stderr);
+    assert!(
+        said.contains("warning[slice.holes-closed]: layers 0-3") && said.contains("(1 hole(s)"),
+        "{said}"
+    );
+    let (a, b) = (areas(&plan(&whole_dir)), areas(&plan(&holed_dir)));
+    assert_eq!(a.len(), b.len());
+    for (a, b) in a.iter().zip(&b) {
+        assert!((a - b).abs() < 1e-9 * a, "{b} against {a}");
+        assert!((a - 124.0).abs() < 1e-9, "{a}");
+    }
+    let (out, out_dir) = run(&fence, "fence.stl");
     let err = text(&out.stderr);
     assert!(!out.status.success(), "{err}");
     assert!(

@@ -7,7 +7,8 @@
 //! Neighbouring triangles share those edges, so segments chain into loops without any
 //! tolerance. Faces lying in the plane produce nothing, and vertices or edges in the
 //! plane produce segments through them. What does not close (open meshes, non-manifold
-//! edges) is joined across small gaps, and reported when it cannot be.
+//! edges) is joined across the mesh's holes ([`crate::holes`]) and small gaps, and
+//! reported when it cannot be.
 
 use std::sync::Arc;
 
@@ -16,6 +17,15 @@ use lamina_api::{Contour, Layer, LayerSlot, Mesh, Point2, Result, Warning};
 
 /// The code of the warnings about open chains a layer drops.
 const OPEN_CHAINS_DROPPED: &str = "open-chains-dropped";
+/// The code of the warnings about cuts closed across the mesh's holes.
+const HOLES_CLOSED: &str = "holes-closed";
+/// Most chains a layer asks [`winding_number`] about.
+const SOLID_TESTS: usize = 16;
+/// The winding number above which the point beside a chain is inside a solid: 1 for a
+/// solid, a half beside a sheet, with room either way for what other holes and sheets
+/// subtend.
+const SOLID_WINDING: f64 = 0.75;
+use crate::holes::{Holes, edge_key, probe, winding_number};
 use lamina_geom::ring::{Ring, contour_of, ring_of};
 use lamina_geom::segment_distance;
 use rayon::prelude::*;
@@ -49,7 +59,7 @@ lamina_api::option_type!(FillRule = "string");
 /// Options every slicer takes, documented once.
 pub(crate) const CLOSE_GAPS: SharedOption = SharedOption::new(
     "0.05",
-    "open chains whose ends are closer than this (mm) are joined",
+    "open chains whose ends are closer than this (mm) are joined; ends on the rim of one hole of the mesh are joined whatever the gap, where the mesh's winding number says the chain is a solid's wall",
 )
 .within(0.0, 10.0);
 pub(crate) const FILL_RULE: SharedOption = SharedOption::new(
@@ -112,6 +122,11 @@ pub struct CutMesh {
     /// about, so that a segment missing from an open cut changes the sum by no more
     /// than the thin triangle it makes with this point.
     centre: Point2,
+    /// The mesh's holes, across which cuts are closed.
+    holes: Holes,
+    /// How far beside a chain the winding number is asked (mm): thinner than any wall,
+    /// a hundred-thousandth of the mesh's size.
+    reach: f64,
 }
 
 /// One cut segment: its two ends, each an edge key and a point, and the direction the
@@ -133,11 +148,6 @@ fn swept_area(chain: &[Point2], centre: Point2) -> f64 {
             0.5 * (a.x * b.y - a.y * b.x)
         })
         .sum()
-}
-
-fn edge_key(a: u32, b: u32) -> u64 {
-    let (lo, hi) = if a < b { (a, b) } else { (b, a) };
-    (u64::from(lo) << 32) | u64::from(hi)
 }
 
 impl CutMesh {
@@ -207,8 +217,16 @@ impl CutMesh {
         } else {
             Point2::new(0.5 * (bb.min.x + bb.max.x), 0.5 * (bb.min.y + bb.max.y))
         };
+        let reach = if bb.is_empty() {
+            1e-6
+        } else {
+            ((bb.max - bb.min).norm() * 1e-5).max(1e-9)
+        };
+        let holes = Holes::of(&mesh);
         Self {
             centre,
+            holes,
+            reach,
             mesh,
             orientation,
             ranges,
@@ -308,7 +326,21 @@ impl CutMesh {
         let (loops, open) = chain(&segments);
         let mut contours = Vec::new();
         let mut gaps = Gaps::default();
-        let closed = close_open(open, self.options.close_gaps, self.centre, &mut gaps);
+        // Each chain asked about costs a pass over the triangles: a layer asks about a
+        // few, so that a soup of open chains costs no more than a few cuts.
+        let mut asked = 0;
+        let mut bounds_solid = |chain: &[Point2]| {
+            asked += 1;
+            asked <= SOLID_TESTS
+                && probe(chain, slot.cut_z, self.reach)
+                    .is_some_and(|p| self.orientation * winding_number(&self.mesh, p) > SOLID_WINDING)
+        };
+        let mut closing = Closing {
+            tolerance: self.options.close_gaps,
+            holes: &self.holes,
+            bounds_solid: &mut bounds_solid,
+        };
+        let closed = close_open(open, &mut closing, self.centre, &mut gaps);
         for mut lp in loops.into_iter().chain(closed) {
             lp.points.dedup_by(|a, b| (*a - *b).norm() <= 1e-12);
             while lp.points.len() > 1 && (lp.points[0] - lp.points[lp.points.len() - 1]).norm() <= 1e-12 {
@@ -344,6 +376,19 @@ impl CutMesh {
                     d.first.y,
                     d.last.x,
                     d.last.y
+                ),
+            ));
+        }
+        if let Some((widest, at)) = gaps.widest_bridge {
+            layer.warnings.push(Warning::new(
+                HOLES_CLOSED,
+                format!(
+                    "closed {} cut(s) across holes of the mesh ({} hole(s), the longest rim {:.2} mm), the widest gap {widest:.3} mm at ({:.3}, {:.3})",
+                    gaps.bridged,
+                    self.holes.count(),
+                    self.holes.longest(),
+                    at.x,
+                    at.y
                 ),
             ));
         }
@@ -408,6 +453,9 @@ struct Gaps {
     closed: usize,
     /// The widest gap closed and where (the end of the chain it was closed from).
     widest: Option<(f64, Point2)>,
+    /// Joins across the mesh's holes, and the widest.
+    bridged: usize,
+    widest_bridge: Option<(f64, Point2)>,
     dropped: Vec<Dropped>,
 }
 
@@ -416,6 +464,13 @@ impl Gaps {
         self.closed += 1;
         if self.widest.is_none_or(|(w, _)| gap > w) {
             self.widest = Some((gap, at));
+        }
+    }
+
+    fn bridge(&mut self, gap: f64, at: Point2) {
+        self.bridged += 1;
+        if self.widest_bridge.is_none_or(|(w, _)| gap > w) {
+            self.widest_bridge = Some((gap, at));
         }
     }
 }
@@ -691,7 +746,7 @@ fn segments_within(a: Point2, b: Point2, c: Point2, d: Point2, eps: f64) -> bool
 
 /// Chains segments into closed loops by their edge keys. Returns the loops (oriented
 /// by the majority of their segments' directions) and the chains that did not close.
-fn chain(segments: &[Segment]) -> (Vec<Contour>, Vec<Vec<Point2>>) {
+fn chain(segments: &[Segment]) -> (Vec<Contour>, Vec<Open>) {
     let at = Ends::new(segments);
     let mut used = vec![false; segments.len()];
     let mut loops = Vec::new();
@@ -727,6 +782,7 @@ fn chain(segments: &[Segment]) -> (Vec<Contour>, Vec<Vec<Point2>>) {
             points.push(p);
             key = k;
         }
+        let last_key = key;
         if closed {
             points.pop();
             let mut c = Contour::new(points);
@@ -753,12 +809,21 @@ fn chain(segments: &[Segment]) -> (Vec<Contour>, Vec<Vec<Point2>>) {
         }
         back.reverse();
         back.extend(points);
+        let mut keys = [key, last_key];
         if votes < 0 {
             back.reverse();
+            keys.reverse();
         }
-        open.push(back);
+        open.push(Open { points: back, keys });
     }
     (loops, open)
+}
+
+/// A chain of segments that does not close: its points, each step with the solid on
+/// its left, and the edges its first and last points lie on.
+struct Open {
+    points: Vec<Point2>,
+    keys: [u64; 2],
 }
 
 /// The segments ending at each edge key: each key is the end of (normally) two
@@ -801,26 +866,55 @@ impl Ends {
     }
 }
 
-/// Joins open chains end to start across gaps smaller than `tolerance`; chains that
-/// still do not close are reported and dropped (stray sheets).
+/// How open chains are joined: across gaps smaller than `tolerance`, and across the
+/// mesh's `holes` where `bounds_solid` says the chain is the wall of a solid.
+struct Closing<'a> {
+    tolerance: f64,
+    holes: &'a Holes,
+    /// Whether a chain (each step with the solid on its left) is the cut of a solid's
+    /// wall rather than of a sheet; asked once per chain, and only for a join across a
+    /// hole wider than `tolerance`.
+    bounds_solid: &'a mut dyn FnMut(&[Point2]) -> bool,
+}
+
+/// Joins open chains end to start, first across holes (a chain's end to the nearest
+/// chain end on the same rim, its own start included), then across gaps smaller than
+/// the tolerance; chains that still do not close are reported and dropped (stray
+/// sheets).
 ///
 /// The chains wait in `open` and are taken from its end; a chain's end is joined to the
 /// nearest start (or end, the chain then reversed) of a waiting chain, ties going to the
 /// lowest place in `open` and a start before an end, and a taken chain's place is filled
 /// by the last one (`swap_remove`). The ends are found through a grid of cells of the
 /// tolerance's size, so that a layer of many open chains (a triangle soup gives one per
-/// triangle it cuts) costs time in proportion to their number, not its square.
-fn close_open(mut open: Vec<Vec<Point2>>, tolerance: f64, centre: Point2, gaps: &mut Gaps) -> Vec<Contour> {
+/// triangle it cuts) costs time in proportion to their number, not its square; the
+/// ends on a rim through a list per rim, which a rim with more ends in one layer than
+/// [`RIM_ENDS`] does not get (a soup's rims are everything).
+fn close_open(
+    mut open: Vec<Open>,
+    closing: &mut Closing<'_>,
+    centre: Point2,
+    gaps: &mut Gaps,
+) -> Vec<Contour> {
+    let tolerance = closing.tolerance;
     let ends = EndGrid::new(&open, tolerance);
+    let rims = RimEnds::new(&open, closing.holes);
     // `id[i]`: the chain at place `i` of `open`, by its first place; `place[id]`: back.
     let mut id: Vec<usize> = (0..open.len()).collect();
     let mut place: Vec<Option<usize>> = (0..open.len()).map(Some).collect();
     let mut out = Vec::new();
     let mut near = Vec::new();
-    while let Some(mut chain) = open.pop() {
+    while let Some(Open {
+        points: mut chain,
+        keys,
+    }) = open.pop()
+    {
         if let Some(c) = id.pop() {
             place[c] = None;
         }
+        let start_key = keys[0];
+        let mut end_key = keys[1];
+        let mut solid: Option<bool> = None;
         loop {
             let (first, last) = (chain[0], chain[chain.len() - 1]);
             if (last - first).norm() <= tolerance && chain.len() > 2 {
@@ -828,24 +922,57 @@ fn close_open(mut open: Vec<Vec<Point2>>, tolerance: f64, centre: Point2, gaps: 
                 out.push(Contour::new(chain));
                 break;
             }
-            // The nearest chain start (or end, reversed) to our end: (distance, place,
-            // reversed), least first.
-            let mut best: Option<(f64, usize, bool)> = None;
-            ends.near(last, &mut near);
-            for &(c, rev) in &near {
-                let Some(i) = place[c] else { continue };
-                let p = if rev {
-                    open[i][open[i].len() - 1]
-                } else {
-                    open[i][0]
-                };
-                let d = (p - last).norm();
-                if d <= tolerance && best.is_none_or(|b| (d, i, rev) < b) {
-                    best = Some((d, i, rev));
+            // The nearest end across the hole our end lies on: (distance, place or
+            // none for our own start, reversed).
+            let mut across: Option<(f64, Option<usize>, bool)> = None;
+            if let Some(rim) = closing.holes.rim(end_key).filter(|r| rims.has(*r)) {
+                if chain.len() > 2 && closing.holes.rim(start_key) == Some(rim) {
+                    across = Some(((last - first).norm(), None, false));
+                }
+                for &(c, rev) in rims.on(rim) {
+                    let Some(i) = place[c] else { continue };
+                    let d = (end_of(&open[i].points, rev) - last).norm();
+                    if across.is_none_or(|(b, bi, brev)| (d, Some(i), rev) < (b, bi, brev)) {
+                        across = Some((d, Some(i), rev));
+                    }
+                }
+                if let Some((d, _, _)) = across
+                    && d > tolerance
+                    && !*solid.get_or_insert_with(|| (closing.bounds_solid)(&chain))
+                {
+                    across = None;
                 }
             }
+            let best = match across {
+                Some((d, None, _)) => {
+                    gaps.bridge(d, last);
+                    out.push(Contour::new(chain));
+                    break;
+                }
+                Some((d, Some(i), rev)) => {
+                    gaps.bridge(d, last);
+                    Some((i, rev))
+                }
+                None => {
+                    // The nearest chain start (or end, reversed) to our end within the
+                    // tolerance: (distance, place, reversed), least first.
+                    let mut best: Option<(f64, usize, bool)> = None;
+                    ends.near(last, &mut near);
+                    for &(c, rev) in &near {
+                        let Some(i) = place[c] else { continue };
+                        let d = (end_of(&open[i].points, rev) - last).norm();
+                        if d <= tolerance && best.is_none_or(|b| (d, i, rev) < b) {
+                            best = Some((d, i, rev));
+                        }
+                    }
+                    best.map(|(d, i, rev)| {
+                        gaps.close(d, last);
+                        (i, rev)
+                    })
+                }
+            };
             match best {
-                Some((d, i, rev)) => {
+                Some((i, rev)) => {
                     let mut next = open.swap_remove(i);
                     let taken = id.swap_remove(i);
                     place[taken] = None;
@@ -853,10 +980,11 @@ fn close_open(mut open: Vec<Vec<Point2>>, tolerance: f64, centre: Point2, gaps: 
                         place[moved] = Some(i);
                     }
                     if rev {
-                        next.reverse();
+                        next.points.reverse();
+                        next.keys.reverse();
                     }
-                    gaps.close(d, last);
-                    chain.extend(next);
+                    end_key = next.keys[1];
+                    chain.extend(next.points);
                 }
                 None => {
                     gaps.dropped.push(Dropped {
@@ -875,6 +1003,45 @@ fn close_open(mut open: Vec<Vec<Point2>>, tolerance: f64, centre: Point2, gaps: 
     out
 }
 
+/// A chain's first point, or its last when `rev`.
+fn end_of(chain: &[Point2], rev: bool) -> Point2 {
+    if rev { chain[chain.len() - 1] } else { chain[0] }
+}
+
+/// Most chain ends one rim may have in a layer for joins across it.
+const RIM_ENDS: usize = 64;
+
+/// The ends of open chains by the rim they lie on: (chain, whether it is the chain's
+/// end), for the rims with at most [`RIM_ENDS`] of them.
+struct RimEnds {
+    by_rim: FxHashMap<u32, Vec<(usize, bool)>>,
+}
+
+impl RimEnds {
+    fn new(open: &[Open], holes: &Holes) -> Self {
+        let mut by_rim: FxHashMap<u32, Vec<(usize, bool)>> = FxHashMap::default();
+        if holes.count() > 0 {
+            for (c, chain) in open.iter().enumerate() {
+                for (rev, key) in [(false, chain.keys[0]), (true, chain.keys[1])] {
+                    if let Some(rim) = holes.rim(key) {
+                        by_rim.entry(rim).or_default().push((c, rev));
+                    }
+                }
+            }
+            by_rim.retain(|_, ends| ends.len() <= RIM_ENDS);
+        }
+        Self { by_rim }
+    }
+
+    fn has(&self, rim: u32) -> bool {
+        self.by_rim.contains_key(&rim)
+    }
+
+    fn on(&self, rim: u32) -> &[(usize, bool)] {
+        self.by_rim.get(&rim).map_or(&[], Vec::as_slice)
+    }
+}
+
 /// The ends of open chains by grid cell: (chain, whether it is the chain's end).
 struct EndGrid {
     cell: f64,
@@ -882,7 +1049,7 @@ struct EndGrid {
 }
 
 impl EndGrid {
-    fn new(open: &[Vec<Point2>], tolerance: f64) -> Self {
+    fn new(open: &[Open], tolerance: f64) -> Self {
         // A cell no smaller than the coordinates can tell apart; cells saturate far
         // out, which only puts more candidates in one cell.
         let cell = if tolerance.is_finite() && tolerance > 0.0 {
@@ -895,7 +1062,8 @@ impl EndGrid {
             cells: FxHashMap::default(),
         };
         for (c, chain) in open.iter().enumerate() {
-            for (rev, p) in [(false, chain[0]), (true, chain[chain.len() - 1])] {
+            for rev in [false, true] {
+                let p = end_of(&chain.points, rev);
                 grid.cells.entry(grid.key(p)).or_default().push((c, rev));
             }
         }
@@ -1093,22 +1261,98 @@ mod tests {
     }
 
     #[test]
-    fn open_sheet_is_reported() {
+    fn a_box_missing_a_wall_is_closed_across_its_hole() {
         let mut m = cube(1.0);
-        // Remove one side wall: the cut leaves an open chain with a 1 mm gap.
+        // Remove one side wall: the cut leaves an open chain with a 1 mm gap, 20 times
+        // the distance limit, whose ends lie on the hole's rim.
         m.triangles.drain(4..6);
         let c = CutMesh::new(Arc::new(m), CutOptions::default());
         let l = c.cut(&slot(0.5)).expect("cut");
+        assert_eq!(l.contours.len(), 1);
+        assert!((l.contours[0].signed_area() - 1.0).abs() < 1e-12);
+        assert_eq!(l.section_area, Some(l.contours[0].signed_area()));
+        assert_eq!(l.warnings.len(), 1, "{:?}", l.warnings);
+        let w = &l.warnings[0];
+        assert_eq!(w.code, HOLES_CLOSED);
+        assert!(
+            w.message
+                .contains("closed 1 cut(s) across holes of the mesh (1 hole(s)")
+                && w.message.contains("the widest gap 1.000 mm"),
+            "{w}"
+        );
+    }
+
+    /// A prism of `sides` walls around the z axis, `radius` to its corners and 0 to
+    /// `height` high, with its caps, wound outward.
+    fn prism(sides: u32, radius: f64, height: f64) -> Mesh {
+        let mut v = Vec::new();
+        for z in [0.0, height] {
+            for i in 0..sides {
+                let a = std::f64::consts::TAU * f64::from(i) / f64::from(sides);
+                v.push(Point3::new(radius * a.cos(), radius * a.sin(), z));
+            }
+        }
+        v.push(Point3::new(0.0, 0.0, 0.0));
+        v.push(Point3::new(0.0, 0.0, height));
+        let (bottom, top) = (2 * sides, 2 * sides + 1);
+        let mut t = Vec::new();
+        for i in 0..sides {
+            let j = (i + 1) % sides;
+            t.push([i, j, sides + j]);
+            t.push([i, sides + j, sides + i]);
+            t.push([bottom, j, i]);
+            t.push([top, sides + i, sides + j]);
+        }
+        Mesh::new("prism", v, t)
+    }
+
+    #[test]
+    fn a_wall_triangle_missing_over_the_whole_height_closes_every_layer_whole() {
+        let whole = prism(12, 10.0, 10.0);
+        let mut m = whole.clone();
+        // The wall's first triangle: every cut from z = 0 to 10 passes its hole, with
+        // a gap of up to 5 mm.
+        m.triangles.remove(0);
+        let (whole, holed) = (
+            CutMesh::new(Arc::new(whole), CutOptions::default()),
+            CutMesh::new(Arc::new(m), CutOptions::default()),
+        );
+        for z in [0.1, 2.5, 5.0, 9.9] {
+            let (a, b) = (
+                whole.cut(&slot(z)).expect("cut"),
+                holed.cut(&slot(z)).expect("cut"),
+            );
+            assert_eq!(b.contours.len(), 1, "z = {z}");
+            let (a, b) = (a.contours[0].signed_area(), b.contours[0].signed_area());
+            assert!((a - b).abs() < 1e-9 * a, "z = {z}: {b} against {a}");
+        }
+    }
+
+    #[test]
+    fn a_stray_sheet_is_reported_and_dropped() {
+        // A third of an open cylinder, 10 mm in radius and 4 mm high: a sheet that
+        // encloses nothing, its cut an arc whose ends lie on the sheet's one rim.
+        let mut v = Vec::new();
+        for z in [0.0, 4.0] {
+            for i in 0..=8 {
+                let a = std::f64::consts::TAU / 3.0 * f64::from(i) / 8.0;
+                v.push(Point3::new(10.0 * a.cos(), 10.0 * a.sin(), z));
+            }
+        }
+        let t = (0..8u32)
+            .flat_map(|i| [[i, i + 1, i + 10], [i, i + 10, i + 9]])
+            .collect();
+        let c = CutMesh::new(Arc::new(Mesh::new("sheet", v, t)), CutOptions::default());
+        assert_eq!(c.holes.count(), 1);
+        let l = c.cut(&slot(2.0)).expect("cut");
         assert!(l.contours.is_empty());
-        // The three sides left enclose, with the box's middle, three quarters of the
-        // square: the area the run finds missing.
-        let section = l.section_area.expect("measured");
-        assert!((section - 0.75).abs() < 1e-12, "{section}");
         assert_eq!(l.warnings.len(), 1, "{:?}", l.warnings);
         let w = &l.warnings[0];
         assert_eq!(w.code, OPEN_CHAINS_DROPPED);
         assert!(w.message.starts_with("dropped an open chain"), "{w}");
-        assert!(w.message.contains("gap of 1.000 mm"), "{w}");
+        assert!(w.message.contains("gap of 17.321 mm"), "{w}");
+        // An arc encloses nothing the layer should hold.
+        assert_eq!(l.section_area, Some(0.0));
     }
 
     fn square(x: f64, y: f64, half: f64, ccw: bool) -> Contour {

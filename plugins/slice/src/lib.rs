@@ -3,6 +3,7 @@
 
 mod adaptive;
 pub mod cut;
+mod holes;
 mod uniform;
 
 pub use cut::{CutMesh, CutOptions, FillRule};
