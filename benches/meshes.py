@@ -45,7 +45,7 @@ METRES = ["stanford_bunny.stl", "octagonal_pocket_plate.stl", "openfoam_building
 
 
 # A bed no mesh here outgrows: only the volume PrusaSlicer deposits is wanted.
-BIG_BED = ["--bed-shape", "0x0,2000x0,2000x2000,0x2000", "--max-print-height", "2000"]
+BIG_BED = ["--bed-shape", "0x0,1000x0,1000x1000,0x1000", "--max-print-height", "1000"]
 
 
 def reference(mesh, scale, work, python):

@@ -878,9 +878,9 @@ struct Closing<'a> {
 }
 
 /// Joins open chains end to start, first across holes (a chain's end to the nearest
-/// chain end on the same rim, its own start included), then across gaps smaller than
-/// the tolerance; chains that still do not close are reported and dropped (stray
-/// sheets).
+/// chain start on the same rim, its own included, or to the nearest end there,
+/// reversed, when no start is), then across gaps smaller than the tolerance; chains
+/// that still do not close are reported and dropped (stray sheets).
 ///
 /// The chains wait in `open` and are taken from its end; a chain's end is joined to the
 /// nearest start (or end, the chain then reversed) of a waiting chain, ties going to the
@@ -929,10 +929,12 @@ fn close_open(
                 if chain.len() > 2 && closing.holes.rim(start_key) == Some(rim) {
                     across = Some(((last - first).norm(), None, false));
                 }
+                // A start before any end: a mesh wound one way joins end to start, and
+                // an end reversed is taken only where no start lies on the rim.
                 for &(c, rev) in rims.on(rim) {
                     let Some(i) = place[c] else { continue };
                     let d = (end_of(&open[i].points, rev) - last).norm();
-                    if across.is_none_or(|(b, bi, brev)| (d, Some(i), rev) < (b, bi, brev)) {
+                    if across.is_none_or(|(b, bi, brev)| (rev, d, Some(i)) < (brev, b, bi)) {
                         across = Some((d, Some(i), rev));
                     }
                 }
