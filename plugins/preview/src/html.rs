@@ -410,60 +410,95 @@ impl Sink {
         }))
     }
 
-    /// Appends the machine's moves, read back from the G-code, one block per layer.
+    /// Appends the machine's moves, read back from the G-code, one block per layer,
+    /// as the file is read: memory holds the moves of a few layers, whatever its size.
     fn write_moves(&mut self, files: &dyn OutputFiles) -> Result<()> {
+        use std::io::BufRead;
         let Some((name, file)) = self.gcode_file(files)? else {
             return Ok(());
         };
-        let bytes = std::fs::read(&file).map_err(|e| Error::io(&name, e))?;
-        let moves = crate::moves::read(&String::from_utf8_lossy(&bytes));
-        let [ox, oy] = moves.offset;
-        let mut pack = Packer::new(self.options.digits);
-        let path = self.path.clone();
-        for (&layer, list) in &moves.layers {
-            if !layer.is_multiple_of(self.options.every) {
-                continue;
+        let mut input = std::io::BufReader::new(std::fs::File::open(&file).map_err(|e| Error::io(&name, e))?);
+        let mut reader = crate::moves::Reader::new();
+        let mut written: Result<()> = Ok(());
+        let mut layers = LayerMoves {
+            out: &mut self.out,
+            path: &self.path,
+            every: self.options.every,
+            pack: Packer::new(self.options.digits),
+        };
+        let mut put = |layer: usize, list: Vec<crate::moves::Move>, offset: [f64; 2]| {
+            if written.is_ok() {
+                written = layers.write(layer, &list, offset);
             }
-            let start = list.iter().map(|m| m.t0).fold(f64::INFINITY, f64::min);
-            let mut run: Vec<([f64; 2], f64)> = Vec::new();
-            let mut key = None;
-            for m in list {
-                let k = (m.system, m.tool, if m.extrude { 0u8 } else { 1 });
-                let from = [m.from[0] - ox, m.from[1] - oy];
-                let to = [m.to[0] - ox, m.to[1] - oy];
-                // A run goes on only without a pause (a dwell or a wait at a barrier
-                // is shown as the head standing, not as a slow move).
-                let joined = key == Some(k)
-                    && run
-                        .last()
-                        .is_some_and(|(p, t)| *p == from && (t - (m.t0 - start)).abs() < 1e-9);
-                if !joined {
-                    if let Some((s, t, kind)) = key {
-                        pack.timed(s, t, kind, &run);
-                    }
-                    run.clear();
-                    run.push((from, m.t0 - start));
-                    key = Some(k);
-                }
-                run.push((to, m.t1 - start));
+        };
+        let mut line = Vec::new();
+        loop {
+            line.clear();
+            let read = input
+                .read_until(b'\n', &mut line)
+                .map_err(|e| Error::io(&name, e))?;
+            if read == 0 {
+                break;
             }
-            if let Some((s, t, kind)) = key {
-                pack.timed(s, t, kind, &run);
-            }
-            writeln!(
-                self.out,
-                "<script>MOVES.set({layer}, \"{}\");</script>",
-                pack.take_base64()
-            )
-            .map_err(io(&path))?;
+            reader.line(&String::from_utf8_lossy(&line), &mut put);
         }
+        let (systems, offset) = reader.finish(&mut put);
+        written?;
         let about = script_json(&serde_json::json!({
             "file": name.display().to_string(),
-            "systems": moves.systems,
-            "offset": moves.offset,
+            "systems": systems,
+            "offset": offset,
         }))
-        .map_err(|e| Error::io(&path, std::io::Error::other(e)))?;
-        writeln!(self.out, "<script>GCODE = {about};</script>").map_err(io(&path))
+        .map_err(|e| Error::io(&self.path, std::io::Error::other(e)))?;
+        writeln!(self.out, "<script>GCODE = {about};</script>").map_err(io(&self.path))
+    }
+}
+
+/// Writes the machine's moves layer by layer as the G-code reader hands them over.
+struct LayerMoves<'a> {
+    out: &'a mut Box<dyn Write + Send>,
+    path: &'a std::path::Path,
+    every: usize,
+    pack: Packer,
+}
+
+impl LayerMoves<'_> {
+    fn write(&mut self, layer: usize, list: &[crate::moves::Move], [ox, oy]: [f64; 2]) -> Result<()> {
+        if !layer.is_multiple_of(self.every) {
+            return Ok(());
+        }
+        let start = list.iter().map(|m| m.t0).fold(f64::INFINITY, f64::min);
+        let mut run: Vec<([f64; 2], f64)> = Vec::new();
+        let mut key = None;
+        for m in list {
+            let k = (m.system, m.tool, if m.extrude { 0u8 } else { 1 });
+            let from = [m.from[0] - ox, m.from[1] - oy];
+            let to = [m.to[0] - ox, m.to[1] - oy];
+            // A run goes on only without a pause (a dwell or a wait at a barrier is
+            // shown as the head standing, not as a slow move).
+            let joined = key == Some(k)
+                && run
+                    .last()
+                    .is_some_and(|(p, t)| *p == from && (t - (m.t0 - start)).abs() < 1e-9);
+            if !joined {
+                if let Some((s, t, kind)) = key {
+                    self.pack.timed(s, t, kind, &run);
+                }
+                run.clear();
+                run.push((from, m.t0 - start));
+                key = Some(k);
+            }
+            run.push((to, m.t1 - start));
+        }
+        if let Some((s, t, kind)) = key {
+            self.pack.timed(s, t, kind, &run);
+        }
+        writeln!(
+            self.out,
+            "<script>MOVES.set({layer}, \"{}\");</script>",
+            self.pack.take_base64()
+        )
+        .map_err(io(self.path))
     }
 }
 

@@ -38,7 +38,9 @@ pub struct Move {
     pub t1: f64,
 }
 
-/// The moves of a file by layer (`;LAYER:` number), each system's in its order.
+/// The moves of a file by layer (`;LAYER:` number), each system's in its order: the
+/// whole file at once, for the tests.
+#[cfg(test)]
 #[derive(Debug, Default)]
 pub struct Moves {
     pub layers: BTreeMap<usize, Vec<Move>>,
@@ -192,30 +194,112 @@ fn offset(line: &str) -> Option<[f64; 2]> {
     Some([x, y])
 }
 
-/// Reads a G-code file's moves. Unknown commands are skipped.
+/// Reads a G-code file's moves at once. Unknown commands are skipped.
+#[cfg(test)]
 pub fn read(text: &str) -> Moves {
-    let mut systems = vec![System::new()];
-    let mut current = 0;
-    let mut barriers = 0;
-    let mut placed = [0.0, 0.0];
+    let mut moves = Moves::default();
+    let mut reader = Reader::new();
+    let mut keep =
+        |layer: usize, list: Vec<Move>, _: [f64; 2]| moves.layers.entry(layer).or_default().extend(list);
     for line in text.lines() {
+        reader.line(line, &mut keep);
+    }
+    let (systems, offset) = reader.finish(&mut keep);
+    moves.systems = systems;
+    moves.offset = offset;
+    moves
+}
+
+/// Reads a G-code file line by line and hands over each layer's moves as soon as no
+/// motion system can add to it, so that a file of any size is read in the memory of a
+/// few layers. Layers are taken to come in the file's order (each system's `;LAYER:`
+/// numbers do not go back), as Lamina's files and the common slicers' write them.
+pub struct Reader {
+    systems: Vec<System>,
+    /// The system the lines are for (`M596`).
+    current: usize,
+    barriers: usize,
+    placed: [f64; 2],
+    /// Each system's clock and how many of its steps are not yet on it (`steps[..at]`
+    /// are done and dropped as the reading goes on).
+    time: Vec<f64>,
+    at: Vec<usize>,
+    /// Steps system 0 has done, and its clock after the steps a forked system waits
+    /// for (`Step::Start`).
+    done0: usize,
+    starts: BTreeMap<usize, f64>,
+    /// Moves on the clock whose layers may still grow.
+    pending: BTreeMap<usize, Vec<Move>>,
+    /// Lines since the steps were last put on the clock.
+    unclocked: usize,
+}
+
+/// How many lines are read between two passes of the clock: the pass is cheap, and
+/// this keeps what waits for it small.
+const CLOCK_EVERY: usize = 4096;
+
+impl Default for Reader {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+impl Reader {
+    pub fn new() -> Self {
+        Reader {
+            systems: vec![System::new()],
+            current: 0,
+            barriers: 0,
+            placed: [0.0, 0.0],
+            time: vec![0.0],
+            at: vec![0],
+            done0: 0,
+            starts: BTreeMap::new(),
+            pending: BTreeMap::new(),
+            unclocked: 0,
+        }
+    }
+
+    /// Reads one line; `out` gets every layer completed by it, with its moves and the
+    /// offset the exporter placed the plan by (its `; coordinates:` comment, before
+    /// any layer).
+    pub fn line(&mut self, line: &str, out: &mut impl FnMut(usize, Vec<Move>, [f64; 2])) {
         let line = line.trim();
         if let Some(rest) = line.strip_prefix(";LAYER:") {
             let n = rest.split_whitespace().next().and_then(|n| n.parse().ok());
-            systems[current].layer = n;
-            continue;
+            self.systems[self.current].layer = n;
+            // A new layer is where earlier ones may be done.
+            self.clock();
+            self.hand_over(out, false);
+            return;
         }
         if let Some(o) = offset(line) {
-            placed = o;
-            continue;
+            self.placed = o;
+            return;
         }
+        self.command(line);
+        self.unclocked += 1;
+        if self.unclocked >= CLOCK_EVERY {
+            self.clock();
+        }
+    }
+
+    /// Ends the reading: `out` gets the layers left. Returns the number of motion
+    /// systems the file used and the offset the exporter placed the plan by.
+    pub fn finish(mut self, out: &mut impl FnMut(usize, Vec<Move>, [f64; 2])) -> (usize, [f64; 2]) {
+        self.clock();
+        self.hand_over(out, true);
+        (self.systems.len(), self.placed)
+    }
+
+    fn command(&mut self, line: &str) {
         let w = words(line);
         let Some(&(letter, number)) = w.first() else {
-            continue;
+            return;
         };
         // Commands with a fraction (`G29.1`) are none the viewer needs.
         if number.fract() != 0.0 || !(-1.0..1e6).contains(&number) {
-            continue;
+            return;
         }
         let number = number as i64;
         let rest = &w[1..];
@@ -223,13 +307,12 @@ pub fn read(text: &str) -> Moves {
         // The fork: RepRapFirmware 3.5 has two motion systems, and the second starts
         // reading here, with the first's modes, while the first goes on.
         if (letter, number) == ('M', 606) {
-            if systems.len() < 2 {
-                let second = fork(&systems[0]);
-                systems.push(second);
+            if self.systems.len() < 2 {
+                self.fork();
             }
-            continue;
+            return;
         }
-        let s = &mut systems[current];
+        let s = &mut self.systems[self.current];
         match (letter, number) {
             ('G', 0..=3) => s.linear(rest),
             ('G', 4) => {
@@ -237,7 +320,7 @@ pub fn read(text: &str) -> Moves {
                 if seconds > 0.0 {
                     s.steps.push(Step::Wait(seconds));
                 } else {
-                    sync(&mut systems, &mut barriers);
+                    self.sync();
                 }
             }
             ('G', 90) => (s.relative, s.relative_e) = (false, false),
@@ -249,20 +332,19 @@ pub fn read(text: &str) -> Moves {
             }
             ('M', 82) => s.relative_e = false,
             ('M', 83) => s.relative_e = true,
-            ('M', 400 | 598) => sync(&mut systems, &mut barriers),
+            ('M', 400 | 598) => self.sync(),
             ('M', 0..=2) => {
-                sync(&mut systems, &mut barriers);
-                current = 0;
+                self.sync();
+                self.current = 0;
             }
             ('M', 596) => {
                 let p = arg('P').unwrap_or(0.0);
                 // More systems than RepRapFirmware's two are taken as given, within
                 // reason; one named before any fork starts where the file is.
                 if (0.0..8.0).contains(&p) {
-                    current = p as usize;
-                    while systems.len() <= current {
-                        let new = fork(&systems[0]);
-                        systems.push(new);
+                    self.current = p as usize;
+                    while self.systems.len() <= self.current {
+                        self.fork();
                     }
                 }
             }
@@ -270,100 +352,141 @@ pub fn read(text: &str) -> Moves {
             _ => {}
         }
     }
-    let mut moves = Moves {
-        systems: systems.len(),
-        offset: placed,
-        ..Moves::default()
-    };
-    clock(&mut systems, &mut moves);
-    moves
-}
 
-/// A new motion system forked from system 0 where system 0's reading now is: its
-/// modes, positions and tool, and a clock that starts when system 0 gets here.
-fn fork(first: &System) -> System {
-    let mut s = first.clone();
-    s.steps = vec![Step::Start(first.steps.len())];
-    s.layer = None;
-    s.uses_uv = false;
-    s
-}
-
-/// A synchronisation point for every system.
-fn sync(systems: &mut [System], barriers: &mut usize) {
-    for s in systems.iter_mut() {
-        s.steps.push(Step::Sync(*barriers));
+    /// A new motion system forked from system 0 where system 0's reading now is: its
+    /// modes, positions and tool, and a clock that starts when system 0 gets here.
+    fn fork(&mut self) {
+        let first = &self.systems[0];
+        let mut s = first.clone();
+        let n = self.done0 + first.steps.len();
+        s.steps = vec![Step::Start(n)];
+        s.layer = None;
+        s.uses_uv = false;
+        self.systems.push(s);
+        self.time.push(0.0);
+        self.at.push(0);
+        if n == self.done0 {
+            self.starts.insert(n, self.time[0]);
+        }
     }
-    *barriers += 1;
-}
 
-/// Puts every system's steps on one clock: each system runs on until its next
-/// synchronisation point; when every system that has one left is at it, all go on
-/// from the latest arrival.
-fn clock(systems: &mut [System], moves: &mut Moves) {
-    let mut at = vec![0usize; systems.len()];
-    let mut time = vec![0.0f64; systems.len()];
-    // System 0's clock after each of its steps, for the systems forked from it.
-    let mut first_after = vec![0.0f64];
-    loop {
-        // Every system runs on to its next synchronisation point (or its end).
-        let mut next = vec![None; systems.len()];
-        for (k, s) in systems.iter().enumerate() {
-            while let Some(step) = s.steps.get(at[k]) {
-                match step {
-                    Step::Move { m, seconds, layer } => {
-                        let t0 = time[k];
-                        time[k] += seconds;
-                        if let Some(layer) = *layer
-                            && m.from != m.to
-                        {
-                            moves.layers.entry(layer).or_default().push(Move {
-                                system: k,
-                                t0,
-                                t1: time[k],
-                                ..m.clone()
-                            });
+    /// A synchronisation point for every system.
+    fn sync(&mut self) {
+        for s in &mut self.systems {
+            s.steps.push(Step::Sync(self.barriers));
+        }
+        self.barriers += 1;
+    }
+
+    /// Puts the steps read so far on one clock: each system runs on until its next
+    /// synchronisation point; when every system that has one left is at it, all go on
+    /// from the latest arrival. Steps done are dropped.
+    fn clock(&mut self) {
+        self.unclocked = 0;
+        let n = self.systems.len();
+        loop {
+            // Every system runs on to its next synchronisation point (or its last
+            // step read).
+            let mut next = vec![None; n];
+            for (k, waits_at) in next.iter_mut().enumerate() {
+                while let Some(step) = self.systems[k].steps.get(self.at[k]) {
+                    match step {
+                        Step::Move { m, seconds, layer } => {
+                            let t0 = self.time[k];
+                            self.time[k] += seconds;
+                            if let Some(layer) = *layer
+                                && m.from != m.to
+                            {
+                                self.pending.entry(layer).or_default().push(Move {
+                                    system: k,
+                                    t0,
+                                    t1: self.time[k],
+                                    ..m.clone()
+                                });
+                            }
                         }
+                        Step::Wait(seconds) => self.time[k] += seconds,
+                        Step::Sync(b) => {
+                            *waits_at = Some(*b);
+                            break;
+                        }
+                        Step::Start(s) => match self.starts.get(s) {
+                            Some(&t) => self.time[k] = self.time[k].max(t),
+                            // System 0 is held at a point before the fork.
+                            None => break,
+                        },
                     }
-                    Step::Wait(seconds) => time[k] += seconds,
-                    Step::Sync(n) => {
-                        next[k] = Some(*n);
-                        break;
+                    self.at[k] += 1;
+                    if k == 0 {
+                        self.step_done0();
                     }
-                    Step::Start(n) => match first_after.get(*n) {
-                        Some(&t) => time[k] = time[k].max(t),
-                        // System 0 is held at a point before the fork.
-                        None => break,
-                    },
                 }
-                at[k] += 1;
-                if k == 0 {
-                    first_after.push(time[0]);
+            }
+            // The earliest point in the file any system waits at: the systems there
+            // meet (a system started after it never had it).
+            let Some(first) = next.iter().flatten().min().copied() else {
+                break;
+            };
+            let meet = (0..n)
+                .filter(|&k| next[k] == Some(first))
+                .map(|k| self.time[k])
+                .fold(0.0, f64::max);
+            for (k, waits_at) in next.iter().enumerate() {
+                if *waits_at == Some(first) {
+                    self.time[k] = meet;
+                    self.at[k] += 1;
+                    if k == 0 {
+                        self.step_done0();
+                    }
                 }
             }
         }
-        // The earliest point in the file any system waits at: the systems there meet
-        // (a system started after it never had it).
-        let Some(first) = next.iter().flatten().min().copied() else {
-            break;
-        };
-        let meet = (0..systems.len())
-            .filter(|&k| next[k] == Some(first))
-            .map(|k| time[k])
-            .fold(0.0, f64::max);
-        for k in 0..systems.len() {
-            if next[k] == Some(first) {
-                time[k] = meet;
-                at[k] += 1;
-                if k == 0 {
-                    first_after.push(time[0]);
-                }
+        for (s, at) in self.systems.iter_mut().zip(&mut self.at) {
+            s.steps.drain(..*at);
+            *at = 0;
+        }
+    }
+
+    /// Counts a step of system 0 done, noting its clock where a fork waits for it.
+    fn step_done0(&mut self) {
+        self.done0 += 1;
+        if self.systems.len() > 1 {
+            let waited = self.systems[1..]
+                .iter()
+                .any(|s| matches!(s.steps.first(), Some(Step::Start(n)) if *n == self.done0));
+            if waited {
+                self.starts.insert(self.done0, self.time[0]);
             }
         }
     }
-    for layer in moves.layers.values_mut() {
-        // Each system's moves stay in order; systems follow one another.
-        layer.sort_by_key(|m| m.system);
+
+    /// Hands `out` each layer no system can add to any more: below every layer a
+    /// system still has steps in, or is reading; every layer at the end.
+    fn hand_over(&mut self, out: &mut impl FnMut(usize, Vec<Move>, [f64; 2]), all: bool) {
+        let open = if all {
+            usize::MAX
+        } else {
+            self.systems
+                .iter()
+                .map(|s| {
+                    let waiting = s.steps.iter().find_map(|step| match step {
+                        Step::Move { layer, .. } => *layer,
+                        _ => None,
+                    });
+                    waiting.or(s.layer).unwrap_or(usize::MAX)
+                })
+                .min()
+                .unwrap_or(usize::MAX)
+        };
+        while let Some(entry) = self.pending.first_entry() {
+            if *entry.key() >= open {
+                break;
+            }
+            let (layer, mut list) = entry.remove_entry();
+            // Each system's moves stay in order; systems follow one another.
+            list.sort_by_key(|m| m.system);
+            out(layer, list, self.placed);
+        }
     }
 }
 
@@ -383,6 +506,48 @@ mod tests {
             (l[0].t0 - 2.0).abs() < 1e-9 && (l[0].t1 - 3.0).abs() < 1e-9,
             "{l:?}"
         );
+    }
+
+    /// Each layer is handed over once no system can add to it, not at the end: the
+    /// reader holds a few layers, whatever the file's size.
+    #[test]
+    fn layers_are_handed_over_as_soon_as_every_system_is_past_them() {
+        let mut reader = Reader::new();
+        let mut got: Vec<(usize, usize)> = Vec::new();
+        let mut lines = 0;
+        let mut feed = |reader: &mut Reader, text: &str, got: &mut Vec<(usize, usize)>| {
+            for line in text.lines() {
+                lines += 1;
+                reader.line(line, &mut |layer, list, _| got.push((layer, list.len())));
+            }
+        };
+        feed(
+            &mut reader,
+            "G90\nM83\n;LAYER:0\nG1 X10 Y0 E1 F600\n;LAYER:1\n",
+            &mut got,
+        );
+        assert_eq!(got, vec![(0, 1)]);
+        feed(
+            &mut reader,
+            "G1 X10 Y10 E1\nG1 X0 Y10 E1\n;LAYER:2\nG1 X0 Y0\n",
+            &mut got,
+        );
+        assert_eq!(got, vec![(0, 1), (1, 2)]);
+        reader.finish(&mut |layer, list, _| got.push((layer, list.len())));
+        assert_eq!(got, vec![(0, 1), (1, 2), (2, 1)]);
+        // Two systems: system 0 past layer 0 does not close it while system 1 is in
+        // it.
+        let mut reader = Reader::new();
+        let mut got = Vec::new();
+        feed(
+            &mut reader,
+            "G90\nM83\nM606 S1\nM596 P0\n;LAYER:0\nG1 X20 Y0 E1 F600\nM596 P1\n;LAYER:0\nG1 U10 V0 F600\nM596 P0\n;LAYER:1\nG1 X0 Y0 E1\n",
+            &mut got,
+        );
+        assert!(got.is_empty(), "{got:?}");
+        feed(&mut reader, "M596 P1\n;LAYER:1\n", &mut got);
+        assert_eq!(got, vec![(0, 2)]);
+        assert!(lines > 0);
     }
 
     #[test]
