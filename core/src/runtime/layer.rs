@@ -23,6 +23,9 @@ pub(super) struct Kept {
     pub(super) section: f64,
     /// The contours' area, holes less.
     pub(super) kept: f64,
+    /// Whether the slicer repaired the cut (it warned: chains dropped, joined across
+    /// gaps or holes, or the layer filled from a neighbour).
+    pub(super) repaired: bool,
 }
 
 impl Engine {
@@ -114,6 +117,7 @@ impl Engine {
                         mesh: mi,
                         section,
                         kept: layer.contours.iter().map(|c| c.signed_area()).sum(),
+                        repaired: !layer.warnings.is_empty(),
                     });
                 }
                 cut[mi] = Some((layer, tree));

@@ -218,7 +218,7 @@ impl Engine {
             },
         )?;
         tally.check_fill()?;
-        tally.volumes.check(|mesh| {
+        let said = tally.volumes.check(|mesh| {
             let parts: Vec<String> = (0..info.parts.len())
                 .filter(|&p| part_mesh[p] == mesh)
                 .map(|p| format!("`{}`", info.parts[p].name))
@@ -226,6 +226,9 @@ impl Engine {
             let word = if parts.len() == 1 { "part" } else { "parts" };
             format!("{word} {}", parts.join(", "))
         })?;
+        for (code, message) in said {
+            say(Diagnostic::warning(StageKind::Slice, code, message));
+        }
         for (sink, label) in sinks.into_iter().zip(&labels) {
             timings.time(StageKind::Export, || {
                 crate::plugin::guard_call(label, || sink.finish(info, &mut outputs))
