@@ -228,8 +228,10 @@ pub fn summary(report: &RunReport, timings: bool) {
     );
     // The plan's time moves at the plan's constant speeds, without acceleration,
     // heating or tool changes: a machine file's own estimate is what the machine takes.
+    // The comparison with one tool at a time says something only where the tools
+    // worked at once: with one busy tool the two times are the same.
     match (report.build_time, report.sequential_time) {
-        (Some(t), Some(s)) if s > 0.0 => {
+        (Some(t), Some(s)) if s > 0.0 && (t / s - 1.0).abs() >= 5e-4 => {
             eprintln!(
                 "the plan's build time (its toolpaths at constant speeds): {t:.1} s ({s:.1} s one tool at a time: ratio {:.3})",
                 t / s
