@@ -1,5 +1,5 @@
 //! Resource limits of a run: every buffer whose size comes from the input (a model's
-//! triangles, a grid's cells, a family's sub-regions) is checked against one of these
+//! triangles, a grid's samples, a family's sub-regions) is checked against one of these
 //! before it is allocated, so a typo or a hostile file ends in an error that names the
 //! limit, never in an allocation the machine cannot make.
 //!
@@ -28,19 +28,26 @@ pub struct Limits {
     pub triangles: u64,
     /// Bytes of one model file, or of a 3MF package's uncompressed model part.
     pub model_bytes: u64,
-    /// Cells of one grid a stage allocates for a layer (distance-field cells, bitmap
-    /// pixels).
-    pub grid_cells: u64,
+    /// Samples of one grid a stage allocates for a layer (a distance field's samples, a
+    /// bitmap's pixels). `grid_samples` in a pipeline (the host reads its former name
+    /// `grid_cells` too, [`GRID_SAMPLES_FORMERLY`]); on the plugin wire it keeps the
+    /// former name, which plugins of ABI 7.0-7.3 know.
+    #[serde(rename = "grid_cells")]
+    pub grid_samples: u64,
     /// Sub-regions (rings, levels, cells) a discretiser makes in one family.
     pub regions: u64,
 }
+
+/// The name `grid_samples` had in a pipeline's `[limits]` table, and still has in its
+/// serde form.
+pub const GRID_SAMPLES_FORMERLY: &str = "grid_cells";
 
 impl Default for Limits {
     fn default() -> Self {
         Self {
             triangles: 20_000_000,
             model_bytes: 1 << 30,
-            grid_cells: 1 << 24,
+            grid_samples: 1 << 24,
             regions: 1_000,
         }
     }
@@ -51,7 +58,7 @@ impl Default for Limits {
 pub enum Limit {
     Triangles,
     ModelBytes,
-    GridCells,
+    GridSamples,
     Regions,
 }
 
@@ -59,7 +66,7 @@ impl Limit {
     pub const ALL: [Limit; 4] = [
         Limit::Triangles,
         Limit::ModelBytes,
-        Limit::GridCells,
+        Limit::GridSamples,
         Limit::Regions,
     ];
 
@@ -68,7 +75,7 @@ impl Limit {
         match self {
             Limit::Triangles => "triangles",
             Limit::ModelBytes => "bytes",
-            Limit::GridCells => "grid cells",
+            Limit::GridSamples => "grid samples",
             Limit::Regions => "sub-regions",
         }
     }
@@ -78,7 +85,7 @@ impl Limit {
         match self {
             Limit::Triangles => "triangles",
             Limit::ModelBytes => "model_bytes",
-            Limit::GridCells => "grid_cells",
+            Limit::GridSamples => "grid_samples",
             Limit::Regions => "regions",
         }
     }
@@ -90,7 +97,7 @@ impl Limits {
         match limit {
             Limit::Triangles => self.triangles,
             Limit::ModelBytes => self.model_bytes,
-            Limit::GridCells => self.grid_cells,
+            Limit::GridSamples => self.grid_samples,
             Limit::Regions => self.regions,
         }
     }
@@ -129,8 +136,8 @@ mod tests {
             text.contains("limits.regions") && text.contains("1001") && text.contains("rings"),
             "{text}"
         );
-        assert!(limits.check(Limit::GridCells, f64::NAN, "a grid").is_err());
-        assert!(limits.check(Limit::GridCells, f64::INFINITY, "a grid").is_err());
+        assert!(limits.check(Limit::GridSamples, f64::NAN, "a grid").is_err());
+        assert!(limits.check(Limit::GridSamples, f64::INFINITY, "a grid").is_err());
     }
 
     #[test]

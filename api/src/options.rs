@@ -366,33 +366,34 @@ macro_rules! stage_options {
         $(, $($rest:tt)*)?
     ) => {
         $crate::stage_options!(@field $attrs $vis $name [$($done)*
-            { [$fvis] $field [$ty] [$shared.default] [$shared.doc] [$shared.range] }
+            { [$fvis] $field [$ty] [$shared.default] [$shared.doc] [$shared.range] [] }
         ] $($($rest)*)?);
     };
 
-    // A default written as a TOML literal.
+    // A default written as a TOML literal. `#[formerly("old")]`: the name the option
+    // had before, still read.
     (@field $attrs:tt $vis:tt $name:ident [$($done:tt)*]
-        $(#[doc = $doc:literal])* $(#[range($min:expr, $max:expr)])?
+        $(#[doc = $doc:literal])* $(#[range($min:expr, $max:expr)])? $(#[formerly($old:literal)])?
         $fvis:vis $field:ident : $ty:ty = $default:literal
         $(, $($rest:tt)*)?
     ) => {
         $crate::stage_options!(@field $attrs $vis $name [$($done)*
             { [$fvis] $field [$ty] [::core::option::Option::Some($default)]
               [$crate::options::doc_text(::core::concat!($($doc),*))]
-              [$crate::stage_options!(@range $($min, $max)?)] }
+              [$crate::stage_options!(@range $($min, $max)?)] [$($old)?] }
         ] $($($rest)*)?);
     };
 
     // No default: required, or absent when the type is an `Option`.
     (@field $attrs:tt $vis:tt $name:ident [$($done:tt)*]
-        $(#[doc = $doc:literal])* $(#[range($min:expr, $max:expr)])?
+        $(#[doc = $doc:literal])* $(#[range($min:expr, $max:expr)])? $(#[formerly($old:literal)])?
         $fvis:vis $field:ident : $ty:ty
         $(, $($rest:tt)*)?
     ) => {
         $crate::stage_options!(@field $attrs $vis $name [$($done)*
             { [$fvis] $field [$ty] [::core::option::Option::None]
               [$crate::options::doc_text(::core::concat!($($doc),*))]
-              [$crate::stage_options!(@range $($min, $max)?)] }
+              [$crate::stage_options!(@range $($min, $max)?)] [$($old)?] }
         ] $($($rest)*)?);
     };
 
@@ -400,7 +401,7 @@ macro_rules! stage_options {
     (@range $min:expr, $max:expr) => { ::core::option::Option::Some(($min as f64, $max as f64)) };
 
     (@field [$($attr:tt)*] [$vis:vis] $name:ident [$(
-        { [$fvis:vis] $field:ident [$ty:ty] [$default:expr] [$doc:expr] [$range:expr] }
+        { [$fvis:vis] $field:ident [$ty:ty] [$default:expr] [$doc:expr] [$range:expr] [$($old:literal)?] }
     )*]) => {
         $($attr)*
         $vis struct $name {
@@ -439,7 +440,7 @@ macro_rules! stage_options {
             #[serde(deny_unknown_fields)]
             struct Given {
                 $(
-                    #[serde(default)]
+                    #[serde(default $(, alias = $old)?)]
                     $field: $crate::options::Checked<$ty, $field>,
                 )*
             }
@@ -502,6 +503,30 @@ mod tests {
             point: [f64; 3] = "[0.0, 0.0, 1.0]",
             layers: Vec<usize> = "[]",
         }
+    }
+
+    crate::stage_options! {
+        #[derive(Debug)]
+        struct Renamed {
+            /// samples (formerly `cells`)
+            #[range(8, 64)]
+            #[formerly("cells")]
+            samples: usize = "16",
+        }
+    }
+
+    #[test]
+    fn a_renamed_option_is_read_by_its_former_name_too() {
+        let read = |text: &str| toml::from_str::<Renamed>(text).map(|r| r.samples);
+        assert_eq!(read("samples = 32").unwrap(), 32);
+        assert_eq!(read("cells = 32").unwrap(), 32);
+        assert_eq!(read("").unwrap(), 16);
+        // The former name is checked as the option is: its range, once.
+        let e = read("cells = 4").unwrap_err().to_string();
+        assert!(e.contains("`samples` = 4 is outside its range 8 to 64"), "{e}");
+        let e = read("cells = 32\nsamples = 32").unwrap_err().to_string();
+        assert!(e.contains("duplicate field `samples`"), "{e}");
+        assert_eq!(Renamed::SPECS[0].name, "samples");
     }
 
     #[test]

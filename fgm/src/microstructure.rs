@@ -308,8 +308,11 @@ impl Microstructure {
     pub fn cells_in(&self, lo: [f64; 3], hi: [f64; 3], limit: usize) -> Result<Vec<PlacedCell>> {
         let (lo, hi) = (Vector3::from(lo), Vector3::from(hi));
         let count = self.lattice.count_in_box(lo, hi);
-        self.limits
-            .check(Limit::GridCells, count, "the base cells' lattice over the model")?;
+        self.limits.check(
+            Limit::GridSamples,
+            count,
+            "the base cells' lattice over the model",
+        )?;
         let stride = ((count / limit.max(1) as f64).ceil() as usize).max(1);
         let mut out = Vec::new();
         let mut seen = 0usize;
@@ -346,7 +349,7 @@ impl Microstructure {
         };
         let lattice = self.lattice.moved(&turn, offset);
         self.limits.check(
-            Limit::GridCells,
+            Limit::GridSamples,
             lattice.count_near_plane(z, self.reach, bbox),
             "the base cells' lattice points near a layer",
         )?;

@@ -322,10 +322,10 @@ pub fn mesh_info(dir: &Path, mesh: &lamina_core::Mesh) -> lamina_core::RunInfo {
 }
 
 /// The `distance-field` discretiser from the family's boundary (the paper's field), at
-/// `levels`, on `cells` samples along the longer side; every other option its default.
+/// `levels`, on `samples` samples along the longer side; every other option its default.
 pub fn boundary_field(
     levels: lamina_discretise::distance_field::Levels,
-    cells: usize,
+    samples: usize,
 ) -> lamina_discretise::distance_field::DistanceField {
     lamina_discretise::distance_field::DistanceField {
         feature: lamina_discretise::distance_field::Feature::Boundary,
@@ -335,8 +335,8 @@ pub fn boundary_field(
         surfaces: Default::default(),
         width: None,
         levels,
-        cells,
-        cell_size: None,
+        samples,
+        sample_spacing: None,
         around: Default::default(),
         limits: Default::default(),
     }

@@ -867,3 +867,41 @@ fn a_holed_wall_is_closed_and_a_part_its_layers_do_not_hold_fails_the_run_naming
     );
     assert!(!out_dir.exists() || std::fs::read_dir(&out_dir).expect("folder").next().is_none());
 }
+
+/// Options renamed so that "cell" means a circumferential cell alone are still read by
+/// their former names, with the same outcome: a pipeline written before the renames
+/// runs as it did (`cells` of the distance field is `samples` now, the NC exporter's
+/// hybrid `cell` its `machine`).
+#[test]
+fn pipelines_with_former_option_names_run_as_with_the_new_ones() {
+    for (name, new, old, file) in [
+        ("blade-skin", "samples = 128", "cells = 128", "blade-skin.json"),
+        (
+            "pipe-work-cycles",
+            "machine = \"cmpm-hybrid\"",
+            "cell = \"cmpm-hybrid\"",
+            "pipe-work-cycles.nc",
+        ),
+    ] {
+        let shipped = std::fs::read_to_string(pipelines().join(format!("{name}.toml"))).expect("pipeline");
+        assert!(shipped.contains(new), "{name} says `{new}`");
+        let outputs: Vec<Vec<u8>> = [shipped.clone(), shipped.replace(new, old)]
+            .iter()
+            .map(|t| {
+                let dir = tempfile::tempdir().expect("tempdir");
+                let pipeline = write(dir.path(), &format!("{name}.toml"), t);
+                let out = dir.path().join("out");
+                let o = lamina(&[
+                    "run",
+                    pipeline.to_str().expect("utf-8"),
+                    "--out",
+                    out.to_str().expect("utf-8"),
+                    "--quiet",
+                ]);
+                assert!(o.status.success(), "{name}: {}", text(&o.stderr));
+                std::fs::read(out.join(file)).expect("the output")
+            })
+            .collect();
+        assert!(outputs[0] == outputs[1], "{name}: the former name changed {file}");
+    }
+}

@@ -311,10 +311,10 @@ fn option_values_that_would_exhaust_the_machine_are_refused_before_work() {
     let p = |name: &str| pipelines().join(name);
     let cases: &[(&str, &str, &[&str], &str)] = &[
         (
-            "distance-field cells",
+            "distance-field samples",
             "blade-skin.toml",
-            &["discretise.cells=8192"],
-            "limits.grid_cells",
+            &["discretise.samples=8192"],
+            "limits.grid_samples",
         ),
         (
             "distance-field count",
@@ -323,10 +323,10 @@ fn option_values_that_would_exhaust_the_machine_are_refused_before_work() {
             "limits.regions",
         ),
         (
-            "distance-field cell size",
+            "distance-field sample spacing",
             "blade-skin.toml",
-            &["discretise.cell_size=1e-5"],
-            "`cell_size` = 1e-5 is outside its range 0.0001 to 1000000",
+            &["discretise.sample_spacing=1e-5"],
+            "`sample_spacing` = 1e-5 is outside its range 0.0001 to 1000000",
         ),
         (
             "offset count",
@@ -865,7 +865,7 @@ fn files_a_pipeline_names_stay_in_its_folder_unless_the_command_line_allows_more
     let cell = sub.join("cell.toml");
     std::fs::write(
         &cell,
-        format!("[model]\nuse = \"tube\"\nheight = 2.0\n\n{head}[[output]]\nuse = \"nc\"\npath = \"x.nc\"\ncell = \"{}\"\n", abs(&secret_toml)),
+        format!("[model]\nuse = \"tube\"\nheight = 2.0\n\n{head}[[output]]\nuse = \"nc\"\npath = \"x.nc\"\nmachine = \"{}\"\n", abs(&secret_toml)),
     )
     .expect("write");
     refused("cell", &s.check(&cell, &[]));

@@ -192,7 +192,7 @@ fn machining_paths_keep_their_tools_radius_from_the_boundaries() {
     let small = pipe
         .replace("pass = \"rough\"\n", "pass = \"rough\"\ndiameter = 4.0\n")
         .replace("pass = \"finish\"\n", "pass = \"finish\"\ndiameter = 4.0\n")
-        .replace("cell = \"cmpm-hybrid\"", "tools = { cup-wheel = 3 }");
+        .replace("machine = \"cmpm-hybrid\"", "tools = { cup-wheel = 3 }");
     assert_eq!(small.matches("diameter = 4.0").count(), 2);
     let plan = crate::support::run_text(dir.path(), &small, "pipe-work-cycles.json");
     let layers = plan["layers"].as_array().expect("layers");
@@ -627,7 +627,7 @@ thickness = 0.5
 [[process]]
 use = "engrave"
 diameter = 0.02
-cell = CELL
+base_cell = CELL
 
 [[output]]
 use = "json"
@@ -637,7 +637,7 @@ path = "plan.json"
 use = "bitmap"
 path = "cells"
 pixel = 0.01
-cell = CELL
+base_cell = CELL
 "#;
 
 #[test]
@@ -802,8 +802,8 @@ fn cells_that_outgrow_their_lattice_or_conflicting_void_options_are_refused() {
     let err = text(&try_run_text(dir.path(), &CELLS.replace("CELL", shape)).stderr);
     assert!(err.contains("cell") && err.contains("`shape` is `cone`"), "{err}");
     let both = CELLS.replace(
-        "diameter = 0.02\ncell = CELL",
-        "diameter = 0.02\nvoid_radius = 0.2\ncell = { size = 0.2, period = [1.0, 1.0, 1.0] }",
+        "diameter = 0.02\nbase_cell = CELL",
+        "diameter = 0.02\nvoid_radius = 0.2\nbase_cell = { size = 0.2, period = [1.0, 1.0, 1.0] }",
     );
     let err = text(
         &try_run_text(
@@ -813,7 +813,7 @@ fn cells_that_outgrow_their_lattice_or_conflicting_void_options_are_refused() {
         .stderr,
     );
     assert!(
-        err.contains("void_radius") && err.contains("give either `cell`"),
+        err.contains("void_radius") && err.contains("give either `base_cell`"),
         "{err}"
     );
 }
@@ -843,16 +843,16 @@ fn the_nc_file_is_refused_where_the_cell_could_not_run_the_plan() {
     let cell = include_str!("../../plugins/process/cells/cmpm-hybrid.toml")
         .replace("x = [-150.0, 150.0]", "x = [-5.0, 5.0]");
     std::fs::write(dir.path().join("small.toml"), cell).expect("cell");
-    let small = pipe.replace("cell = \"cmpm-hybrid\"", "cell = \"small.toml\"");
+    let small = pipe.replace("machine = \"cmpm-hybrid\"", "machine = \"small.toml\"");
     let err = text(&try_run_text(dir.path(), &small).stderr);
     assert!(err.contains("travel x [-5.0, 5.0]"), "{err}");
     // Numbers come from the cell or from `tools`, not both.
     let both = pipe.replace(
-        "cell = \"cmpm-hybrid\"",
-        "cell = \"cmpm-hybrid\"\ntools = { laser = 9 }",
+        "machine = \"cmpm-hybrid\"",
+        "machine = \"cmpm-hybrid\"\ntools = { laser = 9 }",
     );
     let err = text(&try_run_text(dir.path(), &both).stderr);
-    assert!(err.contains("give `cell` or `tools`, not both"), "{err}");
+    assert!(err.contains("give `machine` or `tools`, not both"), "{err}");
 }
 
 #[test]
@@ -877,7 +877,7 @@ fn options_that_would_exhaust_the_machine_stop_at_the_grid_limit() {
         .replacen("CELL", "{ size = 1e-4, period = [1e-3, 1e-3, 1e-3] }", 1)
         .replace("CELL", "{ size = 0.3, period = [1.0, 1.0, 1.0] }");
     let err = text(&try_run_text(dir.path(), &dense).stderr);
-    assert!(err.contains("grid_cells"), "{err}");
+    assert!(err.contains("grid_samples"), "{err}");
 }
 
 #[test]
@@ -889,9 +889,9 @@ fn cells_turn_with_the_model_when_it_is_oriented_by_them() {
     let cell = r#"{ shape = "box", size = 0.2, aspect = [1.0, 2.0, 0.5], period = [1.0, 1.0, 1.0], origin = [0.5, 0.5, 0.5] }"#;
     let text = format!(
         "[materials.m]\ncolour = [70, 130, 180]\n[model]\nuse = \"box\"\nsize = [10.0, 2.0, 1.0]\n\
-         [orient]\nuse = \"candidates\"\ncriterion = \"base-cell\"\ncell = {cell}\n\
+         [orient]\nuse = \"candidates\"\ncriterion = \"base-cell\"\nbase_cell = {cell}\n\
          [slice]\nuse = \"uniform\"\nthickness = 0.5\n\
-         [[process]]\nuse = \"engrave\"\ndiameter = 0.02\ncell = {cell}\n\
+         [[process]]\nuse = \"engrave\"\ndiameter = 0.02\nbase_cell = {cell}\n\
          [[output]]\nuse = \"json\"\npath = \"plan.json\"\n"
     );
     let dir = tempfile::tempdir().expect("tempdir");
@@ -932,7 +932,7 @@ fn the_program_speaks_its_controllers_dialect_or_is_refused_with_what_the_contro
     let pipe = pipe_with_outputs(&pipe, &["nc"]);
     // A Fanuc-like controller: program number, reference return, M06, feeders as macro
     // variables, a decimal point on every coordinate.
-    let fanuc = pipe.replace("cell = \"cmpm-hybrid\"", "cell = \"cmpm-hybrid-fanuc\"");
+    let fanuc = pipe.replace("machine = \"cmpm-hybrid\"", "machine = \"cmpm-hybrid-fanuc\"");
     let o = try_run_text(dir.path(), &fanuc);
     assert!(o.status.success(), "{}", text(&o.stderr));
     let nc = std::fs::read_to_string(dir.path().join("out/pipe-work-cycles.nc")).expect("nc");
@@ -952,7 +952,7 @@ fn the_program_speaks_its_controllers_dialect_or_is_refused_with_what_the_contro
         }
     }
     // Grbl cannot hold the hybrid process: no spray gun, no tool changer.
-    let grbl = pipe.replace("cell = \"cmpm-hybrid\"", "cell = \"grbl-laser\"");
+    let grbl = pipe.replace("machine = \"cmpm-hybrid\"", "machine = \"grbl-laser\"");
     let dir = tempfile::tempdir().expect("tempdir");
     let o = try_run_text(dir.path(), &grbl);
     assert!(!o.status.success());
@@ -1003,7 +1003,8 @@ fn a_wheel_its_spindle_cannot_turn_fast_enough_grinds_at_the_top_speed_and_the_r
     assert_ne!(slow, cell);
     std::fs::write(dir.path().join("slow.toml"), slow).expect("cell");
     let pipe = std::fs::read_to_string(pipelines().join("pipe-work-cycles.toml")).expect("pipe");
-    let pipe = pipe_with_outputs(&pipe, &["nc"]).replace("cell = \"cmpm-hybrid\"", "cell = \"slow.toml\"");
+    let pipe =
+        pipe_with_outputs(&pipe, &["nc"]).replace("machine = \"cmpm-hybrid\"", "machine = \"slow.toml\"");
     let o = try_run_text(dir.path(), &pipe);
     let err = text(&o.stderr);
     assert!(o.status.success(), "{err}");
@@ -1017,7 +1018,7 @@ fn a_wheel_its_spindle_cannot_turn_fast_enough_grinds_at_the_top_speed_and_the_r
     assert!(nc.contains("\nS6000 M3\n") && !nc.contains("S23873"));
     // The shipped cell reaches it.
     let dir = tempfile::tempdir().expect("tempdir");
-    let shipped = pipe.replace("cell = \"slow.toml\"", "cell = \"cmpm-hybrid\"");
+    let shipped = pipe.replace("machine = \"slow.toml\"", "machine = \"cmpm-hybrid\"");
     let o = try_run_text(dir.path(), &shipped);
     assert!(
         o.status.success() && !text(&o.stderr).contains("rev/min"),

@@ -73,7 +73,7 @@ fn the_base_cells_main_surfaces_choose_the_direction_not_the_objects() {
     // large faces then stand parallel to the build direction). Over the plate's own
     // surfaces the least is along x, its length.
     let dir = tempfile::tempdir().expect("tempdir");
-    let cell = "cell = { shape = \"box\", size = 0.1, aspect = [1.0, 3.0, 0.2], period = [1.0, 1.0, 1.0], origin = [0.5, 0.5, 0.5] }";
+    let cell = "base_cell = { shape = \"box\", size = 0.1, aspect = [1.0, 3.0, 0.2], period = [1.0, 1.0, 1.0], origin = [0.5, 0.5, 0.5] }";
     let (plan, _) = run(
         dir.path(),
         &format!("use = \"candidates\"\ncriterion = \"base-cell\"\n{cell}"),
@@ -104,7 +104,7 @@ fn the_base_cells_main_surfaces_choose_the_direction_not_the_objects() {
     std::fs::write(
         &path,
         "[model]\nuse = \"box\"\n[materials.a]\ncolour = [1, 2, 3]\n[orient]\nuse = \"candidates\"\n\
-         criterion = \"base-cell\"\ncell = { size = 0.1, period = [1.0, 1.0, 1.0] }\n",
+         criterion = \"base-cell\"\nbase_cell = { size = 0.1, period = [1.0, 1.0, 1.0] }\n",
     )
     .expect("write");
     let out = Command::new(env!("CARGO_BIN_EXE_lamina"))

@@ -275,7 +275,7 @@ fn auto_thicknesses_follow_the_base_cell_and_the_sampled_gradient() {
     // composite, one material, the thickest: 2 mm. A steeper FGM (z / 2) stops at 0.5.
     let dir = tempfile::tempdir().expect("tempdir");
     let pipe = std::fs::read_to_string(pipelines().join("pipe-work-cycles.toml")).expect("pipe");
-    let auto = "[sequence]\nuse = \"work-cycles\"\nthickness = { inner = \"auto\", middle = \"auto\", outer = \"auto\" }\ncell = { inner = 1.0 }\nstep = 0.1\n";
+    let auto = "[sequence]\nuse = \"work-cycles\"\nthickness = { inner = \"auto\", middle = \"auto\", outer = \"auto\" }\nbase_cell = { inner = 1.0 }\nstep = 0.1\n";
     let text = pipe.replace("[sequence]\nuse = \"work-cycles\"\n", auto);
     assert_ne!(text, pipe);
     let plan = run_text(dir.path(), &text, "pipe-work-cycles.json");
@@ -296,7 +296,7 @@ fn auto_thicknesses_follow_the_base_cell_and_the_sampled_gradient() {
     let plan = run_text(dir.path(), &steep, "pipe-work-cycles.json");
     assert_eq!(plan["sequence"]["regions"][1]["thickness_um"], 500);
     // A base cell for a name that is neither a part nor a region is named.
-    let wrong = text.replace("cell = { inner = 1.0 }", "cell = { core = 1.0 }");
+    let wrong = text.replace("base_cell = { inner = 1.0 }", "base_cell = { core = 1.0 }");
     let err = crate::support::text(&try_run_text(dir.path(), &wrong).stderr);
     assert!(err.contains("no part or region named `core`"), "{err}");
 }

@@ -329,7 +329,21 @@ impl Pipeline {
         });
         let plugins = raw.plugins.iter().map(|p| base_dir.join(p)).collect();
         let limits = match raw.limits.take() {
-            Some(t) => reader.table(vec![key("limits")], t).with_host_keys(&[]).parse()?,
+            Some(mut t) => {
+                // The table names the grid limit `grid_samples` (or, as before,
+                // `grid_cells`); its serde form keeps the former name.
+                let former = lamina_api::limits::GRID_SAMPLES_FORMERLY;
+                if let Some(v) = t.remove("grid_samples") {
+                    if t.contains_key(former) {
+                        return Err(reader.table(vec![key("limits")], t).error_at(
+                            former,
+                            "give `grid_samples` or its former name `grid_cells`, not both",
+                        ));
+                    }
+                    t.insert(former.to_string(), v);
+                }
+                reader.table(vec![key("limits")], t).with_host_keys(&[]).parse()?
+            }
             None => Limits::default(),
         };
         Ok(Pipeline {

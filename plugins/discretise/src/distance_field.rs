@@ -82,12 +82,14 @@ lamina_api::stage_options! {
         /// distance (mm) that r = 1 stands for (farther is r = 1); default each family's largest distance (Eq. 2's max(d_ij))
         #[range(0.001, 1e6)]
         width: Option<f64>,
-        /// samples along the family's longer side
+        /// samples of the distance along the family's longer side (formerly `cells`)
         #[range(8, 65536)]
-        cells: usize = "256",
-        /// sample spacing (mm) instead of `cells`
+        #[formerly("cells")]
+        samples: usize = "256",
+        /// spacing of the samples (mm) instead of `samples` (formerly `cell_size`)
         #[range(0.0001, 1e6)]
-        cell_size: Option<f64>,
+        #[formerly("cell_size")]
+        sample_spacing: Option<f64>,
         cells_around: Option<usize> = use crate::cells::AROUND_OPTION,
         cell_length: Option<f64> = use crate::cells::LENGTH_OPTION,
         cell_cuts: Option<crate::cells::Cuts> = use crate::cells::CUTS_OPTION,
@@ -169,25 +171,26 @@ pub struct DistanceField {
     /// The chosen faces of each mesh met so far (by address), built once per run.
     pub surfaces: Surfaces,
     pub levels: Levels,
-    pub cells: usize,
-    pub cell_size: Option<f64>,
+    /// Samples along the longer side of a family's box, or their spacing (mm).
+    pub samples: usize,
+    pub sample_spacing: Option<f64>,
     /// Circumferential cells of every sub-region.
     pub around: Cells,
     /// The distance (mm) that r = 1 stands for, instead of each family's largest
     /// distance: one scale for every layer (a surface feature's distance varies along
     /// Z, not only in the layer).
     pub width: Option<f64>,
-    /// The run's limits: a grid that `cell_size` makes too fine is refused.
+    /// The run's limits: a grid that `sample_spacing` makes too fine is refused.
     pub limits: lamina_api::Limits,
 }
 
 impl DistanceField {
-    /// Samples along the longer side of the family's box: `cells`, or what
-    /// `cell_size` gives.
+    /// Samples along the longer side of the family's box: `samples`, or what
+    /// `sample_spacing` gives.
     fn resolution(&self, bbox: &lamina_api::BBox2) -> usize {
-        match self.cell_size {
+        match self.sample_spacing {
             Some(s) => ((bbox.width().max(bbox.height()) / s).ceil() as usize + 3).clamp(4, 1 << 15),
-            None => self.cells,
+            None => self.samples,
         }
     }
 
@@ -316,16 +319,16 @@ impl Discretiser for DistanceField {
 
     fn discretise(&self, ctx: &FamilyContext<'_>) -> Result<Vec<SubRegion>> {
         let polygon = ctx.tree.family_polygon(&ctx.layer.contours, ctx.family);
-        if self.cell_size.is_some() {
+        if self.sample_spacing.is_some() {
             let bbox = polygon.bbox();
             let n = self.resolution(&bbox) as f64;
             let (w, h) = (bbox.width(), bbox.height());
             self.limits.check(
-                lamina_api::Limit::GridCells,
+                lamina_api::Limit::GridSamples,
                 n * n * w.min(h) / w.max(h).max(f64::MIN_POSITIVE),
                 &format!(
-                    "a distance field of {w:.1} x {h:.1} mm in cells of {} mm",
-                    self.cell_size.unwrap_or(0.0)
+                    "a distance field of {w:.1} x {h:.1} mm sampled every {} mm",
+                    self.sample_spacing.unwrap_or(0.0)
                 ),
             )?;
         }
@@ -402,21 +405,27 @@ fn build(config: &StageConfig<'_>) -> Result<AnyStage> {
     if let Levels::Steps(t) = &levels {
         crate::options::regions(config, "step", t.count as f64)?;
     }
-    if o.cells < 8 {
-        return Err(config.error("cells", format!("`cells` must be at least 8, not {}", o.cells)));
+    if o.samples < 8 {
+        return Err(config.error(
+            "samples",
+            format!("`samples` must be at least 8, not {}", o.samples),
+        ));
     }
     config
         .limits
         .check(
-            lamina_api::Limit::GridCells,
-            (o.cells as f64).powi(2),
-            "`cells` squared",
+            lamina_api::Limit::GridSamples,
+            (o.samples as f64).powi(2),
+            "`samples` squared",
         )
-        .map_err(|e| config.error("cells", e.to_string()))?;
-    if let Some(s) = o.cell_size
+        .map_err(|e| config.error("samples", e.to_string()))?;
+    if let Some(s) = o.sample_spacing
         && (s.is_nan() || s <= 0.0 || s.is_infinite())
     {
-        return Err(config.error("cell_size", "`cell_size` must be a positive number of mm"));
+        return Err(config.error(
+            "sample_spacing",
+            "`sample_spacing` must be a positive number of mm",
+        ));
     }
     let point = match (o.feature, o.point) {
         (Feature::Point, None) => {
@@ -458,8 +467,8 @@ fn build(config: &StageConfig<'_>) -> Result<AnyStage> {
             None => None,
         },
         levels,
-        cells: o.cells,
-        cell_size: o.cell_size,
+        samples: o.samples,
+        sample_spacing: o.sample_spacing,
         around: Cells::checked(o.cells_around, o.cell_length, o.cell_cuts, config)?,
         limits: config.limits,
     })))

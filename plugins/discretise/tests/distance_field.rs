@@ -8,7 +8,7 @@ use common::*;
 #[test]
 fn tube_field_from_outer_gives_rings_close_to_the_exact_ones() {
     let fam = OneFamily::new(circle(0.0, 0.0, 10.0, 512), vec![circle(0.0, 0.0, 5.0, 512)]);
-    let regions = fam.tiles("use = \"distance-field\"\nfeature = \"outer\"\ncount = 5\ncells = 256");
+    let regions = fam.tiles("use = \"distance-field\"\nfeature = \"outer\"\ncount = 5\nsamples = 256");
     assert_eq!(indices(&regions), vec![0, 1, 2, 3, 4]);
     // r = d / 5 from the outer: band j is the ring 10 - j .. 9 - j, with Eq. 2's
     // f = d / max(d) where it starts: j / 5.
@@ -42,7 +42,7 @@ fn every_feature_tiles() {
         "use = \"distance-field\"",
         "use = \"distance-field\"\nfeature = \"holes\"\ncount = 6",
         "use = \"distance-field\"\nfeature = \"centre\"\ncount = 4",
-        "use = \"distance-field\"\nfeature = \"point\"\npoint = [0.0, 20.0]\ncell_size = 0.1",
+        "use = \"distance-field\"\nfeature = \"point\"\npoint = [0.0, 20.0]\nsample_spacing = 0.1",
     ] {
         let regions = fam.tiles(text);
         assert!(regions.len() >= 4, "{text}: {}", regions.len());
@@ -56,7 +56,7 @@ fn every_feature_tiles() {
 fn bad_field_options_are_refused() {
     assert_refused(&[
         ("use = \"distance-field\"\nfeature = \"point\"", "point"),
-        ("use = \"distance-field\"\ncells = 2", "cells"),
+        ("use = \"distance-field\"\nsamples = 2", "samples"),
         ("use = \"distance-field\"\nstep = 1.5", "step"),
         ("use = \"distance-field\"\nspacing = -1.0", "spacing"),
         ("use = \"distance-field\"\nspacing = 1.0\nstep = 0.5", "spacing"),
@@ -80,7 +80,7 @@ fn fig_7_iso_contours_every_one_and_a_half_over_a_maximum_of_11_76() {
     for (k, t) in iso.cut.thresholds.iter().enumerate() {
         assert!((t * iso.max - 1.5 * (k + 1) as f64).abs() < 1e-9);
     }
-    let regions = fam.tiles("use = \"distance-field\"\nspacing = 1.5\ncells = 256");
+    let regions = fam.tiles("use = \"distance-field\"\nspacing = 1.5\nsamples = 256");
     assert_eq!(indices(&regions), (0..8).collect::<Vec<_>>());
     for r in &regions {
         let j = r.index as f64;

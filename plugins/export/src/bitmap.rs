@@ -43,8 +43,9 @@ lamina_api::stage_options! {
         /// radius of the spherical void at each inserting point (mm)
         #[range(0.0, 1000.0)]
         void_radius: f64 = "0.3",
-        /// the base cell instead of spheres: `{ shape = "sphere" | "box" | "cylinder", size, aspect, turn, lean, insert, period, origin, tilt }`, sizes and angles numbers or Rhai expressions of x, y, z
-        cell: Option<CellSpec>,
+        /// the base cell instead of spheres: `{ shape = "sphere" | "box" | "cylinder", size, aspect, turn, lean, insert, period, origin, tilt }`, sizes and angles numbers or Rhai expressions of x, y, z (formerly `cell`)
+        #[formerly("cell")]
+        base_cell: Option<CellSpec>,
     }
 }
 
@@ -59,7 +60,7 @@ pub struct Raster {
 
 impl Raster {
     /// A grid aligned to multiples of `pixel` covering `bbox`, refused when it would
-    /// hold more pixels than `limits.grid_cells`.
+    /// hold more pixels than `limits.grid_samples`.
     pub fn covering(bbox: &BBox2, pixel: f64, limits: &Limits) -> Result<Self> {
         let x0 = (bbox.min.x / pixel).floor();
         let y0 = (bbox.min.y / pixel).floor();
@@ -67,7 +68,7 @@ impl Raster {
         let h = (bbox.max.y / pixel).ceil() - y0;
         // NaN (an empty box) fails the check too.
         limits.check(
-            Limit::GridCells,
+            Limit::GridSamples,
             w * h,
             &format!("a bitmap layer of {w} x {h} pixels of {pixel} mm"),
         )?;
@@ -323,7 +324,7 @@ fn build(config: &StageConfig<'_>) -> Result<AnyStage> {
     if !(options.pixel.is_finite() && options.pixel > 0.0) {
         return Err(config.error("pixel", "must be a positive number of mm"));
     }
-    let voids = match &options.cell {
+    let voids = match &options.base_cell {
         Some(spec) => {
             if let Some(k) = ["period", "origin", "void_radius"]
                 .into_iter()
@@ -331,16 +332,16 @@ fn build(config: &StageConfig<'_>) -> Result<AnyStage> {
             {
                 return Err(config.error(
                     k,
-                    "give either `cell` or the spheres' `period`, `origin` and `void_radius`",
+                    "give either `base_cell` or the spheres' `period`, `origin` and `void_radius`",
                 ));
             }
             if spec.period.iter().any(|&p| p < options.pixel) {
                 return Err(config.error(
-                    "cell",
+                    "base_cell",
                     format!("every period must be at least the pixel ({} mm)", options.pixel),
                 ));
             }
-            Voids::Cells(Arc::new(Microstructure::new(spec, config, "cell")?))
+            Voids::Cells(Arc::new(Microstructure::new(spec, config, "base_cell")?))
         }
         None => spheres(config, &options)?,
     };

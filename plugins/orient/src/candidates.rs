@@ -43,11 +43,13 @@ lamina_api::stage_options! {
     struct Options {
         /// what to minimise: "surface-angle" (sum A_i alpha_i over the object's surfaces), "base-cell" (the same over the faces of the microstructure's base cells) or "height"
         criterion: Criterion = r#""surface-angle""#,
-        /// the base cell for "base-cell", in the model's own coordinates (as `engrave` and `bitmap` read theirs: the cells turn with the model): `{ shape = "box" | "cylinder", size, aspect, turn, lean, insert, period, origin, tilt }`
-        cell: Option<CellSpec>,
-        /// most cells weighed for "base-cell" (every n-th inserting point in the model's box beyond that)
+        /// the base cell for "base-cell", in the model's own coordinates (as `engrave` and `bitmap` read theirs: the cells turn with the model): `{ shape = "box" | "cylinder", size, aspect, turn, lean, insert, period, origin, tilt }` (formerly `cell`)
+        #[formerly("cell")]
+        base_cell: Option<CellSpec>,
+        /// most base cells weighed for "base-cell" (every n-th inserting point in the model's box beyond that) (formerly `cells`)
         #[range(1, 1e6)]
-        cells: usize = "2000",
+        #[formerly("cells")]
+        base_cells: usize = "2000",
         /// directions sampled evenly over the sphere
         #[range(0, MAX_SAMPLES)]
         samples: usize = "64",
@@ -285,24 +287,27 @@ fn build(config: &StageConfig<'_>) -> Result<AnyStage> {
         }
         directions.push(v / len);
     }
-    let cells = match (&o.cell, o.criterion) {
+    let cells = match (&o.base_cell, o.criterion) {
         (Some(spec), Criterion::BaseCell) => {
             if spec.shape == "sphere" {
                 return Err(config.error(
-                    "cell",
+                    "base_cell",
                     "a sphere weighs every build direction the same: the base-cell criterion needs a box or a cylinder",
                 ));
             }
-            if o.cells == 0 {
-                return Err(config.error("cells", "must be at least 1"));
+            if o.base_cells == 0 {
+                return Err(config.error("base_cells", "must be at least 1"));
             }
-            Some((Microstructure::new(spec, config, "cell")?, o.cells))
+            Some((Microstructure::new(spec, config, "base_cell")?, o.base_cells))
         }
         (None, Criterion::BaseCell) => {
-            return Err(config.error("cell", "the base-cell criterion needs the `cell` it weighs"));
+            return Err(config.error(
+                "base_cell",
+                "the base-cell criterion needs the `base_cell` it weighs",
+            ));
         }
         (Some(_), _) => {
-            return Err(config.error("cell", "only the base-cell criterion reads a `cell`"));
+            return Err(config.error("base_cell", "only the base-cell criterion reads a `base_cell`"));
         }
         (None, _) => None,
     };

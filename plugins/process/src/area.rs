@@ -80,7 +80,7 @@ pub fn raster(polygons: &[Polygon], spacing: f64, z: f64, limits: &Limits) -> Re
     }
     let count = (bbox.height() / spacing).ceil().max(1.0);
     limits.check(
-        Limit::GridCells,
+        Limit::GridSamples,
         count,
         &format!("passes {spacing} mm apart over the layer"),
     )?;

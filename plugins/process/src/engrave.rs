@@ -1,6 +1,6 @@
 //! `engrave`: step 4 of the process. A periodic microstructure is an array of base
 //! cells, voids on a lattice (cmpm-process-planning 4.3, `lamina_fgm::microstructure`):
-//! spheres by default, or the `cell` table's shape, size, orientation and inserting
+//! spheres by default, or the `base_cell` table's shape, size, orientation and inserting
 //! function. The voids the layer's plane cuts (at mid-layer, where the contours are
 //! cut) are engraved by a laser from the surface down through the layer: rings inside
 //! each void's outline, the first half a spot in, the next ones a spot less the overlap
@@ -41,8 +41,9 @@ lamina_api::stage_options! {
         /// radius of the spherical void at each inserting point (mm)
         #[range(0.001, LENGTH)]
         void_radius: f64 = "0.3",
-        /// the base cell instead of spheres: `{ shape = "sphere" | "box" | "cylinder", size, aspect, turn, lean, insert, period, origin, tilt }`, sizes and angles numbers or Rhai expressions of x, y, z
-        cell: Option<CellSpec>,
+        /// the base cell instead of spheres: `{ shape = "sphere" | "box" | "cylinder", size, aspect, turn, lean, insert, period, origin, tilt }`, sizes and angles numbers or Rhai expressions of x, y, z (formerly `cell`)
+        #[formerly("cell")]
+        base_cell: Option<CellSpec>,
         /// the laser's name
         tool: String = r#""laser""#,
         /// spot diameter (mm)
@@ -207,14 +208,14 @@ impl Process for Engrave {
             })
             .sum();
         self.limits.check(
-            Limit::GridCells,
+            Limit::GridSamples,
             rings,
             &format!("laser rings {step} mm apart in the layer's voids"),
         )?;
         let depth = surface - bottom;
         let passes = (depth / self.options.depth_per_pass - 1e-9).ceil().max(1.0);
         self.limits.check(
-            Limit::GridCells,
+            Limit::GridSamples,
             rings * passes,
             &format!(
                 "laser rings in {passes} passes of {} mm",
@@ -265,7 +266,7 @@ impl Process for Engrave {
 
 fn build(config: &StageConfig<'_>) -> Result<AnyStage> {
     let options: Options = config.parse()?;
-    let cells = match &options.cell {
+    let cells = match &options.base_cell {
         Some(spec) => {
             if let Some(k) = ["period", "origin", "void_radius"]
                 .into_iter()
@@ -273,10 +274,10 @@ fn build(config: &StageConfig<'_>) -> Result<AnyStage> {
             {
                 return Err(config.error(
                     k,
-                    "give either `cell` or the spheres' `period`, `origin` and `void_radius`",
+                    "give either `base_cell` or the spheres' `period`, `origin` and `void_radius`",
                 ));
             }
-            Microstructure::new(spec, config, "cell")?
+            Microstructure::new(spec, config, "base_cell")?
         }
         None => {
             if options.period.iter().any(|p| !(p.is_finite() && *p > 0.0)) {

@@ -16,12 +16,13 @@ use crate::cycle::{blocks, mm_to_um};
 lamina_api::stage_options! {
     #[derive(Debug)]
     struct Options {
-        /// layer thickness by part name (mm), or "auto" (from the material: see `cell` and `step`); default: the thinnest `layer_thickness` of the part's materials
+        /// layer thickness by part name (mm), or "auto" (from the material: see `base_cell` and `step`); default: the thinnest `layer_thickness` of the part's materials
         thickness: BTreeMap<String, Thickness> = "{}",
         /// regions grouping parts: `{ name, parts = [...], thickness }` (mm or "auto"); default: one region per part
         regions: Vec<RegionSpec> = "[]",
-        /// base-cell dimension (mm) by part or region name: an "auto" thickness there is a microstructure's, 1/10 to 1/20 of the cell
-        cell: BTreeMap<String, f64> = "{}",
+        /// base-cell dimension (mm) by part or region name: an "auto" thickness there is a microstructure's, 1/10 to 1/20 of the cell (formerly `cell`)
+        #[formerly("cell")]
+        base_cell: BTreeMap<String, f64> = "{}",
         /// largest change of a material's fraction one layer may hold: an "auto" thickness elsewhere is this over the composition's gradient along z (sampled from the grading), within 0.5 to 2 mm
         #[range(0.001, 1.0)]
         step: f64 = "0.1",
@@ -83,13 +84,13 @@ fn thickness_um(mm: f64) -> std::result::Result<u64, String> {
 
 impl WorkCycles {
     /// An `auto` thickness for the region or part `name` of `parts`: a microstructure's
-    /// where `cell` gives its base cell, else a graded region's from the parts'
+    /// where `base_cell` gives its base cell, else a graded region's from the parts'
     /// sampled gradients.
     fn auto(&self, info: &RunInfo, name: &str, parts: &[usize]) -> Result<(u64, String)> {
-        match self.options.cell.get(name) {
+        match self.options.base_cell.get(name) {
             Some(&cell) => crate::auto::microstructure_um(cell).ok_or_else(|| {
                 self.table.error_at(
-                    "cell",
+                    "base_cell",
                     format!("`{name}`: a base cell of {cell} mm is under 10 µm; its layers would be under a micrometre"),
                 )
             }),
@@ -268,7 +269,7 @@ fn round_um(mm: f64) -> f64 {
 impl Sequencer for WorkCycles {
     fn needs_gradients(&self) -> bool {
         // An `auto` thickness without a base cell follows the grading.
-        let graded = |name: &str, t: &Thickness| t.is_auto() && !self.options.cell.contains_key(name);
+        let graded = |name: &str, t: &Thickness| t.is_auto() && !self.options.base_cell.contains_key(name);
         self.options.thickness.iter().any(|(n, t)| graded(n, t))
             || self
                 .options
@@ -278,13 +279,13 @@ impl Sequencer for WorkCycles {
     }
 
     fn sequence(&self, info: &RunInfo) -> Result<Sequence> {
-        for name in self.options.cell.keys() {
+        for name in self.options.base_cell.keys() {
             let known = info.parts.iter().any(|p| &p.name == name)
                 || self.options.regions.iter().any(|r| &r.name == name);
             if !known {
                 return Err(self
                     .table
-                    .error_at("cell", format!("no part or region named `{name}`")));
+                    .error_at("base_cell", format!("no part or region named `{name}`")));
             }
         }
         let regions = self.regions(info)?;
@@ -332,10 +333,10 @@ fn build(config: &StageConfig<'_>) -> Result<AnyStage> {
             check("regions", format!("region `{}`", r.name), t)?;
         }
     }
-    for (name, &d) in &options.cell {
+    for (name, &d) in &options.base_cell {
         if !(d.is_finite() && d > 0.0 && d <= 1000.0) {
             return Err(config.error(
-                "cell",
+                "base_cell",
                 format!("`{name}`: the base cell must be a positive number of mm"),
             ));
         }

@@ -96,9 +96,10 @@ lamina_api::stage_options! {
     struct Options {
         /// each `{ kind = "point" | "axis" | "plane" | "surface", at = [x, y, z], direction = [x, y, z] (axis direction or plane normal), width (or alpha), k = 1, start, end (material name or fractions), step = 0.25, weight = 1 }`; a `surface` source measures d in space from chosen faces of the part's mesh (Fig. 1d): `faces = { normal = [x, y, z], within = 30.0, groups = ["name"] }` (all faces when absent), or within the layer to the family's boundary with `measure = "layer"`
         sources: Vec<SourceSpec>,
-        /// samples along a family's longer side where the distance in space to a `surface` source's faces is sampled
+        /// samples along a family's longer side where the distance in space to a `surface` source's faces is sampled (formerly `surface_cells`)
         #[range(8, 4096)]
-        surface_cells: usize = "256",
+        #[formerly("surface_cells")]
+        surface_samples: usize = "256",
         /// largest chord error of curved step boundaries (mm)
         #[range(0.0001, 10.0)]
         tolerance: f64 = "0.001",
@@ -121,7 +122,7 @@ struct Sources {
     /// Per source, the faces of a `surface` source measured in space, and their
     /// surface per mesh, built once per run.
     faces: Vec<Option<(FaceSelection, Surfaces)>>,
-    surface_cells: usize,
+    surface_samples: usize,
 }
 
 /// A piece of the family with, per source, its step and whether it lies in that
@@ -280,7 +281,7 @@ impl Sources {
                         &surface,
                         &family.bbox(),
                         z,
-                        self.surface_cells,
+                        self.surface_samples,
                         &levels,
                     ))
                 }
@@ -419,8 +420,8 @@ fn build(config: &StageConfig<'_>) -> Result<AnyStage> {
     if !(o.tolerance.is_finite() && o.tolerance > 0.0) {
         return Err(config.error("tolerance", "must be a positive number of mm"));
     }
-    if !(8..=4096).contains(&o.surface_cells) {
-        return Err(config.error("surface_cells", "must be between 8 and 4096"));
+    if !(8..=4096).contains(&o.surface_samples) {
+        return Err(config.error("surface_samples", "must be between 8 and 4096"));
     }
     let mut sources = Vec::new();
     let mut faces = Vec::new();
@@ -508,7 +509,7 @@ fn build(config: &StageConfig<'_>) -> Result<AnyStage> {
         tolerance: o.tolerance,
         combine: o.combine,
         faces,
-        surface_cells: o.surface_cells,
+        surface_samples: o.surface_samples,
     })))
 }
 

@@ -50,9 +50,10 @@ lamina_api::stage_options! {
     struct Options {
         /// the NC file
         path: PathBuf = r#""job.nc""#,
-        /// the hybrid cell: a built-in profile (`cmpm-hybrid`, `cmpm-hybrid-fanuc`, `grbl-laser`) or a TOML file; its controller, tools, feeders and motion shape the program, and every operation is checked against it; empty: a LinuxCNC program with tools numbered by `tools`
-        cell: String = "\"\"",
-        /// tool numbers by tool name, without a cell; tools not listed get the next free number
+        /// the hybrid machine: a built-in profile (`cmpm-hybrid`, `cmpm-hybrid-fanuc`, `grbl-laser`) or a TOML file; its controller, tools, feeders and motion shape the program, and every operation is checked against it; empty: a LinuxCNC program with tools numbered by `tools` (formerly `cell`)
+        #[formerly("cell")]
+        machine: String = "\"\"",
+        /// tool numbers by tool name, without a `machine`; tools not listed get the next free number
         tools: BTreeMap<String, u32> = "{}",
         /// height above the highest surface so far at which tools travel between operations (mm)
         #[range(0.0, LENGTH)]
@@ -596,18 +597,19 @@ fn build(config: &StageConfig<'_>) -> Result<AnyStage> {
             return Err(config.error("tools", format!("`{other}` and `{name}` both have number {n}")));
         }
     }
-    let (cell, named) = if options.cell.is_empty() {
-        let generic: Cell = toml::from_str(GENERIC).map_err(|e| config.error("cell", e.to_string()))?;
+    let (cell, named) = if options.machine.is_empty() {
+        let generic: Cell = toml::from_str(GENERIC).map_err(|e| config.error("machine", e.to_string()))?;
         (generic, false)
     } else {
         if !options.tools.is_empty() {
             return Err(config.error(
                 "tools",
-                "the cell numbers its tools: give `cell` or `tools`, not both",
+                "the machine numbers its tools: give `machine` or `tools`, not both",
             ));
         }
         (
-            Cell::load(&options.cell, config.base_dir, config.reach).map_err(|m| config.error("cell", m))?,
+            Cell::load(&options.machine, config.base_dir, config.reach)
+                .map_err(|m| config.error("machine", m))?,
             true,
         )
     };
@@ -620,7 +622,7 @@ lamina_api::register_stage!(StageFactory {
         name: "nc",
         doc: "NC program for a hybrid cell in its controller's dialect: safe start, tool changes at the safe height, ramped and side entries, feeders set to each sub-region's composition, laser at focal height, cycle-time estimate.",
         options: Options::SPECS,
-        example: "use = \"nc\"\npath = \"job.nc\"\ncell = \"cmpm-hybrid\"",
+        example: "use = \"nc\"\npath = \"job.nc\"\nmachine = \"cmpm-hybrid\"",
     },
     build,
 });
