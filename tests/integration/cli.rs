@@ -1,7 +1,7 @@
 //! The `lamina` command line as users and scripts rely on it: exit codes, error
 //! positions, listings, and outputs that do not depend on the thread count.
 
-use crate::support::{box_stl, lamina, pipelines, text, write};
+use crate::support::{box_stl, lamina, pipelines, text, try_run, write};
 use std::path::{Path, PathBuf};
 use std::process::Output;
 
@@ -891,13 +891,7 @@ fn pipelines_with_former_option_names_run_as_with_the_new_ones() {
                 let dir = tempfile::tempdir().expect("tempdir");
                 let pipeline = write(dir.path(), &format!("{name}.toml"), t);
                 let out = dir.path().join("out");
-                let o = lamina(&[
-                    "run",
-                    pipeline.to_str().expect("utf-8"),
-                    "--out",
-                    out.to_str().expect("utf-8"),
-                    "--quiet",
-                ]);
+                let o = try_run(&pipeline, &out, &[]);
                 assert!(o.status.success(), "{name}: {}", text(&o.stderr));
                 std::fs::read(out.join(file)).expect("the output")
             })
