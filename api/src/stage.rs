@@ -412,6 +412,17 @@ pub trait OutputFiles {
     /// deposits), for the run's summary: what a user reads there is what the machine
     /// will do. A host that keeps no summary ignores it.
     fn report(&mut self, _report: MachineFileReport) {}
+    /// Tells the user something about an output file that is neither an error nor part
+    /// of the file (a page split in two, data left out to keep it in bounds): the run
+    /// prints it with the export stage's other diagnostics, naming the file. A host
+    /// that prints nothing ignores it.
+    fn tell(
+        &mut self,
+        _file: &Path,
+        _severity: crate::diagnostic::Severity,
+        _said: crate::diagnostic::Warning,
+    ) {
+    }
 }
 
 /// What a machine file (G-code, NC) says of itself.

@@ -111,6 +111,8 @@ pub struct AtomicOutputs {
     dir: PathBuf,
     pending: Vec<(TempPath, PathBuf)>,
     reports: Vec<crate::stage::MachineFileReport>,
+    /// What exporters told of their files, in the order they told it.
+    told: Vec<lamina_api::Diagnostic>,
     /// Folders this run created, outermost first: a run that fails removes them again
     /// where they are empty, so it leaves nothing behind.
     made: Vec<PathBuf>,
@@ -140,6 +142,7 @@ impl AtomicOutputs {
             dir: dir.into(),
             pending: Vec::new(),
             reports: Vec::new(),
+            told: Vec::new(),
             made: Vec::new(),
             searched: false,
         }
@@ -148,6 +151,12 @@ impl AtomicOutputs {
     /// What the machine files of the run said of themselves, in the order they said it.
     pub fn take_reports(&mut self) -> Vec<crate::stage::MachineFileReport> {
         std::mem::take(&mut self.reports)
+    }
+
+    /// What exporters told of their files ([`OutputFiles::tell`]), as diagnostics of
+    /// the export stage whose message starts with the file's name.
+    pub fn take_told(&mut self) -> Vec<lamina_api::Diagnostic> {
+        std::mem::take(&mut self.told)
     }
 
     pub fn dir(&self) -> &Path {
@@ -195,6 +204,15 @@ impl AtomicOutputs {
 impl OutputFiles for AtomicOutputs {
     fn report(&mut self, report: crate::stage::MachineFileReport) {
         self.reports.push(report);
+    }
+
+    fn tell(&mut self, file: &Path, severity: lamina_api::Severity, said: lamina_api::Warning) {
+        self.told.push(lamina_api::Diagnostic::new(
+            severity,
+            lamina_api::kind::StageKind::Export,
+            said.code.as_str(),
+            format!("{}: {}", file.display(), said.message),
+        ));
     }
 
     fn create(&mut self, name: &Path) -> Result<Box<dyn Write + Send>> {

@@ -514,3 +514,107 @@ fn the_viewer_lists_each_layers_process_operations_and_draws_the_chosen_ones_pat
         );
     }
 }
+
+/// The lines of a viewer page that start with `prefix`.
+fn lines_starting<'a>(page: &'a str, prefix: &str) -> Vec<&'a str> {
+    page.lines().filter(|l| l.starts_with(prefix)).collect()
+}
+
+/// A viewer larger than its page size is split into pages of consecutive layers, each
+/// within the size, that together hold every layer and every machine move of the
+/// whole viewer, byte for byte, link to their neighbours, and are told of in the
+/// summary; in Chromium a later page shows its own first layer and its links.
+#[test]
+fn a_viewer_larger_than_its_page_size_is_split_into_linked_pages_holding_it_all() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let pipeline = pipelines().join("gear-mixing-gcode.toml");
+    let pipeline = pipeline.to_str().expect("utf-8");
+    let whole = dir.path().join("whole");
+    let split = dir.path().join("split");
+    let o = lamina(&[
+        "run",
+        "--quiet",
+        "--out",
+        whole.to_str().expect("utf-8"),
+        pipeline,
+    ]);
+    assert!(o.status.success(), "{}", text(&o.stderr));
+    let o = lamina(&[
+        "run",
+        "--out",
+        split.to_str().expect("utf-8"),
+        "--set",
+        "output.1.page_mb=0.5",
+        pipeline,
+    ]);
+    assert!(o.status.success(), "{}", text(&o.stderr));
+    let said = format!("{}{}", text(&o.stderr), text(&o.stdout));
+    let one = std::fs::read_to_string(whole.join("gear-mixing.html")).expect("whole viewer");
+    assert!(one.len() > 1_000_000, "the whole viewer is {} bytes", one.len());
+    let mut pages = vec![std::fs::read_to_string(split.join("gear-mixing.html")).expect("page 1")];
+    while let Ok(page) = std::fs::read_to_string(split.join(format!("gear-mixing-{}.html", pages.len() + 1)))
+    {
+        pages.push(page);
+    }
+    let count = pages.len();
+    assert!(count >= 3, "{count} pages");
+    assert!(
+        said.contains(&format!(
+            "note[export.pages-split]: gear-mixing.html: the viewer is split into {count} pages of at most 0.5 MB"
+        )),
+        "{said}"
+    );
+    let mut layers = Vec::new();
+    let mut moves = Vec::new();
+    for (k, page) in pages.iter().enumerate() {
+        assert!(page.len() <= 500_000, "page {} is {} bytes", k + 1, page.len());
+        assert!(page.ends_with("</html>\n"), "page {} is not whole", k + 1);
+        let own = lines_starting(page, "<script>LAYERS.push(");
+        assert!(!own.is_empty(), "page {} holds no layer", k + 1);
+        layers.extend(own);
+        moves.extend(lines_starting(page, "<script>MOVES.set("));
+        let about = lines_starting(page, "<script>PAGES = ");
+        assert_eq!(about.len(), 1, "page {}", k + 1);
+        let json = about[0]
+            .strip_prefix("<script>PAGES = ")
+            .and_then(|l| l.strip_suffix(";</script>"))
+            .expect("PAGES line");
+        let about: serde_json::Value = serde_json::from_str(json).expect("PAGES json");
+        let name = |j: usize| {
+            if j == 0 {
+                "gear-mixing.html".to_string()
+            } else {
+                format!("gear-mixing-{}.html", j + 1)
+            }
+        };
+        assert_eq!(about["index"], k, "{about}");
+        assert_eq!(about["count"], count, "{about}");
+        assert_eq!(
+            about["prev"],
+            serde_json::json!(k.checked_sub(1).map(name)),
+            "{about}"
+        );
+        assert_eq!(
+            about["next"],
+            serde_json::json!((k + 1 < count).then(|| name(k + 1))),
+            "{about}"
+        );
+        assert_eq!(about["moves_left_out"], 0, "{about}");
+    }
+    assert_eq!(layers, lines_starting(&one, "<script>LAYERS.push("));
+    assert_eq!(moves, lines_starting(&one, "<script>MOVES.set("));
+    let Some(browser) = browser() else { return };
+    let page = split.join("gear-mixing-2.html");
+    let url = format!("file://{}#test:layer=0", page.display());
+    let shown = page_report(&browser, &dir.path().join("profile"), &url);
+    let first = shown["pages"]["first"].as_u64().expect("first");
+    assert!(first > 0, "{shown}");
+    assert!(
+        shown["label"]
+            .as_str()
+            .expect("label")
+            .starts_with(&format!("layer {first} of ")),
+        "{shown}"
+    );
+    assert!(shown["moves"].is_object(), "{shown}");
+}

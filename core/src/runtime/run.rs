@@ -234,6 +234,9 @@ impl Engine {
                 crate::plugin::guard_call(label, || sink.finish(info, &mut outputs))
             })?;
         }
+        for d in outputs.take_told() {
+            say(d);
+        }
         let machine_files = outputs.take_reports();
         for m in &machine_files {
             for note in &m.notes {

@@ -316,6 +316,22 @@
     player.hidden = false;
     player.title = "moves read back from " + GCODE.file + (GCODE.systems > 1 ? " (" + GCODE.systems + " motion systems)" : "");
   }
+  // ---- pages: a viewer larger than its page size is split into runs of layers ----
+
+  const pagesBox = document.getElementById("pages");
+  if (PAGES) {
+    const link = (name, text) => {
+      const a = document.createElement("a");
+      a.href = encodeURIComponent(name);
+      a.textContent = text;
+      return a;
+    };
+    if (PAGES.prev) pagesBox.append(link(PAGES.prev, "\u25c0 earlier layers"), " ");
+    pagesBox.append("page " + (PAGES.index + 1) + " of " + PAGES.count + " (layers " + PAGES.first + "-" + PAGES.last + ")");
+    if (PAGES.next) pagesBox.append(" ", link(PAGES.next, "later layers \u25b6"));
+    pagesBox.title = "pages of at most " + PAGES.page_mb + " MB (the viewer's page_mb)";
+    pagesBox.hidden = false;
+  }
   showMoves.addEventListener("change", () => { stop(); draw(); });
   playButton.addEventListener("click", play);
   timeSlider.addEventListener("input", () => {
@@ -513,7 +529,8 @@
     slider.value = current;
     const L = LAYERS[current];
     label.textContent = L
-      ? "layer " + L.i + " of " + LAMINA.layer_count + ", z = " + L.z + " mm (" + L.t + " mm thick)"
+      ? "layer " + L.i + " of " + LAMINA.layer_count + ", z = " + L.z + " mm (" + L.t + " mm thick)" +
+        (PAGES && PAGES.moves_left_out && !MOVES.has(L.i) ? "; its machine moves are left out of this page (page_mb)" : "")
       : "no layers";
     listOps();
     if (in3d) v3.draw(); else draw();
@@ -689,6 +706,7 @@
       label: label.textContent,
       region,
       layers: LAYERS.length,
+      pages: PAGES,
       tools: [...tools.values()],
       ready_ms: ready,
       walk_ms_per_layer: walk,

@@ -41,7 +41,23 @@ lamina_api::stage_options! {
         /// the G-code output to read back (a path as given to its exporter); unset:
         /// the first `.gcode`, `.gco` or `.g` output written before this one (an `nc` file of a hybrid cell is not read unless named)
         gcode: Option<PathBuf>,
+        /// largest page (MB): a larger viewer is split into pages of consecutive
+        /// layers (`viewer.html`, `viewer-2.html`, …), each linking to its neighbours;
+        /// machine moves that would not fit their layer's page are left out, with a note
+        #[range(0.5, 4096.0)]
+        page_mb: f64 = "64",
     }
+}
+
+/// What a layer's machine moves are expected to take in its page per byte of its
+/// packed toolpaths: measured 1.43-1.56 (median, 3DBenchy and the Stanford bunny), at
+/// most 2.6. Pages are cut with this room kept, so that the moves seldom miss it.
+const MOVES_PER_PATH_BYTE: f64 = 1.6;
+
+/// Room kept at the end of every page for what is written there when the run ends:
+/// the scripts, and the few lines that link the pages and name the G-code.
+fn trailer_room() -> u64 {
+    (VIEW3D_JS.len() + VIEWER_JS.len() + 4096) as u64
 }
 
 struct Html {
@@ -49,12 +65,82 @@ struct Html {
 }
 
 struct Sink {
-    out: Box<dyn Write + Send>,
+    /// The pages written so far, in layer order; all stay open until the run ends,
+    /// when each gets its layers' machine moves and the scripts.
+    pages: Vec<Page>,
+    /// The output's name: the first page's, from which the others' are made.
     path: PathBuf,
+    /// Everything a page holds before its layers (style, header, the bar).
+    head: String,
     options: Options,
     /// The outputs opened before this one: the only ones complete when it finishes
     /// (sinks finish in the order they were opened).
     earlier: Vec<PathBuf>,
+    /// Whether machine moves will be read back into the pages: room is kept for them.
+    moves_expected: bool,
+}
+
+/// One page of the viewer: a run of consecutive layers.
+struct Page {
+    out: Counted,
+    name: PathBuf,
+    /// The plan indices of its first and last layer.
+    layers: Option<(usize, usize)>,
+    /// Bytes written, and those expected of the moves of its layers.
+    planned: u64,
+    /// Layers whose machine moves did not fit.
+    moves_left_out: Vec<usize>,
+}
+
+/// A writer that counts what passes through it.
+struct Counted {
+    inner: Box<dyn Write + Send>,
+    bytes: u64,
+}
+
+impl Write for Counted {
+    fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
+        let n = self.inner.write(buf)?;
+        self.bytes += n as u64;
+        Ok(n)
+    }
+
+    fn flush(&mut self) -> std::io::Result<()> {
+        self.inner.flush()
+    }
+}
+
+/// The name of page `k` (from 0) of the viewer named `first`: `viewer.html`,
+/// `viewer-2.html`, … in the same folder.
+fn page_name(first: &std::path::Path, k: usize) -> PathBuf {
+    if k == 0 {
+        return first.to_path_buf();
+    }
+    let stem = first.file_stem().and_then(|s| s.to_str()).unwrap_or("viewer");
+    let name = match first.extension().and_then(|e| e.to_str()) {
+        Some(ext) => format!("{stem}-{}.{ext}", k + 1),
+        None => format!("{stem}-{}", k + 1),
+    };
+    first.with_file_name(name)
+}
+
+/// Layer indices as ranges: "0-3, 7, 9-12".
+fn ranges(layers: &[usize]) -> String {
+    let mut out: Vec<String> = Vec::new();
+    let mut i = 0;
+    while i < layers.len() {
+        let mut j = i;
+        while j + 1 < layers.len() && layers[j + 1] == layers[j] + 1 {
+            j += 1;
+        }
+        out.push(if i == j {
+            layers[i].to_string()
+        } else {
+            format!("{}-{}", layers[i], layers[j])
+        });
+        i = j + 1;
+    }
+    out.join(", ")
 }
 
 #[derive(Serialize)]
@@ -222,7 +308,7 @@ fn io(path: &std::path::Path) -> impl Fn(std::io::Error) -> Error + '_ {
 impl Exporter for Html {
     fn open(&self, ctx: &mut ExportContext<'_>) -> Result<Box<dyn LayerSink>> {
         let path = self.options.path.clone();
-        let earlier = ctx.files.written().into_iter().map(|(name, _)| name).collect();
+        let earlier: Vec<PathBuf> = ctx.files.written().into_iter().map(|(name, _)| name).collect();
         let mut out = ctx.files.create(&path)?;
         let header = Header {
             name: ctx.pipeline_name,
@@ -270,23 +356,50 @@ impl Exporter for Html {
             })
             .collect::<Vec<_>>()
             .join(" ");
-        write!(
-            out,
-            "<!doctype html>\n<html lang=\"en\">\n<head>\n<meta charset=\"utf-8\">\n<title>{name} - Lamina</title>\n<style>\n{VIEWER_CSS}</style>\n</head>\n<body>\n<div id=\"bar\"><strong>{name}</strong><input id=\"layer\" type=\"range\" min=\"0\" max=\"0\" value=\"0\" aria-label=\"layer\"><span id=\"label\"></span><label><input id=\"paths\" type=\"checkbox\" checked> toolpaths</label><span id=\"tools\"></span>{legend}<span id=\"player\" hidden><label><input id=\"moves\" type=\"checkbox\" checked> machine moves</label> <button id=\"play\" type=\"button\">play</button> <input id=\"time\" type=\"range\" min=\"0\" max=\"1000\" value=\"1000\" aria-label=\"time in the layer\"> <select id=\"speed\" aria-label=\"speed\"><option value=\"1\">1x</option><option value=\"10\" selected>10x</option><option value=\"100\">100x</option></select> <span id=\"clock\"></span></span><label><input id=\"v3d\" type=\"checkbox\"> 3D</label><span id=\"cutbox\" hidden><label><input id=\"cut\" type=\"checkbox\"> cut</label> <input id=\"cutat\" type=\"range\" min=\"0\" max=\"1000\" value=\"500\" aria-label=\"cut plane across x\"></span><span id=\"opsbox\" hidden><label><input id=\"ops\" type=\"checkbox\" checked> operations</label> <select id=\"op\" aria-label=\"operation shown\"></select></span><span id=\"cursor\"></span></div>\n<ol id=\"oplist\" hidden></ol>\n<canvas id=\"view\"></canvas>\n<canvas id=\"view3d\" hidden></canvas>\n<div id=\"tip\"></div>\n<pre id=\"test-result\" hidden></pre>\n<script>const LAMINA = {header}; const LAYERS = []; const MOVES = new Map(); let GCODE = null;</script>\n",
+        let head = format!(
+            "<!doctype html>\n<html lang=\"en\">\n<head>\n<meta charset=\"utf-8\">\n<title>{name} - Lamina</title>\n<style>\n{VIEWER_CSS}</style>\n</head>\n<body>\n<div id=\"bar\"><strong>{name}</strong><input id=\"layer\" type=\"range\" min=\"0\" max=\"0\" value=\"0\" aria-label=\"layer\"><span id=\"label\"></span><span id=\"pages\" hidden></span><label><input id=\"paths\" type=\"checkbox\" checked> toolpaths</label><span id=\"tools\"></span>{legend}<span id=\"player\" hidden><label><input id=\"moves\" type=\"checkbox\" checked> machine moves</label> <button id=\"play\" type=\"button\">play</button> <input id=\"time\" type=\"range\" min=\"0\" max=\"1000\" value=\"1000\" aria-label=\"time in the layer\"> <select id=\"speed\" aria-label=\"speed\"><option value=\"1\">1x</option><option value=\"10\" selected>10x</option><option value=\"100\">100x</option></select> <span id=\"clock\"></span></span><label><input id=\"v3d\" type=\"checkbox\"> 3D</label><span id=\"cutbox\" hidden><label><input id=\"cut\" type=\"checkbox\"> cut</label> <input id=\"cutat\" type=\"range\" min=\"0\" max=\"1000\" value=\"500\" aria-label=\"cut plane across x\"></span><span id=\"opsbox\" hidden><label><input id=\"ops\" type=\"checkbox\" checked> operations</label> <select id=\"op\" aria-label=\"operation shown\"></select></span><span id=\"cursor\"></span></div>\n<ol id=\"oplist\" hidden></ol>\n<canvas id=\"view\"></canvas>\n<canvas id=\"view3d\" hidden></canvas>\n<div id=\"tip\"></div>\n<pre id=\"test-result\" hidden></pre>\n<script>const LAMINA = {header}; const LAYERS = []; const MOVES = new Map(); let GCODE = null; let PAGES = null;</script>\n",
             name = escape(ctx.pipeline_name),
-        )
-        .map_err(io(&path))?;
+        );
+        out.write_all(head.as_bytes()).map_err(io(&path))?;
+        let moves_expected = self.options.moves && gcode_candidate(&self.options, &earlier);
         Ok(Box::new(Sink {
-            out,
+            pages: vec![Page {
+                out: Counted {
+                    inner: out,
+                    bytes: head.len() as u64,
+                },
+                name: path.clone(),
+                layers: None,
+                planned: head.len() as u64,
+                moves_left_out: Vec::new(),
+            }],
             path,
+            head,
             options: self.options.clone(),
             earlier,
+            moves_expected,
         }))
     }
 }
 
+/// Whether `name` is a G-code file by its extension.
+fn is_gcode(name: &std::path::Path) -> bool {
+    name.extension()
+        .and_then(|e| e.to_str())
+        .is_some_and(|e| ["gcode", "gco", "g"].contains(&e.to_ascii_lowercase().as_str()))
+}
+
+/// Whether the viewer will find a G-code to read back among the outputs opened before
+/// it.
+fn gcode_candidate(options: &Options, earlier: &[PathBuf]) -> bool {
+    match &options.gcode {
+        Some(name) => earlier.contains(name),
+        None => earlier.iter().any(|n| is_gcode(n)),
+    }
+}
+
 impl LayerSink for Sink {
-    fn layer(&mut self, info: &RunInfo, plan: &LayerPlan, _files: &mut dyn OutputFiles) -> Result<()> {
+    fn layer(&mut self, info: &RunInfo, plan: &LayerPlan, files: &mut dyn OutputFiles) -> Result<()> {
         if !plan.index.is_multiple_of(self.options.every) {
             return Ok(());
         }
@@ -330,21 +443,29 @@ impl LayerSink for Sink {
             })
             .collect();
         let mut tools = Vec::new();
-        if self.options.toolpaths {
-            for t in &plan.toolpaths {
-                let kind = match t.kind {
-                    PathKind::Extrude => 0,
-                    PathKind::Travel => 1,
-                    PathKind::Pause => 2,
-                };
-                pack.path(t.tool, kind, t.points.iter().map(|p| [p.p.x, p.p.y]));
-                if !tools.contains(&t.tool) {
-                    tools.push(t.tool);
-                }
+        // Packed even when not shown: their size foretells that of the moves.
+        for t in &plan.toolpaths {
+            let kind = match t.kind {
+                PathKind::Extrude => 0,
+                PathKind::Travel => 1,
+                PathKind::Pause => 2,
+            };
+            pack.path(t.tool, kind, t.points.iter().map(|p| [p.p.x, p.p.y]));
+            if !tools.contains(&t.tool) {
+                tools.push(t.tool);
             }
-            tools.sort_unstable();
         }
-        let p = pack.take_base64();
+        tools.sort_unstable();
+        let mut p = pack.take_base64();
+        let expected_moves = if self.moves_expected {
+            (p.len() as f64 * MOVES_PER_PATH_BYTE) as u64
+        } else {
+            0
+        };
+        if !self.options.toolpaths {
+            p.clear();
+            tools.clear();
+        }
         let mut ops = Vec::new();
         for (k, op) in plan.operations.iter().enumerate() {
             for path in &op.paths {
@@ -368,25 +489,148 @@ impl LayerSink for Sink {
             q: pack.take_base64(),
         };
         let json = script_json(&layer).map_err(|e| Error::io(&self.path, std::io::Error::other(e)))?;
-        let path = self.path.clone();
-        writeln!(self.out, "<script>LAYERS.push({json});</script>").map_err(io(&path))
+        let line = format!("<script>LAYERS.push({json});</script>\n");
+        let need = line.len() as u64 + expected_moves;
+        let limit = self.limit();
+        let page = self.pages.last().expect("a page is opened with the sink");
+        if page.layers.is_some() && page.planned + need + trailer_room() > limit {
+            self.open_page(files)?;
+        }
+        let page = self.pages.last_mut().expect("a page is opened with the sink");
+        page.out.write_all(line.as_bytes()).map_err(io(&page.name))?;
+        page.planned += need;
+        page.layers = Some(match page.layers {
+            Some((first, _)) => (first, plan.index),
+            None => (plan.index, plan.index),
+        });
+        Ok(())
     }
 
     fn finish(mut self: Box<Self>, _info: &RunInfo, files: &mut dyn OutputFiles) -> Result<()> {
-        let path = self.path.clone();
-        if self.options.moves {
-            self.write_moves(files)?;
+        let gcode = if self.options.moves {
+            self.write_moves(files)?
+        } else {
+            None
+        };
+        let count = self.pages.len();
+        let names: Vec<String> = self
+            .pages
+            .iter()
+            .map(|p| {
+                p.name
+                    .file_name()
+                    .map(|n| n.to_string_lossy().into_owned())
+                    .unwrap_or_default()
+            })
+            .collect();
+        for (k, page) in self.pages.iter_mut().enumerate() {
+            let name = page.name.clone();
+            if let Some(about) = &gcode {
+                writeln!(page.out, "<script>GCODE = {about};</script>").map_err(io(&name))?;
+            }
+            if count > 1 || !page.moves_left_out.is_empty() {
+                let (first, last) = page.layers.unwrap_or((0, 0));
+                let about = script_json(&serde_json::json!({
+                    "index": k,
+                    "count": count,
+                    "first": first,
+                    "last": last,
+                    "prev": k.checked_sub(1).map(|j| &names[j]),
+                    "next": names.get(k + 1),
+                    "moves_left_out": page.moves_left_out.len(),
+                    "page_mb": self.options.page_mb,
+                }))
+                .map_err(|e| Error::io(&name, std::io::Error::other(e)))?;
+                writeln!(page.out, "<script>PAGES = {about};</script>").map_err(io(&name))?;
+            }
+            write!(
+                page.out,
+                "<script>\n{VIEW3D_JS}</script>\n<script>\n{VIEWER_JS}</script>\n</body>\n</html>\n"
+            )
+            .map_err(io(&name))?;
+            page.out.flush().map_err(io(&name))?;
         }
-        write!(
-            self.out,
-            "<script>\n{VIEW3D_JS}</script>\n<script>\n{VIEWER_JS}</script>\n</body>\n</html>\n"
-        )
-        .map_err(io(&path))?;
-        self.out.flush().map_err(io(&path))
+        self.tell(files);
+        Ok(())
     }
 }
 
 impl Sink {
+    /// The largest page, in bytes.
+    fn limit(&self) -> u64 {
+        (self.options.page_mb * 1e6) as u64
+    }
+
+    /// Starts the next page.
+    fn open_page(&mut self, files: &mut dyn OutputFiles) -> Result<()> {
+        let name = page_name(&self.path, self.pages.len());
+        let mut out = files.create(&name)?;
+        out.write_all(self.head.as_bytes()).map_err(io(&name))?;
+        self.pages.push(Page {
+            out: Counted {
+                inner: out,
+                bytes: self.head.len() as u64,
+            },
+            name,
+            layers: None,
+            planned: self.head.len() as u64,
+            moves_left_out: Vec::new(),
+        });
+        Ok(())
+    }
+
+    /// Says how the viewer was split and what it left out, once for the run.
+    fn tell(&self, files: &mut dyn OutputFiles) {
+        let limit = format!("{} MB", round(self.options.page_mb, 3));
+        if self.pages.len() > 1 {
+            let shown: Vec<String> = self
+                .pages
+                .iter()
+                .take(4)
+                .map(|p| {
+                    let (a, b) = p.layers.unwrap_or((0, 0));
+                    format!("{} (layers {a}-{b})", p.name.display())
+                })
+                .collect();
+            let more = if self.pages.len() > 4 {
+                format!(" and {} more", self.pages.len() - 4)
+            } else {
+                String::new()
+            };
+            files.tell(
+                &self.path,
+                lamina_api::Severity::Note,
+                lamina_api::Warning::new(
+                    "pages-split",
+                    format!(
+                        "the viewer is split into {} pages of at most {limit}, each linking to its neighbours: {}{more} (`page_mb` sets the size)",
+                        self.pages.len(),
+                        shown.join(", ")
+                    ),
+                ),
+            );
+        }
+        let left_out: Vec<usize> = self
+            .pages
+            .iter()
+            .flat_map(|p| p.moves_left_out.iter().copied())
+            .collect();
+        if !left_out.is_empty() {
+            files.tell(
+                &self.path,
+                lamina_api::Severity::Warning,
+                lamina_api::Warning::new(
+                    "moves-left-out",
+                    format!(
+                        "the machine's moves of {} layer(s) ({}) are left out of the viewer to keep its pages under {limit}: raise `page_mb`, or show every n-th layer (`every`)",
+                        left_out.len(),
+                        ranges(&left_out)
+                    ),
+                ),
+            );
+        }
+    }
+
     /// The G-code output to read back: the one `gcode` names, or the first written.
     fn gcode_file(&self, files: &dyn OutputFiles) -> Result<Option<(PathBuf, PathBuf)>> {
         let written: Vec<(PathBuf, PathBuf)> = files
@@ -403,26 +647,25 @@ impl Sink {
                 ))),
             };
         }
-        Ok(written.into_iter().find(|(n, _)| {
-            n.extension()
-                .and_then(|e| e.to_str())
-                .is_some_and(|e| ["gcode", "gco", "g"].contains(&e.to_ascii_lowercase().as_str()))
-        }))
+        Ok(written.into_iter().find(|(n, _)| is_gcode(n)))
     }
 
-    /// Appends the machine's moves, read back from the G-code, one block per layer,
-    /// as the file is read: memory holds the moves of a few layers, whatever its size.
-    fn write_moves(&mut self, files: &dyn OutputFiles) -> Result<()> {
+    /// Appends the machine's moves, read back from the G-code, one block per layer to
+    /// the page holding the layer, as the file is read: memory holds the moves of a
+    /// few layers, whatever its size. Returns what the pages say of the G-code, when
+    /// one was read.
+    fn write_moves(&mut self, files: &dyn OutputFiles) -> Result<Option<String>> {
         use std::io::BufRead;
         let Some((name, file)) = self.gcode_file(files)? else {
-            return Ok(());
+            return Ok(None);
         };
         let mut input = std::io::BufReader::new(std::fs::File::open(&file).map_err(|e| Error::io(&name, e))?);
         let mut reader = crate::moves::Reader::new();
         let mut written: Result<()> = Ok(());
+        let limit = self.limit();
         let mut layers = LayerMoves {
-            out: &mut self.out,
-            path: &self.path,
+            pages: &mut self.pages,
+            limit,
             every: self.options.every,
             pack: Packer::new(self.options.digits),
         };
@@ -450,14 +693,15 @@ impl Sink {
             "offset": offset,
         }))
         .map_err(|e| Error::io(&self.path, std::io::Error::other(e)))?;
-        writeln!(self.out, "<script>GCODE = {about};</script>").map_err(io(&self.path))
+        Ok(Some(about))
     }
 }
 
-/// Writes the machine's moves layer by layer as the G-code reader hands them over.
+/// Writes the machine's moves layer by layer as the G-code reader hands them over,
+/// each into the page that holds its layer while the page has room.
 struct LayerMoves<'a> {
-    out: &'a mut Box<dyn Write + Send>,
-    path: &'a std::path::Path,
+    pages: &'a mut [Page],
+    limit: u64,
     every: usize,
     pack: Packer,
 }
@@ -493,12 +737,22 @@ impl LayerMoves<'_> {
         if let Some((s, t, kind)) = key {
             self.pack.timed(s, t, kind, &run);
         }
-        writeln!(
-            self.out,
-            "<script>MOVES.set({layer}, \"{}\");</script>",
+        let line = format!(
+            "<script>MOVES.set({layer}, \"{}\");</script>\n",
             self.pack.take_base64()
-        )
-        .map_err(io(self.path))
+        );
+        // The page whose layers reach furthest without passing this one.
+        let k = self
+            .pages
+            .iter()
+            .rposition(|p| p.layers.is_some_and(|(first, _)| first <= layer))
+            .unwrap_or(0);
+        let page = &mut self.pages[k];
+        if page.layers.is_some() && page.out.bytes + line.len() as u64 + trailer_room() > self.limit {
+            page.moves_left_out.push(layer);
+            return Ok(());
+        }
+        page.out.write_all(line.as_bytes()).map_err(io(&page.name))
     }
 }
 
@@ -523,3 +777,75 @@ lamina_api::register_stage!(StageFactory {
     },
     build,
 });
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::moves::Move;
+
+    fn page(name: &str, layers: (usize, usize)) -> Page {
+        Page {
+            out: Counted {
+                inner: Box::new(Vec::new()),
+                bytes: 0,
+            },
+            name: PathBuf::from(name),
+            layers: Some(layers),
+            planned: 0,
+            moves_left_out: Vec::new(),
+        }
+    }
+
+    /// `n` extruding moves in a zigzag, a second each.
+    fn zigzag(n: usize) -> Vec<Move> {
+        (0..n)
+            .map(|i| Move {
+                system: 0,
+                tool: 0,
+                extrude: true,
+                from: [i as f64, (i % 2) as f64 * 10.0],
+                to: [i as f64 + 1.0, ((i + 1) % 2) as f64 * 10.0],
+                t0: i as f64,
+                t1: i as f64 + 1.0,
+            })
+            .collect()
+    }
+
+    /// Each layer's moves go to the page holding the layer; those that would take a
+    /// page past its size are left out and counted on that page, and the next page
+    /// still takes its own.
+    #[test]
+    fn moves_go_to_their_layers_page_and_are_left_out_where_it_is_full() {
+        let mut pages = vec![page("v.html", (0, 4)), page("v-2.html", (5, 9))];
+        let mut moves = LayerMoves {
+            pages: &mut pages,
+            limit: trailer_room() + 2000,
+            every: 1,
+            pack: Packer::new(2),
+        };
+        moves.write(0, &zigzag(10), [0.0, 0.0]).expect("written");
+        moves.write(3, &zigzag(1000), [0.0, 0.0]).expect("left out");
+        moves.write(4, &zigzag(10), [0.0, 0.0]).expect("written");
+        moves.write(7, &zigzag(10), [0.0, 0.0]).expect("written");
+        let [first, second] = &pages[..] else {
+            unreachable!()
+        };
+        assert_eq!(first.moves_left_out, vec![3]);
+        assert!(second.moves_left_out.is_empty());
+        assert!(first.out.bytes > 0 && first.out.bytes <= 2000);
+        assert!(second.out.bytes > 0);
+    }
+
+    #[test]
+    fn pages_are_named_after_the_first_and_ranges_are_joined() {
+        let first = std::path::Path::new("out/viewer.html");
+        assert_eq!(page_name(first, 0), PathBuf::from("out/viewer.html"));
+        assert_eq!(page_name(first, 2), PathBuf::from("out/viewer-3.html"));
+        assert_eq!(
+            page_name(std::path::Path::new("view"), 1),
+            PathBuf::from("view-2")
+        );
+        assert_eq!(ranges(&[0, 1, 2, 5, 7, 8]), "0-2, 5, 7-8");
+        assert_eq!(ranges(&[]), "");
+    }
+}
