@@ -26,6 +26,7 @@ mod layering;
 mod linked_plugins;
 mod machine;
 mod orient;
+mod plate;
 mod plugins;
 mod properties;
 mod readme;

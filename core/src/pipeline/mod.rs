@@ -70,6 +70,12 @@ pub struct PartSpec {
     /// Selects the family containing this point (x, y at height z) and the families
     /// that overlap it layer after layer, instead of every family of the mesh.
     pub family_at: Option<[f64; 3]>,
+    /// How many of the part the plate holds (1: the part alone). The copies are laid
+    /// out beside the part's model in a grid, `copy_gap` apart, and each is the part's
+    /// plan moved there: graded in the part's own frame, so every copy is the same.
+    pub copies: usize,
+    /// The gap between neighbouring copies (mm).
+    pub copy_gap: f64,
     pub discretise: Option<TableRef>,
     pub grade: Option<TableRef>,
     pub table: Option<TableRef>,

@@ -76,6 +76,8 @@ struct RawPart {
     materials: Option<Vec<String>>,
     mesh: Option<usize>,
     family_at: Option<[f64; 3]>,
+    copies: Option<i64>,
+    copy_gap: Option<f64>,
     #[serde(default)]
     #[expect(dead_code, reason = "read through its TableRef")]
     model: Option<toml::Table>,
@@ -187,6 +189,18 @@ impl Reader<'_> {
         if part_materials.is_empty() {
             return Err(tr.error_at("materials", "a part needs at least one material"));
         }
+        let copies = match p.copies {
+            None => 1,
+            Some(n) if (1..=MAX_COPIES as i64).contains(&n) => n as usize,
+            Some(_) => {
+                return Err(tr.error_at("copies", format!("must be a whole number from 1 to {MAX_COPIES}")));
+            }
+        };
+        let copy_gap = match p.copy_gap {
+            None => DEFAULT_COPY_GAP,
+            Some(g) if g.is_finite() && (0.0..=1000.0).contains(&g) => g,
+            Some(_) => return Err(tr.error_at("copy_gap", "must be a distance from 0 to 1000 mm")),
+        };
         Ok(PartSpec {
             name: p.name.unwrap_or_else(|| format!("part{i}")),
             materials: part_materials,
@@ -197,6 +211,8 @@ impl Reader<'_> {
                 Some(_) => return Err(tr.error_at("family_at", "must be three finite numbers [x, y, z]")),
                 None => None,
             },
+            copies,
+            copy_gap,
             discretise: sub("discretise", &["use"]),
             grade: sub("grade", &["use"]),
             table: Some(tr),
@@ -240,11 +256,18 @@ fn whole_part(materials: &[Material]) -> PartSpec {
         model: None,
         mesh: None,
         family_at: None,
+        copies: 1,
+        copy_gap: DEFAULT_COPY_GAP,
         discretise: None,
         grade: None,
         table: None,
     }
 }
+
+/// Most copies of one part a pipeline may ask for.
+pub const MAX_COPIES: usize = 256;
+/// The gap between copies of a part on the plate (mm) when the pipeline gives none.
+pub const DEFAULT_COPY_GAP: f64 = 10.0;
 
 impl Pipeline {
     /// [`parse`](Self::parse), the files named read within `reach`.

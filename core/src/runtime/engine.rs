@@ -27,6 +27,9 @@ pub(super) struct PartStages {
     /// Index into `Engine::models`.
     pub(super) model: usize,
     pub(super) mesh: Option<usize>,
+    /// How many of the part the plate holds, and the gap between them (mm).
+    pub(super) copies: usize,
+    pub(super) copy_gap: f64,
     pub(super) discretiser: Option<Box<dyn Discretiser>>,
     pub(super) grader: Option<Box<dyn Grader>>,
 }
@@ -288,6 +291,8 @@ impl Builder<'_> {
             materials: part.materials.clone(),
             model: model?,
             mesh: part.mesh,
+            copies: part.copies,
+            copy_gap: part.copy_gap,
             discretiser,
             grader,
         })

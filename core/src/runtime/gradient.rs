@@ -41,6 +41,7 @@ impl Engine {
             sequence: None,
             prepared,
             part_mesh,
+            copies: &[],
             selections: &selections,
             timings,
             surfaces: &[],

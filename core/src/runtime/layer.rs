@@ -41,6 +41,7 @@ impl Engine {
             sequence,
             prepared,
             part_mesh,
+            copies,
             selections,
             timings,
             meshes,
@@ -142,6 +143,12 @@ impl Engine {
                 families,
                 regions,
             });
+            // Each copy is the part's plan moved: graded once, in the part's frame.
+            let own = parts.len() - 1;
+            for (k, c) in copies.iter().enumerate().filter(|(_, c)| c.of == pi) {
+                let copy = super::copies::moved(&parts[own], self.parts.len() + k, c.offset);
+                parts.push(copy);
+            }
         }
         let mut plan = LayerPlan {
             index: slot.index,
@@ -230,7 +237,21 @@ impl Engine {
                 let tree = shared
                     .timings
                     .time(StageKind::Sort, || self.sorter.sort(&layer))?;
-                polygons.extend((0..tree.families.len()).map(|f| tree.family_polygon(&layer.contours, f)));
+                let own: Vec<_> = (0..tree.families.len())
+                    .map(|f| tree.family_polygon(&layer.contours, f))
+                    .collect();
+                // The copies of the region's parts on this mesh stand as high.
+                let mut offsets: Vec<_> = shared
+                    .copies
+                    .iter()
+                    .filter(|c| region.parts.contains(&c.of) && shared.part_mesh[c.of] == mi)
+                    .map(|c| c.offset)
+                    .collect();
+                offsets.dedup();
+                for by in offsets {
+                    polygons.extend(own.iter().map(|p| super::copies::moved_polygon(p, by)));
+                }
+                polygons.extend(own);
             }
             out.push(crate::process::RegionOutline {
                 region: q,
@@ -330,6 +351,8 @@ pub(super) struct LayerShared<'a> {
     pub(super) sequence: Option<&'a Sequence>,
     pub(super) prepared: &'a [Box<dyn MeshSlicer>],
     pub(super) part_mesh: &'a [usize],
+    /// The parts' copies: copy `k` is part `parts + k`, its source's plan moved.
+    pub(super) copies: &'a [super::copies::PartCopy],
     pub(super) selections: &'a Selections,
     pub(super) timings: &'a Timings,
     /// The material regions' surfaces before each layer (empty without process stages).

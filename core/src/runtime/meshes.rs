@@ -12,6 +12,7 @@ use crate::model::{ModelFrame, Orientation, PartInfo};
 use crate::pipeline::{ModelSpec, Placement};
 use crate::stage::{Orienter, StageKind};
 
+use super::copies::{Instance, PartCopy};
 use super::engine::Engine;
 use super::report::Timings;
 
@@ -65,6 +66,9 @@ pub(super) struct PartMeshes {
     pub model_frame: Option<ModelFrame>,
     /// What the readers repaired, for the run's diagnostics.
     pub warnings: Vec<Warning>,
+    /// The parts' copies on the plate, part by part; copy `k` is part
+    /// `parts_info.len() + k` of the run.
+    pub copies: Vec<PartCopy>,
 }
 
 impl Engine {
@@ -89,6 +93,15 @@ impl Engine {
         // share it: it is cut once per layer. Each distinct mesh is made once, moved out
         // of the loaded models when nothing else needs it, and the loaded models are
         // dropped: a run holds each mesh once.
+        // Each model's box in X-Y, before its meshes are moved out: copies are laid out
+        // by it, so the parts of one model move together.
+        let model_boxes: Vec<BBox2> = loaded
+            .iter()
+            .map(|model| {
+                let b = model.iter().fold(BBox3::EMPTY, |b, m| b.union(&m.bbox()));
+                flat(&b)
+            })
+            .collect();
         let mut mesh_keys: Vec<(usize, Option<usize>)> = Vec::new();
         for p in &self.parts {
             let model = &loaded[p.model];
@@ -139,17 +152,22 @@ impl Engine {
             });
         }
         let bbox = meshes.iter().fold(BBox3::EMPTY, |b, m| b.union(&m.bbox()));
-        let xy_bounds = if bbox.is_empty() {
-            crate::geom::BBox2::EMPTY
-        } else {
-            crate::geom::BBox2::from_points([
-                Point2::new(bbox.min.x, bbox.min.y),
-                Point2::new(bbox.max.x, bbox.max.y),
-            ])
-        };
+        let (copies, instances) = self.plate(&model_boxes, &meshes, &part_mesh)?;
+        let xy_bounds =
+            instances.iter().fold(
+                flat(&bbox),
+                |b, i| if i.bbox.is_empty() { b } else { b.union(&i.bbox) },
+            );
         if let Some(machine) = &self.pipeline.machine {
+            if !copies.is_empty() {
+                self.check_plate_on_bed(machine, &copies, &xy_bounds)?;
+            }
             for (p, &mi) in self.parts.iter().zip(&part_mesh) {
-                check_on_bed(machine, &p.name, &meshes[mi], &xy_bounds)?;
+                check_on_bed(machine, &p.name, &meshes[mi], Vector2::zeros(), &xy_bounds)?;
+            }
+            for c in &copies {
+                let name = format!("{}#{}", self.parts[c.of].name, c.number);
+                check_on_bed(machine, &name, &meshes[part_mesh[c.of]], c.offset, &xy_bounds)?;
             }
         }
         Ok(PartMeshes {
@@ -161,7 +179,87 @@ impl Engine {
             orientation,
             model_frame,
             warnings,
+            copies,
         })
+    }
+
+    /// Refuses a plate of copies larger than a rectangular bed as a whole, before any
+    /// one part is found off it: the count or the gap is what to change.
+    fn check_plate_on_bed(
+        &self,
+        machine: &crate::machine::Machine,
+        copies: &[PartCopy],
+        plate: &BBox2,
+    ) -> Result<()> {
+        let bed = &machine.bed;
+        if !matches!(bed.shape, crate::machine::BedShape::Rectangle { .. }) {
+            return Ok(());
+        }
+        let placed = super::copies::moved_box(plate, machine.placement_offset(plate));
+        if bed.contains_box(&placed, 0.0) {
+            return Ok(());
+        }
+        let mut asking: Vec<String> = Vec::new();
+        for (pi, p) in self.parts.iter().enumerate() {
+            let n = copies.iter().filter(|c| c.of == pi).count();
+            if n > 0 {
+                asking.push(format!("part `{}` and {n} copies", p.name));
+            }
+        }
+        Err(machine.error(format!(
+            "the plate ({}, {} x {} mm) does not fit the {} bed: ask for fewer copies or a smaller `copy_gap`",
+            asking.join(", "),
+            short(plate.width()),
+            short(plate.height()),
+            bed.describe()
+        )))
+    }
+
+    /// The copies the parts ask for, laid out beside their models, and every instance
+    /// on the plate; refuses a plate where a copy overlaps another instance.
+    fn plate(
+        &self,
+        model_boxes: &[BBox2],
+        meshes: &[Arc<Mesh>],
+        part_mesh: &[usize],
+    ) -> Result<(Vec<PartCopy>, Vec<Instance>)> {
+        let mut copies = Vec::new();
+        let mut instances: Vec<Instance> = Vec::new();
+        for (pi, p) in self.parts.iter().enumerate() {
+            let own = flat(&meshes[part_mesh[pi]].bbox());
+            let places = super::copies::grid(&model_boxes[p.model], p.copies, p.copy_gap);
+            for (k, &offset) in places.iter().enumerate() {
+                let label = match k {
+                    0 => format!("part `{}`", p.name),
+                    _ => format!("part `{}`'s copy {}", p.name, k + 1),
+                };
+                let bbox = super::copies::moved_box(&own, offset);
+                match instances
+                    .iter_mut()
+                    .find(|i| i.model == p.model && i.offset == offset)
+                {
+                    Some(i) => {
+                        i.bbox = i.bbox.union(&bbox);
+                        i.label = format!("{} and {label}", i.label);
+                    }
+                    None => instances.push(Instance {
+                        model: p.model,
+                        offset,
+                        label,
+                        bbox,
+                    }),
+                }
+                if k > 0 {
+                    copies.push(PartCopy {
+                        of: pi,
+                        number: k + 1,
+                        offset,
+                    });
+                }
+            }
+        }
+        super::copies::check_apart(&instances)?;
+        Ok((copies, instances))
     }
 
     /// Reads the model as a run would (every file parsed, the meshes placed, oriented
@@ -389,9 +487,10 @@ pub(super) fn check_on_bed(
     machine: &crate::machine::Machine,
     part: &str,
     mesh: &Mesh,
+    shift: Vector2,
     all: &crate::geom::BBox2,
 ) -> Result<()> {
-    let offset = machine.placement_offset(all);
+    let offset = machine.placement_offset(all) + shift;
     let bbox = mesh.bbox();
     if bbox.is_empty() {
         return Ok(());
@@ -430,6 +529,14 @@ pub(super) fn check_on_bed(
         )));
     }
     Ok(())
+}
+
+/// A box's extent in X-Y (empty for an empty box).
+fn flat(b: &BBox3) -> BBox2 {
+    if b.is_empty() {
+        return BBox2::EMPTY;
+    }
+    BBox2::from_points([Point2::new(b.min.x, b.min.y), Point2::new(b.max.x, b.max.y)])
 }
 
 #[cfg(test)]

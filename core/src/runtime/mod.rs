@@ -13,6 +13,7 @@
 //!   kinds it leaves out), the model sources, and what `lamina check` summarises;
 //! - [`meshes`]: loading, unit and size checks, placement, orientation and merging of
 //!   the meshes, and the check that each part fits the machine;
+//! - [`copies`]: the copies of a part on the plate, each the part's plan moved;
 //! - [`families`]: which families of a layer belong to a part that picks its solid
 //!   with `family_at`, followed from layer to layer;
 //! - [`layer`]: one layer through slice, sort, discretise, grade and plan;
@@ -27,6 +28,7 @@ use crate::pipeline::Pipeline;
 use crate::registry::Registry;
 use crate::script::ScriptLimits;
 
+mod copies;
 mod engine;
 mod families;
 mod gradient;

@@ -90,6 +90,8 @@ struct Layout {
     prepared: Vec<Box<dyn MeshSlicer>>,
     sequence: Option<Sequence>,
     slots: Vec<LayerSlot>,
+    /// The parts' copies; copy `k` is part `parts + k` of `info`.
+    copies: Vec<super::copies::PartCopy>,
 }
 
 /// Worker threads for the layers.
@@ -141,6 +143,7 @@ impl Engine {
             prepared,
             sequence,
             slots,
+            copies,
             ..
         } = &layout;
         let selections = self.select_families(slots, meshes, prepared, part_mesh, &pool, &timings)?;
@@ -175,6 +178,7 @@ impl Engine {
             sequence: sequence.as_ref(),
             prepared,
             part_mesh,
+            copies,
             selections: &selections,
             timings: &timings,
         };
@@ -219,7 +223,7 @@ impl Engine {
         )?;
         tally.check_fill()?;
         let said = tally.volumes.check(|mesh| {
-            let parts: Vec<String> = (0..info.parts.len())
+            let parts: Vec<String> = (0..part_mesh.len())
                 .filter(|&p| part_mesh[p] == mesh)
                 .map(|p| format!("`{}`", info.parts[p].name))
                 .collect();
@@ -285,6 +289,7 @@ impl Engine {
             orientation,
             model_frame,
             warnings,
+            copies,
         } = self.part_meshes(timings)?;
         for w in &warnings {
             say(Diagnostic::from_warning(StageKind::Model, w));
@@ -324,6 +329,13 @@ impl Engine {
         for d in thin_parts(&info, &slots) {
             say(d);
         }
+        // The copies join the parts once the sequence and the layers are made: they
+        // follow their parts' material regions and are cut with them.
+        for c in &copies {
+            let mut copy = info.parts[c.of].clone();
+            copy.name = format!("{}#{}", copy.name, c.number);
+            info.parts.push(copy);
+        }
         Ok(Layout {
             meshes,
             part_mesh,
@@ -332,6 +344,7 @@ impl Engine {
             prepared,
             sequence,
             slots,
+            copies,
         })
     }
 
