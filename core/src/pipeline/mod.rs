@@ -76,6 +76,9 @@ pub struct PartSpec {
     pub copies: usize,
     /// The gap between neighbouring copies (mm).
     pub copy_gap: f64,
+    /// Columns of the copies' grid (along X); `None`: about as many as rows. One
+    /// column lays the copies out front to back, as two gantries ordered in Y want.
+    pub copy_columns: Option<usize>,
     pub discretise: Option<TableRef>,
     pub grade: Option<TableRef>,
     pub table: Option<TableRef>,

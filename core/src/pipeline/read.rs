@@ -78,6 +78,7 @@ struct RawPart {
     family_at: Option<[f64; 3]>,
     copies: Option<i64>,
     copy_gap: Option<f64>,
+    copy_columns: Option<i64>,
     #[serde(default)]
     #[expect(dead_code, reason = "read through its TableRef")]
     model: Option<toml::Table>,
@@ -201,6 +202,16 @@ impl Reader<'_> {
             Some(g) if g.is_finite() && (0.0..=1000.0).contains(&g) => g,
             Some(_) => return Err(tr.error_at("copy_gap", "must be a distance from 0 to 1000 mm")),
         };
+        let copy_columns = match p.copy_columns {
+            None => None,
+            Some(n) if (1..=MAX_COPIES as i64).contains(&n) => Some(n as usize),
+            Some(_) => {
+                return Err(tr.error_at(
+                    "copy_columns",
+                    format!("must be a whole number from 1 to {MAX_COPIES}"),
+                ));
+            }
+        };
         Ok(PartSpec {
             name: p.name.unwrap_or_else(|| format!("part{i}")),
             materials: part_materials,
@@ -213,6 +224,7 @@ impl Reader<'_> {
             },
             copies,
             copy_gap,
+            copy_columns,
             discretise: sub("discretise", &["use"]),
             grade: sub("grade", &["use"]),
             table: Some(tr),
@@ -258,6 +270,7 @@ fn whole_part(materials: &[Material]) -> PartSpec {
         family_at: None,
         copies: 1,
         copy_gap: DEFAULT_COPY_GAP,
+        copy_columns: None,
         discretise: None,
         grade: None,
         table: None,

@@ -21,9 +21,10 @@ pub(super) struct PartCopy {
 }
 
 /// The places of `copies` instances of a model whose box is `model` (the first is the
-/// model where it is), in a grid of about as many columns as rows, `gap` apart.
-pub(super) fn grid(model: &BBox2, copies: usize, gap: f64) -> Vec<Vector2> {
-    let columns = (copies as f64).sqrt().ceil().max(1.0) as usize;
+/// model where it is), in a grid of `columns` (unset: about as many as rows), `gap`
+/// apart.
+pub(super) fn grid(model: &BBox2, copies: usize, gap: f64, columns: Option<usize>) -> Vec<Vector2> {
+    let columns = columns.unwrap_or_else(|| (copies as f64).sqrt().ceil() as usize).max(1);
     let size = model.max - model.min;
     (0..copies)
         .map(|k| {
@@ -140,14 +141,16 @@ mod tests {
             min: Point2::new(-5.0, 10.0),
             max: Point2::new(15.0, 20.0),
         };
-        let at = grid(&model, 5, 2.0);
+        let at = grid(&model, 5, 2.0, None);
         let want = [(0.0, 0.0), (22.0, 0.0), (44.0, 0.0), (0.0, 12.0), (22.0, 12.0)];
         assert_eq!(at.len(), 5);
         for (a, (x, y)) in at.iter().zip(want) {
             assert_eq!((a.x, a.y), (x, y));
         }
-        assert_eq!(grid(&model, 1, 2.0), vec![Vector2::zeros()]);
-        assert_eq!(grid(&model, 4, 0.0)[3], Vector2::new(20.0, 10.0));
+        assert_eq!(grid(&model, 1, 2.0, None), vec![Vector2::zeros()]);
+        assert_eq!(grid(&model, 4, 0.0, None)[3], Vector2::new(20.0, 10.0));
+        let column = grid(&model, 3, 1.0, Some(1));
+        assert_eq!(column, vec![Vector2::zeros(), Vector2::new(0.0, 11.0), Vector2::new(0.0, 22.0)]);
     }
 
     #[test]

@@ -30,6 +30,7 @@ pub(super) struct PartStages {
     /// How many of the part the plate holds, and the gap between them (mm).
     pub(super) copies: usize,
     pub(super) copy_gap: f64,
+    pub(super) copy_columns: Option<usize>,
     pub(super) discretiser: Option<Box<dyn Discretiser>>,
     pub(super) grader: Option<Box<dyn Grader>>,
 }
@@ -293,6 +294,7 @@ impl Builder<'_> {
             mesh: part.mesh,
             copies: part.copies,
             copy_gap: part.copy_gap,
+            copy_columns: part.copy_columns,
             discretiser,
             grader,
         })

@@ -227,7 +227,7 @@ impl Engine {
         let mut instances: Vec<Instance> = Vec::new();
         for (pi, p) in self.parts.iter().enumerate() {
             let own = flat(&meshes[part_mesh[pi]].bbox());
-            let places = super::copies::grid(&model_boxes[p.model], p.copies, p.copy_gap);
+            let places = super::copies::grid(&model_boxes[p.model], p.copies, p.copy_gap, p.copy_columns);
             for (k, &offset) in places.iter().enumerate() {
                 let label = match k {
                     0 => format!("part `{}`", p.name),
