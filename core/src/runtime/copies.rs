@@ -24,7 +24,9 @@ pub(super) struct PartCopy {
 /// model where it is), in a grid of `columns` (unset: about as many as rows), `gap`
 /// apart.
 pub(super) fn grid(model: &BBox2, copies: usize, gap: f64, columns: Option<usize>) -> Vec<Vector2> {
-    let columns = columns.unwrap_or_else(|| (copies as f64).sqrt().ceil() as usize).max(1);
+    let columns = columns
+        .unwrap_or_else(|| (copies as f64).sqrt().ceil() as usize)
+        .max(1);
     let size = model.max - model.min;
     (0..copies)
         .map(|k| {
@@ -150,7 +152,10 @@ mod tests {
         assert_eq!(grid(&model, 1, 2.0, None), vec![Vector2::zeros()]);
         assert_eq!(grid(&model, 4, 0.0, None)[3], Vector2::new(20.0, 10.0));
         let column = grid(&model, 3, 1.0, Some(1));
-        assert_eq!(column, vec![Vector2::zeros(), Vector2::new(0.0, 11.0), Vector2::new(0.0, 22.0)]);
+        assert_eq!(
+            column,
+            vec![Vector2::zeros(), Vector2::new(0.0, 11.0), Vector2::new(0.0, 22.0)]
+        );
     }
 
     #[test]

@@ -25,7 +25,7 @@ use std::collections::BTreeMap;
 
 use lamina_api::machine::HeadClass;
 use lamina_api::stage::{AnyStage, Planner, StageConfig, StageInfo, StageKind};
-use lamina_api::{BBox2, Error, LayerPlan, Point2, Result, RunInfo, StageFactory, Toolpath};
+use lamina_api::{BBox2, Error, LayerPlan, Point2, Result, RunInfo, StageFactory, Toolpath, Vector2};
 use serde::Deserialize;
 
 use crate::assign::Assign;
@@ -258,6 +258,27 @@ fn sync_cost(o: &Options, info: &RunInfo) -> f64 {
 }
 
 /// The machine's heads' kinematics class (free heads without a machine).
+/// The bed in the plan's coordinates (where the exporter places the plan on it), or
+/// an empty box without a machine: what the heads can reach. A round bed gives the
+/// square inside it.
+fn bed_reach(info: &RunInfo) -> BBox2 {
+    let Some(m) = &info.machine else {
+        return BBox2::EMPTY;
+    };
+    let off = m.placement_offset(&info.xy_bounds);
+    let b = m.bed.bounds();
+    let inset = match m.bed.shape {
+        lamina_api::machine::BedShape::Rectangle { .. } => 0.0,
+        lamina_api::machine::BedShape::Circle { diameter } => {
+            diameter / 2.0 * (1.0 - std::f64::consts::FRAC_1_SQRT_2)
+        }
+    };
+    BBox2 {
+        min: b.min - off + Vector2::new(inset, inset),
+        max: b.max - off - Vector2::new(inset, inset),
+    }
+}
+
 fn head_class(info: &RunInfo) -> HeadClass {
     info.machine
         .as_ref()
@@ -348,7 +369,8 @@ fn prepare(o: &Options, info: &RunInfo, plan: &mut LayerPlan, step: f64) -> Resu
     }
     let rmax = tools.iter().map(|t| t.envelope).fold(0.0, f64::max);
     let vmax = tools.iter().map(ToolSpec::max_speed).fold(0.0, f64::max);
-    let parks = Parks::new(&work.bbox, tools.len(), 2.0 * rmax + 2.0 * vmax * step + 1.0);
+    let parks =
+        Parks::new(&work.bbox, tools.len(), 2.0 * rmax + 2.0 * vmax * step + 1.0).within(&bed_reach(info));
     // Gantries sweep the layer front to back in bands of an envelope.
     let sweep = (head_class(info) == HeadClass::DualGantry).then_some(rmax);
     let routes = tools

@@ -267,6 +267,19 @@ impl Parks {
         }
     }
 
+    /// The parks moved onto `reach` (the bed, in the plan's coordinates) where they
+    /// would lie beyond its edge: a plate that fills the bed leaves less room than the
+    /// spacing in front of and behind the layer, and a head cannot be sent off the
+    /// bed. The parks stay out of the layer (the entry rows are not moved).
+    pub fn within(mut self, reach: &BBox2) -> Self {
+        if reach.is_empty() {
+            return self;
+        }
+        self.park_y = self.park_y.max(reach.min.y).min(self.entry_y);
+        self.rear_park_y = self.rear_park_y.min(reach.max.y).max(self.rear_entry_y);
+        self
+    }
+
     /// Where `tool` parks: in the front row, or behind the layer for a gantry's rear head.
     pub fn park_of(&self, tool: &ToolSpec) -> Point2 {
         let p = self.park(tool.index);
@@ -508,5 +521,24 @@ mod tests {
         let p = Parks::new(&bbox(0.0, 4.0), 2, 12.0);
         assert_eq!(p.park(0).x, -4.0);
         assert_eq!(p.park(1).x, 8.0);
+    }
+
+    #[test]
+    fn parks_stay_on_the_bed_and_out_of_the_layer() {
+        // A layer from y 10 to 30 on a bed from y 0 to 35: 12 mm in front of the entry
+        // row would be off the bed, and so would 12 mm behind the rear entry row.
+        let p = Parks::new(&bbox(-30.0, 30.0), 2, 12.0).within(&BBox2::from_points([
+            Point2::new(-100.0, 0.0),
+            Point2::new(100.0, 35.0),
+        ]));
+        assert_eq!((p.park_y, p.entry_y), (0.0, 9.0));
+        assert_eq!((p.rear_entry_y, p.rear_park_y), (31.0, 35.0));
+        // A bed with room leaves them where they were.
+        let q = Parks::new(&bbox(-30.0, 30.0), 2, 12.0);
+        let r = q.within(&BBox2::from_points([
+            Point2::new(-100.0, -100.0),
+            Point2::new(100.0, 100.0),
+        ]));
+        assert_eq!((r.park_y, r.rear_park_y), (q.park_y, q.rear_park_y));
     }
 }

@@ -586,6 +586,7 @@ pub fn concurrent(
         }
         run.why.fill(None);
         run.look_along_routes();
+        run.follow_the_rear();
         if run.anticipate {
             anticipate_holds(
                 &run.agents,
@@ -639,6 +640,9 @@ struct Run<'a> {
     moving: Vec<bool>,
     /// Per tool: why it was first held at this check.
     why: Vec<Option<Why>>,
+    /// Per tool: whether it may leave the start of its route (see
+    /// [`Run::follow_the_rear`]).
+    released: Vec<bool>,
     /// Per tool: how its pause under way is counted.
     counted: Vec<Why>,
     pauses: Pauses,
@@ -683,6 +687,7 @@ impl<'a> Run<'a> {
             waited: vec![false; n],
             moving: vec![false; n],
             why: vec![None; n],
+            released: vec![false; n],
             counted: vec![Why::Other; n],
             pauses: Pauses::default(),
         }
@@ -706,6 +711,47 @@ impl<'a> Run<'a> {
                 a.walk(step, t, false, Some(&mut self.tracks[i]));
                 speed_along_x(&self.tracks[i])
             };
+        }
+    }
+
+    /// On gantries in Y order, where every route sweeps the layer front to back, the
+    /// rear head leads: the front head leaves its park only once the rear head has
+    /// begun its beads a keep-out beyond the front head's first bead (or is done).
+    /// Started the other way round, the rear head would wait behind the front one for
+    /// the front of the layer until the front head had done all of its work. These
+    /// waits count as decided by another rule than speed along X.
+    fn follow_the_rear(&mut self) {
+        if self.settings.separation != Separation::OrderedY {
+            return;
+        }
+        let n = self.agents.len();
+        for i in 0..n {
+            let a = &self.agents[i];
+            if self.released[i] || a.done || a.spec.rear {
+                continue;
+            }
+            let first = a
+                .route
+                .iter()
+                .find(|m| m.kind == PathKind::Extrude)
+                .and_then(|m| m.points.first());
+            let Some(first) = first else {
+                self.released[i] = true;
+                continue;
+            };
+            let ahead = |j: usize| {
+                let b = &self.agents[j];
+                let begun = b.route[..=b.at.mv.min(b.route.len() - 1)]
+                    .iter()
+                    .any(|m| m.kind == PathKind::Extrude);
+                b.done || (begun && b.pos.y >= first.y + a.spec.envelope + b.spec.envelope)
+            };
+            if (0..n).all(|j| j == i || !self.agents[j].spec.rear || ahead(j)) {
+                self.released[i] = true;
+            } else {
+                self.moving[i] = false;
+                self.why[i] = Some(Why::Other);
+            }
         }
     }
 
@@ -758,6 +804,16 @@ impl<'a> Run<'a> {
         // Whether holding i alone, and j alone, clears the other's next position: a
         // tool moving away from the one behind it is not the one to hold.
         let clears = (self.safe(i, j, false, true), self.safe(i, j, true, false));
+        // Gantries in Y order sweep the layer front to back: the rear head leads and the
+        // front one follows, so the front head waits wherever its pause clears the way.
+        // Held the other way round, the rear head could not reach the front of the layer
+        // until the front head had done all of its work.
+        if self.settings.separation == Separation::OrderedY {
+            let front = if self.agents[i].spec.rear { j } else { i };
+            if (front == i && clears.0) || (front == j && clears.1) {
+                return (front, Why::of(front, i, j, clears, &self.along_x));
+            }
+        }
         let ruled = ruled_loser(priority, &self.agents, i, j, &self.along_x);
         let loser = match (priority, clears) {
             (Priority::XSpeed | Priority::Clearing | Priority::Busiest, (true, false)) => i,

@@ -1074,3 +1074,77 @@ fn by_busiest_the_tool_with_more_work_left_goes_on() {
     let paths = simulate_ahead(&[(&up, r0), (&across, r1)], Priority::XSpeed, 0.5);
     assert!(holds(&paths).iter().all(|h| h.tool == 0));
 }
+
+/// Two gantries sweeping three rows front to back, one bead a row each (20 s): the rear
+/// head leads from the front row while the front head waits at its park, then each
+/// row is beaded by the rear head while the front head beads the row before it: the
+/// layer takes under three quarters of one head after the other, and the heads keep
+/// their order and distance in Y throughout.
+#[test]
+fn on_two_gantries_the_rear_head_leads_and_the_front_head_follows_a_row_behind() {
+    let front = tool(0, 10.0, 5.0);
+    let rear = ToolSpec {
+        rear: true,
+        ..tool(1, 10.0, 5.0)
+    };
+    let rows = [0.0, 40.0, 80.0];
+    let route = |park: Point2| {
+        let mut moves = Vec::new();
+        let mut at = park;
+        for (k, &y) in rows.iter().enumerate() {
+            // Serpentine, as the nearest-neighbour routes go.
+            let (x0, x1) = if k % 2 == 0 { (0.0, 200.0) } else { (200.0, 0.0) };
+            let (a, b) = (Point2::new(x0, y), Point2::new(x1, y));
+            moves.push(Move::travel(vec![at, a], 10.0));
+            moves.push(bead(a, b, 10.0));
+            at = b;
+        }
+        moves.push(Move::travel(vec![at, park], 10.0));
+        moves
+    };
+    let (a, b) = (route(Point2::new(0.0, -30.0)), route(Point2::new(200.0, 110.0)));
+    let settings = Settings {
+        step: STEP,
+        budget: 1000.0,
+        max_side_steps: 20,
+        priority: Priority::XSpeed,
+        look_ahead: 0.5,
+        separation: sim::Separation::OrderedY,
+        room: 0.0,
+    };
+    let s = sim::concurrent(
+        &[(&front, a.clone()), (&rear, b.clone())],
+        &settings,
+        &BBox2::EMPTY,
+    )
+    .expect("no deadlock");
+    let duration = |r: &[Move]| -> f64 {
+        r.iter()
+            .map(|m| m.points.windows(2).map(|w| (w[1] - w[0]).norm()).sum::<f64>() / m.speed)
+            .sum()
+    };
+    let one_after_the_other = duration(&a) + duration(&b);
+    println!(
+        "{:.1} s against {one_after_the_other:.1} s one after the other",
+        s.end
+    );
+    assert!(
+        s.end < 0.75 * one_after_the_other,
+        "{} s of {one_after_the_other}",
+        s.end
+    );
+    let first_bead = |tool: usize| {
+        s.paths
+            .iter()
+            .filter(|p| p.tool == tool && p.kind == PathKind::Extrude)
+            .map(|p| p.points[0].t)
+            .fold(f64::INFINITY, f64::min)
+    };
+    assert!(first_bead(1) < first_bead(0), "the rear head begins");
+    let (ta, tb) = (timeline(&s.paths, 0), timeline(&s.paths, 1));
+    let least = (0..=20_000)
+        .map(|k| s.end * k as f64 / 20_000.0)
+        .map(|t| position(&tb, t).y - position(&ta, t).y)
+        .fold(f64::INFINITY, f64::min);
+    assert!(least >= 10.0 - 1e-6, "{least} mm in Y");
+}
