@@ -146,3 +146,40 @@ fn box_stl(lo: [f64; 2], hi: [f64; 2]) -> String {
     }
     out + "endsolid box\n"
 }
+
+/// On two gantries the rear head cannot come nearer the bed's front edge than the two
+/// envelopes (the front head at the edge), nor the front head nearer the back edge: a
+/// column of gears on shafts that fills the bed in Y is refused with the head, the
+/// edge and how far it reaches, and writes nothing.
+#[test]
+fn a_plate_beyond_the_gantries_reach_is_refused() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let out = dir.path().join("out");
+    let pipeline = crate::support::pipelines().join("assembly-two-tools.toml");
+    let mut args = vec![
+        "run",
+        pipeline.to_str().expect("utf-8"),
+        "--out",
+        out.to_str().expect("utf-8"),
+        "--set",
+        "machine=\"rrf-dual-gantry-2\"",
+    ];
+    for o in [
+        "parts.0.copies=4",
+        "parts.1.copies=4",
+        "parts.0.copy_columns=1",
+        "parts.1.copy_columns=1",
+        "parts.0.copy_gap=35.0",
+        "parts.1.copy_gap=35.0",
+    ] {
+        args.extend(["--set", o]);
+    }
+    let o = crate::support::lamina(&args);
+    let said = text(&o.stderr);
+    assert_eq!(o.status.code(), Some(1), "{said}");
+    assert!(
+        said.contains("head (tool ") && said.contains("on two gantries it reaches no nearer the bed's"),
+        "{said}"
+    );
+    assert!(!out.join("assembly-two-tools.gcode").exists());
+}

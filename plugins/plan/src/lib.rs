@@ -279,6 +279,56 @@ fn bed_reach(info: &RunInfo) -> BBox2 {
     }
 }
 
+/// Refuses beads two gantries cannot lay: with the front head as far forward as the
+/// bed goes, the rear head reaches no nearer the front edge than the two envelopes,
+/// and the front head no nearer the back edge. A plate that fills the bed in Y puts
+/// some of the rear head's beads out of its reach (or the front head's).
+fn within_gantry_reach(tools: &[ToolSpec], jobs: &[Vec<route::Job>], info: &RunInfo) -> Result<()> {
+    let reach = bed_reach(info);
+    if reach.is_empty() {
+        return Ok(());
+    }
+    let keep = |rear: bool| {
+        tools
+            .iter()
+            .filter(|t| t.rear != rear)
+            .map(|t| t.envelope)
+            .fold(0.0, f64::max)
+    };
+    let shift = info
+        .machine
+        .as_ref()
+        .map_or(0.0, |m| m.placement_offset(&info.xy_bounds).y);
+    for (t, jobs) in tools.iter().zip(jobs) {
+        let (lo, hi) = jobs
+            .iter()
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), j| {
+                (lo.min(j.bbox.min.y), hi.max(j.bbox.max.y))
+            });
+        let gap = t.envelope + keep(t.rear);
+        let (out, limit, edge) = if t.rear {
+            (lo < reach.min.y + gap, reach.min.y + gap, "front")
+        } else {
+            (hi > reach.max.y - gap, reach.max.y - gap, "back")
+        };
+        if out {
+            let at = if t.rear { lo } else { hi };
+            return Err(Error::stage(
+                "plan",
+                format!(
+                    "the {} head (tool {}, {}) has beads at Y {:.1} mm on the bed, but on two gantries it reaches no nearer the bed's {edge} edge than Y {:.1} mm (the heads' envelopes apart, the other head at the edge): move the parts away from that edge (fewer copies or a smaller `copy_gap`, or a smaller plate)",
+                    if t.rear { "rear" } else { "front" },
+                    t.index,
+                    t.name,
+                    at + shift,
+                    limit + shift
+                ),
+            ));
+        }
+    }
+    Ok(())
+}
+
 fn head_class(info: &RunInfo) -> HeadClass {
     info.machine
         .as_ref()
@@ -366,6 +416,9 @@ fn prepare(o: &Options, info: &RunInfo, plan: &mut LayerPlan, step: f64) -> Resu
              with the area-weighted mean composition (`thin = \"skip\"` leaves them out)",
             work.merged, widths.min
         ));
+    }
+    if head_class(info) == HeadClass::DualGantry {
+        within_gantry_reach(&tools, &work.jobs, info)?;
     }
     let rmax = tools.iter().map(|t| t.envelope).fold(0.0, f64::max);
     let vmax = tools.iter().map(ToolSpec::max_speed).fold(0.0, f64::max);
