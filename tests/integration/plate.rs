@@ -48,6 +48,11 @@ fn copies_are_the_parts_plan_moved_to_a_grid_a_gap_apart() {
         .map(|p| p["name"].as_str().expect("name"))
         .collect();
     assert_eq!(names, ["tube", "tube#2", "tube#3"]);
+    // `check` says what the plate holds.
+    let o = crate::support::lamina(&["check", dir.path().join("p.toml").to_str().expect("utf-8")]);
+    assert!(o.status.success(), "{}", text(&o.stderr));
+    let said = format!("{}{}", text(&o.stdout), text(&o.stderr));
+    assert!(said.contains("x 1 mm, and 2 copies on the plate"), "{said}");
     let steps = [[0.0, 0.0], [25.0, 0.0], [0.0, 25.0]];
     for layer in plan["layers"].as_array().expect("layers") {
         let parts = layer["parts"].as_array().expect("parts");

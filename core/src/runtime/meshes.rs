@@ -271,16 +271,22 @@ impl Engine {
             .parts_info
             .iter()
             .zip(&m.part_mesh)
-            .map(|(p, &i)| {
+            .enumerate()
+            .map(|(pi, (p, &i))| {
                 let mesh = &m.meshes[i];
                 let size = mesh.bbox().size();
+                let copies = m.copies.iter().filter(|c| c.of == pi).count();
                 format!(
-                    "part `{}`: {} triangles, {} x {} x {} mm",
+                    "part `{}`: {} triangles, {} x {} x {} mm{}",
                     p.name,
                     mesh.triangles.len(),
                     short(size.x),
                     short(size.y),
-                    short(size.z)
+                    short(size.z),
+                    match copies {
+                        0 => String::new(),
+                        n => format!(", and {n} copies on the plate"),
+                    }
                 )
             })
             .collect();

@@ -741,10 +741,13 @@ impl<'a> Run<'a> {
             };
             let ahead = |j: usize| {
                 let b = &self.agents[j];
-                let begun = b.route[..=b.at.mv.min(b.route.len() - 1)]
-                    .iter()
-                    .any(|m| m.kind == PathKind::Extrude);
-                b.done || (begun && b.pos.y >= first.y + a.spec.envelope + b.spec.envelope)
+                let begun = || {
+                    b.route
+                        .iter()
+                        .take(b.at.mv + 1)
+                        .any(|m| m.kind == PathKind::Extrude)
+                };
+                b.done || (b.pos.y >= first.y + a.spec.envelope + b.spec.envelope && begun())
             };
             if (0..n).all(|j| j == i || !self.agents[j].spec.rear || ahead(j)) {
                 self.released[i] = true;
