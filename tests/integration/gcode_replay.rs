@@ -165,8 +165,8 @@ fn replay(
 struct Targets {
     coverage: f64,
     overlap: f64,
-    /// Also replay each motion system of a multi-system file running slower than the
-    /// file assumes (feeds a fifth slower, or accelerations halved): no collision,
+    /// Also replay the file with a motion system running slower than it assumes
+    /// (system 0's feeds a fifth slower, then system 1's accelerations halved): no collision,
     /// no wait with a loaded nozzle, and the heads the envelopes' sum and one margin
     /// apart all the same.
     perturb: bool,
@@ -297,7 +297,7 @@ fn replay_file(
                 closest(&json)
             );
             let perturbations = if targets.perturb {
-                &["0:0.8,1", "1:0.8,1", "0:1,0.5", "1:1,0.5"][..]
+                &["0:0.8,1", "1:1,0.5"][..]
             } else {
                 &[]
             };
@@ -1050,12 +1050,13 @@ fn a_mixing_head_follows_eq_18_along_its_beads() {
     }
 }
 
-/// Four copies of the graded gear on one plate (`copies = 4`): the replayed G-code
-/// deposits each copy whole where the plate puts it (two columns, 10 mm apart), as
-/// checked against a plate of four gears composed by trimesh, not by Lamina: volume
-/// within 2 % and every sampled layer covered, with the gear's own mixes in each copy.
+/// Copies of the graded gear on one plate (`copies = 2`): the replayed G-code deposits
+/// each copy whole where the plate puts it (side by side, 10 mm apart), as checked
+/// against a plate of gears composed by trimesh, not by Lamina: volume within 2 % and
+/// every sampled layer covered. (`plate::` checks the grid's rows and the copies'
+/// grading.)
 #[test]
-fn four_copies_of_the_gear_are_deposited_whole_where_the_plate_puts_them() {
+fn copies_of_the_gear_are_deposited_whole_where_the_plate_puts_them() {
     if !checker_ready() {
         return;
     }
@@ -1078,7 +1079,7 @@ fn four_copies_of_the_gear_are_deposited_whole_where_the_plate_puts_them() {
              g = trimesh.load(sys.argv[1])\n\
              (x0, y0, _), (x1, y1, _) = g.bounds\n\
              w, h = x1 - x0 + 10.0, y1 - y0 + 10.0\n\
-             copies = [g.copy().apply_translation([c * w, r * h, 0]) for r in (0, 1) for c in (0, 1)]\n\
+             copies = [g.copy().apply_translation([c * w, 0, 0]) for c in (0, 1)]\n\
              trimesh.util.concatenate(copies).export(sys.argv[2])\n",
         )
         .arg(&gear)
@@ -1097,19 +1098,17 @@ fn four_copies_of_the_gear_are_deposited_whole_where_the_plate_puts_them() {
         "--model",
         gear.to_str().expect("utf-8"),
         "--set",
-        "parts.0.copies=4",
+        "parts.0.copies=2",
         "--out",
         out.to_str().expect("utf-8"),
         "-q",
     ]);
     let gcode = out.join("gear-mixing.gcode");
     let text = std::fs::read_to_string(&gcode).expect("G-code");
-    for n in 2..=4 {
-        assert!(
-            text.contains(&format!("; part gear#{n}: red, green")),
-            "copy {n} is not named"
-        );
-    }
+    assert!(
+        text.contains("; part gear#2: red, green"),
+        "the copy is not named"
+    );
     let report = dir.path().join("replay.json");
     let machine = machine_table(&toml::Value::String("marlin-mixing-2in1".into()), &pipeline);
     let [x0, y0, x1, y1] = bed(&machine);
