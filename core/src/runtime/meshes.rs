@@ -89,10 +89,6 @@ impl Engine {
             .flatten()
             .flat_map(|m| m.warnings.iter().cloned())
             .collect();
-        // Parts taking the same mesh of the same model (told apart by `family_at`)
-        // share it: it is cut once per layer. Each distinct mesh is made once, moved out
-        // of the loaded models when nothing else needs it, and the loaded models are
-        // dropped: a run holds each mesh once.
         // Each model's box in X-Y, before its meshes are moved out: copies are laid out
         // by it, so the parts of one model move together.
         let model_boxes: Vec<BBox2> = loaded
@@ -102,6 +98,10 @@ impl Engine {
                 flat(&b)
             })
             .collect();
+        // Parts taking the same mesh of the same model (told apart by `family_at`)
+        // share it: it is cut once per layer. Each distinct mesh is made once, moved out
+        // of the loaded models when nothing else needs it, and the loaded models are
+        // dropped: a run holds each mesh once.
         let mut mesh_keys: Vec<(usize, Option<usize>)> = Vec::new();
         for p in &self.parts {
             let model = &loaded[p.model];
