@@ -177,6 +177,38 @@ mod tests {
         let mut b = at(1, 5.0, "b");
         b.offset = Vector2::zeros();
         check_apart(&[at(0, 0.0, "a"), b]).expect("the pipeline's placement");
+        // The copies of two parts of one model at one place (gear and shaft) may
+        // overlap; a copy over its own model's original may not.
+        check_apart(&[at(0, 10.0, "gear's copy 2"), at(0, 10.0, "shaft's copy 2")]).expect("an assembly");
+        check_apart(&[at(0, 0.0, "a"), at(0, 5.0, "a's copy 2")]).expect_err("over its original");
+    }
+
+    /// Boxes that only touch, side by side in X or in Y, either way round, are apart.
+    #[test]
+    fn copies_touching_along_an_edge_are_apart() {
+        let at = |label: &str, x: f64, y: f64| Instance {
+            model: 0,
+            offset: Vector2::new(x, y),
+            label: label.into(),
+            bbox: BBox2 {
+                min: Point2::new(x, y),
+                max: Point2::new(x + 10.0, y + 10.0),
+            },
+        };
+        for (dx, dy) in [(10.0, 0.0), (-10.0, 0.0), (0.0, 10.0), (0.0, -10.0)] {
+            check_apart(&[at("copy 2", 20.0, 20.0), at("copy 3", 20.0 + dx, 20.0 + dy)]).expect("touching");
+            check_apart(&[
+                at("copy 2", 20.0, 20.0),
+                at("copy 3", 20.0 + dx / 2.0, 20.0 + dy / 2.0),
+            ])
+            .expect_err("overlapping");
+        }
+        let b = BBox2 {
+            min: Point2::new(1.0, 2.0),
+            max: Point2::new(3.0, 5.0),
+        };
+        let m = moved_box(&b, Vector2::new(10.0, -1.0));
+        assert_eq!((m.min, m.max), (Point2::new(11.0, 1.0), Point2::new(13.0, 4.0)));
     }
 
     #[test]
