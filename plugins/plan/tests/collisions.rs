@@ -1148,3 +1148,81 @@ fn on_two_gantries_the_rear_head_leads_and_the_front_head_follows_a_row_behind()
         .fold(f64::INFINITY, f64::min);
     assert!(least >= 10.0 - 1e-6, "{least} mm in Y");
 }
+
+/// A layer of two parts, one a material, each a 40 mm wide rectangle: tool 0's (the
+/// front head's) from y `front.0` to `front.1`, tool 1's (the rear head's) from
+/// `rear.0` to `rear.1`, on a plate from y 0 to `depth` (other parts fill the rest),
+/// on `machine`, placed as the exporter places them.
+fn gantry_layer(
+    machine: lamina_core::Machine,
+    front: (f64, f64),
+    rear: (f64, f64),
+    depth: f64,
+) -> (RunInfo, LayerPlan) {
+    let mut rng = Rng(1);
+    let (mut info, mut plan) = layout(&mut rng, 2);
+    for (part, (y0, y1)) in [front, rear].into_iter().enumerate() {
+        let outer = rect(0.0, y0, 40.0, y1 - y0);
+        plan.parts[part].regions.truncate(1);
+        let r = &mut plan.parts[part].regions[0];
+        r.reference = Point2::new(20.0, (y0 + y1) / 2.0);
+        r.polygon = Polygon::new(outer, Vec::new());
+    }
+    info.xy_bounds = lamina_core::BBox2::from_points([Point2::new(0.0, 0.0), Point2::new(40.0, depth)]);
+    info.machine = Some(machine);
+    (info, plan)
+}
+
+/// On two gantries (rrf-dual-gantry-2: a 300 mm deep bed, the plate centred on it) the
+/// rear head reaches no nearer the bed's front edge than the two envelopes (5 mm each
+/// here), nor the front head the back edge: a plan that puts the rear head's beads at
+/// Y 5-15 mm, or the front head's at 285-295 mm, is refused naming the head and how
+/// far it reaches; with room at both edges it is planned. A round bed's reach is the
+/// square inside it.
+#[test]
+fn on_two_gantries_beads_beyond_a_heads_reach_are_refused() {
+    let gantry = lamina_core::machine::load::builtin("rrf-dual-gantry-2").expect("profile");
+    let p = planner("use = \"concurrent\"");
+    // The rear head's part at the front of a plate 290 mm deep: Y 5-15 on the bed.
+    let (info, mut plan) = gantry_layer(gantry.clone(), (100.0, 140.0), (0.0, 10.0), 290.0);
+    let e = p
+        .plan(&info, &mut plan)
+        .expect_err("out of the rear head's reach")
+        .to_string();
+    assert!(
+        e.contains("the rear head (tool 1, m1)") && e.contains("front edge than Y 10.0 mm"),
+        "{e}"
+    );
+    // The front head's part at the back: Y 285-295.
+    let (info, mut plan) = gantry_layer(gantry.clone(), (280.0, 290.0), (100.0, 140.0), 290.0);
+    let e = p
+        .plan(&info, &mut plan)
+        .expect_err("out of the front head's reach")
+        .to_string();
+    assert!(
+        e.contains("the front head (tool 0, m0)") && e.contains("back edge than Y 290.0 mm"),
+        "{e}"
+    );
+    // Room at both edges: planned, every bead on the bed.
+    let (info, mut plan) = gantry_layer(gantry.clone(), (0.0, 40.0), (60.0, 100.0), 100.0);
+    p.plan(&info, &mut plan).expect("within reach");
+    assert!(!plan.toolpaths.is_empty());
+    let off = gantry.placement_offset(&info.xy_bounds);
+    for t in &plan.toolpaths {
+        for q in &t.points {
+            let y = q.p.y + off.y;
+            assert!((0.0..=300.0).contains(&y), "tool {} at Y {y} on the bed", t.tool);
+        }
+    }
+    // A round bed of 300 mm: the square inside it starts 43.9 mm from the round bed's
+    // box, so the rear head reaches no nearer than Y 53.9 mm; the plate, 240 mm deep,
+    // puts its part at Y 30-50.
+    let mut round = gantry;
+    round.bed.shape = lamina_core::machine::BedShape::Circle { diameter: 300.0 };
+    let (info, mut plan) = gantry_layer(round, (100.0, 140.0), (0.0, 20.0), 240.0);
+    let e = p
+        .plan(&info, &mut plan)
+        .expect_err("out of reach on a round bed")
+        .to_string();
+    assert!(e.contains("front edge than Y 53.9 mm"), "{e}");
+}
