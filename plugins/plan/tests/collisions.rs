@@ -1141,6 +1141,30 @@ fn on_two_gantries_the_rear_head_leads_and_the_front_head_follows_a_row_behind()
             .fold(f64::INFINITY, f64::min)
     };
     assert!(first_bead(1) < first_bead(0), "the rear head begins");
+    // The front head waits at its park until the rear head has beaded the front row
+    // and gone on, not only until it has begun.
+    let first_path = |tool: usize| {
+        s.paths
+            .iter()
+            .filter(|p| p.tool == tool)
+            .min_by(|a, b| a.points[0].t.total_cmp(&b.points[0].t))
+            .expect("a path")
+    };
+    let waits = first_path(0);
+    let rear_row = s
+        .paths
+        .iter()
+        .filter(|p| p.tool == 1 && p.kind == PathKind::Extrude)
+        .min_by(|a, b| a.points[0].t.total_cmp(&b.points[0].t))
+        .expect("a bead");
+    assert_eq!(waits.kind, PathKind::Pause);
+    assert_eq!(waits.points[0].p, Point2::new(0.0, -30.0));
+    let until = waits.points.last().expect("end").t;
+    let row_done = rear_row.points.last().expect("end").t;
+    assert!(
+        until >= row_done - STEP,
+        "the front head left its park at {until} s, the rear head's row ends at {row_done} s"
+    );
     let (ta, tb) = (timeline(&s.paths, 0), timeline(&s.paths, 1));
     let least = (0..=20_000)
         .map(|k| s.end * k as f64 / 20_000.0)
