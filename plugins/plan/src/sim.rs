@@ -807,16 +807,6 @@ impl<'a> Run<'a> {
         // Whether holding i alone, and j alone, clears the other's next position: a
         // tool moving away from the one behind it is not the one to hold.
         let clears = (self.safe(i, j, false, true), self.safe(i, j, true, false));
-        // Gantries in Y order sweep the layer front to back: the rear head leads and the
-        // front one follows, so the front head waits wherever its pause clears the way.
-        // Held the other way round, the rear head could not reach the front of the layer
-        // until the front head had done all of its work.
-        if self.settings.separation == Separation::OrderedY {
-            let front = if self.agents[i].spec.rear { j } else { i };
-            if (front == i && clears.0) || (front == j && clears.1) {
-                return (front, Why::of(front, i, j, clears, &self.along_x));
-            }
-        }
         let ruled = ruled_loser(priority, &self.agents, i, j, &self.along_x);
         let loser = match (priority, clears) {
             (Priority::XSpeed | Priority::Clearing | Priority::Busiest, (true, false)) => i,
