@@ -1241,12 +1241,28 @@ fn on_two_gantries_beads_beyond_a_heads_reach_are_refused() {
     // A round bed of 300 mm: the square inside it starts 43.9 mm from the round bed's
     // box, so the rear head reaches no nearer than Y 53.9 mm; the plate, 240 mm deep,
     // puts its part at Y 30-50.
-    let mut round = gantry;
+    let mut round = gantry.clone();
     round.bed.shape = lamina_core::machine::BedShape::Circle { diameter: 300.0 };
-    let (info, mut plan) = gantry_layer(round, (100.0, 140.0), (0.0, 20.0), 240.0);
+    let (info, mut plan) = gantry_layer(round.clone(), (100.0, 140.0), (0.0, 20.0), 240.0);
     let e = p
         .plan(&info, &mut plan)
         .expect_err("out of reach on a round bed")
         .to_string();
     assert!(e.contains("front edge than Y 53.9 mm"), "{e}");
+    // And the front head no nearer its back edge than Y 246.1 mm.
+    let (info, mut plan) = gantry_layer(round.clone(), (220.0, 240.0), (100.0, 140.0), 240.0);
+    let e = p
+        .plan(&info, &mut plan)
+        .expect_err("out of reach on a round bed")
+        .to_string();
+    assert!(e.contains("back edge than Y 246.1 mm"), "{e}");
+    // Heads of different sizes: the rear head (8 mm) keeps its own envelope and the
+    // front head's (5 mm) from the front edge.
+    let sized = planner("use = \"concurrent\"\ntools = { m1 = { envelope = 8.0 } }");
+    let (info, mut plan) = gantry_layer(round, (100.0, 140.0), (0.0, 20.0), 240.0);
+    let e = sized
+        .plan(&info, &mut plan)
+        .expect_err("out of reach")
+        .to_string();
+    assert!(e.contains("front edge than Y 56.9 mm"), "{e}");
 }
