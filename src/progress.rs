@@ -71,32 +71,6 @@ fn shape(message: &str) -> String {
     out
 }
 
-/// Layer indices as ranges: `3-17, 20, 31-33`; past `MAX_RANGES` ranges the rest are
-/// counted.
-fn layer_ranges(layers: &[usize]) -> String {
-    const MAX_RANGES: usize = 6;
-    let mut sorted = layers.to_vec();
-    sorted.sort_unstable();
-    sorted.dedup();
-    let mut ranges: Vec<(usize, usize)> = Vec::new();
-    for l in sorted {
-        match ranges.last_mut() {
-            Some(r) if r.1 + 1 == l => r.1 = l,
-            _ => ranges.push((l, l)),
-        }
-    }
-    let shown: Vec<String> = ranges
-        .iter()
-        .take(MAX_RANGES)
-        .map(|&(a, b)| if a == b { a.to_string() } else { format!("{a}-{b}") })
-        .collect();
-    let mut out = shown.join(", ");
-    if ranges.len() > MAX_RANGES {
-        out.push_str(&format!(" and {} more ranges", ranges.len() - MAX_RANGES));
-    }
-    out
-}
-
 impl Group {
     /// One line: the first diagnostic's words, with the layers and count of all.
     fn line(&self) -> String {
@@ -107,7 +81,10 @@ impl Group {
         let mut place = Vec::new();
         if !self.layers.is_empty() {
             let word = if self.layers.len() == 1 { "layer" } else { "layers" };
-            place.push(format!("{word} {}", layer_ranges(&self.layers)));
+            place.push(format!(
+                "{word} {}",
+                lamina_core::text::layer_ranges(&self.layers, 6)
+            ));
         }
         if let Some(p) = &d.part {
             place.push(format!("part `{p}`"));

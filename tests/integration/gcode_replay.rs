@@ -674,6 +674,28 @@ fn replayed_volumes(gcode: &Path, extra: &[&str]) -> serde_json::Value {
     json["volume"].clone()
 }
 
+/// The checker's JSON report on `gcode` replayed with `args`, which must pass; its
+/// summary is printed.
+fn checked_replay(gcode: &Path, args: &[String]) -> serde_json::Value {
+    let report = gcode.with_extension("checked.json");
+    let o = Command::new("python3")
+        .arg(root().join("tests/replay/gcode_replay.py"))
+        .arg(gcode)
+        .args(args)
+        .arg("--json")
+        .arg(&report)
+        .output()
+        .expect("python3 runs");
+    let said = String::from_utf8_lossy(&o.stdout);
+    eprintln!("{said}");
+    assert!(
+        o.status.success(),
+        "{} {args:?} does not replay cleanly:\n{said}",
+        gcode.display()
+    );
+    serde_json::from_str(&std::fs::read_to_string(&report).expect("report")).expect("JSON report")
+}
+
 /// PrusaSlicer 2.5 (the Debian package), a slicer the printing world trusts, fills the
 /// gear solid (100 % rectilinear infill, 0.4 mm nozzle, 0.2 mm layers) and deposits
 /// within 2 % of the mesh volume; Lamina's file for the same gear must agree with it
@@ -1109,26 +1131,22 @@ fn copies_of_the_gear_are_deposited_whole_where_the_plate_puts_them() {
         text.contains("; part gear#2: red, green"),
         "the copy is not named"
     );
-    let report = dir.path().join("replay.json");
     let machine = machine_table(&toml::Value::String("marlin-mixing-2in1".into()), &pipeline);
     let [x0, y0, x1, y1] = bed(&machine);
-    let o = Command::new("python3")
-        .arg(root().join("tests/replay/gcode_replay.py"))
-        .arg(&gcode)
-        .arg("--mesh")
-        .arg(&plate)
-        .args(["--place", "centre", "--bead-ends", "round", "--coverage-every=3"])
-        .arg(format!("--bed={x0},{y0},{x1},{y1}"))
-        .args(heating_args(&machine))
-        .arg("--json")
-        .arg(&report)
-        .output()
-        .expect("python3 runs");
-    let said = String::from_utf8_lossy(&o.stdout);
-    eprintln!("{said}");
-    assert!(o.status.success(), "the plate does not replay cleanly:\n{said}");
-    let r: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(&report).expect("report")).expect("JSON report");
+    let mut args: Vec<String> = [
+        "--mesh",
+        plate.to_str().expect("utf-8"),
+        "--place",
+        "centre",
+        "--bead-ends",
+        "round",
+    ]
+    .map(String::from)
+    .to_vec();
+    args.push("--coverage-every=3".into());
+    args.push(format!("--bed={x0},{y0},{x1},{y1}"));
+    args.extend(heating_args(&machine));
+    let r = checked_replay(&gcode, &args);
     eprintln!("volume: {}", r["volume"]);
 }
 
@@ -1162,25 +1180,10 @@ fn replay_plate(machine: &str, overrides: &[&str], perturb: &[&str]) -> Vec<serd
     let gcode = out.join("assembly-two-tools.gcode");
     let mut reports = Vec::new();
     for p in std::iter::once(None).chain(perturb.iter().map(Some)) {
-        let report = dir.path().join("replay.json");
-        let mut c = Command::new("python3");
-        c.arg(root().join("tests/replay/gcode_replay.py"))
-            .arg(&gcode)
-            .arg(format!("--bed={x0},{y0},{x1},{y1}"))
-            .args(heating_args(&table))
-            .arg("--json")
-            .arg(&report);
-        if let Some(p) = p {
-            c.arg(format!("--perturb={p}"));
-        }
-        let o = c.output().expect("python3 runs");
-        let said = String::from_utf8_lossy(&o.stdout);
-        assert!(
-            o.status.success(),
-            "{} ({p:?}) does not replay cleanly:\n{said}",
-            gcode.display()
-        );
-        reports.push(serde_json::from_str(&std::fs::read_to_string(&report).expect("report")).expect("JSON"));
+        let mut args = vec![format!("--bed={x0},{y0},{x1},{y1}")];
+        args.extend(heating_args(&table));
+        args.extend(p.map(|p| format!("--perturb={p}")));
+        reports.push(checked_replay(&gcode, &args));
     }
     reports
 }

@@ -92,6 +92,21 @@ struct Page {
     moves_left_out: Vec<usize>,
 }
 
+impl Page {
+    /// A page written to `out` as far as `head`, holding no layer yet.
+    fn start(mut out: Box<dyn Write + Send>, name: PathBuf, head: &str) -> Result<Page> {
+        out.write_all(head.as_bytes()).map_err(io(&name))?;
+        let bytes = head.len() as u64;
+        Ok(Page {
+            out: Counted { inner: out, bytes },
+            name,
+            layers: None,
+            planned: bytes,
+            moves_left_out: Vec::new(),
+        })
+    }
+}
+
 /// A writer that counts what passes through it.
 struct Counted {
     inner: Box<dyn Write + Send>,
@@ -122,25 +137,6 @@ fn page_name(first: &std::path::Path, k: usize) -> PathBuf {
         None => format!("{stem}-{}", k + 1),
     };
     first.with_file_name(name)
-}
-
-/// Layer indices as ranges: "0-3, 7, 9-12".
-fn ranges(layers: &[usize]) -> String {
-    let mut out: Vec<String> = Vec::new();
-    let mut i = 0;
-    while i < layers.len() {
-        let mut j = i;
-        while j + 1 < layers.len() && layers[j + 1] == layers[j] + 1 {
-            j += 1;
-        }
-        out.push(if i == j {
-            layers[i].to_string()
-        } else {
-            format!("{}-{}", layers[i], layers[j])
-        });
-        i = j + 1;
-    }
-    out.join(", ")
 }
 
 #[derive(Serialize)]
@@ -309,7 +305,7 @@ impl Exporter for Html {
     fn open(&self, ctx: &mut ExportContext<'_>) -> Result<Box<dyn LayerSink>> {
         let path = self.options.path.clone();
         let earlier: Vec<PathBuf> = ctx.files.written().into_iter().map(|(name, _)| name).collect();
-        let mut out = ctx.files.create(&path)?;
+        let out = ctx.files.create(&path)?;
         let header = Header {
             name: ctx.pipeline_name,
             layer_count: ctx.layer_count,
@@ -360,19 +356,9 @@ impl Exporter for Html {
             "<!doctype html>\n<html lang=\"en\">\n<head>\n<meta charset=\"utf-8\">\n<title>{name} - Lamina</title>\n<style>\n{VIEWER_CSS}</style>\n</head>\n<body>\n<div id=\"bar\"><strong>{name}</strong><input id=\"layer\" type=\"range\" min=\"0\" max=\"0\" value=\"0\" aria-label=\"layer\"><span id=\"label\"></span><span id=\"pages\" hidden></span><label><input id=\"paths\" type=\"checkbox\" checked> toolpaths</label><span id=\"tools\"></span>{legend}<span id=\"player\" hidden><label><input id=\"moves\" type=\"checkbox\" checked> machine moves</label> <button id=\"play\" type=\"button\">play</button> <input id=\"time\" type=\"range\" min=\"0\" max=\"1000\" value=\"1000\" aria-label=\"time in the layer\"> <select id=\"speed\" aria-label=\"speed\"><option value=\"1\">1x</option><option value=\"10\" selected>10x</option><option value=\"100\">100x</option></select> <span id=\"clock\"></span></span><label><input id=\"v3d\" type=\"checkbox\"> 3D</label><span id=\"cutbox\" hidden><label><input id=\"cut\" type=\"checkbox\"> cut</label> <input id=\"cutat\" type=\"range\" min=\"0\" max=\"1000\" value=\"500\" aria-label=\"cut plane across x\"></span><span id=\"opsbox\" hidden><label><input id=\"ops\" type=\"checkbox\" checked> operations</label> <select id=\"op\" aria-label=\"operation shown\"></select></span><span id=\"cursor\"></span></div>\n<ol id=\"oplist\" hidden></ol>\n<canvas id=\"view\"></canvas>\n<canvas id=\"view3d\" hidden></canvas>\n<div id=\"tip\"></div>\n<pre id=\"test-result\" hidden></pre>\n<script>const LAMINA = {header}; const LAYERS = []; const MOVES = new Map(); let GCODE = null; let PAGES = null;</script>\n",
             name = escape(ctx.pipeline_name),
         );
-        out.write_all(head.as_bytes()).map_err(io(&path))?;
         let moves_expected = self.options.moves && gcode_candidate(&self.options, &earlier);
         Ok(Box::new(Sink {
-            pages: vec![Page {
-                out: Counted {
-                    inner: out,
-                    bytes: head.len() as u64,
-                },
-                name: path.clone(),
-                layers: None,
-                planned: head.len() as u64,
-                moves_left_out: Vec::new(),
-            }],
+            pages: vec![Page::start(out, path.clone(), &head)?],
             path,
             head,
             options: self.options.clone(),
@@ -564,18 +550,8 @@ impl Sink {
     /// Starts the next page.
     fn open_page(&mut self, files: &mut dyn OutputFiles) -> Result<()> {
         let name = page_name(&self.path, self.pages.len());
-        let mut out = files.create(&name)?;
-        out.write_all(self.head.as_bytes()).map_err(io(&name))?;
-        self.pages.push(Page {
-            out: Counted {
-                inner: out,
-                bytes: self.head.len() as u64,
-            },
-            name,
-            layers: None,
-            planned: self.head.len() as u64,
-            moves_left_out: Vec::new(),
-        });
+        let out = files.create(&name)?;
+        self.pages.push(Page::start(out, name, &self.head)?);
         Ok(())
     }
 
@@ -624,7 +600,7 @@ impl Sink {
                     format!(
                         "the machine's moves of {} layer(s) ({}) are left out of the viewer to keep its pages under {limit}: raise `page_mb`, or show every n-th layer (`every`)",
                         left_out.len(),
-                        ranges(&left_out)
+                        lamina_api::text::layer_ranges(&left_out, 6)
                     ),
                 ),
             );
@@ -837,7 +813,7 @@ mod tests {
     }
 
     #[test]
-    fn pages_are_named_after_the_first_and_ranges_are_joined() {
+    fn pages_are_named_after_the_first() {
         let first = std::path::Path::new("out/viewer.html");
         assert_eq!(page_name(first, 0), PathBuf::from("out/viewer.html"));
         assert_eq!(page_name(first, 2), PathBuf::from("out/viewer-3.html"));
@@ -845,7 +821,5 @@ mod tests {
             page_name(std::path::Path::new("view"), 1),
             PathBuf::from("view-2")
         );
-        assert_eq!(ranges(&[0, 1, 2, 5, 7, 8]), "0-2, 5, 7-8");
-        assert_eq!(ranges(&[]), "");
     }
 }
