@@ -1854,19 +1854,20 @@ def bead_geometry(segs: list[tuple], height: float, area: float, ends: str = "fl
     else:
         rects = shapely.polygons(ring)
         bead_area = float((width * ln).sum())
-    union = shapely.union_all(rects)
     if ends == "round":
         # A continuous extrusion is one bead: where its own segments meet (joints,
         # and the tight turns of a densely sampled centre line) the nozzle lays no
         # second layer of material. Each run's footprint is the union of its
-        # segments; what the footprints of different runs share is overlap.
+        # segments; what the footprints of different runs share is overlap. The
+        # layer's union is that of the footprints (the same set, fewer pieces).
         order = np.argsort(runs, kind="stable")
         bounds = np.flatnonzero(np.diff(runs[order])) + 1
         groups = np.split(order, bounds)
         footprints = [shapely.union_all(rects[g]) for g in groups]
         run_area = float(sum(f.area for f in footprints))
         consecutive = bead_area - run_area
-        return union, bead_area, consecutive, width
+        return shapely.union_all(footprints), bead_area, consecutive, width
+    union = shapely.union_all(rects)
     same = runs[1:] == runs[:-1]
     consecutive = 0.0
     if same.any():
