@@ -10,8 +10,8 @@ pub const GRADED_RANGE: (f64, f64) = (0.5, 2.0);
 /// with the rule in words: a tenth of the cell where that is at most 0.1 mm, else a
 /// twentieth (but no less than 0.1 mm). Whole tens of micrometres where the rule's
 /// range holds one, so that work cycles stay short (a tenth rounded down, a twentieth
-/// up, within a tenth), whole micrometres otherwise; `None` for a cell under 10 µm,
-/// where no whole micrometre is a tenth of it or less.
+/// up, which stays within a tenth), whole micrometres for a tenth under 10 µm; `None`
+/// for a cell under 10 µm, where no whole micrometre is a tenth of it or less.
 pub fn microstructure_um(cell: f64) -> Option<(u64, String)> {
     let tenth_um = cell * 100.0;
     if tenth_um.is_nan() || tenth_um < 1.0 - 1e-9 {
@@ -21,14 +21,11 @@ pub fn microstructure_um(cell: f64) -> Option<(u64, String)> {
         let um = (tenth_um + 1e-9).floor() as u64;
         (if um >= 10 { um / 10 * 10 } else { um }, "1/10")
     } else {
+        // Rounded up to tens, a twentieth (at least 100 µm) stays within the tenth:
+        // the tenth is over 100 µm here, and over the twentieth by more than 10 µm
+        // once the twentieth is over 100.
         let twentieth = (cell * 50.0).max(100.0);
-        let up = ((twentieth - 1e-9) / 10.0).ceil() as u64 * 10;
-        let um = if (up as f64) <= tenth_um + 1e-9 {
-            up
-        } else {
-            (twentieth + 1e-9).floor() as u64
-        };
-        (um, "1/20")
+        (((twentieth - 1e-9) / 10.0).ceil() as u64 * 10, "1/20")
     };
     Some((um, format!("auto: {why} of the {cell} mm base cell")))
 }
@@ -67,8 +64,22 @@ mod tests {
         assert_eq!(um(2.1), 110);
         let t = um(3.9) as f64 / 1000.0;
         assert!((3.9 / 20.0..=3.9 / 10.0).contains(&t), "{t}");
-        // A cell under 10 µm has no whole micrometre within a tenth of it.
+        // A cell under 10 µm has no whole micrometre within a tenth of it; one of
+        // exactly 10 µm has its tenth.
         assert!(microstructure_um(0.005).is_none());
+        assert_eq!(um(0.01), 1);
+        // Rounded up, a twentieth stays within the tenth from just over 1 mm on.
+        for cell in [1.0001, 1.05, 1.99, 2.0, 2.01, 2.5, 7.3, 40.0] {
+            let t = um(cell) as f64 / 1000.0;
+            assert!(
+                (cell / 20.0 - 1e-12..=cell / 10.0).contains(&t) && t >= 0.1,
+                "{cell}: {t}"
+            );
+        }
+        // The rule says which share it took: a tenth of exactly 1 mm is 0.1 mm.
+        let rule = |cell: f64| microstructure_um(cell).expect("a thickness").1;
+        assert_eq!(rule(1.0), "auto: 1/10 of the 1 mm base cell");
+        assert_eq!(rule(1.0001), "auto: 1/20 of the 1.0001 mm base cell");
     }
 
     #[test]

@@ -341,9 +341,6 @@ fn build(config: &StageConfig<'_>) -> Result<AnyStage> {
             ));
         }
     }
-    if !(options.step.is_finite() && options.step > 0.0 && options.step <= 1.0) {
-        return Err(config.error("step", "must be a share of a fraction in (0, 1]"));
-    }
     Ok(AnyStage::Sequence(Box::new(WorkCycles {
         options,
         table: config.table.clone(),
