@@ -362,6 +362,258 @@ mod tests {
         );
     }
 
+    /// The distance to a triangle by another route: inside the triangle's own
+    /// projection, the height over its plane; else the nearest of its three edges.
+    fn reference_distance(p: Point3, t: &[Point3; 3]) -> f64 {
+        let [a, b, c] = *t;
+        let segment = |s: Point3, e: Point3| {
+            let d = e - s;
+            let u = ((p - s).dot(&d) / d.norm_squared()).clamp(0.0, 1.0);
+            (p - (s + d * u)).norm()
+        };
+        let edges = segment(a, b).min(segment(b, c)).min(segment(c, a));
+        let n = (b - a).cross(&(c - a)).normalize();
+        let h = (p - a).dot(&n);
+        let q = p - n * h;
+        let side = |s: Point3, e: Point3| (e - s).cross(&(q - s)).dot(&n);
+        if side(a, b) >= 0.0 && side(b, c) >= 0.0 && side(c, a) >= 0.0 {
+            h.abs()
+        } else {
+            edges
+        }
+    }
+
+    /// A reproducible sequence of numbers in [0, 1).
+    fn numbers(seed: u64) -> impl FnMut() -> f64 {
+        let mut state = seed;
+        move || {
+            state = state
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            (state >> 11) as f64 / (1u64 << 53) as f64
+        }
+    }
+
+    #[test]
+    fn point_to_triangle_agrees_with_the_projection_and_the_edges() {
+        let mut r = numbers(7);
+        for _ in 0..5000 {
+            let mut v = || Point3::new(4.0 * r() - 2.0, 4.0 * r() - 2.0, 4.0 * r() - 2.0);
+            let t = [v(), v(), v()];
+            let p = v();
+            if (t[1] - t[0]).cross(&(t[2] - t[0])).norm() < 1e-3 {
+                continue;
+            }
+            let (got, want) = (triangle_distance(p, &t), reference_distance(p, &t));
+            assert!((got - want).abs() < 1e-9, "{p:?} to {t:?}: {got} against {want}");
+        }
+    }
+
+    #[test]
+    fn a_degenerate_triangle_is_its_nearest_edge() {
+        let a = Point3::new(0.0, 0.0, 0.0);
+        let b = Point3::new(2.0, 0.0, 0.0);
+        // Collinear corners: the segment from a to b.
+        let line = [a, b, Point3::new(1.0, 0.0, 0.0)];
+        assert!((triangle_distance(Point3::new(1.0, 3.0, 4.0), &line) - 5.0).abs() < 1e-12);
+        assert!((triangle_distance(Point3::new(3.0, 0.0, 0.0), &line) - 1.0).abs() < 1e-12);
+        // All corners at one point.
+        let dot = [b, b, b];
+        assert!((triangle_distance(Point3::new(2.0, 3.0, 4.0), &dot) - 5.0).abs() < 1e-12);
+    }
+
+    /// A closed, finely cut surface: a sphere of radius 5 about (1, 2, 3), as a
+    /// latitude-longitude grid of 2 * 24 * 48 triangles.
+    fn sphere() -> Mesh {
+        let (rings, sectors) = (24u32, 48u32);
+        let mut vertices = Vec::new();
+        for i in 0..=rings {
+            let theta = std::f64::consts::PI * i as f64 / rings as f64;
+            for j in 0..sectors {
+                let phi = 2.0 * std::f64::consts::PI * j as f64 / sectors as f64;
+                vertices.push(Point3::new(
+                    1.0 + 5.0 * theta.sin() * phi.cos(),
+                    2.0 + 5.0 * theta.sin() * phi.sin(),
+                    3.0 + 5.0 * theta.cos(),
+                ));
+            }
+        }
+        let at = |i: u32, j: u32| i * sectors + j % sectors;
+        let mut triangles = Vec::new();
+        for i in 0..rings {
+            for j in 0..sectors {
+                triangles.push([at(i, j), at(i + 1, j), at(i + 1, j + 1)]);
+                triangles.push([at(i, j), at(i + 1, j + 1), at(i, j + 1)]);
+            }
+        }
+        Mesh::new("sphere", vertices, triangles)
+    }
+
+    #[test]
+    fn the_grid_finds_the_nearest_triangle_inside_outside_and_far_away() {
+        let mesh = sphere();
+        let chosen: Vec<usize> = (0..mesh.triangles.len()).collect();
+        let s = Surface::new(&mesh, &chosen).expect("a surface");
+        let brute = |p: Point3| {
+            chosen
+                .iter()
+                .map(|&t| triangle_distance(p, &mesh.triangle(t)))
+                .fold(f64::INFINITY, f64::min)
+        };
+        let mut r = numbers(11);
+        for i in 0..600 {
+            // Inside the grid's box, around it, and far beyond it.
+            let spread = [12.0, 30.0, 400.0][i % 3];
+            let p = Point3::new(
+                1.0 + spread * (r() - 0.5),
+                2.0 + spread * (r() - 0.5),
+                3.0 + spread * (r() - 0.5),
+            );
+            let want = brute(p);
+            assert!((s.distance(p) - want).abs() < 1e-12, "{p:?}");
+            // Under a cap the distance is exact; beyond it, at least the cap.
+            for cap in [0.5, 2.0, 7.0] {
+                let got = s.distance_within(p, cap);
+                if want < cap {
+                    assert!(
+                        (got - want).abs() < 1e-12,
+                        "{p:?} under {cap}: {got} against {want}"
+                    );
+                } else {
+                    assert!(
+                        got >= cap.min(want) - 1e-12,
+                        "{p:?} under {cap}: {got} against {want}"
+                    );
+                }
+            }
+        }
+        // The centre is about the radius from every face.
+        assert!((s.distance(Point3::new(1.0, 2.0, 3.0)) - 5.0).abs() < 0.06);
+        // A NaN cap is no cap.
+        assert!((s.distance_within(Point3::new(1.0, 2.0, 20.0), f64::NAN) - 12.0).abs() < 1e-9);
+    }
+
+    #[test]
+    fn faces_chosen_by_group_and_within_an_angle() {
+        let mut mesh = cube();
+        mesh.material_names = vec!["core".into(), "skin".into()];
+        // The top and the side at x = 1 are skin.
+        mesh.triangle_materials = vec![0, 0, 1, 1, 0, 0, 0, 0, 1, 1, 0, 0];
+        let skin = FaceSelection {
+            groups: vec!["skin".into()],
+            ..FaceSelection::default()
+        };
+        assert_eq!(skin.select(&mesh).unwrap(), [2, 3, 8, 9]);
+        // Both criteria: skin facing up.
+        let up_skin = FaceSelection {
+            normal: Some([0.0, 0.0, 2.0]),
+            ..skin.clone()
+        };
+        assert_eq!(up_skin.select(&mesh).unwrap(), [2, 3]);
+        let e = FaceSelection {
+            groups: vec!["shell".into()],
+            ..FaceSelection::default()
+        }
+        .select(&mesh)
+        .unwrap_err();
+        assert!(e.contains("no face group `shell` (it has: core, skin)"), "{e}");
+        // A direction halfway between up and +x: the top and that side lie 45 degrees
+        // off it, the others 90 or more.
+        let between = |within: f64| FaceSelection {
+            normal: Some([1.0, 0.0, 1.0]),
+            within,
+            groups: Vec::new(),
+        };
+        assert_eq!(between(45.0).select(&mesh).unwrap(), [2, 3, 8, 9]);
+        assert!(between(44.0).select(&mesh).unwrap().is_empty());
+        assert_eq!(between(90.0).select(&mesh).unwrap().len(), 12 - 4);
+        assert_eq!(between(180.0).select(&mesh).unwrap().len(), 12);
+        // A triangle of no area faces nowhere.
+        let mut flat = cube();
+        flat.triangles[2] = [4, 4, 5];
+        let up = FaceSelection {
+            normal: Some([0.0, 0.0, 1.0]),
+            ..FaceSelection::default()
+        };
+        assert_eq!(up.select(&flat).unwrap(), [3]);
+    }
+
+    #[test]
+    fn selections_are_checked() {
+        let ok = FaceSelection::default();
+        assert!(ok.check().is_ok());
+        for (sel, says) in [
+            (
+                FaceSelection {
+                    normal: Some([0.0; 3]),
+                    ..FaceSelection::default()
+                },
+                "non-zero direction",
+            ),
+            (
+                FaceSelection {
+                    normal: Some([f64::NAN, 0.0, 1.0]),
+                    ..FaceSelection::default()
+                },
+                "non-zero direction",
+            ),
+            (
+                FaceSelection {
+                    within: -1.0,
+                    ..FaceSelection::default()
+                },
+                "[0, 180]",
+            ),
+            (
+                FaceSelection {
+                    within: 180.5,
+                    ..FaceSelection::default()
+                },
+                "[0, 180]",
+            ),
+        ] {
+            assert!(sel.check().unwrap_err().contains(says), "{sel:?}");
+        }
+        for within in [0.0, 180.0] {
+            assert!(FaceSelection { within, ..ok.clone() }.check().is_ok());
+        }
+        assert!(
+            FaceSelection {
+                normal: Some([0.0, 0.0, -1.0]),
+                ..ok
+            }
+            .check()
+            .is_ok()
+        );
+    }
+
+    #[test]
+    fn surfaces_are_built_once_per_mesh_and_none_without_faces() {
+        let (a, b) = (cube(), sphere());
+        let all = FaceSelection::default();
+        let surfaces = Surfaces::default();
+        let first = surfaces.of(&a, &all).unwrap().expect("a surface");
+        let again = surfaces.of(&a, &all).unwrap().expect("a surface");
+        assert!(Arc::ptr_eq(&first, &again));
+        let other = surfaces.of(&b, &all).unwrap().expect("a surface");
+        assert!(!Arc::ptr_eq(&first, &other));
+        // A clone starts empty: its own run's meshes.
+        let fresh = surfaces.clone().of(&a, &all).unwrap().expect("a surface");
+        assert!(!Arc::ptr_eq(&first, &fresh));
+        assert!(Surface::new(&a, &[]).is_none());
+        // A surface of one point has no extent.
+        let mut dot = cube();
+        dot.triangles = vec![[1, 1, 1]];
+        assert!(Surface::new(&dot, &[0]).is_none());
+        // A selection that matches nothing gives no surface.
+        let diagonal = FaceSelection {
+            normal: Some([1.0, 1.0, 1.0]),
+            within: 0.0,
+            groups: Vec::new(),
+        };
+        assert!(Surfaces::default().of(&a, &diagonal).unwrap().is_none());
+    }
+
     #[test]
     fn point_to_triangle_in_every_region() {
         let t = [
