@@ -366,3 +366,166 @@ impl Microstructure {
         Ok(out)
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use lamina_api::geom::Point2;
+
+    fn square(lo: f64, hi: f64) -> BBox2 {
+        BBox2 {
+            min: Point2::new(lo, lo),
+            max: Point2::new(hi, hi),
+        }
+    }
+
+    /// Centre (of the bounding box) and radius (from the area) of a circular void.
+    fn circle(c: &Contour) -> (f64, f64, f64) {
+        let b = c.bbox();
+        (
+            (b.min.x + b.max.x) / 2.0,
+            (b.min.y + b.max.y) / 2.0,
+            (c.area() / std::f64::consts::PI).sqrt(),
+        )
+    }
+
+    /// Spheres of radius 0.5 on a 2 mm lattice: a plane 0.3 mm above a row of centres
+    /// cuts circles of radius 0.4 about them, counter-clockwise, in lattice order; a
+    /// plane between the rows cuts nothing.
+    #[test]
+    fn a_plane_cuts_each_sphere_in_the_circle_of_its_chord() {
+        let m = Microstructure::spheres([2.0; 3], [0.0; 3], 0.5, Limits::default());
+        let voids = m.voids(0.3, &square(-0.1, 4.1), None).unwrap();
+        let mut centres = Vec::new();
+        for v in &voids {
+            let (x, y, r) = circle(v);
+            assert!(v.area() > 0.0, "counter-clockwise");
+            assert!((r - 0.4).abs() < 0.004, "{r}");
+            centres.push((x.round() as i64, y.round() as i64));
+        }
+        let mut sorted = centres.clone();
+        sorted.sort_unstable();
+        assert_eq!(
+            sorted,
+            (0..3)
+                .flat_map(|i| (0..3).map(move |j| (2 * i, 2 * j)))
+                .collect::<Vec<_>>()
+        );
+        // Through the next row's centres the whole radius; between rows nothing.
+        let through = m.voids(2.0, &square(-0.1, 4.1), None).unwrap();
+        assert_eq!(through.len(), 9);
+        assert!(through.iter().all(|v| (circle(v).2 - 0.5).abs() < 0.005));
+        assert!(m.voids(1.0, &square(-0.1, 4.1), None).unwrap().is_empty());
+        assert!(m.voids(1.45, &square(-0.1, 4.1), None).unwrap().is_empty());
+        // 0.45 below the next row's centres: radius sqrt(0.25 - 0.2025).
+        let edge = m.voids(1.55, &square(-0.1, 4.1), None).unwrap();
+        assert_eq!(edge.len(), 9);
+        assert!(
+            edge.iter()
+                .all(|v| (circle(v).2 - 0.0475f64.sqrt()).abs() < 0.003)
+        );
+        // Only the cells whose inserting points lie within a cell's reach (half the
+        // lattice's diagonal, 1.73 mm) of the box.
+        assert_eq!(m.voids(0.3, &square(1.9, 2.1), None).unwrap().len(), 1);
+        assert_eq!(m.voids(0.3, &square(1.5, 2.5), None).unwrap().len(), 9);
+    }
+
+    /// The model turned a quarter about x and moved 0.5 along x: the lattice turns and
+    /// moves with it, so its spacing along the build's z is the model's y spacing.
+    #[test]
+    fn the_lattice_turns_and_moves_with_the_model() {
+        let m = Microstructure::spheres([2.0, 3.0, 5.0], [0.0; 3], 0.5, Limits::default());
+        // (x, y, z) -> (x, -z, y): the model's y is the build's z.
+        let frame = ModelFrame {
+            rotation: [[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]],
+            offset: [0.5, 0.0, 0.0],
+        };
+        let at = |z: f64| m.voids(z, &square(-0.2, 10.2), Some(&frame)).unwrap();
+        // Centres at build z = 0, 3, 6; x = 0.5 + 2k; y = -5j.
+        for z in [0.0, 3.0, 6.0] {
+            let v = at(z);
+            assert!(!v.is_empty(), "{z}");
+            for c in &v {
+                let (x, y, r) = circle(c);
+                assert!(((x - 0.5) / 2.0 - ((x - 0.5) / 2.0).round()).abs() < 1e-3, "{x}");
+                assert!((y / 5.0 - (y / 5.0).round()).abs() < 1e-3, "{y}");
+                assert!((r - 0.5).abs() < 0.005, "{r}");
+            }
+        }
+        assert!(at(1.5).is_empty());
+        assert!(at(5.0).is_empty());
+        // Unturned, the spacing along z is 5.
+        assert!(!m.voids(5.0, &square(-0.2, 10.2), None).unwrap().is_empty());
+        assert!(m.voids(3.0, &square(-0.2, 10.2), None).unwrap().is_empty());
+    }
+
+    #[test]
+    fn a_cell_reaching_past_half_the_lattice_diagonal_is_refused() {
+        // Half the diagonal of a 2 mm lattice: 1.732 mm.
+        let fits = Microstructure::spheres([2.0; 3], [0.0; 3], 1.73, Limits::default());
+        assert!(fits.voids(0.0, &square(-0.1, 0.1), None).is_ok());
+        let big = Microstructure::spheres([2.0; 3], [0.0; 3], 1.74, Limits::default());
+        let e = big.voids(0.0, &square(-0.1, 0.1), None).unwrap_err().to_string();
+        assert!(
+            e.contains("reaches 1.7400 mm") && e.contains("(1.7321 mm)"),
+            "{e}"
+        );
+        // A cell of no size is no void.
+        let none = Microstructure::spheres([2.0; 3], [0.0; 3], 0.0, Limits::default());
+        assert!(none.voids(0.0, &square(-0.1, 4.1), None).unwrap().is_empty());
+    }
+
+    #[test]
+    fn the_lattice_points_are_counted_against_the_limits_first() {
+        let limits = Limits {
+            grid_samples: 8,
+            ..Limits::default()
+        };
+        let m = Microstructure::spheres([1.0; 3], [0.0; 3], 0.3, limits);
+        // 3 x 3 points near the plane fit, 11 x 11 do not.
+        assert_eq!(m.voids(0.0, &square(-0.1, 1.1), None).map(|v| v.len()).ok(), None);
+        let small = Microstructure::spheres(
+            [1.0; 3],
+            [0.0; 3],
+            0.3,
+            Limits {
+                grid_samples: 100,
+                ..limits
+            },
+        );
+        assert_eq!(small.voids(0.0, &square(-0.1, 1.1), None).unwrap().len(), 4);
+        let e = m.voids(0.0, &square(-0.1, 10.1), None).unwrap_err().to_string();
+        assert!(e.contains("lattice points near a layer"), "{e}");
+        let e = m.cells_in([0.0; 3], [10.0; 3], 5).unwrap_err().to_string();
+        assert!(e.contains("lattice over the model"), "{e}");
+    }
+
+    /// Every n-th cell of the box when it holds more than the limit asks.
+    #[test]
+    fn cells_in_a_box_are_thinned_to_about_the_limit() {
+        let m = Microstructure::spheres([1.0; 3], [0.0; 3], 0.3, Limits::default());
+        // 3 x 3 x 3 = 27 points.
+        let all = m.cells_in([0.0; 3], [2.0; 3], 100).unwrap();
+        assert_eq!(all.len(), 27);
+        assert!(
+            all.iter()
+                .all(|c| c.half == [0.3; 3] && c.shape == CellShape::Sphere)
+        );
+        // At most 10: every third.
+        let some = m.cells_in([0.0; 3], [2.0; 3], 10).unwrap();
+        assert_eq!(some.len(), 9);
+        assert_eq!(some[0].centre, all[0].centre);
+        assert_eq!(some[1].centre, all[3].centre);
+        assert_eq!(m.cells_in([0.0; 3], [2.0; 3], 0).unwrap().len(), 1);
+    }
+
+    #[test]
+    fn the_description_names_the_cells_and_their_lattice() {
+        let m = Microstructure::spheres([2.0, 3.0, 4.0], [0.5, 0.0, -1.0], 0.25, Limits::default());
+        assert_eq!(
+            m.describe(),
+            "sphere cells of size 0.25 mm x [1, 1, 1] on a lattice of period [2, 3, 4] mm \
+             from [0.5, 0, -1], tilted 0 deg about x"
+        );
+    }
+}
