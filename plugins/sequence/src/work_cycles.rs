@@ -371,5 +371,15 @@ mod tests {
         assert!(thickness_um(-1.0).is_err());
         assert!(thickness_um(f64::NAN).is_err());
         assert!(thickness_um(5000.0).is_err());
+        // The bounds: one micrometre, and one metre (the longest cycle).
+        assert_eq!(thickness_um(0.001), Ok(1));
+        assert_eq!(thickness_um(1000.0), Ok(1_000_000));
+        assert!(thickness_um(1000.001).is_err());
+        // Zero, and a thickness that rounds to zero micrometres, are no thickness.
+        assert_eq!(
+            thickness_um(0.0),
+            Err("0 is not a positive number of mm".to_string())
+        );
+        assert!(thickness_um(1e-10).is_err());
     }
 }
