@@ -140,6 +140,29 @@ mod tests {
         assert_eq!(t.truncate(0.449), 0.3);
     }
 
+    /// A value exactly at a threshold, as `thresholds` computes it, starts its band;
+    /// the float just below it is still in the band before. Steps whose thresholds
+    /// are not exact in binary (0.1, 0.3, 0.07, 1/3) put the first estimate on the
+    /// wrong side, which the band must settle.
+    #[test]
+    fn a_value_at_a_threshold_starts_its_band() {
+        for step in [0.1, 0.3, 0.07, 1.0 / 3.0, 0.013, 0.25, 0.6] {
+            let t = Truncation::new(step).unwrap();
+            for (i, &th) in t.thresholds().iter().enumerate() {
+                let k = i + 1;
+                assert_eq!(t.band(th), k, "t_g = {step}, threshold {th}");
+                let below = f64::from_bits(th.to_bits() - 1);
+                assert_eq!(t.band(below), k - 1, "t_g = {step}, just below {th}");
+                let mid = th + 0.5 * step;
+                assert_eq!(t.band(mid), k, "t_g = {step}, {mid}");
+                assert_eq!(t.truncate(th), t.level(k));
+            }
+            assert_eq!(t.band(f64::NAN), 0);
+            assert_eq!(t.band(10.0), t.count - 1);
+            assert_eq!(t.band(f64::INFINITY), t.count - 1);
+        }
+    }
+
     #[test]
     fn bad_steps_are_refused() {
         for s in [0.0, -0.25, 1.5, f64::NAN, 1e-9] {

@@ -538,6 +538,94 @@ mod tests {
         assert_eq!(up.select(&flat).unwrap(), [3]);
     }
 
+    /// The angle between a face's normal and the asked direction, on faces whose
+    /// normals are not of unit length (a cube of side 3), and the default angle.
+    #[test]
+    fn the_angle_is_measured_whatever_the_faces_size() {
+        let mut big = cube();
+        for v in &mut big.vertices {
+            *v = Point3::from(v.coords * 3.0);
+        }
+        let tilted = |within: f64| FaceSelection {
+            normal: Some([1.0, 0.0, 1.0]),
+            within,
+            groups: Vec::new(),
+        };
+        assert_eq!(tilted(45.0).select(&big).unwrap(), [2, 3, 8, 9]);
+        assert!(tilted(44.0).select(&big).unwrap().is_empty());
+        // 30 degrees unless the table says.
+        let unsaid = FaceSelection::deserialize(serde::de::value::MapDeserializer::<
+            _,
+            serde::de::value::Error,
+        >::new(std::iter::empty::<(&str, f64)>()))
+        .unwrap();
+        assert_eq!(unsaid.within, 30.0);
+        assert_eq!(
+            unsaid,
+            FaceSelection {
+                within: 30.0,
+                ..FaceSelection::default()
+            }
+        );
+        // 30 degrees off the top: within the default, not within 29.
+        let (s, c) = (30f64.to_radians().sin(), 30f64.to_radians().cos());
+        let off = FaceSelection {
+            normal: Some([s, 0.0, c]),
+            ..unsaid.clone()
+        };
+        assert_eq!(off.select(&big).unwrap(), [2, 3]);
+        assert!(
+            FaceSelection { within: 29.0, ..off }
+                .select(&big)
+                .unwrap()
+                .is_empty()
+        );
+    }
+
+    /// Two small faces at opposite corners of the grid, and points beyond the grid's
+    /// box where the nearer face lies at the far end of the grid along one axis: the
+    /// shells must reach across the whole grid from where the point clamps to it.
+    #[test]
+    fn the_search_reaches_across_the_grid_from_outside_it() {
+        let v = |x: f64, y: f64, z: f64| Point3::new(x, y, z);
+        let mesh = Mesh::new(
+            "corners",
+            vec![
+                v(0.0, 0.0, 0.0),
+                v(1.0, 0.0, 0.0),
+                v(0.0, 1.0, 0.0),
+                v(100.0, 100.0, 0.0),
+                v(99.0, 100.0, 0.0),
+                v(100.0, 99.0, 0.0),
+            ],
+            vec![[0, 1, 2], [3, 4, 5]],
+        );
+        let s = Surface::new(&mesh, &[0, 1]).expect("a surface");
+        let brute = |p: Point3| {
+            (0..2)
+                .map(|t| triangle_distance(p, &mesh.triangle(t)))
+                .fold(f64::INFINITY, f64::min)
+        };
+        for p in [
+            v(101.0, -200.0, 0.0),
+            v(-200.0, 101.0, 0.0),
+            v(150.0, -60.0, 3.0),
+            v(50.0, 50.0, 0.0),
+            v(49.0, 49.0, -40.0),
+            v(51.0, 51.0, 40.0),
+            v(101.0, 101.0, 0.0),
+            v(200.0, -600.0, 0.0),
+            v(-600.0, 200.0, 5.0),
+        ] {
+            assert!(
+                (s.distance(p) - brute(p)).abs() < 1e-12,
+                "{p:?}: {} against {}",
+                s.distance(p),
+                brute(p)
+            );
+        }
+    }
+
     #[test]
     fn selections_are_checked() {
         let ok = FaceSelection::default();
