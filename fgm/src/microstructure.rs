@@ -464,6 +464,9 @@ mod tests {
         // Half the diagonal of a 2 mm lattice: 1.732 mm.
         let fits = Microstructure::spheres([2.0; 3], [0.0; 3], 1.73, Limits::default());
         assert!(fits.voids(0.0, &square(-0.1, 0.1), None).is_ok());
+        // Exactly half the diagonal still fits.
+        let exact = Microstructure::spheres([2.0; 3], [0.0; 3], 0.5 * 12f64.sqrt(), Limits::default());
+        assert!(exact.voids(0.0, &square(-0.1, 0.1), None).is_ok());
         let big = Microstructure::spheres([2.0; 3], [0.0; 3], 1.74, Limits::default());
         let e = big.voids(0.0, &square(-0.1, 0.1), None).unwrap_err().to_string();
         assert!(

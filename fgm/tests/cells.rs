@@ -137,6 +137,15 @@ fn a_box_turns_and_leans_where_its_scripts_say() {
         "box cells of size 0.2 mm x [1, 1, 4], leaning 90 deg on a lattice of period [3, 3, 3] mm \
          from [0, 0, 0], tilted 0 deg about x"
     );
+    // Leaning 45 degrees toward -y: a plane 0.3 above the centre cuts the box about
+    // its axis at y = -0.3.
+    let m = cells(
+        "{ shape = \"box\", size = 0.2, aspect = [1.0, 1.0, 4.0], period = [3.0, 3.0, 3.0], lean = 45.0 }",
+    );
+    let v = m.voids(0.3, &square(-0.1, 0.1), None).unwrap();
+    assert_eq!(v.len(), 1);
+    let ((x, y), _) = boxed(&v[0]);
+    assert!(near(x, 0.0, 1e-9) && near(y, -0.3, 1e-9), "({x}, {y})");
 }
 
 /// A cylinder's radius is size x aspect[0], its half-height size x aspect[2].
@@ -244,4 +253,42 @@ fn bad_cells_are_refused_at_their_key() {
     let m = cells("{ size = \"1.0 / x\", period = [3.0, 3.0, 3.0] }");
     let e = m.voids(0.0, &square(-0.1, 0.1), None).unwrap_err().to_string();
     assert!(e.contains("returned inf") && e.contains("size"), "{e}");
+}
+
+/// Scripts read every coordinate of the inserting point.
+#[test]
+fn scripts_read_y_and_z_as_well() {
+    let m = cells("{ size = 0.3, period = [2.0, 2.0, 2.0], insert = \"y + z - 3.0\" }");
+    // At z = 2: cells where y > 1.
+    let mut ys: Vec<i64> = m
+        .voids(2.0, &square(-0.1, 4.1), None)
+        .unwrap()
+        .iter()
+        .map(|v| boxed(v).0.1.round() as i64)
+        .collect();
+    ys.sort_unstable();
+    ys.dedup();
+    assert_eq!(ys, [2, 4]);
+}
+
+/// A box cell's half-edges are its size times the aspect along each of its axes, and
+/// on a tilted lattice it leans with the lattice: a plane 0.3 above its centre cuts it
+/// about the point of its axis there, 0.3 tan 30 toward -y.
+#[test]
+fn a_box_on_a_tilted_lattice_leans_with_it() {
+    let m = cells("{ shape = \"box\", size = 0.2, aspect = [1.0, 2.0, 4.0], period = [10.0, 10.0, 10.0] }");
+    let v = m.voids(0.0, &square(-0.1, 0.1), None).unwrap();
+    let (_, (w, d)) = boxed(&v[0]);
+    assert!(near(w, 0.4, 1e-9) && near(d, 0.8, 1e-9), "{w} x {d}");
+    let m = cells(
+        "{ shape = \"box\", size = 0.2, aspect = [1.0, 1.0, 4.0], period = [10.0, 10.0, 10.0], tilt = 30.0 }",
+    );
+    let v = m.voids(0.3, &square(-0.1, 0.1), None).unwrap();
+    assert_eq!(v.len(), 1);
+    let ((x, y), _) = boxed(&v[0]);
+    let want = -0.3 * 30f64.to_radians().tan();
+    assert!(
+        near(x, 0.0, 1e-9) && near(y, want, 1e-9),
+        "({x}, {y}) against (0, {want})"
+    );
 }
