@@ -182,6 +182,7 @@ option_type! {
     String = "string", array "array of string";
     PathBuf = "string", array "array of string";
     crate::machine::Flavor = "string";
+    lamina_geom::offset::Join = "string";
 }
 
 /// Default and doc of an option that several stages accept alike; each stage names

@@ -18,8 +18,10 @@ use i_overlay::i_shape::int::shape::IntShapes;
 
 use crate::simplify::simplify_into;
 
-/// How offset edges meet where they part.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+/// How offset edges meet where they part; written `"round"`, `"miter"` or `"bevel"`
+/// in a pipeline's options.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Deserialize)]
+#[serde(rename_all = "lowercase")]
 pub enum Join {
     /// Arcs: the offset is the exact Euclidean erosion or dilation (within the
     /// tolerance).

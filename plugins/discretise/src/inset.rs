@@ -2,10 +2,12 @@
 //! how offset edges meet. The offsets themselves are lamina-geom's
 //! ([`lamina_geom::offset`]), one engine for every stage.
 
-use lamina_geom::offset::{self, RawOffset};
+use lamina_geom::offset::RawOffset;
 use serde::Deserialize;
 
-lamina_api::option_type!(From = "string"; Join = "string");
+pub use lamina_geom::offset::Join;
+
+lamina_api::option_type!(From = "string");
 
 /// Which boundaries the offsets start from: the grading reference.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Deserialize)]
@@ -18,19 +20,6 @@ pub enum From {
     Outer,
 }
 
-/// How offset edges meet at corners.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Deserialize)]
-#[serde(rename_all = "lowercase")]
-pub enum Join {
-    /// Arcs: the offset is the exact Euclidean erosion (within `tolerance`).
-    #[default]
-    Round,
-    /// Sharp corners (bevelled where the corner's inside angle is below 5 degrees).
-    Miter,
-    /// Corners cut straight.
-    Bevel,
-}
-
 /// An inward offsetter with its settings.
 #[derive(Debug, Clone, Copy)]
 pub struct Inset {
@@ -40,22 +29,11 @@ pub struct Inset {
     pub tolerance: f64,
 }
 
-impl Join {
-    /// The engine's join.
-    pub fn geom(self) -> offset::Join {
-        match self {
-            Join::Round => offset::Join::Round,
-            Join::Miter => offset::Join::Miter,
-            Join::Bevel => offset::Join::Bevel,
-        }
-    }
-}
-
 impl Inset {
     /// The offsetter these settings make.
     pub fn raw(&self) -> RawOffset {
         RawOffset {
-            join: self.join.geom(),
+            join: self.join,
             tolerance: self.tolerance,
         }
     }
