@@ -234,7 +234,7 @@ mod tests {
 
     use super::*;
     use crate::geom::{BBox2, Point2};
-    use crate::model::{ContourTree, Material, PartInfo, PartLayer, PathKind, TimedPoint};
+    use crate::model::{ContourTree, Fill, Material, PartInfo, PartLayer, PathKind, TimedPoint};
     use crate::process::OperationPath;
 
     fn info() -> RunInfo {
@@ -357,6 +357,51 @@ mod tests {
         let mut bad = plan(vec![bead()]);
         bad.build_time = Some(f64::INFINITY);
         assert!(bad.check(&info()).expect_err("refused").contains("build time"));
+        // A point may come at the same time as the one before it (a corner taken at
+        // once), not earlier.
+        let mut p = bead();
+        p.points[2].t = p.points[1].t;
+        plan(vec![p]).check(&info()).expect("simultaneous points");
+    }
+
+    /// Timings and fill: finite and not negative, zero included.
+    #[test]
+    fn timings_and_fill_must_be_finite_and_not_negative() {
+        let with = |build: Option<f64>, sequential: Option<f64>, fill: Option<Fill>| {
+            let mut p = plan(vec![bead()]);
+            p.build_time = build;
+            p.sequential_time = sequential;
+            p.fill = fill;
+            p.check(&info())
+        };
+        let fill = |area: f64, deposited: f64, min_ratio: f64| {
+            Some(Fill {
+                area,
+                deposited,
+                min_ratio,
+            })
+        };
+        with(Some(0.0), Some(0.0), fill(0.0, 0.0, 0.0)).expect("zeros");
+        with(None, None, None).expect("nothing said");
+        with(Some(2.0), Some(3.0), fill(10.0, 9.9, 0.99)).expect("a layer");
+        for (build, sequential, says) in [
+            (Some(-1.0), None, "its build time is -1 s"),
+            (Some(f64::NAN), None, "its build time is NaN s"),
+            (None, Some(-0.5), "its sequential time is -0.5 s"),
+            (Some(1.0), Some(f64::INFINITY), "its sequential time is inf s"),
+        ] {
+            let e = with(build, sequential, None).expect_err("refused");
+            assert_eq!(e, says);
+        }
+        for f in [
+            fill(-1.0, 1.0, 1.0),
+            fill(1.0, f64::NAN, 1.0),
+            fill(1.0, 1.0, -0.1),
+            fill(f64::INFINITY, 1.0, 1.0),
+        ] {
+            let e = with(None, None, f).expect_err("refused");
+            assert!(e.starts_with("its fill is Fill"), "{e}");
+        }
     }
 
     #[test]
