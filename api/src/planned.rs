@@ -419,6 +419,60 @@ mod tests {
             e.contains("operation 0 (`mill`): path 0 has a point at (1, 2000000)"),
             "{e}"
         );
+        // Its tool's numbers finite and not negative (zero allowed), its surface and
+        // values finite, its paths at finite heights.
+        let checked = |change: &dyn Fn(&mut Operation)| {
+            let mut op = Operation::new("mill", None);
+            op.tool = Some(crate::process::OperationTool {
+                name: "end-mill".into(),
+                kind: "end-mill".into(),
+                diameter: 2.0,
+                feed: 0.0,
+                spindle: Some(0.0),
+                power: None,
+            });
+            op.surface = Some(1.5);
+            op.values.insert("depth".into(), -0.2);
+            change(&mut op);
+            let mut p = plan(Vec::new());
+            p.operations.push(op);
+            p.check(&info())
+        };
+        checked(&|_| {}).expect("a sound operation");
+        for (change, says) in [
+            (
+                &(|op: &mut Operation| op.tool.as_mut().expect("tool").feed = -1.0)
+                    as &dyn Fn(&mut Operation),
+                "tool `end-mill` has -1 among its diameter, feed, spindle and power",
+            ),
+            (
+                &|op: &mut Operation| op.tool.as_mut().expect("tool").power = Some(f64::NAN),
+                "tool `end-mill` has NaN among",
+            ),
+            (
+                &|op: &mut Operation| op.surface = Some(f64::INFINITY),
+                "surface at inf mm",
+            ),
+            (
+                &|op: &mut Operation| {
+                    op.values.insert("depth".into(), f64::NAN);
+                },
+                "value `depth` = NaN",
+            ),
+            (
+                &|op: &mut Operation| {
+                    op.paths.push(OperationPath {
+                        z: f64::NAN,
+                        points: vec![Point2::new(0.0, 0.0)],
+                        closed: false,
+                    })
+                },
+                "path 0 at z = NaN",
+            ),
+        ] {
+            let e = checked(change).expect_err("refused");
+            assert!(e.contains(says), "{e}");
+        }
     }
 
     #[test]
