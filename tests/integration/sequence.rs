@@ -295,6 +295,20 @@ fn auto_thicknesses_follow_the_base_cell_and_the_sampled_gradient() {
     let steep = text.replace("f = \"z / 6.0\"", "f = \"clamp01(z / 2.0)\"");
     let plan = run_text(dir.path(), &steep, "pipe-work-cycles.json");
     assert_eq!(plan["sequence"]["regions"][1]["thickness_um"], 500);
+    // A quadratic grading changes fastest at the top. The gradient is the steepest
+    // change between neighbouring sample cuts, 24 over the part's 6 mm: graded at
+    // their layers' tops, the last two (5.75 and 6 mm) differ by (36 - 33.0625) / 36
+    // over 0.25 mm, 0.3264 per mm; a change of 0.5 per layer then takes 1.5 mm layers.
+    let quadratic = text
+        .replace("f = \"z / 6.0\"", "f = \"(z / 6.0) * (z / 6.0)\"")
+        .replace("step = 0.1", "step = 0.5");
+    let plan = run_text(dir.path(), &quadratic, "pipe-work-cycles.json");
+    let middle = &plan["sequence"]["regions"][1];
+    assert_eq!(middle["thickness_um"], 1500, "{middle}");
+    assert!(
+        middle["rule"].as_str().expect("rule").contains("0.3264 per mm"),
+        "{middle}"
+    );
     // A base cell for a name that is neither a part nor a region is named.
     let wrong = text.replace("base_cell = { inner = 1.0 }", "base_cell = { core = 1.0 }");
     let err = crate::support::text(&try_run_text(dir.path(), &wrong).stderr);
