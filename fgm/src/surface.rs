@@ -493,6 +493,15 @@ mod tests {
         assert!((s.distance_within(Point3::new(1.0, 2.0, 20.0), f64::NAN) - 12.0).abs() < 1e-9);
     }
 
+    /// Faces within `within` degrees of the direction halfway between +x and up.
+    fn toward_x_and_up(within: f64) -> FaceSelection {
+        FaceSelection {
+            normal: Some([1.0, 0.0, 1.0]),
+            within,
+            groups: Vec::new(),
+        }
+    }
+
     #[test]
     fn faces_chosen_by_group_and_within_an_angle() {
         let mut mesh = cube();
@@ -519,15 +528,10 @@ mod tests {
         assert!(e.contains("no face group `shell` (it has: core, skin)"), "{e}");
         // A direction halfway between up and +x: the top and that side lie 45 degrees
         // off it, the others 90 or more.
-        let between = |within: f64| FaceSelection {
-            normal: Some([1.0, 0.0, 1.0]),
-            within,
-            groups: Vec::new(),
-        };
-        assert_eq!(between(45.0).select(&mesh).unwrap(), [2, 3, 8, 9]);
-        assert!(between(44.0).select(&mesh).unwrap().is_empty());
-        assert_eq!(between(90.0).select(&mesh).unwrap().len(), 12 - 4);
-        assert_eq!(between(180.0).select(&mesh).unwrap().len(), 12);
+        assert_eq!(toward_x_and_up(45.0).select(&mesh).unwrap(), [2, 3, 8, 9]);
+        assert!(toward_x_and_up(44.0).select(&mesh).unwrap().is_empty());
+        assert_eq!(toward_x_and_up(90.0).select(&mesh).unwrap().len(), 12 - 4);
+        assert_eq!(toward_x_and_up(180.0).select(&mesh).unwrap().len(), 12);
         // A triangle of no area faces nowhere.
         let mut flat = cube();
         flat.triangles[2] = [4, 4, 5];
@@ -546,13 +550,8 @@ mod tests {
         for v in &mut big.vertices {
             *v = Point3::from(v.coords * 3.0);
         }
-        let tilted = |within: f64| FaceSelection {
-            normal: Some([1.0, 0.0, 1.0]),
-            within,
-            groups: Vec::new(),
-        };
-        assert_eq!(tilted(45.0).select(&big).unwrap(), [2, 3, 8, 9]);
-        assert!(tilted(44.0).select(&big).unwrap().is_empty());
+        assert_eq!(toward_x_and_up(45.0).select(&big).unwrap(), [2, 3, 8, 9]);
+        assert!(toward_x_and_up(44.0).select(&big).unwrap().is_empty());
         // 30 degrees unless the table says.
         let unsaid = FaceSelection::deserialize(serde::de::value::MapDeserializer::<
             _,

@@ -1207,22 +1207,26 @@ fn gantry_layer(
 fn on_two_gantries_beads_beyond_a_heads_reach_are_refused() {
     let gantry = lamina_core::machine::load::builtin("rrf-dual-gantry-2").expect("profile");
     let p = planner("use = \"concurrent\"");
+    // The message of a plan refused for the layer `gantry_layer` makes.
+    let refused = |planner: &dyn Planner,
+                   machine: &lamina_core::Machine,
+                   rear: (f64, f64),
+                   front: (f64, f64),
+                   depth: f64| {
+        let (info, mut plan) = gantry_layer(machine.clone(), rear, front, depth);
+        planner
+            .plan(&info, &mut plan)
+            .expect_err("out of a head's reach")
+            .to_string()
+    };
     // The rear head's part at the front of a plate 290 mm deep: Y 5-15 on the bed.
-    let (info, mut plan) = gantry_layer(gantry.clone(), (100.0, 140.0), (0.0, 10.0), 290.0);
-    let e = p
-        .plan(&info, &mut plan)
-        .expect_err("out of the rear head's reach")
-        .to_string();
+    let e = refused(&*p, &gantry, (100.0, 140.0), (0.0, 10.0), 290.0);
     assert!(
         e.contains("the rear head (tool 1, m1)") && e.contains("front edge than Y 10.0 mm"),
         "{e}"
     );
     // The front head's part at the back: Y 285-295.
-    let (info, mut plan) = gantry_layer(gantry.clone(), (280.0, 290.0), (100.0, 140.0), 290.0);
-    let e = p
-        .plan(&info, &mut plan)
-        .expect_err("out of the front head's reach")
-        .to_string();
+    let e = refused(&*p, &gantry, (280.0, 290.0), (100.0, 140.0), 290.0);
     assert!(
         e.contains("the front head (tool 0, m0)") && e.contains("back edge than Y 290.0 mm"),
         "{e}"
@@ -1243,26 +1247,14 @@ fn on_two_gantries_beads_beyond_a_heads_reach_are_refused() {
     // puts its part at Y 30-50.
     let mut round = gantry.clone();
     round.bed.shape = lamina_core::machine::BedShape::Circle { diameter: 300.0 };
-    let (info, mut plan) = gantry_layer(round.clone(), (100.0, 140.0), (0.0, 20.0), 240.0);
-    let e = p
-        .plan(&info, &mut plan)
-        .expect_err("out of reach on a round bed")
-        .to_string();
+    let e = refused(&*p, &round, (100.0, 140.0), (0.0, 20.0), 240.0);
     assert!(e.contains("front edge than Y 53.9 mm"), "{e}");
     // And the front head no nearer its back edge than Y 246.1 mm.
-    let (info, mut plan) = gantry_layer(round.clone(), (220.0, 240.0), (100.0, 140.0), 240.0);
-    let e = p
-        .plan(&info, &mut plan)
-        .expect_err("out of reach on a round bed")
-        .to_string();
+    let e = refused(&*p, &round, (220.0, 240.0), (100.0, 140.0), 240.0);
     assert!(e.contains("back edge than Y 246.1 mm"), "{e}");
     // Heads of different sizes: the rear head (8 mm) keeps its own envelope and the
     // front head's (5 mm) from the front edge.
     let sized = planner("use = \"concurrent\"\ntools = { m1 = { envelope = 8.0 } }");
-    let (info, mut plan) = gantry_layer(round, (100.0, 140.0), (0.0, 20.0), 240.0);
-    let e = sized
-        .plan(&info, &mut plan)
-        .expect_err("out of reach")
-        .to_string();
+    let e = refused(&*sized, &round, (100.0, 140.0), (0.0, 20.0), 240.0);
     assert!(e.contains("front edge than Y 56.9 mm"), "{e}");
 }
