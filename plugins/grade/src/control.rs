@@ -142,15 +142,23 @@ impl Control {
     }
 
     /// The composition at `args.r` over `n` materials; `context` names the place for
-    /// errors (part, layer, region).
-    pub fn composition(&self, args: &ScriptArgs<'_>, n: usize, context: &str) -> Result<Composition> {
+    /// errors (part, layer, region). It is a closure because a grader calls this for
+    /// every region or sample point, and writing the place out costs more than a
+    /// built-in control function: it is written only for an error, or for a script,
+    /// whose host reports its own errors with it.
+    pub fn composition(
+        &self,
+        args: &ScriptArgs<'_>,
+        n: usize,
+        context: impl Fn() -> String,
+    ) -> Result<Composition> {
         let r = args.r;
         let f = match self {
             Control::Linear { mu, lambda } => mu * r + lambda,
             Control::Constant { mu } => *mu,
             Control::Wave { mu, lambda } => mu * (lambda * r).sin(),
             Control::Power { alpha, k } => (alpha * r).powf(*k),
-            Control::Script(s) => return Composition::new(s.fractions(args, n, context)?),
+            Control::Script(s) => return Composition::new(s.fractions(args, n, &context())?),
         };
         // sin(pi) and friends leave a rounding residue just outside [0, 1].
         let f = if (-1e-12..0.0).contains(&f) {
@@ -163,12 +171,13 @@ impl Control {
         match n {
             1 if (f - 1.0).abs() <= 1e-9 => Ok(Composition::pure(0, 1)),
             2 => Composition::binary(f)
-                .map_err(|e| Error::stage("grade", format!("{context}: f(r = {r}) = {f}: {e}"))),
+                .map_err(|e| Error::stage("grade", format!("{}: f(r = {r}) = {f}: {e}", context()))),
             _ => Err(Error::stage(
                 "grade",
                 format!(
-                    "{context}: a built-in control function grades two materials, the part has {n}; \
-                     use a Rhai function that returns {n} fractions"
+                    "{}: a built-in control function grades two materials, the part has {n}; \
+                     use a Rhai function that returns {n} fractions",
+                    context()
                 ),
             )),
         }
@@ -203,7 +212,7 @@ mod tests {
             layer: 0,
             part: "p",
         };
-        c.composition(&args, n, "test")
+        c.composition(&args, n, || "test".to_string())
     }
 
     fn first(c: &Control, r: f64) -> f64 {

@@ -211,11 +211,13 @@ impl Grader for InPlane {
                     let r = lines.level(p);
                     let mut args = region_args(ctx, region, r);
                     (args.x, args.y) = (p.x, p.y);
-                    let context = format!(
-                        "part `{}`, layer {} (z = {:.4}), family {}, region {} at ({:.3}, {:.3}) (r = {r})",
-                        part.name, ctx.layer.index, ctx.layer.z, ctx.family, region.index, p.x, p.y
-                    );
-                    let c = self.control.composition(&args, n, &context)?;
+                    let context = || {
+                        format!(
+                            "part `{}`, layer {} (z = {:.4}), family {}, region {} at ({:.3}, {:.3}) (r = {r})",
+                            part.name, ctx.layer.index, ctx.layer.z, ctx.family, region.index, p.x, p.y
+                        )
+                    };
+                    let c = self.control.composition(&args, n, context)?;
                     sum.iter_mut().zip(&c.fractions).for_each(|(s, f)| *s += f);
                     samples.push(Sample {
                         at: p,
@@ -236,11 +238,13 @@ impl Grader for InPlane {
                 LevelSource::Level | LevelSource::Points => region.level,
             };
             let args = region_args(ctx, region, r);
-            let context = format!(
-                "part `{}`, layer {} (z = {:.4}), family {}, region {} (r = {r})",
-                part.name, ctx.layer.index, ctx.layer.z, ctx.family, region.index
-            );
-            region.composition = Some(self.control.composition(&args, n, &context)?);
+            let context = || {
+                format!(
+                    "part `{}`, layer {} (z = {:.4}), family {}, region {} (r = {r})",
+                    part.name, ctx.layer.index, ctx.layer.z, ctx.family, region.index
+                )
+            };
+            region.composition = Some(self.control.composition(&args, n, context)?);
         }
         Ok(())
     }

@@ -83,11 +83,13 @@ impl Grader for AlongZ {
         );
         for region in regions.iter_mut() {
             let args = region_args(ctx, region, r);
-            let context = format!(
-                "part `{}`, layer {} (z = {:.4}, r = {r}), region {}",
-                part.name, ctx.layer.index, ctx.layer.z, region.index
-            );
-            region.composition = Some(self.control.composition(&args, n, &context)?);
+            let context = || {
+                format!(
+                    "part `{}`, layer {} (z = {:.4}, r = {r}), region {}",
+                    part.name, ctx.layer.index, ctx.layer.z, region.index
+                )
+            };
+            region.composition = Some(self.control.composition(&args, n, context)?);
         }
         Ok(())
     }

@@ -109,12 +109,14 @@ impl Grader for Both {
                 index_level(region.index, region.count)
             };
             let args = |r: f64| region_args(ctx, region, r);
-            let context = format!(
-                "part `{}`, layer {} (z = {:.4}, r_z = {rz}), region {} (r_xy = {rxy})",
-                part.name, ctx.layer.index, ctx.layer.z, region.index
-            );
-            let mz = spread(self.z.composition(&args(rz), zi.len(), &context)?, &zi);
-            let mxy = spread(self.xy.composition(&args(rxy), xyi.len(), &context)?, &xyi);
+            let context = || {
+                format!(
+                    "part `{}`, layer {} (z = {:.4}, r_z = {rz}), region {} (r_xy = {rxy})",
+                    part.name, ctx.layer.index, ctx.layer.z, region.index
+                )
+            };
+            let mz = spread(self.z.composition(&args(rz), zi.len(), context)?, &zi);
+            let mxy = spread(self.xy.composition(&args(rxy), xyi.len(), context)?, &xyi);
             let mut f: Vec<f64> = mz
                 .iter()
                 .zip(&mxy)
