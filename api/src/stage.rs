@@ -273,6 +273,8 @@ pub trait Sorter: Send + Sync {
 /// What a discretiser or grader knows about the family it works on.
 #[derive(Debug, Clone, Copy)]
 pub struct FamilyContext<'a> {
+    /// The run; without its machine for a stage that does not say it reads it
+    /// (`reads_machine`).
     pub info: &'a RunInfo,
     pub layer: &'a Layer,
     pub tree: &'a ContourTree,
@@ -302,6 +304,14 @@ pub trait Discretiser: Send + Sync {
         false
     }
 
+    /// True when the stage reads the machine of the run ([`RunInfo::machine`] in
+    /// [`FamilyContext::info`]): only then is it given to it (and, behind the plugin
+    /// boundary, sent with every call). The stage's configuration carries the machine
+    /// when it is built, which is where a bead width or a nozzle is best read.
+    fn reads_machine(&self) -> bool {
+        false
+    }
+
     /// The sub-regions of each of `families` of one part's layer, in their order (the
     /// context's own `family` is not read). This is what the runtime calls: by default
     /// it discretises the families one by one; a stage behind the plugin boundary is
@@ -326,6 +336,13 @@ pub trait Grader: Send + Sync {
     /// True when the stage measures the part's mesh ([`FamilyContext::mesh`]): only
     /// then is the mesh given to it (and, behind the plugin boundary, sent to it).
     fn reads_mesh(&self) -> bool {
+        false
+    }
+
+    /// True when the stage reads the machine of the run ([`RunInfo::machine`] in
+    /// [`FamilyContext::info`]): only then is it given to it (and, behind the plugin
+    /// boundary, sent with every call).
+    fn reads_machine(&self) -> bool {
         false
     }
 

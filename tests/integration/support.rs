@@ -208,10 +208,23 @@ pub fn box_stl(min: [f64; 3], max: [f64; 3]) -> String {
     stl + "endsolid box\n"
 }
 
-/// Copies the folder `from` into `to`, leaving out `target` folders and writing only
-/// the files that differ (so that a build of the copy stays incremental).
+/// Makes the folder `to` a copy of `from`, leaving out `target` folders and writing
+/// only the files that differ (so that a build of the copy stays incremental). What
+/// `to` holds that `from` no longer does goes: a source file moved since the last copy
+/// (`offset.rs` to `offset/mod.rs`) would otherwise stay and break the copy's build.
 pub fn copy_dir(from: &Path, to: &Path) {
     std::fs::create_dir_all(to).expect("folder");
+    for entry in std::fs::read_dir(to).expect("read folder") {
+        let entry = entry.expect("entry");
+        if entry.file_name() != "target" && !from.join(entry.file_name()).exists() {
+            let path = entry.path();
+            if entry.file_type().expect("file type").is_dir() {
+                std::fs::remove_dir_all(&path).expect("remove folder");
+            } else {
+                std::fs::remove_file(&path).expect("remove file");
+            }
+        }
+    }
     for entry in std::fs::read_dir(from).expect("read folder") {
         let entry = entry.expect("entry");
         let (src, dst) = (entry.path(), to.join(entry.file_name()));

@@ -38,6 +38,9 @@ pub const WIRE_SCHEMAS: &[u64] = &[
     // (`Layer::section_area`). Warnings of meshes, layers and machine files carry
     // their code inside the string an older plugin reads (`Warning`).
     0xd3fc_00ea_dc1e_9a83,
+    // 7.4: discretisers and graders say whether they read the run's machine
+    // (`ReadsMachine`); those that do not are sent the run without it.
+    0xa974_ebfb_e110_89b7,
 ];
 /// The minor version of this build: a plugin of this major and of this minor or an
 /// older one loads (the host reads every message an older plugin writes, and sends it

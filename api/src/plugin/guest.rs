@@ -457,22 +457,7 @@ fn handle(request: Request<'static>) -> Result<Response> {
     match request {
         Request::Describe => Ok(describe()),
         Request::Build { stage, label, config } => build(stage, label, config),
-        Request::Load { handle, base_dir } => {
-            on_stage(handle, "load a model", |_, stage, label| match stage {
-                AnyStage::Model(s) => Some(guard_call(label, || s.load(&base_dir)).map(|meshes| {
-                    Response::Meshes(
-                        meshes
-                            .into_iter()
-                            .map(|mut mesh| WireMesh {
-                                warnings: std::mem::take(&mut mesh.warnings),
-                                mesh,
-                            })
-                            .collect(),
-                    )
-                })),
-                _ => None,
-            })
-        }
+        Request::Load { handle, base_dir } => load(handle, &base_dir),
         Request::Orient { handle, meshes } => on_stage(handle, "orient", |_, stage, label| match stage {
             AnyStage::Orient(s) => {
                 let refs: Vec<&Mesh> = meshes.iter().map(|m| &**m).collect();
@@ -573,6 +558,13 @@ fn handle(request: Request<'static>) -> Result<Response> {
                 _ => None,
             })
         }
+        Request::ReadsMachine { handle } => {
+            answer(handle, "say whether it reads the machine", |stage| match stage {
+                AnyStage::Discretise(s) => Some(s.reads_machine()),
+                AnyStage::Grade(s) => Some(s.reads_machine()),
+                _ => None,
+            })
+        }
         Request::ReadsGeometry { handle } => {
             answer(handle, "say whether it reads contours", |stage| match stage {
                 AnyStage::Grade(s) => Some(s.reads_geometry()),
@@ -598,6 +590,24 @@ fn handle(request: Request<'static>) -> Result<Response> {
             },
         ),
     }
+}
+
+/// A model source's meshes, each with what its reader repaired beside it.
+fn load(handle: u64, base_dir: &Path) -> Result<Response> {
+    on_stage(handle, "load a model", |_, stage, label| match stage {
+        AnyStage::Model(s) => Some(guard_call(label, || s.load(base_dir)).map(|meshes| {
+            Response::Meshes(
+                meshes
+                    .into_iter()
+                    .map(|mut mesh| WireMesh {
+                        warnings: std::mem::take(&mut mesh.warnings),
+                        mesh,
+                    })
+                    .collect(),
+            )
+        })),
+        _ => None,
+    })
 }
 
 /// The plugin's stages as the host lists them: names, documentation, options.

@@ -35,8 +35,13 @@ impl Engine {
         timings: &Timings,
     ) -> Result<Vec<Option<f64>>> {
         let selections = Selections::none(self.parts.len());
+        let bare_info = RunInfo {
+            machine: None,
+            ..info.clone()
+        };
         let shared = LayerShared {
             info,
+            bare_info: &bare_info,
             meshes,
             sequence: None,
             prepared,

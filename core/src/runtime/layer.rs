@@ -48,6 +48,7 @@ impl Engine {
             slots,
             surfaces: _,
             layer_count: _,
+            bare_info: _,
         } = *shared;
         // Each distinct mesh is cut and sorted once per layer.
         let mut cut: Vec<Option<(Layer, crate::model::ContourTree)>> =
@@ -278,10 +279,10 @@ impl Engine {
         if families.is_empty() {
             return Ok(regions);
         }
-        // One call a stage for all the part's families of the layer; the mesh only to
-        // the stages that read it.
-        let ctx = |reads_mesh: bool| FamilyContext {
-            info,
+        // One call a stage for all the part's families of the layer; the mesh and the
+        // machine only to the stages that read them.
+        let ctx = |reads_mesh: bool, reads_machine: bool| FamilyContext {
+            info: if reads_machine { info } else { shared.bare_info },
             layer,
             tree,
             mesh: mesh.filter(|_| reads_mesh),
@@ -290,7 +291,7 @@ impl Engine {
         };
         let mut sets = match &p.discretiser {
             Some(d) => timings.time(StageKind::Discretise, || {
-                d.discretise_families(&ctx(d.reads_mesh()), families)
+                d.discretise_families(&ctx(d.reads_mesh(), d.reads_machine()), families)
             })?,
             None => families
                 .iter()
@@ -305,7 +306,7 @@ impl Engine {
         }
         match &p.grader {
             Some(g) => timings.time(StageKind::Grade, || {
-                g.grade_families(&ctx(g.reads_mesh()), families, &mut sets)
+                g.grade_families(&ctx(g.reads_mesh(), g.reads_machine()), families, &mut sets)
             })?,
             None => {
                 // A discretiser whose regions follow the material (grading sources)
@@ -346,6 +347,9 @@ impl Engine {
 #[derive(Clone, Copy)]
 pub(super) struct LayerShared<'a> {
     pub(super) info: &'a RunInfo,
+    /// The run without its machine: what discretisers and graders that do not read it
+    /// are given (a dynamic plugin's is sent with every call).
+    pub(super) bare_info: &'a RunInfo,
     /// The meshes as sliced (placed and oriented), for stages that measure in space.
     pub(super) meshes: &'a [Arc<Mesh>],
     pub(super) sequence: Option<&'a Sequence>,

@@ -169,11 +169,16 @@ impl Engine {
             _ => Vec::new(),
         };
         let mut surface_check = crate::process::SurfaceCheck::new(sequence.as_ref());
+        let bare_info = RunInfo {
+            machine: None,
+            ..info.clone()
+        };
         let shared = LayerShared {
             surfaces: &surfaces,
             layer_count: slots.len(),
             slots,
             info,
+            bare_info: &bare_info,
             meshes,
             sequence: sequence.as_ref(),
             prepared,

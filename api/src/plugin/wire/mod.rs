@@ -141,6 +141,12 @@ pub enum Request<'a> {
         families: Cow<'a, [usize]>,
         regions: Vec<Vec<RegionFacts>>,
     },
+    /// (ABI 7.4) Asks a discretiser or grader whether it reads the run's machine:
+    /// the run is sent without it to those that do not. Older plugins are not asked,
+    /// and are sent it.
+    ReadsMachine {
+        handle: u64,
+    },
 }
 
 /// (ABI 7.2) What a grader that reads no geometry knows of a sub-region: all but its

@@ -30,6 +30,10 @@ struct Remote {
     /// For a grader: whether it reads contours and polygons (asked once, when built);
     /// those that do not are sent neither.
     reads_geometry: bool,
+    /// For a discretiser or grader: whether it reads the run's machine (asked once,
+    /// when built, of plugins of ABI 7.4 on; older ones are sent it, as they always
+    /// were).
+    reads_machine: bool,
     /// For a process stage: whether it needs the higher regions (asked once, when built);
     /// for a sequencer, whether it needs the parts' gradients.
     needs_higher: bool,
@@ -88,6 +92,7 @@ impl Remote {
             grades: false,
             reads_mesh: false,
             reads_geometry: true,
+            reads_machine: false,
             needs_higher: false,
             meshes_sent: Mutex::new(HashSet::new()),
         }
@@ -175,12 +180,14 @@ pub(crate) fn build(
         grades: false,
         reads_mesh: false,
         reads_geometry: true,
+        reads_machine: false,
         needs_higher: false,
         meshes_sent: Mutex::new(HashSet::new()),
     };
     // What the stage says about itself once, when built.
     if matches!(kind, StageKind::Discretise | StageKind::Grade) {
         stage.reads_mesh = stage.ask(Request::ReadsMesh { handle })?;
+        stage.reads_machine = stage.library.minor < 4 || stage.ask(Request::ReadsMachine { handle })?;
     }
     match kind {
         StageKind::Grade => stage.reads_geometry = stage.ask(Request::ReadsGeometry { handle })?,
@@ -303,6 +310,10 @@ impl Discretiser for Remote {
         self.reads_mesh
     }
 
+    fn reads_machine(&self) -> bool {
+        self.reads_machine
+    }
+
     fn discretise_families(
         &self,
         ctx: &FamilyContext<'_>,
@@ -341,6 +352,10 @@ impl Grader for Remote {
 
     fn reads_mesh(&self) -> bool {
         self.reads_mesh
+    }
+
+    fn reads_machine(&self) -> bool {
+        self.reads_machine
     }
 
     fn reads_geometry(&self) -> bool {
