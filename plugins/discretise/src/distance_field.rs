@@ -405,12 +405,6 @@ fn build(config: &StageConfig<'_>) -> Result<AnyStage> {
     if let Levels::Steps(t) = &levels {
         crate::options::regions(config, "step", t.count as f64)?;
     }
-    if o.samples < 8 {
-        return Err(config.error(
-            "samples",
-            format!("`samples` must be at least 8, not {}", o.samples),
-        ));
-    }
     config
         .limits
         .check(
@@ -419,14 +413,6 @@ fn build(config: &StageConfig<'_>) -> Result<AnyStage> {
             "`samples` squared",
         )
         .map_err(|e| config.error("samples", e.to_string()))?;
-    if let Some(s) = o.sample_spacing
-        && (s.is_nan() || s <= 0.0 || s.is_infinite())
-    {
-        return Err(config.error(
-            "sample_spacing",
-            "`sample_spacing` must be a positive number of mm",
-        ));
-    }
     let point = match (o.feature, o.point) {
         (Feature::Point, None) => {
             return Err(config.error("point", "`feature = \"point\"` needs `point = [x, y]`"));
@@ -439,9 +425,6 @@ fn build(config: &StageConfig<'_>) -> Result<AnyStage> {
         .into_iter()
         .map(|[x, y]| Point2::new(x, y))
         .collect();
-    if points.iter().any(|p| !(p.x.is_finite() && p.y.is_finite())) {
-        return Err(config.error("points", "`points` must be finite coordinates (mm)"));
-    }
     match o.feature {
         Feature::Line if points.len() != 2 || (points[1] - points[0]).norm() == 0.0 => {
             return Err(config.error(

@@ -23,6 +23,66 @@ fn tube_field_from_outer_gives_rings_close_to_the_exact_ones() {
     }
 }
 
+/// The samples follow `sample_spacing` (mm) when it is given: 0.05 mm on the tube's
+/// 20 mm is 403 samples, and gives the rings 256 samples give.
+#[test]
+fn sample_spacing_sets_the_fields_resolution() {
+    let fam = OneFamily::new(circle(0.0, 0.0, 10.0, 512), vec![circle(0.0, 0.0, 5.0, 512)]);
+    let regions =
+        fam.tiles("use = \"distance-field\"\nfeature = \"outer\"\ncount = 5\nsample_spacing = 0.05");
+    assert_eq!(indices(&regions), vec![0, 1, 2, 3, 4]);
+    assert_ring_areas(&regions, 10.0, 1.0, 1e-2);
+}
+
+/// The distance from the centre (the family's pole) and from a given point: a disc's
+/// bands from its centre are rings of equal width, and a square's bands from its
+/// corner are quarter rings about that corner.
+#[test]
+fn centre_and_point_features_measure_from_where_they_say() {
+    let disc = OneFamily::new(circle(0.0, 0.0, 10.0, 512), vec![]);
+    let regions = disc.tiles("use = \"distance-field\"\nfeature = \"centre\"\ncount = 5\nsamples = 256");
+    assert_eq!(indices(&regions), vec![0, 1, 2, 3, 4]);
+    for r in &regions {
+        let (a, b) = (2.0 * r.index as f64, 2.0 * (r.index + 1) as f64);
+        let want = std::f64::consts::PI * (b * b - a * a);
+        assert!(
+            (r.area() - want).abs() / want < 2e-2,
+            "ring {}: {} vs {want}",
+            r.index,
+            r.area()
+        );
+    }
+    // 20 x 20 from the corner (0, 0): the largest distance is the far corner's,
+    // 28.28, so band 0 is the quarter disc of radius 7.07 about the origin.
+    let square = OneFamily::new(rect(0.0, 0.0, 20.0, 20.0), vec![]);
+    let regions =
+        square.tiles("use = \"distance-field\"\nfeature = \"point\"\npoint = [0.0, 0.0]\ncount = 4");
+    let near: Vec<_> = regions.iter().filter(|r| r.index == 0).collect();
+    let area: f64 = near.iter().map(|r| r.area()).sum();
+    let want = std::f64::consts::PI * 50.0 / 4.0;
+    assert!((area - want).abs() / want < 2e-2, "{area} vs {want}");
+    assert!(near.iter().all(|r| r.reference.coords.norm() < 7.1), "{near:?}");
+}
+
+/// Iso-contours every 5 um over a largest distance of 10 mm (9.96 as sampled) would be
+/// about 2,000 bands: refused by the limit on sub-regions, before the field is cut.
+#[test]
+fn a_spacing_finer_than_the_regions_limit_allows_is_refused() {
+    let fam = OneFamily::new(rect(0.0, 0.0, 40.0, 20.0), vec![]);
+    let e = fam
+        .try_run(&*stage("use = \"distance-field\"\nspacing = 0.005"))
+        .expect_err("about 2,000 bands")
+        .to_string();
+    assert!(
+        e.contains("needs 1993 sub-regions") && e.contains("limits.regions"),
+        "{e}"
+    );
+    assert!(
+        fam.try_run(&*stage("use = \"distance-field\"\nspacing = 0.5"))
+            .is_ok()
+    );
+}
+
 #[test]
 fn step_width_levels_on_the_field() {
     let fam = OneFamily::new(rect(0.0, 0.0, 30.0, 20.0), vec![circle(20.0, 10.0, 4.0, 128)]);
@@ -57,6 +117,14 @@ fn bad_field_options_are_refused() {
     assert_refused(&[
         ("use = \"distance-field\"\nfeature = \"point\"", "point"),
         ("use = \"distance-field\"\nsamples = 2", "samples"),
+        ("use = \"distance-field\"\nsamples = 7", "samples"),
+        ("use = \"distance-field\"\nsample_spacing = 0.0", "sample_spacing"),
+        ("use = \"distance-field\"\nsample_spacing = inf", "sample_spacing"),
+        ("use = \"distance-field\"\nsample_spacing = nan", "sample_spacing"),
+        (
+            "use = \"distance-field\"\nfeature = \"line\"\npoints = [[0.0, 0.0], [1.0, nan]]",
+            "points",
+        ),
         ("use = \"distance-field\"\nstep = 1.5", "step"),
         ("use = \"distance-field\"\nspacing = -1.0", "spacing"),
         ("use = \"distance-field\"\nspacing = 1.0\nstep = 0.5", "spacing"),
@@ -130,11 +198,24 @@ fn line_polyline_and_surface_features() {
             assert!((got - w).abs() / w < 1e-2, "band {j}: {got} vs {w}");
         }
     };
-    // d = y, every 5 mm: four strips of 40 x 5.
-    let line = fam.run(&*stage(
-        "use = \"distance-field\"\nfeature = \"line\"\npoints = [[10.0, 0.0], [11.0, 0.0]]\nspacing = 5.0",
+    // d = y, every 5 mm: four strips of 40 x 5. The line runs across the family
+    // whichever two of its points are given, from its middle or its corner.
+    for points in ["[[10.0, 0.0], [11.0, 0.0]]", "[[0.0, 0.0], [1.0, 0.0]]"] {
+        let line = fam.run(&*stage(&format!(
+            "use = \"distance-field\"\nfeature = \"line\"\npoints = {points}\nspacing = 5.0"
+        )));
+        strips(&line, &[200.0; 4]);
+    }
+    // A polyline of two points is that segment, not a line: within half the largest
+    // distance (the corner's, 18.03) of the segment from (15, 10) to (25, 10) lies a
+    // stadium of 2 x 10 r + pi r^2 with r = 9.01.
+    let segment = fam.run(&*stage(
+        "use = \"distance-field\"\nfeature = \"polyline\"\npoints = [[15.0, 10.0], [25.0, 10.0]]\ncount = 2",
     ));
-    strips(&line, &[200.0; 4]);
+    let r = 325f64.sqrt() / 2.0;
+    let want = 20.0 * r + std::f64::consts::PI * r * r;
+    let got: f64 = segment.iter().filter(|s| s.index == 0).map(|s| s.area()).sum();
+    assert!((got - want).abs() / want < 2e-2, "{got} vs {want}");
     // d = |y - 10|, two equal parts of r: the middle band |y - 10| < 5, then the rest.
     let mid = fam.run(&*stage(
         "use = \"distance-field\"\nfeature = \"polyline\"\npoints = [[0.0, 10.0], [20.0, 10.0], [40.0, 10.0]]\ncount = 2",
@@ -148,6 +229,9 @@ fn line_polyline_and_surface_features() {
     ));
     strips(&side, &[200.0; 4]);
     assert!(side[0].reference.x < 10.0 && side[3].reference.x > 30.0);
+    // Only a surface feature reads the mesh: the runtime gives it to those alone.
+    assert!(stage("use = \"distance-field\"\nfeature = \"surface\"").reads_mesh());
+    assert!(!stage("use = \"distance-field\"").reads_mesh());
     // Without a mesh, or with faces that select nothing, the stage says so.
     let d = stage("use = \"distance-field\"\nfeature = \"surface\"");
     let ctx_error = |fam: &OneFamily| fam.try_run(&*d).expect_err("refused").to_string();
