@@ -125,6 +125,8 @@ fn bad_field_options_are_refused() {
             "use = \"distance-field\"\nfeature = \"line\"\npoints = [[0.0, 0.0], [1.0, nan]]",
             "points",
         ),
+        ("use = \"distance-field\"\nfeature = \"polyline\"", "points"),
+        ("use = \"distance-field\"\nfeature = \"polyline\"\npoints = [[0.0, 0.0]]", "points"),
         ("use = \"distance-field\"\nstep = 1.5", "step"),
         ("use = \"distance-field\"\nspacing = -1.0", "spacing"),
         ("use = \"distance-field\"\nspacing = 1.0\nstep = 0.5", "spacing"),
