@@ -399,8 +399,11 @@ fn build(config: &StageConfig<'_>) -> Result<AnyStage> {
     let levels = match (o.step, o.spacing) {
         (Some(_), Some(_)) => return Err(config.error("spacing", "give `step` or `spacing`, not both")),
         (Some(step), None) => Levels::Steps(Truncation::new(step).map_err(|e| config.error("step", e))?),
-        (None, Some(s)) => Levels::Spacing(crate::options::positive_mm(config, "spacing", s)?),
-        (None, None) => Levels::Equal(crate::options::count(config, Some(o.count))?.unwrap_or(1)),
+        (None, Some(s)) => Levels::Spacing(s),
+        (None, None) => {
+            crate::options::count(config, Some(o.count))?;
+            Levels::Equal(o.count)
+        }
     };
     if let Levels::Steps(t) = &levels {
         crate::options::regions(config, "step", t.count as f64)?;
@@ -445,10 +448,7 @@ fn build(config: &StageConfig<'_>) -> Result<AnyStage> {
         points,
         faces,
         surfaces: Surfaces::default(),
-        width: match o.width {
-            Some(w) => Some(crate::options::positive_mm(config, "width", w)?),
-            None => None,
-        },
+        width: o.width,
         levels,
         samples: o.samples,
         sample_spacing: o.sample_spacing,

@@ -15,7 +15,7 @@ use crate::cells::Cells;
 use crate::grid::Grid;
 use crate::inset::{From, Inset, Join};
 use crate::measure::{min_contour_distance, pole};
-use crate::options::{self, derived_count, positive_mm};
+use crate::options::{self, derived_count};
 use crate::regions::{from_bands, uniform_level, whole};
 
 const STAGE: &str = "discretise:offset";
@@ -114,11 +114,6 @@ fn build(config: &StageConfig<'_>) -> Result<AnyStage> {
 }
 
 fn checked(o: &Options, config: &StageConfig<'_>) -> Result<Offset> {
-    positive_mm(config, "nozzle", o.nozzle)?;
-    options::tolerance(config, o.tolerance)?;
-    if let Some(s) = o.spacing {
-        positive_mm(config, "spacing", s)?;
-    }
     options::count(config, o.count)?;
     Ok(Offset {
         nozzle: o.nozzle,

@@ -1,7 +1,6 @@
 //! Options that several discretisers share, with their documentation and checks, so
 //! that `nozzle`, `count`, `join` and `tolerance` read and fail alike everywhere.
 
-use lamina_api::limits::{MAX_COORDINATE, is_coordinate};
 use lamina_api::options::SharedOption;
 use lamina_api::stage::StageConfig;
 use lamina_api::{Limit, Limits, Result};
@@ -25,39 +24,12 @@ pub const TOLERANCE: SharedOption =
     SharedOption::new("0.005", "largest arc-to-chord distance of round corners (mm)")
         .within(MIN_TOLERANCE, 10.0);
 
-/// `v` when it is a positive number of millimetres, at most a kilometre.
-pub fn positive_mm(config: &StageConfig<'_>, key: &str, v: f64) -> Result<f64> {
-    if v > 0.0 && is_coordinate(v) {
-        Ok(v)
-    } else {
-        Err(config.error(
-            key,
-            format!("`{key}` must be a positive number of mm up to {MAX_COORDINATE}, not {v}"),
-        ))
-    }
-}
-
-/// An arc-to-chord `tolerance`: a length of at least [`MIN_TOLERANCE`].
-pub fn tolerance(config: &StageConfig<'_>, v: f64) -> Result<f64> {
-    positive_mm(config, "tolerance", v)?;
-    if v < MIN_TOLERANCE {
-        return Err(config.error(
-            "tolerance",
-            format!("`tolerance` must be at least {MIN_TOLERANCE} mm, not {v}"),
-        ));
-    }
-    Ok(v)
-}
-
-/// A `count` of at least 1 and within the run's `limits.regions`, when given.
-pub fn count(config: &StageConfig<'_>, count: Option<usize>) -> Result<Option<usize>> {
+/// A `count` within the run's `limits.regions`, when given (its declared range, 1 and
+/// up, is checked as the options are read).
+pub fn count(config: &StageConfig<'_>, count: Option<usize>) -> Result<()> {
     match count {
-        Some(0) => Err(config.error("count", "`count` must be at least 1")),
-        Some(n) => {
-            regions(config, "count", n as f64)?;
-            Ok(Some(n))
-        }
-        None => Ok(None),
+        Some(n) => regions(config, "count", n as f64),
+        None => Ok(()),
     }
 }
 

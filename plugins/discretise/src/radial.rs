@@ -19,7 +19,7 @@ use crate::grid::Grid;
 use crate::inset::From;
 use crate::measure::pole;
 use crate::offset::reach;
-use crate::options::{self, derived_count, positive_mm};
+use crate::options::{self, derived_count};
 use crate::regions::{from_bands, uniform_level, whole};
 
 const STAGE: &str = "discretise:radial";
@@ -475,7 +475,6 @@ impl Discretiser for Radial {
 
 fn build(config: &StageConfig<'_>) -> Result<AnyStage> {
     let o: Options = config.parse()?;
-    positive_mm(config, "nozzle", o.nozzle)?;
     options::count(config, o.count)?;
     let cells = Cells::checked(o.cells_around, o.cell_length, o.cell_cuts, config)?;
     Ok(AnyStage::Discretise(Box::new(Radial {

@@ -12,7 +12,6 @@ use crate::cells::Cells;
 use crate::grid::Grid;
 use crate::inset::{From, Inset, Join};
 use crate::measure::{contour_distance, pole};
-use crate::options::positive_mm;
 use crate::regions::{from_bands, whole};
 
 const STAGE: &str = "discretise:step-width";
@@ -109,13 +108,6 @@ fn build(config: &StageConfig<'_>) -> Result<AnyStage> {
     let o: Options = config.parse()?;
     let truncation = Truncation::new(o.step).map_err(|e| config.error("step", e))?;
     crate::options::regions(config, "step", truncation.count as f64)?;
-    if o.power.is_nan() || o.power <= 0.0 || o.power.is_infinite() {
-        return Err(config.error("power", format!("`power` must be positive, not {}", o.power)));
-    }
-    if let Some(w) = o.width {
-        positive_mm(config, "width", w)?;
-    }
-    crate::options::tolerance(config, o.tolerance)?;
     Ok(AnyStage::Discretise(Box::new(StepWidth {
         truncation,
         power: o.power,

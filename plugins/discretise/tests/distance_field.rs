@@ -126,9 +126,15 @@ fn bad_field_options_are_refused() {
             "points",
         ),
         ("use = \"distance-field\"\nfeature = \"polyline\"", "points"),
-        ("use = \"distance-field\"\nfeature = \"polyline\"\npoints = [[0.0, 0.0]]", "points"),
+        (
+            "use = \"distance-field\"\nfeature = \"polyline\"\npoints = [[0.0, 0.0]]",
+            "points",
+        ),
         ("use = \"distance-field\"\nstep = 1.5", "step"),
         ("use = \"distance-field\"\nspacing = -1.0", "spacing"),
+        ("use = \"distance-field\"\nwidth = 0.0", "width"),
+        ("use = \"distance-field\"\ncount = 0", "count"),
+        ("use = \"distance-field\"\ncount = 1001", "count"),
         ("use = \"distance-field\"\nspacing = 1.0\nstep = 0.5", "spacing"),
     ]);
 }

@@ -160,6 +160,10 @@ fn bad_options_are_refused() {
         ("use = \"offset\"\nnozzle = -1.0", "nozzle"),
         ("use = \"offset\"\ncount = 0", "count"),
         ("use = \"offset\"\nspacing = 0.0", "spacing"),
+        ("use = \"offset\"\nnozzle = 0.0", "nozzle"),
+        ("use = \"offset\"\nnozzle = nan", "nozzle"),
+        ("use = \"offset\"\ntolerance = 0.00001", "tolerance"),
+        ("use = \"offset\"\ncount = 1001", "count"),
     ]);
     assert!(!build_error("use = \"offset\"\nfrom = \"inner\"").is_empty());
 }

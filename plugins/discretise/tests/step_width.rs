@@ -88,7 +88,17 @@ fn step_that_does_not_divide_one_ends_at_one() {
 
 #[test]
 fn bad_steps_are_refused() {
-    for bad in ["step = 0.0", "step = 1.5", "step = 1e-9", "power = 0.0"] {
+    for bad in [
+        "step = 0.0",
+        "step = 1.5",
+        "step = 1e-9",
+        "power = 0.0",
+        "power = nan",
+        "power = inf",
+        "width = 0.0",
+        "width = -2.0",
+        "tolerance = 0.00001",
+    ] {
         let key = bad.split(' ').next().unwrap_or_default();
         assert!(
             build_error(&format!("use = \"step-width\"\n{bad}")).contains(key),
