@@ -243,7 +243,11 @@ fn line_polyline_and_surface_features() {
     // Without a mesh, or with faces that select nothing, the stage says so.
     let d = stage("use = \"distance-field\"\nfeature = \"surface\"");
     let ctx_error = |fam: &OneFamily| fam.try_run(&*d).expect_err("refused").to_string();
-    assert!(ctx_error(&fam).contains("mesh"));
+    assert!(
+        ctx_error(&fam).contains("needs the part's mesh"),
+        "{}",
+        ctx_error(&fam)
+    );
     let none = stage(
         "use = \"distance-field\"\nfeature = \"surface\"\nfaces = { normal = [1.0, 1.0, 1.0], within = 1.0 }",
     );
@@ -261,6 +265,26 @@ fn line_polyline_and_surface_features() {
         build_error("use = \"distance-field\"\nfeature = \"surface\"\nfaces = { normal = [0.0, 0.0, 0.0] }")
             .contains("faces")
     );
+}
+
+/// The distance in space is taken at the layer's mid-height: from the top face of a
+/// 10 x 20 x 10 box, a layer 2 mm thick whose top is at z = 6 measures from z = 5, so
+/// over the box the distance is 5, and beyond its x = 10 side it is
+/// sqrt((x - 10)^2 + 25). Band 0 of four on a family 40 mm long then ends where that
+/// reaches a quarter of the largest, sqrt(30^2 + 25) / 4.
+#[test]
+fn a_surface_feature_measures_at_the_layers_mid_height() {
+    let mut fam = OneFamily::new(rect(0.0, 0.0, 40.0, 20.0), vec![]);
+    fam.mesh = Some(box_mesh(10.0, 20.0, 10.0));
+    (fam.layer.z, fam.layer.thickness) = (6.0, 2.0);
+    let regions = fam.run(&*stage(
+        "use = \"distance-field\"\nfeature = \"surface\"\nfaces = { normal = [0.0, 0.0, 1.0], within = 10.0 }\ncount = 4",
+    ));
+    assert_tiles(&fam.polygon(), &regions);
+    let quarter = (900.0f64 + 25.0).sqrt() / 4.0;
+    let want = 20.0 * (10.0 + (quarter * quarter - 25.0).sqrt());
+    let got: f64 = regions.iter().filter(|r| r.index == 0).map(|r| r.area()).sum();
+    assert!((got - want).abs() / want < 1e-2, "{got} vs {want}");
 }
 
 /// An axis-aligned box from the origin, outward winding.

@@ -77,6 +77,29 @@ fn given_count_and_spacing_are_used() {
     assert!((core.area() - want).abs() / want < 2e-3);
 }
 
+/// A band of three corners is a region: a triangle offset once is its triangle whole,
+/// offset twice a smaller triangle inside a ring.
+#[test]
+fn a_triangle_band_is_a_region() {
+    let fam = OneFamily::new(
+        Contour::new(vec![
+            Point2::new(0.0, 0.0),
+            Point2::new(30.0, 0.0),
+            Point2::new(0.0, 30.0),
+        ]),
+        vec![],
+    );
+    let one = fam.tiles("use = \"offset\"\ncount = 1");
+    assert_eq!(one.len(), 1);
+    assert_eq!(one[0].polygon.outer.len(), 3, "{:?}", one[0].polygon);
+    let two = fam.tiles("use = \"offset\"\ncount = 2\njoin = \"miter\"");
+    assert_eq!(indices(&two), vec![0, 1]);
+    assert!(
+        two.iter().any(|r| r.index == 1 && r.polygon.outer.len() == 3),
+        "{two:?}"
+    );
+}
+
 #[test]
 fn square_with_holes_tiles() {
     let holes = vec![
