@@ -54,6 +54,38 @@ fn eccentric_hole_gives_rings_thin_on_the_near_side() {
     assert!((far - (-10.0 + 11.0 / 8.0)).abs() < 0.02, "{far}");
 }
 
+/// A radial line ends where it meets the hole on its way to the hole's centre, not at
+/// the hole's nearest corner: around a 10 mm square hole in a disc of radius 20, the
+/// line at angle a ends 5 / max(|cos a|, |sin a|) from the centre, and two rings meet
+/// half-way along each line. The inner ring's area is that curve's, less the hole's.
+#[test]
+fn radial_lines_end_on_the_hole_toward_its_centre() {
+    let fam = OneFamily::new(circle(0.0, 0.0, 20.0, 720), vec![rect(-5.0, -5.0, 10.0, 10.0)]);
+    let regions = fam.tiles("use = \"radial\"\ncount = 2");
+    one_ring_each(&regions, 2, 1);
+    let n = 720;
+    let half_way: Vec<(f64, f64)> = (0..n)
+        .map(|k| {
+            let a = 2.0 * PI * k as f64 / n as f64;
+            let r = (20.0 + 5.0 / a.cos().abs().max(a.sin().abs())) / 2.0;
+            (r * a.cos(), r * a.sin())
+        })
+        .collect();
+    let enclosed: f64 = (0..n)
+        .map(|k| {
+            let ((x0, y0), (x1, y1)) = (half_way[k], half_way[(k + 1) % n]);
+            x0 * y1 - x1 * y0
+        })
+        .sum::<f64>()
+        / 2.0;
+    let inner = regions.iter().find(|r| r.index == 1).expect("ring 1").area();
+    assert!(
+        (inner - (enclosed - 100.0)).abs() / (enclosed - 100.0) < 1e-2,
+        "{inner} vs {}",
+        enclosed - 100.0
+    );
+}
+
 #[test]
 fn several_holes_and_no_holes_tile() {
     let holes = vec![
