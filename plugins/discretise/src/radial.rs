@@ -499,13 +499,73 @@ lamina_api::register_stage!(StageFactory {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::shapes::circle;
+    use crate::shapes::{circle, rect};
+
+    /// Without holes a line ends at the centre of the largest disc inside the family
+    /// that touches the outline at its start. In a 40 x 10 rectangle: from inside a long
+    /// side, on the mid-line 5 mm in; from a side near a corner, on the corner's
+    /// bisector as far in as the start is from the corner; from the corner itself, where
+    /// the bisector meets the mid-line; from the middle of a short side, 5 mm in.
+    #[test]
+    fn without_holes_a_line_ends_on_the_medial_axis() {
+        let polygon = Polygon::new(rect(0.0, 0.0, 40.0, 10.0).oriented(true), vec![]);
+        let cases = [
+            ((20.0, 0.0), (20.0, 5.0)),
+            ((20.0, 10.0), (20.0, 5.0)),
+            ((2.0, 0.0), (2.0, 2.0)),
+            ((0.0, 3.0), (3.0, 3.0)),
+            ((0.0, 0.0), (5.0, 5.0)),
+            ((40.0, 10.0), (35.0, 5.0)),
+            ((40.0, 5.0), (35.0, 5.0)),
+        ];
+        let starts: Vec<Point2> = cases.iter().map(|&((x, y), _)| Point2::new(x, y)).collect();
+        let got = medial_ends(&polygon, &starts, 1e-3).expect("ends");
+        for (&(start, (x, y)), end) in cases.iter().zip(got) {
+            assert!((end - Point2::new(x, y)).norm() < 1e-6, "from {start:?}: {end}");
+        }
+    }
 
     /// A radial line goes to the hole whose outline is nearest (the distance to its
     /// centre less its radius), not to the nearest centre: from the top of a disc of
     /// radius 30, a hole of radius 10 centred 12 mm right is 32.3 - 10 = 22.3 mm away,
     /// one of radius 1 centred 10 mm left 31.6 - 1 = 30.6 mm, though its centre is the
     /// nearer.
+    /// The same on outlines of many short edges, whose grid of edges the search walks
+    /// ring by ring: the side a line meets is up, down, left or right of its start.
+    #[test]
+    fn the_medial_axis_search_finds_the_edge_it_meets_in_every_direction() {
+        let dense = |w: f64, h: f64| {
+            let corners = [(0.0, 0.0), (w, 0.0), (w, h), (0.0, h)];
+            let mut points = Vec::new();
+            for k in 0..4 {
+                let (a, b) = (corners[k], corners[(k + 1) % 4]);
+                let n = (4.0 * f64::max((b.0 - a.0).abs(), (b.1 - a.1).abs())) as usize;
+                for i in 0..n {
+                    let s = i as f64 / n as f64;
+                    points.push(Point2::new(a.0 + (b.0 - a.0) * s, a.1 + (b.1 - a.1) * s));
+                }
+            }
+            Polygon::new(Contour::new(points).oriented(true), vec![])
+        };
+        for (polygon, cases) in [
+            (
+                dense(40.0, 10.0),
+                [((20.0, 0.0), (20.0, 5.0)), ((20.0, 10.0), (20.0, 5.0))],
+            ),
+            (
+                dense(10.0, 40.0),
+                [((0.0, 20.0), (5.0, 20.0)), ((10.0, 20.0), (5.0, 20.0))],
+            ),
+        ] {
+            let mut starts: Vec<Point2> = cases.iter().map(|&((x, y), _)| Point2::new(x, y)).collect();
+            starts.push(polygon.outer.points[1]);
+            let got = medial_ends(&polygon, &starts, 1e-3).expect("ends");
+            for (&(start, (x, y)), end) in cases.iter().zip(got) {
+                assert!((end - Point2::new(x, y)).norm() < 1e-6, "from {start:?}: {end}");
+            }
+        }
+    }
+
     #[test]
     fn a_radial_line_ends_on_the_hole_whose_outline_is_nearest() {
         let polygon = Polygon::new(
