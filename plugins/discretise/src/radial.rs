@@ -566,6 +566,31 @@ mod tests {
         }
     }
 
+    /// A vertex where the contour turns back by more than about 170 degrees goes (a
+    /// spike between lines that end on different holes); corners, turns of 150 and 163
+    /// degrees and a repeated point stay.
+    #[test]
+    fn spikes_are_dropped_and_corners_kept() {
+        let p = |x: f64, y: f64| Point2::new(x, y);
+        let mut points = vec![
+            p(0.0, 0.0),
+            p(10.0, 0.0),
+            p(10.0, 0.0),
+            p(10.0, 10.0),
+            p(7.0, 10.0),
+            p(7.0, 16.0),
+            p(7.01, 10.0),
+            p(4.0, 10.0),
+            p(4.0 + 3.0 * 3f64.sqrt() / 2.0, 11.5),
+            p(0.0, 10.0),
+        ];
+        // The tip goes first; its base then turns back on itself and goes next pass.
+        let mut want = points.clone();
+        want.drain(4..7);
+        without_spikes(&mut points);
+        assert_eq!(points, want);
+    }
+
     #[test]
     fn a_radial_line_ends_on_the_hole_whose_outline_is_nearest() {
         let polygon = Polygon::new(
