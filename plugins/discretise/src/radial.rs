@@ -530,6 +530,32 @@ mod tests {
     /// radius 30, a hole of radius 10 centred 12 mm right is 32.3 - 10 = 22.3 mm away,
     /// one of radius 1 centred 10 mm left 31.6 - 1 = 30.6 mm, though its centre is the
     /// nearer.
+    /// Where the largest disc first meets a corner of the outline rather than a side: in
+    /// an L of 20 x 20 with the 10 x 10 square at (10, 10) cut away, the disc growing up
+    /// from (9, 0) reaches the inner corner (10, 10) at radius t with 1 + (10 - t)^2 =
+    /// t^2, t = 5.05, before any side; from (15, 0) it meets the side above at t = 5.
+    #[test]
+    fn a_line_ends_where_its_disc_meets_an_inner_corner() {
+        let p = |x: f64, y: f64| Point2::new(x, y);
+        let outline = [
+            (0.0, 0.0),
+            (20.0, 0.0),
+            (20.0, 10.0),
+            (10.0, 10.0),
+            (10.0, 20.0),
+            (0.0, 20.0),
+        ];
+        let polygon = Polygon::new(
+            Contour::new(outline.iter().map(|&(x, y)| p(x, y)).collect()).oriented(true),
+            vec![],
+        );
+        let starts = [p(9.0, 0.0), p(15.0, 0.0), p(0.0, 15.0)];
+        let got = medial_ends(&polygon, &starts, 1e-3).expect("ends");
+        for (end, want) in got.into_iter().zip([p(9.0, 5.05), p(15.0, 5.0), p(5.0, 15.0)]) {
+            assert!((end - want).norm() < 1e-9, "{end} against {want}");
+        }
+    }
+
     /// The same on outlines of many short edges, whose grid of edges the search walks
     /// ring by ring: the side a line meets is up, down, left or right of its start.
     #[test]
