@@ -157,6 +157,24 @@ pub struct Sample {
 }
 
 impl SubRegion {
+    /// Region `index` of `count` of family `family`, at `level`, not yet graded, with
+    /// its reference point by the one rule every stage uses
+    /// ([`lamina_geom::reference::reference_point`]): the same polygon gets the same
+    /// point whichever stage cut it.
+    pub fn new(family: usize, index: usize, count: usize, level: f64, polygon: crate::geom::Polygon) -> Self {
+        Self {
+            family,
+            index,
+            count,
+            level,
+            reference: lamina_geom::reference::reference_point(&polygon),
+            polygon,
+            cell: None,
+            composition: None,
+            samples: Vec::new(),
+        }
+    }
+
     pub fn area(&self) -> f64 {
         self.polygon.area()
     }

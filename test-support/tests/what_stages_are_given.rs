@@ -27,18 +27,7 @@ impl Discretiser for Whole {
     fn discretise(&self, ctx: &FamilyContext<'_>) -> Result<Vec<SubRegion>> {
         check(ctx, self.reads, "discretise")?;
         let polygon = ctx.tree.family_polygon(&ctx.layer.contours, ctx.family);
-        let reference = polygon.outer.interior_point().expect("a point inside");
-        Ok(vec![SubRegion {
-            family: ctx.family,
-            index: 0,
-            count: 1,
-            level: 0.0,
-            polygon,
-            cell: None,
-            reference,
-            composition: None,
-            samples: Vec::new(),
-        }])
+        Ok(vec![SubRegion::new(ctx.family, 0, 1, 0.0, polygon)])
     }
 
     fn reads_machine(&self) -> bool {

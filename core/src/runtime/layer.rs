@@ -370,19 +370,7 @@ pub(super) struct LayerShared<'a> {
 
 /// The single region of a family that is not discretised.
 fn whole_family(tree: &crate::model::ContourTree, layer: &Layer, f: usize) -> SubRegion {
-    let polygon = tree.family_polygon(&layer.contours, f);
-    let reference = lamina_geom::reference::reference_point(&polygon);
-    SubRegion {
-        family: f,
-        index: 0,
-        count: 1,
-        level: 0.0,
-        polygon,
-        cell: None,
-        reference,
-        composition: None,
-        samples: Vec::new(),
-    }
+    SubRegion::new(f, 0, 1, 0.0, tree.family_polygon(&layer.contours, f))
 }
 
 /// What a stage of `kind` added to a plan that held `before`, one a machine can follow

@@ -25,7 +25,6 @@ use serde::Deserialize;
 use crate::bands::{options, solver};
 use crate::grid::Grid;
 use crate::measure::pole;
-use crate::regions::region;
 use lamina_geom::reference::{cell_centre, reference_point};
 
 /// More cells around one region than anyone could deposit: a guard against typos.
@@ -195,7 +194,7 @@ impl Cells {
                     if polygon.outer.len() < 3 {
                         continue;
                     }
-                    let mut c = region(r.family, r.index, r.count, r.level, polygon);
+                    let mut c = SubRegion::new(r.family, r.index, r.count, r.level, polygon);
                     c.cell = Some(cell);
                     c.reference = cell_centre(&c.polygon).unwrap_or(c.reference);
                     out.push(c);
@@ -235,7 +234,7 @@ impl Cells {
             // Numbered along the contour from the first cut.
             cells.sort_by(|a, b| a.0.total_cmp(&b.0));
             for (i, (_, polygon)) in cells.into_iter().enumerate() {
-                let mut c = region(r.family, r.index, r.count, r.level, polygon);
+                let mut c = SubRegion::new(r.family, r.index, r.count, r.level, polygon);
                 c.cell = Some(i);
                 c.reference = cell_centre(&c.polygon).unwrap_or(c.reference);
                 out.push(c);

@@ -6,7 +6,6 @@ use i_overlay::i_shape::int::shape::IntShapes;
 use lamina_api::{FamilyContext, Polygon, SubRegion};
 
 use crate::grid::Grid;
-use lamina_geom::reference::reference_point;
 
 /// Regions from bands (outermost first) with the given levels (one per band).
 pub fn from_bands(
@@ -22,27 +21,10 @@ pub fn from_bands(
             if polygon.outer.len() < 3 {
                 continue;
             }
-            regions.push(region(ctx.family, index, count, level(index), polygon));
+            regions.push(SubRegion::new(ctx.family, index, count, level(index), polygon));
         }
     }
     regions
-}
-
-/// One region with its reference point (a central point of its widest scan interval,
-/// the bounding-box centre if no scan line finds an inside).
-pub fn region(family: usize, index: usize, count: usize, level: f64, polygon: Polygon) -> SubRegion {
-    let reference = reference_point(&polygon);
-    SubRegion {
-        family,
-        index,
-        count,
-        level,
-        polygon,
-        cell: None,
-        reference,
-        composition: None,
-        samples: Vec::new(),
-    }
 }
 
 /// Level r_j = j / (N_R - 1) of Eq. 21; 0 for a single region.
@@ -57,5 +39,5 @@ pub fn uniform_level(j: usize, count: usize) -> f64 {
 /// The family as one region: the fallback for a family the grid or the overlay cannot
 /// represent (no area at the grid's resolution).
 pub fn whole(ctx: &FamilyContext<'_>, polygon: Polygon) -> Vec<SubRegion> {
-    vec![region(ctx.family, 0, 1, 0.0, polygon)]
+    vec![SubRegion::new(ctx.family, 0, 1, 0.0, polygon)]
 }

@@ -392,15 +392,8 @@ fn sub_regions(pieces: Vec<Piece>, family_area: f64, family: usize) -> Result<Ve
         let composition = Composition::new(fractions)?;
         for polygon in polygons {
             regions.push(SubRegion {
-                family,
-                index,
-                count,
-                level,
-                reference: lamina_geom::reference::reference_point(&polygon),
-                polygon,
-                cell: None,
                 composition: Some(composition.clone()),
-                samples: Vec::new(),
+                ..SubRegion::new(family, index, count, level, polygon)
             });
         }
     }
