@@ -116,12 +116,14 @@ fn offset_part(info: &RunInfo, layers: &[(Layer, ContourTree)], dir: &Path, runs
         let regions: usize = layers
             .par_iter()
             .map(|(layer, tree)| {
+                let polygons = tree.family_polygons(&layer.contours);
                 (0..tree.families.len())
                     .map(|family| {
                         let ctx = FamilyContext {
                             info,
                             layer,
                             tree,
+                            polygons: &polygons,
                             mesh: None,
                             part: 0,
                             family,

@@ -100,7 +100,9 @@ pub struct ContourTree {
 }
 
 impl ContourTree {
-    /// The polygon of family `f` built from the layer's contours.
+    /// The polygon of family `f` built from the layer's contours: a copy of them,
+    /// outer counter-clockwise and holes clockwise. Stages that work on a family read
+    /// [`crate::stage::FamilyContext::polygon`], built once a layer, instead.
     pub fn family_polygon(&self, contours: &[Contour], f: usize) -> Polygon {
         let fam = &self.families[f];
         Polygon::new(
@@ -110,6 +112,21 @@ impl ContourTree {
                 .map(|&h| contours[h].clone().oriented(false))
                 .collect(),
         )
+    }
+
+    /// The polygon of every family, in order: what a layer's discretisers and graders
+    /// share ([`crate::stage::FamilyContext::polygons`]).
+    pub fn family_polygons(&self, contours: &[Contour]) -> Vec<Polygon> {
+        (0..self.families.len())
+            .map(|f| self.family_polygon(contours, f))
+            .collect()
+    }
+
+    /// The area (mm²) of family `f`: its outer contour's less its holes', read from the
+    /// contours without building the polygon.
+    pub fn family_area(&self, contours: &[Contour], f: usize) -> f64 {
+        let fam = &self.families[f];
+        contours[fam.outer].area() - fam.holes.iter().map(|&h| contours[h].area()).sum::<f64>()
     }
 
     /// Contours with no parent.

@@ -12,7 +12,7 @@ use serde::{Deserialize, Serialize};
 pub use crate::kind::StageKind;
 
 use crate::error::Result;
-use crate::geom::BBox2;
+use crate::geom::{BBox2, Polygon};
 use crate::machine::Machine;
 use crate::mesh::Mesh;
 use crate::model::*;
@@ -278,12 +278,24 @@ pub struct FamilyContext<'a> {
     pub info: &'a RunInfo,
     pub layer: &'a Layer,
     pub tree: &'a ContourTree,
+    /// The polygon of every family of the layer ([`ContourTree::family_polygons`]),
+    /// built once by whoever calls the stage and shared by its discretiser and grader:
+    /// read the one worked on with [`FamilyContext::polygon`].
+    pub polygons: &'a [Polygon],
     /// The part's mesh as it was sliced (placed and oriented), for stages that measure
     /// in space (distances to chosen faces) and say so (`reads_mesh`); `None` for the
     /// others, and where no mesh exists (tests of a stage on a drawn family).
     pub mesh: Option<&'a crate::mesh::Mesh>,
     pub part: usize,
     pub family: usize,
+}
+
+impl<'a> FamilyContext<'a> {
+    /// The polygon of the family worked on: its outer contour counter-clockwise, its
+    /// holes clockwise.
+    pub fn polygon(&self) -> &'a Polygon {
+        &self.polygons[self.family]
+    }
 }
 
 /// Divides one contour family into sub-regions of constant material that tile it. A

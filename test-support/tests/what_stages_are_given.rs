@@ -26,7 +26,7 @@ struct Whole {
 impl Discretiser for Whole {
     fn discretise(&self, ctx: &FamilyContext<'_>) -> Result<Vec<SubRegion>> {
         check(ctx, self.reads, "discretise")?;
-        let polygon = ctx.tree.family_polygon(&ctx.layer.contours, ctx.family);
+        let polygon = ctx.polygon().clone();
         Ok(vec![SubRegion::new(ctx.family, 0, 1, 0.0, polygon)])
     }
 

@@ -473,9 +473,9 @@ fn real_models_discretise_into_tiling_sub_regions() {
                 let sampled = slot.index % step == 0;
                 let layer = prepared.slice(slot).expect("slices");
                 let tree = sorter.sort(&layer).expect("sorts");
-                for f in 0..tree.families.len() {
-                    let family = tree.family_polygon(&layer.contours, f);
-                    let invalid = ogc_errors(&family);
+                let polygons = tree.family_polygons(&layer.contours);
+                for (f, family) in polygons.iter().enumerate() {
+                    let invalid = ogc_errors(family);
                     assert!(
                         invalid.is_empty(),
                         "{}: layer {} family {f} is not a valid polygon: {invalid:?}",
@@ -487,6 +487,7 @@ fn real_models_discretise_into_tiling_sub_regions() {
                         info: &info,
                         layer: &layer,
                         tree: &tree,
+                        polygons: &polygons,
                         // The stages that measure in space (the outer-surface source) read it.
                         mesh: Some(&mesh),
                         part: 0,
@@ -509,7 +510,7 @@ fn real_models_discretise_into_tiling_sub_regions() {
                                 r.index
                             );
                         }
-                        let t = lamina_discretise::check::tiling(&family, &out);
+                        let t = lamina_discretise::check::tiling(family, &out);
                         assert!(
                             t.is_ok(1e-3),
                             "{}: layer {} family {f} ({text}): {t:?}",

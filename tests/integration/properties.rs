@@ -668,10 +668,12 @@ fn discretise_and_check(f: &RandomFamily, text: &str) -> Result<(), TestCaseErro
     // than past its bottom, for the stages that measure in space from the mesh.
     let mid = layer.z - layer.thickness / 2.0;
     let prism = lamina_model::extrude("prism", &family, mid - 2.0 * f.size, mid + 0.5 * f.size).ok();
+    let polygons = tree.family_polygons(&layer.contours);
     let ctx = FamilyContext {
         info: &info,
         layer: &layer,
         tree: &tree,
+        polygons: &polygons,
         mesh: prism.as_ref(),
         part: 0,
         family: 0,

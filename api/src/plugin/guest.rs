@@ -442,10 +442,13 @@ fn with_family<T>(
                 })?,
         ),
     };
+    // Built once for the call, which covers every family of the part's layer.
+    let polygons = family.tree.family_polygons(&family.layer.contours);
     let ctx = FamilyContext {
         info: &family.info,
         layer: &family.layer,
         tree: &family.tree,
+        polygons: &polygons,
         mesh: mesh.as_deref(),
         part: family.part,
         family: 0,

@@ -19,7 +19,7 @@ use std::sync::atomic::{AtomicUsize, Ordering};
 
 use lamina_geom::follow::{Area, LayerLinks, follow_links, holding};
 
-use crate::geom::Point2;
+use crate::geom::{Point2, Polygon};
 use crate::model::{ContourTree, Layer, LayerSlot};
 use crate::stage::{MeshSlicer, StageKind};
 
@@ -72,23 +72,19 @@ impl Selections {
             .take()
     }
 
-    /// The families of `layer` that belong to part `pi`.
+    /// The families of a layer (their `polygons`) that belong to part `pi`.
     pub(super) fn families(
         &self,
         pi: usize,
         layer_index: usize,
-        layer: &Layer,
-        tree: &ContourTree,
+        polygons: &[Polygon],
         part_mesh: &[usize],
     ) -> Vec<usize> {
         let selecting_on_mesh = |o: usize| part_mesh[o] == part_mesh[pi] && self.samples[o].is_some();
         if !(0..self.samples.len()).any(selecting_on_mesh) {
             // Nobody selects on this mesh: the part has every family.
-            return (0..tree.families.len()).collect();
+            return (0..polygons.len()).collect();
         }
-        let polygons: Vec<_> = (0..tree.families.len())
-            .map(|f| tree.family_polygon(&layer.contours, f))
-            .collect();
         let owned_by = |part: usize| -> Vec<usize> {
             let samples = self.samples[part]
                 .as_ref()
@@ -137,8 +133,10 @@ impl Engine {
             })?;
             let tree = timings.time(StageKind::Sort, || self.sorter.sort(&layer))?;
             check_tree(&layer, &tree)?;
-            let areas = (0..tree.families.len())
-                .map(|f| Area::new(tree.family_polygon(&layer.contours, f)))
+            let areas = tree
+                .family_polygons(&layer.contours)
+                .into_iter()
+                .map(Area::new)
                 .collect();
             let cut = (layer, tree);
             let bytes = cut_bytes(&cut);

@@ -70,7 +70,8 @@ impl Engine {
                             timings.time(StageKind::Slice, || prepared[part_mesh[pi]].slice(&slot))?;
                         let tree = timings.time(StageKind::Sort, || self.sorter.sort(&layer))?;
                         let families: Vec<usize> = (0..tree.families.len()).collect();
-                        let regions = self.process_part(pi, &layer, &tree, &families, &shared)?;
+                        let polygons = tree.family_polygons(&layer.contours);
+                        let regions = self.process_part(pi, &layer, &tree, &polygons, &families, &shared)?;
                         Ok((z, regions))
                     })
                     .collect::<Result<_>>()

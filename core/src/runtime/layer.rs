@@ -9,6 +9,7 @@ use super::mend::slice_mended;
 use super::report::Timings;
 use crate::diagnostic::Diagnostic;
 use crate::error::{Error, Result};
+use crate::geom::Polygon;
 use crate::mesh::Mesh;
 use crate::model::{Composition, Layer, LayerPlan, LayerSlot, PartLayer, Sequence, SubRegion};
 use crate::planned::Counts;
@@ -50,8 +51,9 @@ impl Engine {
             layer_count: _,
             bare_info: _,
         } = *shared;
-        // Each distinct mesh is cut and sorted once per layer.
-        let mut cut: Vec<Option<(Layer, crate::model::ContourTree)>> =
+        // Each distinct mesh is cut and sorted once per layer, and its families'
+        // polygons built once, for every part and stage that reads them.
+        let mut cut: Vec<Option<(Layer, crate::model::ContourTree, Vec<Polygon>)>> =
             (0..prepared.len()).map(|_| None).collect();
         let mut diagnostics = Vec::new();
         let mut parts = Vec::new();
@@ -122,17 +124,20 @@ impl Engine {
                         repaired: !layer.warnings.is_empty(),
                     });
                 }
-                cut[mi] = Some((layer, tree));
+                let polygons = tree.family_polygons(&layer.contours);
+                cut[mi] = Some((layer, tree, polygons));
             }
-            let Some((layer, tree)) = &cut[mi] else { continue };
-            let families = selections.families(pi, slot.index, layer, tree, part_mesh);
+            let Some((layer, tree, polygons)) = &cut[mi] else {
+                continue;
+            };
+            let families = selections.families(pi, slot.index, polygons, part_mesh);
             let regions = self
-                .process_part(pi, layer, tree, &families, shared)
+                .process_part(pi, layer, tree, polygons, &families, shared)
                 .map_err(|e| e.in_part(&p.name))?;
             readers[mi] -= 1;
             let (contours, tree) = match readers[mi] {
                 0 => match cut[mi].take() {
-                    Some((layer, tree)) => (layer.contours, tree),
+                    Some((layer, tree, _)) => (layer.contours, tree),
                     None => continue,
                 },
                 _ => (layer.contours.clone(), tree.clone()),
@@ -238,9 +243,7 @@ impl Engine {
                 let tree = shared
                     .timings
                     .time(StageKind::Sort, || self.sorter.sort(&layer))?;
-                let own: Vec<_> = (0..tree.families.len())
-                    .map(|f| tree.family_polygon(&layer.contours, f))
-                    .collect();
+                let own = tree.family_polygons(&layer.contours);
                 // The copies of the region's parts on this mesh stand as high.
                 let mut offsets: Vec<_> = shared
                     .copies
@@ -268,6 +271,7 @@ impl Engine {
         pi: usize,
         layer: &Layer,
         tree: &crate::model::ContourTree,
+        polygons: &[Polygon],
         families: &[usize],
         shared: &LayerShared<'_>,
     ) -> Result<Vec<SubRegion>> {
@@ -285,6 +289,7 @@ impl Engine {
             info: if reads_machine { info } else { shared.bare_info },
             layer,
             tree,
+            polygons,
             mesh: mesh.filter(|_| reads_mesh),
             part: pi,
             family: families[0],
@@ -293,9 +298,10 @@ impl Engine {
             Some(d) => timings.time(StageKind::Discretise, || {
                 d.discretise_families(&ctx(d.reads_mesh(), d.reads_machine()), families)
             })?,
+            // Without a discretiser a family is one region, at level 0.
             None => families
                 .iter()
-                .map(|&f| vec![whole_family(tree, layer, f)])
+                .map(|&f| vec![SubRegion::new(f, 0, 1, 0.0, polygons[f].clone())])
                 .collect(),
         };
         if sets.len() != families.len() {
@@ -366,11 +372,6 @@ pub(super) struct LayerShared<'a> {
     /// The run's layers in build order, for a layer an open mesh leaves empty to take
     /// the contours of its neighbours (none: such a layer stays empty).
     pub(super) slots: &'a [LayerSlot],
-}
-
-/// The single region of a family that is not discretised.
-fn whole_family(tree: &crate::model::ContourTree, layer: &Layer, f: usize) -> SubRegion {
-    SubRegion::new(f, 0, 1, 0.0, tree.family_polygon(&layer.contours, f))
 }
 
 /// What a stage of `kind` added to a plan that held `before`, one a machine can follow

@@ -318,7 +318,7 @@ impl Discretiser for DistanceField {
     }
 
     fn discretise(&self, ctx: &FamilyContext<'_>) -> Result<Vec<SubRegion>> {
-        let polygon = ctx.tree.family_polygon(&ctx.layer.contours, ctx.family);
+        let polygon = ctx.polygon();
         if self.sample_spacing.is_some() {
             let bbox = polygon.bbox();
             let n = self.resolution(&bbox) as f64;
@@ -332,10 +332,10 @@ impl Discretiser for DistanceField {
                 ),
             )?;
         }
-        let Ok(grid) = Grid::for_polygon(&polygon, STAGE) else {
-            return Ok(whole(ctx, polygon));
+        let Ok(grid) = Grid::for_polygon(polygon, STAGE) else {
+            return Ok(whole(ctx));
         };
-        let base = clean(&vec![grid.shape(&polygon)]);
+        let base = clean(&vec![grid.shape(polygon)]);
         let surface = match (self.feature, ctx.mesh) {
             (Feature::Surface, Some(mesh)) => self
                 .surfaces
@@ -360,9 +360,9 @@ impl Discretiser for DistanceField {
             max,
             field,
             ..
-        }) = self.iso_sets(&polygon, space).filter(|_| !base.is_empty())
+        }) = self.iso_sets(polygon, space).filter(|_| !base.is_empty())
         else {
-            return Ok(whole(ctx, polygon));
+            return Ok(whole(ctx));
         };
         if let Levels::Spacing(s) = self.levels {
             self.limits.check(
@@ -389,7 +389,7 @@ impl Discretiser for DistanceField {
             Ok(any)
         })?;
         let mut regions = from_bands(ctx, &grid, &bands, count, |k| cut.levels[k]);
-        self.around.split(&grid, &polygon, &mut regions, &self.limits)?;
+        self.around.split(&grid, polygon, &mut regions, &self.limits)?;
         Ok(regions)
     }
 }

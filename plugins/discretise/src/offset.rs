@@ -91,19 +91,19 @@ impl Offset {
 
 impl Discretiser for Offset {
     fn discretise(&self, ctx: &FamilyContext<'_>) -> Result<Vec<SubRegion>> {
-        let polygon = ctx.tree.family_polygon(&ctx.layer.contours, ctx.family);
-        let Some((grid, base)) = Grid::family(&polygon, STAGE) else {
-            return Ok(whole(ctx, polygon));
+        let polygon = ctx.polygon();
+        let Some((grid, base)) = Grid::family(polygon, STAGE) else {
+            return Ok(whole(ctx));
         };
-        let Some((count, spacing)) = self.plan(&polygon)? else {
-            return Ok(whole(ctx, polygon));
+        let Some((count, spacing)) = self.plan(polygon)? else {
+            return Ok(whole(ctx));
         };
         if spacing.is_nan() || spacing <= 0.0 || spacing.is_infinite() {
-            return Ok(whole(ctx, polygon));
+            return Ok(whole(ctx));
         }
         let bands = offset_bands(&base, grid.scale(), count, &self.inset, |k| k as f64 * spacing)?;
         let mut regions = from_bands(ctx, &grid, &bands, count, |j| uniform_level(j, count));
-        self.cells.split(&grid, &polygon, &mut regions, &self.limits)?;
+        self.cells.split(&grid, polygon, &mut regions, &self.limits)?;
         Ok(regions)
     }
 }

@@ -434,24 +434,24 @@ fn without_spikes(points: &mut Vec<Point2>) {
 
 impl Discretiser for Radial {
     fn discretise(&self, ctx: &FamilyContext<'_>) -> Result<Vec<SubRegion>> {
-        let polygon = ctx.tree.family_polygon(&ctx.layer.contours, ctx.family);
-        let Some((grid, base)) = Grid::family(&polygon, STAGE) else {
-            return Ok(whole(ctx, polygon));
+        let polygon = ctx.polygon();
+        let Some((grid, base)) = Grid::family(polygon, STAGE) else {
+            return Ok(whole(ctx));
         };
         let count = match self.count {
             Some(n) => n,
-            None => match reach(&polygon, From::Outer, self.nozzle * 0.05) {
+            None => match reach(polygon, From::Outer, self.nozzle * 0.05) {
                 Some(r) => derived_count(
                     &self.limits,
                     r / self.nozzle,
                     &format!("{r:.3} mm of reach in rings of the {} mm nozzle", self.nozzle),
                 )?,
-                None => return Ok(whole(ctx, polygon)),
+                None => return Ok(whole(ctx)),
             },
         };
         let starts = rays(&polygon.outer);
-        let Some(ends) = ends(&polygon, &starts, self.nozzle * 0.05) else {
-            return Ok(whole(ctx, polygon));
+        let Some(ends) = ends(polygon, &starts, self.nozzle * 0.05) else {
+            return Ok(whole(ctx));
         };
         let mut points = Vec::with_capacity(starts.len());
         let bands = nested_bands(&base, count, FillRule::Positive, |k, _, overlay| {
@@ -468,7 +468,7 @@ impl Discretiser for Radial {
             Ok(true)
         })?;
         let mut regions = from_bands(ctx, &grid, &bands, count, |j| uniform_level(j, count));
-        self.cells.split(&grid, &polygon, &mut regions, &self.limits)?;
+        self.cells.split(&grid, polygon, &mut regions, &self.limits)?;
         Ok(regions)
     }
 }

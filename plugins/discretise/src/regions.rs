@@ -3,7 +3,7 @@
 //! with a reference point inside it.
 
 use i_overlay::i_shape::int::shape::IntShapes;
-use lamina_api::{FamilyContext, Polygon, SubRegion};
+use lamina_api::{FamilyContext, SubRegion};
 
 use crate::grid::Grid;
 
@@ -38,6 +38,6 @@ pub fn uniform_level(j: usize, count: usize) -> f64 {
 
 /// The family as one region: the fallback for a family the grid or the overlay cannot
 /// represent (no area at the grid's resolution).
-pub fn whole(ctx: &FamilyContext<'_>, polygon: Polygon) -> Vec<SubRegion> {
-    vec![SubRegion::new(ctx.family, 0, 1, 0.0, polygon)]
+pub fn whole(ctx: &FamilyContext<'_>) -> Vec<SubRegion> {
+    vec![SubRegion::new(ctx.family, 0, 1, 0.0, ctx.polygon().clone())]
 }

@@ -77,16 +77,16 @@ fn far_end(polygon: &Polygon, from: From) -> Option<f64> {
 
 impl Discretiser for StepWidth {
     fn discretise(&self, ctx: &FamilyContext<'_>) -> Result<Vec<SubRegion>> {
-        let polygon = ctx.tree.family_polygon(&ctx.layer.contours, ctx.family);
-        let Some((grid, base)) = Grid::family(&polygon, STAGE) else {
-            return Ok(whole(ctx, polygon));
+        let polygon = ctx.polygon();
+        let Some((grid, base)) = Grid::family(polygon, STAGE) else {
+            return Ok(whole(ctx));
         };
         let scale = match self.width {
             Some(w) => Some(w),
-            None => far_end(&polygon, self.inset.from),
+            None => far_end(polygon, self.inset.from),
         };
         let Some(scale) = scale.filter(|s| *s > 0.0) else {
-            return Ok(whole(ctx, polygon));
+            return Ok(whole(ctx));
         };
         // f(d) = (d / scale)^power: a threshold t on f is the distance scale t^(1 / power).
         let distances: Vec<f64> = self
@@ -99,7 +99,7 @@ impl Discretiser for StepWidth {
         let depth = |k: usize| if k == 0 { 0.0 } else { distances[k - 1] };
         let bands = offset_bands(&base, grid.scale(), count, &self.inset, depth)?;
         let mut regions = from_bands(ctx, &grid, &bands, count, |k| self.truncation.level(k));
-        self.cells.split(&grid, &polygon, &mut regions, &self.limits)?;
+        self.cells.split(&grid, polygon, &mut regions, &self.limits)?;
         Ok(regions)
     }
 }

@@ -198,7 +198,7 @@ fn layer_out<'a>(info: &'a RunInfo, plan: &'a LayerPlan, toolpaths: bool) -> Lay
                         level: pl.tree.nodes[fam.outer].level,
                         outer: &pl.contours[fam.outer],
                         holes: fam.holes.iter().map(|&h| &pl.contours[h]).collect(),
-                        area: pl.tree.family_polygon(&pl.contours, f).area(),
+                        area: pl.tree.family_area(&pl.contours, f),
                         sub_regions: regions,
                     }
                 })

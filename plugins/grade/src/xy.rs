@@ -193,16 +193,16 @@ impl Grader for InPlane {
         let part = &ctx.info.parts[ctx.part];
         let n = part.materials.len();
         if self.source == LevelSource::Points {
-            let family = ctx.tree.family_polygon(&ctx.layer.contours, ctx.family);
+            let family = ctx.polygon();
             // Without holes the lines run to the family's centre: the most inland of a
             // coarse grid of its points.
             let pole = family.holes.is_empty().then(|| {
-                grid_points(&family, family.bbox().center(), family.bbox().diagonal() / 64.0)
+                grid_points(family, family.bbox().center(), family.bbox().diagonal() / 64.0)
                     .into_iter()
                     .max_by(|a, b| family.outer.distance(*a).total_cmp(&family.outer.distance(*b)))
                     .unwrap_or_else(|| family.bbox().center())
             });
-            let lines = RadialLines::new(&family, pole);
+            let lines = RadialLines::new(family, pole);
             for region in regions.iter_mut() {
                 let points = grid_points(&region.polygon, region.reference, self.grid);
                 let mut sum = vec![0.0; n];
@@ -416,6 +416,7 @@ mod tests {
             info: &info,
             layer: &layer,
             tree: &tree,
+            polygons: &[],
             mesh: None,
             part: 0,
             family: 0,
@@ -465,6 +466,7 @@ mod tests {
             info: &info,
             layer: &layer,
             tree: &tree,
+            polygons: &[],
             mesh: None,
             part: 0,
             family: 0,
@@ -513,6 +515,7 @@ mod tests {
             info: &info,
             layer: &layer,
             tree: &tree,
+            polygons: &tree.family_polygons(&layer.contours),
             mesh: None,
             part: 0,
             family: 0,

@@ -186,7 +186,7 @@ impl Discretiser for Sources {
     }
 
     fn discretise(&self, ctx: &FamilyContext<'_>) -> Result<Vec<SubRegion>> {
-        let family = ctx.tree.family_polygon(&ctx.layer.contours, ctx.family);
+        let family = ctx.polygon();
         let family_area = family.area();
         let z = ctx.layer.z - ctx.layer.thickness / 2.0;
         let mut bbox = family.bbox();
@@ -196,13 +196,13 @@ impl Discretiser for Sources {
         let sources = self.resolved_sources(ctx)?;
         // Cells of the overlay: a piece of the family, the step of each source and
         // whether it is in that source's effective grading region.
-        let family_shapes = clean(&vec![shape_of(&family)]);
+        let family_shapes = clean(&vec![shape_of(family)]);
         let mut cells = vec![Cell {
             shapes: family_shapes.clone(),
             steps: Vec::new(),
             effective: Vec::new(),
         }];
-        let fields = self.surface_fields(ctx, &sources, &family, z)?;
+        let fields = self.surface_fields(ctx, &sources, family, z)?;
         let closer = |i: usize, d: f64| match &fields[i] {
             Some(field) => field.closer_than(d, &family_shapes),
             None => closer_than(&sources[i].datum, d, z, &bbox, self.tolerance, &family_shapes),

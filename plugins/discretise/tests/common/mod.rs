@@ -113,10 +113,12 @@ impl OneFamily {
 
     #[allow(dead_code)]
     pub fn try_run(&self, d: &dyn Discretiser) -> lamina_core::Result<Vec<SubRegion>> {
+        let polygons = self.tree.family_polygons(&self.layer.contours);
         let ctx = FamilyContext {
             info: &self.info,
             layer: &self.layer,
             tree: &self.tree,
+            polygons: &polygons,
             mesh: self.mesh.as_ref(),
             part: 0,
             family: 0,
