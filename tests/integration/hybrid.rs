@@ -186,7 +186,7 @@ fn every_regions_surface_is_sprayed_high_ground_back_and_ends_at_its_design_heig
 fn machining_paths_keep_their_tools_radius_from_the_boundaries() {
     // A 4 mm wheel, so that covering the ring takes passes where they belong (the
     // pipe's own 20 mm wheel covers it from one line through the centre); the NC file
-    // is left out, its cell has the 20 mm wheel.
+    // is left out, its machine has the 20 mm wheel.
     let dir = tempfile::tempdir().expect("tempdir");
     let pipe = std::fs::read_to_string(pipelines().join("pipe-work-cycles.toml")).expect("pipe");
     let small = pipe
@@ -353,13 +353,13 @@ fn segment_distance(p: [f64; 2], a: [f64; 2], b: [f64; 2]) -> f64 {
     (p[0] - a[0] - s * dx).hypot(p[1] - a[1] - s * dy)
 }
 
-/// The replay of `tests/replay/nc_replay.py` on an NC file, with the cell's profile.
-fn replay_nc(file: &Path, cell: &Path) -> Value {
+/// The replay of `tests/replay/nc_replay.py` on an NC file, with the machine's profile.
+fn replay_nc(file: &Path, machine: &Path) -> Value {
     let out = Command::new("python3")
         .arg(root().join("tests/replay/nc_replay.py"))
         .arg(file)
-        .arg("--cell")
-        .arg(cell)
+        .arg("--machine")
+        .arg(machine)
         .output()
         .expect("python3 runs");
     let report: Value = serde_json::from_slice(&out.stdout)
@@ -417,8 +417,8 @@ fn a_third_party_parser_runs_the_nc_program_as_a_machinist_would_and_finds_the_p
         }
     }
     let nc = dir.path().join("pipe-work-cycles.nc");
-    let cell = root().join("plugins/process/cells/cmpm-hybrid.toml");
-    let report = replay_nc(&nc, &cell);
+    let machine = root().join("plugins/process/machines/cmpm-hybrid.toml");
+    let report = replay_nc(&nc, &machine);
     // The replay says which tool kinds it knows.
     let help = Command::new("python3")
         .arg(root().join("tests/replay/nc_replay.py"))
@@ -819,10 +819,10 @@ fn cells_that_outgrow_their_lattice_or_conflicting_void_options_are_refused() {
 }
 
 #[test]
-fn the_nc_file_is_refused_where_the_cell_could_not_run_the_plan() {
+fn the_nc_file_is_refused_where_the_machine_could_not_run_the_plan() {
     let dir = tempfile::tempdir().expect("tempdir");
     let pipe = std::fs::read_to_string(pipelines().join("pipe-work-cycles.toml")).expect("pipe");
-    // A 1 mm cutter in the plan, 0.8 mm in the cell.
+    // A 1 mm cutter in the plan, 0.8 mm in the machine.
     let wider = pipe.replace(
         "use = \"end-mill\"\ndiameter = 0.8",
         "use = \"end-mill\"\ndiameter = 1.0",
@@ -832,21 +832,21 @@ fn the_nc_file_is_refused_where_the_cell_could_not_run_the_plan() {
     let err = text(&o.stderr);
     assert!(!o.status.success());
     assert!(
-        err.contains("`end-mill` measures 0.8 mm in the cell, the plan was made for 1 mm"),
+        err.contains("`end-mill` measures 0.8 mm in the machine, the plan was made for 1 mm"),
         "{err}"
     );
     assert!(
         !dir.path().join("out/pipe-work-cycles.nc").exists(),
         "no partial output"
     );
-    // A cell whose table is too small for the pipe (radius 10).
-    let cell = include_str!("../../plugins/process/cells/cmpm-hybrid.toml")
+    // A machine whose table is too small for the pipe (radius 10).
+    let machine = include_str!("../../plugins/process/machines/cmpm-hybrid.toml")
         .replace("x = [-150.0, 150.0]", "x = [-5.0, 5.0]");
-    std::fs::write(dir.path().join("small.toml"), cell).expect("cell");
+    std::fs::write(dir.path().join("small.toml"), machine).expect("machine");
     let small = pipe.replace("machine = \"cmpm-hybrid\"", "machine = \"small.toml\"");
     let err = text(&try_run_text(dir.path(), &small).stderr);
     assert!(err.contains("travel x [-5.0, 5.0]"), "{err}");
-    // Numbers come from the cell or from `tools`, not both.
+    // Numbers come from the machine or from `tools`, not both.
     let both = pipe.replace(
         "machine = \"cmpm-hybrid\"",
         "machine = \"cmpm-hybrid\"\ntools = { laser = 9 }",
@@ -957,7 +957,7 @@ fn the_program_speaks_its_controllers_dialect_or_is_refused_with_what_the_contro
     let o = try_run_text(dir.path(), &grbl);
     assert!(!o.status.success());
     assert!(
-        text(&o.stderr).contains("the cell `grbl-laser` has no tool `spray-gun` (tools: laser)"),
+        text(&o.stderr).contains("the machine `grbl-laser` has no tool `spray-gun` (tools: laser)"),
         "{}",
         text(&o.stderr)
     );
@@ -994,14 +994,14 @@ fn the_program_speaks_its_controllers_dialect_or_is_refused_with_what_the_contro
 #[test]
 fn a_wheel_its_spindle_cannot_turn_fast_enough_grinds_at_the_top_speed_and_the_run_says_so() {
     let dir = tempfile::tempdir().expect("tempdir");
-    let cell = include_str!("../../plugins/process/cells/cmpm-hybrid.toml");
-    let slow = cell.replacen(
+    let machine = include_str!("../../plugins/process/machines/cmpm-hybrid.toml");
+    let slow = machine.replacen(
         "surface_speed = 25.0\nramp_angle = 5.0\nmax_spindle = 30000.0",
         "surface_speed = 25.0\nramp_angle = 5.0\nmax_spindle = 6000.0",
         1,
     );
-    assert_ne!(slow, cell);
-    std::fs::write(dir.path().join("slow.toml"), slow).expect("cell");
+    assert_ne!(slow, machine);
+    std::fs::write(dir.path().join("slow.toml"), slow).expect("machine");
     let pipe = std::fs::read_to_string(pipelines().join("pipe-work-cycles.toml")).expect("pipe");
     let pipe =
         pipe_with_outputs(&pipe, &["nc"]).replace("machine = \"cmpm-hybrid\"", "machine = \"slow.toml\"");

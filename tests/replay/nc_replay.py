@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Replays an NC file for a hybrid cell as a LinuxCNC-style controller reads it.
+"""Replays an NC file for a hybrid machine as a LinuxCNC-style controller reads it.
 
 Every line is parsed by pygcode, a third-party RS-274/NGC parser (a line it cannot read
 is a violation); the state machine below follows the RS-274/NGC semantics of the
@@ -15,7 +15,7 @@ LinuxCNC 2.9 G-code reference:
   output n to v;
 - M0 pauses for the operator; M2/M30 end the program.
 
-The cell is read from its profile (`--cell FILE.toml`, as the `nc` output names it):
+The machine is read from its profile (`--machine FILE.toml`, as the `nc` output names it):
 the tools' numbers and kinds, the digital outputs of the spray gun and the filler, the
 feeders' analog outputs and scale, the motion limits. Without one, `--tool N=KIND`
 says what each tool number is. A feed move in XY is *working* when its tool works: a
@@ -121,11 +121,11 @@ def trapezoid(length, v, a):
 
 def main():
     ap = argparse.ArgumentParser(
-        description="Replays a hybrid cell's NC file and checks it.",
+        description="Replays a hybrid machine's NC file and checks it.",
         epilog="Tool kinds known: " + ", ".join(KINDS) + ".",
     )
     ap.add_argument("file")
-    ap.add_argument("--cell", help="the cell's profile (TOML): tools, outputs, feeders, motion")
+    ap.add_argument("--machine", help="the machine's profile (TOML): tools, outputs, feeders, motion")
     ap.add_argument("--tool", action="append", default=[], help="N=KIND, KIND one of " + ", ".join(KINDS))
     ap.add_argument("--spray-output", type=int, default=0)
     ap.add_argument("--fill-output", type=int, default=1)
@@ -135,18 +135,18 @@ def main():
     scale = 1.0
     motion = None
     spray_out, fill_out = args.spray_output, args.fill_output
-    if args.cell:
-        with open(args.cell, "rb") as f:
-            cell = tomllib.load(f)
-        for t in cell.get("tools", []):
+    if args.machine:
+        with open(args.machine, "rb") as f:
+            profile = tomllib.load(f)
+        for t in profile.get("tools", []):
             kinds[int(t["number"])] = t["kind"]
-        outs = cell.get("outputs", {})
+        outs = profile.get("outputs", {})
         spray_out = outs.get("spray", spray_out)
         fill_out = outs.get("filler", fill_out)
-        fd = cell.get("feeders", {})
+        fd = profile.get("feeders", {})
         feeders = {int(n): m for m, n in fd.get("outputs", {}).items()}
         scale = float(fd.get("scale", 1.0))
-        motion = cell.get("motion")
+        motion = profile.get("motion")
     for t in args.tool:
         n, k = t.split("=", 1)
         if k not in KINDS:
@@ -289,7 +289,7 @@ def main():
                 if name != "GCodeRapidMove" or set(g.params) != {"Z"} or float(g.params["Z"].value) != 0.0:
                     bad(n, "a move in machine coordinates other than the rapid to Z 0")
                 if motion and state["pos"][2] is not None:
-                    top = cell["travel"]["z"][1]
+                    top = profile["travel"]["z"][1]
                     time += trapezoid(top - state["pos"][2], motion["rapid"][2] / 60.0, motion["acceleration"][2])
                 state["pos"][2] = None
                 state["safe"] = True
@@ -331,7 +331,7 @@ def main():
                         time += trapezoid(length, v, a)
             elif motion and state["pos"][2] is None and target[2] is not None and all(p is not None for p in state["pos"][:2]) and not moves_xy:
                 # Down from the safe height.
-                top = cell["travel"]["z"][1]
+                top = profile["travel"]["z"][1]
                 time += trapezoid(top - target[2], motion["rapid"][2] / 60.0, motion["acceleration"][2])
             if layer is not None and target[2] is not None and kind and (name == "GCodeLinearMove" or kind == "laser"):
                 if kind != "laser" or moved[2] or name == "GCodeLinearMove":

@@ -1,5 +1,5 @@
 //! lamina-process: the operations of the CMPM hybrid process (cmpm-process-planning §2)
-//! and NC code for the cell that runs them.
+//! and NC code for the machine that runs them.
 //!
 //! Each operation is a `[[process]]` stage; the stages run on every planned layer in the
 //! order the pipeline lists them, each appending its [`Operation`]s to the layer's plan.
@@ -19,13 +19,13 @@
 //!    the voids, where it protects the part from erosion. (`remove-filler`, an extra
 //!    operation a pipeline may ask for, melts or leaches it out at the end.)
 //!
-//! The `nc` exporter writes the operations as G-code for a hybrid cell.
+//! The `nc` exporter writes the operations as G-code for a hybrid machine.
 
 mod area;
-mod cell;
 mod engrave;
 mod fill;
 mod grind;
+mod hybrid;
 mod mill;
 mod nc;
 mod regions;

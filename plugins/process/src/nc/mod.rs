@@ -1,16 +1,16 @@
-//! `nc`: the operations as an NC program for a hybrid cell, in the dialect of the cell's
-//! controller (`cell.rs`: LinuxCNC, a Fanuc-like controller and Grbl ship built in).
+//! `nc`: the operations as an NC program for a hybrid machine, in the dialect of the machine's
+//! controller (`hybrid.rs`: LinuxCNC, a Fanuc-like controller and Grbl ship built in).
 //!
 //! - **Start and end.** The controller's header and safe start (units, plane, modes,
 //!   compensations cancelled, work offset); at the end everything stops, the length
 //!   offset is cancelled, the head rises to the safe height in machine coordinates,
 //!   then the program ends.
 //! - **Tool changes** at the safe height in machine coordinates, with the length offset
-//!   cancelled before and the new tool's applied after. Tools are numbered by the cell,
+//!   cancelled before and the new tool's applied after. Tools are numbered by the machine,
 //!   or without one by the `tools` table, the rest in the order they first come.
 //! - **Cutters never plunge.** An end mill ramps down along its own path
 //!   (`entry::ramp`); a cup wheel enters each pass from the side, lowered beside the
-//!   part where its face is clear (`entry::side_entry`). Both turn at the cell's cutting
+//!   part where its face is clear (`entry::side_entry`). Both turn at the machine's cutting
 //!   data (a wheel's speed from its surface speed) with the chip vacuum on.
 //! - **The laser** stays at its focal height across a layer's rings, off between them;
 //!   it steps down to each pass's floor, so the engraving's depth is in Z.
@@ -19,7 +19,7 @@
 //!   before the gun opens; the gun stands `spray_standoff` above the surface.
 //! - **No wasted lines.** A move to where the tool is, or a word already in force, is
 //!   not written.
-//! - **Cycle time.** The program's header gives the time it takes by the cell's motion
+//! - **Cycle time.** The program's header gives the time it takes by the machine's motion
 //!   limits, tool-change and spindle times, with each operation's share; the run's
 //!   summary prints the same.
 //!
@@ -41,7 +41,7 @@ use lamina_api::{
 };
 
 use crate::area::{distance_to_area, layer_area};
-use crate::cell::{Cell, Cutting, RAMP_ANGLE};
+use crate::hybrid::{Cutting, HybridMachine, RAMP_ANGLE};
 use crate::tool::LENGTH;
 use program::{Program, number};
 
@@ -76,13 +76,13 @@ lamina_api::stage_options! {
     }
 }
 
-/// The controller and motion of a program written without a cell.
-const GENERIC: &str = include_str!("../../cells/generic-linuxcnc.toml");
+/// The controller and motion of a program written without a machine.
+const GENERIC: &str = include_str!("../../machines/generic-linuxcnc.toml");
 
 struct Nc {
     options: Options,
-    /// The cell named, or the generic profile (`named` false).
-    cell: Cell,
+    /// The machine named, or the generic profile (`named` false).
+    machine: HybridMachine,
     named: bool,
 }
 
@@ -136,7 +136,7 @@ impl Exporter for Nc {
             .map(|s: &Sequence| s.regions.iter().map(|r| r.name.clone()).collect())
             .unwrap_or_default();
         let numbers: BTreeMap<String, u32> = if self.named {
-            self.cell
+            self.machine
                 .tools
                 .iter()
                 .map(|t| (t.name.clone(), t.number))
@@ -151,7 +151,7 @@ impl Exporter for Nc {
             regions,
             numbers,
             named: self.named,
-            program: Program::new(self.cell.clone()),
+            program: Program::new(self.machine.clone()),
             top: 0.0,
             notes: Vec::new(),
             title: format!("lamina nc: {}, {} layers", ctx.pipeline_name, ctx.layer_count),
@@ -209,7 +209,7 @@ impl Sink {
         self.program.change(&tool.name, n)?;
         self.program.doing = op.kind.clone();
         let cutting = if self.named {
-            self.program.cell.cutting(tool, &mut self.notes)?
+            self.program.machine.cutting(tool, &mut self.notes)?
         } else {
             Cutting {
                 feed: tool.feed,
@@ -254,7 +254,7 @@ impl Sink {
             .map(|&(m, f)| (m, f * matrix))
             .chain(inclusions.iter().copied())
             .collect();
-        let feeders = self.program.cell.feeders.clone();
+        let feeders = self.program.machine.feeders.clone();
         if feeders.outputs.is_empty() {
             let said: Vec<String> = mix
                 .iter()
@@ -263,7 +263,7 @@ impl Sink {
             self.program.line(format!(
                 "({})",
                 comment(&format!(
-                    "mix set by hand, the cell has no feeders: {}",
+                    "mix set by hand, the machine has no feeders: {}",
                     said.join(", ")
                 ))
             ));
@@ -280,8 +280,8 @@ impl Sink {
                     return Err(Error::stage(
                         "export:nc",
                         format!(
-                            "`spray`: the cell `{}` has no feeder for `{m}` (feeders: {})",
-                            self.program.cell.name,
+                            "`spray`: the machine `{}` has no feeder for `{m}` (feeders: {})",
+                            self.program.machine.name,
                             names.join(", ")
                         ),
                     ));
@@ -292,7 +292,7 @@ impl Sink {
                 self.program.analog(output, f * feeders.scale)?;
             }
         }
-        let gun = self.program.cell.outputs.spray;
+        let gun = self.program.machine.outputs.spray;
         let standoff = self.options.spray_standoff;
         let clear = self.top + self.options.clearance;
         for (i, p) in op.paths.iter().enumerate() {
@@ -323,14 +323,14 @@ impl Sink {
     /// The laser's rings: down to each pass's focal height, on along a ring, off
     /// between rings, never up until the operation ends.
     fn laser(&mut self, op: &Operation, c: &Cutting) -> Result<()> {
-        let vacuum = self.program.cell.outputs.vacuum;
+        let vacuum = self.program.machine.outputs.vacuum;
         if vacuum.is_some() {
             self.program.output(vacuum, true, "chip vacuum")?;
         }
         let power = c.power.ok_or_else(|| {
             Error::stage(
                 "export:nc",
-                "`engrave`: the laser has no power, in the plan or in the cell",
+                "`engrave`: the laser has no power, in the plan or in the machine",
             )
         })?;
         let clear = self.top + self.options.clearance;
@@ -351,7 +351,7 @@ impl Sink {
     /// The filler's passes, the nozzle lifted between them only where the way over
     /// leaves the layer's area (where another region may stand higher).
     fn fill(&mut self, op: &Operation, c: &Cutting, area: &[Polygon]) -> Result<()> {
-        let output = self.program.cell.outputs.filler;
+        let output = self.program.machine.outputs.filler;
         let standoff = self.options.fill_standoff;
         let (clear, approach) = (
             self.top + self.options.clearance,
@@ -437,7 +437,7 @@ impl Sink {
 
     /// The chip vacuum on and the spindle at the cutting speed.
     fn spin(&mut self, c: &Cutting) -> Result<()> {
-        let vacuum = self.program.cell.outputs.vacuum;
+        let vacuum = self.program.machine.outputs.vacuum;
         if vacuum.is_some() {
             self.program.output(vacuum, true, "chip vacuum")?;
         }
@@ -461,10 +461,10 @@ impl LayerSink for Sink {
             return Ok(());
         }
         for op in &plan.operations {
-            crate::cell::readable(op).map_err(|e| e.in_layer(plan.index, plan.z))?;
+            crate::hybrid::readable(op).map_err(|e| e.in_layer(plan.index, plan.z))?;
             if self.named {
                 self.program
-                    .cell
+                    .machine
                     .admits(op)
                     .map_err(|e| e.in_layer(plan.index, plan.z))?;
             }
@@ -492,8 +492,8 @@ impl LayerSink for Sink {
 
     fn finish(mut self: Box<Self>, _info: &RunInfo, files: &mut dyn OutputFiles) -> Result<()> {
         self.program.end();
-        let cell = &self.program.cell;
-        let c = &cell.controller;
+        let machine = &self.program.machine;
+        let c = &machine.controller;
         let mut head = String::new();
         for l in c.header.lines() {
             head.push_str(l);
@@ -504,7 +504,7 @@ impl LayerSink for Sink {
         };
         say(self.title.clone());
         if self.named {
-            say(format!("cell: {} - {}", cell.name, cell.description));
+            say(format!("machine: {} - {}", machine.name, machine.description));
         }
         say(format!("controller: {}", c.dialect));
         let total = self.program.shares.total();
@@ -521,7 +521,7 @@ impl LayerSink for Sink {
             duration(total),
             shares.join(", ")
         ));
-        let o = cell.outputs;
+        let o = machine.outputs;
         let outputs: Vec<String> = [
             (o.spray, "spray gun"),
             (o.filler, "filler nozzle"),
@@ -533,8 +533,8 @@ impl LayerSink for Sink {
         if !outputs.is_empty() {
             say(format!("outputs: {}", outputs.join(", ")));
         }
-        if !cell.feeders.outputs.is_empty() {
-            let feeders: Vec<String> = cell
+        if !machine.feeders.outputs.is_empty() {
+            let feeders: Vec<String> = machine
                 .feeders
                 .outputs
                 .iter()
@@ -543,7 +543,7 @@ impl LayerSink for Sink {
             say(format!(
                 "feeders: {}, each set to its volume fraction times {}",
                 feeders.join(", "),
-                number(cell.feeders.scale, false)
+                number(machine.feeders.scale, false)
             ));
         }
         let mut listed: Vec<(&String, &u32)> = self.numbers.iter().collect();
@@ -597,8 +597,9 @@ fn build(config: &StageConfig<'_>) -> Result<AnyStage> {
             return Err(config.error("tools", format!("`{other}` and `{name}` both have number {n}")));
         }
     }
-    let (cell, named) = if options.machine.is_empty() {
-        let generic: Cell = toml::from_str(GENERIC).map_err(|e| config.error("machine", e.to_string()))?;
+    let (machine, named) = if options.machine.is_empty() {
+        let generic: HybridMachine =
+            toml::from_str(GENERIC).map_err(|e| config.error("machine", e.to_string()))?;
         (generic, false)
     } else {
         if !options.tools.is_empty() {
@@ -608,19 +609,23 @@ fn build(config: &StageConfig<'_>) -> Result<AnyStage> {
             ));
         }
         (
-            Cell::load(&options.machine, config.base_dir, config.reach)
+            HybridMachine::load(&options.machine, config.base_dir, config.reach)
                 .map_err(|m| config.error("machine", m))?,
             true,
         )
     };
-    Ok(AnyStage::Export(Box::new(Nc { options, cell, named })))
+    Ok(AnyStage::Export(Box::new(Nc {
+        options,
+        machine,
+        named,
+    })))
 }
 
 lamina_api::register_stage!(StageFactory {
     info: StageInfo {
         kind: StageKind::Export,
         name: "nc",
-        doc: "NC program for a hybrid cell in its controller's dialect: safe start, tool changes at the safe height, ramped and side entries, feeders set to each sub-region's composition, laser at focal height, cycle-time estimate.",
+        doc: "NC program for a hybrid machine in its controller's dialect: safe start, tool changes at the safe height, ramped and side entries, feeders set to each sub-region's composition, laser at focal height, cycle-time estimate.",
         options: Options::SPECS,
         example: "use = \"nc\"\npath = \"job.nc\"\nmachine = \"cmpm-hybrid\"",
     },

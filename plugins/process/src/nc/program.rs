@@ -3,13 +3,13 @@
 //!
 //! A move is written only for the axes it changes, as they will be printed: a move to
 //! where the tool already is, or a feed word already in force, is not written. Every
-//! position is checked against the cell's travel.
+//! position is checked against the machine's travel.
 //!
 //! The time of each move follows the controller's limits: its speed is the feed (or the
 //! rapid speed) capped so no axis exceeds its own, its acceleration the most every axis
 //! allows along it, on a trapezoidal profile. A rapid starts and ends at rest, and so
 //! does every run of feed moves, which any other line ends. Within a run, the speed
-//! through a corner is the one that keeps the tool within the cell's junction deviation
+//! through a corner is the one that keeps the tool within the machine's junction deviation
 //! δ of the corner at its acceleration a: v² = a δ sin(θ/2) / (1 − sin(θ/2)), θ the
 //! angle between the moves (the junction-deviation rule of Grbl's planner, a model of a
 //! controller blending within a tolerance), and a look-ahead over the run lowers each
@@ -19,7 +19,7 @@ use std::collections::{BTreeMap, BTreeSet};
 
 use lamina_api::{Error, Result};
 
-use crate::cell::{Cell, render};
+use crate::hybrid::{HybridMachine, render};
 
 /// A feed move waiting for the run it belongs to to end.
 #[derive(Debug, Clone, Copy)]
@@ -98,7 +98,7 @@ impl Shares {
 }
 
 pub struct Program {
-    pub cell: Cell,
+    pub machine: HybridMachine,
     pub text: String,
     /// Position in work coordinates as printed; `None` until known (after a retract in
     /// machine coordinates, z is not).
@@ -162,9 +162,9 @@ pub fn trapezoid(length: f64, v: f64, a: f64) -> f64 {
 }
 
 impl Program {
-    pub fn new(cell: Cell) -> Self {
+    pub fn new(machine: HybridMachine) -> Self {
         Self {
-            cell,
+            machine,
             text: String::new(),
             pos: [None; 3],
             safe: false,
@@ -199,13 +199,13 @@ impl Program {
         if self.run.is_empty() {
             return;
         }
-        let t = run_time(&self.run, self.cell.motion.junction_deviation);
+        let t = run_time(&self.run, self.machine.motion.junction_deviation);
         self.run.clear();
         self.wait(t);
     }
 
     pub fn num(&self, v: f64) -> String {
-        number(v, self.cell.controller.decimal_point)
+        number(v, self.machine.controller.decimal_point)
     }
 
     fn wait(&mut self, seconds: f64) {
@@ -226,8 +226,8 @@ impl Program {
         Error::stage(
             "export:nc",
             format!(
-                "the cell `{}` cannot {what}: its controller ({}) has no `controller.{key}`",
-                self.cell.name, self.cell.controller.dialect
+                "the machine `{}` cannot {what}: its controller ({}) has no `controller.{key}`",
+                self.machine.name, self.machine.controller.dialect
             ),
         )
     }
@@ -238,7 +238,7 @@ impl Program {
 
     /// A straight move to `to` (an axis left `None` stays), rapid or at `feed` (mm/s).
     fn go(&mut self, to: [Option<f64>; 3], feed: Option<f64>) -> Result<()> {
-        let travel = self.cell.travel;
+        let travel = self.machine.travel;
         let limits = [travel.x, travel.y, travel.z];
         let mut words = Vec::new();
         let mut delta = [0.0f64; 3];
@@ -256,8 +256,8 @@ impl Program {
                 return Err(Error::stage(
                     "export:nc",
                     format!(
-                        "a move to {axis} {printed} is outside the cell `{}`'s travel x {:?}, y {:?}, z {:?}",
-                        self.cell.name, travel.x, travel.y, travel.z
+                        "a move to {axis} {printed} is outside the machine `{}`'s travel x {:?}, y {:?}, z {:?}",
+                        self.machine.name, travel.x, travel.y, travel.z
                     ),
                 ));
             }
@@ -287,7 +287,7 @@ impl Program {
             delta[2] = z2 - z0;
             before = Some(z0);
         }
-        let m = self.cell.motion;
+        let m = self.machine.motion;
         let length = delta.iter().map(|d| d * d).sum::<f64>().sqrt();
         let (mut v, mut a) = (f64::INFINITY, f64::INFINITY);
         for (i, d) in delta.iter().enumerate() {
@@ -351,11 +351,11 @@ impl Program {
         if self.safe {
             return;
         }
-        let lines = self.cell.controller.retract.lines().to_vec();
+        let lines = self.machine.controller.retract.lines().to_vec();
         self.template(&lines, &[]);
-        let m = self.cell.motion;
+        let m = self.machine.motion;
         let up = match self.pos[2] {
-            Some(z) => self.cell.travel.z[1] - z,
+            Some(z) => self.machine.travel.z[1] - z,
             None => 0.0,
         };
         self.wait(trapezoid(up.max(0.0), m.rapid[2] / 60.0, m.acceleration[2]));
@@ -365,7 +365,7 @@ impl Program {
 
     pub fn spindle_off(&mut self) {
         if self.spindle.take().is_some() {
-            let lines = self.cell.controller.spindle_off.lines().to_vec();
+            let lines = self.machine.controller.spindle_off.lines().to_vec();
             self.template(&lines, &[]);
         }
     }
@@ -374,25 +374,25 @@ impl Program {
         if self.spindle == Some(speed) {
             return Ok(());
         }
-        if self.cell.controller.spindle_on.is_empty() {
+        if self.machine.controller.spindle_on.is_empty() {
             return Err(self.lacks("spindle_on", "turn a spindle"));
         }
-        let lines = self.cell.controller.spindle_on.lines().to_vec();
+        let lines = self.machine.controller.spindle_on.lines().to_vec();
         let speed_word = self.num(speed);
         self.template(&lines, &[("speed", speed_word)]);
         if self.spindle.is_none() {
-            self.wait(self.cell.motion.spindle_start);
+            self.wait(self.machine.motion.spindle_start);
         }
         self.spindle = Some(speed);
         Ok(())
     }
 
     pub fn laser_on(&mut self, watts: f64) -> Result<()> {
-        if self.cell.controller.laser_on.is_empty() {
+        if self.machine.controller.laser_on.is_empty() {
             return Err(self.lacks("laser_on", "switch a laser"));
         }
-        let lines = self.cell.controller.laser_on.lines().to_vec();
-        let power = self.num(watts * self.cell.controller.power_scale);
+        let lines = self.machine.controller.laser_on.lines().to_vec();
+        let power = self.num(watts * self.machine.controller.power_scale);
         self.template(&lines, &[("power", power)]);
         self.laser = true;
         Ok(())
@@ -400,7 +400,7 @@ impl Program {
 
     pub fn laser_off(&mut self) {
         if std::mem::take(&mut self.laser) {
-            let lines = self.cell.controller.laser_off.lines().to_vec();
+            let lines = self.machine.controller.laser_off.lines().to_vec();
             self.template(&lines, &[]);
         }
     }
@@ -412,8 +412,8 @@ impl Program {
                 return Err(Error::stage(
                     "export:nc",
                     format!(
-                        "the cell `{}` has no output for the {what} (`outputs`)",
-                        self.cell.name
+                        "the machine `{}` has no output for the {what} (`outputs`)",
+                        self.machine.name
                     ),
                 ));
             }
@@ -422,7 +422,7 @@ impl Program {
         if self.outputs.contains(&n) == on {
             return Ok(());
         }
-        let c = &self.cell.controller;
+        let c = &self.machine.controller;
         let lines = if on {
             c.output_on.lines()
         } else {
@@ -455,10 +455,10 @@ impl Program {
         if self.analog.get(&n) == Some(&word) {
             return Ok(());
         }
-        if self.cell.controller.analog.is_empty() {
+        if self.machine.controller.analog.is_empty() {
             return Err(self.lacks("analog", "set the feeders' flow"));
         }
-        let lines = self.cell.controller.analog.lines().to_vec();
+        let lines = self.machine.controller.analog.lines().to_vec();
         self.template(&lines, &[("output", n.to_string()), ("value", word.clone())]);
         self.analog.insert(n, word);
         Ok(())
@@ -475,7 +475,7 @@ impl Program {
         self.spindle_off();
         self.laser_off();
         self.outputs_off();
-        let c = self.cell.controller.clone();
+        let c = self.machine.controller.clone();
         if self.tool.is_some() && c.tool_change.is_empty() {
             let now = self.tool.clone().unwrap_or_default();
             return Err(self.lacks(
@@ -491,7 +491,7 @@ impl Program {
         self.line(format!("(tool {number}: {})", super::comment(name)));
         if !c.tool_change.is_empty() {
             self.template(c.tool_change.lines(), &[("tool", number.to_string())]);
-            self.wait(self.cell.motion.tool_change);
+            self.wait(self.machine.motion.tool_change);
         }
         if !c.length_on.is_empty() {
             self.template(c.length_on.lines(), &[("tool", number.to_string())]);
@@ -508,7 +508,7 @@ impl Program {
         self.spindle_off();
         self.laser_off();
         self.outputs_off();
-        let c = self.cell.controller.clone();
+        let c = self.machine.controller.clone();
         if self.length {
             self.template(c.length_off.lines(), &[]);
             self.length = false;
@@ -522,14 +522,14 @@ impl Program {
 mod tests {
     use super::*;
 
-    fn program(cell: &str) -> Program {
+    fn program(machine: &str) -> Program {
         Program::new(
-            Cell::load(
-                cell,
+            HybridMachine::load(
+                machine,
                 std::path::Path::new("."),
                 &lamina_api::reach::Reach::anywhere(),
             )
-            .expect("cell"),
+            .expect("machine"),
         )
     }
 
@@ -547,7 +547,7 @@ mod tests {
         p.rapid(None, None, Some(14.0)).expect("in travel");
         assert!(p.text.ends_with("G0 Z15\nG0 Z14\n"), "{}", p.text);
         // The merged rise takes the time of one move of 3 mm, not of two.
-        let z = p.cell.motion;
+        let z = p.machine.motion;
         let one = trapezoid(3.0, z.rapid[2] / 60.0, z.acceleration[2]);
         let two = trapezoid(2.0, z.rapid[2] / 60.0, z.acceleration[2])
             + trapezoid(1.0, z.rapid[2] / 60.0, z.acceleration[2]);
@@ -600,7 +600,7 @@ mod tests {
         let mut p = program("cmpm-hybrid");
         let err = p.rapid(Some(151.0), None, None).expect_err("outside").to_string();
         assert!(
-            err.contains("X 151 is outside the cell `cmpm-hybrid`'s travel"),
+            err.contains("X 151 is outside the machine `cmpm-hybrid`'s travel"),
             "{err}"
         );
         let mut f = program("cmpm-hybrid-fanuc");

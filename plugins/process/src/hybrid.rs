@@ -1,4 +1,4 @@
-//! The hybrid cell the `nc` exporter writes for, from a built-in profile (`cells/`) or
+//! The hybrid machine the `nc` exporter writes for, from a built-in profile (`machines/`) or
 //! a TOML file of the same form:
 //!
 //! - its tools (number, kind, size), their cutting data (feed, spindle speed or the
@@ -11,8 +11,8 @@
 //!   left out, and a program that needs it is refused;
 //! - its motion limits, from which the program's cycle time is estimated.
 //!
-//! Every operation is checked against the cell before a line is written: a tool the
-//! cell lacks, of another kind or size, run beyond its limits, or a path outside the
+//! Every operation is checked against the machine before a line is written: a tool the
+//! machine lacks, of another kind or size, run beyond its limits, or a path outside the
 //! travel would be refused by the machine, so the run is refused.
 
 use crate::tool;
@@ -23,19 +23,19 @@ use std::path::Path;
 use lamina_api::{Error, Operation, Result, Warning};
 use serde::Deserialize;
 
-/// The cells shipped with Lamina, by name.
+/// The machines shipped with Lamina, by name.
 const BUILT_IN: &[(&str, &str)] = &[
-    ("cmpm-hybrid", include_str!("../cells/cmpm-hybrid.toml")),
+    ("cmpm-hybrid", include_str!("../machines/cmpm-hybrid.toml")),
     (
         "cmpm-hybrid-fanuc",
-        include_str!("../cells/cmpm-hybrid-fanuc.toml"),
+        include_str!("../machines/cmpm-hybrid-fanuc.toml"),
     ),
-    ("grbl-laser", include_str!("../cells/grbl-laser.toml")),
+    ("grbl-laser", include_str!("../machines/grbl-laser.toml")),
 ];
 
 #[derive(Debug, Clone, Deserialize)]
 #[serde(deny_unknown_fields)]
-pub struct Cell {
+pub struct HybridMachine {
     pub name: String,
     #[serde(default)]
     pub description: String,
@@ -46,7 +46,7 @@ pub struct Cell {
     pub motion: Motion,
     #[serde(default)]
     pub feeders: Feeders,
-    pub tools: Vec<CellTool>,
+    pub tools: Vec<HybridTool>,
 }
 
 #[derive(Debug, Clone, Copy, Deserialize)]
@@ -57,7 +57,7 @@ pub struct Travel {
     pub z: [f64; 2],
 }
 
-/// Digital outputs; one the cell lacks is left out.
+/// Digital outputs; one the machine lacks is left out.
 #[derive(Debug, Clone, Copy, Default, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct Outputs {
@@ -189,7 +189,7 @@ impl Default for Feeders {
 
 #[derive(Debug, Clone, Deserialize)]
 #[serde(deny_unknown_fields)]
-pub struct CellTool {
+pub struct HybridTool {
     pub number: u32,
     pub name: String,
     pub kind: String,
@@ -217,7 +217,7 @@ pub struct CellTool {
     pub max_power: Option<f64>,
 }
 
-/// How a tool runs in the program: the cell's data where it gives them, the plan's
+/// How a tool runs in the program: the machine's data where it gives them, the plan's
 /// otherwise.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Cutting {
@@ -262,7 +262,7 @@ pub fn readable(op: &Operation) -> Result<()> {
     }
 }
 
-/// `template` with each `{key}` replaced; the keys were checked when the cell loaded.
+/// `template` with each `{key}` replaced; the keys were checked when the machine loaded.
 pub fn render(template: &str, values: &[(&str, String)]) -> String {
     let mut s = template.to_string();
     for (k, v) in values {
@@ -310,17 +310,21 @@ fn placeholders(key: &str, lines: &Lines, allowed: &[&str]) -> std::result::Resu
 /// ([`crate::tool`]).
 const RANGE_SURFACE_SPEED: (f64, f64, &str) = (0.01, 500.0, "m/s");
 
-impl Cell {
-    /// A built-in cell by name, or a file (relative to `base_dir`, read within `reach`).
-    pub fn load(reference: &str, base_dir: &Path, reach: &Reach) -> std::result::Result<Cell, String> {
+impl HybridMachine {
+    /// A built-in machine by name, or a file (relative to `base_dir`, read within `reach`).
+    pub fn load(
+        reference: &str,
+        base_dir: &Path,
+        reach: &Reach,
+    ) -> std::result::Result<HybridMachine, String> {
         let (origin, text) = match BUILT_IN.iter().find(|(n, _)| *n == reference) {
-            Some((n, text)) => (format!("built-in cell `{n}`"), (*text).to_string()),
+            Some((n, text)) => (format!("built-in machine `{n}`"), (*text).to_string()),
             None => {
                 let path = base_dir.join(reference);
                 let names: Vec<&str> = BUILT_IN.iter().map(|(n, _)| *n).collect();
                 let text = reach.read_text(&path).map_err(|e| {
                     format!(
-                        "`{reference}` is no built-in cell ({}) and {} cannot be read: {e}",
+                        "`{reference}` is no built-in machine ({}) and {} cannot be read: {e}",
                         names.join(", "),
                         path.display()
                     )
@@ -328,9 +332,9 @@ impl Cell {
                 (path.display().to_string(), text)
             }
         };
-        let cell: Cell = toml::from_str(&text).map_err(|e| format!("{origin}: {e}"))?;
-        cell.check().map_err(|e| format!("{origin}: {e}"))?;
-        Ok(cell)
+        let machine: HybridMachine = toml::from_str(&text).map_err(|e| format!("{origin}: {e}"))?;
+        machine.check().map_err(|e| format!("{origin}: {e}"))?;
+        Ok(machine)
     }
 
     fn check(&self) -> std::result::Result<(), String> {
@@ -471,13 +475,13 @@ impl Cell {
         Ok(())
     }
 
-    pub fn tool(&self, name: &str) -> Option<&CellTool> {
+    pub fn tool(&self, name: &str) -> Option<&HybridTool> {
         self.tools.iter().find(|t| t.name == name)
     }
 
-    /// How the cell runs `tool`: its own data where it gives them, each checked against
-    /// its limits. A wheel whose surface speed needs a spindle faster than the cell's
-    /// runs at the cell's top speed, and the note says so.
+    /// How the machine runs `tool`: its own data where it gives them, each checked against
+    /// its limits. A wheel whose surface speed needs a spindle faster than the machine's
+    /// runs at the machine's top speed, and the note says so.
     pub fn cutting(&self, tool: &lamina_api::OperationTool, notes: &mut Vec<Warning>) -> Result<Cutting> {
         let fail = |m: String| Err(Error::stage("export:nc", m));
         let own = self.tool(&tool.name);
@@ -535,7 +539,7 @@ impl Cell {
         })
     }
 
-    /// Checks that the cell has `op`'s tool; the error says what the machine lacks. The
+    /// Checks that the machine has `op`'s tool; the error says what the machine lacks. The
     /// travel is checked move by move as the program is written.
     pub fn admits(&self, op: &Operation) -> Result<()> {
         let fail = |m: String| Err(Error::stage("export:nc", format!("`{}`: {m}", op.kind)));
@@ -544,7 +548,7 @@ impl Cell {
         let Some(own) = self.tool(&tool.name) else {
             let names: Vec<&str> = self.tools.iter().map(|t| t.name.as_str()).collect();
             return fail(format!(
-                "the cell `{}` has no tool `{}` (tools: {})",
+                "the machine `{}` has no tool `{}` (tools: {})",
                 self.name,
                 tool.name,
                 names.join(", ")
@@ -552,13 +556,13 @@ impl Cell {
         };
         if own.kind != tool.kind {
             return fail(format!(
-                "`{}` is a {} in the cell, the plan wants a {}",
+                "`{}` is a {} in the machine, the plan wants a {}",
                 own.name, own.kind, tool.kind
             ));
         }
         if (own.diameter - tool.diameter).abs() > 1e-9 {
             return fail(format!(
-                "`{}` measures {} mm in the cell, the plan was made for {} mm",
+                "`{}` measures {} mm in the machine, the plan was made for {} mm",
                 own.name, own.diameter, tool.diameter
             ));
         }
@@ -571,37 +575,38 @@ mod tests {
     use super::*;
 
     #[test]
-    fn every_built_in_cell_loads() {
+    fn every_built_in_machine_loads() {
         for (name, _) in BUILT_IN {
-            let c = Cell::load(name, Path::new("."), &Reach::anywhere()).expect("loads");
+            let c = HybridMachine::load(name, Path::new("."), &Reach::anywhere()).expect("loads");
             assert_eq!(&c.name, name);
             assert!(!c.tools.is_empty());
         }
-        let err =
-            Cell::load("nowhere.toml", Path::new("."), &Reach::folder(Path::new("."))).expect_err("no file");
-        assert!(err.contains("no built-in cell (cmpm-hybrid"), "{err}");
+        let err = HybridMachine::load("nowhere.toml", Path::new("."), &Reach::folder(Path::new(".")))
+            .expect_err("no file");
+        assert!(err.contains("no built-in machine (cmpm-hybrid"), "{err}");
     }
 
     #[test]
     fn tool_and_motion_values_outside_their_physical_range_are_refused_by_name() {
-        let text = include_str!("../cells/cmpm-hybrid.toml");
+        let text = include_str!("../machines/cmpm-hybrid.toml");
         for (what, change, expected) in [
             ("a huge mill", "diameter", "diameter must lie in 0.001..=1000 mm"),
             ("a crawling feed", "feed", "feed must lie in 0.01..=10000 mm/s"),
         ] {
-            let mut cell: Cell = toml::from_str(text).expect("parses");
-            let tool = &mut cell.tools[0];
+            let mut machine: HybridMachine = toml::from_str(text).expect("parses");
+            let tool = &mut machine.tools[0];
             match change {
                 "diameter" => tool.diameter = 1e300,
                 _ => tool.feed = Some(5e-324),
             }
-            let err = cell.check().expect_err(what);
+            let err = machine.check().expect_err(what);
             assert!(err.contains(expected), "{what}: {err}");
         }
-        let mut cell: Cell = toml::from_str(text).expect("parses");
-        cell.motion.rapid[0] = 1e300;
+        let mut machine: HybridMachine = toml::from_str(text).expect("parses");
+        machine.motion.rapid[0] = 1e300;
         assert!(
-            cell.check()
+            machine
+                .check()
                 .expect_err("a rapid of 1e300")
                 .contains("1..=1000000 mm/min")
         );
@@ -609,17 +614,17 @@ mod tests {
 
     #[test]
     fn a_template_naming_what_its_line_cannot_know_is_refused() {
-        let text = include_str!("../cells/cmpm-hybrid.toml").replace("T{tool} M6", "T{tol} M6");
-        let cell: Cell = toml::from_str(&text).expect("parses");
-        let err = cell.check().expect_err("unknown placeholder");
+        let text = include_str!("../machines/cmpm-hybrid.toml").replace("T{tool} M6", "T{tol} M6");
+        let machine: HybridMachine = toml::from_str(&text).expect("parses");
+        let err = machine.check().expect_err("unknown placeholder");
         assert!(err.contains("controller.tool_change: `{tol}`"), "{err}");
     }
 
     #[test]
     fn a_wheel_too_fast_for_its_spindle_runs_at_the_top_speed_with_a_note() {
-        let text = include_str!("../cells/cmpm-hybrid.toml");
-        let mut cell: Cell = toml::from_str(text).expect("parses");
-        let wheel = cell
+        let text = include_str!("../machines/cmpm-hybrid.toml");
+        let mut machine: HybridMachine = toml::from_str(text).expect("parses");
+        let wheel = machine
             .tools
             .iter_mut()
             .find(|t| t.kind == "grinding-wheel")
@@ -636,7 +641,7 @@ mod tests {
             power: None,
         };
         let mut notes = Vec::new();
-        let c = cell.cutting(&tool, &mut notes).expect("runs");
+        let c = machine.cutting(&tool, &mut notes).expect("runs");
         assert_eq!(c.spindle, Some(6000.0));
         assert_eq!(notes.len(), 1, "{notes:?}");
         assert!(
@@ -649,19 +654,22 @@ mod tests {
         // A feed beyond the tool's limit is refused, naming the tool and both figures.
         let mut fast = tool.clone();
         fast.feed = 150.0;
-        let err = cell.cutting(&fast, &mut notes).expect_err("too fast").to_string();
+        let err = machine
+            .cutting(&fast, &mut notes)
+            .expect_err("too fast")
+            .to_string();
         assert!(
             err.contains("`cup-wheel` feeds at most 100 mm/s, the program asks 150"),
             "{err}"
         );
         // Within the spindle's range, the speed follows v = pi d n.
-        let fast = cell
+        let fast = machine
             .tools
             .iter_mut()
             .find(|t| t.kind == "grinding-wheel")
             .expect("a wheel");
         fast.max_spindle = Some(30_000.0);
-        let c = cell.cutting(&tool, &mut notes).expect("runs");
+        let c = machine.cutting(&tool, &mut notes).expect("runs");
         let want = (25.0 * 60_000.0 / (std::f64::consts::PI * diameter)).round();
         assert_eq!(c.spindle, Some(want));
     }
