@@ -15,7 +15,7 @@ use lamina_api::limits::{Limit, Limits};
 use lamina_api::model::ModelFrame;
 use lamina_api::script::{ScriptArgs, ScriptFn};
 use lamina_api::stage::StageConfig;
-use lamina_geom::cell::{CellArray, CellShape, PlacedCell};
+use lamina_geom::base_cell::{BaseCellArray, BaseCellShape, PlacedBaseCell};
 
 /// A number, or a Rhai expression of `x`, `y` and `z` (mm) evaluated at each
 /// inserting point.
@@ -29,7 +29,7 @@ pub enum NumberOrScript {
 /// The `cell` table of a stage.
 #[derive(Debug, Clone, Deserialize)]
 #[serde(deny_unknown_fields)]
-pub struct CellSpec {
+pub struct BaseCellSpec {
     /// `sphere`, `box` or `cylinder`.
     #[serde(default = "sphere")]
     pub shape: String,
@@ -70,7 +70,7 @@ fn ones() -> [f64; 3] {
     [1.0; 3]
 }
 
-lamina_api::option_type!(CellSpec = "table");
+lamina_api::option_type!(BaseCellSpec = "table");
 
 enum Value {
     Number(f64),
@@ -125,13 +125,13 @@ impl Value {
 
 /// A microstructure ready to give each layer its voids.
 pub struct Microstructure {
-    shape: CellShape,
+    shape: BaseCellShape,
     size: Value,
     aspect: [f64; 3],
     turn: Option<Value>,
     lean: Option<Value>,
     insert: Option<Value>,
-    lattice: CellArray,
+    lattice: BaseCellArray,
     /// How far a cell may reach from its inserting point: half the lattice's diagonal,
     /// the search band's half-width `L_max`.
     reach: f64,
@@ -143,11 +143,11 @@ pub struct Microstructure {
 
 impl Microstructure {
     /// The microstructure of `spec`, read from the option `key` of `config`.
-    pub fn new(spec: &CellSpec, config: &StageConfig<'_>, key: &str) -> Result<Self> {
+    pub fn new(spec: &BaseCellSpec, config: &StageConfig<'_>, key: &str) -> Result<Self> {
         let shape = match spec.shape.as_str() {
-            "sphere" => CellShape::Sphere,
-            "box" => CellShape::Box,
-            "cylinder" => CellShape::Cylinder,
+            "sphere" => BaseCellShape::Sphere,
+            "box" => BaseCellShape::Box,
+            "cylinder" => BaseCellShape::Cylinder,
             other => {
                 return Err(config.error(
                     key,
@@ -184,7 +184,7 @@ impl Microstructure {
                 .map(|v| Value::new(v, config, key))
                 .transpose()?,
             insert: script(&spec.insert)?,
-            lattice: CellArray::tilted_about_x(spec.period, spec.origin, spec.tilt.to_radians()),
+            lattice: BaseCellArray::tilted_about_x(spec.period, spec.origin, spec.tilt.to_radians()),
             reach: 0.5 * Vector3::from(spec.period).norm(),
             tilt: spec.tilt,
             limits: config.limits,
@@ -195,13 +195,13 @@ impl Microstructure {
     /// take `period`, `origin` and `void_radius`.
     pub fn spheres(period: [f64; 3], origin: [f64; 3], radius: f64, limits: Limits) -> Self {
         Self {
-            shape: CellShape::Sphere,
+            shape: BaseCellShape::Sphere,
             size: Value::Number(radius),
             aspect: [1.0; 3],
             turn: None,
             lean: None,
             insert: None,
-            lattice: CellArray::upright(period, origin),
+            lattice: BaseCellArray::upright(period, origin),
             reach: 0.5 * Vector3::from(period).norm(),
             tilt: 0.0,
             limits,
@@ -211,9 +211,9 @@ impl Microstructure {
     /// The microstructure in a line, for file headers.
     pub fn describe(&self) -> String {
         let shape = match self.shape {
-            CellShape::Sphere => "sphere",
-            CellShape::Box => "box",
-            CellShape::Cylinder => "cylinder",
+            BaseCellShape::Sphere => "sphere",
+            BaseCellShape::Box => "box",
+            BaseCellShape::Cylinder => "cylinder",
         };
         let mut s = format!(
             "{shape} cells of size {} mm x [{}, {}, {}]",
@@ -241,7 +241,7 @@ impl Microstructure {
 
     /// The cell at an inserting point, or `None` where the inserting function leaves
     /// it out.
-    fn cell(&self, p: Vector3<f64>) -> Result<Option<PlacedCell>> {
+    fn cell(&self, p: Vector3<f64>) -> Result<Option<PlacedBaseCell>> {
         self.cell_moved(p, p, &Matrix3::identity())
     }
 
@@ -252,7 +252,7 @@ impl Microstructure {
         p: Vector3<f64>,
         at: Vector3<f64>,
         turned: &Matrix3<f64>,
-    ) -> Result<Option<PlacedCell>> {
+    ) -> Result<Option<PlacedBaseCell>> {
         if let Some(f) = &self.insert
             && f.at(&p, "insert")? <= 0.0
         {
@@ -278,7 +278,7 @@ impl Microstructure {
         let own: Matrix3<f64> = *(Rotation3::from_axis_angle(&Vector3::z_axis(), turn)
             * Rotation3::from_axis_angle(&Vector3::x_axis(), lean))
         .matrix();
-        let cell = PlacedCell {
+        let cell = PlacedBaseCell {
             shape: self.shape,
             centre: at,
             half,
@@ -305,7 +305,7 @@ impl Microstructure {
     /// The cells whose inserting points lie in the box `lo..hi`, at most about `limit`
     /// of them (every n-th, in lattice order, when there are more): what the build
     /// direction is weighed over.
-    pub fn cells_in(&self, lo: [f64; 3], hi: [f64; 3], limit: usize) -> Result<Vec<PlacedCell>> {
+    pub fn cells_in(&self, lo: [f64; 3], hi: [f64; 3], limit: usize) -> Result<Vec<PlacedBaseCell>> {
         let (lo, hi) = (Vector3::from(lo), Vector3::from(hi));
         let count = self.lattice.count_in_box(lo, hi);
         self.limits.check(
@@ -512,7 +512,7 @@ mod tests {
         assert_eq!(all.len(), 27);
         assert!(
             all.iter()
-                .all(|c| c.half == [0.3; 3] && c.shape == CellShape::Sphere)
+                .all(|c| c.half == [0.3; 3] && c.shape == BaseCellShape::Sphere)
         );
         // At most 10: every third.
         let some = m.cells_in([0.0; 3], [2.0; 3], 10).unwrap();

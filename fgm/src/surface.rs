@@ -90,9 +90,9 @@ impl FaceSelection {
 pub struct Surface {
     triangles: Vec<[Point3; 3]>,
     min: Point3,
-    cell: f64,
+    bucket: f64,
     dims: [usize; 3],
-    cells: Vec<Vec<u32>>,
+    buckets: Vec<Vec<u32>>,
 }
 
 impl Surface {
@@ -113,16 +113,16 @@ impl Surface {
         if !(extent.is_finite() && extent > 0.0) {
             return None;
         }
-        // About one triangle per cell on average, at most 128 cells a side.
+        // About one triangle per bucket on average, at most 128 buckets a side.
         let side = ((triangles.len() as f64).cbrt().ceil() as usize).clamp(1, 128);
-        let cell = extent / side as f64;
-        let dims = [0, 1, 2].map(|k| ((size[k] / cell) as usize + 1).min(side + 1));
+        let bucket = extent / side as f64;
+        let dims = [0, 1, 2].map(|k| ((size[k] / bucket) as usize + 1).min(side + 1));
         let mut surface = Surface {
             triangles,
             min: lo,
-            cell,
+            bucket,
             dims,
-            cells: vec![Vec::new(); dims[0] * dims[1] * dims[2]],
+            buckets: vec![Vec::new(); dims[0] * dims[1] * dims[2]],
         };
         for (i, t) in surface.triangles.iter().enumerate() {
             let a = t[0].inf(&t[1]).inf(&t[2]);
@@ -132,7 +132,7 @@ impl Surface {
                 for y in i0[1]..=i1[1] {
                     for x in i0[0]..=i1[0] {
                         let k = (z * dims[1] + y) * dims[0] + x;
-                        surface.cells[k].push(i as u32);
+                        surface.buckets[k].push(i as u32);
                     }
                 }
             }
@@ -142,7 +142,7 @@ impl Surface {
 
     fn index(&self, p: &Point3) -> [usize; 3] {
         [0, 1, 2].map(|k| {
-            let v = (p[k] - self.min[k]) / self.cell;
+            let v = (p[k] - self.min[k]) / self.bucket;
             if v.is_nan() || v <= 0.0 {
                 0
             } else {
@@ -151,20 +151,20 @@ impl Surface {
         })
     }
 
-    /// The distance from `p` to the nearest chosen triangle: cells searched in shells
-    /// about the cell nearest to `p` until no farther shell can hold a nearer one.
+    /// The distance from `p` to the nearest chosen triangle: buckets searched in shells
+    /// about the bucket nearest to `p` until no farther shell can hold a nearer one.
     pub fn distance(&self, p: Point3) -> f64 {
         self.distance_within(p, f64::INFINITY)
     }
 
     /// [`Self::distance`] where it is below `cap`, else some value at least `cap`: the
     /// search stops at the shells beyond `cap`, so points far from the surface cost a
-    /// few empty cells instead of a walk to the nearest triangle.
+    /// few empty buckets instead of a walk to the nearest triangle.
     pub fn distance_within(&self, p: Point3, cap: f64) -> f64 {
         let c = self.index(&p);
         // How far p lies outside the grid's box: shells start counting from there.
         let outside = {
-            let hi = self.min + Vector3::from(self.dims.map(|d| d as f64 * self.cell));
+            let hi = self.min + Vector3::from(self.dims.map(|d| d as f64 * self.bucket));
             let d = Vector3::new(
                 (self.min.x - p.x).max(p.x - hi.x).max(0.0),
                 (self.min.y - p.y).max(p.y - hi.y).max(0.0),
@@ -175,9 +175,9 @@ impl Surface {
         let mut best = if cap.is_nan() { f64::INFINITY } else { cap };
         let max_shell = self.dims.iter().copied().max().unwrap_or(1);
         for r in 0..=max_shell {
-            // Every cell of shell r is at least (r - 1) cells from p, and no nearer than
+            // Every bucket of shell r is at least (r - 1) buckets from p, and no nearer than
             // the grid's box.
-            if outside.max((r as f64 - 1.0) * self.cell) > best {
+            if outside.max((r as f64 - 1.0) * self.bucket) > best {
                 break;
             }
             let r = r as isize;
@@ -192,22 +192,22 @@ impl Surface {
                             continue;
                         }
                         let k = (q[2] as usize * self.dims[1] + q[1] as usize) * self.dims[0] + q[0] as usize;
-                        if self.cells[k].is_empty() {
+                        if self.buckets[k].is_empty() {
                             continue;
                         }
-                        // A triangle's nearest point to p lies in one of the cells it is
-                        // listed in, no nearer than that cell's box: a cell whose box is
+                        // A triangle's nearest point to p lies in one of the buckets it is
+                        // listed in, no nearer than that bucket's box: a bucket whose box is
                         // beyond the best so far holds nothing nearer.
                         let gap = Vector3::from([0, 1, 2].map(|a| {
-                            let lo = self.min[a] + q[a] as f64 * self.cell;
-                            (lo - p[a]).max(p[a] - (lo + self.cell)).max(0.0)
+                            let lo = self.min[a] + q[a] as f64 * self.bucket;
+                            (lo - p[a]).max(p[a] - (lo + self.bucket)).max(0.0)
                         }));
                         if gap.norm_squared() >= best * best {
                             continue;
                         }
-                        // A triangle in several cells is measured again: cheaper than
+                        // A triangle in several buckets is measured again: cheaper than
                         // remembering which were.
-                        for &t in &self.cells[k] {
+                        for &t in &self.buckets[k] {
                             best = best.min(triangle_distance(p, &self.triangles[t as usize]));
                         }
                     }

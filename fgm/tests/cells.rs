@@ -10,12 +10,12 @@ use lamina_api::model::ModelFrame;
 use lamina_api::reach::Reach;
 use lamina_api::stage::StageConfig;
 use lamina_api::table::TableRef;
-use lamina_fgm::microstructure::{CellSpec, Microstructure};
+use lamina_fgm::microstructure::{BaseCellSpec, Microstructure};
 use serde::Deserialize;
 
 #[derive(Deserialize)]
 struct Table {
-    cell: CellSpec,
+    cell: BaseCellSpec,
 }
 
 /// The microstructure of a `cell = { ... }` table, or the error building it.

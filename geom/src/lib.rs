@@ -17,7 +17,7 @@
 //! - [`cell`]: base cells (sphere, box, cylinder) on a lattice that may be tilted, and
 //!   the sections a layer's plane cuts from them (the search band of Fig. 5).
 
-pub mod cell;
+pub mod base_cell;
 pub mod centroid;
 pub mod field;
 pub mod follow;

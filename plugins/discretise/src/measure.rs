@@ -102,16 +102,16 @@ pub fn min_contour_distance(polygon: &Polygon) -> Option<f64> {
     (contours.len() > 1 && best.is_finite()).then_some(best)
 }
 
-/// A square cell of the pole search: centre, half size, distance of the centre to the
-/// boundary (negative outside) and the best distance any point of the cell can reach.
-struct Cell {
+/// A square of the pole search: centre, half size, distance of the centre to the
+/// boundary (negative outside) and the best distance any point of the square can reach.
+struct Square {
     c: Point2,
     h: f64,
     d: f64,
     max: f64,
 }
 
-impl Cell {
+impl Square {
     fn new(edges: &Edges, c: Point2, h: f64) -> Self {
         let d = edges.distance(c);
         let d = if edges.contains(c) { d } else { -d };
@@ -124,18 +124,18 @@ impl Cell {
     }
 }
 
-impl PartialEq for Cell {
+impl PartialEq for Square {
     fn eq(&self, other: &Self) -> bool {
         self.max == other.max
     }
 }
-impl Eq for Cell {}
-impl PartialOrd for Cell {
+impl Eq for Square {}
+impl PartialOrd for Square {
     fn partial_cmp(&self, other: &Self) -> Option<Ordering> {
         Some(self.cmp(other))
     }
 }
-impl Ord for Cell {
+impl Ord for Square {
     fn cmp(&self, other: &Self) -> Ordering {
         self.max.total_cmp(&other.max)
     }
@@ -143,7 +143,7 @@ impl Ord for Cell {
 
 /// The pole of inaccessibility (the interior point farthest from the boundary) within
 /// `precision`, and its distance to the boundary: the radius of the largest inscribed
-/// circle. Branch and bound over square cells; `None` for a polygon with no inside.
+/// circle. Branch and bound over squares; `None` for a polygon with no inside.
 pub fn pole(polygon: &Polygon, precision: f64) -> Option<(Point2, f64)> {
     let bbox = polygon.bbox();
     let size = bbox.width().min(bbox.height());
@@ -158,29 +158,29 @@ pub fn pole(polygon: &Polygon, precision: f64) -> Option<(Point2, f64)> {
     while y < bbox.max.y {
         let mut x = bbox.min.x;
         while x < bbox.max.x {
-            heap.push(Cell::new(&edges, Point2::new(x + h, y + h), h));
+            heap.push(Square::new(&edges, Point2::new(x + h, y + h), h));
             x += size;
         }
         y += size;
     }
     let start = interior_point(polygon)?;
-    let mut best = Cell::new(&edges, start, 0.0);
+    let mut best = Square::new(&edges, start, 0.0);
     // A bound on the work for pathological inputs: the answer stays a valid interior
     // point, only less central.
     let mut budget = 20_000;
-    while let Some(cell) = heap.pop() {
-        if cell.d > best.d {
-            best = Cell::new(&edges, cell.c, 0.0);
+    while let Some(square) = heap.pop() {
+        if square.d > best.d {
+            best = Square::new(&edges, square.c, 0.0);
         }
-        if cell.max - best.d <= precision || budget == 0 {
+        if square.max - best.d <= precision || budget == 0 {
             continue;
         }
         budget -= 1;
-        let h = cell.h / 2.0;
+        let h = square.h / 2.0;
         for (sx, sy) in [(-1.0, -1.0), (1.0, -1.0), (-1.0, 1.0), (1.0, 1.0)] {
-            heap.push(Cell::new(
+            heap.push(Square::new(
                 &edges,
-                Point2::new(cell.c.x + sx * h, cell.c.y + sy * h),
+                Point2::new(square.c.x + sx * h, square.c.y + sy * h),
                 h,
             ));
         }

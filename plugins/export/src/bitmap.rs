@@ -20,7 +20,7 @@ use lamina_api::stage::{
     AnyStage, ExportContext, Exporter, LayerSink, OutputFiles, StageConfig, StageInfo, StageKind,
 };
 use lamina_api::{BBox2, Contour, Error, LayerPlan, Limit, Limits, Result, RunInfo, StageFactory};
-use lamina_fgm::microstructure::{CellSpec, Microstructure};
+use lamina_fgm::microstructure::{BaseCellSpec, Microstructure};
 use lamina_geom::lattice::Lattice;
 use std::sync::Arc;
 
@@ -45,7 +45,7 @@ lamina_api::stage_options! {
         void_radius: f64 = "0.3",
         /// the base cell instead of spheres: `{ shape = "sphere" | "box" | "cylinder", size, aspect, turn, lean, insert, period, origin, tilt }`, sizes and angles numbers or Rhai expressions of x, y, z (formerly `cell`)
         #[formerly("cell")]
-        base_cell: Option<CellSpec>,
+        base_cell: Option<BaseCellSpec>,
     }
 }
 

@@ -6,7 +6,7 @@
 use lamina_api::{LayerPlan, Point2, Vector2};
 
 /// Cells of the edge grid along the layer's longer side, at most.
-const CELLS: f64 = 128.0;
+const BUCKETS: f64 = 128.0;
 
 /// The contours of a layer's parts, in machine coordinates, filed in a grid.
 pub struct Solid {
@@ -14,7 +14,7 @@ pub struct Solid {
     /// The middle of each family's outer contour's box, where detours turn toward.
     centres: Vec<Point2>,
     min: Point2,
-    cell: f64,
+    bucket: f64,
     cols: usize,
     rows: usize,
     grid: Vec<Vec<u32>>,
@@ -66,20 +66,20 @@ impl Solid {
                 edges,
                 centres,
                 min: Point2::origin(),
-                cell: 1.0,
+                bucket: 1.0,
                 cols: 0,
                 rows: 0,
                 grid: Vec::new(),
             };
         }
-        let cell = ((max.x - min.x).max(max.y - min.y) / CELLS).max(0.5);
-        let cols = ((max.x - min.x) / cell).floor() as usize + 1;
-        let rows = ((max.y - min.y) / cell).floor() as usize + 1;
+        let bucket = ((max.x - min.x).max(max.y - min.y) / BUCKETS).max(0.5);
+        let cols = ((max.x - min.x) / bucket).floor() as usize + 1;
+        let rows = ((max.y - min.y) / bucket).floor() as usize + 1;
         let mut solid = Self {
             edges,
             centres,
             min,
-            cell,
+            bucket,
             cols,
             rows,
             grid: vec![Vec::new(); cols * rows],
@@ -95,9 +95,10 @@ impl Solid {
         solid
     }
 
-    /// The cells (column, row) of the box of `a`-`b`, clamped to the grid.
+    /// The buckets (column, row) of the box of `a`-`b`, clamped to the grid.
     fn span(&self, a: Point2, b: Point2) -> ((usize, usize), (usize, usize)) {
-        let index = |v: f64, lo: f64, n: usize| (((v - lo) / self.cell).floor().max(0.0) as usize).min(n - 1);
+        let index =
+            |v: f64, lo: f64, n: usize| (((v - lo) / self.bucket).floor().max(0.0) as usize).min(n - 1);
         let (x0, x1) = (a.x.min(b.x), a.x.max(b.x));
         let (y0, y1) = (a.y.min(b.y), a.y.max(b.y));
         (
@@ -160,9 +161,9 @@ impl Solid {
 
     /// Whether `p` is inside (even-odd over every contour: holes count out).
     fn inside(&self, p: Point2) -> bool {
-        // A ray toward +x meets the edges filed in the cells of its row to the right.
+        // A ray toward +x meets the edges filed in the buckets of its row to the right.
         let ((c0, r), _) = self.span(p, p);
-        // An edge filed in several cells of the row counts once.
+        // An edge filed in several buckets of the row counts once.
         let mut row: Vec<u32> = (c0..self.cols)
             .flat_map(|c| self.grid[r * self.cols + c].iter().copied())
             .collect();

@@ -18,8 +18,8 @@ pub struct WeldReport {
     pub degenerate: usize,
 }
 
-/// Welds a soup into an indexed mesh. Corners are snapped to a grid of cell
-/// `tolerance`: corners in the same cell become one vertex, which merges the exact
+/// Welds a soup into an indexed mesh. Corners are snapped to a grid of bucket
+/// `tolerance`: corners in the same bucket become one vertex, which merges the exact
 /// duplicates STL files are made of and the tiny rounding differences some exporters
 /// leave. Triangles with two equal corners after welding are dropped.
 pub fn weld(name: &str, soup: &Soup, tolerance: f64) -> (Mesh, WeldReport) {
@@ -229,7 +229,7 @@ impl Welder {
     }
 }
 
-/// The welding grid: a corner's key is its cell, or its exact coordinates when the
+/// The welding grid: a corner's key is its bucket, or its exact coordinates when the
 /// tolerance is zero.
 #[derive(Clone, Copy)]
 struct Grid {
@@ -245,15 +245,15 @@ impl Grid {
 
     fn key(self, p: &Point3) -> [i64; 3] {
         if self.inv > 0.0 {
-            let cell = [p.x * self.inv, p.y * self.inv, p.z * self.inv];
-            // A cell finer than the coordinates' own spacing (past 2^52 cells from the
+            let bucket = [p.x * self.inv, p.y * self.inv, p.z * self.inv];
+            // A bucket finer than the coordinates' own spacing (past 2^52 buckets from the
             // origin) merges nothing that exact equality does not, and past i64 it would
             // merge everything beyond into one corner (a weld of 1e-18 mm made slivers
             // of most of a boat). Such a corner is keyed by its exact coordinates: at
-            // least one component is then a float's bits beyond 2^52, which no cell
+            // least one component is then a float's bits beyond 2^52, which no bucket
             // reaches, so the two kinds of key never meet.
-            if cell.iter().all(|c| c.abs() < EXACT) {
-                return cell.map(round);
+            if bucket.iter().all(|c| c.abs() < EXACT) {
+                return bucket.map(round);
             }
         }
         [p.x.to_bits() as i64, p.y.to_bits() as i64, p.z.to_bits() as i64]
@@ -311,7 +311,7 @@ mod tests {
 
     #[test]
     fn a_weld_finer_than_the_coordinates_merges_only_equal_corners() {
-        // Corners tens of millimetres out, so that a cell of 1e-18 mm would number
+        // Corners tens of millimetres out, so that a bucket of 1e-18 mm would number
         // past i64 (and saturate into one) if it were used.
         let p = |x: f64, y: f64, z: f64| Point3::new(x, y, z);
         let mut triangles = Vec::new();

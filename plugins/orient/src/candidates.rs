@@ -16,7 +16,7 @@ use nalgebra::{Rotation3, Unit, Vector3};
 use serde::Deserialize;
 
 use crate::surfaces::{Facet, bed_contact, facets, flat_faces, height, surface_angle};
-use lamina_fgm::microstructure::{CellSpec, Microstructure};
+use lamina_fgm::microstructure::{BaseCellSpec, Microstructure};
 
 lamina_api::option_type!(Criterion = "string");
 
@@ -45,7 +45,7 @@ lamina_api::stage_options! {
         criterion: Criterion = r#""surface-angle""#,
         /// the base cell for "base-cell", in the model's own coordinates (as `engrave` and `bitmap` read theirs: the cells turn with the model): `{ shape = "box" | "cylinder", size, aspect, turn, lean, insert, period, origin, tilt }` (formerly `cell`)
         #[formerly("cell")]
-        base_cell: Option<CellSpec>,
+        base_cell: Option<BaseCellSpec>,
         /// most base cells weighed for "base-cell" (every n-th inserting point in the model's box beyond that) (formerly `cells`)
         #[range(1, 1e6)]
         #[formerly("cells")]
@@ -67,7 +67,7 @@ lamina_api::stage_options! {
 
 struct Candidates {
     criterion: Criterion,
-    cells: Option<(Microstructure, usize)>,
+    base_cells: Option<(Microstructure, usize)>,
     samples: usize,
     faces: usize,
     main_surfaces: f64,
@@ -151,7 +151,7 @@ impl Orienter for Candidates {
             ));
         }
         // The base cells' faces, over the cells inserted in the model's box.
-        let cell_faces: Vec<Facet> = match &self.cells {
+        let cell_faces: Vec<Facet> = match &self.base_cells {
             Some((m, limit)) => {
                 let b = meshes
                     .iter()
@@ -313,7 +313,7 @@ fn build(config: &StageConfig<'_>) -> Result<AnyStage> {
     };
     Ok(AnyStage::Orient(Box::new(Candidates {
         criterion: o.criterion,
-        cells,
+        base_cells: cells,
         samples: o.samples,
         faces: o.faces,
         main_surfaces: o.main_surfaces,
@@ -340,7 +340,7 @@ mod tests {
     fn orienter(criterion: Criterion) -> Candidates {
         Candidates {
             criterion,
-            cells: None,
+            base_cells: None,
             samples: 64,
             faces: 8,
             main_surfaces: 1.0,

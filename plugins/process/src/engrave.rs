@@ -18,9 +18,9 @@ use lamina_api::{
     Contour, LayerPlan, Limit, Operation, OperationPath, OperationTool, Point2, Polygon, ProcessContext,
     Result, StageFactory,
 };
-use lamina_fgm::microstructure::{CellSpec, Microstructure};
+use lamina_fgm::microstructure::{BaseCellSpec, Microstructure};
 use lamina_geom::Shapes;
-use lamina_geom::cell::inset_convex;
+use lamina_geom::base_cell::inset_convex;
 use lamina_geom::ring::{polygons_of, ring_of, shape_of};
 
 use crate::area::{distance_to_area, layer_area, offset, surface_now};
@@ -43,7 +43,7 @@ lamina_api::stage_options! {
         void_radius: f64 = "0.3",
         /// the base cell instead of spheres: `{ shape = "sphere" | "box" | "cylinder", size, aspect, turn, lean, insert, period, origin, tilt }`, sizes and angles numbers or Rhai expressions of x, y, z (formerly `cell`)
         #[formerly("cell")]
-        base_cell: Option<CellSpec>,
+        base_cell: Option<BaseCellSpec>,
         /// the laser's name
         tool: String = r#""laser""#,
         /// spot diameter (mm)

@@ -6,14 +6,14 @@
 /// Thinnest and thickest layers of a graded or composite region (mm).
 pub const GRADED_RANGE: (f64, f64) = (0.5, 2.0);
 
-/// The layer of a microstructure whose base cell measures `cell` mm, in micrometres,
+/// The layer of a microstructure whose base cell measures `base_cell` mm, in micrometres,
 /// with the rule in words: a tenth of the cell where that is at most 0.1 mm, else a
 /// twentieth (but no less than 0.1 mm). Whole tens of micrometres where the rule's
 /// range holds one, so that work cycles stay short (a tenth rounded down, a twentieth
 /// up, which stays within a tenth), whole micrometres for a tenth under 10 µm; `None`
 /// for a cell under 10 µm, where no whole micrometre is a tenth of it or less.
-pub fn microstructure_um(cell: f64) -> Option<(u64, String)> {
-    let tenth_um = cell * 100.0;
+pub fn microstructure_um(base_cell: f64) -> Option<(u64, String)> {
+    let tenth_um = base_cell * 100.0;
     if tenth_um.is_nan() || tenth_um < 1.0 - 1e-9 {
         return None;
     }
@@ -24,10 +24,10 @@ pub fn microstructure_um(cell: f64) -> Option<(u64, String)> {
         // Rounded up to tens, a twentieth (at least 100 µm) stays within the tenth:
         // the tenth is over 100 µm here, and over the twentieth by more than 10 µm
         // once the twentieth is over 100.
-        let twentieth = (cell * 50.0).max(100.0);
+        let twentieth = (base_cell * 50.0).max(100.0);
         (((twentieth - 1e-9) / 10.0).ceil() as u64 * 10, "1/20")
     };
-    Some((um, format!("auto: {why} of the {cell} mm base cell")))
+    Some((um, format!("auto: {why} of the {base_cell} mm base cell")))
 }
 
 /// The layer of a graded region whose fractions change by at most `gradient` per mm

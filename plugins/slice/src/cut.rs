@@ -618,20 +618,20 @@ fn already_simple(loops: &[Contour]) -> bool {
         }
     }
     let n = segs.len();
-    // A grid of square cells about twice the mean segment length, at most ~2 per segment;
-    // each segment is listed in the cells its grown box touches.
+    // A grid of square buckets about twice the mean segment length, at most ~2 per segment;
+    // each segment is listed in the buckets its grown box touches.
     let (x0, y0) = (bbox.min.x - eps, bbox.min.y - eps);
     let (w, h) = (bbox.width() + 2.0 * eps, bbox.height() + 2.0 * eps);
-    let cell = (2.0 * length / n as f64)
+    let bucket = (2.0 * length / n as f64)
         .max((w * h / (2 * n) as f64).sqrt())
         .max(eps);
-    let nx = (w / cell) as usize + 1;
-    let ny = (h / cell) as usize + 1;
-    // Any monotone map from coordinates to cells lists two overlapping boxes in a
-    // common cell (the cells of the overlap's corners are in both ranges), so a product
+    let nx = (w / bucket) as usize + 1;
+    let ny = (h / bucket) as usize + 1;
+    // Any monotone map from coordinates to buckets lists two overlapping boxes in a
+    // common bucket (the buckets of the overlap's corners are in both ranges), so a product
     // serves as well as a quotient.
-    let per_cell = 1.0 / cell;
-    let cells = |s: &Seg| {
+    let per_cell = 1.0 / bucket;
+    let buckets = |s: &Seg| {
         let c = |v: f64, o: f64, n: usize| (((v - o) * per_cell).max(0.0) as usize).min(n - 1);
         (
             c(s.lo.x, x0, nx)..=c(s.hi.x, x0, nx),
@@ -640,12 +640,12 @@ fn already_simple(loops: &[Contour]) -> bool {
     };
     let mut starts = vec![0u32; nx * ny + 1];
     let mut listed = 0usize;
-    // Each segment's cells, worked out once for counting and listing.
+    // Each segment's buckets, worked out once for counting and listing.
     let mut spans = Vec::with_capacity(n);
     for s in &segs {
-        let (xs, ys) = cells(s);
+        let (xs, ys) = buckets(s);
         listed += xs.clone().count() * ys.clone().count();
-        // Long segments over many cells: a layer unlike a sliced solid; leave it.
+        // Long segments over many buckets: a layer unlike a sliced solid; leave it.
         if listed > 16 * n + 64 {
             return false;
         }
@@ -885,7 +885,7 @@ struct Closing<'a> {
 /// The chains wait in `open` and are taken from its end; a chain's end is joined to the
 /// nearest start (or end, the chain then reversed) of a waiting chain, ties going to the
 /// lowest place in `open` and a start before an end, and a taken chain's place is filled
-/// by the last one (`swap_remove`). The ends are found through a grid of cells of the
+/// by the last one (`swap_remove`). The ends are found through a grid of buckets of the
 /// tolerance's size, so that a layer of many open chains (a triangle soup gives one per
 /// triangle it cuts) costs time in proportion to their number, not its square; the
 /// ends on a rim through a list per rim, which a rim with more ends in one layer than
@@ -1044,46 +1044,49 @@ impl RimEnds {
     }
 }
 
-/// The ends of open chains by grid cell: (chain, whether it is the chain's end).
+/// The ends of open chains by grid bucket: (chain, whether it is the chain's end).
 struct EndGrid {
-    cell: f64,
-    cells: FxHashMap<(i64, i64), Vec<(usize, bool)>>,
+    bucket: f64,
+    buckets: FxHashMap<(i64, i64), Vec<(usize, bool)>>,
 }
 
 impl EndGrid {
     fn new(open: &[Open], tolerance: f64) -> Self {
-        // A cell no smaller than the coordinates can tell apart; cells saturate far
-        // out, which only puts more candidates in one cell.
-        let cell = if tolerance.is_finite() && tolerance > 0.0 {
+        // A bucket no smaller than the coordinates can tell apart; buckets saturate far
+        // out, which only puts more candidates in one bucket.
+        let bucket = if tolerance.is_finite() && tolerance > 0.0 {
             tolerance.max(1e-9)
         } else {
             1e-9
         };
         let mut grid = Self {
-            cell,
-            cells: FxHashMap::default(),
+            bucket,
+            buckets: FxHashMap::default(),
         };
         for (c, chain) in open.iter().enumerate() {
             for rev in [false, true] {
                 let p = end_of(&chain.points, rev);
-                grid.cells.entry(grid.key(p)).or_default().push((c, rev));
+                grid.buckets.entry(grid.key(p)).or_default().push((c, rev));
             }
         }
         grid
     }
 
     fn key(&self, p: Point2) -> (i64, i64) {
-        ((p.x / self.cell).floor() as i64, (p.y / self.cell).floor() as i64)
+        (
+            (p.x / self.bucket).floor() as i64,
+            (p.y / self.bucket).floor() as i64,
+        )
     }
 
-    /// The ends in the cells around `p` into `found`: every end within one cell's size
+    /// The ends in the buckets around `p` into `found`: every end within one bucket's size
     /// of it, and some farther.
     fn near(&self, p: Point2, found: &mut Vec<(usize, bool)>) {
         let (x, y) = self.key(p);
         found.clear();
         for dx in -1..=1i64 {
             for dy in -1..=1i64 {
-                if let Some(list) = self.cells.get(&(x.saturating_add(dx), y.saturating_add(dy))) {
+                if let Some(list) = self.buckets.get(&(x.saturating_add(dx), y.saturating_add(dy))) {
                     found.extend_from_slice(list);
                 }
             }

@@ -127,13 +127,13 @@ struct Sources {
 
 /// A piece of the family with, per source, its step and whether it lies in that
 /// source's effective grading region.
-struct Cell {
+struct Patch {
     shapes: Shapes,
     steps: Vec<usize>,
     effective: Vec<bool>,
 }
 
-/// `cells` cut by `set`: the pieces inside it (tagged `true`) and outside.
+/// `shapes` cut by `set`: the pieces inside it (tagged `true`) and outside.
 fn split(shapes: Shapes, set: &Set) -> Vec<(Shapes, bool)> {
     match set {
         Set::Whole => vec![(shapes, true)],
@@ -194,10 +194,10 @@ impl Discretiser for Sources {
         bbox.include(lamina_api::Point2::new(bbox.min.x - margin, bbox.min.y - margin));
         bbox.include(lamina_api::Point2::new(bbox.max.x + margin, bbox.max.y + margin));
         let sources = self.resolved_sources(ctx)?;
-        // Cells of the overlay: a piece of the family, the step of each source and
+        // Patches of the overlay: a piece of the family, the step of each source and
         // whether it is in that source's effective grading region.
         let family_shapes = clean(&vec![shape_of(family)]);
-        let mut cells = vec![Cell {
+        let mut patches = vec![Patch {
             shapes: family_shapes.clone(),
             steps: Vec::new(),
             effective: Vec::new(),
@@ -221,9 +221,9 @@ impl Discretiser for Sources {
                     },
                 ),
             };
-            cells = cut_cells(cells, &sets, &within, &behind);
+            patches = cut_patches(patches, &sets, &within, &behind);
         }
-        let pieces = homogeneous_pieces(&sources, cells);
+        let pieces = homogeneous_pieces(&sources, patches);
         sub_regions(pieces, family_area, ctx.family)
     }
 
@@ -292,15 +292,15 @@ impl Sources {
     }
 }
 
-/// `cells` cut by one more source: by the sets closer than each of its step
+/// `patches` cut by one more source: by the sets closer than each of its step
 /// thresholds (nearest first), then by its effective region, `within` it and not
-/// `behind` its plane. Each piece keeps its cell's steps and flags, with this source's
+/// `behind` its plane. Each piece keeps its patch's steps and flags, with this source's
 /// appended.
-fn cut_cells(cells: Vec<Cell>, sets: &[Set], within: &Set, behind: &Set) -> Vec<Cell> {
+fn cut_patches(patches: Vec<Patch>, sets: &[Set], within: &Set, behind: &Set) -> Vec<Patch> {
     let mut next = Vec::new();
-    for cell in cells {
+    for patch in patches {
         let mut stepped = Vec::new();
-        let mut rest = cell.shapes;
+        let mut rest = patch.shapes;
         for (u, set) in sets.iter().enumerate() {
             let inside = set.intersect(&rest);
             if !inside.is_empty() {
@@ -317,10 +317,10 @@ fn cut_cells(cells: Vec<Cell>, sets: &[Set], within: &Set, behind: &Set) -> Vec<
         for (shapes, u) in stepped {
             for (shapes, w) in split(shapes, within) {
                 for (shapes, b) in split(shapes, behind) {
-                    next.push(Cell {
+                    next.push(Patch {
                         shapes,
-                        steps: [cell.steps.as_slice(), &[u]].concat(),
-                        effective: [cell.effective.as_slice(), &[w && !b]].concat(),
+                        steps: [patch.steps.as_slice(), &[u]].concat(),
+                        effective: [patch.effective.as_slice(), &[w && !b]].concat(),
                     });
                 }
             }
@@ -333,19 +333,19 @@ fn cut_cells(cells: Vec<Cell>, sets: &[Set], within: &Set, behind: &Set) -> Vec<
 /// composition's fractions and its level.
 type Piece = (Shapes, Vec<usize>, Vec<f64>, f64);
 
-/// Each cell's composition (Eq. 2 per source, Eq. 8 over the sources that grade it);
-/// cells of equal steps and composition are one homogeneous region.
-fn homogeneous_pieces(sources: &[Source], cells: Vec<Cell>) -> Vec<Piece> {
+/// Each patch's composition (Eq. 2 per source, Eq. 8 over the sources that grade it);
+/// patches of equal steps and composition are one homogeneous region.
+fn homogeneous_pieces(sources: &[Source], patches: Vec<Patch>) -> Vec<Piece> {
     let mut pieces: Vec<Piece> = Vec::new();
-    for cell in cells {
+    for patch in patches {
         let levels: Vec<f64> = sources
             .iter()
-            .zip(&cell.steps)
+            .zip(&patch.steps)
             .map(|(s, &u)| s.steps.level(u))
             .collect();
-        let any = cell.effective.iter().any(|&e| e);
+        let any = patch.effective.iter().any(|&e| e);
         let counted: Vec<usize> = (0..sources.len())
-            .filter(|&i| !any || cell.effective[i])
+            .filter(|&i| !any || patch.effective[i])
             .collect();
         let parts: Vec<(f64, Vec<f64>)> = counted
             .iter()
@@ -364,9 +364,9 @@ fn homogeneous_pieces(sources: &[Source], cells: Vec<Cell>) -> Vec<Piece> {
             .map(|&i| sources[i].weight * levels[i])
             .sum::<f64>()
             / weight;
-        match pieces.iter_mut().find(|p| p.1 == cell.steps && p.2 == fractions) {
-            Some(p) => p.0 = union(&p.0, &cell.shapes),
-            None => pieces.push((cell.shapes, cell.steps, fractions, level)),
+        match pieces.iter_mut().find(|p| p.1 == patch.steps && p.2 == fractions) {
+            Some(p) => p.0 = union(&p.0, &patch.shapes),
+            None => pieces.push((patch.shapes, patch.steps, fractions, level)),
         }
     }
     pieces

@@ -253,11 +253,11 @@ fn barrier_times(paths: &[Vec<&Toolpath>], tracks: &[Vec<(f64, Point2)>], keep: 
 }
 
 /// The stretches of path a head swept since the last barrier, filed in a grid of
-/// keep-out-sized cells so that a new stretch is checked only against those near it.
+/// keep-out-sized buckets so that a new stretch is checked only against those near it.
 struct Swept {
     segments: Vec<(Point2, Point2)>,
     bbox: BBox2,
-    cell: f64,
+    bucket: f64,
     grid: std::collections::HashMap<(i64, i64), Vec<usize>>,
 }
 
@@ -266,14 +266,14 @@ impl Swept {
         Swept {
             segments: Vec::new(),
             bbox: BBox2::default(),
-            cell: keep_out.max(0.5),
+            bucket: keep_out.max(0.5),
             grid: std::collections::HashMap::new(),
         }
     }
 
-    /// The cells a box grown by `margin` covers.
-    fn cells(&self, b: &BBox2, margin: f64) -> impl Iterator<Item = (i64, i64)> + use<> {
-        let c = self.cell;
+    /// The buckets a box grown by `margin` covers.
+    fn buckets(&self, b: &BBox2, margin: f64) -> impl Iterator<Item = (i64, i64)> + use<> {
+        let c = self.bucket;
         let lo = |v: f64| ((v - margin) / c).floor() as i64;
         let hi = |v: f64| ((v + margin) / c).floor() as i64;
         let (x0, x1, y0, y1) = (lo(b.min.x), hi(b.max.x), lo(b.min.y), hi(b.max.y));
@@ -289,8 +289,8 @@ impl Swept {
         self.bbox = self.bbox.union(&b);
         let k = self.segments.len();
         self.segments.push(s);
-        // The cells borrow nothing of `self`: filed as they come.
-        for c in self.cells(&b, 0.0) {
+        // The buckets borrow nothing of `self`: filed as they come.
+        for c in self.buckets(&b, 0.0) {
             self.grid.entry(c).or_default().push(k);
         }
     }
@@ -310,7 +310,7 @@ impl Swept {
         if dx.hypot(dy) >= keep_out {
             return true;
         }
-        self.cells(&b, keep_out).all(|c| {
+        self.buckets(&b, keep_out).all(|c| {
             self.grid.get(&c).is_none_or(|list| {
                 list.iter().all(|&k| {
                     let o = self.segments[k];

@@ -19,7 +19,7 @@ use crate::shape::{BBox2, Contour, Point2};
 
 /// The shape of a base cell's void, in the cell's own frame.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum CellShape {
+pub enum BaseCellShape {
     /// Radius `half[0]`.
     Sphere,
     /// Half-edges `half[0..3]` along the cell's x, y and z.
@@ -33,21 +33,21 @@ const ROUND: usize = 32;
 
 /// One base cell placed in the machine's frame.
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub struct PlacedCell {
-    pub shape: CellShape,
+pub struct PlacedBaseCell {
+    pub shape: BaseCellShape,
     pub centre: Vector3<f64>,
     pub half: [f64; 3],
     /// Cell frame to machine frame.
     pub rotation: Matrix3<f64>,
 }
 
-impl PlacedCell {
+impl PlacedBaseCell {
     /// How far the cell reaches from its centre.
     pub fn reach(&self) -> f64 {
         match self.shape {
-            CellShape::Sphere => self.half[0],
-            CellShape::Box => Vector3::from(self.half).norm(),
-            CellShape::Cylinder => self.half[0].hypot(self.half[2]),
+            BaseCellShape::Sphere => self.half[0],
+            BaseCellShape::Box => Vector3::from(self.half).norm(),
+            BaseCellShape::Cylinder => self.half[0].hypot(self.half[2]),
         }
     }
 
@@ -58,8 +58,8 @@ impl PlacedCell {
         let axis = |k: usize| self.rotation.column(k).into_owned();
         let [a, b, c] = self.half;
         match self.shape {
-            CellShape::Sphere => Vec::new(),
-            CellShape::Box => {
+            BaseCellShape::Sphere => Vec::new(),
+            BaseCellShape::Box => {
                 let mut out = Vec::with_capacity(6);
                 for (k, area) in [(0, 4.0 * b * c), (1, 4.0 * a * c), (2, 4.0 * a * b)] {
                     out.push((area, axis(k)));
@@ -67,7 +67,7 @@ impl PlacedCell {
                 }
                 out
             }
-            CellShape::Cylinder => {
+            BaseCellShape::Cylinder => {
                 let (r, h) = (a, c);
                 let mut out = vec![
                     (std::f64::consts::PI * r * r, axis(2)),
@@ -91,7 +91,7 @@ impl PlacedCell {
             return None;
         }
         match self.shape {
-            CellShape::Sphere => {
+            BaseCellShape::Sphere => {
                 let r = (self.half[0] * self.half[0] - dz * dz).sqrt();
                 Some(Contour::circle(
                     Point2::new(self.centre.x, self.centre.y),
@@ -99,7 +99,7 @@ impl PlacedCell {
                     ROUND,
                 ))
             }
-            CellShape::Box => {
+            BaseCellShape::Box => {
                 let [a, b, c] = self.half;
                 let corners: Vec<Vector3<f64>> = (0..8)
                     .map(|i| {
@@ -120,7 +120,7 @@ impl PlacedCell {
                 }
                 self.cut(&corners, &edges, z)
             }
-            CellShape::Cylinder => {
+            BaseCellShape::Cylinder => {
                 let (r, h) = (self.half[0], self.half[2]);
                 let mut corners = Vec::with_capacity(2 * ROUND);
                 for k in 0..ROUND {
@@ -216,7 +216,7 @@ pub fn inset_convex(c: &Contour, d: f64) -> Option<Contour> {
 /// turned into the machine's frame by `rotation` (the tilt of Fig. 5, and the model's
 /// own turn) and moved by `offset`.
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub struct CellArray {
+pub struct BaseCellArray {
     pub period: [f64; 3],
     pub origin: [f64; 3],
     /// Lattice frame to machine frame.
@@ -225,7 +225,7 @@ pub struct CellArray {
     pub offset: Vector3<f64>,
 }
 
-impl CellArray {
+impl BaseCellArray {
     /// An upright lattice.
     pub fn upright(period: [f64; 3], origin: [f64; 3]) -> Self {
         Self {
@@ -407,8 +407,8 @@ impl CellArray {
 mod tests {
     use super::*;
 
-    fn placed(shape: CellShape, half: [f64; 3], rotation: Matrix3<f64>) -> PlacedCell {
-        PlacedCell {
+    fn placed(shape: BaseCellShape, half: [f64; 3], rotation: Matrix3<f64>) -> PlacedBaseCell {
+        PlacedBaseCell {
             shape,
             centre: Vector3::new(1.0, 2.0, 3.0),
             half,
@@ -418,7 +418,7 @@ mod tests {
 
     #[test]
     fn a_sphere_cuts_a_circle_of_the_chord_radius() {
-        let s = placed(CellShape::Sphere, [0.5, 0.0, 0.0], Matrix3::identity());
+        let s = placed(BaseCellShape::Sphere, [0.5, 0.0, 0.0], Matrix3::identity());
         let c = s.section(3.3).expect("cut");
         let r = (0.25f64 - 0.09).sqrt();
         assert!((c.area() - std::f64::consts::PI * r * r).abs() < 0.01 * c.area());
@@ -431,7 +431,7 @@ mod tests {
         // centre meets a rectangle 0.8 long in x and 2 * 0.1 / sin 30 = 0.4 wide in y
         // (where the thin z half-edge limits it), or 2 * 0.2 / cos 30 where y does.
         let rot = *nalgebra::Rotation3::from_axis_angle(&Vector3::x_axis(), 30f64.to_radians()).matrix();
-        let b = placed(CellShape::Box, [0.4, 0.2, 0.1], rot);
+        let b = placed(BaseCellShape::Box, [0.4, 0.2, 0.1], rot);
         let c = b.section(3.0).expect("cut");
         let width = (2.0f64 * 0.1 / 30f64.to_radians().sin()).min(2.0 * 0.2 / 30f64.to_radians().cos());
         assert!(
@@ -442,7 +442,7 @@ mod tests {
         );
         assert!(c.is_ccw());
         // Upright, a plane above its top misses it.
-        let up = placed(CellShape::Box, [0.4, 0.2, 0.1], Matrix3::identity());
+        let up = placed(BaseCellShape::Box, [0.4, 0.2, 0.1], Matrix3::identity());
         assert!(up.section(3.11).is_none());
         assert!((up.section(3.05).expect("cut").area() - 0.8 * 0.4).abs() < 1e-9);
     }
@@ -452,7 +452,7 @@ mod tests {
         // Radius 0.2, half-height 0.5, its axis along x: a plane 0.1 above the axis
         // cuts a rectangle 1.0 long and 2 sqrt(0.2^2 - 0.1^2) wide (the prism's chord).
         let rot = *nalgebra::Rotation3::from_axis_angle(&Vector3::y_axis(), 90f64.to_radians()).matrix();
-        let c = placed(CellShape::Cylinder, [0.2, 0.2, 0.5], rot)
+        let c = placed(BaseCellShape::Cylinder, [0.2, 0.2, 0.5], rot)
             .section(3.1)
             .expect("cut");
         let want = 1.0 * 2.0 * (0.04f64 - 0.01).sqrt();
@@ -462,7 +462,7 @@ mod tests {
     #[test]
     fn a_boxs_facets_are_its_six_faces_turned_with_it() {
         let rot = *nalgebra::Rotation3::from_axis_angle(&Vector3::x_axis(), 90f64.to_radians()).matrix();
-        let f = placed(CellShape::Box, [0.3, 0.1, 0.02], rot).facets();
+        let f = placed(BaseCellShape::Box, [0.3, 0.1, 0.02], rot).facets();
         assert_eq!(f.len(), 6);
         let total: f64 = f.iter().map(|x| x.0).sum();
         assert!((total - 8.0 * (0.1 * 0.02 + 0.3 * 0.02 + 0.3 * 0.1)).abs() < 1e-12);
@@ -488,12 +488,12 @@ mod tests {
     #[test]
     fn the_band_visits_only_points_near_the_plane_even_when_tilted() {
         let bbox = BBox2::from_points([Point2::new(0.0, 0.0), Point2::new(4.0, 4.0)]);
-        let up = CellArray::upright([1.0, 1.0, 1.0], [0.0; 3]);
+        let up = BaseCellArray::upright([1.0, 1.0, 1.0], [0.0; 3]);
         let near = up.near_plane(2.2, 0.3, &bbox);
         // Only the row k = 2, over the 5 x 5 points of the box (grown by 0.3: still 5 x 5).
         assert_eq!(near.len(), 25);
         assert!(near.iter().all(|(ijk, _)| ijk[2] == 2));
-        let tilted = CellArray::tilted_about_x([1.0, 1.0, 1.0], [0.0; 3], 20f64.to_radians());
+        let tilted = BaseCellArray::tilted_about_x([1.0, 1.0, 1.0], [0.0; 3], 20f64.to_radians());
         let near = tilted.near_plane(2.2, 0.3, &bbox);
         assert!(!near.is_empty());
         // Every point within the band, and none of the lattice's points near the plane
@@ -515,7 +515,7 @@ mod tests {
         assert_eq!(got, brute);
         // A lattice turned a right angle about x (its y axis now climbs) is walked
         // along y: the same points as a brute-force scan.
-        let turned = CellArray::tilted_about_x([1.0, 1.0, 1.0], [0.0; 3], 90f64.to_radians());
+        let turned = BaseCellArray::tilted_about_x([1.0, 1.0, 1.0], [0.0; 3], 90f64.to_radians());
         let mut near: Vec<[i64; 3]> = turned
             .near_plane(2.2, 0.3, &bbox)
             .iter()
