@@ -96,13 +96,8 @@ impl Cells {
                     format!("`cells_around` must be in 1..={MAX_CELLS}, not {n}"),
                 ));
             }
-            (None, Some(l)) if l > 0.0 && l.is_finite() => Count::Length(l),
-            (None, Some(l)) => {
-                return Err(config.error(
-                    "cell_length",
-                    format!("`cell_length` must be a positive number of mm, not {l}"),
-                ));
-            }
+            // Its declared range keeps it positive and finite.
+            (None, Some(l)) => Count::Length(l),
             (None, None) => Count::None,
         };
         Ok(Cells {
@@ -440,4 +435,260 @@ fn first_exit(polygon: &Polygon, p: Point2, dir: Vector2) -> Option<f64> {
         }
     }
     best
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::shapes::{circle, rect};
+
+    fn split(family: &Polygon, count: Count, cuts: Cuts) -> Vec<SubRegion> {
+        let grid = Grid::for_polygon(family, "test").expect("grid");
+        let mut regions = vec![SubRegion::new(0, 0, 1, 0.0, family.clone())];
+        Cells { count, cuts }
+            .split(&grid, family, &mut regions, &Limits::default())
+            .expect("splits");
+        regions
+    }
+
+    fn angle_about(c: Point2, p: Point2) -> f64 {
+        (p.y - c.y).atan2(p.x - c.x).rem_euclid(std::f64::consts::TAU)
+    }
+
+    #[test]
+    fn a_walk_starts_at_the_lowest_of_the_rightmost_points_and_runs_counter_clockwise() {
+        // Given clockwise: the walk turns it.
+        let square = Contour::new(vec![
+            Point2::new(0.0, 0.0),
+            Point2::new(0.0, 10.0),
+            Point2::new(10.0, 10.0),
+            Point2::new(10.0, 0.0),
+        ]);
+        let walk = Walk::new(&square);
+        assert_eq!(walk.pts[0], Point2::new(10.0, 0.0));
+        assert_eq!(walk.total, 40.0);
+        let near = |a: Point2, b: Point2| (a - b).norm() < 1e-12;
+        for (s, p) in [
+            (5.0, (10.0, 5.0)),
+            (15.0, (5.0, 10.0)),
+            (-5.0, (5.0, 0.0)),
+            (45.0, (10.0, 5.0)),
+        ] {
+            assert!(
+                near(walk.at(s), Point2::new(p.0, p.1)),
+                "at({s}) = {:?}",
+                walk.at(s)
+            );
+        }
+        // Projected onto the nearest edge; the start is 0, not the full length.
+        for (p, f) in [
+            ((10.0, 0.0), 0.0),
+            ((10.0, 5.0), 0.125),
+            ((12.0, 5.0), 0.125),
+            ((5.0, 11.0), 0.375),
+            ((0.0, 5.0), 0.625),
+            ((5.0, -1.0), 0.875),
+        ] {
+            let got = walk.position(Point2::new(p.0, p.1));
+            assert!((got - f).abs() < 1e-12, "position({p:?}) = {got}, not {f}");
+        }
+    }
+
+    #[test]
+    fn a_ray_leaves_the_polygon_at_the_first_boundary_it_meets() {
+        let square = Polygon::new(rect(0.0, 0.0, 10.0, 10.0).oriented(true), Vec::new());
+        let left = Vector2::new(-1.0, 0.0);
+        let exit = first_exit(&square, Point2::new(10.0, 5.0), left).expect("exits");
+        assert!((exit - 10.0).abs() < 1e-12, "{exit}");
+        let ring = Polygon::new(
+            rect(0.0, 0.0, 10.0, 10.0).oriented(true),
+            vec![rect(4.0, 3.0, 2.0, 4.0).oriented(false)],
+        );
+        let exit = first_exit(&ring, Point2::new(10.0, 5.0), left).expect("exits");
+        assert!((exit - 4.0).abs() < 1e-12, "{exit}");
+        // Along the edge it starts on, or away from the polygon: no exit ahead.
+        assert_eq!(
+            first_exit(&square, Point2::new(10.0, 5.0), Vector2::new(1.0, 0.0)),
+            None
+        );
+    }
+
+    #[test]
+    fn crossings_are_found_between_any_two_cuts_and_touching_is_no_crossing() {
+        let s = |a: (f64, f64), b: (f64, f64)| (Point2::new(a.0, a.1), Point2::new(b.0, b.1));
+        let cross = s((0.0, 0.0), (2.0, 2.0));
+        let other = s((0.0, 2.0), (2.0, 0.0));
+        let apart = s((5.0, 0.0), (5.0, 2.0));
+        assert!(any_crossing(&[cross, other]));
+        // Not neighbours in the list: all pairs are compared for a few hundred.
+        assert!(any_crossing(&[cross, apart, apart, other]));
+        assert!(!any_crossing(&[cross, apart]));
+        // Meeting at an end point (cuts toward one centre) is not crossing.
+        assert!(!any_crossing(&[
+            s((0.0, 0.0), (1.0, 1.0)),
+            s((2.0, 0.0), (1.0, 1.0))
+        ]));
+        // Many cuts: neighbours and their next ones only.
+        let mut many: Vec<_> = (0..400)
+            .map(|i| s((i as f64 * 10.0, 0.0), (i as f64 * 10.0, 1.0)))
+            .collect();
+        assert!(!any_crossing(&many));
+        many[201] = s((1990.0, 0.0), (2030.0, 1.0));
+        assert!(any_crossing(&many), "crosses its next neighbour");
+    }
+
+    #[test]
+    fn a_length_gives_as_many_cells_as_fit_along_the_middle() {
+        let ring = Polygon::new(
+            rect(0.0, 0.0, 20.0, 10.0).oriented(true),
+            vec![rect(4.0, 3.0, 12.0, 4.0).oriented(false)],
+        );
+        // Middle: (60 + 32) / 2 = 46 mm.
+        let cells = |count| {
+            Cells {
+                count,
+                cuts: Cuts::Arc,
+            }
+            .count(&ring)
+        };
+        assert_eq!(cells(Count::Length(10.0)), 5);
+        assert_eq!(cells(Count::Length(46.0)), 1);
+        assert_eq!(cells(Count::Length(1e3)), 1);
+        assert_eq!(cells(Count::Length(1e-6)), MAX_CELLS);
+        assert_eq!(cells(Count::Around(7)), 7);
+        assert_eq!(cells(Count::None), 1);
+    }
+
+    /// Equal angles about the centre of the largest hole's box, numbered
+    /// counter-clockwise from +x: about (-3, 0) the quadrants of a 20 mm square with a
+    /// 6 x 6 mm hole hold 121, 61, 61 and 121 mm².
+    #[test]
+    fn sectors_are_equal_angles_about_the_holes_centre() {
+        let family = Polygon::new(
+            rect(-10.0, -10.0, 20.0, 20.0).oriented(true),
+            vec![
+                rect(-6.0, -3.0, 6.0, 6.0).oriented(false),
+                rect(5.0, 5.0, 1.0, 1.0).oriented(false),
+            ],
+        );
+        let cells = split(&family, Count::Around(4), Cuts::Sectors);
+        let centre = Point2::new(-3.0, 0.0);
+        assert_eq!(cells.len(), 4);
+        for (i, (c, want)) in cells.iter().zip([120.0, 61.0, 61.0, 121.0]).enumerate() {
+            assert_eq!(c.cell, Some(i));
+            assert!(
+                (c.area() - want).abs() < 1e-6,
+                "cell {i}: {} mm², not {want}",
+                c.area()
+            );
+            let a = angle_about(centre, c.reference);
+            let quarter = std::f64::consts::FRAC_PI_2;
+            assert!(
+                a > i as f64 * quarter && a < (i + 1) as f64 * quarter,
+                "cell {i} at {a}"
+            );
+            assert!(c.polygon.contains(c.reference));
+        }
+        // Without holes, about the pole: eight equal triangles of a square.
+        let square = Polygon::new(rect(0.0, 0.0, 10.0, 10.0).oriented(true), Vec::new());
+        let cells = split(&square, Count::Around(8), Cuts::Sectors);
+        assert_eq!(cells.len(), 8);
+        for (i, c) in cells.iter().enumerate() {
+            assert_eq!(c.cell, Some(i));
+            assert!((c.area() - 12.5).abs() < 1e-3, "cell {i}: {}", c.area());
+            let a = angle_about(Point2::new(5.0, 5.0), c.reference);
+            let eighth = std::f64::consts::FRAC_PI_4;
+            assert!(
+                a > i as f64 * eighth && a < (i + 1) as f64 * eighth,
+                "cell {i} at {a}"
+            );
+        }
+        // One cell: the region whole, numbered.
+        let one = split(&square, Count::Around(1), Cuts::Sectors);
+        assert_eq!(one.len(), 1);
+        assert_eq!(one[0].cell, Some(0));
+        assert_eq!(one[0].polygon, square);
+    }
+
+    /// Arc cells of a rectangular ring (outer 60 mm round) in four: cuts at 0, 15, 30
+    /// and 45 mm from (20, 0) along the outer contour, each cell holding 15 mm of it,
+    /// numbered along it.
+    #[test]
+    fn arc_cells_share_the_outer_contour_equally_and_are_numbered_along_it() {
+        let ring = Polygon::new(
+            rect(0.0, 0.0, 20.0, 10.0).oriented(true),
+            vec![rect(4.0, 3.0, 12.0, 4.0).oriented(false)],
+        );
+        let cells = split(&ring, Count::Around(4), Cuts::Arc);
+        assert_eq!(cells.len(), 4);
+        let total: f64 = cells.iter().map(SubRegion::area).sum();
+        assert!((total - ring.area()).abs() < 1e-6, "{total} vs {}", ring.area());
+        let walk = Walk::new(&ring.outer);
+        let on_outer = |p: Point2| ring.outer.distance(p) < 1e-6;
+        for (i, c) in cells.iter().enumerate() {
+            assert_eq!(c.cell, Some(i));
+            let share: f64 = c
+                .polygon
+                .outer
+                .edges()
+                .filter(|&(a, b)| on_outer(a) && on_outer(b) && on_outer(a + (b - a) * 0.5))
+                .map(|(a, b)| (b - a).norm())
+                .sum();
+            assert!(
+                (share - 15.0).abs() < 1e-3,
+                "cell {i} holds {share} mm of the outer contour"
+            );
+            // Its stretch of the outer contour is the i-th quarter.
+            let at = walk.position(c.reference);
+            assert!(
+                at > i as f64 * 0.25 && at < (i + 1) as f64 * 0.25,
+                "cell {i} at {at}"
+            );
+        }
+        // The cut from (15, 10) runs straight down to the hole, where the first cell
+        // ends.
+        let cut: Vec<_> = cells[0]
+            .polygon
+            .outer
+            .points
+            .iter()
+            .filter(|p| (p.x - 15.0).abs() < 1e-6)
+            .collect();
+        assert!(
+            cut.len() >= 2,
+            "the first cell ends at x = 15: {:?}",
+            cells[0].polygon.outer.points
+        );
+    }
+
+    /// Cuts of a disc converge: cut along the normals they would cross, so they run to
+    /// one centre, the pole, where they meet.
+    #[test]
+    fn the_cuts_of_a_thick_region_meet_at_its_pole() {
+        let disc = Polygon::new(circle(0.0, 0.0, 10.0, 360).oriented(true), Vec::new());
+        let grid = Grid::for_polygon(&disc, "test").expect("grid");
+        let walk = Walk::new(&disc.outer);
+        let lines = cuts(&grid, &disc, &walk, 6);
+        assert_eq!(lines.len(), 6);
+        for [a, b] in &lines {
+            let (a, b) = (grid.unpoint(*a), grid.unpoint(*b));
+            assert!(b.coords.norm() < 0.05, "a cut ends at {b:?}, not the centre");
+            assert!(a.coords.norm() > 10.0, "a cut starts inside, at {a:?}");
+        }
+        // A thin ring: straight across, from outside the outer circle to inside the hole.
+        let ring = Polygon::new(
+            circle(0.0, 0.0, 10.0, 360).oriented(true),
+            vec![circle(0.0, 0.0, 9.0, 360).oriented(false)],
+        );
+        let lines = cuts(&grid, &ring, &Walk::new(&ring.outer), 6);
+        assert_eq!(lines.len(), 6);
+        for [a, b] in &lines {
+            let (a, b) = (grid.unpoint(*a), grid.unpoint(*b));
+            let (ra, rb) = (a.coords.norm(), b.coords.norm());
+            assert!(ra > 10.0 && ra < 10.1 && rb < 9.0 && rb > 8.9, "{ra} .. {rb}");
+            // Along the normal: toward the centre.
+            let across = (b - a).normalize();
+            assert!(across.dot(&(-a.coords.normalize())) > 0.999, "{a:?} -> {b:?}");
+        }
+    }
 }

@@ -251,6 +251,9 @@ fn bad_radial_and_cell_options_are_refused() {
         ("use = \"radial\"\nnozzle = 0.0", "nozzle"),
         ("use = \"offset\"\ncells_around = 0", "cells_around"),
         ("use = \"offset\"\ncell_length = -1.0", "cell_length"),
+        ("use = \"offset\"\ncell_length = 0.0", "cell_length"),
+        ("use = \"radial\"\ncell_length = nan", "cell_length"),
+        ("use = \"offset\"\ncells_around = 1001", "cells_around"),
         (
             "use = \"radial\"\ncells_around = 4\ncell_length = 1.0",
             "not both",
