@@ -455,7 +455,7 @@ pub trait OutputFiles {
 }
 
 /// What a machine file (G-code, NC) says of itself.
-#[derive(Debug, Clone, PartialEq, Default)]
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
 pub struct MachineFileReport {
     /// The file, as its exporter created it.
     pub file: PathBuf,

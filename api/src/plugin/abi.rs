@@ -41,6 +41,9 @@ pub const WIRE_SCHEMAS: &[u64] = &[
     // 7.4: discretisers and graders say whether they read the run's machine
     // (`ReadsMachine`); those that do not are sent the run without it.
     0xa974_ebfb_e110_89b7,
+    // 7.5: exporters' notes on their files (`HostRequest::Tell`) and machine files'
+    // reports (`HostRequest::Report`) reach the host, as they do from linked exporters.
+    0x1e09_41f0_080a_ce60,
 ];
 /// The minor version of this build: a plugin of this major and of this minor or an
 /// older one loads (the host reads every message an older plugin writes, and sends it

@@ -299,6 +299,20 @@ impl OutputFiles for HostFiles {
             other => Err(unexpected(&other)),
         }
     }
+
+    // What the host cannot take in is dropped, as a host that keeps no summary would:
+    // neither is part of the file.
+    fn report(&mut self, report: crate::stage::MachineFileReport) {
+        let _ = host_call(&HostRequest::Report(report));
+    }
+
+    fn tell(&mut self, file: &Path, severity: crate::diagnostic::Severity, said: crate::diagnostic::Warning) {
+        let _ = host_call(&HostRequest::Tell {
+            file: Cow::Borrowed(file),
+            severity,
+            said,
+        });
+    }
 }
 
 /// An output file the host holds.

@@ -295,6 +295,16 @@ pub enum HostRequest<'a> {
         calls: Vec<WireCall>,
         n: usize,
     },
+    /// (ABI 7.5) What an exporter tells the user about an output file
+    /// ([`crate::stage::OutputFiles::tell`]); replies with [`HostResponse::Done`].
+    Tell {
+        file: Cow<'a, Path>,
+        severity: crate::diagnostic::Severity,
+        said: crate::diagnostic::Warning,
+    },
+    /// (ABI 7.5) What a machine file says of itself, for the run's summary
+    /// ([`crate::stage::OutputFiles::report`]); replies with [`HostResponse::Done`].
+    Report(crate::stage::MachineFileReport),
 }
 
 /// (ABI 7.2) One call of a [`HostRequest::FractionsBatch`]: `r`, `d`, `x`, `y`, `z`,

@@ -391,6 +391,18 @@ impl<'a, 'f> HostCtx<'a, 'f> {
                     .insert(id, writer);
                 Ok(HostResponse::File(id))
             }
+            HostRequest::Tell { file, severity, said } => {
+                if let Some(files) = self.creator.borrow_mut().as_mut() {
+                    files.tell(&file, severity, said);
+                }
+                Ok(HostResponse::Done)
+            }
+            HostRequest::Report(report) => {
+                if let Some(files) = self.creator.borrow_mut().as_mut() {
+                    files.report(report);
+                }
+                Ok(HostResponse::Done)
+            }
             HostRequest::Write { file, bytes } => {
                 let mut open = self.files.open.lock().unwrap_or_else(|e| e.into_inner());
                 let w = open.get_mut(&file).ok_or_else(|| no_file(file))?;
