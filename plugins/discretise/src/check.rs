@@ -245,4 +245,108 @@ mod tests {
         assert!((t.overlap - 0.5).abs() < 1e-9, "{t:?}");
         assert!((t.area_error - 0.5).abs() < 1e-9);
     }
+
+    fn region(outer: Contour, holes: Vec<Contour>) -> SubRegion {
+        SubRegion::new(0, 0, 1, 0.0, Polygon::new(outer, holes))
+    }
+
+    fn pts(v: &[(f64, f64)]) -> Contour {
+        Contour::new(v.iter().map(|&(x, y)| Point2::new(x, y)).collect())
+    }
+
+    /// Three points on a line, the third back between the first two: the ring folds
+    /// over itself with no edge to meet but its neighbours. A point on a straight
+    /// stretch of a ring does not fold.
+    #[test]
+    fn a_ring_that_folds_back_is_not_simple_and_a_straight_vertex_is() {
+        assert!(!is_simple(&pts(&[(0.0, 0.0), (2.0, 0.0), (1.0, 0.0)])));
+        assert!(is_simple(&pts(&[
+            (0.0, 0.0),
+            (1.0, 0.0),
+            (2.0, 0.0),
+            (2.0, 2.0),
+            (0.0, 2.0)
+        ])));
+        assert!(!is_simple(&pts(&[(0.0, 0.0), (1.0, 1.0)])));
+    }
+
+    #[test]
+    fn wrong_orientations_and_rings_that_are_not_simple_are_counted() {
+        let family = Polygon::new(crate::shapes::rect(0.0, 0.0, 4.0, 4.0), vec![]);
+        let square = |x: f64, y: f64| crate::shapes::rect(x, y, 2.0, 2.0).oriented(true);
+        let bow = pts(&[(2.0, 2.0), (4.0, 4.0), (4.0, 2.0), (2.0, 4.0)]);
+        let regions = [
+            // Clockwise outside.
+            region(square(0.0, 0.0).oriented(false), vec![]),
+            // A hole counter-clockwise.
+            region(
+                square(2.0, 0.0),
+                vec![crate::shapes::rect(2.5, 0.5, 1.0, 1.0).oriented(true)],
+            ),
+            region(square(0.0, 2.0), vec![]),
+            region(bow.clone(), vec![]),
+        ];
+        let t = tiling(&family, &regions);
+        // The bow tie's area is 0: not counter-clockwise either.
+        assert_eq!(
+            (t.misoriented, t.non_simple, t.family_non_simple),
+            (3, 1, 0),
+            "{t:?}"
+        );
+        assert!(!t.is_ok(1.0));
+        // Two of each.
+        let twice: Vec<_> = regions.iter().chain(&regions).cloned().collect();
+        let t = tiling(&family, &twice);
+        assert_eq!((t.misoriented, t.non_simple), (6, 2), "{t:?}");
+        // A family that crosses itself is reported apart.
+        let t = tiling(&Polygon::new(bow, vec![]), &[]);
+        assert_eq!((t.family_non_simple, t.non_simple), (1, 0), "{t:?}");
+    }
+
+    #[test]
+    fn a_tiling_is_ok_only_within_the_tolerance_and_with_every_ring_valid() {
+        let good = Tiling {
+            family_area: 1.0,
+            region_area: 1.0,
+            area_error: 1e-4,
+            overlap: 1e-4,
+            misoriented: 0,
+            non_simple: 0,
+            family_non_simple: 3,
+        };
+        assert!(good.is_ok(1e-3));
+        for bad in [
+            Tiling {
+                area_error: 2e-3,
+                ..good
+            },
+            Tiling {
+                overlap: 2e-3,
+                ..good
+            },
+            Tiling {
+                misoriented: 1,
+                ..good
+            },
+            Tiling {
+                non_simple: 1,
+                ..good
+            },
+        ] {
+            assert!(!bad.is_ok(1e-3), "{bad:?}");
+        }
+        // Regions of the family's area, no more and no less, and none covering another.
+        let family = Polygon::new(crate::shapes::rect(0.0, 0.0, 2.0, 1.0), vec![]);
+        let halves = [
+            region(crate::shapes::rect(0.0, 0.0, 1.0, 1.0).oriented(true), vec![]),
+            region(crate::shapes::rect(1.0, 0.0, 1.0, 1.0).oriented(true), vec![]),
+        ];
+        let t = tiling(&family, &halves);
+        assert!(t.is_ok(1e-9), "{t:?}");
+        assert!(
+            (t.region_area - 2.0).abs() < 1e-12 && t.overlap.abs() < 1e-12,
+            "{t:?}"
+        );
+        assert!(!tiling(&family, &halves[..1]).is_ok(1e-3));
+    }
 }
