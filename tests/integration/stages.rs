@@ -143,3 +143,44 @@ fn every_number_option_has_a_physical_range() {
     }
     assert!(failures.is_empty(), "{}", failures.join("\n"));
 }
+
+/// Every number option refuses a value beyond its declared range, naming itself, when
+/// its stage is built: a stage's own check of a number may then rely on the range.
+#[test]
+fn every_number_option_refuses_a_value_beyond_its_range() {
+    let registry = registry();
+    let dir = tempfile::tempdir().unwrap_or_else(|e| panic!("a temporary folder: {e}"));
+    lamina_test_support::write_models(dir.path());
+    let mut failures = Vec::new();
+    let mut checked = 0;
+    for entry in registry.list(None) {
+        let info = entry.info();
+        let label = entry.label();
+        let example: toml::Table =
+            toml::from_str(info.example).unwrap_or_else(|e| panic!("{label}: its example is not TOML: {e}"));
+        for o in info.options {
+            let Some((min, max)) = o.range else { continue };
+            let beyond = match o.ty {
+                "float" => toml::Value::Float(if max > 0.0 { max * 2.0 } else { max + 1.0 }),
+                // Below the least the type holds is a refusal too, but of the type.
+                "integer" if max < 1e15 => toml::Value::Integer(max as i64 + 1),
+                "integer" if min > -1e15 => toml::Value::Integer(min as i64 - 1),
+                _ => continue,
+            };
+            let mut table = example.clone();
+            table.insert(o.name.to_string(), beyond.clone());
+            let text = toml::to_string(&table).unwrap_or_default();
+            checked += 1;
+            match lamina_test_support::try_stage(info.kind, &text, dir.path()) {
+                Ok(_) => failures.push(format!("{label}: `{}` = {beyond} was taken", o.name)),
+                Err(e) if !e.to_string().contains(&format!("`{}`", o.name)) => failures.push(format!(
+                    "{label}: `{}` = {beyond}: the error does not name it: {e}",
+                    o.name
+                )),
+                Err(_) => {}
+            }
+        }
+    }
+    assert!(checked > 100, "only {checked} options checked");
+    assert!(failures.is_empty(), "{}", failures.join("\n"));
+}

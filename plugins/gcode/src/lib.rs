@@ -229,18 +229,6 @@ fn build(config: &StageConfig<'_>) -> Result<AnyStage> {
             ));
         }
     }
-    for (k, v) in [
-        ("filament_diameter", o.filament_diameter),
-        ("retract_speed", o.retract_speed),
-        ("temperature", o.temperature),
-    ] {
-        if !(v.is_finite() && v > 0.0) {
-            return Err(config.error(k, "must be a positive number"));
-        }
-    }
-    if !(o.retract.is_finite() && o.retract >= 0.0) {
-        return Err(config.error("retract", "must be zero or more mm"));
-    }
     if o.direct_mixing && config.machine.is_none() && o.flavor != Flavor::MarlinMixing {
         return Err(config.error("direct_mixing", "only the `marlin-mixing` flavor has M165"));
     }

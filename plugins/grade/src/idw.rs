@@ -132,10 +132,8 @@ impl Grader for Idw {
 }
 
 fn build(config: &StageConfig<'_>) -> Result<AnyStage> {
+    // `power` is positive by its declared range.
     let o: Options = config.parse()?;
-    if !(o.power.is_finite() && o.power > 0.0) {
-        return Err(config.error("power", "must be a positive number"));
-    }
     if let Some(HolesSpec::Near(list)) = &o.holes {
         if list.is_empty() {
             return Err(config.error("holes", "lists no material"));
