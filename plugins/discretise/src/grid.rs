@@ -119,6 +119,36 @@ mod tests {
     use super::*;
     use lamina_geom::offset::HALF_RANGE;
 
+    /// A family with one coordinate not a number, or none at all, has no grid: a NaN
+    /// in y alone, or an infinite x, is enough.
+    #[test]
+    fn non_finite_or_empty_families_are_refused() {
+        let triangle = |x: f64, y: f64| {
+            Polygon::new(
+                Contour::new(vec![
+                    Point2::new(0.0, 0.0),
+                    Point2::new(10.0, 0.0),
+                    Point2::new(x, y),
+                ]),
+                Vec::new(),
+            )
+        };
+        assert!(Grid::for_polygon(&triangle(5.0, 5.0), "test").is_ok());
+        for (x, y) in [
+            (5.0, f64::NAN),
+            (f64::INFINITY, 5.0),
+            (f64::NAN, 5.0),
+            (5.0, f64::NEG_INFINITY),
+        ] {
+            let err = Grid::for_polygon(&triangle(x, y), "test").expect_err("refused");
+            assert!(err.to_string().contains("non-finite"), "({x}, {y}): {err}");
+        }
+        let empty = Polygon::new(Contour::new(Vec::new()), Vec::new());
+        assert!(Grid::for_polygon(&empty, "test").is_err());
+        let point = Polygon::new(Contour::new(vec![Point2::new(1.0, 1.0); 3]), Vec::new());
+        assert!(Grid::for_polygon(&point, "test").is_err());
+    }
+
     #[test]
     fn round_trip_is_within_half_a_unit() {
         let poly = Polygon::new(
