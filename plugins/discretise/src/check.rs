@@ -217,6 +217,7 @@ mod tests {
         // edge before it (a T-touch), and an edge that folds back over the previous one.
         let touching = pts(&[(0.0, 0.0), (4.0, 0.0), (4.0, 4.0), (2.0, 0.0), (0.0, 4.0)]);
         assert!(!is_simple(&touching));
+        assert_eq!(self_crossings(&touching), 0);
         let spike = pts(&[(0.0, 0.0), (2.0, 0.0), (1.0, 0.0), (1.0, 1.0)]);
         assert!(!is_simple(&spike));
         assert!(!is_simple(&pts(&[
@@ -257,6 +258,31 @@ mod tests {
     /// Three points on a line, the third back between the first two: the ring folds
     /// over itself with no edge to meet but its neighbours. A point on a straight
     /// stretch of a ring does not fold.
+    /// A touch is no crossing, from either segment's side and either way round; every
+    /// end of either segment on the other one is a meeting.
+    #[test]
+    fn segments_cross_only_inside_both_and_meet_at_any_shared_point() {
+        let p = |x: f64, y: f64| Point2::new(x, y);
+        let base = (p(0.0, 0.0), p(4.0, 0.0));
+        assert!(crosses(base, (p(2.0, -1.0), p(2.0, 1.0))));
+        assert!(crosses((p(2.0, 1.0), p(2.0, -1.0)), base));
+        for stem in [
+            (p(2.0, 0.0), p(2.0, 2.0)),
+            (p(2.0, 2.0), p(2.0, 0.0)),
+            (p(2.0, 0.0), p(2.0, -2.0)),
+            (p(2.0, -2.0), p(2.0, 0.0)),
+        ] {
+            assert!(!crosses(base, stem), "{stem:?}");
+            assert!(!crosses(stem, base), "{stem:?}");
+            assert!(meets(base, stem) && meets(stem, base), "{stem:?}");
+        }
+        // Apart, side by side on one line, or beyond an end.
+        assert!(!meets(base, (p(0.0, 1.0), p(4.0, 1.0))));
+        assert!(!meets(base, (p(5.0, 0.0), p(6.0, 0.0))));
+        assert!(!meets(base, (p(5.0, -1.0), p(5.0, 1.0))));
+        assert!(meets(base, (p(3.0, 0.0), p(6.0, 0.0))));
+    }
+
     #[test]
     fn a_ring_that_folds_back_is_not_simple_and_a_straight_vertex_is() {
         assert!(!is_simple(&pts(&[(0.0, 0.0), (2.0, 0.0), (1.0, 0.0)])));
