@@ -119,6 +119,38 @@ mod tests {
     use super::*;
     use lamina_geom::offset::HALF_RANGE;
 
+    /// Points that land on one grid point are one; a ring closed by a copy of its
+    /// first point, or several, is left open; a ring of one point stays one point.
+    #[test]
+    fn snapping_drops_repeats_and_closing_copies() {
+        let grid = Grid {
+            origin: Point2::new(0.0, 0.0),
+            scale: 1.0,
+        };
+        let at = |v: &[(f64, f64)]| {
+            grid.snapped(
+                v.iter()
+                    .map(|&(x, y)| Point2::new(x, y))
+                    .collect::<Vec<_>>()
+                    .into_iter(),
+            )
+        };
+        let q = |x: i32, y: i32| IntPoint::new(x, y);
+        assert_eq!(
+            at(&[
+                (0.0, 0.0),
+                (0.2, 0.1),
+                (3.0, 0.0),
+                (3.0, 2.0),
+                (0.0, 0.0),
+                (0.1, 0.0)
+            ]),
+            vec![q(0, 0), q(3, 0), q(3, 2)]
+        );
+        assert_eq!(at(&[(1.0, 1.0), (1.0, 1.0), (1.0, 1.0)]), vec![q(1, 1)]);
+        assert_eq!(at(&[(0.0, 0.0), (2.0, 0.0), (0.0, 0.0)]), vec![q(0, 0), q(2, 0)]);
+    }
+
     /// A family with one coordinate not a number, or none at all, has no grid: a NaN
     /// in y alone, or an infinite x, is enough.
     #[test]
