@@ -213,4 +213,71 @@ mod tests {
         let (_, r) = pole(&Polygon::new(rect(0.0, 0.0, 10.0, 4.0), vec![]), 1e-3).expect("pole");
         assert!((r - 2.0).abs() < 2e-3, "{r}");
     }
+
+    fn pts(v: &[(f64, f64)]) -> Contour {
+        Contour::new(v.iter().map(|&(x, y)| Point2::new(x, y)).collect())
+    }
+
+    /// Inside the outer contour and outside every hole, found by the ray toward +x,
+    /// also next to a slanted edge.
+    #[test]
+    fn containment_counts_the_edges_the_ray_crosses() {
+        let triangle = pts(&[(0.0, 0.0), (4.0, 0.0), (0.0, 4.0)]);
+        let edges = Edges::new([&triangle]);
+        for (x, y, inside) in [
+            (1.0, 1.0, true),
+            (1.9, 2.0, true),
+            (2.1, 2.0, false),
+            (3.9, 0.05, true),
+            (3.9, 0.2, false),
+            (-0.1, 1.0, false),
+            (5.0, 1.0, false),
+        ] {
+            assert_eq!(edges.contains(Point2::new(x, y)), inside, "({x}, {y})");
+        }
+        let ring = [rect(0.0, 0.0, 10.0, 10.0), rect(4.0, 4.0, 2.0, 2.0)];
+        let edges = Edges::new(ring.iter());
+        assert!(edges.contains(Point2::new(2.0, 5.0)));
+        assert!(!edges.contains(Point2::new(5.0, 5.0)));
+        assert!(edges.contains(Point2::new(8.0, 5.0)));
+        assert!((edges.distance(Point2::new(5.0, 5.0)) - 1.0).abs() < 1e-12);
+        assert_eq!(Edges::new([]).distance(Point2::new(0.0, 0.0)), f64::INFINITY);
+    }
+
+    /// L_s is the least distance over every pair of contours: here between the two
+    /// holes (1 mm), not from either hole to the outer contour (2 mm).
+    #[test]
+    fn the_least_distance_is_over_every_pair_of_contours() {
+        assert!((contour_distance(&rect(0.0, 0.0, 1.0, 1.0), &rect(3.0, 0.5, 1.0, 1.0)) - 2.0).abs() < 1e-12);
+        let outer = rect(0.0, 0.0, 20.0, 20.0);
+        let a = rect(2.0, 2.0, 2.0, 2.0).oriented(false);
+        let b = rect(5.0, 2.0, 2.0, 2.0).oriented(false);
+        let two = Polygon::new(outer.clone(), vec![a.clone(), b]);
+        let ls = min_contour_distance(&two).expect("holes");
+        assert!((ls - 1.0).abs() < 1e-12, "{ls}");
+        let one = Polygon::new(outer.clone(), vec![a]);
+        assert!((min_contour_distance(&one).expect("a hole") - 2.0).abs() < 1e-12);
+        assert_eq!(min_contour_distance(&Polygon::new(outer, vec![])), None);
+    }
+
+    /// The pole of a 3-4-5 triangle is its incentre (1, 1), radius 1; a polygon with
+    /// no inside has none.
+    #[test]
+    fn the_pole_is_the_centre_of_the_largest_inscribed_circle() {
+        let triangle = Polygon::new(pts(&[(0.0, 0.0), (3.0, 0.0), (0.0, 4.0)]), vec![]);
+        let (c, r) = pole(&triangle, 1e-6).expect("a pole");
+        assert!(
+            (c - Point2::new(1.0, 1.0)).norm() < 1e-4 && (r - 1.0).abs() < 1e-5,
+            "{c:?} {r}"
+        );
+        // Off the origin, on the right of its box.
+        let moved = Polygon::new(pts(&[(13.0, 20.0), (13.0, 24.0), (10.0, 20.0)]), vec![]);
+        let (c, r) = pole(&moved, 1e-6).expect("a pole");
+        assert!(
+            (c - Point2::new(12.0, 21.0)).norm() < 1e-4 && (r - 1.0).abs() < 1e-5,
+            "{c:?} {r}"
+        );
+        let flat = Polygon::new(pts(&[(0.0, 0.0), (0.0, 2.0), (0.0, 4.0)]), vec![]);
+        assert_eq!(pole(&flat, 1e-3), None);
+    }
 }
