@@ -5,7 +5,6 @@
 use std::cmp::Ordering;
 use std::collections::BinaryHeap;
 
-use lamina_api::geom::segment_distance;
 use lamina_api::{Contour, Point2, Polygon};
 use lamina_geom::reference::interior_point;
 use rstar::primitives::Line;
@@ -186,15 +185,6 @@ pub fn pole(polygon: &Polygon, precision: f64) -> Option<(Point2, f64)> {
         }
     }
     (best.d > 0.0).then_some((best.c, best.d))
-}
-
-/// Distance from `p` to the nearest of `contours`.
-pub fn distance_to(contours: &[&Contour], p: Point2) -> f64 {
-    contours
-        .iter()
-        .flat_map(|c| c.edges())
-        .map(|(a, b)| segment_distance(p, a, b))
-        .fold(f64::INFINITY, f64::min)
 }
 
 #[cfg(test)]
