@@ -661,6 +661,45 @@ mod tests {
         );
     }
 
+    /// A sampled contour is jagged: the cut's normal is square to the chord a quarter
+    /// cell either side, not to the tooth it starts on. Teeth of 0.05 mm every 0.25 mm
+    /// along the bottom of a square ring would tilt a tooth's normal by 11 degrees.
+    #[test]
+    fn a_cut_on_a_jagged_contour_runs_square_to_the_contour_not_the_tooth() {
+        let mut outer: Vec<Point2> = (0..80)
+            .map(|k| Point2::new(k as f64 * 0.25, if k % 2 == 1 { 0.05 } else { 0.0 }))
+            .collect();
+        outer.extend([
+            Point2::new(20.0, 0.0),
+            Point2::new(20.0, 20.0),
+            Point2::new(0.0, 20.0),
+        ]);
+        let ring = Polygon::new(
+            Contour::new(outer).oriented(true),
+            vec![rect(4.0, 4.0, 12.0, 12.0).oriented(false)],
+        );
+        let grid = Grid::for_polygon(&ring, "test").expect("grid");
+        let walk = Walk::new(&ring.outer);
+        let lines = cuts(&grid, &ring, &walk, 8);
+        assert_eq!(lines.len(), 8);
+        let on_bottom: Vec<_> = lines
+            .iter()
+            .map(|[a, b]| (grid.unpoint(*a), grid.unpoint(*b)))
+            .filter(|(a, _)| a.y < 0.1 && a.x > 1.0 && a.x < 19.0)
+            .collect();
+        assert!(!on_bottom.is_empty(), "no cut starts on the jagged side");
+        // Square to the side within a third of a degree: neither along a tooth's normal
+        // (11 degrees off) nor toward the hole's centre (0.8 degrees off from x = 10.15),
+        // where cuts that cross would be sent.
+        for (a, b) in on_bottom {
+            let d = (b - a).normalize();
+            assert!(
+                d.x.abs() < 0.006 && d.y > 0.0,
+                "the cut from {a:?} runs along {d:?}"
+            );
+        }
+    }
+
     /// Cuts of a disc converge: cut along the normals they would cross, so they run to
     /// one centre, the pole, where they meet.
     #[test]
