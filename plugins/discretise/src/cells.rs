@@ -458,12 +458,7 @@ mod tests {
     #[test]
     fn a_walk_starts_at_the_lowest_of_the_rightmost_points_and_runs_counter_clockwise() {
         // Given clockwise: the walk turns it.
-        let square = Contour::new(vec![
-            Point2::new(0.0, 0.0),
-            Point2::new(0.0, 10.0),
-            Point2::new(10.0, 10.0),
-            Point2::new(10.0, 0.0),
-        ]);
+        let square = crate::shapes::through(&[(0.0, 0.0), (0.0, 10.0), (10.0, 10.0), (10.0, 0.0)]);
         let walk = Walk::new(&square);
         assert_eq!(walk.pts[0], Point2::new(10.0, 0.0));
         assert_eq!(walk.total, 40.0);

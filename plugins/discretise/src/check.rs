@@ -179,6 +179,7 @@ fn meets((a, b): Seg, (c, d): Seg) -> bool {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::shapes::through as pts;
     use lamina_api::Point2;
 
     #[test]
@@ -199,7 +200,6 @@ mod tests {
     /// It crosses nothing, so only the touch test sees it.
     #[test]
     fn a_ring_through_a_vertex_twice_is_not_simple() {
-        let pts = |v: &[(f64, f64)]| Contour::new(v.iter().map(|&(x, y)| Point2::new(x, y)).collect());
         let pinched = pts(&[
             (5.0, 5.0),
             (5.0, 15.0),
@@ -249,10 +249,6 @@ mod tests {
 
     fn region(outer: Contour, holes: Vec<Contour>) -> SubRegion {
         SubRegion::new(0, 0, 1, 0.0, Polygon::new(outer, holes))
-    }
-
-    fn pts(v: &[(f64, f64)]) -> Contour {
-        Contour::new(v.iter().map(|&(x, y)| Point2::new(x, y)).collect())
     }
 
     /// Three points on a line, the third back between the first two: the ring folds

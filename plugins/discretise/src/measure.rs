@@ -190,7 +190,7 @@ pub fn pole(polygon: &Polygon, precision: f64) -> Option<(Point2, f64)> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::shapes::{circle, rect};
+    use crate::shapes::{circle, rect, through as pts};
 
     #[test]
     fn tube_distance_and_pole() {
@@ -202,10 +202,6 @@ mod tests {
         assert!((ls - 5.0).abs() < 0.01, "{ls}");
         let (_, r) = pole(&Polygon::new(rect(0.0, 0.0, 10.0, 4.0), vec![]), 1e-3).expect("pole");
         assert!((r - 2.0).abs() < 2e-3, "{r}");
-    }
-
-    fn pts(v: &[(f64, f64)]) -> Contour {
-        Contour::new(v.iter().map(|&(x, y)| Point2::new(x, y)).collect())
     }
 
     /// Inside the outer contour and outside every hole, found by the ray toward +x,
