@@ -360,6 +360,15 @@ pub fn plugin_library(lib: &str) -> PathBuf {
     ))
 }
 
+/// The linked stages twice, for a test that must hold on both sides of the plugin
+/// boundary: as linked (`"linked"`), and behind a loopback plugin (`"remote"`).
+pub fn linked_and_remote() -> [(&'static str, Registry); 2] {
+    [
+        ("linked", registry()),
+        ("remote", registry_through_boundary("loopback")),
+    ]
+}
+
 /// Every linked stage behind the plugin boundary, as if a plugin library named `name`
 /// held them (each call a message, stages behind handles), with the program's
 /// defaults: what a pipeline run with it must give as the linked stages do.

@@ -86,13 +86,7 @@ fn run(registry: Registry) -> RunReport {
 
 #[test]
 fn an_exporters_notes_and_reports_reach_the_run_linked_and_loaded() {
-    for (how, registry) in [
-        ("linked", lamina_test_support::registry()),
-        (
-            "remote",
-            lamina_test_support::registry_through_boundary("loopback"),
-        ),
-    ] {
+    for (how, registry) in lamina_test_support::linked_and_remote() {
         let report = run(registry);
         let told: Vec<_> = report
             .diagnostics

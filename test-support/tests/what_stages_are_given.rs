@@ -100,13 +100,7 @@ fn run(discretise: &str, grade: &str, registry: Registry) -> Result<()> {
 
 #[test]
 fn the_machine_is_given_to_the_discretisers_and_graders_that_read_it_only() {
-    for (how, registry) in [
-        ("linked", lamina_test_support::registry()),
-        (
-            "remote",
-            lamina_test_support::registry_through_boundary("loopback"),
-        ),
-    ] {
+    for (how, registry) in lamina_test_support::linked_and_remote() {
         for (discretise, grade) in [
             ("test-machine-discretiser", "test-blind-grader"),
             ("test-blind-discretiser", "test-machine-grader"),
