@@ -456,7 +456,23 @@ fn with_family<T>(
                 })?,
         ),
     };
-    // Built once for the call, which covers every family of the part's layer.
+    // Built once for the call, which covers every family of the part's layer; a tree
+    // naming contours the layer lacks is an error here, not a panic.
+    let n = family.layer.contours.len();
+    if let Some(f) = family
+        .tree
+        .families
+        .iter()
+        .find(|f| f.outer >= n || f.holes.iter().any(|&h| h >= n))
+    {
+        return Err(Error::stage(
+            "plugin",
+            format!(
+                "the host sent a family (outer contour {}) beyond the layer's {n} contours",
+                f.outer
+            ),
+        ));
+    }
     let polygons = family.tree.family_polygons(&family.layer.contours);
     let ctx = FamilyContext {
         info: &family.info,
