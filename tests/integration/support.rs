@@ -36,12 +36,15 @@ pub fn cargo(dir: &Path, args: &[&str]) -> Command {
 /// build is reused, and the quickest to compile (the default `dev` profile, in
 /// `target/debug`) serves best. `RUSTC_BOOTSTRAP` is not passed on: a runner may set
 /// it for libtest's per-test times (.ci/timed), and cargo rebuilds everything when it
-/// changes.
+/// changes. Nor is clippy's driver (.ci/run compiles the workspace with it): the crate
+/// is built as its author's cargo builds it.
 pub fn cargo_outside(dir: &Path, args: &[&str]) -> Command {
     let mut command = Command::new(std::env::var("CARGO").unwrap_or_else(|_| "cargo".into()));
     command
         .current_dir(dir)
         .env_remove("RUSTC_BOOTSTRAP")
+        .env_remove("RUSTC_WORKSPACE_WRAPPER")
+        .env_remove("CLIPPY_ARGS")
         .args(args)
         .arg("--target-dir")
         .arg(target_dir());
