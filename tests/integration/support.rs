@@ -19,35 +19,41 @@ pub fn pipelines() -> PathBuf {
 /// tests load): into the workspace's target folder, in the profile the tests were
 /// built with (`cargo test` builds in `test`, `cargo test --release` in `release`), so
 /// that the artifacts `cargo test` made are found fresh instead of the tree being
-/// compiled again.
+/// compiled again (with the compiler driver they were made with: .ci/run compiles the
+/// workspace with clippy's).
 pub fn cargo(dir: &Path, args: &[&str]) -> Command {
     let profile = if profile_dir() == "debug" {
         "test"
     } else {
         profile_dir()
     };
-    let mut command = cargo_outside(dir, args);
+    let mut command = cargo_in(dir, args);
     command.args(["--profile", profile]);
+    command
+}
+
+/// `cargo <args>` in `dir`, into the workspace's target folder. `RUSTC_BOOTSTRAP` is
+/// not passed on: a runner may set it for libtest's per-test times (.ci/timed), and
+/// cargo rebuilds everything when it changes.
+fn cargo_in(dir: &Path, args: &[&str]) -> Command {
+    let mut command = Command::new(std::env::var("CARGO").unwrap_or_else(|_| "cargo".into()));
+    command
+        .current_dir(dir)
+        .env_remove("RUSTC_BOOTSTRAP")
+        .args(args)
+        .arg("--target-dir")
+        .arg(target_dir());
     command
 }
 
 /// `cargo <args>` in `dir` for a crate outside the workspace (a scaffolded plugin, the
 /// skewed fixture): its own workspace and profiles, so nothing of the workspace's
 /// build is reused, and the quickest to compile (the default `dev` profile, in
-/// `target/debug`) serves best. `RUSTC_BOOTSTRAP` is not passed on: a runner may set
-/// it for libtest's per-test times (.ci/timed), and cargo rebuilds everything when it
-/// changes. Nor is clippy's driver (.ci/run compiles the workspace with it): the crate
-/// is built as its author's cargo builds it.
+/// `target/debug`) serves best. Clippy's driver is not passed on (.ci/run compiles the
+/// workspace with it): the crate is built as its author's cargo builds it.
 pub fn cargo_outside(dir: &Path, args: &[&str]) -> Command {
-    let mut command = Command::new(std::env::var("CARGO").unwrap_or_else(|_| "cargo".into()));
-    command
-        .current_dir(dir)
-        .env_remove("RUSTC_BOOTSTRAP")
-        .env_remove("RUSTC_WORKSPACE_WRAPPER")
-        .env_remove("CLIPPY_ARGS")
-        .args(args)
-        .arg("--target-dir")
-        .arg(target_dir());
+    let mut command = cargo_in(dir, args);
+    command.env_remove("RUSTC_WORKSPACE_WRAPPER").env_remove("CLIPPY_ARGS");
     command
 }
 
