@@ -53,7 +53,9 @@ fn cargo_in(dir: &Path, args: &[&str]) -> Command {
 /// workspace with it): the crate is built as its author's cargo builds it.
 pub fn cargo_outside(dir: &Path, args: &[&str]) -> Command {
     let mut command = cargo_in(dir, args);
-    command.env_remove("RUSTC_WORKSPACE_WRAPPER").env_remove("CLIPPY_ARGS");
+    command
+        .env_remove("RUSTC_WORKSPACE_WRAPPER")
+        .env_remove("CLIPPY_ARGS");
     command
 }
 
