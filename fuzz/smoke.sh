@@ -27,6 +27,11 @@ sanitizer="${FUZZ_SANITIZER:-none}"
 export CARGO_PROFILE_RELEASE_DEBUG=line-tables-only
 export CARGO_PROFILE_RELEASE_OPT_LEVEL="${FUZZ_OPT_LEVEL:-1}"
 "${fuzz[@]}" build -O -s "$sanitizer"
+# FUZZ_BUILD_ONLY=1 stops here: .ci/run builds the targets while the tests run, and
+# fuzzes once they are done.
+if [ "${FUZZ_BUILD_ONLY:-0}" = 1 ]; then
+    exit 0
+fi
 scratch="$(mktemp -d)"
 trap 'rm -rf "$scratch"' EXIT
 targets="stl obj threemf threemf_components pipeline machine script cli_roundtrip pipeline_values plugin_messages"
