@@ -26,15 +26,24 @@ fn regions(layer: &serde_json::Value) -> Vec<&serde_json::Value> {
         .collect()
 }
 
+/// Also with `step` left out: its default is the paper's t_g = 0.25.
 #[test]
 fn an_axis_source_steps_in_rings_of_the_right_area() {
-    let text = "[model]\nuse = \"box\"\nsize = [40.0, 40.0, 2.0]\nplace = \"centre\"\n\
+    for step in [", step = 0.25", ""] {
+        axis_source_rings(step);
+    }
+}
+
+fn axis_source_rings(step: &str) {
+    let text = format!(
+        "[model]\nuse = \"box\"\nsize = [40.0, 40.0, 2.0]\nplace = \"centre\"\n\
         [materials.a]\ncolour = [255, 0, 0]\n[materials.b]\ncolour = [0, 0, 255]\n\
         [discretise]\nuse = \"sources\"\n\
-        sources = [{ kind = \"axis\", at = [0.0, 0.0, 0.0], width = 16.0, start = \"a\", end = \"b\", step = 0.25 }]\n\
+        sources = [{{ kind = \"axis\", at = [0.0, 0.0, 0.0], width = 16.0, start = \"a\", end = \"b\"{step} }}]\n\
         [slice]\nuse = \"uniform\"\nthickness = 1.0\n\
-        [[output]]\nuse = \"json\"\npath = \"plan.json\"\n";
-    let plan = run(text);
+        [[output]]\nuse = \"json\"\npath = \"plan.json\"\n"
+    );
+    let plan = run(&text);
     let pi = std::f64::consts::PI;
     // f = d / 16 truncated at .125, .375, .625, .875: radii 2, 6, 10, 14.
     let want = [
@@ -316,5 +325,163 @@ fn behind_a_plane_the_composition_is_the_start_one() {
                 );
             }
         }
+    }
+}
+
+/// A source's composition names the part's materials, or as many fractions as it has;
+/// otherwise the run fails naming the source (counted from 0) and what is wrong.
+#[test]
+fn a_source_whose_composition_the_part_cannot_take_is_an_error_naming_it() {
+    let cases = [
+        ("\"c\"", "source 1: part `box` has no material `c`"),
+        (
+            "[0.5, 0.3, 0.2]",
+            "source 1: 3 fractions, part `box` has 2 materials",
+        ),
+        ("[1.0]", "source 1: 1 fractions, part `box` has 2 materials"),
+    ];
+    for (start, message) in cases {
+        let text = format!(
+            "[model]\nuse = \"box\"\nsize = [10.0, 10.0, 1.0]\nplace = \"centre\"\n\
+            [materials.a]\ncolour = [255, 0, 0]\n[materials.b]\ncolour = [0, 0, 255]\n\
+            [[parts]]\nname = \"box\"\nmaterials = [\"a\", \"b\"]\n\
+            [discretise]\nuse = \"sources\"\n\
+            sources = [{{ kind = \"point\", at = [0.0, 0.0, 0.0], width = 4.0, start = \"a\", end = \"b\" }}, \
+            {{ kind = \"point\", at = [2.0, 0.0, 0.0], width = 4.0, start = {start}, end = \"b\" }}]\n\
+            [slice]\nuse = \"uniform\"\nthickness = 1.0\n\
+            [[output]]\nuse = \"json\"\npath = \"plan.json\"\n"
+        );
+        let dir = tempfile::tempdir().expect("tempdir");
+        let out = crate::support::try_run_text(dir.path(), &text);
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert!(!out.status.success(), "{start}: the run passed");
+        assert!(stderr.contains(message), "{start}: {stderr}");
+        assert!(
+            !dir.path().join("out/plan.json").exists(),
+            "{start}: a plan was written"
+        );
+    }
+}
+
+/// Each way a source can be wrong is refused when the stage is built, at the key
+/// `sources`, naming the source (counted from 0) and what is wrong with it.
+#[test]
+fn a_source_that_cannot_grade_is_refused_naming_it() {
+    use lamina_core::stage::StageKind;
+    let good = "{ kind = \"point\", at = [0.0, 0.0, 0.0], width = 4.0, start = \"a\", end = \"b\" }";
+    let cases = [
+        (
+            "kind = \"point\", at = [1e300, 0.0, 0.0], width = 4.0",
+            "`at` must be three numbers within",
+        ),
+        (
+            "kind = \"axis\", at = [0.0, 0.0, 0.0], direction = [0.0, 0.0, 0.0], width = 4.0",
+            "`direction` must be a non-zero vector",
+        ),
+        (
+            "kind = \"plane\", at = [0.0, 0.0, 0.0], direction = [0.0, 0.0, 0.0], width = 4.0",
+            "`direction` (the normal) must be a non-zero vector",
+        ),
+        (
+            "kind = \"surface\", measure = \"layer\", faces = { normal = [0.0, 0.0, 1.0] }, width = 4.0",
+            "`faces` are chosen on the mesh",
+        ),
+        (
+            "kind = \"point\", at = [0.0, 0.0, 0.0]",
+            "give `width` (mm over which f runs from 0 to 1) or `alpha`",
+        ),
+        (
+            "kind = \"point\", at = [0.0, 0.0, 0.0], width = 4.0, alpha = 0.25",
+            "give either `width` (positive) or `alpha`, not both",
+        ),
+        (
+            "kind = \"point\", at = [0.0, 0.0, 0.0], width = -4.0",
+            "give either `width` (positive) or `alpha`, not both",
+        ),
+        (
+            "kind = \"point\", at = [0.0, 0.0, 0.0], alpha = 1e-9",
+            "`alpha` must be at least 1e-6 per mm",
+        ),
+        (
+            "kind = \"point\", at = [0.0, 0.0, 0.0], width = 4.0, k = 0.0",
+            "`k` must be a positive number",
+        ),
+        (
+            "kind = \"point\", at = [0.0, 0.0, 0.0], width = 4.0, weight = 0.0",
+            "`weight` must be a positive number",
+        ),
+        (
+            "kind = \"point\", at = [0.0, 0.0, 0.0], width = 4.0, measure = \"layer\"",
+            "`faces` and `measure` belong to `kind = \"surface\"`",
+        ),
+        (
+            "kind = \"plane\", at = [0.0, 0.0, 0.0], width = 4.0, faces = { normal = [0.0, 0.0, 1.0] }",
+            "`faces` and `measure` belong to `kind = \"surface\"`",
+        ),
+    ];
+    for (spec, message) in cases {
+        let table =
+            format!("use = \"sources\"\nsources = [{good}, {{ {spec}, start = \"a\", end = \"b\" }}]");
+        let error = match lamina_test_support::try_stage(StageKind::Discretise, &table, Path::new(".")) {
+            Ok(_) => panic!("{spec}: built"),
+            Err(e) => e.to_string(),
+        };
+        assert!(error.contains("sources"), "{spec}: {error}");
+        assert!(error.contains(&format!("source 1: {message}")), "{spec}: {error}");
+    }
+    // One well-made source builds.
+    let table = format!("use = \"sources\"\nsources = [{good}]");
+    assert!(lamina_test_support::try_stage(StageKind::Discretise, &table, Path::new(".")).is_ok());
+}
+
+/// The mesh is handed to the stage only where a source measures in space from the
+/// part's faces: a point source and a surface source measured in the layer do without.
+#[test]
+fn only_a_surface_source_measured_in_space_reads_the_mesh() {
+    let cases = [
+        ("kind = \"point\", at = [0.0, 0.0, 0.0]", false),
+        ("kind = \"surface\", measure = \"layer\"", false),
+        ("kind = \"surface\"", true),
+    ];
+    for (spec, reads) in cases {
+        let table = format!(
+            "use = \"sources\"\nsources = [{{ kind = \"axis\", at = [0.0, 0.0, 0.0], width = 4.0, start = \"a\", end = \"b\" }}, \
+             {{ {spec}, width = 4.0, start = \"a\", end = \"b\" }}]"
+        );
+        assert_eq!(
+            lamina_test_support::discretiser(&table).reads_mesh(),
+            reads,
+            "{spec}"
+        );
+    }
+}
+
+/// Behind a plane the plane's source does not grade (its effective region is
+/// 0 <= f <= 1, Eq. 3 puts the back at f < 0), so a point source there is on its own
+/// (Eq. 8 over the effective sources): at its centre its start composition alone, pure
+/// `a`, not blended with the plane's Ms. The point lies at the layer's mid-height, where
+/// the distance in space is measured.
+#[test]
+fn behind_a_plane_another_source_grades_alone() {
+    let text = "[model]\nuse = \"box\"\nsize = [40.0, 40.0, 1.0]\nplace = \"centre\"\n\
+        [materials.a]\ncolour = [255, 0, 0]\n[materials.b]\ncolour = [0, 0, 255]\n\
+        [discretise]\nuse = \"sources\"\n\
+        sources = [{ kind = \"plane\", at = [0.0, 0.0, 0.0], direction = [1.0, 0.0, 0.0], width = 10.0, start = [0.75, 0.25], end = [0.0, 1.0] }, \
+        { kind = \"point\", at = [-10.0, 0.0, 0.5], width = 4.0, start = \"a\", end = \"b\" }]\n\
+        [slice]\nuse = \"uniform\"\nthickness = 1.0\n\
+        [[output]]\nuse = \"json\"\npath = \"plan.json\"\n";
+    let plan = run(text);
+    for layer in plan["layers"].as_array().expect("layers") {
+        // f = d / 4 below the first half step (d < 0.5 mm): a disc of radius 0.5.
+        let pure: Vec<f64> = regions(layer)
+            .iter()
+            .filter(|r| r["composition"]["a"].as_f64() == Some(1.0))
+            .map(|r| r["area"].as_f64().expect("area"))
+            .collect();
+        let disc = std::f64::consts::PI * 0.25;
+        assert!(
+            pure.len() == 1 && (pure[0] - disc).abs() < 1e-3 * disc,
+            "the point source's centre: {pure:?} mm², want {disc}"
+        );
     }
 }
