@@ -403,6 +403,10 @@ fn a_source_that_cannot_grade_is_refused_naming_it() {
             "`alpha` must be at least 1e-6 per mm",
         ),
         (
+            "kind = \"point\", at = [0.0, 0.0, 0.0], width = 0.0",
+            "give either `width` (positive) or `alpha`, not both",
+        ),
+        (
             "kind = \"point\", at = [0.0, 0.0, 0.0], width = 4.0, k = 0.0",
             "`k` must be a positive number",
         ),
@@ -484,4 +488,32 @@ fn behind_a_plane_another_source_grades_alone() {
             "the point source's centre: {pure:?} mm², want {disc}"
         );
     }
+}
+
+/// `alpha` is the inverse of `width`, and a direction is only a direction: a plane
+/// given by `alpha = 0.1` and the normal [3, 0, 0] grades as one given by `width = 10`
+/// and [1, 0, 0].
+#[test]
+fn a_source_by_alpha_and_any_length_of_direction_is_the_source_by_width() {
+    let plan = |spec: &str| {
+        let text = format!(
+            "[model]\nuse = \"box\"\nsize = [40.0, 40.0, 1.0]\nplace = \"centre\"\n\
+            [materials.a]\ncolour = [255, 0, 0]\n[materials.b]\ncolour = [0, 0, 255]\n\
+            [discretise]\nuse = \"sources\"\n\
+            sources = [{{ kind = \"plane\", at = [0.0, 0.0, 0.0], {spec}, start = \"a\", end = \"b\" }}]\n\
+            [slice]\nuse = \"uniform\"\nthickness = 1.0\n\
+            [[output]]\nuse = \"json\"\npath = \"plan.json\"\n"
+        );
+        let plan = run(&text);
+        let layers = plan["layers"].as_array().expect("layers");
+        layers.iter().map(|l| l["parts"].clone()).collect::<Vec<_>>()
+    };
+    let by_width = plan("direction = [1.0, 0.0, 0.0], width = 10.0");
+    let by_alpha = plan("direction = [3.0, 0.0, 0.0], alpha = 0.1");
+    assert_eq!(by_width, by_alpha);
+    // Steps in front of the plane and the back: the source did grade.
+    let regions = by_width[0][0]["families"][0]["sub_regions"]
+        .as_array()
+        .map(Vec::len);
+    assert!(regions.is_some_and(|n| n >= 4), "{regions:?}");
 }
