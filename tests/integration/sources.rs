@@ -27,6 +27,20 @@ fn regions(layer: &serde_json::Value) -> Vec<&serde_json::Value> {
 }
 
 /// Also with `step` left out: its default is the paper's t_g = 0.25.
+/// A pipeline: a box of `size` on the bed's centre, in materials `a` and `b`, cut into
+/// 1 mm layers and discretised by `sources` with `options` (the lines of its table
+/// after `use`), its plan written to `plan.json`.
+fn graded_box(size: [f64; 3], options: &str) -> String {
+    format!(
+        "[model]\nuse = \"box\"\nsize = [{:?}, {:?}, {:?}]\nplace = \"centre\"\n\
+        [materials.a]\ncolour = [255, 0, 0]\n[materials.b]\ncolour = [0, 0, 255]\n\
+        [discretise]\nuse = \"sources\"\n{options}\n\
+        [slice]\nuse = \"uniform\"\nthickness = 1.0\n\
+        [[output]]\nuse = \"json\"\npath = \"plan.json\"\n",
+        size[0], size[1], size[2]
+    )
+}
+
 #[test]
 fn an_axis_source_steps_in_rings_of_the_right_area() {
     for step in [", step = 0.25", ""] {
@@ -35,15 +49,12 @@ fn an_axis_source_steps_in_rings_of_the_right_area() {
 }
 
 fn axis_source_rings(step: &str) {
-    let text = format!(
-        "[model]\nuse = \"box\"\nsize = [40.0, 40.0, 2.0]\nplace = \"centre\"\n\
-        [materials.a]\ncolour = [255, 0, 0]\n[materials.b]\ncolour = [0, 0, 255]\n\
-        [discretise]\nuse = \"sources\"\n\
-        sources = [{{ kind = \"axis\", at = [0.0, 0.0, 0.0], width = 16.0, start = \"a\", end = \"b\"{step} }}]\n\
-        [slice]\nuse = \"uniform\"\nthickness = 1.0\n\
-        [[output]]\nuse = \"json\"\npath = \"plan.json\"\n"
-    );
-    let plan = run(&text);
+    let plan = run(&graded_box(
+        [40.0, 40.0, 2.0],
+        &format!(
+            "sources = [{{ kind = \"axis\", at = [0.0, 0.0, 0.0], width = 16.0, start = \"a\", end = \"b\"{step} }}]"
+        ),
+    ));
     let pi = std::f64::consts::PI;
     // f = d / 16 truncated at .125, .375, .625, .875: radii 2, 6, 10, 14.
     let want = [
@@ -273,15 +284,13 @@ fn a_surface_source_measures_in_space_from_every_face() {
 #[test]
 fn behind_a_plane_the_composition_is_the_start_one() {
     for combine in ["intersection", "everywhere"] {
-        let text = format!(
-            "[model]\nuse = \"box\"\nsize = [40.0, 40.0, 2.0]\nplace = \"centre\"\n\
-            [materials.a]\ncolour = [255, 0, 0]\n[materials.b]\ncolour = [0, 0, 255]\n\
-            [discretise]\nuse = \"sources\"\ncombine = \"{combine}\"\n\
-            sources = [{{ kind = \"plane\", at = [0.0, 0.0, 0.0], direction = [1.0, 0.0, 0.0], width = 10.0, start = [0.75, 0.25], end = [0.0, 1.0], step = 0.25 }}]\n\
-            [slice]\nuse = \"uniform\"\nthickness = 1.0\n\
-            [[output]]\nuse = \"json\"\npath = \"plan.json\"\n"
-        );
-        let plan = run(&text);
+        let plan = run(&graded_box(
+            [40.0, 40.0, 2.0],
+            &format!(
+                "combine = \"{combine}\"\n\
+                sources = [{{ kind = \"plane\", at = [0.0, 0.0, 0.0], direction = [1.0, 0.0, 0.0], width = 10.0, start = [0.75, 0.25], end = [0.0, 1.0], step = 0.25 }}]"
+            ),
+        ));
         for layer in plan["layers"].as_array().expect("layers") {
             let mut behind = 0;
             let mut by_a: Vec<(f64, f64)> = Vec::new();
@@ -341,16 +350,13 @@ fn a_source_whose_composition_the_part_cannot_take_is_an_error_naming_it() {
         ("[1.0]", "source 1: 1 fractions, part `box` has 2 materials"),
     ];
     for (start, message) in cases {
-        let text = format!(
-            "[model]\nuse = \"box\"\nsize = [10.0, 10.0, 1.0]\nplace = \"centre\"\n\
-            [materials.a]\ncolour = [255, 0, 0]\n[materials.b]\ncolour = [0, 0, 255]\n\
-            [[parts]]\nname = \"box\"\nmaterials = [\"a\", \"b\"]\n\
-            [discretise]\nuse = \"sources\"\n\
-            sources = [{{ kind = \"point\", at = [0.0, 0.0, 0.0], width = 4.0, start = \"a\", end = \"b\" }}, \
-            {{ kind = \"point\", at = [2.0, 0.0, 0.0], width = 4.0, start = {start}, end = \"b\" }}]\n\
-            [slice]\nuse = \"uniform\"\nthickness = 1.0\n\
-            [[output]]\nuse = \"json\"\npath = \"plan.json\"\n"
-        );
+        let text = graded_box(
+            [10.0, 10.0, 1.0],
+            &format!(
+                "sources = [{{ kind = \"point\", at = [0.0, 0.0, 0.0], width = 4.0, start = \"a\", end = \"b\" }}, \
+                {{ kind = \"point\", at = [2.0, 0.0, 0.0], width = 4.0, start = {start}, end = \"b\" }}]"
+            ),
+        ) + "[[parts]]\nname = \"box\"\nmaterials = [\"a\", \"b\"]\n";
         let dir = tempfile::tempdir().expect("tempdir");
         let out = crate::support::try_run_text(dir.path(), &text);
         let stderr = String::from_utf8_lossy(&out.stderr);
@@ -467,14 +473,11 @@ fn only_a_surface_source_measured_in_space_reads_the_mesh() {
 /// the distance in space is measured.
 #[test]
 fn behind_a_plane_another_source_grades_alone() {
-    let text = "[model]\nuse = \"box\"\nsize = [40.0, 40.0, 1.0]\nplace = \"centre\"\n\
-        [materials.a]\ncolour = [255, 0, 0]\n[materials.b]\ncolour = [0, 0, 255]\n\
-        [discretise]\nuse = \"sources\"\n\
-        sources = [{ kind = \"plane\", at = [0.0, 0.0, 0.0], direction = [1.0, 0.0, 0.0], width = 10.0, start = [0.75, 0.25], end = [0.0, 1.0] }, \
-        { kind = \"point\", at = [-10.0, 0.0, 0.5], width = 4.0, start = \"a\", end = \"b\" }]\n\
-        [slice]\nuse = \"uniform\"\nthickness = 1.0\n\
-        [[output]]\nuse = \"json\"\npath = \"plan.json\"\n";
-    let plan = run(text);
+    let plan = run(&graded_box(
+        [40.0, 40.0, 1.0],
+        "sources = [{ kind = \"plane\", at = [0.0, 0.0, 0.0], direction = [1.0, 0.0, 0.0], width = 10.0, start = [0.75, 0.25], end = [0.0, 1.0] }, \
+        { kind = \"point\", at = [-10.0, 0.0, 0.5], width = 4.0, start = \"a\", end = \"b\" }]",
+    ));
     for layer in plan["layers"].as_array().expect("layers") {
         // f = d / 4 below the first half step (d < 0.5 mm): a disc of radius 0.5.
         let pure: Vec<f64> = regions(layer)
@@ -496,15 +499,12 @@ fn behind_a_plane_another_source_grades_alone() {
 #[test]
 fn a_source_by_alpha_and_any_length_of_direction_is_the_source_by_width() {
     let plan = |spec: &str| {
-        let text = format!(
-            "[model]\nuse = \"box\"\nsize = [40.0, 40.0, 1.0]\nplace = \"centre\"\n\
-            [materials.a]\ncolour = [255, 0, 0]\n[materials.b]\ncolour = [0, 0, 255]\n\
-            [discretise]\nuse = \"sources\"\n\
-            sources = [{{ kind = \"plane\", at = [0.0, 0.0, 0.0], {spec}, start = \"a\", end = \"b\" }}]\n\
-            [slice]\nuse = \"uniform\"\nthickness = 1.0\n\
-            [[output]]\nuse = \"json\"\npath = \"plan.json\"\n"
-        );
-        let plan = run(&text);
+        let plan = run(&graded_box(
+            [40.0, 40.0, 1.0],
+            &format!(
+                "sources = [{{ kind = \"plane\", at = [0.0, 0.0, 0.0], {spec}, start = \"a\", end = \"b\" }}]"
+            ),
+        ));
         let layers = plan["layers"].as_array().expect("layers");
         layers.iter().map(|l| l["parts"].clone()).collect::<Vec<_>>()
     };
