@@ -246,6 +246,15 @@ fn holds(paths: &[Toolpath]) -> Vec<Hold> {
     out
 }
 
+/// The seconds `tool` has spent moving at time `t`: `t` less its pauses before.
+fn route_time(holds: &[Hold], tool: usize, t: f64) -> f64 {
+    t - holds
+        .iter()
+        .filter(|h| h.tool == tool)
+        .map(|h| (t.min(h.to) - h.from).max(0.0))
+        .sum::<f64>()
+}
+
 /// Checks the paper's rule on a two-tool schedule: whenever one tool starts a pause
 /// while the other goes on (an encounter decided by priority, not a tool held behind
 /// a held one or both held for a side-step), the one going on was at least as fast
@@ -255,8 +264,15 @@ fn holds(paths: &[Toolpath]) -> Vec<Hold> {
 /// was. Returns the encounters decided by speed and those forced.
 fn check_priority_by_speed_along_x(paths: &[Toolpath], step: f64, horizon: f64, e: f64) -> (usize, usize) {
     let lines = [timeline(paths, 0), timeline(paths, 1)];
+    let holds = holds(paths);
+    let routes = [0, 1].map(|tool| {
+        lines[tool]
+            .iter()
+            .map(|&(t, p)| (route_time(&holds, tool, t), p))
+            .collect::<Vec<_>>()
+    });
     let (mut decided, mut forced) = (0, 0);
-    for h in holds(paths) {
+    for h in &holds {
         let other = 1 - h.tool;
         let line = &lines[other];
         if line.is_empty() {
@@ -279,11 +295,15 @@ fn check_priority_by_speed_along_x(paths: &[Toolpath], step: f64, horizon: f64, 
         // Would holding the other have cleared the way? Its position then against this
         // tool's motion after the pause, sampled finely (a little slack for the
         // samples missing the closest approach between them).
+        // The route is followed for `horizon` seconds of motion: later pauses of this
+        // tool are left out, as the planner's look along the route leaves them out.
         let held = position(line, h.from);
+        let route = &routes[h.tool];
+        let start = route_time(&holds, h.tool, h.to);
         let samples = (horizon / 1e-3).ceil() as usize;
         let near = (0..=samples).any(|k| {
-            let t = h.to + horizon * k as f64 / samples as f64;
-            (position(&lines[h.tool], t) - held).norm() < e + 0.05
+            let t = start + horizon * k as f64 / samples as f64;
+            (position(route, t) - held).norm() < e + 0.05
         });
         if near {
             forced += 1;
