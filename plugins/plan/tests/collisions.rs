@@ -246,12 +246,33 @@ fn holds(paths: &[Toolpath]) -> Vec<Hold> {
     out
 }
 
-/// The seconds `tool` has spent moving at time `t`: `t` less its pauses before.
-fn route_time(holds: &[Hold], tool: usize, t: f64) -> f64 {
-    t - holds
+/// The intervals in which `tool` does not follow its route: its pauses, and its
+/// side-steps (a travel out and the travel straight back to where it left).
+fn off_route(paths: &[Toolpath], tool: usize) -> Vec<(f64, f64)> {
+    let mut mine: Vec<&Toolpath> = paths.iter().filter(|p| p.tool == tool).collect();
+    mine.sort_by(|a, b| a.points[0].t.total_cmp(&b.points[0].t));
+    let ends = |p: &Toolpath| (p.points[0], p.points[p.points.len() - 1]);
+    let mut out = Vec::new();
+    for (k, p) in mine.iter().enumerate() {
+        if p.kind == PathKind::Pause {
+            out.push((ends(p).0.t, ends(p).1.t));
+        } else if let Some(back) = mine.get(k + 1)
+            && p.kind == PathKind::Travel
+            && back.kind == PathKind::Travel
+            && (ends(back).1.p - ends(p).0.p).norm() < 1e-9
+        {
+            out.push((ends(p).0.t, ends(back).1.t));
+        }
+    }
+    out
+}
+
+/// The seconds a tool has followed its route at time `t`: `t` less the time it spent
+/// off it before ([`off_route`]).
+fn route_time(off: &[(f64, f64)], t: f64) -> f64 {
+    t - off
         .iter()
-        .filter(|h| h.tool == tool)
-        .map(|h| (t.min(h.to) - h.from).max(0.0))
+        .map(|&(from, to)| (t.min(to) - from).max(0.0))
         .sum::<f64>()
 }
 
@@ -264,15 +285,15 @@ fn route_time(holds: &[Hold], tool: usize, t: f64) -> f64 {
 /// was. Returns the encounters decided by speed and those forced.
 fn check_priority_by_speed_along_x(paths: &[Toolpath], step: f64, horizon: f64, e: f64) -> (usize, usize) {
     let lines = [timeline(paths, 0), timeline(paths, 1)];
-    let holds = holds(paths);
+    let off = [off_route(paths, 0), off_route(paths, 1)];
     let routes = [0, 1].map(|tool| {
         lines[tool]
             .iter()
-            .map(|&(t, p)| (route_time(&holds, tool, t), p))
+            .map(|&(t, p)| (route_time(&off[tool], t), p))
             .collect::<Vec<_>>()
     });
     let (mut decided, mut forced) = (0, 0);
-    for h in &holds {
+    for h in holds(paths) {
         let other = 1 - h.tool;
         let line = &lines[other];
         if line.is_empty() {
@@ -295,11 +316,12 @@ fn check_priority_by_speed_along_x(paths: &[Toolpath], step: f64, horizon: f64, 
         // Would holding the other have cleared the way? Its position then against this
         // tool's motion after the pause, sampled finely (a little slack for the
         // samples missing the closest approach between them).
-        // The route is followed for `horizon` seconds of motion: later pauses of this
-        // tool are left out, as the planner's look along the route leaves them out.
+        // The route is followed for `horizon` seconds of motion: later pauses and
+        // side-steps of this tool are left out, as the planner's look along the route
+        // leaves them out.
         let held = position(line, h.from);
         let route = &routes[h.tool];
-        let start = route_time(&holds, h.tool, h.to);
+        let start = route_time(&off[h.tool], h.to);
         let samples = (horizon / 1e-3).ceil() as usize;
         let near = (0..=samples).any(|k| {
             let t = start + horizon * k as f64 / samples as f64;
