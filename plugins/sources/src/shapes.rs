@@ -373,6 +373,30 @@ mod tests {
         BBox2::from_points([Point2::new(-50.0, -50.0), Point2::new(50.0, 50.0)])
     }
 
+    /// How far the chords of a regular `n`-gon inscribed in a circle of radius `r`
+    /// stray from the circle.
+    fn sagitta(r: f64, n: usize) -> f64 {
+        r * (1.0 - (std::f64::consts::PI / n as f64).cos())
+    }
+
+    #[test]
+    fn arcs_take_the_fewest_chords_within_the_tolerance() {
+        for (r, tolerance) in [(10.0, 0.01), (2.0, 1e-4), (40.0, 0.005), (0.5, 1e-3)] {
+            let n = segments(r, tolerance);
+            assert!(n > 16 && n < 20_000, "{r} {tolerance}: {n}");
+            assert!(sagitta(r, n) <= tolerance * (1.0 + 1e-9), "{r} {tolerance}: {n}");
+            assert!(
+                sagitta(r, n - 1) > tolerance,
+                "{r} {tolerance}: {n} is not the fewest"
+            );
+        }
+        // A tolerance near the radius would take a few chords; a circle keeps 16. A
+        // tolerance far below it would take millions; 20,000 bound the work.
+        assert_eq!(segments(1.0, 0.9), 16);
+        assert_eq!(segments(1.0, 5.0), 16);
+        assert_eq!(segments(100.0, 1e-9), 20_000);
+    }
+
     #[test]
     fn a_point_cuts_a_disc_of_the_remaining_radius() {
         let s = closer_than(&Datum::Point([0.0, 0.0, 3.0]), 5.0, 0.0, &bbox(), 1e-4, &vec![]);
