@@ -397,6 +397,194 @@ mod tests {
         assert_eq!(segments(100.0, 1e-9), 20_000);
     }
 
+    /// The box from `(x0, y0)` to `(x1, y1)` as shapes.
+    fn rect(x0: f64, y0: f64, x1: f64, y1: f64) -> Shapes {
+        vec![vec![vec![[x0, y0], [x1, y0], [x1, y1], [x0, y1]]]]
+    }
+
+    fn shapes(set: Set) -> Shapes {
+        match set {
+            Set::Shapes(s) => s,
+            other => panic!("shapes expected, not {other:?}"),
+        }
+    }
+
+    /// The area of the ellipse of centre `c`, semi-axes `a` along `e1` and `b` across,
+    /// within the box `[x0, x1] x [y0, y1]`, by the midpoint rule on a fine grid.
+    fn ellipse_in(c: [f64; 2], e1: [f64; 2], a: f64, b: f64, [x0, y0, x1, y1]: [f64; 4]) -> f64 {
+        let n = 2000;
+        let (cx, cy) = ((x1 - x0) / n as f64, (y1 - y0) / n as f64);
+        let mut inside = 0usize;
+        for i in 0..n {
+            for j in 0..n {
+                let (x, y) = (
+                    x0 + (i as f64 + 0.5) * cx - c[0],
+                    y0 + (j as f64 + 0.5) * cy - c[1],
+                );
+                let (s, t) = (x * e1[0] + y * e1[1], -x * e1[1] + y * e1[0]);
+                if (s / a).powi(2) + (t / b).powi(2) < 1.0 {
+                    inside += 1;
+                }
+            }
+        }
+        inside as f64 * cx * cy
+    }
+
+    #[test]
+    fn an_ellipse_far_larger_than_the_box_is_cut_to_it_from_its_own_arcs() {
+        // An axis nearly parallel to the layer: an ellipse a kilometre long whose end
+        // crosses the box. Only its part over the box is drawn, and within the box it
+        // is the ellipse.
+        let h = 50.0;
+        let (x0, y0) = (0.6f64, 0.8f64);
+        for (c, e1, a, b) in [
+            ([1000.0, 5.0], [1.0, 0.0], 1020.0, 30.0),
+            ([-1000.0 * x0, -1000.0 * y0 + 10.0], [x0, y0], 1030.0, 25.0),
+            ([3.0, 900.0], [0.0, 1.0], 930.0, 40.0),
+            // Wide enough to cover the whole box, square to it or turned.
+            ([1000.0, 0.0], [1.0, 0.0], 1100.0, 500.0),
+            ([-1000.0 * x0, -1000.0 * y0], [x0, y0], 1100.0, 500.0),
+        ] {
+            let set = ellipse_over(c, e1, a, b, 1e-3, &bbox());
+            let within = intersect(&shapes(set), &rect(-h, -h, h, h));
+            let want = ellipse_in(c, e1, a, b, [-h, -h, h, h]);
+            assert!(
+                (area(&within) - want).abs() < 2e-3 * want,
+                "{c:?}: {} against {want}",
+                area(&within)
+            );
+            // Drawn over the box (grown by its margin) only, not a kilometre long.
+            let drawn = shapes(ellipse_over(c, e1, a, b, 1e-3, &bbox()));
+            let reach = 1.1 * 2.0 * h * std::f64::consts::SQRT_2;
+            for p in drawn.iter().flatten().flatten() {
+                assert!(p[0].hypot(p[1]) <= reach, "{p:?} is far from the box");
+            }
+        }
+        // A long ellipse that passes the box by: nothing, on either side and either end.
+        for c in [[1100.0, 0.0], [-1100.0, 0.0], [0.0, 1100.0], [0.0, -1100.0]] {
+            assert!(
+                matches!(
+                    ellipse_over(c, [1.0, 0.0], 1000.0, 20.0, 1e-3, &bbox()),
+                    Set::Empty
+                ),
+                "{c:?}"
+            );
+            assert!(
+                matches!(
+                    ellipse_over(c, [0.0, 1.0], 1000.0, 20.0, 1e-3, &bbox()),
+                    Set::Empty
+                ),
+                "{c:?}"
+            );
+        }
+        // Near the box, the whole ellipse, of the ellipse's own area.
+        let whole = shapes(ellipse_over([10.0, -5.0], [x0, y0], 30.0, 12.0, 1e-3, &bbox()));
+        let want = std::f64::consts::PI * 30.0 * 12.0;
+        assert!((area(&whole) - want).abs() < 1e-9 * want, "{}", area(&whole));
+        // Turned along its axis: a quarter of the plane about its centre holds the
+        // share the ellipse puts there.
+        let quarter = [10.0, -5.0, 60.0, 60.0];
+        let want = ellipse_in([10.0, -5.0], [x0, y0], 30.0, 12.0, quarter);
+        let got = area(&intersect(
+            &whole,
+            &rect(quarter[0], quarter[1], quarter[2], quarter[3]),
+        ));
+        assert!((got - want).abs() < 2e-3 * want, "{got} against {want}");
+    }
+
+    #[test]
+    fn a_half_plane_cuts_the_box() {
+        let b = BBox2::from_points([Point2::new(0.0, 0.0), Point2::new(10.0, 20.0)]);
+        // x < 3: a strip of the box.
+        assert!((area(&shapes(half_plane(&b, [1.0, 0.0], 3.0))) - 60.0).abs() < 1e-9);
+        // -x < -3, that is x > 3.
+        assert!((area(&shapes(half_plane(&b, [-1.0, 0.0], -3.0))) - 140.0).abs() < 1e-9);
+        // y < 15, and y > 15.
+        assert!((area(&shapes(half_plane(&b, [0.0, 1.0], 15.0))) - 150.0).abs() < 1e-9);
+        assert!((area(&shapes(half_plane(&b, [0.0, -1.0], -15.0))) - 50.0).abs() < 1e-9);
+        // x + y < 5: the triangle at the origin's corner; x + y < 25: all but the
+        // triangle at the far corner.
+        assert!((area(&shapes(half_plane(&b, [1.0, 1.0], 5.0))) - 12.5).abs() < 1e-9);
+        assert!((area(&shapes(half_plane(&b, [1.0, 1.0], 25.0))) - (200.0 - 12.5)).abs() < 1e-9);
+        // The whole box on the side, or none of it.
+        assert!(matches!(half_plane(&b, [1.0, 0.0], 11.0), Set::Whole));
+        assert!(matches!(half_plane(&b, [1.0, 1.0], 31.0), Set::Whole));
+        assert!(matches!(half_plane(&b, [1.0, 0.0], -1.0), Set::Empty));
+        assert!(matches!(half_plane(&b, [-1.0, -1.0], -31.0), Set::Empty));
+        // Touching a corner only: nothing of the box is on the side.
+        assert!(matches!(half_plane(&b, [1.0, 1.0], 0.0), Set::Empty));
+    }
+
+    #[test]
+    fn a_horizontal_axis_off_the_centre_cuts_a_strip_of_its_own_width() {
+        // An axis along y through x = 10, at height 2; a distance of 5 at z = 6 leaves
+        // |x - 10| < 3 over the box's 100 mm.
+        let axis = Datum::Axis {
+            at: [10.0, 0.0, 2.0],
+            direction: [0.0, 1.0, 0.0],
+        };
+        let strip = shapes(closer_than(&axis, 5.0, 6.0, &bbox(), 1e-4, &vec![]));
+        assert!((area(&strip) - 600.0).abs() < 1e-6, "{}", area(&strip));
+        for p in strip.iter().flatten().flatten() {
+            assert!((p[0] - 10.0).abs() <= 3.0 + 1e-9, "{p:?}");
+        }
+        // Too high above it, nothing; a strip beyond the box, nothing; one wider than
+        // the box, all of it.
+        assert!(matches!(
+            closer_than(&axis, 5.0, 7.5, &bbox(), 1e-4, &vec![]),
+            Set::Empty
+        ));
+        let aside = Datum::Axis {
+            at: [80.0, 0.0, 0.0],
+            direction: [0.0, -2.0, 0.0],
+        };
+        assert!(matches!(
+            closer_than(&aside, 5.0, 0.0, &bbox(), 1e-4, &vec![]),
+            Set::Empty
+        ));
+        let wide = Datum::Axis {
+            at: [0.0, 0.0, 0.0],
+            direction: [0.0, 1.0, 0.0],
+        };
+        assert!(matches!(
+            closer_than(&wide, 80.0, 0.0, &bbox(), 1e-4, &vec![]),
+            Set::Whole
+        ));
+        // A vertical axis: a disc of the distance at every height.
+        let vertical = Datum::Axis {
+            at: [5.0, -5.0, 0.0],
+            direction: [0.0, 0.0, 1.0],
+        };
+        let disc = shapes(closer_than(&vertical, 4.0, 30.0, &bbox(), 1e-4, &vec![]));
+        assert!((area(&disc) - std::f64::consts::PI * 16.0).abs() < 1e-9);
+    }
+
+    #[test]
+    fn sets_meet_shapes_as_all_nothing_or_their_own() {
+        let a = rect(0.0, 0.0, 10.0, 10.0);
+        let b = rect(5.0, 0.0, 15.0, 10.0);
+        let none: Shapes = Vec::new();
+        assert!((area(&intersect(&a, &b)) - 50.0).abs() < 1e-9);
+        assert!((area(&difference(&a, &b)) - 50.0).abs() < 1e-9);
+        assert!((area(&union(&a, &b)) - 150.0).abs() < 1e-9);
+        assert!(intersect(&a, &none).is_empty() && intersect(&none, &a).is_empty());
+        assert_eq!(difference(&a, &none), a);
+        assert!(difference(&none, &a).is_empty());
+        assert_eq!(union(&a, &none), a);
+        assert_eq!(union(&none, &b), b);
+        assert!(Set::Empty.intersect(&a).is_empty());
+        assert_eq!(Set::Whole.intersect(&a), a);
+        assert!((area(&Set::Shapes(b.clone()).intersect(&a)) - 50.0).abs() < 1e-9);
+        assert_eq!(Set::Empty.subtract_from(&a), a);
+        assert!(Set::Whole.subtract_from(&a).is_empty());
+        assert!((area(&Set::Shapes(b).subtract_from(&a)) - 50.0).abs() < 1e-9);
+        // A bow tie (a ring through itself) resolves into its two triangles.
+        let bow: Shapes = vec![vec![vec![[0.0, 0.0], [10.0, 10.0], [10.0, 0.0], [0.0, 10.0]]]];
+        let clean = clean(&bow);
+        assert_eq!(clean.len(), 2, "{clean:?}");
+        assert!((area(&clean) - 50.0).abs() < 1e-9);
+    }
+
     #[test]
     fn a_point_cuts_a_disc_of_the_remaining_radius() {
         let s = closer_than(&Datum::Point([0.0, 0.0, 3.0]), 5.0, 0.0, &bbox(), 1e-4, &vec![]);
