@@ -94,6 +94,9 @@ lamina_api::stage_options! {
         /// room (mm) beyond the envelopes that looking ahead keeps between two tools: one following another hangs back this much more, pausing less often and for longer (on a machine with two motion systems, far fewer synchronisation points, each of which stops both nozzles with their filament pulled back); the envelopes themselves are kept either way
         #[range(0.0, 1e3)]
         room: f64 = "0.0",
+        /// how many orders of each tool's loops two free heads try per layer: the nearest-next order from where the tool enters, then from the corners of the work farthest from it; every pair of orders is scheduled (`orders`² schedules a layer) and the fastest kept, each synchronisation counted at its cost (see `keep_faster`). 1 tries the first order only. Heads on two gantries, which sweep the layer front to back, and three or more busy tools take the first
+        #[range(1, 5)]
+        orders: usize = "2",
         /// deposit a layer one tool at a time when that is faster than the concurrent schedule, each synchronisation of the heads counted at what it costs the machine (a stop, and a retraction, on a machine with two motion systems); a note says which and why. `false` keeps the concurrent schedule (with a warning when it is slower). A layer whose tools stay blocked falls back to one tool at a time regardless
         keep_faster: bool = "true",
     }
@@ -356,12 +359,17 @@ fn rear(info: &RunInfo, index: usize, name: &str) -> bool {
 struct Layer {
     tools: Vec<ToolSpec>,
     routes: Vec<Vec<Move>>,
+    /// Per tool, its routes in other orders (`Options::orders`; none for a planner
+    /// that takes the first).
+    others: Vec<Vec<Vec<Move>>>,
     /// Where a tool may step aside: anywhere above the entry row below the deposits,
     /// which keeps it clear of every park.
     arena: BBox2,
 }
 
-fn prepare(o: &Options, info: &RunInfo, plan: &mut LayerPlan, step: f64) -> Result<Layer> {
+/// The layer's work and each tool's route; with `orders` > 1, also each tool's routes
+/// in up to `orders - 1` other orders.
+fn prepare(o: &Options, info: &RunInfo, plan: &mut LayerPlan, step: f64, orders: usize) -> Result<Layer> {
     let tools = o.tools(info)?;
     if tools.is_empty() {
         return Err(Error::stage("plan", "the pipeline has no materials, so no tools"));
@@ -426,6 +434,31 @@ fn prepare(o: &Options, info: &RunInfo, plan: &mut LayerPlan, step: f64) -> Resu
         Parks::new(&work.bbox, tools.len(), 2.0 * rmax + 2.0 * vmax * step + 1.0).within(&bed_reach(info));
     // Gantries sweep the layer front to back in bands of an envelope.
     let sweep = (head_class(info) == HeadClass::DualGantry).then_some(rmax);
+    // Each tool's other orders: nearest-next from the corners of the work, farthest
+    // from where the tool enters first.
+    let others: Vec<Vec<Vec<Move>>> = if orders > 1 && sweep.is_none() && !work.bbox.is_empty() {
+        tools
+            .iter()
+            .zip(&work.jobs)
+            .map(|(t, jobs)| {
+                let (b, entry) = (&work.bbox, parks.entry_of(t));
+                let mut corners = [
+                    b.min,
+                    Point2::new(b.max.x, b.min.y),
+                    b.max,
+                    Point2::new(b.min.x, b.max.y),
+                ];
+                corners.sort_by(|p, q| (q - entry).norm().total_cmp(&(p - entry).norm()));
+                corners
+                    .into_iter()
+                    .take(orders - 1)
+                    .map(|from| route::route_from(t, jobs.clone(), &parks, o.seam, sweep, from))
+                    .collect()
+            })
+            .collect()
+    } else {
+        Vec::new()
+    };
     let routes = tools
         .iter()
         .zip(work.jobs)
@@ -439,7 +472,12 @@ fn prepare(o: &Options, info: &RunInfo, plan: &mut LayerPlan, step: f64) -> Resu
             max: Point2::new(f64::MAX, f64::MAX),
         }
     };
-    Ok(Layer { tools, routes, arena })
+    Ok(Layer {
+        tools,
+        routes,
+        others,
+        arena,
+    })
 }
 
 /// One tool after another in tool order, each out of its park and back, with a tool
@@ -493,7 +531,7 @@ struct Concurrent(Options);
 
 impl Planner for Sequential {
     fn plan(&self, info: &RunInfo, plan: &mut LayerPlan) -> Result<()> {
-        let layer = prepare(&self.0, info, plan, self.0.step())?;
+        let layer = prepare(&self.0, info, plan, self.0.step(), 1)?;
         let (paths, t) = sequential(&layer, self.0.tool_change);
         lay(&self.0, plan, paths);
         plan.build_time = Some(plan.build_time.unwrap_or(0.0) + t);
@@ -505,7 +543,7 @@ impl Planner for Sequential {
 impl Planner for Concurrent {
     fn plan(&self, info: &RunInfo, plan: &mut LayerPlan) -> Result<()> {
         let o = &self.0;
-        let layer = prepare(o, info, plan, o.step())?;
+        let layer = prepare(o, info, plan, o.step(), o.orders)?;
         let (seq_paths, seq_time) = sequential(&layer, o.tool_change);
         let class = head_class(info);
         if class == HeadClass::SharedBeam && layer.routes.iter().filter(|r| !r.is_empty()).count() > 1 {
@@ -529,6 +567,21 @@ impl Planner for Concurrent {
             .filter(|(_, r)| !r.is_empty())
             .map(|(t, r)| (t, r.clone()))
             .collect();
+        // The busy tools, tool k on its route in order `choice[k]` (0: the first).
+        let in_orders = |choice: &[usize]| -> Vec<(&ToolSpec, Vec<Move>)> {
+            layer
+                .tools
+                .iter()
+                .zip(&layer.routes)
+                .enumerate()
+                .filter(|(_, (_, r))| !r.is_empty())
+                .map(|(k, (t, r))| {
+                    let c = choice.get(k).copied().unwrap_or(0);
+                    let other = c.checked_sub(1).and_then(|c| layer.others.get(k)?.get(c));
+                    (t, other.unwrap_or(r).clone())
+                })
+                .collect()
+        };
         // The concurrent schedule cannot take longer than every tool's route back to
         // back plus every hold; a budget of several sequential times catches a layer
         // whose tools keep giving way to each other.
@@ -549,7 +602,42 @@ impl Planner for Concurrent {
         let sync = sync_cost(o, info);
         // Each pause ends where the waiting head goes on: a synchronisation.
         let syncs = |p: &lamina_api::Pauses| (p.by_x_speed + p.forced + p.other) as f64;
-        let (paths, t, pauses) = match sim::concurrent(&busy, &settings, &layer.arena) {
+        // Every pair of orders of two busy tools, the first fastest kept (strictly
+        // faster replaces it, so that ties keep the lower orders).
+        let costed = |r: &std::result::Result<sim::Schedule, sim::Stuck>| {
+            r.as_ref()
+                .map_or(f64::INFINITY, |s| s.end + syncs(&s.pauses) * sync)
+        };
+        let mut run = sim::concurrent(&busy, &settings, &layer.arena);
+        let mut chosen = (0, 0);
+        let busy_tools: Vec<usize> = (0..layer.tools.len())
+            .filter(|&k| !layer.routes[k].is_empty())
+            .collect();
+        if let [a, b] = busy_tools[..] {
+            let n = |k: usize| layer.others.get(k).map_or(0, Vec::len) + 1;
+            for (i, j) in (0..n(a)).flat_map(|i| (0..n(b)).map(move |j| (i, j))).skip(1) {
+                let mut choice = vec![0; layer.tools.len()];
+                (choice[a], choice[b]) = (i, j);
+                let other = sim::concurrent(&in_orders(&choice), &settings, &layer.arena);
+                if costed(&other) < costed(&run) {
+                    run = other;
+                    chosen = (i, j);
+                }
+            }
+        }
+        if chosen != (0, 0) {
+            plan.note(
+                StageKind::Plan,
+                "other-orders",
+                format!(
+                    "the tools take their loops in other orders than nearest-next from where they enter (orders {} and {} of the {} tried each): a faster concurrent schedule",
+                    chosen.0 + 1,
+                    chosen.1 + 1,
+                    o.orders
+                ),
+            );
+        }
+        let (paths, t, pauses) = match run {
             // Tools that mostly wait for each other can end up slower than taking turns:
             // said, and the concurrent schedule kept unless asked for the faster one
             // (the sequential schedule is collision-free too).

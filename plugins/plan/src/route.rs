@@ -317,13 +317,26 @@ impl Parks {
 /// two gantries keep their order in Y, so both sweep the same way, the rear head
 /// leading and the front one following, instead of meeting where neither can pass.
 pub fn route(tool: &ToolSpec, jobs: Vec<Job>, parks: &Parks, seam: Seam, sweep: Option<f64>) -> Vec<Move> {
+    route_from(tool, jobs, parks, seam, sweep, parks.entry_of(tool))
+}
+
+/// [`route`] whose first loop is the one nearest `from` instead of the tool's entry:
+/// the tool still comes out of its park and goes back to it.
+pub fn route_from(
+    tool: &ToolSpec,
+    jobs: Vec<Job>,
+    parks: &Parks,
+    seam: Seam,
+    sweep: Option<f64>,
+    from: Point2,
+) -> Vec<Move> {
     let mut moves = Vec::new();
     if jobs.is_empty() {
         return moves;
     }
     let park = parks.park_of(tool);
     let entry = parks.entry_of(tool);
-    let mut at = entry;
+    let mut at = from;
     let mut travel = vec![park, entry];
     let mut left: Vec<Option<Job>> = jobs.into_iter().map(Some).collect();
     let mut order: Vec<(f64, usize)> = Vec::with_capacity(left.len());

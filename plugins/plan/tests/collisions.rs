@@ -364,6 +364,63 @@ fn says_slower(plan: &LayerPlan) -> bool {
         .any(|d| d.message.contains("is slower than one tool at a time"))
 }
 
+/// Two tools trying more orders of their loops: the same beads, never a slower
+/// layer (without a machine a synchronisation costs nothing, so the schedule kept is
+/// the quickest of those tried, the first order's among them), and on some layouts a
+/// faster one, said in a note.
+#[test]
+fn more_orders_of_the_loops_never_make_a_layer_slower() {
+    let mut rng = Rng(0x0dde_5eed_0000_0002);
+    let (mut faster, mut noted) = (0, 0);
+    for case in 0..30 {
+        let (info, plan) = layout(&mut rng, 2);
+        let table = format!(
+            "use = \"concurrent\"\nwidth = 0.5\nenvelope = {}\nstep = 0.02\nspeed = {}\n",
+            rng.range(1.5, 6.0),
+            rng.range(10.0, 40.0)
+        );
+        let planned = |orders: usize| {
+            let mut p = plan.clone();
+            planner(&format!("{table}orders = {orders}\n"))
+                .plan(&info, &mut p)
+                .expect("plans");
+            p
+        };
+        let first = planned(1);
+        assert!(!first.diagnostics.iter().any(|d| d.code == "other-orders"));
+        let (t1, a1) = (first.build_time.unwrap_or(0.0), extruded(&first.toolpaths));
+        let mut best = t1;
+        for orders in [2, 3, 5] {
+            let p = planned(orders);
+            let t = p.build_time.unwrap_or(0.0);
+            assert!(
+                t <= best + 1e-9,
+                "case {case}: {orders} orders take {t} s, fewer {best} s"
+            );
+            let a = extruded(&p.toolpaths);
+            assert!(
+                (a - a1).abs() <= 1e-6 * a1.max(1.0),
+                "case {case}: {a} against {a1}"
+            );
+            let said = p.diagnostics.iter().any(|d| d.code == "other-orders");
+            assert_eq!(
+                said,
+                t < t1,
+                "case {case}: {t} s against {t1} s, {:?}",
+                p.diagnostics
+            );
+            noted += usize::from(said);
+            best = t;
+        }
+        faster += usize::from(best < t1);
+    }
+    assert!(
+        faster >= 3,
+        "only {faster} of 30 layouts are faster in other orders"
+    );
+    assert!(noted >= faster);
+}
+
 /// Random layouts planned checking the next step only (`look_ahead = 0`, the
 /// paper's check: every two-tool encounter is then decided by speed along X) and
 /// with the default look-ahead.
