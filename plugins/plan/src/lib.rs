@@ -367,6 +367,62 @@ struct Layer {
     arena: BBox2,
 }
 
+impl Layer {
+    /// The busy tools, tool k on its route in order `choice[k]` (0: the first).
+    fn in_orders(&self, choice: &[usize]) -> Vec<(&ToolSpec, Vec<Move>)> {
+        self.tools
+            .iter()
+            .zip(&self.routes)
+            .enumerate()
+            .filter(|(_, (_, r))| !r.is_empty())
+            .map(|(k, (t, r))| {
+                let c = choice.get(k).copied().unwrap_or(0);
+                let other = c.checked_sub(1).and_then(|c| self.others.get(k)?.get(c));
+                (t, other.unwrap_or(r).clone())
+            })
+            .collect()
+    }
+
+    /// The concurrent schedule of the first orders and, for two busy tools, of every
+    /// other pair of their orders: the first of the fastest (each synchronisation
+    /// counted at `sync` seconds; strictly faster replaces, so that ties keep the lower
+    /// orders), with the orders it takes (0: the first).
+    fn fastest_orders(
+        &self,
+        settings: &sim::Settings,
+        sync: f64,
+    ) -> (std::result::Result<sim::Schedule, sim::Stuck>, (usize, usize)) {
+        let costed = |r: &std::result::Result<sim::Schedule, sim::Stuck>| {
+            r.as_ref()
+                .map_or(f64::INFINITY, |s| s.end + syncs(&s.pauses) * sync)
+        };
+        let mut run = sim::concurrent(&self.in_orders(&[]), settings, &self.arena);
+        let mut chosen = (0, 0);
+        let busy: Vec<usize> = (0..self.tools.len())
+            .filter(|&k| !self.routes[k].is_empty())
+            .collect();
+        if let [a, b] = busy[..] {
+            let n = |k: usize| self.others.get(k).map_or(0, Vec::len) + 1;
+            for (i, j) in (0..n(a)).flat_map(|i| (0..n(b)).map(move |j| (i, j))).skip(1) {
+                let mut choice = vec![0; self.tools.len()];
+                (choice[a], choice[b]) = (i, j);
+                let other = sim::concurrent(&self.in_orders(&choice), settings, &self.arena);
+                if costed(&other) < costed(&run) {
+                    run = other;
+                    chosen = (i, j);
+                }
+            }
+        }
+        (run, chosen)
+    }
+}
+
+/// The synchronisations a schedule's pauses make: each ends where the waiting head
+/// goes on.
+fn syncs(p: &lamina_api::Pauses) -> f64 {
+    (p.by_x_speed + p.forced + p.other) as f64
+}
+
 /// The layer's work and each tool's route; with `orders` > 1, also each tool's routes
 /// in up to `orders - 1` other orders.
 fn prepare(o: &Options, info: &RunInfo, plan: &mut LayerPlan, step: f64, orders: usize) -> Result<Layer> {
@@ -560,28 +616,6 @@ impl Planner for Concurrent {
             report_fill(o, plan);
             return Ok(());
         }
-        let busy: Vec<(&ToolSpec, Vec<Move>)> = layer
-            .tools
-            .iter()
-            .zip(&layer.routes)
-            .filter(|(_, r)| !r.is_empty())
-            .map(|(t, r)| (t, r.clone()))
-            .collect();
-        // The busy tools, tool k on its route in order `choice[k]` (0: the first).
-        let in_orders = |choice: &[usize]| -> Vec<(&ToolSpec, Vec<Move>)> {
-            layer
-                .tools
-                .iter()
-                .zip(&layer.routes)
-                .enumerate()
-                .filter(|(_, (_, r))| !r.is_empty())
-                .map(|(k, (t, r))| {
-                    let c = choice.get(k).copied().unwrap_or(0);
-                    let other = c.checked_sub(1).and_then(|c| layer.others.get(k)?.get(c));
-                    (t, other.unwrap_or(r).clone())
-                })
-                .collect()
-        };
         // The concurrent schedule cannot take longer than every tool's route back to
         // back plus every hold; a budget of several sequential times catches a layer
         // whose tools keep giving way to each other.
@@ -600,31 +634,7 @@ impl Planner for Concurrent {
             },
         };
         let sync = sync_cost(o, info);
-        // Each pause ends where the waiting head goes on: a synchronisation.
-        let syncs = |p: &lamina_api::Pauses| (p.by_x_speed + p.forced + p.other) as f64;
-        // Every pair of orders of two busy tools, the first fastest kept (strictly
-        // faster replaces it, so that ties keep the lower orders).
-        let costed = |r: &std::result::Result<sim::Schedule, sim::Stuck>| {
-            r.as_ref()
-                .map_or(f64::INFINITY, |s| s.end + syncs(&s.pauses) * sync)
-        };
-        let mut run = sim::concurrent(&busy, &settings, &layer.arena);
-        let mut chosen = (0, 0);
-        let busy_tools: Vec<usize> = (0..layer.tools.len())
-            .filter(|&k| !layer.routes[k].is_empty())
-            .collect();
-        if let [a, b] = busy_tools[..] {
-            let n = |k: usize| layer.others.get(k).map_or(0, Vec::len) + 1;
-            for (i, j) in (0..n(a)).flat_map(|i| (0..n(b)).map(move |j| (i, j))).skip(1) {
-                let mut choice = vec![0; layer.tools.len()];
-                (choice[a], choice[b]) = (i, j);
-                let other = sim::concurrent(&in_orders(&choice), &settings, &layer.arena);
-                if costed(&other) < costed(&run) {
-                    run = other;
-                    chosen = (i, j);
-                }
-            }
-        }
+        let (run, chosen) = layer.fastest_orders(&settings, sync);
         if chosen != (0, 0) {
             plan.note(
                 StageKind::Plan,
