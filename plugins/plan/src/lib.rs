@@ -94,7 +94,7 @@ lamina_api::stage_options! {
         /// room (mm) beyond the envelopes that looking ahead keeps between two tools: one following another hangs back this much more, pausing less often and for longer (on a machine with two motion systems, far fewer synchronisation points, each of which stops both nozzles with their filament pulled back); the envelopes themselves are kept either way
         #[range(0.0, 1e3)]
         room: f64 = "0.0",
-        /// how many orders of each tool's loops two free heads try per layer: the nearest-next order from where the tool enters, then from the corners of the work farthest from it; every pair of orders is scheduled (`orders`² schedules a layer) and the fastest kept, each synchronisation counted at its cost (see `keep_faster`). 1 tries the first order only. Heads on two gantries, which sweep the layer front to back, and three or more busy tools take the first
+        /// how many orders of each tool's loops two free heads try per layer: the nearest-next order from where the tool enters, then from the corners of the work farthest from it; every pair of orders is scheduled (`orders`² schedules a layer) and the fastest kept, each synchronisation counted at its cost (see `keep_faster`). 1 tries the first order only. Heads on two gantries, which sweep the layer front to back, three or more busy tools, and a machine whose heads print one at a time (one motion system) take the first
         #[range(1, 5)]
         orders: usize = "2",
         /// deposit a layer one tool at a time when that is faster than the concurrent schedule, each synchronisation of the heads counted at what it costs the machine (a stop, and a retraction, on a machine with two motion systems); a note says which and why. `false` keeps the concurrent schedule (with a warning when it is slower). A layer whose tools stay blocked falls back to one tool at a time regardless
@@ -599,7 +599,10 @@ impl Planner for Sequential {
 impl Planner for Concurrent {
     fn plan(&self, info: &RunInfo, plan: &mut LayerPlan) -> Result<()> {
         let o = &self.0;
-        let layer = prepare(o, info, plan, o.step(), o.orders)?;
+        // Other orders pay only where the heads work at once: a machine with one motion
+        // system writes the tools one at a time whatever the schedule.
+        let at_once = info.machine.as_ref().is_none_or(|m| m.motion_systems > 1);
+        let layer = prepare(o, info, plan, o.step(), if at_once { o.orders } else { 1 })?;
         let (seq_paths, seq_time) = sequential(&layer, o.tool_change);
         let class = head_class(info);
         if class == HeadClass::SharedBeam && layer.routes.iter().filter(|r| !r.is_empty()).count() > 1 {
