@@ -409,25 +409,29 @@ mod tests {
         }
     }
 
-    /// The area of the ellipse of centre `c`, semi-axes `a` along `e1` and `b` across,
-    /// within the box `[x0, x1] x [y0, y1]`, by the midpoint rule on a fine grid.
-    fn ellipse_in(c: [f64; 2], e1: [f64; 2], a: f64, b: f64, [x0, y0, x1, y1]: [f64; 4]) -> f64 {
+    /// The area of the points of the box `[x0, x1] x [y0, y1]` where `inside` holds, by
+    /// the midpoint rule on a fine grid.
+    fn grid_area(inside: impl Fn(f64, f64) -> bool, [x0, y0, x1, y1]: [f64; 4]) -> f64 {
         let n = 2000;
         let (cx, cy) = ((x1 - x0) / n as f64, (y1 - y0) / n as f64);
-        let mut inside = 0usize;
-        for i in 0..n {
-            for j in 0..n {
-                let (x, y) = (
-                    x0 + (i as f64 + 0.5) * cx - c[0],
-                    y0 + (j as f64 + 0.5) * cy - c[1],
-                );
+        let count = (0..n)
+            .flat_map(|i| (0..n).map(move |j| (i, j)))
+            .filter(|&(i, j)| inside(x0 + (i as f64 + 0.5) * cx, y0 + (j as f64 + 0.5) * cy))
+            .count();
+        count as f64 * cx * cy
+    }
+
+    /// The area of the ellipse of centre `c`, semi-axes `a` along `e1` and `b` across,
+    /// within the box `[x0, x1] x [y0, y1]`.
+    fn ellipse_in(c: [f64; 2], e1: [f64; 2], a: f64, b: f64, area: [f64; 4]) -> f64 {
+        grid_area(
+            |x, y| {
+                let (x, y) = (x - c[0], y - c[1]);
                 let (s, t) = (x * e1[0] + y * e1[1], -x * e1[1] + y * e1[0]);
-                if (s / a).powi(2) + (t / b).powi(2) < 1.0 {
-                    inside += 1;
-                }
-            }
-        }
-        inside as f64 * cx * cy
+                (s / a).powi(2) + (t / b).powi(2) < 1.0
+            },
+            area,
+        )
     }
 
     #[test]
@@ -583,6 +587,68 @@ mod tests {
         let clean = clean(&bow);
         assert_eq!(clean.len(), 2, "{clean:?}");
         assert!((area(&clean) - 50.0).abs() < 1e-9);
+    }
+
+    #[test]
+    fn sources_off_the_origin_and_turned_cut_where_they_lie() {
+        // Compared quarter by quarter about a point none of them is centred on, so that
+        // a set of the right area in the wrong place or turned the wrong way fails.
+        let quarters = [
+            [-50.0, -50.0, 4.5, -4.0],
+            [4.5, -50.0, 50.0, -4.0],
+            [-50.0, -4.0, 4.5, 50.0],
+            [4.5, -4.0, 50.0, 50.0],
+        ];
+        let check = |datum: &Datum, z: f64, d: f64, inside: &dyn Fn(f64, f64) -> bool| {
+            let set = closer_than(datum, d, z, &bbox(), 1e-4, &vec![]);
+            let wants: Vec<f64> = quarters.iter().map(|&q| grid_area(inside, q)).collect();
+            let total: f64 = wants.iter().sum();
+            for (q, want) in quarters.iter().zip(wants) {
+                let got = match &set {
+                    Set::Shapes(s) => area(&intersect(s, &rect(q[0], q[1], q[2], q[3]))),
+                    Set::Whole => (q[2] - q[0]) * (q[3] - q[1]),
+                    Set::Empty => 0.0,
+                };
+                assert!(
+                    (got - want).abs() < 2e-3 * total,
+                    "{datum:?} at z {z}, over {q:?}: {got} against {want}"
+                );
+            }
+        };
+        // A point 2 mm below the layer: a disc of radius sqrt(25 - 4) about its foot.
+        let (px, py) = (5.0, -3.0);
+        check(&Datum::Point([px, py, 3.0]), 1.0, 5.0, &|x, y| {
+            (x - px).powi(2) + (y - py).powi(2) + 4.0 < 25.0
+        });
+        // A horizontal axis along (0.6, 0.8) through (10, 5), 4 mm below the layer: a
+        // strip 3 mm either side of its trace.
+        let horizontal = Datum::Axis {
+            at: [10.0, 5.0, 2.0],
+            direction: [0.6, 0.8, 0.0],
+        };
+        check(&horizontal, 6.0, 5.0, &|x, y| {
+            (-0.8 * (x - 10.0) + 0.6 * (y - 5.0)).abs() < 3.0
+        });
+        // An axis turned out of the layer (of unit length, as the stage hands it
+        // over): the points of the layer within 2 mm of the line in space.
+        let norm = 0.5f64.sqrt();
+        let (at, u) = ([4.0, -6.0, 1.0], [0.3 / norm, 0.4 / norm, 0.5 / norm]);
+        let z = 3.0;
+        let near_line = |x: f64, y: f64| {
+            let v = [x - at[0], y - at[1], z - at[2]];
+            let along = v[0] * u[0] + v[1] * u[1] + v[2] * u[2];
+            v[0] * v[0] + v[1] * v[1] + v[2] * v[2] - along * along < 4.0
+        };
+        check(&Datum::Axis { at, direction: u }, z, 2.0, &near_line);
+        // A plane turned out of the layer, off the origin: the side n . (p - at) < d.
+        let n = [0.6, 0.0, 0.8];
+        let plane = Datum::Plane {
+            at: [2.0, 3.0, 1.0],
+            normal: n,
+        };
+        check(&plane, 4.0, 1.0, &|x, y| {
+            n[0] * (x - 2.0) + n[1] * (y - 3.0) + n[2] * (4.0 - 1.0) < 1.0
+        });
     }
 
     #[test]
