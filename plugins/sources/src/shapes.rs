@@ -373,6 +373,12 @@ mod tests {
         BBox2::from_points([Point2::new(-50.0, -50.0), Point2::new(50.0, 50.0)])
     }
 
+    /// The points of the box `bbox()` closer than `d` to a datum in space, at 1e-4 mm,
+    /// for a datum that needs no family.
+    fn near(datum: &Datum, d: f64, z: f64) -> Set {
+        closer_than(datum, d, z, &bbox(), 1e-4, &vec![])
+    }
+
     /// How far the chords of a regular `n`-gon inscribed in a circle of radius `r`
     /// stray from the circle.
     fn sagitta(r: f64, n: usize) -> f64 {
@@ -527,39 +533,30 @@ mod tests {
             at: [10.0, 0.0, 2.0],
             direction: [0.0, 1.0, 0.0],
         };
-        let strip = shapes(closer_than(&axis, 5.0, 6.0, &bbox(), 1e-4, &vec![]));
+        let strip = shapes(near(&axis, 5.0, 6.0));
         assert!((area(&strip) - 600.0).abs() < 1e-6, "{}", area(&strip));
         for p in strip.iter().flatten().flatten() {
             assert!((p[0] - 10.0).abs() <= 3.0 + 1e-9, "{p:?}");
         }
         // Too high above it, nothing; a strip beyond the box, nothing; one wider than
         // the box, all of it.
-        assert!(matches!(
-            closer_than(&axis, 5.0, 7.5, &bbox(), 1e-4, &vec![]),
-            Set::Empty
-        ));
+        assert!(matches!(near(&axis, 5.0, 7.5), Set::Empty));
         let aside = Datum::Axis {
             at: [80.0, 0.0, 0.0],
             direction: [0.0, -2.0, 0.0],
         };
-        assert!(matches!(
-            closer_than(&aside, 5.0, 0.0, &bbox(), 1e-4, &vec![]),
-            Set::Empty
-        ));
+        assert!(matches!(near(&aside, 5.0, 0.0), Set::Empty));
         let wide = Datum::Axis {
             at: [0.0, 0.0, 0.0],
             direction: [0.0, 1.0, 0.0],
         };
-        assert!(matches!(
-            closer_than(&wide, 80.0, 0.0, &bbox(), 1e-4, &vec![]),
-            Set::Whole
-        ));
+        assert!(matches!(near(&wide, 80.0, 0.0), Set::Whole));
         // A vertical axis: a disc of the distance at every height.
         let vertical = Datum::Axis {
             at: [5.0, -5.0, 0.0],
             direction: [0.0, 0.0, 1.0],
         };
-        let disc = shapes(closer_than(&vertical, 4.0, 30.0, &bbox(), 1e-4, &vec![]));
+        let disc = shapes(near(&vertical, 4.0, 30.0));
         assert!((area(&disc) - std::f64::consts::PI * 16.0).abs() < 1e-9);
     }
 
@@ -600,7 +597,7 @@ mod tests {
             [4.5, -4.0, 50.0, 50.0],
         ];
         let check = |datum: &Datum, z: f64, d: f64, inside: &dyn Fn(f64, f64) -> bool| {
-            let set = closer_than(datum, d, z, &bbox(), 1e-4, &vec![]);
+            let set = near(datum, d, z);
             let wants: Vec<f64> = quarters.iter().map(|&q| grid_area(inside, q)).collect();
             let total: f64 = wants.iter().sum();
             for (q, want) in quarters.iter().zip(wants) {
@@ -649,15 +646,25 @@ mod tests {
         check(&plane, 4.0, 1.0, &|x, y| {
             n[0] * (x - 2.0) + n[1] * (y - 3.0) + n[2] * (4.0 - 1.0) < 1.0
         });
+        // Turned about both axes of the layer, its point off both: every component of
+        // the normal and of the point counts.
+        let n = [0.48, 0.6, 0.64];
+        let plane = Datum::Plane {
+            at: [-3.0, 5.0, 2.0],
+            normal: n,
+        };
+        check(&plane, 0.5, 2.0, &|x, y| {
+            n[0] * (x + 3.0) + n[1] * (y - 5.0) + n[2] * (0.5 - 2.0) < 2.0
+        });
     }
 
     #[test]
     fn a_point_cuts_a_disc_of_the_remaining_radius() {
-        let s = closer_than(&Datum::Point([0.0, 0.0, 3.0]), 5.0, 0.0, &bbox(), 1e-4, &vec![]);
+        let s = near(&Datum::Point([0.0, 0.0, 3.0]), 5.0, 0.0);
         let Set::Shapes(s) = s else { panic!("a disc") };
         assert!((area(&s) - std::f64::consts::PI * 16.0).abs() < 1e-9);
         assert!(matches!(
-            closer_than(&Datum::Point([0.0, 0.0, 6.0]), 5.0, 0.0, &bbox(), 1e-4, &vec![]),
+            near(&Datum::Point([0.0, 0.0, 6.0]), 5.0, 0.0),
             Set::Empty
         ));
     }
@@ -686,7 +693,7 @@ mod tests {
             at: [0.0; 3],
             normal: [1.0, 0.0, 0.0],
         };
-        let Set::Shapes(h) = closer_than(&plane, 10.0, 0.0, &bbox(), 1e-4, &vec![]) else {
+        let Set::Shapes(h) = near(&plane, 10.0, 0.0) else {
             panic!("a half plane")
         };
         assert!((area(&h) - 60.0 * 100.0).abs() < 1e-6);
@@ -694,19 +701,13 @@ mod tests {
             at: [0.0; 3],
             normal: [0.0, 0.0, 1.0],
         };
-        assert!(matches!(
-            closer_than(&flat, 1.0, 0.5, &bbox(), 1e-4, &vec![]),
-            Set::Whole
-        ));
-        assert!(matches!(
-            closer_than(&flat, 1.0, 1.5, &bbox(), 1e-4, &vec![]),
-            Set::Empty
-        ));
+        assert!(matches!(near(&flat, 1.0, 0.5), Set::Whole));
+        assert!(matches!(near(&flat, 1.0, 1.5), Set::Empty));
         let axis = Datum::Axis {
             at: [0.0, 0.0, 0.0],
             direction: [1.0, 0.0, 0.0],
         };
-        let Set::Shapes(strip) = closer_than(&axis, 5.0, 3.0, &bbox(), 1e-4, &vec![]) else {
+        let Set::Shapes(strip) = near(&axis, 5.0, 3.0) else {
             panic!("a strip")
         };
         assert!((area(&strip) - 8.0 * 100.0).abs() < 1e-6);
