@@ -416,7 +416,9 @@ def main():
                     help="run only these tasks (repeatable; default all)")
     args = ap.parse_args()
     runs = args.runs or (1 if args.quick else 5)
-    models = Path(args.models)
+    # Absolute: the pipelines it writes live in a temporary folder, where a relative
+    # path (CI's `../shared/models`) would name nothing.
+    models = Path(args.models).resolve()
     ALLOW[:] = ["--allow", str(models)]
     if not models.is_dir():
         print(f"note: {models} not found; nothing to measure")
