@@ -1,0 +1,352 @@
+//! The numbers each operation of the CMPM process (cmpm-process-planning §2) hands to
+//! the machine, read back from a whole run of the stages on the pipe of Fig. 11: three
+//! concentric tubes in work cycles, a microstructure inside, a graded FGM in the
+//! middle and a composite outside. The end-to-end tests (`hybrid::` in the `lamina`
+//! package) check where the paths lie and the order of the operations; these check
+//! what the operations say: the sprayed mix and inclusions, the raster's spacing, the
+//! heights each grind takes the surface from and to, the wheel's spindle speed from
+//! its surface speed, the end mill's depth, the filled voids' volume, and the filler
+//! removed once at the end.
+
+use lamina_process as _;
+use serde_json::Value;
+
+/// The pipe, with a spray track overlap and a removal of the filler that the shipped
+/// pipeline leaves at their defaults or out, and only the plan written.
+const PIPE: &str = r#"
+name = "pipe"
+
+[materials.microstructure]
+colour = [70, 130, 180]
+layer_thickness = 0.2
+[materials.ceramic]
+colour = [240, 240, 230]
+layer_thickness = 0.5
+[materials.metal]
+colour = [90, 90, 100]
+layer_thickness = 0.5
+[materials.composite]
+colour = [150, 75, 0]
+layer_thickness = 1.5
+
+[[parts]]
+name = "inner"
+materials = ["microstructure"]
+[parts.model]
+use = "tube"
+outer_radius = 7.0
+inner_radius = 5.0
+height = 3.0
+
+[[parts]]
+name = "middle"
+materials = ["ceramic", "metal"]
+[parts.model]
+use = "tube"
+outer_radius = 9.0
+inner_radius = 7.0
+height = 3.0
+[parts.grade]
+use = "script"
+f = "z / 3.0"
+
+[[parts]]
+name = "outer"
+materials = ["composite"]
+[parts.model]
+use = "tube"
+outer_radius = 10.0
+inner_radius = 9.0
+height = 3.0
+
+[sequence]
+use = "work-cycles"
+
+[slice]
+use = "adaptive"
+
+[[process]]
+use = "end-mill"
+diameter = 0.8
+
+[[process]]
+use = "spray"
+rough_allowance = 0.1
+finish_allowance = { inner = 0.02 }
+inclusions = { outer = { SiC = 0.2 } }
+diameter = 2.0
+overlap = 0.4
+
+[[process]]
+use = "grind"
+pass = "rough"
+
+[[process]]
+use = "engrave"
+regions = ["inner"]
+period = [1.0, 1.0, 0.6]
+void_radius = 0.25
+
+[[process]]
+use = "fill"
+regions = ["inner"]
+
+[[process]]
+use = "grind"
+pass = "finish"
+
+[[process]]
+use = "remove-filler"
+method = "melt-out"
+temperature = 300.0
+
+[[output]]
+use = "json"
+path = "pipe.json"
+"#;
+
+/// The regions in the sequence's order and their finish allowances.
+const REGIONS: [&str; 3] = ["inner", "middle", "outer"];
+const FINISH: [f64; 3] = [0.02, 0.0, 0.0];
+const ROUGH: f64 = 0.1;
+
+fn f(v: &Value) -> f64 {
+    v.as_f64().unwrap_or_else(|| panic!("not a number: {v}"))
+}
+
+fn layers(plan: &Value) -> &Vec<Value> {
+    plan["layers"].as_array().expect("layers")
+}
+
+fn ops(layer: &Value) -> Vec<&Value> {
+    layer["operations"]
+        .as_array()
+        .map(|a| a.iter().collect())
+        .unwrap_or_default()
+}
+
+fn value(op: &Value, key: &str) -> f64 {
+    f(&op["values"][key])
+}
+
+/// The one operation of `kind` (and grind `pass`) on the layer, if any.
+fn one<'a>(layer: &'a Value, kind: &str, pass: Option<&str>) -> Option<&'a Value> {
+    let mut found = ops(layer)
+        .into_iter()
+        .filter(|o| o["kind"] == kind && pass.is_none_or(|p| o["pass"] == p));
+    let op = found.next();
+    assert!(found.next().is_none(), "two {kind} operations on a layer");
+    op
+}
+
+fn run() -> Value {
+    lamina_test_support::run_pipeline(PIPE).json("pipe.json")
+}
+
+#[test]
+fn each_region_is_sprayed_its_allowances_high_with_its_mix_and_its_inclusions() {
+    let plan = run();
+    let mut sprayed = [0; 3];
+    for (i, l) in layers(&plan).iter().enumerate() {
+        let r = l["region"].as_u64().expect("region") as usize;
+        let (z, t) = (f(&l["z"]), f(&l["thickness"]));
+        let mixes: Vec<&Value> = ops(l).into_iter().filter(|o| o["kind"] == "spray").collect();
+        assert!(!mixes.is_empty(), "layer {i}: not sprayed");
+        // The layer's compositions, by material name, as its sub-regions carry them.
+        let compositions: Vec<&Value> = l["parts"]
+            .as_array()
+            .expect("parts")
+            .iter()
+            .flat_map(|p| p["families"].as_array().expect("families"))
+            .flat_map(|fam| fam["sub_regions"].as_array().expect("sub-regions"))
+            .map(|s| &s["composition"])
+            .collect();
+        for op in &mixes {
+            let surface = f(&op["surface"]);
+            assert!(
+                (surface - (z + ROUGH + FINISH[r])).abs() < 1e-9,
+                "layer {i} ({}): sprayed to {surface}, not {} + {ROUGH} + {}",
+                REGIONS[r],
+                z,
+                FINISH[r]
+            );
+            assert!((value(op, "thickness") - t).abs() < 1e-12);
+            assert!((value(op, "rough_allowance") - ROUGH).abs() < 1e-12);
+            assert!((value(op, "finish_allowance") - FINISH[r]).abs() < 1e-12);
+            // The feeders are set to the mix of a sub-region of the layer, which adds up
+            // to the whole.
+            let fractions: Vec<(&str, f64)> = op["values"]
+                .as_object()
+                .expect("values")
+                .iter()
+                .filter_map(|(k, v)| k.strip_prefix("fraction:").map(|m| (m, f(v))))
+                .collect();
+            let sum: f64 = fractions.iter().map(|(_, v)| v).sum();
+            assert!((sum - 1.0).abs() < 1e-9, "layer {i}: fractions {fractions:?}");
+            assert!(
+                compositions.iter().any(|c| {
+                    fractions
+                        .iter()
+                        .all(|(m, v)| c[*m].as_f64().is_some_and(|w| (w - v).abs() < 1e-9))
+                }),
+                "layer {i}: {fractions:?} is no sub-region's mix"
+            );
+            let inclusion = op["values"].get("inclusion:SiC").map(f);
+            assert_eq!(inclusion, (r == 2).then_some(0.2), "layer {i}");
+            // Passes along x, one track width less the overlap apart (2 mm, 40 %).
+            let mut ys: Vec<f64> = op["paths"]
+                .as_array()
+                .expect("paths")
+                .iter()
+                .map(|p| {
+                    assert!(
+                        (f(&p["z"]) - surface).abs() < 1e-12,
+                        "layer {i}: a pass off the surface"
+                    );
+                    let pts = p["points"].as_array().expect("points");
+                    let (a, b) = (&pts[0], &pts[pts.len() - 1]);
+                    assert!(
+                        (f(&a[1]) - f(&b[1])).abs() < 1e-12,
+                        "layer {i}: a pass not along x"
+                    );
+                    f(&a[1])
+                })
+                .collect();
+            ys.sort_by(f64::total_cmp);
+            ys.dedup_by(|a, b| (*a - *b).abs() < 1e-9);
+            assert!(ys.len() >= 10, "layer {i}: {} passes", ys.len());
+            for w in ys.windows(2) {
+                assert!(
+                    (w[1] - w[0] - 1.2).abs() < 1e-9,
+                    "layer {i}: passes {} apart",
+                    w[1] - w[0]
+                );
+            }
+        }
+        // The graded middle: one operation per mix, the mix changing with height.
+        if r == 1 {
+            assert!(
+                mixes
+                    .iter()
+                    .all(|o| (value(o, "fraction:ceramic") - (z / 3.0)).abs() < 1e-9),
+                "layer {i} at {z}: the mix is f = z / 3 at the layer's top"
+            );
+        } else {
+            let only = if r == 0 {
+                "fraction:microstructure"
+            } else {
+                "fraction:composite"
+            };
+            assert_eq!(mixes.len(), 1);
+            assert_eq!(value(mixes[0], only), 1.0);
+        }
+        sprayed[r] += 1;
+    }
+    assert!(sprayed.iter().all(|&n| n >= 2), "{sprayed:?}");
+}
+
+#[test]
+fn each_grind_takes_the_surface_from_where_the_last_operation_left_it() {
+    let plan = run();
+    // v = pi d n: 25 m/s on the default 20 mm wheel.
+    let spindle = (25.0 * 60_000.0 / (std::f64::consts::PI * 20.0)).round();
+    let mut finished = 0;
+    for (i, l) in layers(&plan).iter().enumerate() {
+        let r = l["region"].as_u64().expect("region") as usize;
+        let z = f(&l["z"]);
+        let spray = one(l, "spray", None).expect("sprayed");
+        let rough = one(l, "grind", Some("rough")).expect("rough ground");
+        assert_eq!(f(&rough["tool"]["spindle"]), spindle, "layer {i}");
+        assert_eq!(rough["levels"], true);
+        let from = f(&spray["surface"]);
+        assert!((value(rough, "from") - from).abs() < 1e-12, "layer {i}");
+        let to = f(&rough["surface"]);
+        assert!((to - (z + FINISH[r])).abs() < 1e-9, "layer {i}: rough to {to}");
+        assert!((value(rough, "removed") - (from - to)).abs() < 1e-12, "layer {i}");
+        match one(l, "grind", Some("finish")) {
+            Some(finish) => {
+                assert!(FINISH[r] > 0.0, "layer {i}: a finish grind without an allowance");
+                // After the fill, which leaves the surface where the rough grind did.
+                assert!((value(finish, "from") - to).abs() < 1e-12, "layer {i}");
+                assert!((f(&finish["surface"]) - z).abs() < 1e-12, "layer {i}");
+                assert!((value(finish, "removed") - FINISH[r]).abs() < 1e-9, "layer {i}");
+                finished += 1;
+            }
+            None => assert_eq!(FINISH[r], 0.0, "layer {i}: no finish grind"),
+        }
+    }
+    assert!(finished >= 5, "{finished}");
+}
+
+#[test]
+fn the_end_mill_cuts_as_deep_as_the_highest_neighbour_stands_above_the_base() {
+    let plan = run();
+    // Each region's surface before each layer: the top of its last layer.
+    let mut now: [Option<f64>; 3] = [None; 3];
+    let mut milled = 0;
+    for (i, l) in layers(&plan).iter().enumerate() {
+        let r = l["region"].as_u64().expect("region") as usize;
+        let (z, t) = (f(&l["z"]), f(&l["thickness"]));
+        let base = z - t;
+        // Every other region standing above the base; the mill cuts along those that
+        // adjoin this one.
+        let higher: Vec<usize> = (0..3)
+            .filter(|&q| q != r && now[q].is_some_and(|s| s > base + 1e-9))
+            .collect();
+        let beside = higher.iter().any(|&q| q.abs_diff(r) == 1);
+        match one(l, "end-mill", None) {
+            Some(op) => {
+                assert!(beside, "layer {i}: milled with nothing higher beside it");
+                let top = higher
+                    .iter()
+                    .filter_map(|&q| now[q])
+                    .fold(f64::NEG_INFINITY, f64::max);
+                assert!((value(op, "depth") - (top - base)).abs() < 1e-9, "layer {i}");
+                assert_eq!(value(op, "regions_higher"), higher.len() as f64, "layer {i}");
+                let paths = op["paths"].as_array().expect("paths");
+                assert!(
+                    paths.iter().all(|p| (f(&p["z"]) - base).abs() < 1e-9),
+                    "layer {i}"
+                );
+                milled += 1;
+            }
+            None => assert!(!beside, "layer {i}: not milled beside {higher:?}"),
+        }
+        now[r] = Some(z);
+    }
+    assert!(milled >= 3, "{milled}");
+}
+
+#[test]
+fn the_filler_fills_the_engraved_voids_and_is_removed_once_at_the_end() {
+    let plan = run();
+    let all = layers(&plan);
+    let mut filled = 0;
+    for (i, l) in all.iter().enumerate() {
+        match (one(l, "engrave", None), one(l, "fill", None)) {
+            (Some(engraved), Some(fill)) => {
+                assert_eq!(value(fill, "voids"), value(engraved, "voids"), "layer {i}");
+                let volume = value(engraved, "void_area") * value(engraved, "depth");
+                assert!(volume > 0.0);
+                assert!((value(fill, "void_volume") - volume).abs() < 1e-12, "layer {i}");
+                // The filler lies on the surface the rough grind left.
+                let surface = f(&one(l, "grind", Some("rough")).expect("ground")["surface"]);
+                let paths = fill["paths"].as_array().expect("paths");
+                assert!(!paths.is_empty(), "layer {i}");
+                assert!(paths.iter().all(|p| (f(&p["z"]) - surface).abs() < 1e-12));
+                filled += 1;
+            }
+            (None, None) => {}
+            (e, _) => panic!("layer {i}: engraved {} but filled otherwise", e.is_some()),
+        }
+        let removal = one(l, "remove-filler", None);
+        if i + 1 == all.len() {
+            let op = removal.expect("the filler removed at the end");
+            assert_eq!(op["pass"], "melt-out");
+            assert_eq!(value(op, "temperature"), 300.0);
+        } else {
+            assert!(removal.is_none(), "layer {i}: the filler removed before the end");
+        }
+    }
+    assert!(filled >= 2, "{filled}");
+}
