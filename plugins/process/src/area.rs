@@ -204,6 +204,46 @@ mod tests {
     }
 
     #[test]
+    fn raster_lines_are_a_spacing_apart_centred_and_end_on_slanted_sides() {
+        // A square turned 45 degrees, 10 mm across: 25 lines at y = 0.2 .. 9.8, each
+        // from side to side, the first along +x and every other one back.
+        let diamond = Polygon::new(
+            Contour::new(vec![
+                Point2::new(5.0, 0.0),
+                Point2::new(10.0, 5.0),
+                Point2::new(5.0, 10.0),
+                Point2::new(0.0, 5.0),
+            ]),
+            Vec::new(),
+        );
+        let paths = raster(&[diamond], 0.4, 1.0, &Limits::default()).expect("within limits");
+        assert_eq!(paths.len(), 25);
+        for (k, p) in paths.iter().enumerate() {
+            let y = 0.2 + 0.4 * k as f64;
+            let (a, b) = (p.points[0], p.points[1]);
+            assert!(
+                (a.y - y).abs() < 1e-9 && (b.y - y).abs() < 1e-9,
+                "line {k}: {a:?} {b:?}"
+            );
+            let half = 5.0 - (y - 5.0).abs();
+            let (from, to) = if k % 2 == 0 {
+                (5.0 - half, 5.0 + half)
+            } else {
+                (5.0 + half, 5.0 - half)
+            };
+            assert!(
+                (a.x - from).abs() < 1e-9 && (b.x - to).abs() < 1e-9,
+                "line {k}: {a:?} {b:?}"
+            );
+        }
+        // No spacing, no passes.
+        for spacing in [0.0, -1.0, f64::NAN, f64::INFINITY] {
+            let none = raster(&[square(0.0, 0.0, 1.0)], spacing, 0.0, &Limits::default()).expect("no passes");
+            assert!(none.is_empty(), "{spacing}");
+        }
+    }
+
+    #[test]
     fn offsets_move_a_square_in_by_their_distance() {
         let inner = offset(&[square(0.0, 0.0, 10.0)], -1.0);
         assert_eq!(inner.len(), 1);
@@ -245,5 +285,36 @@ mod tests {
             0.5,
         );
         assert!(all.len() == 1 && all[0].1);
+    }
+
+    #[test]
+    fn each_stretch_along_the_other_region_is_a_run_ending_within_a_step_of_it() {
+        // The other region holds the lower half of the right side and the upper half of
+        // the left one: two runs, points a step apart, each ending where the region does.
+        let ring = square(0.0, 0.0, 10.0).outer.points;
+        let other = [square(10.0, 0.0, 5.0), square(-5.0, 5.0, 5.0)];
+        let runs = adjoining_runs(&ring, &other, 0.05, 0.25);
+        assert_eq!(runs.len(), 2, "{runs:?}");
+        for (run, closed) in &runs {
+            assert!(!closed);
+            assert!(run.windows(2).all(|w| (w[1] - w[0]).norm() <= 0.25 + 1e-9));
+            let x = run[0].x;
+            assert!(run.iter().all(|p| p.x == x), "{run:?}");
+            let lo = run.iter().map(|p| p.y).fold(f64::INFINITY, f64::min);
+            let hi = run.iter().map(|p| p.y).fold(f64::NEG_INFINITY, f64::max);
+            let want = if x == 10.0 { (0.0, 5.0) } else { (5.0, 10.0) };
+            assert!(x == 10.0 || x == 0.0, "{x}");
+            assert!(
+                (lo - want.0).abs() < 1e-9 && (hi - want.1).abs() < 1e-9,
+                "{x}: {lo} to {hi}"
+            );
+        }
+        // A triangle is a ring too.
+        let triangle = [
+            Point2::new(0.0, 0.0),
+            Point2::new(10.0, 0.0),
+            Point2::new(10.0, 10.0),
+        ];
+        assert_eq!(adjoining_runs(&triangle, &other[..1], 0.05, 0.25).len(), 1);
     }
 }
