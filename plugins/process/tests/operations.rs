@@ -263,6 +263,22 @@ fn each_grind_takes_the_surface_from_where_the_last_operation_left_it() {
         let to = f(&rough["surface"]);
         assert!((to - (z + FINISH[r])).abs() < 1e-9, "layer {i}: rough to {to}");
         assert!((value(rough, "removed") - (from - to)).abs() < 1e-12, "layer {i}");
+        // The wheel's centre runs in lines half its diameter apart (the default
+        // stepover), centred on the area.
+        let mut ys: Vec<f64> = rough["paths"]
+            .as_array()
+            .expect("paths")
+            .iter()
+            .map(|p| f(&p["points"][0][1]))
+            .collect();
+        ys.sort_by(f64::total_cmp);
+        ys.dedup_by(|a, b| (*a - *b).abs() < 1e-9);
+        assert!(ys.len() >= 2, "layer {i}: {ys:?}");
+        assert!(
+            ys.windows(2).all(|w| (w[1] - w[0] - 10.0).abs() < 1e-9),
+            "layer {i}: {ys:?}"
+        );
+        assert!((ys[0] + ys[ys.len() - 1]).abs() < 1e-9, "layer {i}: {ys:?}");
         match one(l, "grind", Some("finish")) {
             Some(finish) => {
                 assert!(FINISH[r] > 0.0, "layer {i}: a finish grind without an allowance");
