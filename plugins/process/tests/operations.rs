@@ -68,6 +68,7 @@ use = "adaptive"
 [[process]]
 use = "end-mill"
 diameter = 0.8
+passes = 2
 
 [[process]]
 use = "spray"
@@ -105,8 +106,9 @@ use = "json"
 path = "pipe.json"
 "#;
 
-/// The regions in the sequence's order and their finish allowances.
+/// The regions in the sequence's order, their radii (mm) and finish allowances.
 const REGIONS: [&str; 3] = ["inner", "middle", "outer"];
+const RADII: [(f64, f64); 3] = [(5.0, 7.0), (7.0, 9.0), (9.0, 10.0)];
 const FINISH: [f64; 3] = [0.02, 0.0, 0.0];
 const ROUGH: f64 = 0.1;
 
@@ -299,7 +301,7 @@ fn the_end_mill_cuts_as_deep_as_the_highest_neighbour_stands_above_the_base() {
     let plan = run();
     // Each region's surface before each layer: the top of its last layer.
     let mut now: [Option<f64>; 3] = [None; 3];
-    let mut milled = 0;
+    let (mut milled, mut second) = (0, false);
     for (i, l) in layers(&plan).iter().enumerate() {
         let r = l["region"].as_u64().expect("region") as usize;
         let (z, t) = (f(&l["z"]), f(&l["thickness"]));
@@ -324,13 +326,26 @@ fn the_end_mill_cuts_as_deep_as_the_highest_neighbour_stands_above_the_base() {
                     paths.iter().all(|p| (f(&p["z"]) - base).abs() < 1e-9),
                     "layer {i}"
                 );
+                // Two passes along each side: a cutter radius in (0.4 mm), then a
+                // stepover of half the diameter further; the 1 mm outer tube has room
+                // for the first only.
+                let (ri, ro) = RADII[r];
+                let at = [ri + 0.4, ri + 0.8, ro - 0.4, ro - 0.8];
+                for p in paths {
+                    for q in p["points"].as_array().expect("points") {
+                        let rho = f(&q[0]).hypot(f(&q[1]));
+                        let k = at.iter().position(|a| (rho - a).abs() < 0.01);
+                        assert!(k.is_some(), "layer {i}: the mill at radius {rho}, not {at:?}");
+                        second |= matches!(k, Some(1 | 3));
+                    }
+                }
                 milled += 1;
             }
             None => assert!(!beside, "layer {i}: not milled beside {higher:?}"),
         }
         now[r] = Some(z);
     }
-    assert!(milled >= 3, "{milled}");
+    assert!(milled >= 3 && second, "{milled} {second}");
 }
 
 #[test]
@@ -339,7 +354,10 @@ fn the_filler_fills_the_engraved_voids_and_is_removed_once_at_the_end() {
     let all = layers(&plan);
     let mut filled = 0;
     for (i, l) in all.iter().enumerate() {
+        // Only the microstructure's layers are engraved and filled (`regions`).
+        let inner = l["region"] == 0;
         match (one(l, "engrave", None), one(l, "fill", None)) {
+            (Some(_), _) | (_, Some(_)) if !inner => panic!("layer {i}: engraved or filled outside `inner`"),
             (Some(engraved), Some(fill)) => {
                 assert_eq!(value(fill, "voids"), value(engraved, "voids"), "layer {i}");
                 let volume = value(engraved, "void_area") * value(engraved, "depth");
