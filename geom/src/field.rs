@@ -1,10 +1,16 @@
 //! A distance field of one family on an `nx` by `ny` grid of samples: the exact distance
 //! to the nearest boundary segment for samples within a cell of it, propagated to the
-//! rest by the Felzenszwalb-Huttenlocher transform with the nearest seed tracked (so a
-//! far sample's distance is measured to a seed's exact boundary point, within half a
-//! cell of the exact distance), and the
+//! rest by the Felzenszwalb-Huttenlocher transform with the nearest seed tracked, and the
 //! interior found by scanning each row. The grid is padded so that its border samples
 //! lie outside the family.
+//!
+//! A far sample's distance is measured to a seed's exact boundary point, so it is never
+//! short of the exact distance. It is over by less than half a cell on round shapes
+//! (the tests' discs), and by at most (1 + 1/sqrt 2) cells anywhere: the nearest seed
+//! on the grid is no farther than the seed nearest the true nearest boundary point
+//! (within half a cell's diagonal of it), and a seed is within a cell of its own
+//! boundary point. Where seeds on two stretches of boundary tie on the grid (beside a
+//! square corner), three quarters of a cell occurs.
 
 use crate::segment::closest_on_segment;
 use crate::shape::{BBox2, Contour, Point2};
@@ -234,18 +240,8 @@ impl Field {
         };
         // Near a medial axis the nearest seed in samples may sit on the farther
         // boundary. There neighbouring samples take seeds on different stretches of
-        // the boundary (seeds more than two samples apart), and each of the two also
-        // tries the other's seed.
-        // Seeds are (row << 16) | column: two are apart when their columns or their
-        // rows differ by more than two, (difference + 2) > 4 in wrapping unsigned
-        // arithmetic, without a branch, so that a whole row is tested at once. A
-        // missing seed (all bits set) is apart from every real one (below 2^15 a side)
-        // and not from another missing one: no special case.
-        let apart = |a: u32, b: u32| {
-            let dc = (a & 0xffff).wrapping_sub(b & 0xffff).wrapping_add(2);
-            let dr = (a >> 16).wrapping_sub(b >> 16).wrapping_add(2);
-            (dc > 4) | (dr > 4)
-        };
+        // the boundary (seeds more than two samples apart: [`apart`]), and each of the
+        // two also tries the other's seed.
         let at = |i: usize, j: usize| Point2::new(ox + i as f64 * h, oy + j as f64 * h);
         // Each sample with its right and upper neighbours: with the samples that look
         // back, its four edge neighbours (the diagonals found nothing more on the
@@ -295,6 +291,19 @@ impl Field {
             std::mem::swap(&mut row, &mut up);
         }
     }
+}
+
+/// Whether two seeds lie on different stretches of the boundary, as far as the cross
+/// step of [`Field::measure_from_seeds`] is concerned: more than two samples apart in
+/// column or in row. Seeds are (row << 16) | column, and the test is
+/// (difference + 2) > 4 in wrapping unsigned arithmetic, without a branch, so that a
+/// whole row is tested at once. A missing seed (all bits set) is apart from every real
+/// one (below 2^15 a side) and not from another missing one: no special case.
+#[inline]
+fn apart(a: u32, b: u32) -> bool {
+    let dc = (a & 0xffff).wrapping_sub(b & 0xffff).wrapping_add(2);
+    let dr = (a >> 16).wrapping_sub(b >> 16).wrapping_add(2);
+    (dc > 4) | (dr > 4)
 }
 
 /// The per-sample work arrays of [`Field::distance_to`], kept per thread: a family's
@@ -484,6 +493,173 @@ mod tests {
             }
         }
         assert!(skipped > 0);
+    }
+
+    #[test]
+    fn the_grid_covers_the_box_with_square_cells_and_a_margin() {
+        // 13 samples' worth along the longer side: 10 cells over the box, 1.5 cells of
+        // margin each side.
+        let bbox = BBox2::from_points([Point2::new(100.0, -50.0), Point2::new(130.0, -30.0)]);
+        let f = Field::over(&bbox, 13);
+        assert_eq!(f.h, 3.0);
+        assert_eq!((f.nx, f.ny), (14, 11));
+        assert_eq!((f.origin.x, f.origin.y), (95.5, -54.5));
+        assert_eq!(f.values.len(), 14 * 11);
+        assert_eq!(f.point(2, 3), Point2::new(101.5, -45.5));
+        // The far samples lie beyond the box by the margin at least.
+        let far = f.point(f.nx - 1, f.ny - 1);
+        assert!(
+            far.x >= 130.0 + 1.5 * f.h && far.y >= -30.0 + 1.5 * f.h,
+            "{far:?}"
+        );
+        // Too few samples asked for: four along the longer side.
+        let f = Field::over(&bbox, 1);
+        assert_eq!((f.h, f.nx, f.ny), (30.0, 5, 5));
+    }
+
+    /// Every sample's inside flag and distance against the exact ones: the flag
+    /// wherever the sample is off the boundary, the distance exact within a cell of
+    /// it, and elsewhere never short of the exact one nor more than the bound of the
+    /// module's documentation over it.
+    fn check_exact(f: &Field, contours: &[&Contour]) {
+        let mut g = f.clone();
+        g.distance_to(contours);
+        let inside = g.inside(contours);
+        let mut flagged = 0;
+        for j in 0..g.ny {
+            for i in 0..g.nx {
+                let p = g.point(i, j);
+                let exact = contours
+                    .iter()
+                    .map(|c| c.distance(p))
+                    .fold(f64::INFINITY, f64::min);
+                let got = g.values[j * g.nx + i];
+                if exact <= g.h {
+                    assert!((got - exact).abs() < 1e-9, "{got} at {p:?}: {exact}");
+                } else {
+                    let bound = (1.0 + std::f64::consts::FRAC_1_SQRT_2) * g.h;
+                    assert!(
+                        got >= exact - 1e-9 && got - exact <= bound,
+                        "{got} at {p:?}: {exact}"
+                    );
+                }
+                let truly = contours.iter().filter(|c| c.contains(p)).count() % 2 == 1;
+                if exact > 1e-9 {
+                    assert_eq!(inside[j * g.nx + i], truly, "{p:?}");
+                }
+                flagged += usize::from(inside[j * g.nx + i]);
+            }
+        }
+        assert!(flagged > 0);
+    }
+
+    #[test]
+    fn a_part_far_from_the_origin_on_coarse_cells_is_measured_exactly() {
+        // Cells of 3.2 mm, a part 400 mm wide a kilometre away, edges along the axes
+        // (a rectangle, a square hole) and slanted (a triangular hole).
+        let outer = rect(1000.0, 2000.0, 400.0, 300.0);
+        let square = rect(1100.0, 2100.0, 80.0, 80.0).oriented(false);
+        let triangle = Contour::new(vec![
+            Point2::new(1250.0, 2050.0),
+            Point2::new(1350.0, 2120.0),
+            Point2::new(1240.0, 2240.0),
+        ])
+        .oriented(false);
+        let contours = [&outer, &square, &triangle];
+        let f = Field::over(&outer.bbox(), 128);
+        assert_eq!(f.h, 3.2);
+        check_exact(&f, &contours);
+        // The same part below and left of the origin.
+        let mirrored: Vec<Contour> = contours
+            .iter()
+            .map(|c| Contour::new(c.points.iter().map(|p| Point2::new(-p.x, -p.y)).collect()))
+            .collect();
+        let mirrored: Vec<&Contour> = mirrored.iter().collect();
+        let f = Field::over(&mirrored[0].bbox(), 128);
+        check_exact(&f, &mirrored);
+    }
+
+    #[test]
+    fn a_row_through_a_vertex_crosses_the_boundary_once() {
+        // The vertex (5, 5) lies on row 5 of a unit grid, where the contour turns in x
+        // and goes on up: one crossing there, not two.
+        let c = Contour::new(vec![
+            Point2::new(2.0, 2.0),
+            Point2::new(8.0, 2.0),
+            Point2::new(8.0, 8.5),
+            Point2::new(2.0, 8.5),
+            Point2::new(5.0, 5.0),
+        ]);
+        let f = Field {
+            nx: 11,
+            ny: 11,
+            origin: Point2::new(0.0, 0.0),
+            h: 1.0,
+            values: vec![0.0; 121],
+        };
+        let inside = f.inside(&[&c]);
+        let row: Vec<bool> = (0..11).map(|i| inside[5 * 11 + i]).collect();
+        let want: Vec<bool> = (0..11).map(|i| (5..=7).contains(&i)).collect();
+        assert_eq!(row, want);
+        check_exact(&f, &[&c]);
+    }
+
+    #[test]
+    fn a_window_over_a_larger_shape_flags_what_it_covers() {
+        // The field covers a window inside a disc: the shape's edges start and end
+        // beyond the grid, on every side of it.
+        let c = circle(0.0, 0.0, 10.0, 360);
+        let window = BBox2::from_points([Point2::new(-4.0, -8.0), Point2::new(4.0, -2.0)]);
+        let f = Field::over(&window, 24);
+        let inside = f.inside(&[&c]);
+        for j in 0..f.ny {
+            for i in 0..f.nx {
+                let p = f.point(i, j);
+                if c.distance(p) > 1e-9 {
+                    assert_eq!(inside[j * f.nx + i], c.contains(p), "{p:?}");
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn only_usual_fields_keep_their_work_arrays() {
+        let kept = || SCRATCH.with(|s| s.borrow().near.capacity());
+        let c = circle(0.0, 0.0, 10.0, 64);
+        let mut small = Field::over(&c.bbox(), 64);
+        small.distance_to(&[&c]);
+        assert!(kept() >= small.nx * small.ny);
+        // 1100 x 1100 samples: beyond the 1024 x 1024 kept.
+        let mut large = Field::over(&c.bbox(), 1100);
+        large.distance_to(&[&c]);
+        assert_eq!(kept(), 0);
+    }
+
+    #[test]
+    fn seeds_are_apart_beyond_two_samples_in_column_or_row() {
+        let seed = |row: u32, column: u32| (row << 16) | column;
+        let s = seed(100, 200);
+        for (dr, dc, want) in [
+            (0, 0, false),
+            (2, 0, false),
+            (0, 2, false),
+            (2, 2, false),
+            (3, 0, true),
+            (0, 3, true),
+            (3, 3, true),
+            (1, 5, true),
+            (40, 1, true),
+        ] {
+            for (r, c) in [(100 + dr, 200 + dc), (100 - dr, 200 - dc), (100 + dr, 200 - dc)] {
+                assert_eq!(apart(s, seed(r, c)), want, "{dr} rows, {dc} columns");
+                assert_eq!(apart(seed(r, c), s), want, "{dr} rows, {dc} columns");
+            }
+        }
+        // At the grid's corners, and against a missing seed.
+        assert!(!apart(seed(0, 0), seed(2, 1)));
+        assert!(apart(seed(0, 0), seed(0, (1 << 15) - 1)));
+        assert!(apart(s, u32::MAX) && apart(u32::MAX, s));
+        assert!(!apart(u32::MAX, u32::MAX));
     }
 
     #[test]

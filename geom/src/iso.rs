@@ -266,4 +266,126 @@ mod tests {
             ring.len()
         );
     }
+
+    /// A field of `nx` by `ny` unit cells from the origin, with `values`.
+    fn grid(nx: usize, ny: usize, values: Vec<f64>) -> Field {
+        assert_eq!(values.len(), nx * ny);
+        Field {
+            nx,
+            ny,
+            origin: Point2::new(0.0, 0.0),
+            h: 1.0,
+            values,
+        }
+    }
+
+    #[test]
+    fn a_saddle_joins_or_parts_by_the_cells_mean() {
+        // The middle cell's high corners are (1, 1) and (2, 2), its low ones 0.2; the
+        // border is 0. Its mean is 0.6.
+        let mut values = vec![0.0; 16];
+        values[4 + 1] = 1.0;
+        values[2 * 4 + 2] = 1.0;
+        values[4 + 2] = 0.2;
+        values[2 * 4 + 1] = 0.2;
+        let f = grid(4, 4, values.clone());
+        // Below the mean the high corners are joined through the centre: one loop.
+        let joined = iso_loops(&f, &values, 0.5);
+        assert_eq!(joined.len(), 1, "{joined:?}");
+        assert!(joined[0].signed_area() > 0.0);
+        // Above it, two loops, one round each high corner.
+        let apart = iso_loops(&f, &values, 0.7);
+        assert_eq!(apart.len(), 2, "{apart:?}");
+        for l in &apart {
+            assert!(l.signed_area() > 0.0);
+            assert!(l.contains(Point2::new(1.0, 1.0)) != l.contains(Point2::new(2.0, 2.0)));
+        }
+        // The other diagonal high: the same, turned.
+        let mut turned = vec![0.0; 16];
+        turned[4 + 2] = 1.0;
+        turned[2 * 4 + 1] = 1.0;
+        turned[4 + 1] = 0.2;
+        turned[2 * 4 + 2] = 0.2;
+        assert_eq!(iso_loops(&f, &turned, 0.5).len(), 1);
+        assert_eq!(iso_loops(&f, &turned, 0.7).len(), 2);
+    }
+
+    #[test]
+    fn loop_vertices_lie_where_the_edge_reaches_the_level() {
+        // A disc with a hole, cut at several levels: every vertex is on a grid edge,
+        // where the straight line between the edge's samples takes the level; outer
+        // loops run counter-clockwise and holes clockwise.
+        let c = circle(0.5, -0.3, 10.0, 200);
+        let hole = circle(2.0, 1.0, 3.0, 90).oriented(false);
+        let (f, values) = signed(&[&c, &hole]);
+        for t in [0.7, 1.5, 2.2] {
+            let loops = iso_loops(&f, &values, t);
+            assert_eq!(loops.len(), 2, "level {t}");
+            let signs: Vec<bool> = loops.iter().map(|l| l.signed_area() > 0.0).collect();
+            assert!(signs.contains(&true) && signs.contains(&false), "level {t}");
+            for l in &loops {
+                let outer = l.signed_area() > 0.0;
+                // Only the outer loop holds a point of the disc away from the hole.
+                assert_eq!(l.contains(Point2::new(-5.0, -0.3)), outer);
+                for p in &l.points {
+                    let (u, v) = ((p.x - f.origin.x) / f.h, (p.y - f.origin.y) / f.h);
+                    let on_vertical = (u - u.round()).abs() < 1e-9;
+                    let (i, j) = if on_vertical {
+                        (u.round() as usize, v.floor() as usize)
+                    } else {
+                        assert!((v - v.round()).abs() < 1e-9, "{p:?} is off the grid's edges");
+                        (u.floor() as usize, v.round() as usize)
+                    };
+                    let k0 = j * f.nx + i;
+                    let (k1, s) = if on_vertical {
+                        (k0 + f.nx, v - v.floor())
+                    } else {
+                        (k0 + 1, u - u.floor())
+                    };
+                    let at = values[k0] + s * (values[k1] - values[k0]);
+                    assert!((at - t).abs() < 1e-9, "level {t}: {at} at {p:?}");
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn many_levels_at_once_are_each_level_alone() {
+        // Levels in no order, repeated and not a number, few (one pass per level) and
+        // many (over 32: the levels are searched instead of counted), all above the
+        // field's border.
+        let c = circle(0.0, 0.0, 10.0, 200);
+        let hole = circle(3.0, 0.0, 2.5, 90).oriented(false);
+        let (f, values) = signed(&[&c, &hole]);
+        let few = vec![3.0, 0.5, f64::NAN, 1.5, 3.0, 0.05, 20.0];
+        let many: Vec<f64> = (0..45).map(|k| 9.0 - f64::from(k) * 0.19).collect();
+        for levels in [few, many] {
+            let all = iso_levels(&f, &values, &levels);
+            assert_eq!(all.len(), levels.len());
+            for (t, loops) in levels.iter().zip(&all) {
+                let alone = if t.is_nan() {
+                    Vec::new()
+                } else {
+                    iso_loops(&f, &values, *t)
+                };
+                let area = |l: &[Contour]| l.iter().map(Contour::signed_area).sum::<f64>();
+                assert_eq!(loops.len(), alone.len(), "level {t}");
+                assert!((area(loops) - area(&alone)).abs() < 1e-9, "level {t}");
+            }
+            // Nothing above the top of the field, and the levels that cut it give
+            // areas that shrink as the level rises.
+            let mut cut: Vec<(f64, f64)> = levels
+                .iter()
+                .zip(&all)
+                .filter(|(t, _)| !t.is_nan())
+                .map(|(t, l)| (*t, l.iter().map(Contour::signed_area).sum()))
+                .collect();
+            cut.sort_by(|a, b| a.0.total_cmp(&b.0));
+            for w in cut.windows(2) {
+                assert!(w[1].1 <= w[0].1 + 1e-9, "{w:?}");
+            }
+        }
+        assert!(iso_levels(&f, &values, &[20.0])[0].is_empty());
+        assert!(iso_levels(&f, &values, &[]).is_empty());
+    }
 }
