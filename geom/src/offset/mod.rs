@@ -203,4 +203,108 @@ mod tests {
             &mut Scratch::default()
         ));
     }
+
+    /// The raw loops of `shapes` offset by `d` mm on a grid of 1000 units per mm,
+    /// resolved, as rings in mm.
+    fn resolved_rings(join: Join, shapes: &Shapes, d: f64) -> Vec<Vec<[f64; 2]>> {
+        let mut overlay = Overlay::new_custom(0, overlay_options(), solver());
+        let offset = RawOffset {
+            join,
+            tolerance: 1e-3,
+        };
+        offset.add_loops(&mut overlay, &on_grid(shapes), d, 1000.0, &mut Scratch::default());
+        let out = overlay.overlay(OverlayRule::Clip, FillRule::Positive);
+        out.iter()
+            .flatten()
+            .map(|c| {
+                c.iter()
+                    .map(|p| [f64::from(p.x) / 1e3, f64::from(p.y) / 1e3])
+                    .collect()
+            })
+            .collect()
+    }
+
+    /// Whether `p` is inside `rings` by the even-odd rule (a ray to the right).
+    fn inside(rings: &[Vec<[f64; 2]>], p: [f64; 2]) -> bool {
+        let mut odd = false;
+        for r in rings {
+            for (i, a) in r.iter().enumerate() {
+                let b = r[(i + 1) % r.len()];
+                if (a[1] > p[1]) != (b[1] > p[1]) {
+                    let x = a[0] + (p[1] - a[1]) / (b[1] - a[1]) * (b[0] - a[0]);
+                    if x > p[0] {
+                        odd = !odd;
+                    }
+                }
+            }
+        }
+        odd
+    }
+
+    /// Distance from `p` to the nearest edge of `rings`.
+    fn boundary_distance(rings: &[Vec<[f64; 2]>], p: [f64; 2]) -> f64 {
+        rings
+            .iter()
+            .flat_map(|r| (0..r.len()).map(move |i| (r[i], r[(i + 1) % r.len()])))
+            .map(|(a, b)| crate::segment::segment_distance2(p, a, b).sqrt())
+            .fold(f64::INFINITY, f64::min)
+    }
+
+    #[test]
+    fn round_offsets_are_the_erosion_and_the_dilation() {
+        // A seven-pointed star (convex tips, reflex notches) with a square hole turned
+        // 30 degrees: inward, a point is in the offset when it is in the part and at
+        // least |d| from its boundary; outward, when it is in the part or within d of
+        // it. Points near the offset's boundary (within the tolerance and the grid's
+        // rounding) are left out.
+        let star: Vec<[f64; 2]> = (0..14)
+            .map(|i| {
+                let a = PI * f64::from(i) / 7.0 + 0.1;
+                let r = if i % 2 == 0 { 10.0 } else { 5.5 };
+                [r * a.cos() + 0.3, r * a.sin() - 0.2]
+            })
+            .collect();
+        let mut hole: Vec<[f64; 2]> = (0..4)
+            .map(|i| {
+                let a = PI / 6.0 + PI * f64::from(i) / 2.0;
+                [1.5 * a.cos() + 0.8, 1.5 * a.sin() + 0.5]
+            })
+            .collect();
+        hole.reverse();
+        let part = vec![vec![star, hole]];
+        let mut state = 0x853c_49e6_748f_ea9bu64;
+        let mut random = move || {
+            state ^= state << 13;
+            state ^= state >> 7;
+            state ^= state << 17;
+            (state >> 11) as f64 / (1u64 << 53) as f64
+        };
+        for d in [-0.4, -1.1, -2.6, 0.4, 1.7] {
+            let rings = resolved_rings(Join::Round, &part, d);
+            assert!(!rings.is_empty(), "{d}");
+            let (mut tested, mut within) = (0, 0);
+            for _ in 0..6000 {
+                let p = [random() * 26.0 - 13.0, random() * 26.0 - 13.0];
+                let (in_part, dist) = (inside(&part[0], p), boundary_distance(&part[0], p));
+                if (dist - d.abs()).abs() < 0.005 {
+                    continue;
+                }
+                let want = if d < 0.0 {
+                    in_part && dist > -d
+                } else {
+                    in_part || dist < d
+                };
+                assert_eq!(
+                    inside(&rings, p),
+                    want,
+                    "offset {d} at {p:?}: {dist} from the part"
+                );
+                tested += 1;
+                within += usize::from(want);
+            }
+            assert!(tested > 5000 && within > 0, "{d}: {within} of {tested}");
+        }
+        // Far enough in, nothing is left.
+        assert!(resolved_rings(Join::Round, &part, -6.0).is_empty());
+    }
 }
