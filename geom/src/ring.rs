@@ -85,4 +85,24 @@ mod tests {
         assert_eq!(ring_perimeter(&square(0.0, 2.0)), 8.0);
         assert_eq!(ring_area(&[]), 0.0);
     }
+
+    #[test]
+    fn rings_keep_their_orientation_and_polygons_take_the_usual_one() {
+        // A clockwise 3-4-5 triangle: negative area, perimeter 12.
+        let t = vec![[0.0, 0.0], [0.0, 4.0], [3.0, 0.0]];
+        assert_eq!(ring_area(&t), -6.0);
+        assert_eq!(ring_perimeter(&t), 12.0);
+        assert_eq!(ring_of(&contour_of(&t)), t);
+        // Outer rings come out counter-clockwise and holes clockwise whatever they were;
+        // empty shapes are dropped.
+        let outer = vec![[0.0, 0.0], [0.0, 10.0], [10.0, 10.0], [10.0, 0.0]];
+        let hole = vec![[2.0, 2.0], [4.0, 2.0], [4.0, 4.0], [2.0, 4.0]];
+        let polygons = polygons_of(&[vec![outer, hole], Vec::new()]);
+        assert_eq!(polygons.len(), 1);
+        assert!(polygons[0].outer.signed_area() > 0.0);
+        assert!(polygons[0].holes[0].signed_area() < 0.0);
+        assert_eq!(polygons[0].area(), 96.0);
+        let back = shape_of(&polygons[0]);
+        assert_eq!((ring_area(&back[0]), ring_area(&back[1])), (100.0, -4.0));
+    }
 }
