@@ -80,4 +80,55 @@ mod tests {
                 .all(|c| (c.2 - (0.09f64 - 0.0625).sqrt()).abs() < 1e-12)
         );
     }
+
+    #[test]
+    fn every_void_the_plane_cuts_near_the_box_is_found_and_no_other() {
+        // Against every inserting point of a wide block of the lattice: a void is
+        // listed when the plane cuts it and its circle reaches the box (its centre
+        // within the circle's radius of it), off the origin and with unequal periods.
+        let l = Lattice {
+            period: [0.7, 1.3, 0.45],
+            origin: [-0.35, 2.1, 0.2],
+            radius: 0.5,
+        };
+        let bbox = BBox2::from_points([Point2::new(-1.9, -0.6), Point2::new(2.3, 3.4)]);
+        for z in [-1.37, 0.2, 0.41, 1.0, 2.66] {
+            let mut got = l.circles(z, &bbox);
+            let mut want = Vec::new();
+            for k in -20i32..20 {
+                for i in -20i32..20 {
+                    for j in -20i32..20 {
+                        let c = [
+                            l.origin[0] + f64::from(i) * l.period[0],
+                            l.origin[1] + f64::from(j) * l.period[1],
+                            l.origin[2] + f64::from(k) * l.period[2],
+                        ];
+                        let rc2 = l.radius * l.radius - (c[2] - z).powi(2);
+                        if rc2 <= 0.0 {
+                            continue;
+                        }
+                        let rc = rc2.sqrt();
+                        if c[0] >= bbox.min.x - rc
+                            && c[0] <= bbox.max.x + rc
+                            && c[1] >= bbox.min.y - rc
+                            && c[1] <= bbox.max.y + rc
+                        {
+                            want.push((c[0], c[1], rc));
+                        }
+                    }
+                }
+            }
+            let key = |c: &(f64, f64, f64)| (c.2, c.0, c.1);
+            got.sort_by(|a, b| key(a).partial_cmp(&key(b)).expect("numbers"));
+            want.sort_by(|a, b| key(a).partial_cmp(&key(b)).expect("numbers"));
+            assert!(!want.is_empty(), "z = {z}");
+            assert_eq!(got.len(), want.len(), "z = {z}");
+            for (g, w) in got.iter().zip(&want) {
+                assert!(
+                    (g.0 - w.0).abs() < 1e-9 && (g.1 - w.1).abs() < 1e-9 && (g.2 - w.2).abs() < 1e-9,
+                    "z = {z}: {g:?} {w:?}"
+                );
+            }
+        }
+    }
 }
