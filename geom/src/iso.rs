@@ -388,4 +388,27 @@ mod tests {
         assert!(iso_levels(&f, &values, &[20.0])[0].is_empty());
         assert!(iso_levels(&f, &values, &[]).is_empty());
     }
+
+    #[test]
+    fn only_usual_fields_keep_their_edge_table() {
+        let kept = || NEXT.with(|n| n.borrow().table.len());
+        // A cone: v = 1 - distance from the middle, cut at 0.5.
+        let cone = |n: usize| {
+            let c = (n as f64 - 1.0) / 2.0;
+            let values: Vec<f64> = (0..n * n)
+                .map(|k| {
+                    let (i, j) = ((k % n) as f64, (k / n) as f64);
+                    1.0 - (i - c).hypot(j - c) / c
+                })
+                .collect();
+            (grid(n, n, values.clone()), values)
+        };
+        let (f, values) = cone(64);
+        assert_eq!(iso_loops(&f, &values, 0.5).len(), 1);
+        assert!(kept() >= 2 * 63 * 64);
+        // 1100 x 1100 samples, 2.4 million edges: beyond the 2^21 kept.
+        let (f, values) = cone(1100);
+        assert_eq!(iso_loops(&f, &values, 0.5).len(), 1);
+        assert_eq!(kept(), 0);
+    }
 }
