@@ -318,4 +318,149 @@ mod tests {
         assert!(p.contains(Point2::new(0.5, 2.0)));
         assert_eq!(p.boundary_distance(Point2::new(0.5, 2.0)), 0.5);
     }
+
+    /// Whether `p` is inside `c` by counting the edges a ray to the right crosses.
+    fn crossings_odd(c: &Contour, p: Point2) -> bool {
+        c.edges()
+            .filter(|(a, b)| {
+                (a.y > p.y) != (b.y > p.y) && a.x + (p.y - a.y) / (b.y - a.y) * (b.x - a.x) > p.x
+            })
+            .count()
+            % 2
+            == 1
+    }
+
+    #[test]
+    fn winding_numbers_count_turns_with_their_sign() {
+        // A star with notches, either way round, against the crossing count.
+        let star = Contour::new(
+            (0..18)
+                .map(|i| {
+                    let a = std::f64::consts::TAU * f64::from(i) / 18.0;
+                    let r = if i % 2 == 0 { 9.0 } else { 4.0 };
+                    Point2::new(3.0 + r * a.cos(), -2.0 + r * a.sin())
+                })
+                .collect(),
+        );
+        let cw = star.clone().oriented(false);
+        for j in 0..60 {
+            for i in 0..60 {
+                let p = Point2::new(-7.05 + f64::from(i) * 0.34, -12.03 + f64::from(j) * 0.34);
+                let inside = crossings_odd(&star, p);
+                assert_eq!(star.winding_number(p), i32::from(inside), "{p:?}");
+                assert_eq!(cw.winding_number(p), -i32::from(inside), "{p:?}");
+                assert_eq!(star.contains(p), inside);
+                assert_eq!(cw.contains(p), inside);
+            }
+        }
+        // A circle gone round twice winds twice.
+        let mut twice = Contour::circle(Point2::new(0.0, 0.0), 1.0, 16).points;
+        twice.extend(twice.clone());
+        assert_eq!(Contour::new(twice).winding_number(Point2::new(0.1, 0.2)), 2);
+    }
+
+    #[test]
+    fn circles_rectangles_and_squares_run_counter_clockwise() {
+        let c = Contour::circle(Point2::new(1.0, 2.0), 3.0, 6);
+        assert_eq!(c.len(), 6);
+        assert!((c.points[0] - Point2::new(4.0, 2.0)).norm() < 1e-12);
+        assert!(
+            c.points
+                .iter()
+                .all(|p| ((p - Point2::new(1.0, 2.0)).norm() - 3.0).abs() < 1e-12)
+        );
+        assert!(c.is_ccw());
+        // A hexagon of circumradius 3: 6 equilateral triangles of side 3.
+        assert!((c.area() - 6.0 * 9.0 * 3f64.sqrt() / 4.0).abs() < 1e-9);
+        assert_eq!(Contour::circle(Point2::new(0.0, 0.0), 1.0, 1).len(), 3);
+        let r = Contour::rectangle(Point2::new(-1.0, 2.0), Point2::new(3.0, 5.0));
+        assert_eq!(
+            r.points,
+            vec![
+                Point2::new(-1.0, 2.0),
+                Point2::new(3.0, 2.0),
+                Point2::new(3.0, 5.0),
+                Point2::new(-1.0, 5.0)
+            ]
+        );
+        assert_eq!((r.signed_area(), r.perimeter()), (12.0, 14.0));
+        let s = Contour::square(Point2::new(1.0, 1.0), 0.5);
+        assert_eq!(s.points[0], Point2::new(0.5, 0.5));
+        assert_eq!(s.points[2], Point2::new(1.5, 1.5));
+        let mut back = r.clone();
+        back.reverse();
+        assert_eq!(back.signed_area(), -12.0);
+        assert!(!back.is_ccw());
+        assert_eq!(back.clone().oriented(true).signed_area(), 12.0);
+        assert_eq!(back.clone().oriented(false), back);
+        assert_eq!(Contour::default().signed_area(), 0.0);
+        assert!(Contour::default().is_empty() && !r.is_empty());
+    }
+
+    #[test]
+    fn an_interior_point_is_inside_and_off_the_boundary() {
+        // A thin C, either way round, starting on a degenerate edge: the point is
+        // strictly inside, clear of the boundary by a share of its nudge.
+        let c = Contour::new(vec![
+            Point2::new(0.0, 0.0),
+            Point2::new(0.0, 0.0),
+            Point2::new(10.0, 0.0),
+            Point2::new(10.0, 0.2),
+            Point2::new(0.2, 0.2),
+            Point2::new(0.2, 9.8),
+            Point2::new(10.0, 9.8),
+            Point2::new(10.0, 10.0),
+            Point2::new(0.0, 10.0),
+        ]);
+        for c in [c.clone(), c.oriented(false)] {
+            let p = c.interior_point().expect("a point inside");
+            assert!(crossings_odd(&c, p), "{p:?}");
+            assert!(c.distance(p) > 1e-6, "{p:?}");
+        }
+        // Nothing inside: too few points, or all on a line.
+        assert!(
+            Contour::new(vec![Point2::new(0.0, 0.0), Point2::new(1.0, 1.0)])
+                .interior_point()
+                .is_none()
+        );
+        let flat = Contour::new(vec![
+            Point2::new(0.0, 0.0),
+            Point2::new(1.0, 1.0),
+            Point2::new(2.0, 2.0),
+        ]);
+        assert!(flat.interior_point().is_none());
+    }
+
+    #[test]
+    fn boxes_grow_join_and_compare() {
+        let b = BBox2::from_points([
+            Point2::new(1.0, 5.0),
+            Point2::new(-2.0, 3.0),
+            Point2::new(0.0, 9.0),
+        ]);
+        assert_eq!((b.min, b.max), (Point2::new(-2.0, 3.0), Point2::new(1.0, 9.0)));
+        assert_eq!((b.width(), b.height(), b.diagonal()), (3.0, 6.0, 45f64.sqrt()));
+        assert_eq!(b.center(), Point2::new(-0.5, 6.0));
+        assert!(!b.is_empty());
+        let empty = BBox2::default();
+        assert!(empty.is_empty());
+        assert_eq!((empty.width(), empty.height(), empty.diagonal()), (0.0, 0.0, 0.0));
+        assert_eq!(empty.union(&b), b);
+        // A box of no width is not empty.
+        assert!(!BBox2::from_points([Point2::new(1.0, 1.0), Point2::new(1.0, 2.0)]).is_empty());
+        let other = BBox2::from_points([Point2::new(1.0, 0.0), Point2::new(4.0, 3.0)]);
+        let u = b.union(&other);
+        assert_eq!((u.min, u.max), (Point2::new(-2.0, 0.0), Point2::new(4.0, 9.0)));
+        assert!(u.contains_box(&b) && u.contains_box(&other) && !b.contains_box(&u));
+        // Touching at a corner overlaps; apart along x or along y does not.
+        assert!(b.overlaps(&other) && other.overlaps(&b));
+        let right = BBox2::from_points([Point2::new(1.5, 3.0), Point2::new(2.0, 9.0)]);
+        let above = BBox2::from_points([Point2::new(-2.0, 9.5), Point2::new(1.0, 10.0)]);
+        let below = BBox2::from_points([Point2::new(-2.0, 0.0), Point2::new(1.0, 2.5)]);
+        for o in [right, above, below] {
+            assert!(!b.overlaps(&o) && !o.overlaps(&b), "{o:?}");
+        }
+        let polygon = Polygon::new(Contour::rectangle(b.min, b.max), Vec::new());
+        assert_eq!(polygon.bbox(), b);
+    }
 }
