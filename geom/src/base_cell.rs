@@ -540,4 +540,183 @@ mod tests {
         let ks: std::collections::BTreeSet<i64> = got.iter().map(|ijk| ijk[2]).collect();
         assert!(ks.len() > 1, "{ks:?}");
     }
+
+    /// A rotation from three angles (about z, then y, then x).
+    fn turn(a: f64, b: f64, c: f64) -> Matrix3<f64> {
+        *nalgebra::Rotation3::from_euler_angles(c, b, a).matrix()
+    }
+
+    /// Whether `p` (machine frame) is inside the solid the cell's sections are cut
+    /// from: the box, the cylinder's prism of `ROUND` sides, or the sphere.
+    fn solid_holds(cell: &PlacedBaseCell, p: Vector3<f64>) -> bool {
+        let q = cell.rotation.transpose() * (p - cell.centre);
+        let [a, b, c] = cell.half;
+        match cell.shape {
+            BaseCellShape::Sphere => q.norm() <= a,
+            BaseCellShape::Box => q.x.abs() <= a && q.y.abs() <= b && q.z.abs() <= c,
+            BaseCellShape::Cylinder => {
+                let prism = Contour::circle(Point2::new(0.0, 0.0), a, ROUND);
+                q.z.abs() <= c && prism.contains(Point2::new(q.x, q.y))
+            }
+        }
+    }
+
+    #[test]
+    fn sections_of_turned_cells_hold_what_the_solid_holds() {
+        // Boxes and cylinders at random turns, cut at several heights: a point of the
+        // plane is inside the section exactly when it is inside the solid (the sphere's
+        // section is a polygon of its circle, so it is checked off its edge only).
+        let mut state = 0x2545_f491_4f6c_dd1du64;
+        let mut random = move || {
+            state ^= state << 13;
+            state ^= state >> 7;
+            state ^= state << 17;
+            (state >> 11) as f64 / (1u64 << 53) as f64
+        };
+        let mut cut = 0;
+        for case in 0..60 {
+            let shape = [BaseCellShape::Box, BaseCellShape::Cylinder, BaseCellShape::Sphere][case % 3];
+            let rotation = turn(random() * 6.3, random() * 6.3, random() * 6.3);
+            let cell = PlacedBaseCell {
+                shape,
+                centre: Vector3::new(random() * 10.0 - 5.0, random() * 10.0 - 5.0, random() * 4.0),
+                half: [0.3 + random(), 0.3 + random(), 0.3 + random()],
+                rotation,
+            };
+            let reach = cell.reach();
+            for dz in [-0.9, -0.5, -0.1, 0.0, 0.3, 0.7, 0.95] {
+                let z = cell.centre.z + dz * reach;
+                let section = cell.section(z);
+                let mut inside = 0;
+                for j in 0..40 {
+                    for i in 0..40 {
+                        let p = Vector3::new(
+                            cell.centre.x + (f64::from(i) / 39.5 - 0.5) * 2.0 * reach,
+                            cell.centre.y + (f64::from(j) / 39.5 - 0.5) * 2.0 * reach,
+                            z,
+                        );
+                        let holds = solid_holds(&cell, p);
+                        let flat = Point2::new(p.x, p.y);
+                        let got = section.as_ref().is_some_and(|c| c.contains(flat));
+                        let edge = section.as_ref().map_or(f64::INFINITY, |c| c.distance(flat));
+                        let margin = if shape == BaseCellShape::Sphere {
+                            0.02 * reach
+                        } else {
+                            1e-9
+                        };
+                        if edge > margin
+                            && (shape != BaseCellShape::Sphere || {
+                                let q = p - cell.centre;
+                                (q.norm() - cell.half[0]).abs() > margin
+                            })
+                        {
+                            assert_eq!(got, holds, "case {case} {shape:?} at {p:?}");
+                        }
+                        inside += usize::from(got);
+                    }
+                }
+                if let Some(c) = &section {
+                    assert!(c.is_ccw(), "case {case}");
+                    cut += usize::from(inside > 0);
+                }
+            }
+            // Beyond its reach the plane misses it.
+            assert!(cell.section(cell.centre.z + 1.001 * reach).is_none());
+            assert!(cell.section(cell.centre.z - 1.001 * reach).is_none());
+        }
+        assert!(cut > 200, "{cut}");
+    }
+
+    #[test]
+    fn a_cells_reach_and_a_cylinders_facets() {
+        let up = |shape, half| PlacedBaseCell {
+            shape,
+            centre: Vector3::zeros(),
+            half,
+            rotation: Matrix3::identity(),
+        };
+        assert_eq!(up(BaseCellShape::Sphere, [0.5, 9.0, 9.0]).reach(), 0.5);
+        assert_eq!(up(BaseCellShape::Box, [2.0, 3.0, 6.0]).reach(), 7.0);
+        assert_eq!(up(BaseCellShape::Cylinder, [3.0, 9.0, 4.0]).reach(), 5.0);
+        assert!(up(BaseCellShape::Sphere, [0.5, 0.5, 0.5]).facets().is_empty());
+        // A cylinder of radius 1 and height 4: two caps along +-z, and the side in
+        // ROUND strips whose normals lie in the x-y plane, the prism's side area.
+        let f = up(BaseCellShape::Cylinder, [1.0, 1.0, 2.0]).facets();
+        assert_eq!(f.len(), 2 + ROUND);
+        assert_eq!((f[0].1, f[1].1), (Vector3::z(), -Vector3::z()));
+        assert!((f[0].0 - std::f64::consts::PI).abs() < 1e-12);
+        let side: f64 = f[2..].iter().map(|x| x.0).sum();
+        assert!((side - 2.0 * std::f64::consts::PI * 4.0).abs() < 1e-9, "{side}");
+        let sum = f[2..].iter().fold(Vector3::zeros(), |s, x| s + x.1);
+        assert!(sum.norm() < 1e-9 && f[2..].iter().all(|x| x.1.z.abs() < 1e-12));
+    }
+
+    #[test]
+    fn a_moved_lattice_visits_every_point_of_a_box_once() {
+        // A tilted lattice turned again and moved: the points visited are exactly the
+        // lattice points inside the box, each once, no more than counted; the points
+        // near a plane are those of the box walk within the band.
+        let lattice = BaseCellArray::tilted_about_x([0.7, 1.1, 0.9], [0.2, -0.3, 0.1], 0.4)
+            .moved(&turn(0.7, 0.0, 0.0), Vector3::new(5.0, -2.0, 1.5));
+        let (lo, hi) = (Vector3::new(1.0, -6.0, 0.0), Vector3::new(9.0, 2.0, 3.0));
+        let mut visited = Vec::new();
+        lattice.in_box(lo, hi, |ijk, p| {
+            assert!((lattice.point(ijk[0], ijk[1], ijk[2]) - p).norm() < 1e-12);
+            visited.push(ijk);
+            true
+        });
+        let mut brute = Vec::new();
+        for k in -30..30 {
+            for j in -30..30 {
+                for i in -30..30 {
+                    let p = lattice.point(i, j, k);
+                    if (0..3).all(|a| p[a] >= lo[a] && p[a] <= hi[a]) {
+                        brute.push([i, j, k]);
+                    }
+                }
+            }
+        }
+        let count = visited.len();
+        visited.sort();
+        visited.dedup();
+        brute.sort();
+        assert_eq!(visited.len(), count);
+        assert!(!brute.is_empty());
+        assert_eq!(visited, brute);
+        assert!(lattice.count_in_box(lo, hi) >= count as f64);
+        // Stopping early stops.
+        let mut seen = 0;
+        lattice.in_box(lo, hi, |_, _| {
+            seen += 1;
+            seen < 3
+        });
+        assert_eq!(seen, 3);
+        // The band about z = 1.4, over the box's x-y.
+        let bbox = BBox2::from_points([Point2::new(2.0, -5.0), Point2::new(8.0, 1.0)]);
+        let near: Vec<[i64; 3]> = lattice
+            .near_plane(1.4, 0.5, &bbox)
+            .into_iter()
+            .map(|(ijk, _)| ijk)
+            .collect();
+        let mut want = Vec::new();
+        for k in -30..30 {
+            for j in -30..30 {
+                for i in -30..30 {
+                    let p = lattice.point(i, j, k);
+                    if (p.z - 1.4).abs() <= 0.5 && p.x >= 1.5 && p.x <= 8.5 && p.y >= -5.5 && p.y <= 1.5 {
+                        want.push([i, j, k]);
+                    }
+                }
+            }
+        }
+        want.sort_by_key(|ijk| (ijk[2], ijk[1], ijk[0]));
+        assert!(!want.is_empty());
+        assert_eq!(near, want);
+        assert!(lattice.count_near_plane(1.4, 0.5, &bbox) >= near.len() as f64);
+        // An unbounded box visits nothing.
+        assert_eq!(
+            lattice.count_in_box(lo, Vector3::new(f64::INFINITY, 2.0, 3.0)),
+            0.0
+        );
+    }
 }
