@@ -341,3 +341,84 @@ lamina_api::register_stage!(StageFactory {
     },
     build,
 });
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Whether every point of `void` on a fine grid at least half a `spot` from its
+    /// outline lies within half a spot of one of `rings`: the laser clears the void
+    /// (all but the corners a round spot cannot reach).
+    fn cleared(void: &Void, rings: &[Contour], spot: f64) -> bool {
+        let b = void.bbox();
+        let inside = |p: Point2| match void {
+            Void::Whole(c) => c.contains(p) && c.distance(p) >= spot / 2.0,
+            Void::Cut(q) => q.contains(p) && q.boundary_distance(p) >= spot / 2.0,
+        };
+        (0..=80).all(|j| {
+            (0..=80).all(|i| {
+                let p = Point2::new(
+                    b.min.x + b.width() * f64::from(i) / 80.0,
+                    b.min.y + b.height() * f64::from(j) / 80.0,
+                );
+                // The offset engine's grid rounds the cut void's rings by a few nm.
+                !inside(p) || rings.iter().any(|r| r.distance(p) <= spot / 2.0 + 1e-6)
+            })
+        })
+    }
+
+    #[test]
+    fn rings_start_half_a_spot_in_step_in_and_clear_the_void() {
+        // A void of radius 0.3 (a 32-gon), a 0.05 mm spot, rings 0.04 apart: insets
+        // 0.025, 0.065, ..., 0.265, then one at the deepest inset (the apothem), as
+        // 0.265 + 0.025 leaves a core.
+        let circle = Contour::circle(Point2::new(1.0, -2.0), 0.3, 32);
+        let apothem = 0.3 * (std::f64::consts::PI / 32.0).cos();
+        let void = Void::Whole(circle.clone());
+        let rings = void.rings(0.05, 0.04);
+        assert_eq!(rings.len(), 8);
+        for (k, r) in rings.iter().take(7).enumerate() {
+            let inset = 0.025 + 0.04 * k as f64;
+            let want = circle.area() * ((apothem - inset) / apothem).powi(2);
+            assert!(
+                (r.area() - want).abs() < 1e-9,
+                "ring {k}: {} against {want}",
+                r.area()
+            );
+        }
+        assert!(rings[7].area() < 1e-6, "{}", rings[7].area());
+        assert!(cleared(&void, &rings, 0.05));
+        // Without the last ring a core would be left.
+        assert!(!cleared(&void, &rings[..7], 0.05));
+        // A void narrower than the spot gets none.
+        assert!(
+            Void::Whole(Contour::circle(Point2::new(0.0, 0.0), 0.02, 32))
+                .rings(0.05, 0.04)
+                .is_empty()
+        );
+    }
+
+    #[test]
+    fn a_void_the_boundary_cuts_is_cleared_too() {
+        // Half of a disc of radius 0.4, cut along a chord 0.1 from its centre.
+        let disc = Contour::circle(Point2::new(0.0, 0.0), 0.4, 48);
+        let clip = vec![vec![lamina_geom::ring::ring_of(&Contour::rectangle(
+            Point2::new(-1.0, 0.1),
+            Point2::new(1.0, 1.0),
+        ))]];
+        let cut: Shapes =
+            vec![vec![ring_of(&disc)]].overlay(&clip, OverlayRule::Intersect, FillRule::NonZero);
+        let polygon = polygons_of(&cut).remove(0);
+        let void = Void::Cut(polygon);
+        let rings = void.rings(0.06, 0.045);
+        assert!(rings.len() >= 3, "{}", rings.len());
+        assert!(cleared(&void, &rings, 0.06));
+        // Every ring stays inside the void, half a spot from its edge at least.
+        let Void::Cut(p) = &void else { unreachable!() };
+        for r in &rings {
+            for q in &r.points {
+                assert!(p.contains(*q) && p.boundary_distance(*q) >= 0.03 - 1e-6, "{q:?}");
+            }
+        }
+    }
+}
