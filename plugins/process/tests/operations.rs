@@ -390,3 +390,140 @@ fn the_filler_fills_the_engraved_voids_and_is_removed_once_at_the_end() {
     }
     assert!(filled >= 2, "{filled}");
 }
+
+/// Three parts on every layer: a tube graded across its width (each of its three rings
+/// a mix of its own), a tube of bronze and metal graded all bronze, and a tube of
+/// bronze alone (the same material, but another mix for the gun's feeders: one
+/// operation each). Only sprayed.
+const MIXES: &str = r#"
+name = "mixes"
+
+[materials.ceramic]
+colour = [240, 240, 230]
+[materials.metal]
+colour = [90, 90, 100]
+[materials.bronze]
+colour = [200, 120, 50]
+
+[[parts]]
+name = "graded"
+materials = ["ceramic", "metal"]
+[parts.model]
+use = "tube"
+outer_radius = 9.0
+inner_radius = 6.0
+height = 1.0
+[parts.grade]
+use = "script"
+f = "(sqrt(x * x + y * y) - 6.0) / 3.0"
+[parts.discretise]
+use = "offset"
+count = 3
+
+[[parts]]
+name = "tinted"
+materials = ["bronze", "metal"]
+[parts.model]
+use = "tube"
+outer_radius = 4.0
+inner_radius = 3.0
+height = 1.0
+[parts.grade]
+use = "script"
+f = "1.0"
+
+[[parts]]
+name = "bronze"
+materials = ["bronze"]
+[parts.model]
+use = "tube"
+outer_radius = 2.0
+inner_radius = 1.0
+height = 1.0
+
+[slice]
+use = "uniform"
+thickness = 0.5
+
+[[process]]
+use = "spray"
+diameter = 0.4
+overlap = 0.0
+
+[[output]]
+use = "json"
+path = "mixes.json"
+"#;
+
+/// The `fraction:` values of an operation, by material.
+fn fractions(op: &Value) -> Vec<(String, f64)> {
+    op["values"]
+        .as_object()
+        .expect("values")
+        .iter()
+        .filter_map(|(k, v)| k.strip_prefix("fraction:").map(|m| (m.to_string(), f(v))))
+        .collect()
+}
+
+#[test]
+fn the_gun_sprays_each_mix_of_the_layer_in_one_operation_over_its_own_area() {
+    let plan = lamina_test_support::run_pipeline(MIXES).json("mixes.json");
+    for (i, l) in layers(&plan).iter().enumerate() {
+        let sprays: Vec<&Value> = ops(l).into_iter().filter(|o| o["kind"] == "spray").collect();
+        // Three rings of three mixes, the tinted tube's area, the bronze tube's.
+        assert_eq!(sprays.len(), 5, "layer {i}");
+        let mut graded = Vec::new();
+        for op in &sprays {
+            let mix = fractions(op);
+            // Where the passes run: the radii of their points (the tubes' circles are
+            // polygons, whose edges pass a few um inside the circles' radii).
+            let radii: Vec<f64> = op["paths"]
+                .as_array()
+                .expect("paths")
+                .iter()
+                .flat_map(|p| p["points"].as_array().expect("points").iter())
+                .map(|p| f(&p[0]).hypot(f(&p[1])))
+                .collect();
+            assert!(!radii.is_empty(), "layer {i}: {mix:?} not sprayed");
+            let (lo, hi) = radii
+                .iter()
+                .fold((f64::INFINITY, 0.0f64), |(a, b), &r| (a.min(r), b.max(r)));
+            let of = |m: &str| mix.iter().find(|(n, _)| n == m).map(|(_, v)| *v);
+            match (mix.len(), of("bronze")) {
+                // Bronze alone, over its tube.
+                (1, Some(b)) => {
+                    assert_eq!(b, 1.0, "layer {i}");
+                    assert!(lo >= 1.0 - 0.01 && hi <= 2.0 + 0.01, "layer {i}: {lo}-{hi}");
+                }
+                // Bronze and no metal, over the tinted tube.
+                (2, Some(b)) => {
+                    assert_eq!((b, of("metal")), (1.0, Some(0.0)), "layer {i}");
+                    assert!(lo >= 3.0 - 0.01 && hi <= 4.0 + 0.01, "layer {i}: {lo}-{hi}");
+                }
+                _ => {
+                    let ceramic = of("ceramic").expect("ceramic");
+                    let sum: f64 = mix.iter().map(|(_, v)| v).sum();
+                    assert!((sum - 1.0).abs() < 1e-9, "layer {i}: {mix:?}");
+                    // The grade rises with the radius, one ring a third of the way each.
+                    assert!(lo >= 6.0 - 0.01 && hi <= 9.0 + 0.01, "layer {i}: {lo}-{hi}");
+                    graded.push((ceramic, lo, hi));
+                }
+            }
+        }
+        graded.sort_by(|a, b| a.1.total_cmp(&b.1));
+        assert_eq!(graded.len(), 3, "layer {i}: {graded:?}");
+        for (k, (ceramic, lo, hi)) in graded.iter().enumerate() {
+            // Ring k spans radii 6 + k .. 7 + k; its mix is read at a point inside it.
+            let (r0, r1) = (6.0 + k as f64, 7.0 + k as f64);
+            assert!(
+                *lo >= r0 - 0.01 && *hi <= r1 + 0.01,
+                "layer {i}, ring {k}: {lo}-{hi}"
+            );
+            let f0 = (r0 - 6.0) / 3.0;
+            assert!(
+                *ceramic > f0 && *ceramic < f0 + 1.0 / 3.0,
+                "layer {i}, ring {k}: {ceramic}"
+            );
+        }
+    }
+}
