@@ -534,6 +534,82 @@ mod tests {
     }
 
     #[test]
+    fn a_move_accelerates_cruises_and_brakes_in_the_seconds_its_profile_takes() {
+        let close = |a: f64, b: f64| (a - b).abs() < 1e-12;
+        // 100 mm at 10 mm/s and 100 mm/s²: 0.1 s up and down over 0.5 mm each, the
+        // 99 mm between at speed.
+        assert!(close(trapezoid(100.0, 10.0, 100.0), 0.2 + 9.9));
+        // Too short to reach the speed: a triangle peaking at sqrt(a L).
+        assert!(close(trapezoid(0.5, 10.0, 100.0), 2.0 * 50f64.sqrt() / 100.0));
+        // Entered at 5 and left at rest: 0.05 s up over 0.375 mm, 0.1 s down over
+        // 0.5 mm, the rest at 10.
+        assert!(close(
+            segment(10.0, 5.0, 0.0, 10.0, 100.0),
+            0.05 + 0.1 + (10.0 - 0.875) / 10.0
+        ));
+        // Entered and left at speed: length over speed. Short, entered fast: the peak
+        // lies between the two ends' speeds.
+        assert!(close(segment(3.0, 10.0, 10.0, 10.0, 100.0), 0.3));
+        let peak = ((2.0 * 100.0 * 0.1 + 4.0 + 1.0) / 2.0f64).sqrt();
+        assert!(close(
+            segment(0.1, 2.0, 1.0, 10.0, 100.0),
+            (peak - 2.0) / 100.0 + (peak - 1.0) / 100.0
+        ));
+        assert_eq!(segment(0.0, 1.0, 1.0, 10.0, 100.0), 0.0);
+    }
+
+    #[test]
+    fn corners_slow_a_run_as_much_as_their_turn_and_the_deviation_ask() {
+        let along = |x: f64, y: f64| Pending {
+            length: 10.0,
+            speed: 10.0,
+            accel: 100.0,
+            unit: [x, y, 0.0],
+        };
+        let straight = [along(1.0, 0.0), along(1.0, 0.0)];
+        let square = [along(1.0, 0.0), along(0.0, 1.0)];
+        // Straight on: one move of the whole length.
+        assert!((run_time(&straight, 0.05) - trapezoid(20.0, 10.0, 100.0)).abs() < 1e-12);
+        // A right angle without deviation stops; with some, the corner is taken at
+        // sqrt(a delta s / (1 - s)), s = sin 45 degrees.
+        let stop = 2.0 * trapezoid(10.0, 10.0, 100.0);
+        assert!((run_time(&square, 0.0) - stop).abs() < 1e-12);
+        let s = 0.5f64.sqrt();
+        let v = (100.0 * 0.05 * s / (1.0 - s)).sqrt();
+        let want = 2.0 * segment(10.0, 0.0, v, 10.0, 100.0);
+        assert!((run_time(&square, 0.05) - want).abs() < 1e-12);
+        assert!(want < stop);
+        // Turning right back stops whatever the deviation.
+        assert!((run_time(&[along(1.0, 0.0), along(-1.0, 0.0)], 0.05) - stop).abs() < 1e-12);
+        // A short last move caps the corner before it at the speed it can shed before
+        // the run stops, however gentle the corner.
+        let short = Pending {
+            length: 0.01,
+            ..along(0.0, 1.0)
+        };
+        let v = (2.0f64 * 100.0 * 0.01).sqrt();
+        let want = segment(10.0, 0.0, v, 10.0, 100.0) + segment(0.01, v, 0.0, 10.0, 100.0);
+        assert!((run_time(&[along(1.0, 0.0), short], 1.0) - want).abs() < 1e-12);
+    }
+
+    #[test]
+    fn numbers_are_printed_to_a_ten_thousandth_without_trailing_zeros() {
+        for (v, plain, pointed) in [
+            (1.5, "1.5", "1.5"),
+            (2.0, "2", "2."),
+            (-1.23456, "-1.2346", "-1.2346"),
+            (0.1, "0.1", "0.1"),
+            (-0.5, "-0.5", "-0.5"),
+            (-0.00004, "0", "0."),
+            (120.00049, "120.0005", "120.0005"),
+            (1e15, "1000000000000000", "1000000000000000"),
+        ] {
+            assert_eq!(number(v, false), plain, "{v}");
+            assert_eq!(number(v, true), pointed, "{v}");
+        }
+    }
+
+    #[test]
     fn a_move_is_written_only_for_what_it_changes_and_two_rises_are_one() {
         let mut p = program("cmpm-hybrid");
         p.rapid(Some(1.0), Some(2.0), Some(10.0)).expect("in travel");
