@@ -673,4 +673,86 @@ mod tests {
         let want = (25.0 * 60_000.0 / (std::f64::consts::PI * diameter)).round();
         assert_eq!(c.spindle, Some(want));
     }
+
+    #[test]
+    fn an_operation_with_a_number_no_controller_can_read_is_refused() {
+        let good = || {
+            let mut op = Operation::new("grind", Some(0));
+            op.surface = Some(1.0);
+            op.values.insert("depth".into(), 0.1);
+            op.paths.push(lamina_api::OperationPath {
+                z: 1.0,
+                points: vec![
+                    lamina_api::Point2::new(0.0, 0.0),
+                    lamina_api::Point2::new(1.0, 0.0),
+                ],
+                closed: false,
+            });
+            op.tool = Some(lamina_api::OperationTool {
+                name: "wheel".into(),
+                kind: "grinding-wheel".into(),
+                diameter: 20.0,
+                feed: 20.0,
+                spindle: Some(3000.0),
+                power: Some(100.0),
+            });
+            op
+        };
+        assert!(readable(&good()).is_ok());
+        let mut no_tool = good();
+        no_tool.tool = None;
+        no_tool.surface = None;
+        assert!(readable(&no_tool).is_ok());
+        type Spoil = fn(&mut Operation);
+        let spoiled: [(&str, Spoil); 11] = [
+            ("surface", |o| o.surface = Some(f64::NAN)),
+            ("value", |o| {
+                o.values.insert("depth".into(), f64::INFINITY);
+            }),
+            ("path height", |o| o.paths[0].z = f64::NAN),
+            ("x", |o| o.paths[0].points[1].x = f64::INFINITY),
+            ("y", |o| o.paths[0].points[0].y = f64::NEG_INFINITY),
+            ("feed", |o| o.tool.as_mut().expect("tool").feed = 0.0),
+            ("feed", |o| o.tool.as_mut().expect("tool").feed = f64::NAN),
+            ("diameter", |o| o.tool.as_mut().expect("tool").diameter = -1.0),
+            ("diameter", |o| {
+                o.tool.as_mut().expect("tool").diameter = f64::INFINITY
+            }),
+            ("spindle", |o| o.tool.as_mut().expect("tool").spindle = Some(0.0)),
+            ("power", |o| o.tool.as_mut().expect("tool").power = Some(f64::NAN)),
+        ];
+        for (what, spoil) in spoiled {
+            let mut op = good();
+            spoil(&mut op);
+            let err = readable(&op).expect_err(what).to_string();
+            assert!(
+                err.contains("`grind`") && err.contains("finite positive"),
+                "{what}: {err}"
+            );
+        }
+    }
+
+    #[test]
+    fn templates_name_only_their_placeholders_and_render_them() {
+        let lines = |v: &[&str]| Lines::Many(v.iter().map(|s| s.to_string()).collect());
+        assert!(placeholders("start", &lines(&["G21", "S{speed} M3 ; {speed}"]), &["speed"]).is_ok());
+        let err = placeholders("start", &lines(&["G21", "T{tol}"]), &["tool", "speed"]).expect_err("unknown");
+        assert_eq!(
+            err,
+            "controller.start: `{tol}` means nothing here (it may use {tool}, {speed})"
+        );
+        let err = placeholders("end", &lines(&["M5 {x}"]), &[]).expect_err("none allowed");
+        assert_eq!(err, "controller.end: `{x}` means nothing here");
+        let err = placeholders("start", &lines(&["S{speed"]), &["speed"]).expect_err("unclosed");
+        assert!(err.contains("opens a `{` it never closes"), "{err}");
+        let err = placeholders("start", &lines(&["G21\nG90"]), &[]).expect_err("two lines");
+        assert_eq!(err, "controller.start: one line per string");
+        assert_eq!(
+            render(
+                "T{tool} M6 ; {tool} at {speed}",
+                &[("tool", "3".into()), ("speed", "800".into())]
+            ),
+            "T3 M6 ; 3 at 800"
+        );
+    }
 }
