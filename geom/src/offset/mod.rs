@@ -99,7 +99,7 @@ mod tests {
     use std::f64::consts::PI;
 
     use i_overlay::core::fill_rule::FillRule;
-    use i_overlay::core::overlay::Overlay;
+    use i_overlay::core::overlay::{Overlay, ShapeType};
     use i_overlay::core::overlay_rule::OverlayRule;
     use i_overlay::i_float::int::point::IntPoint;
     use i_overlay::i_shape::int::shape::IntShapes;
@@ -306,5 +306,59 @@ mod tests {
         }
         // Far enough in, nothing is left.
         assert!(resolved_rings(Join::Round, &part, -6.0).is_empty());
+    }
+
+    #[test]
+    fn the_engine_returns_holes_touching_their_outer_as_holes_and_no_slivers() {
+        // A square less a triangle touching its bottom edge at one point: OGC-valid
+        // output is the outer ring and a hole, not one ring through the point twice.
+        let unit = |x: i32, y: i32| IntPoint::new(x * 1000, y * 1000);
+        let mut overlay = Overlay::new_custom(0, overlay_options(), solver());
+        overlay.add_contour(
+            &[unit(0, 0), unit(10, 0), unit(10, 10), unit(0, 10)],
+            ShapeType::Subject,
+        );
+        overlay.add_contour(&[unit(5, 0), unit(3, 4), unit(7, 4)], ShapeType::Clip);
+        let out = overlay.overlay(OverlayRule::Difference, FillRule::NonZero);
+        let rings: Vec<Vec<usize>> = out.iter().map(|s| s.iter().map(Vec::len).collect()).collect();
+        assert_eq!(rings, vec![vec![4, 3]]);
+        // A piece of 7 x 7 grid units is a rounding sliver, 8 x 8 is kept.
+        for (side, kept) in [(7, 0), (8, 1)] {
+            let mut overlay = Overlay::new_custom(0, overlay_options(), solver());
+            let square = [
+                IntPoint::new(0, 0),
+                IntPoint::new(side, 0),
+                IntPoint::new(side, side),
+                IntPoint::new(0, side),
+            ];
+            overlay.add_contour(&square, ShapeType::Subject);
+            assert_eq!(
+                overlay.overlay(OverlayRule::Subject, FillRule::NonZero).len(),
+                kept,
+                "{side}"
+            );
+        }
+    }
+
+    #[test]
+    fn the_grid_scale_is_the_largest_power_of_two_within_range() {
+        for half in [0.3, 1.0, 100.0, 1234.5, 1e6] {
+            let scale = grid_scale(half);
+            assert_eq!(scale.log2().fract(), 0.0, "{half}: {scale}");
+            assert!(
+                half * scale <= HALF_RANGE && half * scale * 2.0 > HALF_RANGE,
+                "{half}: {scale}"
+            );
+        }
+        // 2^26 / 100 = 671,088.64: 2^19.
+        assert_eq!(grid_scale(100.0), 524_288.0);
+        assert_eq!(HALF_RANGE, 67_108_864.0);
+    }
+
+    #[test]
+    fn no_distance_or_nothing_outlines_to_the_shapes_as_given() {
+        assert_eq!(round_outline(&square(3.0), 0.0, 0.01), square(3.0));
+        assert!(round_outline(&Vec::new(), 1.0, 0.01).is_empty());
+        assert!(tidy(vec![vec![vec![[0.0, 0.0], [1.0, 0.0], [2.0, 0.0]]]], 0.01).is_empty());
     }
 }
