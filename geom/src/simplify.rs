@@ -284,4 +284,21 @@ mod tests {
         assert_eq!(simplify_ring(&[[0.0, 0.0], [1.0, 0.0]], 1.0).len(), 2);
         assert!(simplify_ring(&[], 1.0).is_empty());
     }
+
+    #[test]
+    fn the_ring_is_walked_from_its_sharpest_corner() {
+        // The last point lies halfway along a side: it goes, the four corners stay
+        // (from the last of the sharpest).
+        let square = [[10.0, 0.0], [10.0, 10.0], [0.0, 10.0], [0.0, 0.0], [5.0, 0.0]];
+        let s = simplify_ring(&square, 0.1);
+        assert_eq!(s, vec![[0.0, 0.0], [10.0, 0.0], [10.0, 10.0], [0.0, 10.0]]);
+        // The turn: 0 straight on, 1 at a right angle either way, 2 turning back, and
+        // 0 where a side has no length.
+        assert_eq!(turn([0.0, 0.0], [1.0, 0.0], [2.0, 0.0]), 0.0);
+        assert!((turn([0.0, 0.0], [2.0, 0.0], [2.0, 3.0]) - 1.0).abs() < 1e-12);
+        assert!((turn([0.0, 0.0], [2.0, 0.0], [2.0, -3.0]) - 1.0).abs() < 1e-12);
+        assert!((turn([0.0, 0.0], [2.0, 0.0], [0.5, 0.0]) - 2.0).abs() < 1e-12);
+        assert!((turn([0.0, 0.0], [1.0, 1.0], [1.0, 2.0]) - (1.0 - 0.5f64.sqrt())).abs() < 1e-12);
+        assert_eq!(turn([1.0, 1.0], [1.0, 1.0], [2.0, 0.0]), 0.0);
+    }
 }

@@ -253,7 +253,7 @@ mod tests {
     #[test]
     fn round_offsets_are_the_erosion_and_the_dilation() {
         // A seven-pointed star (convex tips, reflex notches) with a square hole turned
-        // 30 degrees: inward, a point is in the offset when it is in the part and at
+        // 30 degrees, and more below: inward, a point is in the offset when it is in the part and at
         // least |d| from its boundary; outward, when it is in the part or within d of
         // it. Points near the offset's boundary (within the tolerance and the grid's
         // rounding) are left out.
@@ -271,7 +271,15 @@ mod tests {
             })
             .collect();
         hole.reverse();
-        let part = vec![vec![star, hole]];
+        // A disc of 720 chord points (offset within the chord tolerance, after the
+        // vertices the tolerance drops), and a triangle (the fewest vertices).
+        let disc: Vec<[f64; 2]> = (0..720)
+            .map(|i| {
+                let a = PI * f64::from(i) / 360.0;
+                [8.0 * a.cos() - 1.0, 8.0 * a.sin() + 0.5]
+            })
+            .collect();
+        let triangle = vec![[-9.0, -8.0], [9.0, -7.0], [1.0, 9.0]];
         let mut state = 0x853c_49e6_748f_ea9bu64;
         let mut random = move || {
             state ^= state << 13;
@@ -279,33 +287,59 @@ mod tests {
             state ^= state << 17;
             (state >> 11) as f64 / (1u64 << 53) as f64
         };
-        for d in [-0.4, -1.1, -2.6, 0.4, 1.7] {
-            let rings = resolved_rings(Join::Round, &part, d);
-            assert!(!rings.is_empty(), "{d}");
-            let (mut tested, mut within) = (0, 0);
-            for _ in 0..6000 {
-                let p = [random() * 26.0 - 13.0, random() * 26.0 - 13.0];
-                let (in_part, dist) = (inside(&part[0], p), boundary_distance(&part[0], p));
-                if (dist - d.abs()).abs() < 0.005 {
-                    continue;
+        let cases: [(Shapes, &[f64]); 3] = [
+            (vec![vec![star, hole]], &[-0.4, -1.1, -2.6, 0.4, 1.7]),
+            (vec![vec![disc]], &[-3.0, -0.3, 0.5]),
+            (vec![vec![triangle]], &[-2.0, 1.2]),
+        ];
+        for (part, distances) in &cases {
+            for &d in *distances {
+                let rings = resolved_rings(Join::Round, part, d);
+                assert!(!rings.is_empty(), "{d}");
+                let (mut tested, mut within) = (0, 0);
+                for _ in 0..6000 {
+                    let p = [random() * 26.0 - 13.0, random() * 26.0 - 13.0];
+                    let (in_part, dist) = (inside(&part[0], p), boundary_distance(&part[0], p));
+                    if (dist - d.abs()).abs() < 0.005 {
+                        continue;
+                    }
+                    let want = if d < 0.0 {
+                        in_part && dist > -d
+                    } else {
+                        in_part || dist < d
+                    };
+                    assert_eq!(
+                        inside(&rings, p),
+                        want,
+                        "offset {d} at {p:?}: {dist} from the part"
+                    );
+                    tested += 1;
+                    within += usize::from(want);
                 }
-                let want = if d < 0.0 {
-                    in_part && dist > -d
-                } else {
-                    in_part || dist < d
-                };
-                assert_eq!(
-                    inside(&rings, p),
-                    want,
-                    "offset {d} at {p:?}: {dist} from the part"
-                );
-                tested += 1;
-                within += usize::from(want);
+                assert!(tested > 5000 && within > 0, "{d}: {within} of {tested}");
             }
-            assert!(tested > 5000 && within > 0, "{d}: {within} of {tested}");
         }
         // Far enough in, nothing is left.
-        assert!(resolved_rings(Join::Round, &part, -6.0).is_empty());
+        assert!(resolved_rings(Join::Round, &cases[0].0, -6.0).is_empty());
+        // No distance, or none that is a number: no loop.
+        for d in [0.0, f64::NAN, f64::INFINITY, f64::NEG_INFINITY] {
+            let mut overlay = Overlay::new_custom(0, overlay_options(), solver());
+            let offset = RawOffset {
+                join: Join::Round,
+                tolerance: 1e-3,
+            };
+            assert!(!offset.add_loops(
+                &mut overlay,
+                &on_grid(&cases[2].0),
+                d,
+                1000.0,
+                &mut Scratch::default()
+            ));
+            assert!(
+                overlay.overlay(OverlayRule::Clip, FillRule::Positive).is_empty(),
+                "{d}"
+            );
+        }
     }
 
     #[test]
