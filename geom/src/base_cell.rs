@@ -566,13 +566,8 @@ mod tests {
         // Boxes and cylinders at random turns, cut at several heights: a point of the
         // plane is inside the section exactly when it is inside the solid (the sphere's
         // section is a polygon of its circle, so it is checked off its edge only).
-        let mut state = 0x2545_f491_4f6c_dd1du64;
-        let mut random = move || {
-            state ^= state << 13;
-            state ^= state >> 7;
-            state ^= state << 17;
-            (state >> 11) as f64 / (1u64 << 53) as f64
-        };
+        let mut rng = crate::testing::Rng(0x2545_f491_4f6c_dd1d);
+        let mut random = move || rng.unit();
         let mut cut = 0;
         for case in 0..60 {
             let shape = [BaseCellShape::Box, BaseCellShape::Cylinder, BaseCellShape::Sphere][case % 3];

@@ -418,13 +418,8 @@ mod tests {
         // grid gives), against the minimum over every column: the seed of the smallest
         // column that reaches it. Runs of samples are filled per parabola, so this is
         // where an off-by-one in a run's end would show.
-        let mut state = 0x9e37_79b9_7f4a_7c15u64;
-        let mut next = |m: u64| {
-            state ^= state << 13;
-            state ^= state >> 7;
-            state ^= state << 17;
-            state % m
-        };
+        let mut rng = crate::testing::Rng(0x9e37_79b9_7f4a_7c15);
+        let mut next = |m: u64| rng.below(m);
         let mut envelope = Envelope::new(64);
         for _ in 0..2000 {
             let n = 1 + next(64) as usize;

@@ -14,8 +14,9 @@
 //! - [`field`]: a sampled distance field of contours on a square grid;
 //! - [`iso`]: its iso-loops (marching squares), the sets {v >= t} as contours;
 //! - [`lattice`]: a lattice of spherical voids and the circles it cuts in a plane;
-//! - [`cell`]: base cells (sphere, box, cylinder) on a lattice that may be tilted, and
-//!   the sections a layer's plane cuts from them (the search band of Fig. 5).
+//! - [`base_cell`]: base cells (sphere, box, cylinder) on a lattice that may be tilted,
+//!   and the sections a layer's plane cuts from them (the search band of Fig. 5).
+//! - [`offset`]: offsets in and out, the discretisers' raw loops and the float outline.
 
 pub mod base_cell;
 pub mod centroid;
@@ -29,6 +30,8 @@ pub mod ring;
 pub mod segment;
 pub mod shape;
 pub mod simplify;
+#[cfg(test)]
+mod testing;
 
 pub use centroid::{contour_centroid, polygon_centroid};
 pub use ring::{Ring, Shape, Shapes};

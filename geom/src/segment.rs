@@ -80,13 +80,8 @@ mod tests {
 
     #[test]
     fn distances_are_the_least_over_the_segments_points() {
-        let mut state = 0x9e37_79b9_7f4a_7c15u64;
-        let mut random = move || {
-            state ^= state << 13;
-            state ^= state >> 7;
-            state ^= state << 17;
-            (state >> 11) as f64 / (1u64 << 53) as f64 * 20.0 - 10.0
-        };
+        let mut rng = crate::testing::Rng(0x9e37_79b9_7f4a_7c15);
+        let mut random = move || rng.unit() * 20.0 - 10.0;
         for _ in 0..500 {
             let (p, a, b) = ([random(), random()], [random(), random()], [random(), random()]);
             let sampled = (0..=4000)
