@@ -10,7 +10,7 @@
 //! - [`ring`]: the `[x, y]` rings and shapes the boolean engine takes, and conversions.
 //! - [`simplify`]: the one ring simplifier.
 //! - [`follow`]: one solid area followed from layer to layer.
-//! - [`reference`]: a region's reference point, by one rule for every stage.
+//! - [`reference`](mod@reference): a region's reference point, by one rule for every stage.
 //! - [`field`]: a sampled distance field of contours on a square grid;
 //! - [`iso`]: its iso-loops (marching squares), the sets {v >= t} as contours;
 //! - [`lattice`]: a lattice of spherical voids and the circles it cuts in a plane;
