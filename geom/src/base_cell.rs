@@ -634,16 +634,36 @@ mod tests {
         assert_eq!(up(BaseCellShape::Box, [2.0, 3.0, 6.0]).reach(), 7.0);
         assert_eq!(up(BaseCellShape::Cylinder, [3.0, 9.0, 4.0]).reach(), 5.0);
         assert!(up(BaseCellShape::Sphere, [0.5, 0.5, 0.5]).facets().is_empty());
-        // A cylinder of radius 1 and height 4: two caps along +-z, and the side in
-        // ROUND strips whose normals lie in the x-y plane, the prism's side area.
-        let f = up(BaseCellShape::Cylinder, [1.0, 1.0, 2.0]).facets();
+        // A cylinder of radius 1.5 and height 4: two caps along +-z, and the side in
+        // ROUND strips facing out through their middles, the prism's side area.
+        let f = up(BaseCellShape::Cylinder, [1.5, 1.0, 2.0]).facets();
         assert_eq!(f.len(), 2 + ROUND);
         assert_eq!((f[0].1, f[1].1), (Vector3::z(), -Vector3::z()));
-        assert!((f[0].0 - std::f64::consts::PI).abs() < 1e-12);
+        assert!((f[0].0 - std::f64::consts::PI * 2.25).abs() < 1e-12);
         let side: f64 = f[2..].iter().map(|x| x.0).sum();
-        assert!((side - 2.0 * std::f64::consts::PI * 4.0).abs() < 1e-9, "{side}");
-        let sum = f[2..].iter().fold(Vector3::zeros(), |s, x| s + x.1);
-        assert!(sum.norm() < 1e-9 && f[2..].iter().all(|x| x.1.z.abs() < 1e-12));
+        assert!(
+            (side - 2.0 * std::f64::consts::PI * 1.5 * 4.0).abs() < 1e-9,
+            "{side}"
+        );
+        for (k, (_, n)) in f[2..].iter().enumerate() {
+            let t = std::f64::consts::TAU * (k as f64 + 0.5) / ROUND as f64;
+            assert!(
+                (n - Vector3::new(t.cos(), t.sin(), 0.0)).norm() < 1e-12,
+                "strip {k}: {n:?}"
+            );
+        }
+        // A box's faces come in opposite pairs along its axes, each pair as large as
+        // the other two half-edges make.
+        let f = up(BaseCellShape::Box, [1.0, 2.0, 3.0]).facets();
+        let want = [
+            (24.0, Vector3::x()),
+            (24.0, -Vector3::x()),
+            (12.0, Vector3::y()),
+            (12.0, -Vector3::y()),
+            (8.0, Vector3::z()),
+            (8.0, -Vector3::z()),
+        ];
+        assert_eq!(f, want);
     }
 
     #[test]
