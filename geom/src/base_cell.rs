@@ -734,4 +734,52 @@ mod tests {
             0.0
         );
     }
+
+    #[test]
+    fn lattice_points_and_index_ranges_by_hand() {
+        // Upright: origin plus indices times periods; the ranges of an axis-aligned box
+        // are exact, so the count is what the walk visits.
+        let up = BaseCellArray::upright([0.5, 2.0, 0.25], [0.1, -1.0, 0.0]);
+        assert_eq!(up.point(2, 3, -4), Vector3::new(1.1, 5.0, -1.0));
+        let (lo, hi) = (Vector3::new(0.0, -1.0, 0.0), Vector3::new(2.0, 4.0, 1.0));
+        let mut visited = 0;
+        up.in_box(lo, hi, |_, _| {
+            visited += 1;
+            true
+        });
+        // x: 0.1 .. 1.6 (4), y: -1, 1, 3 (3), z: 0 .. 1 (5).
+        assert_eq!(visited, 4 * 3 * 5);
+        assert_eq!(up.count_in_box(lo, hi), 60.0);
+        // No bound that is not a finite number of a sane size gives any range.
+        for bad in [f64::INFINITY, f64::NAN, 1e20] {
+            assert_eq!(up.count_in_box(lo, Vector3::new(bad, 4.0, 1.0)), 0.0, "{bad}");
+            assert_eq!(up.count_in_box(Vector3::new(0.0, -bad, 0.0), hi), 0.0, "{bad}");
+        }
+        // Moving a lattice turns and shifts each of its points.
+        let tilted = BaseCellArray::tilted_about_x([0.7, 1.1, 0.9], [0.2, -0.3, 0.1], 0.4);
+        let (r, o) = (turn(0.7, 0.2, 0.0), Vector3::new(5.0, -2.0, 1.5));
+        let once = tilted.moved(&r, o);
+        let twice = once.moved(&r, o);
+        for (i, j, k) in [(0, 0, 0), (2, -1, 3), (-4, 5, 1)] {
+            let p = tilted.point(i, j, k);
+            assert!((once.point(i, j, k) - (r * p + o)).norm() < 1e-12);
+            assert!((twice.point(i, j, k) - (r * (r * p + o) + o)).norm() < 1e-12);
+        }
+    }
+
+    #[test]
+    fn a_triangle_insets_to_a_smaller_triangle() {
+        // The 3-4-5 triangle has inradius 1: moved in by 0.5 it is the same triangle
+        // halved about its incentre (a quarter of the area); by 1 nothing is left.
+        let t = Contour::new(vec![
+            Point2::new(0.0, 0.0),
+            Point2::new(4.0, 0.0),
+            Point2::new(0.0, 3.0),
+        ]);
+        let i = inset_convex(&t, 0.5).expect("left");
+        assert_eq!(i.len(), 3);
+        assert!((i.area() - 6.0 / 4.0).abs() < 1e-12, "{}", i.area());
+        assert!(inset_convex(&t, 1.0 + 1e-9).is_none());
+        assert!(inset_convex(&t.clone().oriented(false), 0.5).is_some());
+    }
 }
