@@ -755,6 +755,42 @@ mod tests {
             assert_eq!(up.count_in_box(lo, Vector3::new(bad, 4.0, 1.0)), 0.0, "{bad}");
             assert_eq!(up.count_in_box(Vector3::new(0.0, -bad, 0.0), hi), 0.0, "{bad}");
         }
+        // The band about z = 0.4, 0.3 thick each way, over x 0..2 and y -1..4: 5 x 3
+        // columns (the box grown by the band), each crossed in at most
+        // ceil(0.6 / 0.25) + 1 = 4 rows; 2 of them (z = 0.25 and 0.5) are in it.
+        let bbox = BBox2::from_points([Point2::new(0.0, -1.0), Point2::new(2.0, 4.0)]);
+        assert_eq!(up.count_near_plane(0.4, 0.3, &bbox), 60.0);
+        assert_eq!(up.near_plane(0.4, 0.3, &bbox).len(), 30);
+        // A lattice turned about all three axes (every lattice axis climbs): the band
+        // holds exactly the points a scan of every point finds.
+        let turned = BaseCellArray::upright([0.6, 0.9, 0.8], [0.1, 0.2, -0.3])
+            .moved(&turn(0.7, 0.5, 0.3), Vector3::new(1.0, 2.0, 0.4));
+        let (z, reach) = (1.3, 0.35);
+        let got: Vec<[i64; 3]> = turned
+            .near_plane(z, reach, &bbox)
+            .into_iter()
+            .map(|(ijk, _)| ijk)
+            .collect();
+        let mut want = Vec::new();
+        for k in -20..20 {
+            for j in -20..20 {
+                for i in -20..20 {
+                    let p = turned.point(i, j, k);
+                    if (p.z - z).abs() <= reach
+                        && p.x >= -reach
+                        && p.x <= 2.0 + reach
+                        && p.y >= -1.0 - reach
+                        && p.y <= 4.0 + reach
+                    {
+                        want.push([i, j, k]);
+                    }
+                }
+            }
+        }
+        want.sort_by_key(|ijk| (ijk[2], ijk[1], ijk[0]));
+        assert!(want.len() > 10, "{}", want.len());
+        assert_eq!(got, want);
+        assert!(turned.count_near_plane(z, reach, &bbox) >= got.len() as f64);
         // Moving a lattice turns and shifts each of its points.
         let tilted = BaseCellArray::tilted_about_x([0.7, 1.1, 0.9], [0.2, -0.3, 0.1], 0.4);
         let (r, o) = (turn(0.7, 0.2, 0.0), Vector3::new(5.0, -2.0, 1.5));
