@@ -353,6 +353,25 @@ mod tests {
                 assert_eq!(cw.contains(p), inside);
             }
         }
+        // Points level with vertices: counted once, either way round, inside and out.
+        let diamond = Contour::new(vec![
+            Point2::new(5.0, 0.0),
+            Point2::new(10.0, 5.0),
+            Point2::new(5.0, 10.0),
+            Point2::new(0.0, 5.0),
+        ]);
+        let reversed = diamond.clone().oriented(false);
+        for (p, w) in [
+            ((5.0, 5.0), 1),
+            ((12.0, 5.0), 0),
+            ((-1.0, 5.0), 0),
+            ((5.0, 9.0), 1),
+            ((3.0, 0.0), 0),
+        ] {
+            let p = Point2::new(p.0, p.1);
+            assert_eq!(diamond.winding_number(p), w, "{p:?}");
+            assert_eq!(reversed.winding_number(p), -w, "{p:?}");
+        }
         // A circle gone round twice winds twice.
         let mut twice = Contour::circle(Point2::new(0.0, 0.0), 1.0, 16).points;
         twice.extend(twice.clone());
@@ -442,6 +461,16 @@ mod tests {
         assert_eq!((b.width(), b.height(), b.diagonal()), (3.0, 6.0, 45f64.sqrt()));
         assert_eq!(b.center(), Point2::new(-0.5, 6.0));
         assert!(!b.is_empty());
+        // Inside out along one axis only is empty too.
+        let flat_x = BBox2 {
+            min: Point2::new(1.0, 0.0),
+            max: Point2::new(0.0, 1.0),
+        };
+        let flat_y = BBox2 {
+            min: Point2::new(0.0, 1.0),
+            max: Point2::new(1.0, 0.0),
+        };
+        assert!(flat_x.is_empty() && flat_y.is_empty());
         let empty = BBox2::default();
         assert!(empty.is_empty());
         assert_eq!((empty.width(), empty.height(), empty.diagonal()), (0.0, 0.0, 0.0));
