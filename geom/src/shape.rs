@@ -481,6 +481,10 @@ mod tests {
         let u = b.union(&other);
         assert_eq!((u.min, u.max), (Point2::new(-2.0, 0.0), Point2::new(4.0, 9.0)));
         assert!(u.contains_box(&b) && u.contains_box(&other) && !b.contains_box(&u));
+        // Reaching beyond a box's top right is not enough, nor its bottom left alone.
+        let unit = BBox2::from_points([Point2::new(0.0, 0.0), Point2::new(1.0, 1.0)]);
+        let shifted = BBox2::from_points([Point2::new(0.5, 0.5), Point2::new(2.0, 2.0)]);
+        assert!(!shifted.contains_box(&unit) && !unit.contains_box(&shifted));
         // Touching at a corner overlaps; apart along x or along y does not.
         assert!(b.overlaps(&other) && other.overlaps(&b));
         let right = BBox2::from_points([Point2::new(1.5, 3.0), Point2::new(2.0, 9.0)]);

@@ -338,6 +338,24 @@ mod tests {
     }
 
     #[test]
+    fn miter_joins_keep_corners_sharp_and_bevel_the_sharpest() {
+        // Outward, a triangle's mitred offset is the triangle scaled about its
+        // incentre: the 3-4-5 triangle (inradius 1) by 1.5 at 0.5 mm, area 6 x 2.25.
+        let t = vec![vec![vec![[0.0, 0.0], [4.0, 0.0], [0.0, 3.0]]]];
+        let area: f64 = resolved_rings(Join::Miter, &t, 0.5)
+            .iter()
+            .map(|r| ring_area(r))
+            .sum();
+        assert!((area - 13.5).abs() < 1e-3, "{area}");
+        // A spike of 2.9 degrees is bevelled: the offset ends about 0.1 mm past its
+        // tip, where a miter would reach 0.1 / sin(1.43 degrees) = 4 mm.
+        let spike = vec![vec![vec![[0.0, 0.0], [10.0, 0.0], [0.0, 0.5]]]];
+        let rings = resolved_rings(Join::Miter, &spike, 0.1);
+        let far = rings.iter().flatten().map(|p| p[0]).fold(f64::MIN, f64::max);
+        assert!(far > 10.0 && far < 10.2, "{far}");
+    }
+
+    #[test]
     fn the_engine_returns_holes_touching_their_outer_as_holes_and_no_slivers() {
         // A square less a triangle touching its bottom edge at one point: OGC-valid
         // output is the outer ring and a hole, not one ring through the point twice.
