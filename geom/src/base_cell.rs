@@ -485,6 +485,23 @@ mod tests {
         assert!((r.area() - want).abs() < 1e-9, "{} vs {want}", r.area());
     }
 
+    /// Every point of `lattice` with indices in `-n..n` along each axis that `keep`
+    /// accepts, in the order k, j, i (the band's order): the brute-force scan the
+    /// walks are checked against.
+    fn points_where(lattice: &BaseCellArray, n: i64, keep: impl Fn(Vector3<f64>) -> bool) -> Vec<[i64; 3]> {
+        let mut out = Vec::new();
+        for k in -n..n {
+            for j in -n..n {
+                for i in -n..n {
+                    if keep(lattice.point(i, j, k)) {
+                        out.push([i, j, k]);
+                    }
+                }
+            }
+        }
+        out
+    }
+
     #[test]
     fn the_band_visits_only_points_near_the_plane_even_when_tilted() {
         let bbox = BBox2::from_points([Point2::new(0.0, 0.0), Point2::new(4.0, 4.0)]);
@@ -498,17 +515,10 @@ mod tests {
         assert!(!near.is_empty());
         // Every point within the band, and none of the lattice's points near the plane
         // missed: a brute-force scan agrees.
-        let mut brute = Vec::new();
-        for k in -10..20 {
-            for j in -10..20 {
-                for i in -10..20 {
-                    let p = tilted.point(i, j, k);
-                    if (p.z - 2.2).abs() <= 0.3 && p.x >= -0.3 && p.x <= 4.3 && p.y >= -0.3 && p.y <= 4.3 {
-                        brute.push([i, j, k]);
-                    }
-                }
-            }
-        }
+        let in_band = |p: Vector3<f64>| {
+            (p.z - 2.2).abs() <= 0.3 && p.x >= -0.3 && p.x <= 4.3 && p.y >= -0.3 && p.y <= 4.3
+        };
+        let mut brute = points_where(&tilted, 20, in_band);
         let mut got: Vec<[i64; 3]> = near.iter().map(|(ijk, _)| *ijk).collect();
         got.sort();
         brute.sort();
@@ -522,17 +532,7 @@ mod tests {
             .map(|(ijk, _)| *ijk)
             .collect();
         near.sort();
-        let mut brute = Vec::new();
-        for k in -10..20 {
-            for j in -10..20 {
-                for i in -10..20 {
-                    let p = turned.point(i, j, k);
-                    if (p.z - 2.2).abs() <= 0.3 && p.x >= -0.3 && p.x <= 4.3 && p.y >= -0.3 && p.y <= 4.3 {
-                        brute.push([i, j, k]);
-                    }
-                }
-            }
-        }
+        let mut brute = points_where(&turned, 20, in_band);
         brute.sort();
         assert!(!near.is_empty());
         assert_eq!(near, brute);
@@ -680,17 +680,7 @@ mod tests {
             visited.push(ijk);
             true
         });
-        let mut brute = Vec::new();
-        for k in -30..30 {
-            for j in -30..30 {
-                for i in -30..30 {
-                    let p = lattice.point(i, j, k);
-                    if (0..3).all(|a| p[a] >= lo[a] && p[a] <= hi[a]) {
-                        brute.push([i, j, k]);
-                    }
-                }
-            }
-        }
+        let mut brute = points_where(&lattice, 30, |p| (0..3).all(|a| p[a] >= lo[a] && p[a] <= hi[a]));
         let count = visited.len();
         visited.sort();
         visited.dedup();
@@ -713,18 +703,9 @@ mod tests {
             .into_iter()
             .map(|(ijk, _)| ijk)
             .collect();
-        let mut want = Vec::new();
-        for k in -30..30 {
-            for j in -30..30 {
-                for i in -30..30 {
-                    let p = lattice.point(i, j, k);
-                    if (p.z - 1.4).abs() <= 0.5 && p.x >= 1.5 && p.x <= 8.5 && p.y >= -5.5 && p.y <= 1.5 {
-                        want.push([i, j, k]);
-                    }
-                }
-            }
-        }
-        want.sort_by_key(|ijk| (ijk[2], ijk[1], ijk[0]));
+        let want = points_where(&lattice, 30, |p| {
+            (p.z - 1.4).abs() <= 0.5 && p.x >= 1.5 && p.x <= 8.5 && p.y >= -5.5 && p.y <= 1.5
+        });
         assert!(!want.is_empty());
         assert_eq!(near, want);
         assert!(lattice.count_near_plane(1.4, 0.5, &bbox) >= near.len() as f64);
@@ -771,23 +752,13 @@ mod tests {
             .into_iter()
             .map(|(ijk, _)| ijk)
             .collect();
-        let mut want = Vec::new();
-        for k in -20..20 {
-            for j in -20..20 {
-                for i in -20..20 {
-                    let p = turned.point(i, j, k);
-                    if (p.z - z).abs() <= reach
-                        && p.x >= -reach
-                        && p.x <= 2.0 + reach
-                        && p.y >= -1.0 - reach
-                        && p.y <= 4.0 + reach
-                    {
-                        want.push([i, j, k]);
-                    }
-                }
-            }
-        }
-        want.sort_by_key(|ijk| (ijk[2], ijk[1], ijk[0]));
+        let want = points_where(&turned, 20, |p| {
+            (p.z - z).abs() <= reach
+                && p.x >= -reach
+                && p.x <= 2.0 + reach
+                && p.y >= -1.0 - reach
+                && p.y <= 4.0 + reach
+        });
         assert!(want.len() > 10, "{}", want.len());
         assert_eq!(got, want);
         assert!(turned.count_near_plane(z, reach, &bbox) >= got.len() as f64);

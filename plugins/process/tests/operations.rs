@@ -147,6 +147,19 @@ fn one<'a>(layer: &'a Value, kind: &str, pass: Option<&str>) -> Option<&'a Value
     op
 }
 
+/// The distinct y of an operation's passes (each pass's first point), in order.
+fn pass_ys(op: &Value) -> Vec<f64> {
+    let mut ys: Vec<f64> = op["paths"]
+        .as_array()
+        .expect("paths")
+        .iter()
+        .map(|p| f(&p["points"][0][1]))
+        .collect();
+    ys.sort_by(f64::total_cmp);
+    ys.dedup_by(|a, b| (*a - *b).abs() < 1e-9);
+    ys
+}
+
 fn run() -> Value {
     lamina_test_support::run_pipeline(PIPE).json("pipe.json")
 }
@@ -202,26 +215,19 @@ fn each_region_is_sprayed_its_allowances_high_with_its_mix_and_its_inclusions() 
             let inclusion = op["values"].get("inclusion:SiC").map(f);
             assert_eq!(inclusion, (r == 2).then_some(0.2), "layer {i}");
             // Passes along x, one track width less the overlap apart (2 mm, 40 %).
-            let mut ys: Vec<f64> = op["paths"]
-                .as_array()
-                .expect("paths")
-                .iter()
-                .map(|p| {
-                    assert!(
-                        (f(&p["z"]) - surface).abs() < 1e-12,
-                        "layer {i}: a pass off the surface"
-                    );
-                    let pts = p["points"].as_array().expect("points");
-                    let (a, b) = (&pts[0], &pts[pts.len() - 1]);
-                    assert!(
-                        (f(&a[1]) - f(&b[1])).abs() < 1e-12,
-                        "layer {i}: a pass not along x"
-                    );
-                    f(&a[1])
-                })
-                .collect();
-            ys.sort_by(f64::total_cmp);
-            ys.dedup_by(|a, b| (*a - *b).abs() < 1e-9);
+            for p in op["paths"].as_array().expect("paths") {
+                assert!(
+                    (f(&p["z"]) - surface).abs() < 1e-12,
+                    "layer {i}: a pass off the surface"
+                );
+                let pts = p["points"].as_array().expect("points");
+                let (a, b) = (&pts[0], &pts[pts.len() - 1]);
+                assert!(
+                    (f(&a[1]) - f(&b[1])).abs() < 1e-12,
+                    "layer {i}: a pass not along x"
+                );
+            }
+            let ys = pass_ys(op);
             assert!(ys.len() >= 10, "layer {i}: {} passes", ys.len());
             for w in ys.windows(2) {
                 assert!(
@@ -273,14 +279,7 @@ fn each_grind_takes_the_surface_from_where_the_last_operation_left_it() {
         assert!((value(rough, "removed") - (from - to)).abs() < 1e-12, "layer {i}");
         // The wheel's centre runs in lines half its diameter apart (the default
         // stepover), centred on the area.
-        let mut ys: Vec<f64> = rough["paths"]
-            .as_array()
-            .expect("paths")
-            .iter()
-            .map(|p| f(&p["points"][0][1]))
-            .collect();
-        ys.sort_by(f64::total_cmp);
-        ys.dedup_by(|a, b| (*a - *b).abs() < 1e-9);
+        let ys = pass_ys(rough);
         assert!(ys.len() >= 2, "layer {i}: {ys:?}");
         assert!(
             ys.windows(2).all(|w| (w[1] - w[0] - 10.0).abs() < 1e-9),
