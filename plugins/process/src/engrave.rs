@@ -390,6 +390,13 @@ mod tests {
         assert!(cleared(&void, &rings, 0.05));
         // Without the last ring a core would be left.
         assert!(!cleared(&void, &rings[..7], 0.05));
+        // With an apothem of 0.27 the seventh ring (inset 0.265) reaches 0.29, past the
+        // centre: no core is left, and no eighth ring is burnt.
+        let r = 0.27 / (std::f64::consts::PI / 32.0).cos();
+        let void = Void::Whole(Contour::circle(Point2::new(1.0, -2.0), r, 32));
+        let rings = void.rings(0.05, 0.04);
+        assert_eq!(rings.len(), 7);
+        assert!(cleared(&void, &rings, 0.05));
         // A void narrower than the spot gets none.
         assert!(
             Void::Whole(Contour::circle(Point2::new(0.0, 0.0), 0.02, 32))

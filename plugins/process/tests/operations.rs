@@ -367,6 +367,13 @@ fn the_filler_fills_the_engraved_voids_and_is_removed_once_at_the_end() {
                 assert_eq!(value(fill, "voids"), value(engraved, "voids"), "layer {i}");
                 let volume = value(engraved, "void_area") * value(engraved, "depth");
                 assert!(volume > 0.0);
+                // A void's section is at most its cell's circle of `void_radius`.
+                let most = value(engraved, "voids") * std::f64::consts::PI * 0.25f64.powi(2);
+                assert!(
+                    value(engraved, "void_area") <= most,
+                    "layer {i}: {} over {most}",
+                    value(engraved, "void_area")
+                );
                 assert!((value(fill, "void_volume") - volume).abs() < 1e-12, "layer {i}");
                 // The filler lies on the surface the rough grind left.
                 let surface = f(&one(l, "grind", Some("rough")).expect("ground")["surface"]);
