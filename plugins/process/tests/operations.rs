@@ -365,6 +365,14 @@ fn the_filler_fills_the_engraved_voids_and_is_removed_once_at_the_end() {
             (Some(_), _) | (_, Some(_)) if !inner => panic!("layer {i}: engraved or filled outside `inner`"),
             (Some(engraved), Some(fill)) => {
                 assert_eq!(value(fill, "voids"), value(engraved, "voids"), "layer {i}");
+                // The laser stays on the inner tube (radii 5 to 7 mm): voids its
+                // boundary cuts are burnt only where they lie inside it.
+                for p in engraved["paths"].as_array().expect("paths") {
+                    for q in p["points"].as_array().expect("points") {
+                        let rho = f(&q[0]).hypot(f(&q[1]));
+                        assert!((5.0..=7.0).contains(&rho), "layer {i}: the laser at radius {rho}");
+                    }
+                }
                 let volume = value(engraved, "void_area") * value(engraved, "depth");
                 assert!(volume > 0.0);
                 // A void's section is at most its cell's circle of `void_radius`.
