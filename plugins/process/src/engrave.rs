@@ -280,12 +280,7 @@ fn build(config: &StageConfig<'_>) -> Result<AnyStage> {
             Microstructure::new(spec, config, "base_cell")?
         }
         None => {
-            if options.period.iter().any(|p| !(p.is_finite() && *p > 0.0)) {
-                return Err(config.error("period", "every spacing must be a positive number of mm"));
-            }
-            if !(options.void_radius.is_finite() && options.void_radius > 0.0) {
-                return Err(config.error("void_radius", "must be a positive number of mm"));
-            }
+            // `period` and `void_radius` are positive numbers by their declared ranges.
             let smallest = options.period.iter().copied().fold(f64::INFINITY, f64::min);
             if options.void_radius > smallest / 2.0 {
                 return Err(config.error(
@@ -307,9 +302,6 @@ fn build(config: &StageConfig<'_>) -> Result<AnyStage> {
     };
     if !(options.overlap.is_finite() && (0.0..0.9).contains(&options.overlap)) {
         return Err(config.error("overlap", "must be at least 0 and below 0.9"));
-    }
-    if !(options.depth_per_pass.is_finite() && options.depth_per_pass >= 0.001) {
-        return Err(config.error("depth_per_pass", "must be at least 0.001 mm"));
     }
     let tool = checked(
         config,

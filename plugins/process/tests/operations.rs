@@ -431,6 +431,98 @@ fn the_filler_fills_the_engraved_voids_and_is_removed_once_at_the_end() {
     assert!(filled >= 2, "{filled}");
 }
 
+/// The laser on the microstructure's layers (default spot 0.05 mm, 20 % overlap, 0.1 mm
+/// a pass): rings 0.04 mm apart from half a spot inside each void, repeated pass by
+/// pass, each pass focused on the floor it leaves, from the surface the rough grind
+/// left down to the layer's bottom.
+#[test]
+fn the_laser_burns_rings_a_step_apart_in_passes_down_to_the_layers_bottom() {
+    let plan = run();
+    let mut engraved = 0;
+    for (i, l) in layers(&plan).iter().enumerate() {
+        let Some(op) = one(l, "engrave", None) else {
+            continue;
+        };
+        let (z, t) = (f(&l["z"]), f(&l["thickness"]));
+        let surface = f(&one(l, "grind", Some("rough")).expect("ground")["surface"]);
+        let depth = value(op, "depth");
+        assert!(
+            (depth - (surface - (z - t))).abs() < 1e-12,
+            "layer {i}: depth {depth}"
+        );
+        let passes = value(op, "passes");
+        assert_eq!(passes, (depth / 0.1 - 1e-9).ceil(), "layer {i}");
+        let paths = op["paths"].as_array().expect("paths");
+        let per_pass = paths.len() / passes as usize;
+        assert_eq!(per_pass * passes as usize, paths.len(), "layer {i}");
+        for (k, pass) in paths.chunks(per_pass).enumerate() {
+            let want = surface - depth * (k + 1) as f64 / passes;
+            for (m, p) in pass.iter().enumerate() {
+                assert!(
+                    (f(&p["z"]) - want).abs() <= 0.5e-3 + 1e-12,
+                    "layer {i}: pass {k} at {}",
+                    p["z"]
+                );
+                // Each pass burns the first pass's rings again, in the same order.
+                assert_eq!(p["points"], paths[m]["points"], "layer {i}: pass {k}, ring {m}");
+            }
+        }
+        // The rings of the whole voids (the first pass's, by the lattice point they
+        // surround): regular 32-gons whose apothems step in by 0.04 mm from half a spot
+        // inside the section's, then possibly one at the deepest inset.
+        let mid = z - t / 2.0;
+        let r = (0.25f64.powi(2) - (mid - 0.6 * (mid / 0.6).round()).powi(2)).sqrt();
+        let section = r * (std::f64::consts::PI / 32.0).cos();
+        let mut by_void: std::collections::BTreeMap<(i64, i64), Vec<f64>> = Default::default();
+        for p in &paths[..per_pass] {
+            let pts: Vec<(f64, f64)> = p["points"]
+                .as_array()
+                .expect("points")
+                .iter()
+                .map(|q| (f(&q[0]), f(&q[1])))
+                .collect();
+            let n = pts.len() as f64;
+            let (cx, cy) = pts
+                .iter()
+                .fold((0.0, 0.0), |(a, b), q| (a + q.0 / n, b + q.1 / n));
+            let rho = cx.hypot(cy);
+            if pts.len() != 32 || rho < 5.0 + r || rho > 7.0 - r {
+                continue;
+            }
+            let area = pts
+                .iter()
+                .zip(pts.iter().cycle().skip(1))
+                .map(|(a, b)| a.0 * b.1 - b.0 * a.1)
+                .sum::<f64>()
+                .abs()
+                / 2.0;
+            let apothem = (area / (32.0 * (std::f64::consts::PI / 32.0).tan())).sqrt();
+            by_void
+                .entry((cx.round() as i64, cy.round() as i64))
+                .or_default()
+                .push(apothem);
+        }
+        assert!(by_void.len() > 10, "layer {i}: {} whole voids", by_void.len());
+        for (at, mut apothems) in by_void {
+            apothems.sort_by(|a, b| b.total_cmp(a));
+            let steps = ((section - 0.025) / 0.04).floor() as usize + 1;
+            assert!(
+                apothems.len() == steps || apothems.len() == steps + 1,
+                "{at:?}: {apothems:?}"
+            );
+            for (k, a) in apothems.iter().take(steps).enumerate() {
+                let want = section - 0.025 - 0.04 * k as f64;
+                assert!(
+                    (a - want).abs() < 1e-6,
+                    "{at:?}: ring {k} apothem {a}, not {want}"
+                );
+            }
+        }
+        engraved += 1;
+    }
+    assert!(engraved >= 2, "{engraved}");
+}
+
 /// Three parts on every layer: a tube graded across its width (each of its three rings
 /// a mix of its own), a tube of bronze and metal graded all bronze, and a tube of
 /// bronze alone (the same material, but another mix for the gun's feeders: one
@@ -566,4 +658,52 @@ fn the_gun_sprays_each_mix_of_the_layer_in_one_operation_over_its_own_area() {
             );
         }
     }
+}
+
+/// The engraver's table refused where its voids would meet or its spot is wider than
+/// a void, naming the key; the limits themselves allowed.
+#[test]
+fn the_engraver_refuses_voids_that_meet_and_a_spot_wider_than_a_void() {
+    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
+    let build = |options: &str| {
+        lamina_test_support::try_stage(
+            lamina_api::StageKind::Process,
+            &format!("use = \"engrave\"\nperiod = [1.0, 0.8, 0.6]\n{options}"),
+            dir,
+        )
+        .map(|_| ())
+        .map_err(|e| e.to_string())
+    };
+    // Half the smallest period (0.6 mm) at most.
+    assert_eq!(build("void_radius = 0.3"), Ok(()));
+    let err = build("void_radius = 0.31").expect_err("voids that meet");
+    assert!(err.contains("void_radius") && err.contains("(0.3 mm)"), "{err}");
+    // A spot no wider than the void's radius.
+    assert_eq!(build("void_radius = 0.25\ndiameter = 0.25"), Ok(()));
+    let err = build("void_radius = 0.25\ndiameter = 0.26").expect_err("a spot too wide");
+    assert!(
+        err.contains("diameter") && err.contains("smaller than the void"),
+        "{err}"
+    );
+    // Every spacing a positive length, by the option's range.
+    let err = lamina_test_support::try_stage(
+        lamina_api::StageKind::Process,
+        "use = \"engrave\"\nperiod = [1.0, 0.0, 0.6]",
+        dir,
+    )
+    .map(|_| ())
+    .expect_err("a zero spacing");
+    assert!(err.to_string().contains("period"), "{err}");
+    // Rings that cover each other wholly are refused, below that allowed.
+    assert_eq!(build("void_radius = 0.25\noverlap = 0.89"), Ok(()));
+    let err = build("void_radius = 0.25\noverlap = 0.9").expect_err("overlap 0.9");
+    assert!(err.contains("overlap") && err.contains("below 0.9"), "{err}");
+    // Spheres or a base cell, not both.
+    let err =
+        build("void_radius = 0.25\nbase_cell = { shape = \"sphere\", size = 0.5, period = [1.0, 1.0, 1.0] }")
+            .expect_err("both");
+    assert!(
+        err.contains("void_radius") && err.contains("give either"),
+        "{err}"
+    );
 }
