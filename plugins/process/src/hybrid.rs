@@ -704,7 +704,7 @@ mod tests {
         no_tool.surface = None;
         assert!(readable(&no_tool).is_ok());
         type Spoil = fn(&mut Operation);
-        let spoiled: [(&str, Spoil); 11] = [
+        let spoiled: [(&str, Spoil); 16] = [
             ("surface", |o| o.surface = Some(f64::NAN)),
             ("value", |o| {
                 o.values.insert("depth".into(), f64::INFINITY);
@@ -718,8 +718,17 @@ mod tests {
             ("diameter", |o| {
                 o.tool.as_mut().expect("tool").diameter = f64::INFINITY
             }),
+            ("diameter", |o| o.tool.as_mut().expect("tool").diameter = 0.0),
             ("spindle", |o| o.tool.as_mut().expect("tool").spindle = Some(0.0)),
+            ("spindle", |o| {
+                o.tool.as_mut().expect("tool").spindle = Some(f64::INFINITY)
+            }),
             ("power", |o| o.tool.as_mut().expect("tool").power = Some(f64::NAN)),
+            ("power", |o| o.tool.as_mut().expect("tool").power = Some(0.0)),
+            ("power", |o| o.tool.as_mut().expect("tool").power = Some(-5.0)),
+            ("power", |o| {
+                o.tool.as_mut().expect("tool").power = Some(f64::INFINITY)
+            }),
         ];
         for (what, spoil) in spoiled {
             let mut op = good();
@@ -741,6 +750,10 @@ mod tests {
             err,
             "controller.start: `{tol}` means nothing here (it may use {tool}, {speed})"
         );
+        // The scan goes on after each placeholder, wherever it stands in the line.
+        let err = placeholders("start", &lines(&["G21 M3 S{speed} T{tol} ; {speed}"]), &["speed"])
+            .expect_err("unknown after a known one");
+        assert!(err.contains("`{tol}`"), "{err}");
         let err = placeholders("end", &lines(&["M5 {x}"]), &[]).expect_err("none allowed");
         assert_eq!(err, "controller.end: `{x}` means nothing here");
         let err = placeholders("start", &lines(&["S{speed"]), &["speed"]).expect_err("unclosed");
