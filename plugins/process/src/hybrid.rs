@@ -613,6 +613,100 @@ mod tests {
     }
 
     #[test]
+    fn each_mistake_in_a_machine_profile_is_refused_with_what_is_wrong() {
+        let text = include_str!("../machines/cmpm-hybrid.toml");
+        let good = || -> HybridMachine { toml::from_str(text).expect("parses") };
+        assert_eq!(good().check(), Ok(()));
+        type Change = fn(&mut HybridMachine);
+        // Limits themselves are allowed.
+        let allowed: [(&str, Change); 6] = [
+            ("a ramp of 45 degrees", |m| m.tools[0].ramp_angle = Some(45.0)),
+            ("a feed at its maximum", |m| m.tools[0].feed = m.tools[0].max_feed),
+            ("a spindle at its maximum", |m| {
+                m.tools[0].spindle = m.tools[0].max_spindle
+            }),
+            ("no junction deviation", |m| m.motion.junction_deviation = 0.0),
+            ("an instant tool change", |m| {
+                m.motion.tool_change = 0.0;
+                m.motion.spindle_start = 0.0;
+            }),
+            ("no outputs", |m| m.outputs = Outputs::default()),
+        ];
+        for (what, change) in allowed {
+            let mut m = good();
+            change(&mut m);
+            assert_eq!(m.check(), Ok(()), "{what}");
+        }
+        let refused: [(&str, Change); 26] = [
+            ("travel.x must be", |m| m.travel.x = [10.0, 10.0]),
+            ("travel.y must be", |m| m.travel.y = [f64::NAN, 1.0]),
+            ("travel.z must be", |m| m.travel.z = [0.0, f64::INFINITY]),
+            ("tools[0] (`end-mill`): numbers start at 1", |m| {
+                m.tools[0].number = 0
+            }),
+            ("tools[2] (`cup-wheel`): numbers start at 1", |m| {
+                m.tools[2].number = 1
+            }),
+            ("tools[1] (`end-mill`): numbers start at 1", |m| {
+                m.tools[1].name = "end-mill".into()
+            }),
+            ("spindle must lie in", |m| m.tools[0].spindle = Some(f64::NAN)),
+            ("surface_speed must lie in", |m| {
+                m.tools[2].surface_speed = Some(501.0)
+            }),
+            ("power must lie in", |m| m.tools[3].power = Some(-1.0)),
+            ("max_feed must lie in", |m| {
+                m.tools[0].max_feed = Some(f64::INFINITY)
+            }),
+            ("max_spindle must lie in", |m| m.tools[0].max_spindle = Some(0.0)),
+            ("max_power must lie in", |m| m.tools[3].max_power = Some(1e12)),
+            ("ramp_angle must lie in (0, 45]", |m| {
+                m.tools[0].ramp_angle = Some(0.0)
+            }),
+            ("ramp_angle must lie in (0, 45]", |m| {
+                m.tools[0].ramp_angle = Some(45.5)
+            }),
+            ("give `spindle` or `surface_speed`", |m| {
+                m.tools[2].spindle = Some(3000.0)
+            }),
+            ("feed 60 is above the tool's max_feed 50", |m| {
+                m.tools[0].feed = Some(60.0)
+            }),
+            ("spindle 30001 is above", |m| m.tools[0].spindle = Some(30_001.0)),
+            ("power 51 is above", |m| m.tools[3].power = Some(51.0)),
+            ("outputs: the spray gun, the filler", |m| {
+                m.outputs.vacuum = m.outputs.spray
+            }),
+            ("feeders.scale must be positive", |m| m.feeders.scale = 0.0),
+            ("every acceleration in", |m| m.motion.acceleration[2] = 0.5),
+            ("junction_deviation must be zero or", |m| {
+                m.motion.junction_deviation = -0.01
+            }),
+            ("tool_change and spindle_start", |m| {
+                m.motion.spindle_start = f64::NAN
+            }),
+            ("are needed by every program", |m| m.controller.end = Lines::None),
+            ("`spindle_on` and `spindle_off` go in pairs", |m| {
+                m.controller.spindle_off = Lines::None
+            }),
+            ("has no analog outputs", |m| m.controller.analog = Lines::None),
+        ];
+        for (expected, change) in refused {
+            let mut m = good();
+            change(&mut m);
+            let err = m.check().expect_err(expected);
+            assert!(err.contains(expected), "{expected}: {err}");
+        }
+        let mut m = good();
+        m.controller.power_scale = 0.0;
+        assert!(
+            m.check()
+                .expect_err("power scale")
+                .contains("power_scale must be positive")
+        );
+    }
+
+    #[test]
     fn a_template_naming_what_its_line_cannot_know_is_refused() {
         let text = include_str!("../machines/cmpm-hybrid.toml").replace("T{tool} M6", "T{tol} M6");
         let machine: HybridMachine = toml::from_str(&text).expect("parses");
