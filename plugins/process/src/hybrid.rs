@@ -637,7 +637,7 @@ mod tests {
             change(&mut m);
             assert_eq!(m.check(), Ok(()), "{what}");
         }
-        let refused: [(&str, Change); 26] = [
+        let refused: [(&str, Change); 30] = [
             ("travel.x must be", |m| m.travel.x = [10.0, 10.0]),
             ("travel.y must be", |m| m.travel.y = [f64::NAN, 1.0]),
             ("travel.z must be", |m| m.travel.z = [0.0, f64::INFINITY]),
@@ -684,6 +684,14 @@ mod tests {
             }),
             ("tool_change and spindle_start", |m| {
                 m.motion.spindle_start = f64::NAN
+            }),
+            ("tool_change and spindle_start", |m| m.motion.spindle_start = -1.0),
+            ("tool_change and spindle_start", |m| m.motion.tool_change = -1.0),
+            ("are needed by every program", |m| {
+                m.controller.start = Lines::None
+            }),
+            ("are needed by every program", |m| {
+                m.controller.retract = Lines::None
             }),
             ("are needed by every program", |m| m.controller.end = Lines::None),
             ("`spindle_on` and `spindle_off` go in pairs", |m| {
