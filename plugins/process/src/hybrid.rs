@@ -774,6 +774,120 @@ mod tests {
         let c = machine.cutting(&tool, &mut notes).expect("runs");
         let want = (25.0 * 60_000.0 / (std::f64::consts::PI * diameter)).round();
         assert_eq!(c.spindle, Some(want));
+        // A top speed the wheel needs exactly is reached: no note.
+        let exact = 25.0 * 60_000.0 / (std::f64::consts::PI * diameter);
+        machine
+            .tools
+            .iter_mut()
+            .find(|t| t.name == "cup-wheel")
+            .expect("wheel")
+            .max_spindle = Some(exact);
+        let mut quiet = Vec::new();
+        machine.cutting(&tool, &mut quiet).expect("runs");
+        assert!(quiet.is_empty(), "{quiet:?}");
+    }
+
+    #[test]
+    fn a_tool_runs_up_to_its_own_limits_and_not_beyond() {
+        let text = include_str!("../machines/cmpm-hybrid.toml");
+        let machine: HybridMachine = toml::from_str(text).expect("parses");
+        let tool = |name: &str, feed: f64, spindle: Option<f64>, power: Option<f64>| {
+            let own = machine.tool(name).expect("a tool of the machine");
+            lamina_api::OperationTool {
+                name: name.into(),
+                kind: own.kind.clone(),
+                diameter: own.diameter,
+                feed,
+                spindle,
+                power,
+            }
+        };
+        let run =
+            |t: &lamina_api::OperationTool| machine.cutting(t, &mut Vec::new()).map_err(|e| e.to_string());
+        // The laser: the plan's feed and power up to the machine's 2000 mm/s and 50 W.
+        let c = run(&tool("laser", 2000.0, None, Some(50.0))).expect("at the limits");
+        assert_eq!((c.feed, c.power, c.spindle), (2000.0, Some(50.0), None));
+        let err = run(&tool("laser", 2000.5, None, Some(50.0))).expect_err("feed");
+        assert!(
+            err.contains("`laser` feeds at most 2000 mm/s, the program asks 2000.5"),
+            "{err}"
+        );
+        let err = run(&tool("laser", 100.0, None, Some(50.5))).expect_err("power");
+        assert!(
+            err.contains("`laser` gives at most 50 W, the program asks 50.5"),
+            "{err}"
+        );
+        // The end mill's own feed and spindle (5 mm/s, 24000 rev/min) win over the plan's.
+        let c = run(&tool("end-mill", 40.0, Some(1000.0), None)).expect("its own");
+        assert_eq!((c.feed, c.spindle), (5.0, Some(24_000.0)));
+        // A tool the machine does not list runs as the plan says.
+        let free = lamina_api::OperationTool {
+            name: "other".into(),
+            kind: "end-mill".into(),
+            diameter: 1.0,
+            feed: 1e4,
+            spindle: Some(1e6),
+            power: None,
+        };
+        assert_eq!(run(&free).expect("unlisted").spindle, Some(1e6));
+        let mut fast = machine.clone();
+        let mill = fast
+            .tools
+            .iter_mut()
+            .find(|t| t.name == "end-mill")
+            .expect("mill");
+        mill.spindle = None;
+        let at =
+            |m: &HybridMachine, s: f64| m.cutting(&tool("end-mill", 1.0, Some(s), None), &mut Vec::new());
+        assert_eq!(at(&fast, 30_000.0).expect("at the top").spindle, Some(30_000.0));
+        let err = at(&fast, 30_001.0).expect_err("too fast").to_string();
+        assert!(
+            err.contains("`end-mill` turns at most 30000 rev/min, the program asks 30001"),
+            "{err}"
+        );
+    }
+
+    #[test]
+    fn the_machine_admits_an_operation_only_with_a_tool_it_has_as_planned() {
+        let text = include_str!("../machines/cmpm-hybrid.toml");
+        let machine: HybridMachine = toml::from_str(text).expect("parses");
+        let op = |name: &str, kind: &str, diameter: f64| {
+            let mut op = Operation::new("mill", Some(0));
+            op.tool = Some(lamina_api::OperationTool {
+                name: name.into(),
+                kind: kind.into(),
+                diameter,
+                feed: 5.0,
+                spindle: Some(24_000.0),
+                power: None,
+            });
+            op
+        };
+        let admits = |o: &Operation| machine.admits(o).map_err(|e| e.to_string());
+        assert_eq!(admits(&op("end-mill", "end-mill", 0.8)), Ok(()));
+        assert_eq!(admits(&op("end-mill", "end-mill", 0.8 + 1e-12)), Ok(()));
+        assert_eq!(admits(&Operation::new("probe", Some(0))), Ok(()));
+        let err = admits(&op("drill", "end-mill", 0.8)).expect_err("no such tool");
+        assert!(
+            err.contains("`mill`: the machine `cmpm-hybrid` has no tool `drill` (tools: end-mill, spray-gun"),
+            "{err}"
+        );
+        let err = admits(&op("end-mill", "laser", 0.8)).expect_err("another kind");
+        assert!(
+            err.contains("`end-mill` is a end-mill in the machine, the plan wants a laser"),
+            "{err}"
+        );
+        for d in [0.8 - 1e-6, 0.8 + 1e-6] {
+            let err = admits(&op("end-mill", "end-mill", d)).expect_err("another size");
+            assert!(
+                err.contains("`end-mill` measures 0.8 mm in the machine, the plan was made for"),
+                "{err}"
+            );
+        }
+        // An unreadable number is refused before the tool is looked at.
+        let mut nan = op("drill", "end-mill", 0.8);
+        nan.surface = Some(f64::NAN);
+        assert!(admits(&nan).expect_err("NaN").contains("finite positive"));
     }
 
     #[test]
