@@ -631,3 +631,31 @@ lamina_api::register_stage!(StageFactory {
     },
     build,
 });
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn durations_read_in_hours_minutes_and_seconds() {
+        assert_eq!(duration(0.4), "0 s");
+        assert_eq!(duration(59.5), "1 min 0 s");
+        assert_eq!(duration(65.0), "1 min 5 s");
+        assert_eq!(duration(3599.0), "59 min 59 s");
+        assert_eq!(duration(3600.0), "1 h 0 min 0 s");
+        assert_eq!(duration(2.0 * 86_400.0 + 3725.0), "49 h 2 min 5 s");
+    }
+
+    #[test]
+    fn a_comment_is_one_line_without_parentheses_or_semicolons_and_at_most_200_characters() {
+        assert_eq!(
+            comment("spray (rough); region\ninner"),
+            "spray rough, region inner"
+        );
+        let long: String = "é".repeat(250);
+        let cut = comment(&long);
+        assert_eq!(cut.chars().count(), 200);
+        assert!(long.starts_with(&cut));
+        assert_eq!(comment(&"a".repeat(200)), "a".repeat(200));
+    }
+}
