@@ -277,4 +277,25 @@ mod tests {
         assert!((fall / (way[1].0 - way[0].0).norm() - 5f64.to_radians().tan()).abs() < 1e-9);
         assert!(way.iter().skip(1).all(|p| p.1 == 1.0));
     }
+
+    #[test]
+    fn a_point_at_an_arc_length_lies_on_the_path_and_its_ends_hold_past_them() {
+        let p = |x: f64, y: f64| Point2::new(x, y);
+        // An open path starting on a repeated point, 3 + 4 mm long.
+        let open = [p(0.0, 0.0), p(0.0, 0.0), p(3.0, 0.0), p(3.0, 4.0)];
+        assert_eq!(at(&open, false, 0.0), p(0.0, 0.0));
+        assert_eq!(at(&open, false, 1.5), p(1.5, 0.0));
+        assert_eq!(at(&open, false, 5.0), p(3.0, 2.0));
+        // Past the end: the last point, not round to the first.
+        assert_eq!(at(&open, false, 7.0), p(3.0, 4.0));
+        assert_eq!(at(&open, false, 9.0), p(3.0, 4.0));
+        // Closed, the way back to the first point is part of it (5 mm), and past the
+        // whole length stands the first point.
+        assert_eq!(at(&open, true, 9.5), p(1.5, 2.0));
+        assert_eq!(at(&open, true, 13.0), p(0.0, 0.0));
+        let (st, total) = stations(&open, true);
+        assert_eq!((st, total), (vec![0.0, 0.0, 3.0, 7.0], 12.0));
+        let (st, total) = stations(&open, false);
+        assert_eq!((st, total), (vec![0.0, 0.0, 3.0, 7.0], 7.0));
+    }
 }
