@@ -279,6 +279,52 @@ mod tests {
     }
 
     #[test]
+    fn a_walk_lists_the_vertices_strictly_between_its_ends_in_its_direction() {
+        let p = |x: f64, y: f64| Point2::new(x, y);
+        // A 2 x 2 square, 8 mm round, vertices at 0, 2, 4, 6.
+        let square = [p(0.0, 0.0), p(2.0, 0.0), p(2.0, 2.0), p(0.0, 2.0)];
+        let w = walk(&square, true, 1.0, 5.0);
+        assert_eq!(
+            w,
+            vec![
+                (1.0, p(1.0, 0.0)),
+                (2.0, p(2.0, 0.0)),
+                (4.0, p(2.0, 2.0)),
+                (5.0, p(1.0, 2.0))
+            ]
+        );
+        // Backwards, and past the first lap into the second and third: every vertex of
+        // each lap on the way, none twice, none at an end.
+        let w = walk(&square, true, 13.0, 3.0);
+        let s: Vec<f64> = w.iter().map(|(s, _)| *s).collect();
+        assert_eq!(s, vec![13.0, 12.0, 10.0, 8.0, 6.0, 4.0, 3.0]);
+        assert_eq!(w[0].1, p(1.0, 2.0));
+        assert_eq!(w[1].1, p(2.0, 2.0));
+        assert_eq!(w[3].1, p(0.0, 0.0));
+        assert_eq!(w[6].1, p(2.0, 1.0));
+        // Ends on vertices: the vertices are the ends, not listed again.
+        let w = walk(&square, true, 2.0, 6.0);
+        let s: Vec<f64> = w.iter().map(|(s, _)| *s).collect();
+        assert_eq!(s, vec![2.0, 4.0, 6.0]);
+        // A negative arc length wraps round a closed path.
+        assert_eq!(walk(&square, true, -1.0, 0.5)[0].1, p(0.0, 1.0));
+        // Open: no wrapping; vertices between the ends only.
+        let line = [p(0.0, 0.0), p(1.0, 0.0), p(3.0, 0.0)];
+        let w = walk(&line, false, 2.5, 0.5);
+        assert_eq!(
+            w,
+            vec![(2.5, p(2.5, 0.0)), (1.0, p(1.0, 0.0)), (0.5, p(0.5, 0.0))]
+        );
+        // Past an open path's end nothing repeats: its last vertex once.
+        let w = walk(&line, false, 0.0, 4.0);
+        let s: Vec<f64> = w.iter().map(|(s, _)| *s).collect();
+        assert_eq!(s, vec![0.0, 1.0, 3.0, 4.0]);
+        assert_eq!(wrap(-1.0, 3.0, false), -1.0);
+        assert_eq!(wrap(7.0, 3.0, true), 1.0);
+        assert_eq!(wrap(7.0, 0.0, true), 7.0);
+    }
+
+    #[test]
     fn a_point_at_an_arc_length_lies_on_the_path_and_its_ends_hold_past_them() {
         let p = |x: f64, y: f64| Point2::new(x, y);
         // An open path starting on a repeated point, 3 + 4 mm long.
