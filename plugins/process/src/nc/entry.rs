@@ -233,6 +233,27 @@ mod tests {
     }
 
     #[test]
+    fn a_ramp_from_above_the_depth_goes_on_forward_and_a_two_point_loop_is_a_line() {
+        let square = Contour::rectangle(Point2::new(0.0, 0.0), Point2::new(2.0, 2.0)).points;
+        // From 1.5 down to 0.5 mm: a drop of 1 mm, whatever the depth.
+        let path = ramp(&square, true, 1.5, 0.5, 3.0);
+        assert_eq!(path[0].1, 1.5);
+        assert!(path.iter().all(|p| p.1 >= 0.5));
+        assert!((length3(&path) - (1.0 / 3f64.to_radians().sin() + 8.0)).abs() < 1e-6);
+        // The ramp ends 19.08 mm round (3.08 into the second edge, at y = 1.08); the lap
+        // at depth goes on the same way round, to (2, 2) first.
+        let end = path.iter().position(|p| p.1 == 0.5).expect("at depth");
+        assert!((path[end].0 - Point2::new(2.0, 1.0 / 3f64.to_radians().tan() - 18.0)).norm() < 1e-9);
+        assert_eq!(path[end + 1].0, Point2::new(2.0, 2.0));
+        // Two points make a line, whatever the flag says.
+        let line = [Point2::new(0.0, 0.0), Point2::new(5.0, 0.0)];
+        assert_eq!(
+            ramp(&line, true, 0.5, 0.0, 3.0),
+            ramp(&line, false, 0.5, 0.0, 3.0)
+        );
+    }
+
+    #[test]
     fn a_ramp_along_a_short_open_path_goes_back_and_forth_then_cuts_it_whole() {
         let line = [Point2::new(0.0, 0.0), Point2::new(5.0, 0.0)];
         let path = ramp(&line, false, 0.5, 0.0, 3.0);
