@@ -272,6 +272,15 @@ mod tests {
             5.0 - run % 5.0
         };
         assert!((flat - (run + back + 5.0)).abs() < 1e-6, "{flat} {run}");
+        // A ramp that ends back on the start (twice the line's length): no point twice.
+        let path = ramp(&line, false, 0.5, 0.0, 0.05f64.atan().to_degrees());
+        for w in path.windows(2) {
+            assert!(
+                (w[1].0 - w[0].0).norm() > 1e-12,
+                "a point twice or a vertical move {w:?}"
+            );
+        }
+        assert_eq!(path.len(), 4, "{path:?}");
     }
 
     #[test]
