@@ -707,3 +707,35 @@ fn the_engraver_refuses_voids_that_meet_and_a_spot_wider_than_a_void() {
         "{err}"
     );
 }
+
+/// The spray's inclusions and track overlap refused by key where a feeder could not
+/// follow them; the limits themselves allowed.
+#[test]
+fn the_spray_refuses_inclusions_beyond_the_whole_and_tracks_wholly_over_each_other() {
+    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
+    let build = |options: &str| {
+        lamina_test_support::try_stage(
+            lamina_api::StageKind::Process,
+            &format!("use = \"spray\"\n{options}"),
+            dir,
+        )
+        .map(|_| ())
+        .map_err(|e| e.to_string())
+    };
+    assert_eq!(build("inclusions = { outer = { SiC = 0.5, WC = 0.5 } }"), Ok(()));
+    for bad in [
+        "inclusions = { outer = { SiC = 0.6, WC = 0.6 } }",
+        "inclusions = { outer = { SiC = inf } }",
+        "inclusions = { outer = { SiC = nan } }",
+        "inclusions = { outer = { SiC = -0.1 } }",
+    ] {
+        let err = build(bad).expect_err(bad);
+        assert!(
+            err.contains("inclusions") && err.contains("sum to at most 1"),
+            "{bad}: {err}"
+        );
+    }
+    assert_eq!(build("overlap = 0.89"), Ok(()));
+    let err = build("overlap = 0.9").expect_err("overlap 0.9");
+    assert!(err.contains("overlap") && err.contains("below 0.9"), "{err}");
+}
