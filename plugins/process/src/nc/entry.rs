@@ -309,6 +309,40 @@ mod tests {
     }
 
     #[test]
+    fn a_wheel_stands_off_outward_at_the_first_half_millimetre_where_its_face_is_clear() {
+        let disc = Polygon::new(Contour::circle(Point2::new(0.0, 0.0), 10.0, 128), Vec::new());
+        let area = std::slice::from_ref(&disc);
+        let (a, b) = (Point2::new(-4.36, 9.0), Point2::new(4.36, 9.0));
+        for (radius, margin) in [(10.0, 0.3), (50.0, 1.0), (3.0, 0.0)] {
+            let wheel = Wheel {
+                radius,
+                margin,
+                angle_deg: 5.0,
+            };
+            let way = side_entry(a, b, 1.0, 2.0, wheel, area);
+            let clear = |p: Point2| distance_to_area(p, area) >= radius + margin;
+            // Out from each end of the pass, along it, by radius + margin + k 0.5 mm,
+            // the first of these where the face is clear.
+            for (end, from, dir) in [(way[1].0, a, -1.0), (way[4].0, b, 1.0)] {
+                let t = (end - from).x * dir;
+                assert!((end - from).y.abs() < 1e-12 && t > 0.0, "{end:?} from {from:?}");
+                let k = (t - radius - margin) / 0.5;
+                assert!((k - k.round()).abs() < 1e-9 && k > -1e-9, "t {t}");
+                assert!(clear(end), "{end:?}");
+                if k.round() > 0.0 {
+                    assert!(
+                        !clear(from + Point2::new(dir * (t - 0.5), 0.0).coords),
+                        "not the first"
+                    );
+                }
+            }
+            let run = 1.0 / 5f64.to_radians().tan();
+            assert!((way[0].0 - (way[1].0 - Point2::new(run, 0.0).coords)).norm() < 1e-9);
+            assert_eq!((way[2].0, way[3].0), (a, b));
+        }
+    }
+
+    #[test]
     fn a_walk_lists_the_vertices_strictly_between_its_ends_in_its_direction() {
         let p = |x: f64, y: f64| Point2::new(x, y);
         // A 2 x 2 square, 8 mm round, vertices at 0, 2, 4, 6.
