@@ -550,10 +550,10 @@ mod tests {
         // Entered and left at speed: length over speed. Short, entered fast: the peak
         // lies between the two ends' speeds.
         assert!(close(segment(3.0, 10.0, 10.0, 10.0, 100.0), 0.3));
-        let peak = ((2.0 * 100.0 * 0.1 + 4.0 + 1.0) / 2.0f64).sqrt();
+        let peak = ((2.0 * 100.0 * 0.1 + 9.0 + 1.0) / 2.0f64).sqrt();
         assert!(close(
-            segment(0.1, 2.0, 1.0, 10.0, 100.0),
-            (peak - 2.0) / 100.0 + (peak - 1.0) / 100.0
+            segment(0.1, 3.0, 1.0, 10.0, 100.0),
+            (peak - 3.0) / 100.0 + (peak - 1.0) / 100.0
         ));
         assert_eq!(segment(0.0, 1.0, 1.0, 10.0, 100.0), 0.0);
     }
@@ -579,6 +579,20 @@ mod tests {
         let want = 2.0 * segment(10.0, 0.0, v, 10.0, 100.0);
         assert!((run_time(&square, 0.05) - want).abs() < 1e-12);
         assert!(want < stop);
+        // The same right angle between diagonals, and a turn in x-z of
+        // cos theta = 0.36 - 0.64 (s = 0.6).
+        let h = 0.5f64.sqrt();
+        let diagonal = [along(h, h), along(h, -h)];
+        assert!((run_time(&diagonal, 0.05) - want).abs() < 1e-12);
+        let dive = |z: f64| Pending {
+            unit: [0.6, 0.0, z],
+            ..along(0.0, 0.0)
+        };
+        let v = (100.0f64 * 0.05 * 0.6 / 0.4).sqrt();
+        let want = 2.0 * segment(10.0, 0.0, v, 10.0, 100.0);
+        assert!((run_time(&[dive(0.8), dive(-0.8)], 0.05) - want).abs() < 1e-12);
+        // Without deviation (exact stop) even a straight run stops at each move's end.
+        assert!((run_time(&straight, 0.0) - stop).abs() < 1e-12);
         // Turning right back stops whatever the deviation.
         assert!((run_time(&[along(1.0, 0.0), along(-1.0, 0.0)], 0.05) - stop).abs() < 1e-12);
         // A short last move caps the corner before it at the speed it can shed before
