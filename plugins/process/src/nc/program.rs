@@ -593,6 +593,19 @@ mod tests {
         assert!((run_time(&[dive(0.8), dive(-0.8)], 0.05) - want).abs() < 1e-12);
         // Without deviation (exact stop) even a straight run stops at each move's end.
         assert!((run_time(&straight, 0.0) - stop).abs() < 1e-12);
+        // Short moves straight on, before or after a long one: one move of the whole
+        // length, each pass carrying the speed reached so far into the next junction.
+        let short = |l: f64| Pending {
+            length: l,
+            ..along(1.0, 0.0)
+        };
+        let whole = trapezoid(10.02, 10.0, 100.0);
+        for run in [
+            [short(0.01), short(0.01), short(10.0)],
+            [short(10.0), short(0.01), short(0.01)],
+        ] {
+            assert!((run_time(&run, 0.05) - whole).abs() < 1e-12, "{}", run[0].length);
+        }
         // Turning right back stops whatever the deviation.
         assert!((run_time(&[along(1.0, 0.0), along(-1.0, 0.0)], 0.05) - stop).abs() < 1e-12);
         // A short last move caps the corner before it at the speed it can shed before
@@ -604,6 +617,19 @@ mod tests {
         let v = (2.0f64 * 100.0 * 0.01).sqrt();
         let want = segment(10.0, 0.0, v, 10.0, 100.0) + segment(0.01, v, 0.0, 10.0, 100.0);
         assert!((run_time(&[along(1.0, 0.0), short], 1.0) - want).abs() < 1e-12);
+    }
+
+    #[test]
+    fn shares_of_the_time_add_up_per_kind_in_the_order_first_met() {
+        let mut shares = Shares::default();
+        shares.add("spray", 2.0);
+        shares.add("grind", 1.5);
+        shares.add("spray", 0.5);
+        assert_eq!(
+            shares.by,
+            vec![("spray".to_string(), 2.5), ("grind".to_string(), 1.5)]
+        );
+        assert_eq!(shares.total(), 4.0);
     }
 
     #[test]
