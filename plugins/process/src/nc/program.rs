@@ -620,6 +620,29 @@ mod tests {
     }
 
     #[test]
+    fn a_run_of_feed_moves_is_timed_when_another_line_ends_it() {
+        let mut p = program("cmpm-hybrid");
+        p.rapid(Some(0.0), Some(0.0), Some(1.0)).expect("in travel");
+        let before = p.shares.total();
+        p.doing = "mill".into();
+        p.feed(Some(10.0), None, None, 20.0).expect("in travel");
+        p.feed(None, Some(10.0), None, 20.0).expect("in travel");
+        // Not timed until the run ends.
+        assert_eq!(p.shares.total(), before);
+        p.line("M5");
+        let along = |x: f64, y: f64| Pending {
+            length: 10.0,
+            speed: 20.0,
+            accel: 500.0,
+            unit: [x, y, 0.0],
+        };
+        let want = run_time(&[along(1.0, 0.0), along(0.0, 1.0)], 0.01);
+        let mill = p.shares.by.iter().find(|(k, _)| k == "mill").expect("timed").1;
+        assert!((mill - want).abs() < 1e-12, "{mill} {want}");
+        assert!(p.text.ends_with("G1 X10 F1200\nG1 Y10\nM5\n"), "{}", p.text);
+    }
+
+    #[test]
     fn shares_of_the_time_add_up_per_kind_in_the_order_first_met() {
         let mut shares = Shares::default();
         shares.add("spray", 2.0);
