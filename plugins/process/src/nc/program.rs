@@ -742,6 +742,21 @@ mod tests {
             err.contains("X 151 is outside the machine `cmpm-hybrid`'s travel"),
             "{err}"
         );
+        // The travel's ends themselves are in it, a ten-thousandth beyond is not.
+        let [lo, hi] = p.machine.travel.y;
+        p.rapid(None, Some(lo), None).expect("the low end");
+        p.rapid(None, Some(hi), None).expect("the high end");
+        let err = p
+            .rapid(None, Some(lo - 0.0001), None)
+            .expect_err("below")
+            .to_string();
+        assert!(err.contains("is outside the machine"), "{err}");
+        // Where the tool stands in z: known after a move, unknown after a retract.
+        assert_eq!(p.z(), None);
+        p.rapid(None, None, Some(2.5)).expect("in travel");
+        assert_eq!(p.z(), Some(2.5));
+        p.retract();
+        assert_eq!(p.z(), None);
         let mut f = program("cmpm-hybrid-fanuc");
         f.rapid(Some(10.0), Some(-2.5), Some(0.0)).expect("in travel");
         assert_eq!(f.text, "G0 X10. Y-2.5 Z0.\n");
