@@ -643,6 +643,53 @@ mod tests {
     }
 
     #[test]
+    fn rapids_take_the_time_of_the_slowest_axis_and_two_climbs_in_z_are_one() {
+        // cmpm-hybrid: rapids 6000, 6000, 3000 mm/min; accelerations 500, 500, 300 mm/s².
+        let mut p = program("cmpm-hybrid");
+        p.rapid(Some(0.0), Some(0.0), Some(1.0)).expect("in travel");
+        p.doing = "travel".into();
+        // 30 x 40: along y (0.8 of the way) the axis limits bind first.
+        p.rapid(Some(30.0), Some(40.0), None).expect("in travel");
+        let xy = trapezoid(50.0, 100.0 / 0.8, 500.0 / 0.8);
+        let time = |p: &Program| p.shares.by.iter().find(|(k, _)| k == "travel").expect("timed").1;
+        assert!((time(&p) - xy).abs() < 1e-12, "{} {xy}", time(&p));
+        // Up 4, then up 5 more: one climb of 9 mm, one line.
+        p.rapid(None, None, Some(5.0)).expect("in travel");
+        p.rapid(None, None, Some(10.0)).expect("in travel");
+        assert!(p.text.ends_with("G0 X30 Y40\nG0 Z10\n"), "{}", p.text);
+        let climb = trapezoid(9.0, 50.0, 300.0);
+        assert!((time(&p) - xy - climb).abs() < 1e-12, "{}", time(&p) - xy);
+        // Down again is a move of its own.
+        p.rapid(None, None, Some(8.0)).expect("in travel");
+        assert!(p.text.ends_with("G0 Z10\nG0 Z8\n"), "{}", p.text);
+        assert!((time(&p) - xy - climb - trapezoid(2.0, 50.0, 300.0)).abs() < 1e-12);
+        // On down twice more: one descent from 10. Then up and over in x is a move of
+        // its own.
+        p.rapid(None, None, Some(3.0)).expect("in travel");
+        p.rapid(None, None, Some(1.5)).expect("in travel");
+        p.rapid(Some(35.0), None, Some(4.0)).expect("in travel");
+        assert!(p.text.ends_with("G0 Z10\nG0 Z1.5\nG0 X35 Z4\n"), "{}", p.text);
+        // 5 mm in x and 2.5 in z: x's limits bind the speed and the acceleration alike.
+        let l = 31.25f64.sqrt();
+        let over = trapezoid(l, 100.0 * l / 5.0, 500.0 * l / 5.0);
+        let so_far = xy + climb + trapezoid(8.5, 50.0, 300.0) + over;
+        assert!((time(&p) - so_far).abs() < 1e-12, "{}", time(&p) - so_far);
+        // A climb, then over in x and further up: the second is not a climb alone.
+        p.rapid(None, None, Some(6.0)).expect("in travel");
+        p.rapid(Some(40.0), None, Some(9.0)).expect("in travel");
+        assert!(p.text.ends_with("G0 X35 Z4\nG0 Z6\nG0 X40 Z9\n"), "{}", p.text);
+        let l = 34f64.sqrt();
+        let so_far = so_far + trapezoid(2.0, 50.0, 300.0) + trapezoid(l, 50.0 * l / 3.0, 100.0 * l);
+        assert!((time(&p) - so_far).abs() < 1e-12, "{}", time(&p) - so_far);
+        // From the safe height, z unknown, the way down starts at the travel's top.
+        p.retract();
+        let up = time(&p) - so_far;
+        assert!((up - trapezoid(191.0, 50.0, 300.0)).abs() < 1e-12, "{up}");
+        p.rapid(None, None, Some(2.5)).expect("in travel");
+        assert!((time(&p) - so_far - up - trapezoid(197.5, 50.0, 300.0)).abs() < 1e-12);
+    }
+
+    #[test]
     fn shares_of_the_time_add_up_per_kind_in_the_order_first_met() {
         let mut shares = Shares::default();
         shares.add("spray", 2.0);
