@@ -690,6 +690,80 @@ mod tests {
     }
 
     #[test]
+    fn a_tool_is_loaded_run_and_put_away_with_everything_off_at_the_safe_height() {
+        let mut p = program("cmpm-hybrid");
+        let start = p.text.len();
+        p.change("end-mill", 1).expect("a changer");
+        p.doing = "run".into();
+        p.rapid(Some(1.0), Some(2.0), Some(5.0)).expect("in travel");
+        p.spindle_on(24_000.0).expect("a spindle");
+        p.spindle_on(24_000.0).expect("turning already");
+        p.output(Some(2), true, "chip vacuum").expect("an output");
+        p.output(Some(2), true, "chip vacuum").expect("on already");
+        p.output(None, false, "nothing").expect("nothing to switch off");
+        let err = p
+            .output(None, true, "spray gun")
+            .expect_err("no output")
+            .to_string();
+        assert!(err.contains("has no output for the spray gun"), "{err}");
+        // The next tool: spindle and output off, offset cancelled, up, changed.
+        p.change("end-mill", 1).expect("loaded already");
+        p.change("laser", 4).expect("a changer");
+        p.doing = "run".into();
+        p.rapid(None, None, Some(3.0)).expect("in travel");
+        p.laser_on(20.0).expect("a laser");
+        p.end();
+        let lines: Vec<&str> = p.text[start..].lines().collect();
+        assert_eq!(
+            lines,
+            [
+                "G53 G0 Z0",
+                "(tool 1: end-mill)",
+                "T1 M6",
+                "G43 H1",
+                "G0 X1 Y2 Z5",
+                "S24000 M3",
+                "M64 P2",
+                "M5",
+                "M65 P2",
+                "G49",
+                "G53 G0 Z0",
+                "(tool 4: laser)",
+                "T4 M6",
+                "G43 H4",
+                "G0 Z3",
+                "M3 S20",
+                "M5",
+                "G49",
+                "G53 G0 Z0",
+                "M30",
+                "%",
+            ],
+            "{}",
+            p.text
+        );
+        // Two tool changes and the climb from 5 mm to the safe height (the first from
+        // an unknown height takes none); the end's climb from 3 mm; one spindle start.
+        let time = |k: &str| p.shares.by.iter().find(|(w, _)| w == k).map_or(0.0, |s| s.1);
+        let up = |z: f64| trapezoid(200.0 - z, 50.0, 300.0);
+        assert!(
+            (time("tool changes") - (2.0 * 8.0 + up(5.0))).abs() < 1e-9,
+            "{:?}",
+            p.shares.by
+        );
+        assert!((time("end") - up(3.0)).abs() < 1e-12, "{:?}", p.shares.by);
+        // The run: the first move from an unknown place (from the travel's corner:
+        // 149, 148 and 195 mm), the spindle's start, the way down to 3 mm.
+        let d = [149.0f64, 148.0, 195.0];
+        let l = d.iter().map(|v| v * v).sum::<f64>().sqrt();
+        let (rapid, accel) = ([100.0, 100.0, 50.0], [500.0, 500.0, 300.0]);
+        let v = (0..3).map(|i| rapid[i] * l / d[i]).fold(f64::INFINITY, f64::min);
+        let a = (0..3).map(|i| accel[i] * l / d[i]).fold(f64::INFINITY, f64::min);
+        let run = trapezoid(l, v, a) + 2.0 + trapezoid(197.0, 50.0, 300.0);
+        assert!((time("run") - run).abs() < 1e-9, "{:?}", p.shares.by);
+    }
+
+    #[test]
     fn shares_of_the_time_add_up_per_kind_in_the_order_first_met() {
         let mut shares = Shares::default();
         shares.add("spray", 2.0);
