@@ -739,3 +739,112 @@ fn the_spray_refuses_inclusions_beyond_the_whole_and_tracks_wholly_over_each_oth
     let err = build("overlap = 0.9").expect_err("overlap 0.9");
     assert!(err.contains("overlap") && err.contains("below 0.9"), "{err}");
 }
+
+/// The NC program of the pipe read back by `tests/replay/nc_replay.py` (pygcode, a
+/// third-party RS-274 parser, and LinuxCNC's semantics) on the `cmpm-hybrid` machine:
+/// no violation, each tool working the length its operations plan (the mill and the
+/// wheel more: ramps, and a wheel running on past the part), and the feeders set, when
+/// the gun opens, to the layer's mix with its inclusions.
+#[test]
+fn the_nc_program_runs_each_operation_of_the_plan_on_the_machine() {
+    let probe = std::process::Command::new("python3")
+        .args(["-c", "import pygcode, tomllib"])
+        .output();
+    if !probe.is_ok_and(|o| o.status.success()) {
+        assert!(
+            std::env::var_os("LAMINA_REQUIRE").is_none(),
+            "LAMINA_REQUIRE is set, but pygcode is not installed"
+        );
+        println!("note: the pygcode Python package is not installed; skipped");
+        return;
+    }
+    // The machine's gun is 3 mm wide.
+    let pipe = PIPE.replace("diameter = 2.0", "diameter = 3.0");
+    assert_ne!(pipe, PIPE);
+    let run = lamina_test_support::run_pipeline(&format!(
+        "{pipe}\n[[output]]\nuse = \"nc\"\npath = \"pipe.nc\"\nmachine = \"cmpm-hybrid\"\n"
+    ));
+    let plan = run.json("pipe.json");
+    let crate_dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
+    let nc = std::env::temp_dir().join(format!("lamina-process-{}.nc", std::process::id()));
+    std::fs::write(&nc, run.file("pipe.nc")).expect("the program written");
+    let out = std::process::Command::new("python3")
+        .arg(crate_dir.join("../../tests/replay/nc_replay.py"))
+        .arg(&nc)
+        .arg("--machine")
+        .arg(crate_dir.join("machines/cmpm-hybrid.toml"))
+        .output()
+        .expect("python3 runs");
+    let _ = std::fs::remove_file(&nc);
+    let report: Value = serde_json::from_slice(&out.stdout)
+        .unwrap_or_else(|e| panic!("{e}: {}", String::from_utf8_lossy(&out.stderr)));
+    assert!(out.status.success(), "violations: {}", report["violations"]);
+    // Planned lengths by tool number (the machine's: end mill 1, gun 2, wheel 3,
+    // laser 4, filler 5).
+    let numbers = ["end-mill", "spray-gun", "cup-wheel", "laser", "filler"];
+    let mut planned = [0.0f64; 5];
+    for l in layers(&plan) {
+        for op in ops(l) {
+            let Some(name) = op["tool"]["name"].as_str() else {
+                continue;
+            };
+            let n = numbers
+                .iter()
+                .position(|t| *t == name)
+                .expect("a tool of the machine");
+            for p in op["paths"].as_array().expect("paths") {
+                let pts: Vec<(f64, f64)> = p["points"]
+                    .as_array()
+                    .expect("points")
+                    .iter()
+                    .map(|q| (f(&q[0]), f(&q[1])))
+                    .collect();
+                let closing = if p["closed"] == true && pts.len() > 2 {
+                    1
+                } else {
+                    0
+                };
+                planned[n] += (0..pts.len() - 1 + closing)
+                    .map(|k| {
+                        let (a, b) = (pts[k], pts[(k + 1) % pts.len()]);
+                        (b.0 - a.0).hypot(b.1 - a.1)
+                    })
+                    .sum::<f64>();
+            }
+        }
+    }
+    for (i, want) in planned.iter().enumerate() {
+        let got = f(&report["lengths"][(i + 1).to_string()]);
+        assert!(*want > 0.0, "{}: nothing planned", numbers[i]);
+        if i == 0 || i == 2 {
+            assert!(
+                got >= want - 1e-3,
+                "{}: {got} mm worked, {want} planned",
+                numbers[i]
+            );
+        } else {
+            assert!(
+                (got - want).abs() <= 1e-3 * want,
+                "{}: {got} mm worked, {want} planned",
+                numbers[i]
+            );
+        }
+    }
+    // The feeders when the gun opens: the layer's mix, the composite's a fifth SiC.
+    let replayed = report["layers"].as_array().expect("layers");
+    assert_eq!(replayed.len(), layers(&plan).len());
+    for (i, (l, r)) in layers(&plan).iter().zip(replayed).enumerate() {
+        let sprays = r["sprays"].as_array().expect("sprays");
+        let op = one(l, "spray", None).expect("sprayed");
+        assert_eq!(sprays.len(), 1, "layer {i}: {sprays:?}");
+        let inclusion = op["values"].get("inclusion:SiC").map_or(0.0, f);
+        for (m, v) in fractions(op) {
+            let read = f(&sprays[0][m.as_str()]);
+            assert!(
+                (read - v * (1.0 - inclusion)).abs() <= 0.01,
+                "layer {i}, {m}: {read} read, {v} planned"
+            );
+        }
+        assert!((f(&sprays[0]["SiC"]) - inclusion).abs() <= 0.01, "layer {i}");
+    }
+}
