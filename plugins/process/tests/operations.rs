@@ -147,6 +147,16 @@ fn one<'a>(layer: &'a Value, kind: &str, pass: Option<&str>) -> Option<&'a Value
     op
 }
 
+/// A path's points as (x, y).
+fn points(path: &Value) -> Vec<(f64, f64)> {
+    path["points"]
+        .as_array()
+        .expect("points")
+        .iter()
+        .map(|q| (f(&q[0]), f(&q[1])))
+        .collect()
+}
+
 /// The distinct y of an operation's passes (each pass's first point), in order.
 fn pass_ys(op: &Value) -> Vec<f64> {
     let mut ys: Vec<f64> = op["paths"]
@@ -475,12 +485,7 @@ fn the_laser_burns_rings_a_step_apart_in_passes_down_to_the_layers_bottom() {
         let section = r * (std::f64::consts::PI / 32.0).cos();
         let mut by_void: std::collections::BTreeMap<(i64, i64), Vec<f64>> = Default::default();
         for p in &paths[..per_pass] {
-            let pts: Vec<(f64, f64)> = p["points"]
-                .as_array()
-                .expect("points")
-                .iter()
-                .map(|q| (f(&q[0]), f(&q[1])))
-                .collect();
+            let pts = points(p);
             let n = pts.len() as f64;
             let (cx, cy) = pts
                 .iter()
@@ -660,20 +665,20 @@ fn the_gun_sprays_each_mix_of_the_layer_in_one_operation_over_its_own_area() {
     }
 }
 
+/// Builds the process stage a table names; the error's text if it is refused.
+fn process_stage(table: &str) -> Result<(), String> {
+    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
+    lamina_test_support::try_stage(lamina_api::StageKind::Process, table, dir)
+        .map(|_| ())
+        .map_err(|e| e.to_string())
+}
+
 /// The engraver's table refused where its voids would meet or its spot is wider than
 /// a void, naming the key; the limits themselves allowed.
 #[test]
 fn the_engraver_refuses_voids_that_meet_and_a_spot_wider_than_a_void() {
-    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
-    let build = |options: &str| {
-        lamina_test_support::try_stage(
-            lamina_api::StageKind::Process,
-            &format!("use = \"engrave\"\nperiod = [1.0, 0.8, 0.6]\n{options}"),
-            dir,
-        )
-        .map(|_| ())
-        .map_err(|e| e.to_string())
-    };
+    let build =
+        |options: &str| process_stage(&format!("use = \"engrave\"\nperiod = [1.0, 0.8, 0.6]\n{options}"));
     // Half the smallest period (0.6 mm) at most.
     assert_eq!(build("void_radius = 0.3"), Ok(()));
     let err = build("void_radius = 0.31").expect_err("voids that meet");
@@ -686,14 +691,8 @@ fn the_engraver_refuses_voids_that_meet_and_a_spot_wider_than_a_void() {
         "{err}"
     );
     // Every spacing a positive length, by the option's range.
-    let err = lamina_test_support::try_stage(
-        lamina_api::StageKind::Process,
-        "use = \"engrave\"\nperiod = [1.0, 0.0, 0.6]",
-        dir,
-    )
-    .map(|_| ())
-    .expect_err("a zero spacing");
-    assert!(err.to_string().contains("period"), "{err}");
+    let err = process_stage("use = \"engrave\"\nperiod = [1.0, 0.0, 0.6]").expect_err("a zero spacing");
+    assert!(err.contains("period"), "{err}");
     // Rings that cover each other wholly are refused, below that allowed.
     assert_eq!(build("void_radius = 0.25\noverlap = 0.89"), Ok(()));
     let err = build("void_radius = 0.25\noverlap = 0.9").expect_err("overlap 0.9");
@@ -712,16 +711,7 @@ fn the_engraver_refuses_voids_that_meet_and_a_spot_wider_than_a_void() {
 /// follow them; the limits themselves allowed.
 #[test]
 fn the_spray_refuses_inclusions_beyond_the_whole_and_tracks_wholly_over_each_other() {
-    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
-    let build = |options: &str| {
-        lamina_test_support::try_stage(
-            lamina_api::StageKind::Process,
-            &format!("use = \"spray\"\n{options}"),
-            dir,
-        )
-        .map(|_| ())
-        .map_err(|e| e.to_string())
-    };
+    let build = |options: &str| process_stage(&format!("use = \"spray\"\n{options}"));
     assert_eq!(build("inclusions = { outer = { SiC = 0.5, WC = 0.5 } }"), Ok(()));
     for bad in [
         "inclusions = { outer = { SiC = 0.6, WC = 0.6 } }",
@@ -793,12 +783,7 @@ fn the_nc_program_runs_each_operation_of_the_plan_on_the_machine() {
                 .position(|t| *t == name)
                 .expect("a tool of the machine");
             for p in op["paths"].as_array().expect("paths") {
-                let pts: Vec<(f64, f64)> = p["points"]
-                    .as_array()
-                    .expect("points")
-                    .iter()
-                    .map(|q| (f(&q[0]), f(&q[1])))
-                    .collect();
+                let pts = points(p);
                 let closing = if p["closed"] == true && pts.len() > 2 {
                     1
                 } else {
