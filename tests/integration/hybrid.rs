@@ -1,8 +1,9 @@
 //! The CMPM hybrid process end to end on the pipe of Fig. 11 (cmpm-process-planning
 //! §2 and 4.1): every layer of every work cycle is end-milled where a higher region
 //! adjoins, sprayed with allowances, ground, engraved and filled where it is a
-//! microstructure, and ground to height; the NC file it writes is read back by a
-//! third-party G-code parser (pygcode) in `tests/replay/nc_replay.py`.
+//! microstructure, and ground to height. The NC program is read back by a third-party
+//! G-code parser (pygcode, `tests/replay/nc_replay.py`) in the process crate's own
+//! tests (`plugins/process/tests/operations.rs`), where each method it checks lives.
 //!
 //! The pipe is three concentric tubes: the microstructure `inner` (radii 5 to 7), the
 //! FGM `middle` (7 to 9) and the composite `outer` (9 to 10), so where each machining
@@ -10,11 +11,10 @@
 
 use std::collections::BTreeMap;
 use std::path::Path;
-use std::process::Command;
 
 use serde_json::Value;
 
-use crate::support::{pipelines, root, run_plan, skip, text, try_run_text};
+use crate::support::{pipelines, run_plan, text, try_run_text};
 
 fn run_pipe(out: &Path) -> Value {
     run_plan(
@@ -351,187 +351,6 @@ fn segment_distance(p: [f64; 2], a: [f64; 2], b: [f64; 2]) -> f64 {
         0.0
     };
     (p[0] - a[0] - s * dx).hypot(p[1] - a[1] - s * dy)
-}
-
-/// The replay of `tests/replay/nc_replay.py` on an NC file, with the machine's profile.
-fn replay_nc(file: &Path, machine: &Path) -> Value {
-    let out = Command::new("python3")
-        .arg(root().join("tests/replay/nc_replay.py"))
-        .arg(file)
-        .arg("--machine")
-        .arg(machine)
-        .output()
-        .expect("python3 runs");
-    let report: Value = serde_json::from_slice(&out.stdout)
-        .unwrap_or_else(|e| panic!("{e}: {}{}", text(&out.stdout), text(&out.stderr)));
-    assert!(out.status.success(), "violations: {}", report["violations"]);
-    report
-}
-
-fn has_pygcode() -> bool {
-    let probe = Command::new("python3")
-        .args(["-c", "import pygcode, tomllib"])
-        .output();
-    if probe.is_ok_and(|o| o.status.success()) {
-        true
-    } else {
-        skip("the pygcode Python package (and Python 3.11's tomllib) is not installed (pip install pygcode)");
-        false
-    }
-}
-
-#[test]
-fn a_third_party_parser_runs_the_nc_program_as_a_machinist_would_and_finds_the_plan_in_it() {
-    if !has_pygcode() {
-        return;
-    }
-    let dir = tempfile::tempdir().expect("tempdir");
-    let plan = run_pipe(dir.path());
-    let numbers = [
-        ("end-mill", 1),
-        ("spray-gun", 2),
-        ("cup-wheel", 3),
-        ("laser", 4),
-        ("filler", 5),
-    ];
-    let mut planned: BTreeMap<String, f64> = BTreeMap::new();
-    let layers = plan["layers"].as_array().expect("layers");
-    for l in layers {
-        for o in ops(l) {
-            let Some(name) = o["tool"]["name"].as_str() else {
-                continue;
-            };
-            let n = numbers.iter().find(|t| t.0 == name).expect("a numbered tool").1;
-            for p in o["paths"].as_array().expect("paths") {
-                let pts = points(p);
-                let mut length: f64 = pts
-                    .windows(2)
-                    .map(|w| (w[1][0] - w[0][0]).hypot(w[1][1] - w[0][1]))
-                    .sum();
-                if p["closed"] == true && pts.len() > 2 {
-                    let (a, b) = (pts[0], pts[pts.len() - 1]);
-                    length += (a[0] - b[0]).hypot(a[1] - b[1]);
-                }
-                *planned.entry(n.to_string()).or_default() += length;
-            }
-        }
-    }
-    let nc = dir.path().join("pipe-work-cycles.nc");
-    let machine = root().join("plugins/process/machines/cmpm-hybrid.toml");
-    let report = replay_nc(&nc, &machine);
-    // The replay says which tool kinds it knows.
-    let help = Command::new("python3")
-        .arg(root().join("tests/replay/nc_replay.py"))
-        .arg("--help")
-        .output()
-        .expect("python3 runs");
-    assert!(
-        text(&help.stdout).contains("dispenser, end-mill, grinding-wheel, laser, spray"),
-        "{}",
-        text(&help.stdout)
-    );
-    // What each tool works: the spray, the laser and the filler exactly their paths;
-    // the cutters more (ramps cut at depth again, the wheel runs on past the part).
-    assert_eq!(planned.len(), 5, "{planned:?}");
-    for (n, want) in &planned {
-        let got = f(&report["lengths"][n]);
-        if n == "1" || n == "3" {
-            assert!(got >= want - 1e-3, "tool {n}: {got} mm worked, {want} mm planned");
-        } else {
-            assert!(
-                (got - want).abs() <= 1e-3 * want,
-                "tool {n}: {got} mm worked, {want} mm planned"
-            );
-        }
-    }
-    // The targets: no move to where the tool is, no plunge, every tool change at the
-    // safe height, the laser never up and down again within a layer's engraving.
-    assert_eq!(report["noop_moves"], 0, "{}", report["noop_moves"]);
-    assert_eq!(report["plunges"], 0);
-    assert!(f(&report["tool_changes"]) >= 46.0, "{}", report["tool_changes"]);
-    assert_eq!(report["tool_changes_at_safe_height"], report["tool_changes"]);
-    assert_eq!(report["laser_z_cycles"], 0);
-    assert_eq!(
-        report["pauses"], 0,
-        "the filler stays: no operator stop to melt it out"
-    );
-    // The program's own estimate against the replay's.
-    let program = std::fs::read_to_string(&nc).expect("nc");
-    let header = program
-        .lines()
-        .find(|l| l.starts_with("(estimated cycle time"))
-        .expect("an estimate in the header");
-    let own: f64 = header
-        .trim_start_matches("(estimated cycle time ")
-        .split_whitespace()
-        .next()
-        .and_then(|w| w.parse().ok())
-        .unwrap_or_else(|| panic!("no seconds in {header}"));
-    let replayed = f(&report["time"]);
-    assert!(
-        (own - replayed).abs() <= 0.05 * replayed,
-        "{own} s by the program, {replayed} s by the replay"
-    );
-    // Layer by layer: the composition the feeders were set to when the gun opened is
-    // the plan's, with the composite's inclusions; no cutter below the layer's base,
-    // no wheel below the design height, the laser's last pass on the layer's bottom.
-    let replayed_layers = report["layers"].as_array().expect("layers");
-    assert_eq!(replayed_layers.len(), layers.len());
-    let materials: Vec<&str> = plan["materials"]
-        .as_array()
-        .expect("materials")
-        .iter()
-        .map(|m| m["name"].as_str().expect("name"))
-        .collect();
-    let mut checked = 0;
-    for (l, r) in layers.iter().zip(replayed_layers) {
-        let (z, t) = (f(&l["z"]), f(&l["thickness"]));
-        let region = l["region"].as_u64().expect("region");
-        let sprays = r["sprays"].as_array().expect("sprays");
-        let subregions: Vec<&Value> = l["parts"]
-            .as_array()
-            .expect("parts")
-            .iter()
-            .flat_map(|p| p["families"].as_array().expect("families"))
-            .flat_map(|fam| fam["sub_regions"].as_array().expect("regions"))
-            .collect();
-        assert_eq!(
-            sprays.len(),
-            1,
-            "one composition per layer of the pipe: {sprays:?}"
-        );
-        let got = &sprays[0];
-        let inclusion = if region == 2 { 0.2 } else { 0.0 };
-        for sub in &subregions {
-            for m in &materials {
-                let want = f(sub["composition"].get(*m).unwrap_or(&Value::from(0.0))) * (1.0 - inclusion);
-                let read = f(&got[*m]);
-                assert!(
-                    (read - want).abs() <= 0.01,
-                    "layer at z {z}, {m}: {read} read back, {want} planned"
-                );
-                checked += 1;
-            }
-        }
-        assert!((f(&got["SiC"]) - inclusion).abs() <= 0.01, "{got}");
-        let lowest = &r["lowest"];
-        if let Some(mill) = lowest.get("end-mill") {
-            assert!(
-                f(mill) >= z - t - 1e-6,
-                "end mill at {mill} below the base {}",
-                z - t
-            );
-        }
-        assert!(f(&lowest["grinding-wheel"]) >= z - 1e-6, "wheel below z {z}");
-        if let Some(laser) = lowest.get("laser") {
-            assert!(
-                (f(laser) - (z - t)).abs() < 1e-6,
-                "laser's last pass at {laser}, the bottom at {}",
-                z - t
-            );
-        }
-    }
-    assert_eq!(checked, layers.len() * materials.len());
 }
 
 #[test]

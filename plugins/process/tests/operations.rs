@@ -731,10 +731,20 @@ fn the_spray_refuses_inclusions_beyond_the_whole_and_tracks_wholly_over_each_oth
 }
 
 /// The NC program of the pipe read back by `tests/replay/nc_replay.py` (pygcode, a
-/// third-party RS-274 parser, and LinuxCNC's semantics) on the `cmpm-hybrid` machine:
-/// no violation, each tool working the length its operations plan (the mill and the
-/// wheel more: ramps, and a wheel running on past the part), and the feeders set, when
-/// the gun opens, to the layer's mix with its inclusions.
+/// third-party RS-274 parser, and LinuxCNC's semantics) on the `cmpm-hybrid` machine,
+/// as a machinist's controller would run it:
+/// - no violation (among them: no tool change away from the safe height, no rapid of a
+///   cutter or the filler below a surface worked, no tool off crawling over the part);
+/// - no move to where the tool is, no plunge of a cutter, the laser never up and down
+///   again within an engraving, a tool change for each new tool of the plan's order
+///   and an operator's stop for each operation without a tool (the filler's melt-out);
+/// - each tool working the length its operations plan (the mill and the wheel more:
+///   ramps, and a wheel running on past the part);
+/// - each tool's lowest height on each layer where the plan puts it (the gun and the
+///   filler nozzle their standoffs above the surface, the laser's last pass on the
+///   layer's bottom);
+/// - the feeders set, when the gun opens, to the layer's mix with its inclusions;
+/// - the program's own cycle-time estimate within 5 % of the replay's.
 #[test]
 fn the_nc_program_runs_each_operation_of_the_plan_on_the_machine() {
     let probe = std::process::Command::new("python3")
@@ -755,25 +765,128 @@ fn the_nc_program_runs_each_operation_of_the_plan_on_the_machine() {
         "{pipe}\n[[output]]\nuse = \"nc\"\npath = \"pipe.nc\"\nmachine = \"cmpm-hybrid\"\n"
     ));
     let plan = run.json("pipe.json");
-    let crate_dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
+    let program = run.file("pipe.nc");
+    let replay = crate_dir().join("../../tests/replay/nc_replay.py");
     let nc = std::env::temp_dir().join(format!("lamina-process-{}.nc", std::process::id()));
-    std::fs::write(&nc, run.file("pipe.nc")).expect("the program written");
+    std::fs::write(&nc, &program).expect("the program written");
     let out = std::process::Command::new("python3")
-        .arg(crate_dir.join("../../tests/replay/nc_replay.py"))
+        .arg(&replay)
         .arg(&nc)
         .arg("--machine")
-        .arg(crate_dir.join("machines/cmpm-hybrid.toml"))
+        .arg(crate_dir().join("machines/cmpm-hybrid.toml"))
         .output()
         .expect("python3 runs");
     let _ = std::fs::remove_file(&nc);
     let report: Value = serde_json::from_slice(&out.stdout)
         .unwrap_or_else(|e| panic!("{e}: {}", String::from_utf8_lossy(&out.stderr)));
     assert!(out.status.success(), "violations: {}", report["violations"]);
+    // The replay knows every kind of tool the machine has.
+    let help = std::process::Command::new("python3")
+        .arg(&replay)
+        .arg("--help")
+        .output()
+        .expect("python3 runs");
+    let help = String::from_utf8_lossy(&help.stdout);
+    assert!(
+        help.contains("dispenser, end-mill, grinding-wheel, laser, spray"),
+        "{help}"
+    );
+    program_runs_as_planned(&plan, &report, &String::from_utf8_lossy(&program));
+    each_tool_works_its_paths(&plan, &report);
+}
+
+fn crate_dir() -> &'static std::path::Path {
+    std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+}
+
+/// The counts, the estimate and each layer's lowest heights of the replay's `report`
+/// against the `plan` and the `program`'s header.
+fn program_runs_as_planned(plan: &Value, report: &Value, program: &str) {
+    assert_eq!(report["noop_moves"], 0, "moves to where the tool is");
+    assert_eq!(report["plunges"], 0, "plunges");
+    assert_eq!(report["laser_z_cycles"], 0, "the laser up and down again");
+    // One tool change wherever the plan's next tool is another; one stop for the
+    // operator wherever an operation has no tool.
+    let (mut changes, mut stops, mut loaded) = (0, 0, None);
+    for l in layers(plan) {
+        for op in ops(l) {
+            match op["tool"]["name"].as_str() {
+                None => stops += 1,
+                Some(name) if loaded != Some(name) && !op["paths"].as_array().expect("paths").is_empty() => {
+                    changes += 1;
+                    loaded = Some(name);
+                }
+                Some(_) => {}
+            }
+        }
+    }
+    assert!(changes > 20 && stops == 1, "{changes} changes, {stops} stops");
+    assert_eq!(report["tool_changes"], changes);
+    assert_eq!(report["tool_changes_at_safe_height"], changes);
+    assert_eq!(report["pauses"], stops);
+    // The program's own estimate against the replay's.
+    let header = program
+        .lines()
+        .find_map(|l| l.strip_prefix("(estimated cycle time "))
+        .expect("an estimate in the header");
+    let own: f64 = header
+        .split_whitespace()
+        .next()
+        .and_then(|w| w.parse().ok())
+        .unwrap_or_else(|| panic!("no seconds in {header}"));
+    let replayed = f(&report["time"]);
+    assert!(
+        (own - replayed).abs() <= 0.05 * replayed,
+        "{own} s by the program, {replayed} s by the replay"
+    );
+    // Each tool's lowest height on each layer: where its paths lie, the gun its
+    // standoff (80 mm) and the filler's nozzle its own (1 mm) above them.
+    let kinds = [
+        ("end-mill", "end-mill", 0.0),
+        ("spray", "spray", 80.0),
+        ("grind", "grinding-wheel", 0.0),
+        ("engrave", "laser", 0.0),
+        ("fill", "dispenser", 1.0),
+    ];
+    let replayed = report["layers"].as_array().expect("layers");
+    assert_eq!(replayed.len(), layers(plan).len());
+    for (i, (l, r)) in layers(plan).iter().zip(replayed).enumerate() {
+        let lowest = r["lowest"].as_object().expect("lowest");
+        let mut want = serde_json::Map::new();
+        for (kind, tool, standoff) in kinds {
+            let low = ops(l)
+                .into_iter()
+                .filter(|o| o["kind"] == kind)
+                .flat_map(|o| o["paths"].as_array().expect("paths"))
+                .map(|p| f(&p["z"]) + standoff)
+                .fold(f64::INFINITY, f64::min);
+            if low.is_finite() {
+                want.insert(tool.into(), low.into());
+            }
+        }
+        assert_eq!(
+            lowest.keys().collect::<Vec<_>>(),
+            want.keys().collect::<Vec<_>>(),
+            "layer {i}"
+        );
+        for (tool, z) in &want {
+            let got = f(&lowest[tool]);
+            assert!(
+                (got - f(z)).abs() <= 0.5e-3 + 1e-9,
+                "layer {i}: the {tool} down to {got}, its paths at {z}"
+            );
+        }
+    }
+}
+
+/// Each tool's worked length in the replay's `report` against its paths in the `plan`,
+/// and the feeders' mix when the gun opens against each layer's.
+fn each_tool_works_its_paths(plan: &Value, report: &Value) {
     // Planned lengths by tool number (the machine's: end mill 1, gun 2, wheel 3,
     // laser 4, filler 5).
     let numbers = ["end-mill", "spray-gun", "cup-wheel", "laser", "filler"];
     let mut planned = [0.0f64; 5];
-    for l in layers(&plan) {
+    for l in layers(plan) {
         for op in ops(l) {
             let Some(name) = op["tool"]["name"].as_str() else {
                 continue;
@@ -817,8 +930,8 @@ fn the_nc_program_runs_each_operation_of_the_plan_on_the_machine() {
     }
     // The feeders when the gun opens: the layer's mix, the composite's a fifth SiC.
     let replayed = report["layers"].as_array().expect("layers");
-    assert_eq!(replayed.len(), layers(&plan).len());
-    for (i, (l, r)) in layers(&plan).iter().zip(replayed).enumerate() {
+    assert_eq!(replayed.len(), layers(plan).len());
+    for (i, (l, r)) in layers(plan).iter().zip(replayed).enumerate() {
         let sprays = r["sprays"].as_array().expect("sprays");
         let op = one(l, "spray", None).expect("sprayed");
         assert_eq!(sprays.len(), 1, "layer {i}: {sprays:?}");
