@@ -27,10 +27,14 @@ sanitizer="${FUZZ_SANITIZER:-none}"
 export CARGO_PROFILE_RELEASE_DEBUG=line-tables-only
 export CARGO_PROFILE_RELEASE_OPT_LEVEL="${FUZZ_OPT_LEVEL:-1}"
 "${fuzz[@]}" build -O -s "$sanitizer"
-# FUZZ_BUILD_ONLY=1 stops here: .ci/run builds the targets while the tests run, and
-# fuzzes once they are done.
+# FUZZ_BUILD_ONLY=1 stops here. FUZZ_START_FILE=PATH waits, once the targets are
+# built, until that file exists: .ci/run builds the targets from its start and lets
+# them fuzz once the tests are done.
 if [ "${FUZZ_BUILD_ONLY:-0}" = 1 ]; then
     exit 0
+fi
+if [ -n "${FUZZ_START_FILE:-}" ]; then
+    while [ ! -e "$FUZZ_START_FILE" ]; do sleep 1; done
 fi
 scratch="$(mktemp -d)"
 trap 'rm -rf "$scratch"' EXIT
