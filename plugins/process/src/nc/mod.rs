@@ -380,7 +380,9 @@ impl Sink {
     }
 
     /// A rotating cutter (an end mill, or a plugin's tool): ramped in along each path
-    /// from just above the highest surface, up to it between paths.
+    /// from just above the highest surface, up to it between paths. Every move of the
+    /// ramp that goes down, the one reaching the depth too, runs at the plunge feed;
+    /// the path at depth at the cutting feed.
     fn cut(&mut self, op: &Operation, c: &Cutting) -> Result<()> {
         self.spin(c)?;
         let approach = self.top + self.options.approach;
@@ -390,11 +392,12 @@ impl Sink {
             let way = entry::ramp(&p.points, p.closed, start, p.z, c.ramp_angle);
             let Some(&(first, _)) = way.first() else { continue };
             self.travel_to(first, start, if i == 0 { clear } else { approach })?;
-            for &(q, z) in way.iter().skip(1) {
-                let feed = if z < p.z + 1e-9 {
-                    c.feed
-                } else {
+            for w in way.windows(2) {
+                let ((_, from), (q, z)) = (w[0], w[1]);
+                let feed = if z < from - 1e-9 {
                     c.feed * self.options.plunge
+                } else {
+                    c.feed
                 };
                 self.program.feed(Some(q.x), Some(q.y), Some(z), feed)?;
             }
@@ -635,6 +638,230 @@ lamina_api::register_stage!(StageFactory {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use lamina_api::{Contour, OperationPath, OperationTool};
+
+    /// A sink writing for the generic machine, the highest surface so far at `top`.
+    fn sink(top: f64) -> Sink {
+        let machine: HybridMachine = toml::from_str(GENERIC).expect("the generic machine");
+        Sink {
+            out: Box::new(std::io::sink()),
+            path: PathBuf::from("test.nc"),
+            options: Options {
+                path: PathBuf::from("test.nc"),
+                machine: String::new(),
+                tools: BTreeMap::new(),
+                clearance: 5.0,
+                approach: 1.0,
+                wheel_margin: 1.0,
+                spray_standoff: 80.0,
+                fill_standoff: 1.0,
+                plunge: 0.3,
+            },
+            regions: Vec::new(),
+            numbers: BTreeMap::new(),
+            named: false,
+            program: Program::new(machine),
+            top,
+            notes: Vec::new(),
+            title: String::new(),
+        }
+    }
+
+    fn operation(kind: &str, tool: &str, paths: Vec<OperationPath>) -> Operation {
+        let mut op = Operation::new(kind, Some(0));
+        op.tool = Some(OperationTool {
+            name: tool.into(),
+            kind: tool.into(),
+            diameter: 0.8,
+            feed: 10.0,
+            spindle: Some(10_000.0),
+            power: None,
+        });
+        op.paths = paths;
+        op
+    }
+
+    fn open(z: f64, points: &[(f64, f64)]) -> OperationPath {
+        OperationPath {
+            z,
+            points: points.iter().map(|&(x, y)| Point2::new(x, y)).collect(),
+            closed: false,
+        }
+    }
+
+    fn square(x0: f64, y0: f64, side: f64) -> Polygon {
+        let corners = [(0.0, 0.0), (side, 0.0), (side, side), (0.0, side)];
+        Polygon::new(
+            Contour::new(
+                corners
+                    .iter()
+                    .map(|&(x, y)| Point2::new(x0 + x, y0 + y))
+                    .collect(),
+            ),
+            Vec::new(),
+        )
+    }
+
+    /// A move the program makes: rapid or not, where it ends (an axis unknown after a
+    /// retract in machine coordinates) and its feed (mm/min), read from the words.
+    #[derive(Debug)]
+    struct Move {
+        rapid: bool,
+        to: [Option<f64>; 3],
+        feed: Option<f64>,
+    }
+
+    /// The moves of a program's text, the modal motion and feed words carried from
+    /// line to line as a controller carries them.
+    fn moves(text: &str) -> Vec<Move> {
+        let (mut rapid, mut feed, mut at) = (true, None, [None; 3]);
+        let mut out = Vec::new();
+        for line in text.lines() {
+            let words: Vec<(char, f64)> = line
+                .split('(')
+                .next()
+                .unwrap_or("")
+                .split_whitespace()
+                .filter_map(|w| Some((w.chars().next()?, w[1..].parse().ok()?)))
+                .collect();
+            if words.contains(&('G', 53.0)) {
+                at[2] = None;
+                continue;
+            }
+            let mut moved = false;
+            for &(letter, v) in &words {
+                match letter {
+                    'G' if v == 0.0 || v == 1.0 => rapid = v == 0.0,
+                    'F' => feed = Some(v),
+                    'X' | 'Y' | 'Z' => {
+                        at[(letter as u8 - b'X') as usize] = Some(v);
+                        moved = true;
+                    }
+                    _ => {}
+                }
+            }
+            if moved {
+                out.push(Move {
+                    rapid,
+                    to: at,
+                    feed: (!rapid).then_some(feed).flatten(),
+                });
+            }
+        }
+        out
+    }
+
+    /// The heights at which the program crosses in XY by rapid moves, in order.
+    fn crossings(text: &str) -> Vec<Option<f64>> {
+        let mut at = [None; 3];
+        let mut out = Vec::new();
+        for m in moves(text) {
+            if m.rapid && (m.to[0] != at[0] || m.to[1] != at[1]) {
+                out.push(at[2]);
+            }
+            at = m.to;
+        }
+        out
+    }
+
+    /// The filler, working a lower surface than the highest so far (2 mm), goes from
+    /// one pass to the next at its own height where the way stays over the layer's
+    /// area, and climbs to the approach height (top + 1 mm) to cross where it leaves
+    /// it; its first pass is reached from the safe height, where the tool change left
+    /// it.
+    #[test]
+    fn the_filler_climbs_to_the_approach_height_only_where_its_way_leaves_the_area() {
+        let mut s = sink(2.0);
+        // A square, and an L whose foot runs along y = 0 to 2 and whose leg stands at
+        // x = 28 to 30: from the foot's far end the way up the leg stays over it, from
+        // the foot's near end it would not.
+        let l = [
+            (20.0, 0.0),
+            (30.0, 0.0),
+            (30.0, 10.0),
+            (28.0, 10.0),
+            (28.0, 2.0),
+            (20.0, 2.0),
+        ];
+        let area = [
+            square(0.0, 0.0, 10.0),
+            Polygon::new(
+                Contour::new(l.iter().map(|&(x, y)| Point2::new(x, y)).collect()),
+                Vec::new(),
+            ),
+        ];
+        let op = operation(
+            "fill",
+            "dispenser",
+            vec![
+                open(0.5, &[(1.0, 1.0), (9.0, 1.0)]),
+                open(0.5, &[(21.0, 1.0), (29.0, 1.0)]),
+                open(0.5, &[(29.0, 5.0), (29.0, 9.0)]),
+                open(0.5, &[(9.0, 5.0), (1.0, 5.0)]),
+            ],
+        );
+        s.operation(&op, &area).expect("written");
+        // Nozzle 1 mm over the 0.5 mm surface; across the gap at 3 mm (the top, 2 mm,
+        // and the approach, 1 mm), both ways; from the foot up the leg at 1.5 mm.
+        assert_eq!(
+            crossings(&s.program.text),
+            [None, Some(3.0), Some(1.5), Some(3.0)],
+            "{}",
+            s.program.text
+        );
+        // Each pass worked at the nozzle's height, then up to the clearance over the
+        // top.
+        let all = moves(&s.program.text);
+        assert!(all.iter().filter(|m| !m.rapid).all(|m| m.to[2] == Some(1.5)));
+        assert_eq!(all.last().map(|m| m.to[2]), Some(Some(7.0)));
+    }
+
+    /// An end mill ramps into each path from the approach height at a share of its
+    /// feed (`plunge`), works at depth at its feed, and rises to the approach height
+    /// between paths.
+    #[test]
+    fn an_end_mill_ramps_in_at_its_plunge_feed_and_works_at_depth_at_its_feed() {
+        let mut s = sink(1.0);
+        let op = operation(
+            "end-mill",
+            "end-mill",
+            vec![
+                open(0.6, &[(0.0, 0.0), (20.0, 0.0)]),
+                open(0.6, &[(0.0, 5.0), (20.0, 5.0)]),
+            ],
+        );
+        s.operation(&op, &[square(-1.0, -1.0, 30.0)]).expect("written");
+        // The ramp's moves down at 180 mm/min (0.3 of 10 mm/s), the one reaching the
+        // depth too; the moves along the depth at 600; nothing below it. At 3 degrees
+        // from 2 mm down to 0.6 mm the ramp takes 26.7 mm: back along the 20 mm path.
+        let all = moves(&s.program.text);
+        let (mut down, mut along) = (0, 0);
+        for w in all.windows(2) {
+            let (from, m) = (&w[0], &w[1]);
+            if m.rapid {
+                continue;
+            }
+            let (z0, z) = (from.to[2].expect("z known"), m.to[2].expect("z known"));
+            assert!((0.6 - 1e-9..=2.0 + 1e-9).contains(&z), "{m:?}");
+            if z < z0 - 1e-9 {
+                assert_eq!(m.feed, Some(180.0), "{m:?}");
+                down += 1;
+            } else {
+                assert_eq!(m.feed, Some(600.0), "{m:?}");
+                assert!((z - 0.6).abs() < 1e-9, "{m:?}");
+                along += 1;
+            }
+        }
+        assert_eq!((down, along), (4, 4), "{}", s.program.text);
+        // Between the paths, up to 2 mm (top 1 + approach 1): the second path is
+        // reached across at the approach height.
+        assert_eq!(
+            crossings(&s.program.text),
+            [None, Some(2.0)],
+            "{}",
+            s.program.text
+        );
+    }
 
     #[test]
     fn durations_read_in_hours_minutes_and_seconds() {
