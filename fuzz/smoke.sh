@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # Short fuzzing of every target, for continuous integration: builds the targets (nightly
-# toolchain, cargo-fuzz), runs each for FUZZ_SECONDS (default 10) from the seed corpus,
-# and fails on the first crash, timeout (30 s for one input) or use of more than 2 GiB.
+# toolchain, cargo-fuzz), runs each from the seed corpus for its budget (below;
+# FUZZ_SECONDS=N gives every target N seconds), and fails on the first crash, timeout
+# (30 s for one input) or use of more than 2 GiB.
 # New inputs go to a scratch folder, not into the committed corpus.
 #
 # The targets build without AddressSanitizer (FUZZ_SANITIZER=address brings it back):
@@ -12,7 +13,6 @@
 # line tables, enough for a crash's backtrace to name file and line.
 set -euo pipefail
 cd "$(dirname "$0")"
-seconds="${FUZZ_SECONDS:-10}"
 command -v cargo-fuzz >/dev/null 2>&1 || cargo install cargo-fuzz --locked --quiet
 # The sanitizer flags need a nightly compiler; without one, the stable compiler is
 # told to accept them.
@@ -38,7 +38,21 @@ if [ -n "${FUZZ_START_FILE:-}" ]; then
 fi
 scratch="$(mktemp -d)"
 trap 'rm -rf "$scratch"' EXIT
-targets="stl obj threemf threemf_components pipeline machine script cli_roundtrip pipeline_values plugin_messages"
+# Each target's budget (s). The readers that run a whole pipeline per input (a Rhai
+# script, a run written and read back, a pipeline's values checked) run a few hundred
+# to a few thousand inputs in 10 s; the file and message readers run tens of
+# thousands to a million in 5. The slow ones start first, so that the two cores end
+# together.
+budgets="script:10 cli_roundtrip:10 pipeline_values:10 stl:5 obj:5 threemf:5 threemf_components:5 pipeline:5 machine:5 plugin_messages:5"
+targets=""
+for b in $budgets; do targets="$targets ${b%%:*}"; done
+seconds_of() {
+    if [ -n "${FUZZ_SECONDS:-}" ]; then echo "$FUZZ_SECONDS"; return; fi
+    local b
+    for b in $budgets; do
+        if [ "${b%%:*}" = "$1" ]; then echo "${b#*:}"; return; fi
+    done
+}
 # Each target is one process on one core: FUZZ_JOBS of them run at once (default: the
 # machine's cores), and each one's report is printed when all are done.
 jobs_max="${FUZZ_JOBS:-$(nproc)}"
@@ -46,7 +60,7 @@ fuzz_one() {
     local t="$1"
     mkdir -p "$scratch/$t"
     if "${fuzz[@]}" run -O -s "$sanitizer" "$t" "$scratch/$t" "corpus/$t" -- \
-        -max_total_time="$seconds" -timeout=30 -rss_limit_mb=2048 -print_final_stats=1 \
+        -max_total_time="$(seconds_of "$t")" -timeout=30 -rss_limit_mb=2048 -print_final_stats=1 \
         2>"$scratch/$t.log"; then
         echo ok >"$scratch/$t.status"
     else
@@ -59,7 +73,7 @@ for t in $targets; do
 done
 wait
 for t in $targets; do
-    echo "== fuzz $t (${seconds} s)"
+    echo "== fuzz $t ($(seconds_of "$t") s)"
     if [ "$(cat "$scratch/$t.status" 2>/dev/null)" != ok ]; then
         tail -n 60 "$scratch/$t.log"
         echo "fuzz target $t failed"
