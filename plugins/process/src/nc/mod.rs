@@ -796,7 +796,7 @@ mod tests {
             vec![
                 open(0.5, &[(1.0, 1.0), (9.0, 1.0)]),
                 open(0.5, &[(21.0, 1.0), (29.0, 1.0)]),
-                open(0.5, &[(29.0, 5.0), (29.0, 9.0)]),
+                open(0.5, &[(29.0, 5.0), (29.0, 7.0), (29.0, 9.0)]),
                 open(0.5, &[(9.0, 5.0), (1.0, 5.0)]),
             ],
         );
@@ -809,10 +809,12 @@ mod tests {
             "{}",
             s.program.text
         );
-        // Each pass worked at the nozzle's height, then up to the clearance over the
-        // top.
+        // Each pass worked at the nozzle's height, open passes left open (one move per
+        // segment, 1 + 1 + 2 + 1), then up to the clearance over the top.
         let all = moves(&s.program.text);
-        assert!(all.iter().filter(|m| !m.rapid).all(|m| m.to[2] == Some(1.5)));
+        let worked: Vec<&Move> = all.iter().filter(|m| !m.rapid).collect();
+        assert_eq!(worked.len(), 5, "{}", s.program.text);
+        assert!(worked.iter().all(|m| m.to[2] == Some(1.5)));
         assert_eq!(all.last().map(|m| m.to[2]), Some(Some(7.0)));
     }
 
