@@ -305,6 +305,19 @@ impl Rng {
     }
 }
 
+/// Whether what the tests need must be there (`LAMINA_REQUIRE` set and not `0`, as
+/// the workspace's CI sets it).
+pub fn required() -> bool {
+    std::env::var_os("LAMINA_REQUIRE").is_some_and(|v| !v.is_empty() && v != "0")
+}
+
+/// A test that cannot run here (a checker or a model missing): a note, or under
+/// `LAMINA_REQUIRE` a failure.
+pub fn skip(what: &str) {
+    assert!(!required(), "LAMINA_REQUIRE is set, but {what}");
+    println!("note: {what}; skipped");
+}
+
 /// The run of one mesh alone (no materials, no parts): its heights, and files relative
 /// to `dir`.
 pub fn mesh_info(dir: &Path, mesh: &lamina_core::Mesh) -> lamina_core::RunInfo {

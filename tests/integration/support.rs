@@ -146,16 +146,7 @@ pub fn read_json(path: &Path) -> serde_json::Value {
     serde_json::from_str(&s).unwrap_or_else(|e| panic!("{}: {e}", path.display()))
 }
 
-/// Whether what the tests need must be there (`LAMINA_REQUIRE` set and not `0`).
-pub fn required() -> bool {
-    std::env::var_os("LAMINA_REQUIRE").is_some_and(|v| !v.is_empty() && v != "0")
-}
-
-/// A test that cannot run here: a note, or under `LAMINA_REQUIRE` a failure.
-pub fn skip(what: &str) {
-    assert!(!required(), "LAMINA_REQUIRE is set, but {what}");
-    println!("note: {what}; skipped");
-}
+pub use lamina_test_support::skip;
 
 /// `../shared/models` (or `LAMINA_MODELS`), when it exists; otherwise the test skips
 /// (or fails under `LAMINA_REQUIRE`).

@@ -751,11 +751,7 @@ fn the_nc_program_runs_each_operation_of_the_plan_on_the_machine() {
         .args(["-c", "import pygcode, tomllib"])
         .output();
     if !probe.is_ok_and(|o| o.status.success()) {
-        assert!(
-            std::env::var_os("LAMINA_REQUIRE").is_none(),
-            "LAMINA_REQUIRE is set, but pygcode is not installed"
-        );
-        println!("note: the pygcode Python package is not installed; skipped");
+        lamina_test_support::skip("the pygcode Python package is not installed");
         return;
     }
     // The machine's gun is 3 mm wide.
