@@ -16,7 +16,8 @@
 //! - [`lattice`]: a lattice of spherical voids and the circles it cuts in a plane;
 //! - [`base_cell`]: base cells (sphere, box, cylinder) on a lattice that may be tilted,
 //!   and the sections a layer's plane cuts from them (the search band of Fig. 5).
-//! - [`offset`]: offsets in and out, the discretisers' raw loops and the float outline.
+//! - [`offset`]: offsets in and out, one engine of raw loops, on the discretisers'
+//!   family grids and on a grid of their own for float shapes.
 
 pub mod base_cell;
 pub mod centroid;

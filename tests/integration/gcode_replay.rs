@@ -439,12 +439,17 @@ fn gear_and_shaft_on_two_motion_systems_replay_without_collision() {
         bound > printing,
         "the busier tool's work is more than its printing"
     );
-    // Layer by layer, the busier tool's work alone takes 0.66 of the sequential time:
-    // no schedule of these routes does better. Its printing alone takes 0.58: no
+    // Layer by layer, the busier tool's work alone takes 0.69 of the sequential time:
+    // no schedule of these routes does better. Its printing alone takes 0.56: no
     // order of these deposits does better. Looking ahead 0.5 s the replayed ratio is
-    // 0.74, with the heads pulling their filament back at the synchronisations where
-    // they may wait (0.72 when they did not).
-    assert!(ratio <= 0.75, "the concurrent file is not fast enough: {ratio}");
+    // 0.76, with the heads pulling their filament back at the synchronisations where
+    // they may wait: what the schedule costs over that floor is 0.07 of the
+    // sequential time.
+    let floor = bound / time(s);
+    assert!(
+        ratio <= 0.77 && ratio - floor <= 0.08,
+        "the concurrent file is not fast enough: {ratio}, {floor} for the busier tool alone"
+    );
 }
 
 /// The gear and shaft on two gantries with real 15 mm heads: the heads keep their

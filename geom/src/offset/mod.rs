@@ -1,18 +1,19 @@
-//! Offsets of shapes in or out. The discretisers work on their family's integer grid
-//! and add the raw loops of [`raw`] for each step to overlays of their own
-//! ([`RawOffset::add_loops`], resolved under the positive fill rule). The float
+//! Offsets of shapes in or out, by one engine: the raw loops of [`raw`], resolved under
+//! the positive fill rule. The discretisers work on their family's integer grid and add
+//! the loops of each step to overlays of their own ([`RawOffset::add_loops`]); the float
 //! [`round_outline`] and [`round_offset`] (bead loops, machining passes, distance
-//! sources) turn a chord tolerance into the outline engine's join step and tidy what it
-//! returns.
+//! sources) put their shapes on a grid of their own for each call.
 
 pub mod raw;
 
 pub use raw::{Join, RawOffset, Scratch, fits};
 
-use i_overlay::core::overlay::IntOverlayOptions;
+use i_overlay::core::fill_rule::FillRule;
+use i_overlay::core::overlay::{IntOverlayOptions, Overlay};
+use i_overlay::core::overlay_rule::OverlayRule;
 use i_overlay::core::solver::Solver;
-use i_overlay::mesh::float::outline::offset::OutlineOffset;
-use i_overlay::mesh::float::style::{LineJoin, OutlineStyle};
+use i_overlay::i_float::int::point::IntPoint;
+use i_overlay::i_shape::int::shape::IntShapes;
 
 use crate::{Shapes, simplify_ring};
 
@@ -57,15 +58,92 @@ pub fn join_step(d: f64, tolerance: f64) -> f64 {
     step.max(0.01)
 }
 
-/// `shapes` offset by `d` (negative: inward) with round joins straying at most
-/// `tolerance` from the arcs, as the engine returns them (rings in the engine's
-/// orientation, holes the other way round).
+/// `shapes` (outer rings counter-clockwise, holes clockwise) offset by `d` (negative:
+/// inward) with round joins straying at most `tolerance` from the arcs: the raw loops
+/// of [`RawOffset`] on a grid of the shapes' own, resolved under the positive rule.
+/// Rings come back as the overlay writes them (outer counter-clockwise, holes
+/// clockwise). Shapes with no finite extent have no offset.
 pub fn round_outline(shapes: &Shapes, d: f64, tolerance: f64) -> Shapes {
     if shapes.is_empty() || d == 0.0 {
         return shapes.clone();
     }
-    let style = OutlineStyle::new(d).line_join(LineJoin::Round(join_step(d, tolerance)));
-    shapes.outline(&style)
+    let Some(grid) = OwnGrid::around(shapes, d) else {
+        return Vec::new();
+    };
+    let on_grid: IntShapes<i32> = shapes
+        .iter()
+        .map(|shape| shape.iter().map(|ring| grid.ring(ring)).collect())
+        .collect();
+    let edges: usize = on_grid.iter().flatten().map(Vec::len).sum();
+    let mut overlay = Overlay::new_custom(2 * edges, overlay_options(), solver());
+    let offset = RawOffset {
+        join: Join::Round,
+        tolerance,
+    };
+    if !offset.add_loops(&mut overlay, &on_grid, d, grid.scale, &mut Scratch::default()) {
+        return Vec::new();
+    }
+    overlay
+        .overlay(OverlayRule::Clip, FillRule::Positive)
+        .iter()
+        .map(|shape| shape.iter().map(|ring| grid.unring(ring)).collect())
+        .collect()
+}
+
+/// A grid for one offset: origin at the shapes' bounding-box centre, the largest
+/// power-of-two scale that holds them and their outward offset ([`grid_scale`]).
+struct OwnGrid {
+    origin: [f64; 2],
+    scale: f64,
+}
+
+impl OwnGrid {
+    fn around(shapes: &Shapes, d: f64) -> Option<Self> {
+        let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
+        for p in shapes.iter().flatten().flatten() {
+            for a in 0..2 {
+                lo[a] = lo[a].min(p[a]);
+                hi[a] = hi[a].max(p[a]);
+            }
+        }
+        let half = 0.5 * (hi[0] - lo[0]).max(hi[1] - lo[1]) + d.max(0.0);
+        if !(half.is_finite() && half > 0.0 && d.is_finite()) {
+            return None;
+        }
+        Some(Self {
+            origin: [0.5 * (lo[0] + hi[0]), 0.5 * (lo[1] + hi[1])],
+            scale: grid_scale(half),
+        })
+    }
+
+    /// A ring's points on the grid, repeats (and a closing copy of the first) dropped.
+    fn ring(&self, ring: &[[f64; 2]]) -> Vec<IntPoint<i32>> {
+        let mut out: Vec<IntPoint<i32>> = Vec::with_capacity(ring.len());
+        for p in ring {
+            let q = IntPoint::new(
+                ((p[0] - self.origin[0]) * self.scale).round() as i32,
+                ((p[1] - self.origin[1]) * self.scale).round() as i32,
+            );
+            if out.last() != Some(&q) {
+                out.push(q);
+            }
+        }
+        while out.len() > 1 && out.first() == out.last() {
+            out.pop();
+        }
+        out
+    }
+
+    fn unring(&self, ring: &[IntPoint<i32>]) -> Vec<[f64; 2]> {
+        ring.iter()
+            .map(|p| {
+                [
+                    f64::from(p.x) / self.scale + self.origin[0],
+                    f64::from(p.y) / self.scale + self.origin[1],
+                ]
+            })
+            .collect()
+    }
 }
 
 /// [`round_outline`] with each ring simplified within `tolerance` and what
@@ -406,6 +484,23 @@ mod tests {
     fn no_distance_or_nothing_outlines_to_the_shapes_as_given() {
         assert_eq!(round_outline(&square(3.0), 0.0, 0.01), square(3.0));
         assert!(round_outline(&Vec::new(), 1.0, 0.01).is_empty());
+        // No extent that a grid can hold: no offset.
+        let far = vec![vec![vec![[0.0, 0.0], [f64::INFINITY, 0.0], [0.0, 1.0]]]];
+        assert!(round_outline(&far, 1.0, 0.01).is_empty());
+        assert!(round_outline(&square(3.0), f64::NAN, 0.01).is_empty());
+        // Far enough in, nothing is left; outward, a square on a grid of its own far
+        // from the origin comes back a square with round corners, its sides exact.
+        assert!(round_outline(&square(3.0), -1.5, 0.01).is_empty());
+        let off: Shapes = vec![vec![rect(1000.0, -2000.0, 1003.0, -1997.0)]];
+        let grown = round_outline(&off, 0.5, 0.001);
+        let xs = grown[0][0].iter().map(|p| p[0]);
+        let (lo, hi) = (xs.clone().fold(f64::MAX, f64::min), xs.fold(f64::MIN, f64::max));
+        assert!(
+            (lo - 999.5).abs() < 1e-6 && (hi - 1003.5).abs() < 1e-6,
+            "{lo} {hi}"
+        );
+        let area = ring_area(&grown[0][0]);
+        assert!((area - (9.0 + 12.0 * 0.5 + PI * 0.25)).abs() < 2e-3, "{area}");
         assert!(tidy(vec![vec![vec![[0.0, 0.0], [1.0, 0.0], [2.0, 0.0]]]], 0.01).is_empty());
     }
 }
