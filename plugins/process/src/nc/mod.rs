@@ -865,6 +865,145 @@ mod tests {
         );
     }
 
+    /// A cup wheel 10 mm across comes down beside the area, its face its margin
+    /// (1 mm) clear of it, at its ramp angle from the approach height, at the plunge
+    /// feed; it grinds the pass at depth and runs on until it is clear again.
+    #[test]
+    fn a_cup_wheel_comes_down_beside_the_area_and_runs_out_past_it() {
+        let mut s = sink(1.0);
+        let mut op = operation(
+            "grind",
+            "grinding-wheel",
+            vec![open(0.6, &[(2.0, 5.0), (8.0, 5.0)])],
+        );
+        if let Some(tool) = op.tool.as_mut() {
+            tool.diameter = 10.0;
+        }
+        s.operation(&op, &[square(0.0, 0.0, 10.0)]).expect("written");
+        let all = moves(&s.program.text);
+        let worked: Vec<&Move> = all.iter().filter(|m| !m.rapid).collect();
+        let at = |m: &Move| m.to.map(|v| v.expect("known"));
+        // Down from the approach height (top 1 + 1 mm) to 0.6 mm over 1.4 / tan 3°,
+        // to x = -6, where the wheel's face (radius 5) is 1 mm from the area's side at
+        // x = 0, as is x = 16 past the side at x = 10.
+        let run = 1.4 / 3f64.to_radians().tan();
+        let first = all.iter().position(|m| !m.rapid).expect("a feed move");
+        let from = at(&all[first - 1]);
+        assert!(
+            (from[0] - (-6.0 - run)).abs() < 1e-3 && from[1] == 5.0 && from[2] == 2.0,
+            "{from:?}"
+        );
+        let xs: Vec<[f64; 3]> = worked.iter().map(|m| at(m)).collect();
+        assert_eq!(
+            xs,
+            [
+                [-6.0, 5.0, 0.6],
+                [2.0, 5.0, 0.6],
+                [8.0, 5.0, 0.6],
+                [16.0, 5.0, 0.6]
+            ],
+            "{}",
+            s.program.text
+        );
+        let feeds: Vec<Option<f64>> = worked.iter().map(|m| m.feed).collect();
+        assert_eq!(feeds, [Some(180.0), Some(600.0), Some(600.0), Some(600.0)]);
+    }
+
+    /// The laser burns each pass at its focus height, switched on for the pass and off
+    /// after it, and goes from one pass to the next at that height: no ramp, no climb.
+    #[test]
+    fn the_laser_burns_each_pass_at_its_height_switched_on_only_along_it() {
+        let mut s = sink(1.0);
+        let mut op = operation(
+            "engrave",
+            "laser",
+            vec![
+                OperationPath {
+                    z: 0.6,
+                    points: square(1.0, 1.0, 2.0).outer.points,
+                    closed: true,
+                },
+                open(0.6, &[(5.0, 1.0), (5.0, 3.0)]),
+            ],
+        );
+        if let Some(tool) = op.tool.as_mut() {
+            tool.power = Some(20.0);
+        }
+        s.operation(&op, &[square(0.0, 0.0, 10.0)]).expect("written");
+        let text = &s.program.text;
+        let all = moves(text);
+        let worked: Vec<&Move> = all.iter().filter(|m| !m.rapid).collect();
+        assert_eq!(worked.len(), 5, "{text}");
+        assert!(
+            worked
+                .iter()
+                .all(|m| m.to[2] == Some(0.6) && m.feed == Some(600.0)),
+            "{text}"
+        );
+        assert_eq!(crossings(text), [None, Some(0.6)], "{text}");
+        let switched: Vec<&str> = text
+            .lines()
+            .filter(|l| l.starts_with("M3") || l.starts_with("M5"))
+            .collect();
+        assert_eq!(switched, ["M3 S20", "M5", "M3 S20", "M5"], "{text}");
+    }
+
+    /// Tools the `tools` table does not number take the next number after the highest
+    /// in use, and keep it; the comment before each operation names its kind, its pass
+    /// and its region.
+    #[test]
+    fn unnumbered_tools_take_the_next_number_and_each_operation_says_what_it_does() {
+        let mut s = sink(1.0);
+        s.numbers.insert("end-mill".into(), 4);
+        s.regions = vec!["skin".into()];
+        let mut grind = operation(
+            "grind",
+            "grinding-wheel",
+            vec![open(0.6, &[(2.0, 5.0), (8.0, 5.0)])],
+        );
+        grind.pass = "rough".into();
+        let mill = operation("end-mill", "end-mill", vec![open(0.6, &[(2.0, 5.0), (8.0, 5.0)])]);
+        let mut laser = operation("engrave", "laser", vec![open(0.6, &[(2.0, 5.0), (8.0, 5.0)])]);
+        laser.region = Some(3);
+        if let Some(tool) = laser.tool.as_mut() {
+            tool.power = Some(20.0);
+        }
+        let area = [square(0.0, 0.0, 10.0)];
+        for op in [&grind, &mill, &laser, &grind] {
+            s.operation(op, &area).expect("written");
+        }
+        let tools: Vec<&str> = s
+            .program
+            .text
+            .lines()
+            .filter(|l| l.starts_with("(tool "))
+            .collect();
+        assert_eq!(
+            tools,
+            [
+                "(tool 5: grinding-wheel)",
+                "(tool 4: end-mill)",
+                "(tool 6: laser)",
+                "(tool 5: grinding-wheel)"
+            ]
+        );
+        let about: Vec<&str> = s
+            .program
+            .text
+            .lines()
+            .filter(|l| l.starts_with("(grind") || l.starts_with("(end-mill") || l.starts_with("(engrave"))
+            .collect();
+        assert_eq!(
+            about,
+            [
+                "(grind rough, region skin)",
+                "(end-mill, region skin)",
+                "(engrave, region #3)",
+                "(grind rough, region skin)"
+            ]
+        );
+    }
+
     #[test]
     fn durations_read_in_hours_minutes_and_seconds() {
         assert_eq!(duration(0.4), "0 s");
