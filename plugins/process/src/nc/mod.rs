@@ -924,6 +924,12 @@ mod tests {
                     closed: true,
                 },
                 open(0.6, &[(5.0, 1.0), (5.0, 3.0)]),
+                // A closed path of two points is a line: burnt once, not back again.
+                OperationPath {
+                    z: 0.6,
+                    points: vec![Point2::new(7.0, 1.0), Point2::new(7.0, 3.0)],
+                    closed: true,
+                },
             ],
         );
         if let Some(tool) = op.tool.as_mut() {
@@ -933,19 +939,23 @@ mod tests {
         let text = &s.program.text;
         let all = moves(text);
         let worked: Vec<&Move> = all.iter().filter(|m| !m.rapid).collect();
-        assert_eq!(worked.len(), 5, "{text}");
+        assert_eq!(worked.len(), 6, "{text}");
         assert!(
             worked
                 .iter()
                 .all(|m| m.to[2] == Some(0.6) && m.feed == Some(600.0)),
             "{text}"
         );
-        assert_eq!(crossings(text), [None, Some(0.6)], "{text}");
+        assert_eq!(crossings(text), [None, Some(0.6), Some(0.6)], "{text}");
         let switched: Vec<&str> = text
             .lines()
             .filter(|l| l.starts_with("M3") || l.starts_with("M5"))
             .collect();
-        assert_eq!(switched, ["M3 S20", "M5", "M3 S20", "M5"], "{text}");
+        assert_eq!(
+            switched,
+            ["M3 S20", "M5", "M3 S20", "M5", "M3 S20", "M5"],
+            "{text}"
+        );
     }
 
     /// Tools the `tools` table does not number take the next number after the highest
