@@ -942,3 +942,40 @@ fn each_tool_works_its_paths(plan: &Value, report: &Value) {
         assert!((f(&sprays[0]["SiC"]) - inclusion).abs() <= 0.01, "layer {i}");
     }
 }
+
+/// The NC exporter's table refused by key where its heights or tool numbers cannot
+/// make a program; the limits themselves allowed.
+#[test]
+fn the_nc_exporter_refuses_an_approach_over_the_clearance_and_tool_numbers_that_clash() {
+    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
+    let build = |options: &str| {
+        lamina_test_support::try_stage(
+            lamina_api::StageKind::Export,
+            &format!("use = \"nc\"\npath = \"job.nc\"\n{options}"),
+            dir,
+        )
+        .map(|_| ())
+        .map_err(|e| e.to_string())
+    };
+    assert_eq!(build("clearance = 2.0\napproach = 2.0"), Ok(()));
+    let err = build("clearance = 2.0\napproach = 2.5").expect_err("approach over clearance");
+    assert!(
+        err.contains("approach") && err.contains("at most `clearance`"),
+        "{err}"
+    );
+    for plunge in ["0.0", "1.5", "nan", "inf"] {
+        let err = build(&format!("plunge = {plunge}")).expect_err("plunge out of range");
+        assert!(err.contains("plunge"), "{err}");
+    }
+    assert_eq!(build("plunge = 1.0"), Ok(()));
+    assert_eq!(build("tools = { mill = 1, wheel = 2 }"), Ok(()));
+    let err = build("tools = { mill = 0 }").expect_err("tool number 0");
+    assert!(
+        err.contains("tools") && err.contains("`mill`: tool numbers start at 1"),
+        "{err}"
+    );
+    let err = build("tools = { mill = 3, wheel = 3 }").expect_err("one number twice");
+    assert!(err.contains("both have number 3"), "{err}");
+    let err = build("machine = \"cmpm-hybrid\"\ntools = { mill = 1 }").expect_err("both");
+    assert!(err.contains("not both"), "{err}");
+}

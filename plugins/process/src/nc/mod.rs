@@ -588,9 +588,6 @@ fn build(config: &StageConfig<'_>) -> Result<AnyStage> {
     if options.approach > options.clearance {
         return Err(config.error("approach", "must be at most `clearance`"));
     }
-    if !(options.plunge.is_finite() && options.plunge > 0.0 && options.plunge <= 1.0) {
-        return Err(config.error("plunge", "must be above 0 and at most 1"));
-    }
     let mut seen = BTreeMap::new();
     for (name, &n) in &options.tools {
         if n == 0 {
