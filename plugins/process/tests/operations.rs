@@ -667,8 +667,13 @@ fn the_gun_sprays_each_mix_of_the_layer_in_one_operation_over_its_own_area() {
 
 /// Builds the process stage a table names; the error's text if it is refused.
 fn process_stage(table: &str) -> Result<(), String> {
+    stage(lamina_api::StageKind::Process, table)
+}
+
+/// A stage of `kind` built from `table`, or the error's text.
+fn stage(kind: lamina_api::StageKind, table: &str) -> Result<(), String> {
     let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
-    lamina_test_support::try_stage(lamina_api::StageKind::Process, table, dir)
+    lamina_test_support::try_stage(kind, table, dir)
         .map(|_| ())
         .map_err(|e| e.to_string())
 }
@@ -947,15 +952,11 @@ fn each_tool_works_its_paths(plan: &Value, report: &Value) {
 /// make a program; the limits themselves allowed.
 #[test]
 fn the_nc_exporter_refuses_an_approach_over_the_clearance_and_tool_numbers_that_clash() {
-    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
     let build = |options: &str| {
-        lamina_test_support::try_stage(
+        stage(
             lamina_api::StageKind::Export,
             &format!("use = \"nc\"\npath = \"job.nc\"\n{options}"),
-            dir,
         )
-        .map(|_| ())
-        .map_err(|e| e.to_string())
     };
     assert_eq!(build("clearance = 2.0\napproach = 2.0"), Ok(()));
     let err = build("clearance = 2.0\napproach = 2.5").expect_err("approach over clearance");
