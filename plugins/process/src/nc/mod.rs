@@ -906,6 +906,31 @@ mod tests {
         assert_eq!(feeds, [Some(180.0), Some(600.0), Some(600.0), Some(600.0)]);
     }
 
+    /// Between passes a cup wheel goes across at the approach height, as an end mill
+    /// does: the clearance is for the way from another operation.
+    #[test]
+    fn a_cup_wheel_goes_from_pass_to_pass_at_the_approach_height() {
+        let mut s = sink(1.0);
+        let mut op = operation(
+            "grind",
+            "grinding-wheel",
+            vec![
+                open(0.6, &[(2.0, 3.0), (8.0, 3.0)]),
+                open(0.6, &[(2.0, 7.0), (8.0, 7.0)]),
+            ],
+        );
+        if let Some(tool) = op.tool.as_mut() {
+            tool.diameter = 10.0;
+        }
+        s.operation(&op, &[square(0.0, 0.0, 10.0)]).expect("written");
+        assert_eq!(
+            crossings(&s.program.text),
+            [None, Some(2.0)],
+            "{}",
+            s.program.text
+        );
+    }
+
     /// The laser burns each pass at its focus height, switched on for the pass and off
     /// after it, and goes from one pass to the next at that height: no ramp, no climb.
     #[test]
@@ -1009,6 +1034,151 @@ mod tests {
                 "(grind rough, region skin)"
             ]
         );
+    }
+
+    /// One in-memory file the program is written into.
+    #[derive(Clone, Default)]
+    struct Buffer(std::sync::Arc<std::sync::Mutex<Vec<u8>>>);
+
+    impl Write for Buffer {
+        fn write(&mut self, b: &[u8]) -> std::io::Result<usize> {
+            self.0.lock().expect("lock").extend_from_slice(b);
+            Ok(b.len())
+        }
+        fn flush(&mut self) -> std::io::Result<()> {
+            Ok(())
+        }
+    }
+
+    /// The reports a run's summary is given.
+    #[derive(Default)]
+    struct Reports(Vec<MachineFileReport>);
+
+    impl OutputFiles for Reports {
+        fn create(&mut self, name: &std::path::Path) -> Result<Box<dyn Write + Send>> {
+            Err(Error::io(name, std::io::ErrorKind::Unsupported.into()))
+        }
+        fn report(&mut self, report: MachineFileReport) {
+            self.0.push(report);
+        }
+    }
+
+    fn run_info() -> RunInfo {
+        RunInfo {
+            base_dir: PathBuf::from("."),
+            materials: Vec::new(),
+            parts: Vec::new(),
+            z_min: 0.0,
+            z_max: 1.0,
+            xy_bounds: lamina_api::BBox2::from_points([Point2::new(0.0, 0.0)]),
+            machine: None,
+            model_frame: None,
+        }
+    }
+
+    /// The program opens with the controller's header, then says what it is for: the
+    /// run, the machine, its dialect, the cycle time with each operation's share (those
+    /// that took time), the outputs and feeders it switches, the tools by number. Then
+    /// the controller's safe start, then the moves. The run's summary is told the same
+    /// time and shares, and what the machine will do otherwise than planned.
+    #[test]
+    fn the_program_opens_with_what_it_is_for_and_the_run_is_told_its_time() {
+        let machine: HybridMachine =
+            toml::from_str(include_str!("../../machines/cmpm-hybrid.toml")).expect("the machine");
+        let description = comment(&machine.description);
+        let buffer = Buffer::default();
+        let mut s = sink(1.0);
+        s.program = Program::new(machine);
+        s.out = Box::new(buffer.clone());
+        s.named = true;
+        s.title = "pipe, 3 layers".into();
+        s.numbers = BTreeMap::from([
+            ("laser".into(), 4),
+            ("end-mill".into(), 1),
+            ("spray-gun".into(), 2),
+        ]);
+        s.program.shares.by = vec![
+            ("spray".into(), 30.0),
+            ("mill".into(), 0.0),
+            ("grind".into(), 65.0),
+        ];
+        s.program.line("G1 X1 F600");
+        let note = Warning::new("wheel-speed", "the cup wheel turns at 6000 rpm");
+        s.notes.push(note.clone());
+        let mut reports = Reports::default();
+        Box::new(s).finish(&run_info(), &mut reports).expect("finished");
+        let text = String::from_utf8(buffer.0.lock().expect("lock").clone()).expect("text");
+        let [report] = &reports.0[..] else {
+            panic!("{} reports", reports.0.len())
+        };
+        assert_eq!(report.file, PathBuf::from("test.nc"));
+        assert_eq!(report.notes, [note]);
+        // Ending the program adds its own share, the head's way up: none from a
+        // height the program does not know.
+        assert_eq!(
+            report.shares,
+            [
+                ("spray".to_string(), 30.0),
+                ("mill".to_string(), 0.0),
+                ("grind".to_string(), 65.0),
+                ("end".to_string(), 0.0)
+            ]
+        );
+        assert_eq!(report.time, 95.0);
+        let lines: Vec<&str> = text.lines().collect();
+        assert_eq!(
+            lines[..13],
+            [
+                "%",
+                "(pipe, 3 layers)",
+                &format!("(machine: cmpm-hybrid - {description})"),
+                "(controller: linuxcnc)",
+                "(estimated cycle time 95 s = 1 min 35 s: spray 30 s, grind 1 min 5 s)",
+                "(outputs: 0 spray gun, 1 filler nozzle, 2 chip vacuum)",
+                "(feeders: 4 SiC, 1 ceramic, 3 composite, 2 metal, 0 microstructure, each set to its volume fraction times 10)",
+                "(T1 end-mill)",
+                "(T2 spray-gun)",
+                "(T4 laser)",
+                "G17 G21 G40 G49 G80 G90 G94",
+                "G54",
+                "G64 P0.01",
+            ],
+            "{text}"
+        );
+        assert_eq!(lines[13], "G1 X1 F600", "{text}");
+    }
+
+    /// Without a machine nothing is switched and no feeder set: the header lists
+    /// neither, nor a machine.
+    #[test]
+    fn a_program_without_a_machine_names_none_and_lists_no_outputs() {
+        let buffer = Buffer::default();
+        let mut s = sink(1.0);
+        s.program.machine.outputs = Default::default();
+        s.out = Box::new(buffer.clone());
+        s.title = "bare".into();
+        let mut reports = Reports::default();
+        Box::new(s).finish(&run_info(), &mut reports).expect("finished");
+        let text = String::from_utf8(buffer.0.lock().expect("lock").clone()).expect("text");
+        let said: Vec<&str> = text.lines().filter(|l| l.starts_with('(')).collect();
+        assert_eq!(said.len(), 3, "{text}");
+        assert_eq!(said[..2], ["(bare)", "(controller: linuxcnc)"], "{text}");
+        assert!(said[2].starts_with("(estimated cycle time "), "{text}");
+    }
+
+    /// A way is over the area only if every point of it is: a gap of 1 mm between two
+    /// points 6 mm apart, off their middle, is found.
+    #[test]
+    fn a_straight_way_over_a_gap_is_not_over_the_area() {
+        let area = [
+            square(0.0, 0.0, 1.0),
+            square(2.0, 0.0, 1.0),
+            square(3.0, 0.0, 1.0),
+            square(4.0, 0.0, 3.0),
+        ];
+        assert!(!over(Point2::new(0.5, 0.5), Point2::new(6.5, 0.5), &area));
+        assert!(over(Point2::new(2.5, 0.5), Point2::new(6.5, 0.5), &area));
+        assert!(over(Point2::new(0.5, 0.5), Point2::new(0.5, 0.5), &area));
     }
 
     #[test]
