@@ -283,6 +283,24 @@ path = "out.json"
         assert_eq!(e.location().expect("located").line_col().0, 15, "{e}");
     }
 
+    /// The grid limit is `grid_samples` in the file and on the command line, and its
+    /// former name `grid_cells` still reads; one of the two, not both.
+    #[test]
+    fn the_grid_limit_reads_by_its_name_and_its_former_name() {
+        let with = |limits: &str| GOOD.replace("[slice]", &format!("[limits]\n{limits}\n[slice]"));
+        let p = parse(&with("grid_samples = 54"), &[]).expect("grid_samples");
+        assert_eq!(p.limits.grid_samples, 54);
+        let p = parse(&with("grid_cells = 55"), &[]).expect("grid_cells");
+        assert_eq!(p.limits.grid_samples, 55);
+        let o: Override = "limits.grid_samples=56".parse().expect("override");
+        let p = parse(&with("regions = 7"), &[o]).expect("overridden");
+        assert_eq!((p.limits.grid_samples, p.limits.regions), (56, 7));
+        let e = parse(&with("grid_samples = 1\ngrid_cells = 2"), &[]).expect_err("both");
+        assert!(e.to_string().contains("not both"), "{e}");
+        let e = parse(&with("grid_sample = 1"), &[]).expect_err("a misspelling");
+        assert!(e.to_string().contains("grid_sample"), "{e}");
+    }
+
     #[test]
     fn overrides_replace_values() {
         let o: Override = "slice.thickness=0.3".parse().expect("override");

@@ -365,20 +365,19 @@ impl Pipeline {
         });
         let plugins = raw.plugins.iter().map(|p| base_dir.join(p)).collect();
         let limits = match raw.limits.take() {
-            Some(mut t) => {
+            Some(t) => {
                 // The table names the grid limit `grid_samples` (or, as before,
-                // `grid_cells`); its serde form keeps the former name.
+                // `grid_cells`); its serde form keeps the former name and reads the
+                // new one as an alias (the table is read from the file, not from `t`).
                 let former = lamina_api::limits::GRID_SAMPLES_FORMERLY;
-                if let Some(v) = t.remove("grid_samples") {
-                    if t.contains_key(former) {
-                        return Err(reader.table(vec![key("limits")], t).error_at(
-                            former,
-                            "give `grid_samples` or its former name `grid_cells`, not both",
-                        ));
-                    }
-                    t.insert(former.to_string(), v);
+                let table = reader.table(vec![key("limits")], t);
+                if table.get("grid_samples").is_some() && table.get(former).is_some() {
+                    return Err(table.error_at(
+                        former,
+                        "give `grid_samples` or its former name `grid_cells`, not both",
+                    ));
                 }
-                reader.table(vec![key("limits")], t).with_host_keys(&[]).parse()?
+                table.with_host_keys(&[]).parse()?
             }
             None => Limits::default(),
         };
