@@ -528,6 +528,112 @@ fn the_laser_burns_rings_a_step_apart_in_passes_down_to_the_layers_bottom() {
     assert!(engraved >= 2, "{engraved}");
 }
 
+/// A 3 x 3 x 0.6 mm block with a void of radius 0.25 mm at (0.5 + i, 0.5 + j, 0.6 k),
+/// sliced every 0.15 mm and engraved by the `laser` given (spot and overlap) 0.075 mm
+/// a pass: 9 whole voids on each layer, none cut by the block's sides.
+fn lattice_block(limits: &str, laser: &str) -> Result<Value, String> {
+    let pipeline = format!(
+        r#"
+name = "lattice"
+{limits}
+[materials.microstructure]
+colour = [70, 130, 180]
+
+[[parts]]
+name = "block"
+materials = ["microstructure"]
+[parts.model]
+use = "box"
+size = [3.0, 3.0, 0.6]
+
+[slice]
+use = "uniform"
+thickness = 0.15
+
+[[process]]
+use = "engrave"
+period = [1.0, 1.0, 0.6]
+origin = [0.5, 0.5, 0.0]
+void_radius = 0.25
+{laser}
+depth_per_pass = 0.075
+
+[[output]]
+use = "json"
+path = "lattice.json"
+"#
+    );
+    lamina_test_support::try_run_pipeline(&pipeline)
+        .map(|run| run.json("lattice.json"))
+        .map_err(|e| e.to_string())
+}
+
+/// Each layer is burnt in as many passes as its depth holds `depth_per_pass`, no more
+/// where it holds them exactly (0.15 mm in passes of 0.075 mm: 2). A void narrower
+/// than the spot gets no ring, and the layer says how many of its voids did not: at
+/// mid-heights 0.075 and 0.525 mm the sections are 0.2385 mm in radius and take a
+/// ring, at 0.225 and 0.375 mm they are 0.109 mm in radius, under half the 0.25 mm
+/// spot.
+#[test]
+fn the_laser_takes_as_many_passes_as_the_depth_holds_and_names_the_voids_it_cannot_enter() {
+    // A 0.25 mm spot, rings 0.2 mm apart.
+    let plan = lattice_block("", "diameter = 0.25").expect("the block runs");
+    let narrow: Vec<Vec<String>> = layers(&plan)
+        .iter()
+        .map(|l| {
+            l["diagnostics"]
+                .as_array()
+                .into_iter()
+                .flatten()
+                .filter(|d| d["code"] == "voids-narrower-than-spot")
+                .map(|d| d["message"].as_str().expect("a message").to_string())
+                .collect()
+        })
+        .collect();
+    let said = "engrave: 9 of 9 voids are narrower than the 0.25 mm laser spot and get no ring";
+    assert_eq!(
+        narrow,
+        [vec![], vec![said.to_string()], vec![said.to_string()], vec![]]
+    );
+    for (i, l) in layers(&plan).iter().enumerate() {
+        let op = one(l, "engrave", None).expect("engraved");
+        assert_eq!(value(op, "voids"), 9.0, "layer {i}");
+        assert_eq!(value(op, "passes"), 2.0, "layer {i}");
+        let rings = if narrow[i].is_empty() { 9 } else { 0 };
+        assert_eq!(op["paths"].as_array().map_or(0, Vec::len), 2 * rings, "layer {i}");
+    }
+}
+
+/// The rings a layer may take are counted before any is made, against `grid_samples`:
+/// up to half a void's smaller width over the step, plus one, for each void, then for
+/// every pass. On the block's first layer with a 0.02 mm spot rings 0.01 mm apart,
+/// the sections are 32-gons 0.477 mm across: ceil(0.477 / 2 / 0.01) + 1 = 25 rings for
+/// each of 9 voids (225), in 2 passes (450). (The lattice points near a layer, 100,
+/// are counted first.)
+#[test]
+fn the_rings_are_counted_against_the_limit_before_they_are_made() {
+    let block = |n: u32| {
+        lattice_block(
+            &format!("[limits]\ngrid_samples = {n}\n"),
+            "diameter = 0.02\noverlap = 0.5",
+        )
+    };
+    let plan = block(450).expect("450 rings allowed");
+    let first = one(&layers(&plan)[0], "engrave", None).expect("engraved");
+    let burnt = first["paths"].as_array().map_or(0, Vec::len);
+    assert!((400..=450).contains(&burnt), "{burnt}");
+    let err = block(449).expect_err("450 rings over 449");
+    assert!(
+        err.contains("laser rings in 2 passes") && err.contains("needs 450"),
+        "{err}"
+    );
+    let err = block(224).expect_err("225 rings over 224");
+    assert!(
+        err.contains("laser rings 0.01 mm apart") && err.contains("needs 225"),
+        "{err}"
+    );
+}
+
 /// Three parts on every layer: a tube graded across its width (each of its three rings
 /// a mix of its own), a tube of bronze and metal graded all bronze, and a tube of
 /// bronze alone (the same material, but another mix for the gun's feeders: one
