@@ -545,4 +545,59 @@ mod tests {
         assert!((green(&rs[0]) - 5.0 / 9.0).abs() < 5e-3, "{}", green(&rs[0]));
         assert!(green(&rs[1]) > 0.98 && green(&rs[2]) < 0.02);
     }
+
+    /// The points of `r = "points"` are the centres of a square grid over the
+    /// region's box that fall inside it; a grid of more than 4096 squares doubles its
+    /// step until it holds at most that many; a region holding no centre gets its
+    /// reference point.
+    #[test]
+    fn points_lie_at_the_centres_of_the_grid_squares_inside_the_region() {
+        let rect = |x: f64, y: f64, w: f64, h: f64| {
+            Polygon::new(
+                Contour::rectangle(Point2::new(x, y), Point2::new(x + w, y + h)),
+                Vec::new(),
+            )
+        };
+        let at = |v: &[Point2]| v.iter().map(|p| (p.x, p.y)).collect::<Vec<_>>();
+        let fallback = Point2::new(-7.0, -7.0);
+        assert_eq!(
+            at(&grid_points(&rect(1.0, 2.0, 1.0, 0.5), fallback, 0.5)),
+            [(1.25, 2.25), (1.75, 2.25)]
+        );
+        // An L: the centre of its missing corner square is left out.
+        let l = Polygon::new(
+            Contour::new(
+                [
+                    (0.0, 0.0),
+                    (2.0, 0.0),
+                    (2.0, 1.0),
+                    (1.0, 1.0),
+                    (1.0, 2.0),
+                    (0.0, 2.0),
+                ]
+                .iter()
+                .map(|&(x, y)| Point2::new(x, y))
+                .collect(),
+            ),
+            Vec::new(),
+        );
+        assert_eq!(
+            at(&grid_points(&l, fallback, 1.0)),
+            [(0.5, 0.5), (1.5, 0.5), (0.5, 1.5)]
+        );
+        // 64 x 64 squares exactly: kept; 100 mm across at 0.5 mm (40,000 squares):
+        // 1 mm, then 2 mm, 2,500 points 2 mm apart.
+        assert_eq!(
+            grid_points(&rect(0.0, 0.0, 32.0, 32.0), fallback, 0.5).len(),
+            4096
+        );
+        let coarse = grid_points(&rect(0.0, 0.0, 100.0, 100.0), fallback, 0.5);
+        assert_eq!(coarse.len(), 2500);
+        assert_eq!(at(&coarse[..2]), [(1.0, 1.0), (3.0, 1.0)]);
+        // A sliver narrower than half a step holds no centre.
+        assert_eq!(
+            at(&grid_points(&rect(0.0, 0.0, 3.0, 0.2), fallback, 1.0)),
+            [(-7.0, -7.0)]
+        );
+    }
 }
