@@ -625,21 +625,52 @@ mod tests {
         p.rapid(Some(0.0), Some(0.0), Some(1.0)).expect("in travel");
         let before = p.shares.total();
         p.doing = "mill".into();
-        p.feed(Some(10.0), None, None, 20.0).expect("in travel");
-        p.feed(None, Some(10.0), None, 20.0).expect("in travel");
+        // Corners whose speeds depend on each move's direction in x, y and z.
+        let to = [
+            [10.0, 0.0, 1.0],
+            [20.0, 10.0, 1.0],
+            [20.0, 20.0, 2.0],
+            [30.0, 20.0, 3.0],
+        ];
+        for [x, y, z] in to {
+            p.feed(Some(x), Some(y), Some(z), 20.0).expect("in travel");
+        }
         // Not timed until the run ends.
         assert_eq!(p.shares.total(), before);
         p.line("M5");
-        let along = |x: f64, y: f64| Pending {
-            length: 10.0,
-            speed: 20.0,
-            accel: 500.0,
-            unit: [x, y, 0.0],
-        };
-        let want = run_time(&[along(1.0, 0.0), along(0.0, 1.0)], 0.01);
+        // Each move at the acceleration the most each axis allows (500, 500 and 300
+        // mm/s² over the axis's share of the direction).
+        let mut from = [0.0, 0.0, 1.0];
+        let moves: Vec<Pending> = to
+            .iter()
+            .map(|q| {
+                let d = [q[0] - from[0], q[1] - from[1], q[2] - from[2]];
+                from = *q;
+                let length = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
+                let unit = d.map(|c| c / length);
+                let accel = [500.0, 500.0, 300.0]
+                    .iter()
+                    .zip(unit)
+                    .filter(|(_, u)| u.abs() > 0.0)
+                    .map(|(a, u)| a / u.abs())
+                    .fold(f64::INFINITY, f64::min);
+                Pending {
+                    length,
+                    speed: 20.0,
+                    accel,
+                    unit,
+                }
+            })
+            .collect();
+        let want = run_time(&moves, 0.01);
         let mill = p.shares.by.iter().find(|(k, _)| k == "mill").expect("timed").1;
         assert!((mill - want).abs() < 1e-12, "{mill} {want}");
-        assert!(p.text.ends_with("G1 X10 F1200\nG1 Y10\nM5\n"), "{}", p.text);
+        assert!(
+            p.text
+                .ends_with("G1 X10 F1200\nG1 X20 Y10\nG1 Y20 Z2\nG1 X30 Z3\nM5\n"),
+            "{}",
+            p.text
+        );
     }
 
     #[test]
