@@ -283,6 +283,31 @@ mod tests {
         assert_eq!(path.len(), 4, "{path:?}");
     }
 
+    /// On the way back along an open path the ramp goes on falling: each vertex it
+    /// passes at the height its whole way so far gives.
+    #[test]
+    fn a_ramp_falls_by_its_whole_way_on_the_way_back_too() {
+        let line = [
+            Point2::new(0.0, 0.0),
+            Point2::new(10.0, 0.0),
+            Point2::new(20.0, 0.0),
+        ];
+        let slope = 3f64.to_radians().tan();
+        // 35 mm of ramp: out 20 mm, back 15 mm past the middle vertex.
+        let top = 35.0 * slope;
+        let path = ramp(&line, false, top, 0.0, 3.0);
+        let travelled = [0.0, 10.0, 20.0, 30.0, 35.0];
+        let xs = [0.0, 10.0, 20.0, 10.0, 5.0];
+        for (k, (&t, &x)) in travelled.iter().zip(&xs).enumerate() {
+            let (p, z) = path[k];
+            assert_eq!(p, Point2::new(x, 0.0), "{path:?}");
+            assert!((z - (top - t * slope)).abs() < 1e-9, "point {k}: {z}");
+        }
+        // Back to the start at depth, then the whole line.
+        assert_eq!(path.len(), 5 + 1 + 2, "{path:?}");
+        assert!(path[5..].iter().all(|&(_, z)| z == 0.0));
+    }
+
     #[test]
     fn a_wheel_enters_where_its_face_is_clear_of_the_area() {
         let disc = Polygon::new(Contour::circle(Point2::new(0.0, 0.0), 10.0, 128), Vec::new());
@@ -379,6 +404,11 @@ mod tests {
             w,
             vec![(2.5, p(2.5, 0.0)), (1.0, p(1.0, 0.0)), (0.5, p(0.5, 0.0))]
         );
+        // Vertices before the nearer end, or on the farther one, are not between them.
+        let w = walk(&line, false, 1.5, 3.0);
+        assert_eq!(w, vec![(1.5, p(1.5, 0.0)), (3.0, p(3.0, 0.0))]);
+        let w = walk(&line, false, 3.0, 1.5);
+        assert_eq!(w, vec![(3.0, p(3.0, 0.0)), (1.5, p(1.5, 0.0))]);
         // Past an open path's end nothing repeats: its last vertex once.
         let w = walk(&line, false, 0.0, 4.0);
         let s: Vec<f64> = w.iter().map(|(s, _)| *s).collect();
