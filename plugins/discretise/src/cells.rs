@@ -709,6 +709,23 @@ mod tests {
             assert!(b.coords.norm() < 0.05, "a cut ends at {b:?}, not the centre");
             assert!(a.coords.norm() > 10.0, "a cut starts inside, at {a:?}");
         }
+        // A 3-4-5 triangle: its normals cross, so its cuts meet at its pole, the
+        // incentre (1, 1), found to a thousandth of its size.
+        let triangle = Polygon::new(
+            Contour::new(vec![
+                Point2::new(0.0, 0.0),
+                Point2::new(4.0, 0.0),
+                Point2::new(0.0, 3.0),
+            ]),
+            Vec::new(),
+        );
+        let grid3 = Grid::for_polygon(&triangle, "test").expect("grid");
+        let lines = cuts(&grid3, &triangle, &Walk::new(&triangle.outer), 6);
+        assert_eq!(lines.len(), 6);
+        for [_, b] in &lines {
+            let b = grid3.unpoint(*b);
+            assert!((b - Point2::new(1.0, 1.0)).norm() < 0.01, "a cut ends at {b:?}");
+        }
         // A thin ring: straight across, from outside the outer circle to inside the hole.
         let ring = Polygon::new(
             circle(0.0, 0.0, 10.0, 360).oriented(true),
