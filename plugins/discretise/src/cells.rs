@@ -516,8 +516,21 @@ mod tests {
         let apart = s((5.0, 0.0), (5.0, 2.0));
         assert!(any_crossing(&[cross, other]));
         // Not neighbours in the list: all pairs are compared for a few hundred.
-        assert!(any_crossing(&[cross, apart, apart, other]));
+        assert!(any_crossing(&[cross, apart, apart, other, apart, apart]));
         assert!(!any_crossing(&[cross, apart]));
+        // One straddling the other's line is not enough: they must straddle each other.
+        assert!(!any_crossing(&[
+            s((0.0, 0.0), (2.0, 0.0)),
+            s((3.0, -1.0), (3.0, 1.0))
+        ]));
+        assert!(!any_crossing(&[
+            s((3.0, -1.0), (3.0, 1.0)),
+            s((0.0, 0.0), (2.0, 0.0))
+        ]));
+        // One ending on the other (a T) is not crossing either, whichever comes first.
+        let t = s((2.0, 0.0), (1.0, 1.0));
+        assert!(!any_crossing(&[cross, t]));
+        assert!(!any_crossing(&[t, cross]));
         // Meeting at an end point (cuts toward one centre) is not crossing.
         assert!(!any_crossing(&[
             s((0.0, 0.0), (1.0, 1.0)),
@@ -654,6 +667,40 @@ mod tests {
             "the first cell ends at x = 15: {:?}",
             cells[0].polygon.outer.points
         );
+    }
+
+    /// A U (its arms 10 mm wide, the bottom 5 mm): the normals at its corners cross,
+    /// so the cuts run toward the pole in one arm. A cut from the other arm stops
+    /// where it first leaves the region, at the gap, rather than running on across
+    /// it into the pole's arm and cutting slivers there: the cuts meet at the pole or
+    /// end at the region's edge, so n cuts make at most n cells (6, 8 and 12 cuts make
+    /// 5, 6 and 9; run on across the gap they made 8, 10 and 16), which tile the U.
+    #[test]
+    fn a_cut_toward_the_pole_stops_where_it_first_leaves_the_region() {
+        let u = Polygon::new(
+            Contour::new(
+                [
+                    (0.0, 0.0),
+                    (30.0, 0.0),
+                    (30.0, 20.0),
+                    (20.0, 20.0),
+                    (20.0, 5.0),
+                    (10.0, 5.0),
+                    (10.0, 20.0),
+                    (0.0, 20.0),
+                ]
+                .iter()
+                .map(|&(x, y)| Point2::new(x, y))
+                .collect(),
+            ),
+            Vec::new(),
+        );
+        for n in [6, 8, 12] {
+            let cells = split(&u, Count::Around(n), Cuts::Arc);
+            let total: f64 = cells.iter().map(SubRegion::area).sum();
+            assert!((total - u.area()).abs() < 1e-6, "{n}: {total} vs {}", u.area());
+            assert!(cells.len() <= n, "{n} cuts make {} cells", cells.len());
+        }
     }
 
     /// A sampled contour is jagged: the cut's normal is square to the chord a quarter
