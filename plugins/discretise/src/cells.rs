@@ -611,11 +611,24 @@ mod tests {
                 "cell {i} at {a}"
             );
         }
-        // One cell: the region whole, numbered.
-        let one = split(&square, Count::Around(1), Cuts::Sectors);
-        assert_eq!(one.len(), 1);
-        assert_eq!(one[0].cell, Some(0));
-        assert_eq!(one[0].polygon, square);
+        // One cell: the region whole, numbered, by either kind of cut.
+        for cuts in [Cuts::Sectors, Cuts::Arc] {
+            let one = split(&square, Count::Around(1), cuts);
+            assert_eq!(one.len(), 1);
+            assert_eq!(one[0].cell, Some(0));
+            assert_eq!(one[0].polygon, square);
+        }
+        // Without holes the sectors fan out from the pole, found to a thousandth of
+        // the family's size: a 3-4-5 triangle's incentre (1, 1).
+        let triangle = Polygon::new(
+            Contour::new(vec![
+                Point2::new(0.0, 0.0),
+                Point2::new(4.0, 0.0),
+                Point2::new(0.0, 3.0),
+            ]),
+            Vec::new(),
+        );
+        assert!((super::centre(&triangle) - Point2::new(1.0, 1.0)).norm() < 0.005);
     }
 
     /// Arc cells of a rectangular ring (outer 60 mm round) in four: cuts at 0, 15, 30
