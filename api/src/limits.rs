@@ -32,7 +32,7 @@ pub struct Limits {
     /// bitmap's pixels). `grid_samples` in a pipeline (the host reads its former name
     /// `grid_cells` too, [`GRID_SAMPLES_FORMERLY`]); on the plugin wire it keeps the
     /// former name, which plugins of ABI 7.0-7.3 know.
-    #[serde(rename = "grid_cells", alias = "grid_samples")]
+    #[serde(rename = "grid_cells")]
     pub grid_samples: u64,
     /// Sub-regions (rings, levels, cells) a discretiser makes in one family.
     pub regions: u64,
