@@ -1274,6 +1274,41 @@ mod tests {
         assert_eq!(behind_until(&a, &a, 1.0, 0.0), f64::INFINITY);
     }
 
+    /// The look-ahead skips a pair whose bound is clear: the bound of two gantries is
+    /// the rear track's least Y less the front track's greatest, whichever is listed
+    /// first, and no more than the least gap in Y over the tracks; two heads on the
+    /// same side have none to keep, and discs are bounded by their boxes.
+    #[test]
+    fn the_bound_of_two_motions_is_below_their_least_separation() {
+        let spec = |rear: bool| ToolSpec {
+            index: usize::from(rear),
+            name: String::new(),
+            speed: 10.0,
+            travel_speed: 10.0,
+            envelope: 5.0,
+            rear,
+        };
+        let (front, rear) = (spec(false), spec(true));
+        // The front head from y 0 to 10, the rear one from 40 back to 30.
+        let f = [(0.0, Point2::new(0.0, 0.0)), (1.0, Point2::new(5.0, 10.0))];
+        let r = [(0.0, Point2::new(8.0, 40.0)), (1.0, Point2::new(2.0, 30.0))];
+        let y = Separation::OrderedY;
+        assert_eq!(y.bound(&front, &rear, &f, &r), 20.0);
+        assert_eq!(y.bound(&rear, &front, &r, &f), 20.0);
+        assert_eq!(y.bound(&front, &front, &f, &r), f64::INFINITY);
+        assert_eq!(y.bound(&rear, &rear, &f, &r), f64::INFINITY);
+        // Over the motions the least gap in Y is 20 too (at the end), and in the plane
+        // it is at least what the boxes say.
+        assert_eq!(behind_until(&r, &f, f64::INFINITY, 1.0), 20.0);
+        let discs = Separation::Discs.bound(&front, &rear, &f, &r);
+        assert!(discs > 0.0 && discs <= closest(&f, &r), "{discs}");
+        // Passing heads: the rear one's track dips below the front one's top, and
+        // the bound goes below zero with it.
+        let low = [(0.0, Point2::new(8.0, 4.0)), (1.0, Point2::new(2.0, 30.0))];
+        assert_eq!(y.bound(&front, &rear, &f, &low), -6.0);
+        assert!(y.bound(&front, &rear, &f, &low) <= behind_until(&low, &f, f64::INFINITY, 1.0));
+    }
+
     #[test]
     fn closest_approach_is_found_between_the_checks() {
         // Two tools passing each other 1 mm apart: 10 mm apart at both ends of the

@@ -1264,7 +1264,18 @@ fn on_two_gantries_the_rear_head_leads_and_the_front_head_follows_a_row_behind()
         until >= row_done - STEP,
         "the front head left its park at {until} s, the rear head's row ends at {row_done} s"
     );
-    let (ta, tb) = (timeline(&s.paths, 0), timeline(&s.paths, 1));
+    // It leaves as soon as the rear head is the two envelopes (10 mm) beyond the front
+    // head's first bead (y 0), on its way to the next row, and not later.
+    let tb = timeline(&s.paths, 1);
+    let beyond = (0..=200_000)
+        .map(|k| s.end * k as f64 / 200_000.0)
+        .find(|&t| t > row_done && position(&tb, t).y >= 10.0)
+        .expect("the rear head goes on");
+    assert!(
+        (until - beyond).abs() <= 2.0 * STEP,
+        "the front head left its park at {until} s, the rear head was 10 mm beyond its first bead at {beyond} s"
+    );
+    let ta = timeline(&s.paths, 0);
     let least = (0..=20_000)
         .map(|k| s.end * k as f64 / 20_000.0)
         .map(|t| position(&tb, t).y - position(&ta, t).y)
