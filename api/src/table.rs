@@ -48,6 +48,10 @@ pub struct TableRef {
     pub(crate) overridden: bool,
     /// Keys the host consumes before the stage sees the table (`use`, placement).
     pub(crate) host_keys: &'static [&'static str],
+    /// Keys the file names otherwise than the type it is parsed into: (name in the
+    /// file, name in the type). A setting renamed in the file keeps its former name on
+    /// the plugin wire, and an error about it is still placed in the file.
+    pub(crate) renamed: &'static [(&'static str, &'static str)],
 }
 
 impl TableRef {
@@ -60,6 +64,7 @@ impl TableRef {
             path,
             overridden,
             host_keys: &["use"],
+            renamed: &[],
         }
     }
 
@@ -86,6 +91,7 @@ impl TableRef {
             path: Vec::new(),
             overridden: false,
             host_keys: &["use"],
+            renamed: &[],
         }
     }
 
@@ -99,6 +105,7 @@ impl TableRef {
             path: Vec::new(),
             overridden: false,
             host_keys: &["use"],
+            renamed: &[],
         })
     }
 
@@ -146,9 +153,22 @@ impl TableRef {
         self
     }
 
+    /// Same table with keys that the file names otherwise than the type it is parsed
+    /// into: pairs of (name in the file, name in the type). The file may give either
+    /// name, not both.
+    pub fn with_renamed_keys(mut self, renamed: &'static [(&'static str, &'static str)]) -> Self {
+        self.renamed = renamed;
+        self
+    }
+
     /// Deserialises the table, less the host's keys, into `T`. Errors point at the key
     /// or value in the file.
     pub fn parse<T: DeserializeOwned>(&self) -> Result<T> {
+        for (new, old) in self.renamed {
+            if self.table.contains_key(*new) && self.table.contains_key(*old) {
+                return Err(self.error_at(old, format!("give `{new}` or its former name `{old}`, not both")));
+            }
+        }
         if !self.overridden
             && let Some(doc) = self.file.toml()
             && let Some(value) = navigate_de(doc, &self.path)
@@ -164,6 +184,15 @@ impl TableRef {
                 for k in host {
                     t.remove(&k);
                 }
+                for (new, old) in self.renamed {
+                    let written = t.keys().find(|k| k.get_ref().as_ref() == *new).cloned();
+                    if let Some(k) = written
+                        && let Some(v) = t.remove(&k)
+                    {
+                        // The key keeps its place in the file under the type's name.
+                        t.insert(Spanned::new(k.span(), std::borrow::Cow::Borrowed(*old)), v);
+                    }
+                }
             }
             let de = toml::de::ValueDeserializer::from(Spanned::new(span, inner));
             return T::deserialize(de).map_err(|e| self.de_error(&e));
@@ -171,6 +200,11 @@ impl TableRef {
         let mut table = self.table.clone();
         for k in self.host_keys {
             table.remove(*k);
+        }
+        for (new, old) in self.renamed {
+            if let Some(v) = table.remove(*new) {
+                table.insert(old.to_string(), v);
+            }
         }
         // The table as the overrides left it has no file: write it out and read it
         // back, so that an error still finds the key it is about.
@@ -190,15 +224,38 @@ impl TableRef {
                         .min_by_key(|(_, r)| r.end - r.start)
                         .map(|(k, _)| k.clone())
                 });
-                let message = plain(e.message().trim());
+                let message = self.in_file_words(e.message().trim());
                 match key {
-                    Some(k) => self.error_at(&k, message),
+                    Some(k) => self.error_at(self.file_name(&k), message),
                     None => Error::config(format!("[{}] {message}", self.path_string())),
                 }
             });
         }
-        T::deserialize(toml::Value::Table(table))
-            .map_err(|e| Error::config(format!("[{}] {}", self.path_string(), plain(e.message().trim()))))
+        T::deserialize(toml::Value::Table(table)).map_err(|e| {
+            Error::config(format!(
+                "[{}] {}",
+                self.path_string(),
+                self.in_file_words(e.message().trim())
+            ))
+        })
+    }
+
+    /// The name the file gives a key the type names `k`.
+    fn file_name<'k>(&self, k: &'k str) -> &'k str {
+        self.renamed
+            .iter()
+            .find(|(_, old)| *old == k)
+            .map_or(k, |(new, _)| new)
+    }
+
+    /// A deserialiser's message in the reader's words, its keys named as the file
+    /// names them.
+    fn in_file_words(&self, message: &str) -> String {
+        let mut out = plain(message);
+        for (new, old) in self.renamed {
+            out = out.replace(&format!("`{old}`"), &format!("`{new}`"));
+        }
+        out
     }
 
     fn de_error(&self, e: &toml::de::Error) -> Error {
@@ -208,7 +265,11 @@ impl TableRef {
             .or_else(|| self.location_of(None));
         Error::Config {
             location,
-            message: format!("[{}] {}", self.path_string(), plain(e.message().trim())),
+            message: format!(
+                "[{}] {}",
+                self.path_string(),
+                self.in_file_words(e.message().trim())
+            ),
             help: None,
         }
     }

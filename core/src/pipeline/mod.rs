@@ -293,12 +293,29 @@ path = "out.json"
         let p = parse(&with("grid_cells = 55"), &[]).expect("grid_cells");
         assert_eq!(p.limits.grid_samples, 55);
         let o: Override = "limits.grid_samples=56".parse().expect("override");
-        let p = parse(&with("regions = 7"), &[o]).expect("overridden");
+        let p = parse(&with("regions = 7"), std::slice::from_ref(&o)).expect("overridden");
         assert_eq!((p.limits.grid_samples, p.limits.regions), (56, 7));
         let e = parse(&with("grid_samples = 1\ngrid_cells = 2"), &[]).expect_err("both");
         assert!(e.to_string().contains("not both"), "{e}");
         let e = parse(&with("grid_sample = 1"), &[]).expect_err("a misspelling");
         assert!(e.to_string().contains("grid_sample"), "{e}");
+        // The choices name the key as the file does.
+        assert!(e.to_string().contains("`grid_samples`"), "{e}");
+        assert!(!e.to_string().contains("grid_cells"), "{e}");
+        // An error in the renamed key is placed at its value in the file, named as
+        // the file names it.
+        let text = with("regions = 7\ngrid_samples = \"many\"");
+        let e = parse(&text, &[]).expect_err("a string");
+        let at = e.location().expect("placed");
+        assert_eq!(at.file.path, PathBuf::from("p.toml"));
+        let line = text
+            .lines()
+            .position(|l| l.starts_with("grid_samples"))
+            .expect("line");
+        assert_eq!(at.line_col().0, line + 1, "{e}");
+        assert_eq!(&text[at.span.start..at.span.end], "\"many\"", "{e}");
+        let e = parse(&with("grid_cells = 2"), std::slice::from_ref(&o)).expect_err("both, one by --set");
+        assert!(e.to_string().contains("not both"), "{e}");
     }
 
     #[test]

@@ -365,31 +365,17 @@ impl Pipeline {
         });
         let plugins = raw.plugins.iter().map(|p| base_dir.join(p)).collect();
         let limits = match raw.limits.take() {
-            Some(mut t) => {
+            Some(t) => {
                 // The table names the grid limit `grid_samples` (or, as before,
                 // `grid_cells`); its serde form (the plugin wire's) keeps the former
-                // name. A table read from the file would see the key as written, so
-                // the renamed copy is parsed as an overridden table is.
-                let former = lamina_api::limits::GRID_SAMPLES_FORMERLY;
-                let renamed = match t.remove("grid_samples") {
-                    Some(v) => {
-                        if t.contains_key(former) {
-                            return Err(reader.table(vec![key("limits")], t).error_at(
-                                former,
-                                "give `grid_samples` or its former name `grid_cells`, not both",
-                            ));
-                        }
-                        t.insert(former.to_string(), v);
-                        true
-                    }
-                    None => false,
-                };
-                let table = if renamed {
-                    TableRef::new(t, reader.file.clone(), vec![key("limits")], true)
-                } else {
-                    reader.table(vec![key("limits")], t)
-                };
-                table.with_host_keys(&[]).parse()?
+                // name.
+                const RENAMED: &[(&str, &str)] =
+                    &[("grid_samples", lamina_api::limits::GRID_SAMPLES_FORMERLY)];
+                reader
+                    .table(vec![key("limits")], t)
+                    .with_host_keys(&[])
+                    .with_renamed_keys(RENAMED)
+                    .parse()?
             }
             None => Limits::default(),
         };

@@ -440,7 +440,7 @@ fn first_exit(polygon: &Polygon, p: Point2, dir: Vector2) -> Option<f64> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::shapes::{circle, rect};
+    use crate::shapes::{circle, rect, through};
 
     fn split(family: &Polygon, count: Count, cuts: Cuts) -> Vec<SubRegion> {
         let grid = Grid::for_polygon(family, "test").expect("grid");
@@ -458,7 +458,7 @@ mod tests {
     #[test]
     fn a_walk_starts_at_the_lowest_of_the_rightmost_points_and_runs_counter_clockwise() {
         // Given clockwise: the walk turns it.
-        let square = crate::shapes::through(&[(0.0, 0.0), (0.0, 10.0), (10.0, 10.0), (10.0, 0.0)]);
+        let square = through(&[(0.0, 0.0), (0.0, 10.0), (10.0, 10.0), (10.0, 0.0)]);
         let walk = Walk::new(&square);
         assert_eq!(walk.pts[0], Point2::new(10.0, 0.0));
         assert_eq!(walk.total, 40.0);
@@ -620,14 +620,7 @@ mod tests {
         }
         // Without holes the sectors fan out from the pole, found to a thousandth of
         // the family's size: a 3-4-5 triangle's incentre (1, 1).
-        let triangle = Polygon::new(
-            Contour::new(vec![
-                Point2::new(0.0, 0.0),
-                Point2::new(4.0, 0.0),
-                Point2::new(0.0, 3.0),
-            ]),
-            Vec::new(),
-        );
+        let triangle = Polygon::new(through(&[(0.0, 0.0), (4.0, 0.0), (0.0, 3.0)]), Vec::new());
         assert!((super::centre(&triangle) - Point2::new(1.0, 1.0)).norm() < 0.005);
     }
 
@@ -771,14 +764,7 @@ mod tests {
         }
         // A 3-4-5 triangle: its normals cross, so its cuts meet at its pole, the
         // incentre (1, 1), found to a thousandth of its size.
-        let triangle = Polygon::new(
-            Contour::new(vec![
-                Point2::new(0.0, 0.0),
-                Point2::new(4.0, 0.0),
-                Point2::new(0.0, 3.0),
-            ]),
-            Vec::new(),
-        );
+        let triangle = Polygon::new(through(&[(0.0, 0.0), (4.0, 0.0), (0.0, 3.0)]), Vec::new());
         let grid3 = Grid::for_polygon(&triangle, "test").expect("grid");
         let lines = cuts(&grid3, &triangle, &Walk::new(&triangle.outer), 6);
         assert_eq!(lines.len(), 6);

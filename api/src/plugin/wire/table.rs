@@ -59,6 +59,9 @@ impl TableRef {
                 .collect(),
             overridden: w.overridden,
             host_keys,
+            // Keys renamed in the file are the host's own tables' (`[limits]`); a stage's
+            // options carry their former names themselves (`#[formerly]`).
+            renamed: &[],
         })
     }
 }
