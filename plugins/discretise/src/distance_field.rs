@@ -408,14 +408,18 @@ fn build(config: &StageConfig<'_>) -> Result<AnyStage> {
     if let Levels::Steps(t) = &levels {
         crate::options::regions(config, "step", t.count as f64)?;
     }
-    config
-        .limits
-        .check(
-            lamina_api::Limit::GridSamples,
-            (o.samples as f64).powi(2),
-            "`samples` squared",
-        )
-        .map_err(|e| config.error("samples", e.to_string()))?;
+    // A `sample_spacing` grid is counted family by family, as it is made; `samples`
+    // is then unused and not counted.
+    if o.sample_spacing.is_none() {
+        config
+            .limits
+            .check(
+                lamina_api::Limit::GridSamples,
+                (o.samples as f64).powi(2),
+                "`samples` squared",
+            )
+            .map_err(|e| config.error("samples", e.to_string()))?;
+    }
     let point = match (o.feature, o.point) {
         (Feature::Point, None) => {
             return Err(config.error("point", "`feature = \"point\"` needs `point = [x, y]`"));

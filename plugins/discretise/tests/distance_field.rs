@@ -83,6 +83,38 @@ fn a_spacing_finer_than_the_regions_limit_allows_is_refused() {
     );
 }
 
+/// A `sample_spacing` grid is counted against `grid_samples` before it is made: on a
+/// 20 x 10 mm family every 0.5 mm, ceil(20 / 0.5) + 3 = 43 samples along the longer
+/// side and 43 x 43 x 10 / 20 = 924.5 samples in all.
+#[test]
+fn a_sample_spacing_grid_is_counted_against_the_limit() {
+    let fam = OneFamily::new(rect(0.0, 0.0, 20.0, 10.0), vec![]);
+    let text = "use = \"distance-field\"\nsample_spacing = 0.5";
+    let with = |grid_samples: u64| {
+        let limits = lamina_core::Limits {
+            grid_samples,
+            ..Default::default()
+        };
+        fam.try_run(&*stage_with_limits(text, limits))
+    };
+    // The 256 `samples` it does not use are not counted (256² = 65,536 would be
+    // refused here).
+    assert!(with(925).is_ok());
+    let e = with(924).expect_err("924.5 samples").to_string();
+    assert!(e.contains("grid_samples") && e.contains("20.0 x 10.0 mm"), "{e}");
+    // Without a spacing, `samples` squared is counted when the stage is built.
+    let limits = lamina_core::Limits {
+        grid_samples: 1000,
+        ..Default::default()
+    };
+    let built = |samples: usize| {
+        try_stage_with_limits(&format!("use = \"distance-field\"\nsamples = {samples}"), limits)
+    };
+    assert!(built(31).is_ok());
+    let e = built(32).err().expect("1,024 samples").to_string();
+    assert!(e.contains("samples") && e.contains("grid_samples"), "{e}");
+}
+
 #[test]
 fn step_width_levels_on_the_field() {
     let fam = OneFamily::new(rect(0.0, 0.0, 30.0, 20.0), vec![circle(20.0, 10.0, 4.0, 128)]);
@@ -214,6 +246,12 @@ fn line_polyline_and_surface_features() {
         )));
         strips(&line, &[200.0; 4]);
     }
+    // From the family's centre too: d = |y - 10|, the middle band |y - 10| < 5 and
+    // the rest, not a stadium about the 1 mm between the two points.
+    let middle = fam.run(&*stage(
+        "use = \"distance-field\"\nfeature = \"line\"\npoints = [[20.0, 10.0], [21.0, 10.0]]\ncount = 2",
+    ));
+    strips(&middle, &[400.0, 400.0]);
     // A polyline of two points is that segment, not a line: within half the largest
     // distance (the corner's, 18.03) of the segment from (15, 10) to (25, 10) lies a
     // stadium of 2 x 10 r + pi r^2 with r = 9.01.

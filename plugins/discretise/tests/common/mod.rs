@@ -10,12 +10,28 @@ use lamina_discretise::check::tiling;
 pub use lamina_discretise::shapes::{circle, rect};
 
 pub fn stage(text: &str) -> Box<dyn Discretiser> {
+    stage_with_limits(text, lamina_core::Limits::default())
+}
+
+/// A stage built under a run's `limits`.
+pub fn stage_with_limits(text: &str, limits: lamina_core::Limits) -> Box<dyn Discretiser> {
+    try_stage_with_limits(text, limits).unwrap_or_else(|e| panic!("{text}: {e}"))
+}
+
+/// A stage built under a run's `limits`, or the error building it.
+pub fn try_stage_with_limits(
+    text: &str,
+    limits: lamina_core::Limits,
+) -> lamina_core::Result<Box<dyn Discretiser>> {
     let table = lamina_core::pipeline::TableRef::parse_snippet("discretise", text).expect("snippet");
     let scripts = lamina_core::script::local(".", Default::default());
+    let context = lamina_core::stage::PipelineContext {
+        limits,
+        ..Default::default()
+    };
     Registry::linked()
         .expect("registry")
-        .build::<dyn Discretiser>(&table, &scripts, std::path::Path::new("."))
-        .unwrap_or_else(|e| panic!("{text}: {e}"))
+        .build_for::<dyn Discretiser>(&table, &scripts, std::path::Path::new("."), context)
 }
 
 pub fn build_error(text: &str) -> String {
