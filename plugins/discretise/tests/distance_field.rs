@@ -139,6 +139,14 @@ fn every_feature_tiles() {
         let regions = fam.tiles(text);
         assert!(regions.len() >= 4, "{text}: {}", regions.len());
     }
+    // A sliver between the samples has no inside to measure: it is one region.
+    let sliver = OneFamily::new(rect(0.0, 0.0, 10.0, 0.05), vec![]);
+    for feature in ["outer", "boundary", "centre"] {
+        let regions = sliver.tiles(&format!(
+            "use = \"distance-field\"\nfeature = \"{feature}\"\nsamples = 8"
+        ));
+        assert_eq!(regions.len(), 1, "{feature}");
+    }
     // Thin wall: still tiles, with whatever bands the grid resolves.
     let thin = OneFamily::new(circle(0.0, 0.0, 2.54, 256), vec![circle(0.0, 0.0, 2.235, 256)]);
     thin.tiles("use = \"distance-field\"");
