@@ -103,6 +103,14 @@ fn a_triangle_band_is_a_region() {
     // triangle halved about its incentre, a quarter of its 450 mm².
     let inner: f64 = two.iter().filter(|r| r.index == 1).map(|r| r.area()).sum();
     assert!((inner - 112.5).abs() < 0.5, "{inner}");
+    // Without a count, N_R = int(8.787 / 0.4) = int(21.97) = 21 rings, by the nozzle
+    // or by a spacing as wide: the reach is found closely enough to keep the 21st.
+    for text in [
+        "use = \"offset\"\nnozzle = 0.4",
+        "use = \"offset\"\nspacing = 0.4",
+    ] {
+        assert_eq!(fam.tiles(text).len(), 21, "{text}");
+    }
 }
 
 #[test]
