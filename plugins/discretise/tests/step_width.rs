@@ -50,6 +50,24 @@ fn grading_width_and_power_move_the_boundaries() {
     assert!((regions[2].area() - core).abs() / core < 1e-6);
 }
 
+/// Without a width, d is normalised by the inradius (with `from = "all"`), found to a
+/// thousandth of the family's diagonal: a right triangle with 30 mm legs has r =
+/// 8.787, so with t_g = 0.5 its core beyond 0.75 r is the triangle scaled by a
+/// quarter about its incentre, 450 / 16 = 28.1 mm².
+#[test]
+fn without_a_width_d_is_normalised_by_the_inradius() {
+    let fam = OneFamily::new(
+        lamina_discretise::shapes::through(&[(0.0, 0.0), (30.0, 0.0), (0.0, 30.0)]),
+        vec![],
+    );
+    let regions = fam.tiles("use = \"step-width\"\nstep = 0.5\nfrom = \"all\"");
+    assert_eq!(indices(&regions), vec![0, 1, 2]);
+    let core: f64 = regions.iter().filter(|r| r.index == 2).map(|r| r.area()).sum();
+    assert!((core - 28.125).abs() / 28.125 < 0.05, "{core}");
+    let rim: f64 = regions.iter().filter(|r| r.index == 0).map(|r| r.area()).sum();
+    assert!((rim - 450.0 * (1.0 - 0.5625)).abs() / 196.875 < 0.01, "{rim}");
+}
+
 #[test]
 fn step_width_tiles_awkward_families() {
     let fam = OneFamily::new(
