@@ -29,9 +29,6 @@ const STAGE: &str = "discretise:radial";
 /// corners.
 const MIN_RAYS: usize = 256;
 
-/// Nor more than this many added vertices (a bound on the work for huge contours).
-const MAX_ADDED: usize = 4096;
-
 /// Angular bins per inner contour for finding where a ray meets it.
 const BINS: usize = 128;
 
@@ -141,12 +138,12 @@ impl<'a> Target<'a> {
 }
 
 /// The outer contour with long edges divided, so that there are at least `MIN_RAYS`
-/// radial lines.
+/// radial lines. An edge of length l gets ceil(l / step) - 1 < l / step added points,
+/// so all edges together get fewer than `MIN_RAYS`, however many edges there are.
 fn rays(outer: &Contour) -> Vec<Point2> {
     let perimeter = outer.perimeter();
     let step = perimeter / MIN_RAYS as f64;
     let mut points = Vec::with_capacity(outer.len() + MIN_RAYS);
-    let mut added = 0;
     for (a, b) in outer.edges() {
         points.push(a);
         let parts = if step > 0.0 {
@@ -155,11 +152,7 @@ fn rays(outer: &Contour) -> Vec<Point2> {
             1
         };
         for k in 1..parts {
-            if added >= MAX_ADDED {
-                break;
-            }
             points.push(a + (b - a) * (k as f64 / parts as f64));
-            added += 1;
         }
     }
     points
@@ -696,6 +689,25 @@ mod tests {
             }
         }
         assert!(tested > 500, "{tested} lines");
+    }
+
+    /// Long edges are divided so that there are at least 256 lines, evenly along each
+    /// edge: a 10 mm square (steps of 40 / 256 mm) gets 64 parts an edge, 256 points;
+    /// a 1,000-gon of edges shorter than a step keeps its own 1,000 vertices.
+    #[test]
+    fn long_edges_are_divided_into_at_least_256_lines() {
+        let square = rect(0.0, 0.0, 10.0, 10.0);
+        let points = rays(&square);
+        assert_eq!(points.len(), 256);
+        for (k, p) in points.iter().take(64).enumerate() {
+            assert!(
+                (p - Point2::new(10.0 * k as f64 / 64.0, 0.0)).norm() < 1e-12,
+                "{k}: {p}"
+            );
+        }
+        assert!(points.iter().all(|&p| square.distance(p) < 1e-12));
+        let round = circle(0.0, 0.0, 10.0, 1000);
+        assert_eq!(rays(&round), round.points);
     }
 
     /// A vertex where the contour turns back by more than about 170 degrees goes (a
