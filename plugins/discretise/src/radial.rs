@@ -522,11 +522,6 @@ mod tests {
         }
     }
 
-    /// A radial line goes to the hole whose outline is nearest (the distance to its
-    /// centre less its radius), not to the nearest centre: from the top of a disc of
-    /// radius 30, a hole of radius 10 centred 12 mm right is 32.3 - 10 = 22.3 mm away,
-    /// one of radius 1 centred 10 mm left 31.6 - 1 = 30.6 mm, though its centre is the
-    /// nearer.
     /// Where the largest disc first meets a corner of the outline rather than a side: in
     /// an L of 20 x 20 with the 10 x 10 square at (10, 10) cut away, the disc growing up
     /// from (9, 0) reaches the inner corner (10, 10) at radius t with 1 + (10 - t)^2 =
@@ -735,19 +730,25 @@ mod tests {
         assert_eq!(points, want);
     }
 
+    /// A radial line goes to the hole whose outline is nearest (the distance to its
+    /// centre less its radius), not to the nearest centre: from the top of a disc of
+    /// radius 30, a hole of radius 10 centred 12 mm right is 32.3 - 10 = 22.3 mm away,
+    /// one of radius 1 centred 10 mm left 31.6 - 1 = 30.6 mm, though its centre is the
+    /// nearer.
     #[test]
     fn a_radial_line_ends_on_the_hole_whose_outline_is_nearest() {
-        let polygon = Polygon::new(
-            circle(0.0, 0.0, 30.0, 360).oriented(true),
-            vec![
-                circle(12.0, 0.0, 10.0, 360).oriented(false),
-                circle(-10.0, 0.0, 1.0, 90).oriented(false),
-            ],
+        let (large, small) = (
+            circle(12.0, 0.0, 10.0, 360).oriented(false),
+            circle(-10.0, 0.0, 1.0, 90).oriented(false),
         );
-        let end = ends(&polygon, &[Point2::new(0.0, 30.0)], 1e-3).expect("ends")[0];
-        assert!(
-            ((end - Point2::new(12.0, 0.0)).norm() - 10.0).abs() < 0.01,
-            "{end}"
-        );
+        // Whichever hole is listed first.
+        for holes in [vec![large.clone(), small.clone()], vec![small, large]] {
+            let polygon = Polygon::new(circle(0.0, 0.0, 30.0, 360).oriented(true), holes);
+            let end = ends(&polygon, &[Point2::new(0.0, 30.0)], 1e-3).expect("ends")[0];
+            assert!(
+                ((end - Point2::new(12.0, 0.0)).norm() - 10.0).abs() < 0.01,
+                "{end}"
+            );
+        }
     }
 }
