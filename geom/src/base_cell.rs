@@ -566,8 +566,8 @@ mod tests {
         // Boxes and cylinders at random turns, cut at several heights: a point of the
         // plane is inside the section exactly when it is inside the solid (the sphere's
         // section is a polygon of its circle, so it is checked off its edge only).
-        let mut rng = crate::testing::Rng(0x2545_f491_4f6c_dd1d);
-        let mut random = move || rng.unit();
+        let mut rng = fastrand::Rng::with_seed(0x2545_f491_4f6c_dd1d);
+        let mut random = move || rng.f64();
         let mut cut = 0;
         for case in 0..60 {
             let shape = [BaseCellShape::Box, BaseCellShape::Cylinder, BaseCellShape::Sphere][case % 3];

@@ -31,8 +31,6 @@ pub mod ring;
 pub mod segment;
 pub mod shape;
 pub mod simplify;
-#[cfg(test)]
-mod testing;
 
 pub use centroid::{contour_centroid, polygon_centroid};
 pub use ring::{Ring, Shape, Shapes};

@@ -80,8 +80,8 @@ mod tests {
 
     #[test]
     fn distances_are_the_least_over_the_segments_points() {
-        let mut rng = crate::testing::Rng(0x9e37_79b9_7f4a_7c15);
-        let mut random = move || rng.unit() * 20.0 - 10.0;
+        let mut rng = fastrand::Rng::with_seed(0x9e37_79b9_7f4a_7c15);
+        let mut random = move || rng.f64() * 20.0 - 10.0;
         for _ in 0..500 {
             let (p, a, b) = ([random(), random()], [random(), random()], [random(), random()]);
             let sampled = (0..=4000)

@@ -284,27 +284,6 @@ pub fn try_run_pipeline(text: &str) -> Result<Run, lamina_core::Error> {
     Ok(Run { dir, report, out })
 }
 
-/// A small deterministic generator (xorshift64*), so that random layouts repeat and a
-/// failure can be replayed from its seed.
-#[derive(Debug, Clone)]
-pub struct Rng(pub u64);
-
-impl Rng {
-    /// The next number, uniform in [0, 1).
-    #[allow(clippy::should_implement_trait)]
-    pub fn next(&mut self) -> f64 {
-        self.0 ^= self.0 >> 12;
-        self.0 ^= self.0 << 25;
-        self.0 ^= self.0 >> 27;
-        (self.0.wrapping_mul(0x2545_F491_4F6C_DD1D) >> 11) as f64 / (1u64 << 53) as f64
-    }
-
-    /// The next number, uniform in [a, b).
-    pub fn range(&mut self, a: f64, b: f64) -> f64 {
-        a + (b - a) * self.next()
-    }
-}
-
 /// Whether what the tests need must be there (`LAMINA_REQUIRE` set and not `0`, as
 /// the workspace's CI sets it).
 pub fn required() -> bool {

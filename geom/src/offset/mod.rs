@@ -353,8 +353,8 @@ mod tests {
             })
             .collect();
         let triangle = vec![[-9.0, -8.0], [9.0, -7.0], [1.0, 9.0]];
-        let mut rng = crate::testing::Rng(0x853c_49e6_748f_ea9b);
-        let mut random = move || rng.unit();
+        let mut rng = fastrand::Rng::with_seed(0x853c_49e6_748f_ea9b);
+        let mut random = move || rng.f64();
         let cases: [(Shapes, &[f64]); 3] = [
             (vec![vec![star, hole]], &[-0.4, -1.1, -2.6, 0.4, 1.7]),
             (vec![vec![disc]], &[-3.0, -0.3, 0.5]),

@@ -592,13 +592,8 @@ mod tests {
     /// bisection before it. A graze counts as a meeting (within 1e-9 mm).
     #[test]
     fn the_medial_axis_ends_are_those_a_bisection_finds() {
-        let mut seed = 0x853c_49e6_748f_ea9bu64;
-        let mut next = move || {
-            seed ^= seed << 13;
-            seed ^= seed >> 7;
-            seed ^= seed << 17;
-            (seed >> 11) as f64 / (1u64 << 53) as f64
-        };
+        let mut rng = fastrand::Rng::with_seed(0x853c_49e6_748f_ea9b);
+        let mut next = move || rng.f64();
         let mut tested = 0;
         for _ in 0..60 {
             let n = 5 + (next() * 40.0) as usize;

@@ -459,13 +459,8 @@ mod tests {
     /// The windowed planner gives the time of planning everything at once.
     #[test]
     fn the_window_changes_nothing() {
-        let mut state = 0x9E37_79B9_7F4A_7C15u64;
-        let mut next = move || {
-            state ^= state << 13;
-            state ^= state >> 7;
-            state ^= state << 17;
-            (state >> 11) as f64 / (1u64 << 53) as f64
-        };
+        let mut rng = fastrand::Rng::with_seed(0x9E37_79B9_7F4A_7C15);
+        let mut next = move || rng.f64();
         let moves: Vec<([f64; 4], f64)> = (0..20_000)
             .map(|i| {
                 let long = i % 97 == 0;

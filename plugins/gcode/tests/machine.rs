@@ -9,7 +9,7 @@ use std::collections::BTreeMap;
 
 mod support;
 
-use lamina_test_support::Rng;
+use fastrand::Rng;
 use support::{export, layer_plan, run_info};
 
 use lamina_core::machine::{BedPlacement, Machine};
@@ -36,20 +36,20 @@ fn info(machine: Option<Machine>, names: [&str; 2]) -> RunInfo {
 /// Five layers of graded paths inside the square, each path's tool the material it is
 /// mostly made of.
 fn layers(seed: u64) -> Vec<LayerPlan> {
-    let mut rng = Rng(seed);
+    let mut rng = Rng::with_seed(seed);
     (0..5)
         .map(|index| {
             let mut t = 0.0;
             let toolpaths = (0..8)
                 .map(|k| {
                     let f = ((k * 3 + index) % 5) as f64 / 4.0;
-                    let points = (0..2 + (rng.next() * 5.0) as usize)
+                    let points = (0..2 + (rng.f64() * 5.0) as usize)
                         .map(|_| {
                             t += 0.4;
                             TimedPoint {
                                 p: Point2::new(
-                                    (rng.next() * 2.0 - 1.0) * HALF,
-                                    (rng.next() * 2.0 - 1.0) * HALF,
+                                    (rng.f64() * 2.0 - 1.0) * HALF,
+                                    (rng.f64() * 2.0 - 1.0) * HALF,
                                 ),
                                 t,
                             }

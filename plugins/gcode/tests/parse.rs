@@ -4,7 +4,7 @@
 
 mod support;
 
-use lamina_test_support::Rng;
+use fastrand::Rng;
 
 use lamina_core::{Composition, LayerPlan, PathKind, Point2, Registry, RunInfo, TimedPoint, Toolpath};
 
@@ -14,21 +14,21 @@ fn info() -> RunInfo {
 
 /// Layers of random extrusions (two tools, graded compositions), travels and pauses.
 fn layers(seed: u64) -> Vec<LayerPlan> {
-    let mut rng = Rng(seed);
+    let mut rng = Rng::with_seed(seed);
     (0..3)
         .map(|index| {
             let mut t = 0.0;
             let mut toolpaths = Vec::new();
             for k in 0..12 {
                 let tool = k % 2;
-                let n = 2 + (rng.next() * 6.0) as usize;
+                let n = 2 + (rng.f64() * 6.0) as usize;
                 let mut points = Vec::new();
                 for _ in 0..n {
-                    let p = Point2::new(rng.next() * 40.0, rng.next() * 40.0);
+                    let p = Point2::new(rng.f64() * 40.0, rng.f64() * 40.0);
                     t += 0.5;
                     points.push(TimedPoint { p, t });
                 }
-                let f = (rng.next() * 10.0).floor() / 9.0;
+                let f = (rng.f64() * 10.0).floor() / 9.0;
                 let kind = if k % 5 == 4 {
                     PathKind::Travel
                 } else {
@@ -40,7 +40,7 @@ fn layers(seed: u64) -> Vec<LayerPlan> {
                     kind,
                     points: points.clone(),
                     width: if kind == PathKind::Extrude {
-                        0.4 + rng.next() * 0.2
+                        0.4 + rng.f64() * 0.2
                     } else {
                         0.0
                     },

@@ -1169,14 +1169,10 @@ mod tests {
 
     #[test]
     fn the_closest_approach_over_a_horizon_is_that_of_the_sampled_motions() {
-        let mut seed = 0x2545_f491_4f6c_dd1du64;
-        fn next(seed: &mut u64) -> f64 {
-            *seed ^= *seed << 13;
-            *seed ^= *seed >> 7;
-            *seed ^= *seed << 17;
-            (*seed >> 11) as f64 / (1u64 << 53) as f64
-        }
-        fn track(seed: &mut u64, n: usize) -> Vec<(f64, Point2)> {
+        let mut seed = fastrand::Rng::with_seed(0x2545_f491_4f6c_dd1d);
+        let next = |rng: &mut fastrand::Rng| rng.f64();
+        fn track(seed: &mut fastrand::Rng, n: usize) -> Vec<(f64, Point2)> {
+            let next = |rng: &mut fastrand::Rng| rng.f64();
             let mut t = 0.0;
             (0..n)
                 .map(|k| {
@@ -1220,13 +1216,8 @@ mod tests {
 
     #[test]
     fn the_least_gap_in_y_is_that_of_the_sampled_motions() {
-        let mut seed = 0x9e37_79b9_7f4a_7c15u64;
-        let mut next = move || {
-            seed ^= seed << 13;
-            seed ^= seed >> 7;
-            seed ^= seed << 17;
-            (seed >> 11) as f64 / (1u64 << 53) as f64
-        };
+        let mut rng = fastrand::Rng::with_seed(0x9e37_79b9_7f4a_7c15);
+        let mut next = move || rng.f64();
         let y_at = |tr: &[(f64, Point2)], t: f64| -> f64 {
             match tr.iter().position(|q| q.0 > t) {
                 Some(0) => tr[0].1.y,

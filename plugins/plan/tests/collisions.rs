@@ -6,6 +6,7 @@
 
 use std::path::PathBuf;
 
+use fastrand::Rng;
 use lamina_core::stage::Planner;
 use lamina_core::{
     BBox2, Composition, Contour, ContourTree, LayerPlan, Material, PartInfo, PartLayer, PathKind, Point2,
@@ -13,7 +14,6 @@ use lamina_core::{
 };
 use lamina_plan::route::{Move, ToolSpec};
 use lamina_plan::sim::{self, Priority, Settings};
-use lamina_test_support::Rng;
 
 fn build(table: &str) -> lamina_core::Result<Box<dyn Planner>> {
     use lamina_plan as _;
@@ -48,6 +48,11 @@ fn rect(x0: f64, y0: f64, w: f64, h: f64) -> Contour {
     ])
 }
 
+/// A number uniform in [a, b).
+fn range(rng: &mut Rng, a: f64, b: f64) -> f64 {
+    a + (b - a) * rng.f64()
+}
+
 /// `tools` materials, one part each, with 1 to 3 random shapes per part in a 60 mm
 /// square (shapes of different parts may sit side by side or close together).
 fn layout(rng: &mut Rng, tools: usize) -> (RunInfo, LayerPlan) {
@@ -71,12 +76,12 @@ fn layout(rng: &mut Rng, tools: usize) -> (RunInfo, LayerPlan) {
     let mut layers = Vec::new();
     for part in 0..tools {
         let mut regions = Vec::new();
-        for index in 0..1 + (rng.next() * 3.0) as usize {
-            let c = Point2::new(rng.range(0.0, 60.0), rng.range(0.0, 60.0));
-            let outer = if rng.next() < 0.5 {
-                disc(c, rng.range(1.0, 8.0), 48)
+        for index in 0..1 + (rng.f64() * 3.0) as usize {
+            let c = Point2::new(range(rng, 0.0, 60.0), range(rng, 0.0, 60.0));
+            let outer = if rng.f64() < 0.5 {
+                disc(c, range(rng, 1.0, 8.0), 48)
             } else {
-                rect(c.x, c.y, rng.range(1.0, 15.0), rng.range(0.5, 12.0))
+                rect(c.x, c.y, range(rng, 1.0, 15.0), range(rng, 0.5, 12.0))
             };
             // Each region an island of its own (random shapes may overlap, which
             // sub-regions of one family never do).
@@ -370,14 +375,14 @@ fn says_slower(plan: &LayerPlan) -> bool {
 /// faster one, said in a note.
 #[test]
 fn more_orders_of_the_loops_never_make_a_layer_slower() {
-    let mut rng = Rng(0x0dde_5eed_0000_0002);
+    let mut rng = Rng::with_seed(0x0dde_5eed_0000_0002);
     let (mut faster, mut noted) = (0, 0);
     for case in 0..30 {
         let (info, plan) = layout(&mut rng, 2);
         let table = format!(
             "use = \"concurrent\"\nwidth = 0.5\nenvelope = {}\nstep = 0.02\nspeed = {}\n",
-            rng.range(1.5, 6.0),
-            rng.range(10.0, 40.0)
+            range(&mut rng, 1.5, 6.0),
+            range(&mut rng, 10.0, 40.0)
         );
         let planned = |orders: usize| {
             let mut p = plan.clone();
@@ -431,17 +436,17 @@ fn random_layouts_of_two_to_four_tools_never_collide() {
 }
 
 fn random_layouts(look_ahead: Option<f64>) {
-    let mut rng = Rng(0x5eed_1234_abcd_0001);
+    let mut rng = Rng::with_seed(0x5eed_1234_abcd_0001);
     let (mut pauses, mut faster, mut slower, mut decided) = (0, 0, 0, 0);
     for case in 0..40 {
         let tools = 2 + case % 3;
-        let envelope = rng.range(1.5, 6.0);
+        let envelope = range(&mut rng, 1.5, 6.0);
         let table = format!(
             "use = \"concurrent\"\nwidth = 0.5\nenvelope = {envelope}\nstep = 0.02\nspeed = {}\ntravel_speed = 100.0\n{}\
              [tools.m0]\nspeed = {}",
-            rng.range(10.0, 40.0),
+            range(&mut rng, 10.0, 40.0),
             look_ahead.map_or(String::new(), |s| format!("look_ahead = {s}\n")),
-            rng.range(10.0, 40.0)
+            range(&mut rng, 10.0, 40.0)
         );
         let (info, plan) = layout(&mut rng, tools);
         let mut conc = plan.clone();
@@ -531,7 +536,7 @@ fn random_layouts(look_ahead: Option<f64>) {
 #[test]
 fn tools_crossing_head_on_give_way_by_speed_along_x() {
     // Two bars side by side with a narrow gap: the tools must pass each other.
-    let mut rng = Rng(9);
+    let mut rng = Rng::with_seed(9);
     let (info, mut plan) = layout(&mut rng, 2);
     plan.parts[0].regions.truncate(1);
     plan.parts[1].regions.truncate(1);
@@ -564,7 +569,7 @@ fn tools_crossing_head_on_give_way_by_speed_along_x() {
 
 #[test]
 fn thin_regions_are_reported() {
-    let mut rng = Rng(3);
+    let mut rng = Rng::with_seed(3);
     let (info, mut plan) = layout(&mut rng, 2);
     // 0.15 mm wide: under the narrowest bead (0.6 x 0.4 mm), and alone in its part.
     plan.parts[0].regions.truncate(1);
@@ -584,7 +589,7 @@ fn thin_regions_are_reported() {
 
 #[test]
 fn sequential_time_is_path_length_over_speed_plus_tool_changes() {
-    let mut rng = Rng(5);
+    let mut rng = Rng::with_seed(5);
     let (info, mut plan) = layout(&mut rng, 2);
     planner("use = \"sequential\"\nspeed = 20.0\ntravel_speed = 100.0\ntool_change = 7.0")
         .plan(&info, &mut plan)
@@ -626,7 +631,7 @@ fn bead_area_by_tool(plan: &LayerPlan, tools: usize) -> Vec<f64> {
 #[test]
 fn concurrent_plans_report_the_sequential_baseline() {
     for seed in 1..6 {
-        let mut rng = Rng(seed);
+        let mut rng = Rng::with_seed(seed);
         let (info, plan) = layout(&mut rng, 3);
         let mut conc = plan.clone();
         planner("use = \"concurrent\"\nenvelope = 2.0")
@@ -1293,7 +1298,7 @@ fn gantry_layer(
     rear: (f64, f64),
     depth: f64,
 ) -> (RunInfo, LayerPlan) {
-    let mut rng = Rng(1);
+    let mut rng = Rng::with_seed(1);
     let (mut info, mut plan) = layout(&mut rng, 2);
     for (part, (y0, y1)) in [front, rear].into_iter().enumerate() {
         let outer = rect(0.0, y0, 40.0, y1 - y0);
