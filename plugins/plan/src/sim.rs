@@ -172,7 +172,28 @@ struct Agent<'a> {
     out: Vec<Toolpath>,
 }
 
-impl Agent<'_> {
+impl<'a> Agent<'a> {
+    /// The tool at the start of `route` at time 0.
+    fn new(spec: &'a ToolSpec, route: Vec<Move>) -> Self {
+        let pos = route.first().map(|m| m.points[0]).unwrap_or_default();
+        let open = route
+            .first()
+            .map(|m| toolpath(spec.index, m, vec![TimedPoint { p: pos, t: 0.0 }]));
+        Agent {
+            spec,
+            done: route.is_empty(),
+            route,
+            at: Cursor {
+                mv: 0,
+                seg: 0,
+                along: 0.0,
+            },
+            pos,
+            open,
+            out: Vec::new(),
+        }
+    }
+
     /// The cursor and position after `dt` seconds along the route, whether the route
     /// is done, and the length of route covered; with `emit`, the route's vertices
     /// passed on the way are written with their times from `t`.
@@ -653,25 +674,7 @@ impl<'a> Run<'a> {
     fn start(tools: &'a [(&'a ToolSpec, Vec<Move>)], settings: &Settings, arena: &'a BBox2) -> Self {
         let agents: Vec<Agent<'a>> = tools
             .iter()
-            .map(|(spec, route)| {
-                let pos = route.first().map(|m| m.points[0]).unwrap_or_default();
-                let open = route
-                    .first()
-                    .map(|m| toolpath(spec.index, m, vec![TimedPoint { p: pos, t: 0.0 }]));
-                Agent {
-                    spec,
-                    done: route.is_empty(),
-                    route: route.clone(),
-                    at: Cursor {
-                        mv: 0,
-                        seg: 0,
-                        along: 0.0,
-                    },
-                    pos,
-                    open,
-                    out: Vec::new(),
-                }
-            })
+            .map(|(spec, route)| Agent::new(spec, route.clone()))
             .collect();
         let n = agents.len();
         Run {
@@ -1315,5 +1318,167 @@ mod tests {
         ];
         let b = [(0.0, Point2::new(5.0, 8.0)), (1.0, Point2::new(5.0, 8.0))];
         assert!((closest(&a, &b) - 3.0).abs() < 1e-12);
+        // A tool without a motion meets nothing.
+        assert_eq!(closest(&a, &[]), f64::INFINITY);
+        assert_eq!(closest(&[], &b), f64::INFINITY);
+    }
+
+    fn tool() -> ToolSpec {
+        ToolSpec {
+            index: 0,
+            name: "t".into(),
+            speed: 5.0,
+            travel_speed: 50.0,
+            envelope: 1.0,
+            rear: false,
+        }
+    }
+
+    fn bead(points: &[(f64, f64)]) -> Move {
+        Move {
+            kind: PathKind::Extrude,
+            width: 0.4,
+            ..Move::travel(points.iter().map(|&(x, y)| Point2::new(x, y)).collect(), 5.0)
+        }
+    }
+
+    fn travel(points: &[(f64, f64)]) -> Move {
+        Move::travel(points.iter().map(|&(x, y)| Point2::new(x, y)).collect(), 50.0)
+    }
+
+    /// The kind, and the timed points (to a nanometre and a nanosecond), of each path
+    /// a tool wrote.
+    fn written(a: &Agent<'_>) -> Vec<(PathKind, Vec<(f64, f64, f64)>)> {
+        let r = |v: f64| (v * 1e9).round() / 1e9;
+        a.out
+            .iter()
+            .map(|p| {
+                (
+                    p.kind,
+                    p.points.iter().map(|q| (r(q.p.x), r(q.p.y), r(q.t))).collect(),
+                )
+            })
+            .collect()
+    }
+
+    /// The route left is timed from where the tool is: the rest of its move at the
+    /// move's speed, and the moves after it.
+    #[test]
+    fn the_route_left_is_timed_from_the_tools_place() {
+        let spec = tool();
+        // 20 mm of bead at 5 mm/s, then 10 mm of travel at 50 mm/s.
+        let mut a = Agent::new(
+            &spec,
+            vec![
+                bead(&[(0.0, 0.0), (10.0, 0.0), (10.0, 10.0)]),
+                travel(&[(10.0, 10.0), (0.0, 10.0)]),
+            ],
+        );
+        let near = |x: f64, y: f64| (x - y).abs() < 1e-12;
+        assert!(near(a.remaining(), 4.2), "{}", a.remaining());
+        a.advance(0.0, 1.0);
+        assert_eq!(a.pos, Point2::new(5.0, 0.0));
+        assert!(near(a.remaining(), 3.2), "{}", a.remaining());
+        a.advance(1.0, 2.0);
+        assert_eq!(a.pos, Point2::new(10.0, 5.0));
+        assert!(near(a.remaining(), 1.2), "{}", a.remaining());
+        // Past the bead's end, 5 mm into the travel.
+        a.advance(3.0, 1.1);
+        assert!((a.pos - Point2::new(5.0, 10.0)).norm() < 1e-9, "{:?}", a.pos);
+        assert!(near(a.remaining(), 0.1), "{}", a.remaining());
+        assert!(!a.done);
+        a.advance(4.1, 1.0);
+        assert!(a.done && a.remaining() == 0.0);
+        assert_eq!(
+            written(&a),
+            [
+                (
+                    PathKind::Extrude,
+                    vec![(0.0, 0.0, 0.0), (10.0, 0.0, 2.0), (10.0, 10.0, 4.0)]
+                ),
+                (PathKind::Travel, vec![(10.0, 10.0, 4.0), (0.0, 10.0, 4.2)]),
+            ]
+        );
+    }
+
+    /// A pause that lasts no time and a move that goes nowhere leave no path.
+    #[test]
+    fn empty_pauses_and_moves_are_not_written() {
+        let spec = tool();
+        let mut a = Agent::new(
+            &spec,
+            vec![
+                travel(&[(0.0, 0.0), (0.0, 0.0)]),
+                bead(&[(0.0, 0.0), (10.0, 0.0)]),
+            ],
+        );
+        a.hold(0.0, 0.0);
+        a.advance(0.0, 1.0);
+        a.hold(1.0, 0.5);
+        a.advance(1.5, 2.0);
+        assert!(a.done);
+        assert_eq!(
+            written(&a),
+            [
+                (PathKind::Extrude, vec![(0.0, 0.0, 0.0), (5.0, 0.0, 1.0)]),
+                (PathKind::Pause, vec![(5.0, 0.0, 1.0), (5.0, 0.0, 1.5)]),
+                (PathKind::Extrude, vec![(5.0, 0.0, 1.5), (10.0, 0.0, 2.5)]),
+            ]
+        );
+    }
+
+    /// A side-step leaves the bead where the tool is, travels to the side and back
+    /// (the way back yielding), and finishes the bead; the tool stays where it was.
+    #[test]
+    fn a_side_step_goes_aside_and_back_and_finishes_the_bead() {
+        let spec = tool();
+        let mut a = Agent::new(&spec, vec![bead(&[(0.0, 0.0), (10.0, 0.0)])]);
+        a.advance(0.0, 1.0);
+        a.side_step(Point2::new(5.0, 5.0));
+        let route: Vec<(PathKind, Vec<(f64, f64)>, bool)> = a
+            .route
+            .iter()
+            .map(|m| (m.kind, m.points.iter().map(|p| (p.x, p.y)).collect(), m.yields))
+            .collect();
+        assert_eq!(
+            route,
+            [
+                (PathKind::Extrude, vec![(0.0, 0.0), (5.0, 0.0)], false),
+                (PathKind::Travel, vec![(5.0, 0.0), (5.0, 5.0)], false),
+                (PathKind::Travel, vec![(5.0, 5.0), (5.0, 0.0)], true),
+                (PathKind::Extrude, vec![(5.0, 0.0), (10.0, 0.0)], false),
+            ]
+        );
+        assert_eq!(a.pos, Point2::new(5.0, 0.0));
+        // At the end of the first piece: 5 mm aside and back at 50 mm/s, 5 mm of bead.
+        assert!((a.remaining() - 1.2).abs() < 1e-12, "{}", a.remaining());
+        assert!(!a.yields());
+        a.advance(1.0, 0.15);
+        assert!(a.yields(), "on the way back");
+        a.advance(1.15, 2.0);
+        assert!(a.done && !a.yields());
+        let kinds: Vec<PathKind> = a.out.iter().map(|p| p.kind).collect();
+        assert_eq!(
+            kinds,
+            [
+                PathKind::Extrude,
+                PathKind::Travel,
+                PathKind::Travel,
+                PathKind::Extrude
+            ]
+        );
+        assert!((a.out[3].points[1].t - 2.2).abs() < 1e-12);
+    }
+
+    #[test]
+    fn a_stuck_schedule_says_why() {
+        assert_eq!(
+            Stuck::Deadlock(40).to_string(),
+            "the tools kept blocking each other after 40 side-steps"
+        );
+        assert_eq!(
+            Stuck::Timeout(600.0).to_string(),
+            "the simulation ran past its 600 s budget"
+        );
     }
 }
