@@ -1481,4 +1481,69 @@ mod tests {
             "the simulation ran past its 600 s budget"
         );
     }
+
+    fn settings(step: f64, look_ahead: f64, separation: Separation) -> Settings {
+        Settings {
+            step,
+            budget: 1e4,
+            max_side_steps: 2,
+            priority: Priority::XSpeed,
+            look_ahead,
+            separation,
+            room: 0.0,
+        }
+    }
+
+    /// Looking ahead means looking more than a step and a half ahead.
+    #[test]
+    fn a_run_looks_ahead_beyond_a_step_and_a_half() {
+        let spec = tool();
+        let tools = [(&spec, vec![bead(&[(0.0, 0.0), (10.0, 0.0)])])];
+        let arena = BBox2::EMPTY;
+        let ahead = |look_ahead: f64| {
+            Run::start(&tools, &settings(0.5, look_ahead, Separation::Discs), &arena).anticipate
+        };
+        assert!(!ahead(0.0) && !ahead(0.5) && !ahead(0.75));
+        assert!(ahead(0.76) && ahead(2.0));
+    }
+
+    /// On gantries a deadlock is broken by the head with less work left backing off
+    /// toward its own side, twice the room the two need (envelopes and half a step at
+    /// top speed) beyond where it is; past `max_side_steps` the schedule is stuck.
+    #[test]
+    fn a_gantry_head_steps_back_toward_its_own_side() {
+        let front = tool();
+        let rear = ToolSpec {
+            index: 1,
+            envelope: 3.0,
+            travel_speed: 100.0,
+            rear: true,
+            ..tool()
+        };
+        let arena = BBox2::EMPTY;
+        let set = settings(0.01, 0.0, Separation::OrderedY);
+        // The room between them: 1 + 3 + (50 + 100) x 0.01 / 2 = 4.75 mm.
+        let side_step = |front_work: f64, rear_work: f64| {
+            let tools = [
+                (&front, vec![bead(&[(0.0, 10.0), (front_work, 10.0)])]),
+                (&rear, vec![bead(&[(0.0, 14.0), (rear_work, 14.0)])]),
+            ];
+            let mut run = Run::start(&tools, &set, &arena);
+            assert_eq!(run.step_aside(), Ok(true));
+            let moved: Vec<Vec<(f64, f64)>> = run
+                .agents
+                .iter()
+                .map(|a| {
+                    a.route
+                        .get(1)
+                        .map_or(Vec::new(), |m| m.points.iter().map(|p| (p.x, p.y)).collect())
+                })
+                .collect();
+            assert_eq!(run.step_aside(), Ok(true));
+            assert_eq!(run.step_aside(), Err(Stuck::Deadlock(2)));
+            moved
+        };
+        assert_eq!(side_step(40.0, 80.0), [vec![(0.0, 10.0), (0.0, 0.5)], vec![]]);
+        assert_eq!(side_step(80.0, 40.0), [vec![], vec![(0.0, 14.0), (0.0, 23.5)]]);
+    }
 }
