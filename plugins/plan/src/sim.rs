@@ -1295,6 +1295,7 @@ mod tests {
         // it is at least what the boxes say.
         assert_eq!(behind_until(&r, &f, f64::INFINITY, 1.0), 20.0);
         let discs = Separation::Discs.bound(&front, &rear, &f, &r);
+        assert_eq!(discs, gap(&f, &r));
         assert!(discs > 0.0 && discs <= closest(&f, &r), "{discs}");
         // Passing heads: the rear one's track dips below the front one's top, and
         // the bound goes below zero with it.
@@ -1545,5 +1546,120 @@ mod tests {
         };
         assert_eq!(side_step(40.0, 80.0), [vec![(0.0, 10.0), (0.0, 0.5)], vec![]]);
         assert_eq!(side_step(80.0, 40.0), [vec![], vec![(0.0, 14.0), (0.0, 23.5)]]);
+    }
+
+    /// The box bound: the gap between the tracks' bounding boxes.
+    #[test]
+    fn the_box_gap_is_that_of_the_tracks_boxes() {
+        let a = [(0.0, Point2::new(0.0, 0.0)), (1.0, Point2::new(2.0, 2.0))];
+        let b = [
+            (0.0, Point2::new(6.0, 7.0)),
+            (0.5, Point2::new(5.0, 6.0)),
+            (1.0, Point2::new(6.0, 6.5)),
+        ];
+        assert_eq!(gap(&a, &b), 5.0);
+        assert_eq!(gap(&b, &a), 5.0);
+        // Overlapping in X: the gap in Y; overlapping boxes: 0.
+        let c = [(0.0, Point2::new(1.0, 5.0)), (1.0, Point2::new(9.0, 5.0))];
+        assert_eq!(gap(&a, &c), 3.0);
+        assert_eq!(gap(&c, &b), 1.0);
+        let d = [(0.0, Point2::new(4.0, 4.0)), (1.0, Point2::new(7.0, 6.5))];
+        assert_eq!(gap(&d, &b), 0.0);
+    }
+
+    /// The first `h` seconds of a track end where the track is at `h`.
+    #[test]
+    fn a_track_is_cut_where_it_is_at_the_horizon() {
+        let p = |x: f64, y: f64| Point2::new(x, y);
+        let track = [(0.0, p(0.0, 0.0)), (1.0, p(10.0, 0.0)), (2.0, p(10.0, 10.0))];
+        let mut out = Vec::new();
+        let mut cut = |h: f64| {
+            truncate(&track, h, &mut out);
+            out.iter().map(|&(t, q)| (t, q.x, q.y)).collect::<Vec<_>>()
+        };
+        assert_eq!(cut(0.5), [(0.0, 0.0, 0.0), (0.5, 5.0, 0.0)]);
+        assert_eq!(cut(1.0), [(0.0, 0.0, 0.0), (1.0, 10.0, 0.0)]);
+        assert_eq!(cut(1.25), [(0.0, 0.0, 0.0), (1.0, 10.0, 0.0), (1.25, 10.0, 2.5)]);
+        assert_eq!(
+            cut(3.0),
+            [
+                (0.0, 0.0, 0.0),
+                (1.0, 10.0, 0.0),
+                (2.0, 10.0, 10.0),
+                (3.0, 10.0, 10.0)
+            ]
+        );
+        // A jump (two points at one time) is cut at its end.
+        let jump = [
+            (0.0, p(0.0, 0.0)),
+            (1.0, p(0.0, 0.0)),
+            (1.0, p(4.0, 0.0)),
+            (2.0, p(4.0, 0.0)),
+        ];
+        truncate(&jump, 1.0, &mut out);
+        assert_eq!(out.last(), Some(&(1.0, p(0.0, 0.0))));
+    }
+
+    /// A tool stepping aside goes away from the tools within three times the room it
+    /// needs from them, twice that room out, to the nearest place (turning by 45° at a
+    /// time, then farther) that leaves it 1.5 times the room from every other tool
+    /// and lies inside the arena; with no tool near, toward -Y; with no such place,
+    /// straight away, clamped into the arena.
+    #[test]
+    fn a_tool_steps_aside_away_from_its_neighbours_inside_the_arena() {
+        let spec = tool();
+        let at = |x: f64, y: f64| Agent::new(&spec, vec![bead(&[(x, y), (x + 1.0, y)])]);
+        // The room two tools need: 2 mm.
+        let clear = |_: &Agent<'_>, _: &Agent<'_>| 2.0;
+        let open = BBox2::EMPTY;
+        let aside_of = |agents: &[Agent<'_>], arena: &BBox2| {
+            let p = aside(agents, 0, &clear, arena);
+            ((p.x * 1e9).round() / 1e9, (p.y * 1e9).round() / 1e9)
+        };
+        let h = 4.0 / 2f64.sqrt();
+        let h = (h * 1e9).round() / 1e9;
+        // A tool 3 mm to the right: 4 mm to the left.
+        assert_eq!(aside_of(&[at(0.0, 0.0), at(3.0, 0.0)], &open), (-4.0, 0.0));
+        // One within three times the room (6 mm) pushes too: away from both; one at
+        // 6 mm does not.
+        assert_eq!(
+            aside_of(&[at(0.0, 0.0), at(3.0, 0.0), at(0.0, 5.9)], &open),
+            (-h, -h)
+        );
+        assert_eq!(
+            aside_of(&[at(0.0, 0.0), at(3.0, 0.0), at(0.0, 6.0)], &open),
+            (-4.0, 0.0)
+        );
+        // Directions count, not distances: away from (3, 0) and (0, -2) alike.
+        assert_eq!(
+            aside_of(&[at(0.0, 0.0), at(3.0, 0.0), at(0.0, -2.0)], &open),
+            (-h, h)
+        );
+        // No tool near, or one in the same place: toward -Y.
+        assert_eq!(aside_of(&[at(0.0, 0.0), at(30.0, 0.0)], &open), (0.0, -4.0));
+        assert_eq!(aside_of(&[at(0.0, 0.0), at(0.0, 0.0)], &open), (0.0, -4.0));
+        // A tool 6.5 mm to the left does not push, but (-4, 0) is too close to it: the
+        // next place, turned 45°.
+        assert_eq!(
+            aside_of(&[at(0.0, 0.0), at(3.0, 0.0), at(-6.5, 0.0)], &open),
+            (-h, -h)
+        );
+        // Inside an arena from x = -1: turned 90°, to -Y; from y = -1 too: to +Y.
+        let arena = |x0: f64, y0: f64, x1: f64, y1: f64| BBox2 {
+            min: Point2::new(x0, y0),
+            max: Point2::new(x1, y1),
+        };
+        let pair = [at(0.0, 0.0), at(3.0, 0.0)];
+        assert_eq!(aside_of(&pair, &arena(-1.0, -10.0, 10.0, 10.0)), (0.0, -4.0));
+        assert_eq!(aside_of(&pair, &arena(-1.0, -1.0, 10.0, 10.0)), (0.0, 4.0));
+        // The arena's other sides: a tool to the left sends it right, unless the
+        // arena ends at x = 1; one below sends it up, unless it ends at y = 1.
+        let left = [at(0.0, 0.0), at(-3.0, 0.0)];
+        assert_eq!(aside_of(&left, &arena(-10.0, -10.0, 10.0, 10.0)), (4.0, 0.0));
+        assert_eq!(aside_of(&left, &arena(-10.0, -1.0, 1.0, 10.0)), (0.0, 4.0));
+        let below = [at(0.0, 0.0), at(0.0, -3.0)];
+        assert_eq!(aside_of(&below, &arena(-10.0, -10.0, 10.0, 1.0)), (-4.0, 0.0));
+        // Boxed in: straight away, clamped.
+        assert_eq!(aside_of(&pair, &arena(-1.0, -1.0, 1.0, 1.0)), (-1.0, 0.0));
     }
 }
