@@ -1589,6 +1589,10 @@ mod tests {
                 (3.0, 10.0, 10.0)
             ]
         );
+        // Along a two-second segment, a quarter of it.
+        let slow = [(0.0, p(0.0, 0.0)), (2.0, p(10.0, 0.0))];
+        truncate(&slow, 0.5, &mut out);
+        assert_eq!(out, [(0.0, p(0.0, 0.0)), (0.5, p(2.5, 0.0))]);
         // A jump (two points at one time) is cut at its end.
         let jump = [
             (0.0, p(0.0, 0.0)),
@@ -1618,6 +1622,7 @@ mod tests {
         };
         let h = 4.0 / 2f64.sqrt();
         let h = (h * 1e9).round() / 1e9;
+        let h3 = (6.0 / 2f64.sqrt() * 1e9).round() / 1e9;
         // A tool 3 mm to the right: 4 mm to the left.
         assert_eq!(aside_of(&[at(0.0, 0.0), at(3.0, 0.0)], &open), (-4.0, 0.0));
         // One within three times the room (6 mm) pushes too: away from both; one at
@@ -1644,6 +1649,11 @@ mod tests {
             aside_of(&[at(0.0, 0.0), at(3.0, 0.0), at(-6.5, 0.0)], &open),
             (-h, -h)
         );
+        // One at 7.2 mm leaves (-4, 0) 3.2 mm from it, room enough.
+        assert_eq!(
+            aside_of(&[at(0.0, 0.0), at(3.0, 0.0), at(-7.2, 0.0)], &open),
+            (-4.0, 0.0)
+        );
         // Inside an arena from x = -1: turned 90°, to -Y; from y = -1 too: to +Y.
         let arena = |x0: f64, y0: f64, x1: f64, y1: f64| BBox2 {
             min: Point2::new(x0, y0),
@@ -1659,7 +1669,49 @@ mod tests {
         assert_eq!(aside_of(&left, &arena(-10.0, -1.0, 1.0, 10.0)), (0.0, 4.0));
         let below = [at(0.0, 0.0), at(0.0, -3.0)];
         assert_eq!(aside_of(&below, &arena(-10.0, -10.0, 10.0, 1.0)), (-4.0, 0.0));
+        // From x = -3 and y = -1: turned -45°; from x = 2 and y = -1: turned -135°, and
+        // three times the room out (twice is too close to the tool at (3, 0)).
+        assert_eq!(aside_of(&pair, &arena(-3.0, -1.0, 10.0, 10.0)), (-h, h));
+        assert_eq!(aside_of(&pair, &arena(2.0, -1.0, 10.0, 10.0)), (h3, h3));
+        // Nowhere with room inside a narrow arena: straight away, twice the room.
+        let crowd = [at(0.0, 0.0), at(3.0, 0.0), at(-6.5, 0.0)];
+        assert_eq!(aside_of(&crowd, &arena(-5.0, -0.5, 5.0, 0.5)), (-4.0, 0.0));
         // Boxed in: straight away, clamped.
         assert_eq!(aside_of(&pair, &arena(-1.0, -1.0, 1.0, 1.0)), (-1.0, 0.0));
+    }
+
+    /// A pause is counted once, by what started it; when it goes on by another rule
+    /// than the paper's, it is counted again as a break of the rule.
+    #[test]
+    fn a_pause_that_goes_on_by_another_rule_is_counted_as_a_break() {
+        let spec = tool();
+        let tools = [
+            (&spec, vec![bead(&[(0.0, 0.0), (10.0, 0.0)])]),
+            (&spec, vec![bead(&[(0.0, 5.0), (10.0, 5.0)])]),
+        ];
+        let arena = BBox2::EMPTY;
+        let mut run = Run::start(&tools, &settings(0.1, 0.0, Separation::Discs), &arena);
+        let counts = |run: &Run<'_>| (run.pauses.by_x_speed, run.pauses.forced, run.pauses.other);
+        let check = |run: &mut Run<'_>, why: Option<Why>| {
+            run.moving = vec![false, true];
+            run.why = vec![why, None];
+            run.take_step();
+        };
+        check(&mut run, Some(Why::XSpeed));
+        assert_eq!(counts(&run), (1, 0, 0));
+        check(&mut run, Some(Why::XSpeed));
+        assert_eq!(counts(&run), (1, 0, 0));
+        check(&mut run, Some(Why::Other));
+        assert_eq!(counts(&run), (0, 0, 1));
+        check(&mut run, Some(Why::Other));
+        assert_eq!(counts(&run), (0, 0, 1));
+        // Moving on, then a forced pause.
+        run.moving = vec![true, true];
+        run.take_step();
+        check(&mut run, Some(Why::Forced));
+        assert_eq!(counts(&run), (0, 1, 1));
+        // The held tool kept its place; the other moved 0.5 mm a step.
+        assert_eq!(run.agents[0].pos, Point2::new(0.5, 0.0));
+        assert!((run.agents[1].pos - Point2::new(3.0, 5.0)).norm() < 1e-9);
     }
 }
