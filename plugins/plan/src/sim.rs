@@ -1347,9 +1347,12 @@ mod tests {
         Move::travel(points.iter().map(|&(x, y)| Point2::new(x, y)).collect(), 50.0)
     }
 
+    /// A point and its time: x, y, t.
+    type Timed = (f64, f64, f64);
+
     /// The kind, and the timed points (to a nanometre and a nanosecond), of each path
     /// a tool wrote.
-    fn written(a: &Agent<'_>) -> Vec<(PathKind, Vec<(f64, f64, f64)>)> {
+    fn written(a: &Agent<'_>) -> Vec<(PathKind, Vec<Timed>)> {
         let r = |v: f64| (v * 1e9).round() / 1e9;
         a.out
             .iter()
@@ -1436,7 +1439,8 @@ mod tests {
         let mut a = Agent::new(&spec, vec![bead(&[(0.0, 0.0), (10.0, 0.0)])]);
         a.advance(0.0, 1.0);
         a.side_step(Point2::new(5.0, 5.0));
-        let route: Vec<(PathKind, Vec<(f64, f64)>, bool)> = a
+        type Leg = (PathKind, Vec<(f64, f64)>, bool);
+        let route: Vec<Leg> = a
             .route
             .iter()
             .map(|m| (m.kind, m.points.iter().map(|p| (p.x, p.y)).collect(), m.yields))
