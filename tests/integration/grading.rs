@@ -412,6 +412,7 @@ fn a_z_span_by_heights_matches_the_span_by_layers_and_bad_spans_are_refused() {
     assert!(graded > 0, "no layer between the two materials");
     for (bad, key) in [
         (format!("from_z = {:?}\nto_z = {:?}", z_of(9), z_of(3)), "to_z"),
+        ("from_layer = 9\nto_layer = 3".to_string(), "to_layer"),
         (format!("from_z = {:?}", z_of(3)), "from_layer"),
         ("to_layer = 9".to_string(), "from_layer"),
     ] {
@@ -421,6 +422,22 @@ fn a_z_span_by_heights_matches_the_span_by_layers_and_bad_spans_are_refused() {
         let err = crate::support::text(&out.stderr);
         assert_eq!(out.status.code(), Some(2), "{bad}: {err}");
         assert!(err.contains(key), "{bad}: {err}");
+    }
+    // A start equal to its end is a step there (Eq. 9's r jumps from 0 to 1), by
+    // layers or by heights.
+    for step in [
+        "from_layer = 6\nto_layer = 6".to_string(),
+        format!("from_z = {:?}\nto_z = {:?}", z_of(6), z_of(6)),
+    ] {
+        let t = text.replace("from_layer = 3\nto_layer = 9", &step);
+        let path = crate::support::write(dir.path(), "step.toml", &t);
+        let out = crate::support::lamina_in(dir.path(), &["check", path.to_str().expect("path")]);
+        assert_eq!(
+            out.status.code(),
+            Some(0),
+            "{step}: {}",
+            crate::support::text(&out.stderr)
+        );
     }
     // Eq. 8's weights: none negative, not both zero.
     let zxy = std::fs::read_to_string(pipelines().join("blade-zxy.toml")).expect("pipeline");

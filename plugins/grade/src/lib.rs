@@ -10,6 +10,8 @@
 //! - `idw`: inverse-distance weighting of materials carried by a family's contours.
 
 mod constant;
+#[cfg(test)]
+mod fixtures;
 mod z;
 mod zxy;
 /// The name the `script` grader registers under, as a macro so that its example can

@@ -291,53 +291,11 @@ lamina_api::register_stage!(StageFactory {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use lamina_api::{Contour, ContourTree, Layer, Material, PartInfo, Point2, Polygon, RunInfo};
+    use crate::fixtures::{self, regions};
+    use lamina_api::{Contour, ContourTree, Layer, Material, Point2, Polygon, RunInfo};
 
     fn info() -> RunInfo {
-        let mat = |name: &str, colour| Material {
-            name: name.into(),
-            colour,
-            layer_thickness: None,
-        };
-        RunInfo {
-            base_dir: ".".into(),
-            materials: vec![mat("green", [0, 255, 0]), mat("black", [0, 0, 0])],
-            parts: vec![PartInfo {
-                name: "plate".into(),
-                materials: vec![0, 1],
-                mesh: 0,
-                z_min: 0.0,
-                z_max: 1.0,
-                z_gradient: None,
-            }],
-            z_min: 0.0,
-            z_max: 1.0,
-            xy_bounds: lamina_api::BBox2::EMPTY,
-            machine: None,
-            model_frame: None,
-        }
-    }
-
-    fn regions(n: usize) -> Vec<SubRegion> {
-        let square = Contour::new(vec![
-            Point2::new(0.0, 0.0),
-            Point2::new(1.0, 0.0),
-            Point2::new(1.0, 1.0),
-            Point2::new(0.0, 1.0),
-        ]);
-        (0..n)
-            .map(|j| SubRegion {
-                family: 0,
-                index: j,
-                count: n,
-                level: index_level(j, n),
-                polygon: Polygon::new(square.clone(), vec![]),
-                cell: None,
-                reference: Point2::new(0.5, 0.5),
-                composition: None,
-                samples: Vec::new(),
-            })
-            .collect()
+        fixtures::info(&[("green", [0, 255, 0]), ("black", [0, 0, 0])])
     }
 
     /// Eq. 18 along the radial line (Fig. 8): a disc of radius 20 about the origin with

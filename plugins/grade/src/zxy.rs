@@ -183,3 +183,113 @@ lamina_api::register_stage!(StageFactory {
     },
     build,
 });
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::fixtures::{info, regions};
+    use lamina_api::{ContourTree, Layer, RunInfo};
+
+    /// The fractions `both` gives the `n` regions of a family on layer `index`.
+    fn grade(both: &Both, info: &RunInfo, index: usize, n: usize) -> Result<Vec<Vec<f64>>> {
+        let layer = Layer {
+            index,
+            ..Layer::default()
+        };
+        let tree = ContourTree::default();
+        let ctx = FamilyContext {
+            info,
+            layer: &layer,
+            tree: &tree,
+            polygons: &[],
+            mesh: None,
+            part: 0,
+            family: 0,
+        };
+        let mut rs = regions(n);
+        both.grade(&ctx, &mut rs)?;
+        Ok(rs
+            .into_iter()
+            .map(|r| r.composition.expect("graded").fractions)
+            .collect())
+    }
+
+    /// f = r along Z from layer 0 to 10, f = 1 - r across, weighted `weights`.
+    fn both(weights: [f64; 2], z: Option<&[&str]>, xy: Option<&[&str]>) -> Both {
+        let names = |v: Option<&[&str]>| v.map(|v| v.iter().map(|s| s.to_string()).collect());
+        Both {
+            z: Control::Linear { mu: 1.0, lambda: 0.0 },
+            xy: Control::Linear {
+                mu: -1.0,
+                lambda: 1.0,
+            },
+            span: Span::Layers(0, 10),
+            weights,
+            xy_level: false,
+            z_materials: names(z),
+            xy_materials: names(xy),
+        }
+    }
+
+    fn near(a: &[f64], b: &[f64]) -> bool {
+        a.len() == b.len() && a.iter().zip(b).all(|(x, y)| (x - y).abs() < 1e-12)
+    }
+
+    /// Eq. 8, (k_z M_z + k_xy M_xy) / (k_z + k_xy), with weights 1 : 3. On layer 3 of
+    /// 0-10 (r_z = 0.3) the Z grading gives the first material 0.3; across, region j
+    /// of 5 gets 1 - j/4. Over the same two materials the first takes
+    /// (0.3 + 3 (1 - j/4)) / 4; over Fig. 19's two pairs, red 0.3 / 4, green 0.7 / 4,
+    /// ceramic 3 (1 - j/4) / 4, metal 3 (j/4) / 4.
+    #[test]
+    fn eq_8_weighs_the_z_and_the_x_y_grading() {
+        let two = info(&[("a", [255, 0, 0]), ("b", [0, 0, 255])]);
+        let got = grade(&both([1.0, 3.0], None, None), &two, 3, 5).expect("grades");
+        for (j, f) in got.iter().enumerate() {
+            let want = (0.3 + 3.0 * (1.0 - j as f64 / 4.0)) / 4.0;
+            assert!(near(f, &[want, 1.0 - want]), "region {j}: {f:?} vs {want}");
+        }
+        let four = info(&[
+            ("red", [255, 0, 0]),
+            ("green", [0, 255, 0]),
+            ("ceramic", [255, 255, 0]),
+            ("metal", [0, 0, 255]),
+        ]);
+        let fig19 = both([1.0, 3.0], Some(&["red", "green"]), Some(&["ceramic", "metal"]));
+        let got = grade(&fig19, &four, 3, 5).expect("grades");
+        for (j, f) in got.iter().enumerate() {
+            let r = j as f64 / 4.0;
+            let want = [0.3 / 4.0, 0.7 / 4.0, 3.0 * (1.0 - r) / 4.0, 3.0 * r / 4.0];
+            assert!(near(f, &want), "region {j}: {f:?} vs {want:?}");
+        }
+        // The pairs named the other way round: the Z grading runs green to red.
+        let swapped = both([1.0, 3.0], Some(&["green", "red"]), Some(&["ceramic", "metal"]));
+        let got = grade(&swapped, &four, 3, 5).expect("grades");
+        assert!(near(&got[0], &[0.7 / 4.0, 0.3 / 4.0, 0.75, 0.0]), "{:?}", got[0]);
+    }
+
+    /// A weight of 0 leaves the other grading alone, pure materials included.
+    #[test]
+    fn a_zero_weight_leaves_the_other_grading_alone() {
+        let two = info(&[("a", [255, 0, 0]), ("b", [0, 0, 255])]);
+        // Along Z alone on layer 0 (r_z = 0): the second material only.
+        let got = grade(&both([1.0, 0.0], None, None), &two, 0, 3).expect("grades");
+        assert!(got.iter().all(|f| near(f, &[0.0, 1.0])), "{got:?}");
+        // Across alone: the outer region is the first material, whatever the layer.
+        let got = grade(&both([0.0, 1.0], None, None), &two, 7, 3).expect("grades");
+        assert!(
+            near(&got[0], &[1.0, 0.0]) && near(&got[2], &[0.0, 1.0]),
+            "{got:?}"
+        );
+    }
+
+    #[test]
+    fn a_material_the_part_lacks_is_named() {
+        let two = info(&[("a", [255, 0, 0]), ("b", [0, 0, 255])]);
+        let err = grade(&both([1.0, 1.0], None, Some(&["a", "gold"])), &two, 0, 2).expect_err("no gold");
+        assert!(
+            err.to_string()
+                .contains("`xy_materials`: part `plate` has no material `gold`"),
+            "{err}"
+        );
+    }
+}
