@@ -250,6 +250,25 @@ mod tests {
         assert!(e.contains("test") && e.contains("1.25"), "{e}");
     }
 
+    /// A rounding residue just outside [0, 1] is a pure material, exactly: -sin(pi)
+    /// is -1.2e-16, and 1 + 1e-13 is within the band of 1e-12 above 1.
+    #[test]
+    fn a_rounding_residue_is_a_pure_material() {
+        let below = Control::Wave {
+            mu: -1.0,
+            lambda: std::f64::consts::PI,
+        };
+        assert_eq!(at(&below, 1.0, 2).expect("pure").fractions, [0.0, 1.0]);
+        let above = Control::Linear {
+            mu: 1e-13,
+            lambda: 1.0,
+        };
+        assert_eq!(at(&above, 1.0, 2).expect("pure").fractions, [1.0, 0.0]);
+        // Beyond the band it is an error.
+        assert!(at(&Control::Constant { mu: 1.0 + 1e-6 }, 0.0, 2).is_err());
+        assert!(at(&Control::Constant { mu: -1e-6 }, 0.0, 2).is_err());
+    }
+
     /// One material: f must be 1 (the part is that material); three need a script.
     #[test]
     fn one_material_takes_f_of_one_and_three_need_a_script() {

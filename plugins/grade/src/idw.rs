@@ -200,4 +200,131 @@ mod tests {
         assert_eq!(weights(&[0.0, 2.0, 3.0], 1.0), [1.0, 0.0, 0.0]);
         assert_eq!(weights(&[0.0, 0.0, 3.0], 1.0), [0.5, 0.5, 0.0]);
     }
+
+    /// Grades regions whose references are `points` in a 10 mm square with two 2 mm
+    /// square holes, about (3, 5) and (7, 5), by `idw` over materials a, b, c.
+    fn grade_points(idw: &Idw, points: &[(f64, f64)]) -> Result<Vec<Vec<f64>>> {
+        let info = crate::fixtures::info(&[("a", [255, 0, 0]), ("b", [0, 255, 0]), ("c", [0, 0, 255])]);
+        let square = |x0: f64, y0: f64, side: f64| {
+            Contour::rectangle(Point2::new(x0, y0), Point2::new(x0 + side, y0 + side))
+        };
+        let layer = lamina_api::Layer {
+            contours: vec![
+                square(0.0, 0.0, 10.0),
+                square(2.0, 4.0, 2.0).oriented(false),
+                square(6.0, 4.0, 2.0).oriented(false),
+            ],
+            ..lamina_api::Layer::default()
+        };
+        let tree = lamina_api::ContourTree {
+            nodes: Vec::new(),
+            families: vec![lamina_api::Family {
+                outer: 0,
+                holes: vec![1, 2],
+            }],
+        };
+        let ctx = FamilyContext {
+            info: &info,
+            layer: &layer,
+            tree: &tree,
+            polygons: &[],
+            mesh: None,
+            part: 0,
+            family: 0,
+        };
+        let mut regions = crate::fixtures::regions(points.len());
+        for (r, &(x, y)) in regions.iter_mut().zip(points) {
+            r.reference = Point2::new(x, y);
+        }
+        idw.grade(&ctx, &mut regions)?;
+        Ok(regions
+            .into_iter()
+            .map(|r| r.composition.expect("graded").fractions)
+            .collect())
+    }
+
+    fn near(holes: &[((f64, f64), &str)]) -> Option<HolesSpec> {
+        Some(HolesSpec::Near(
+            holes
+                .iter()
+                .map(|&((x, y), m)| NearSpec {
+                    near: [x, y],
+                    material: m.into(),
+                })
+                .collect(),
+        ))
+    }
+
+    /// Eq. 23 at a region's reference: at (5, 1) the outer contour is 1 mm away and
+    /// each hole sqrt(10); at (5, 5), 5 mm and 1 mm and 1 mm; at (9, 9), 1 mm, sqrt(34)
+    /// and sqrt(10); on a hole, that hole's
+    /// material alone. Each hole takes the material of the listed point nearest it,
+    /// whatever the list's order; contours of one material add up.
+    #[test]
+    fn each_contour_weighs_its_material_by_eq_23() {
+        let points = [(5.0, 1.0), (5.0, 5.0), (2.0, 5.0), (9.0, 9.0)];
+        let s10 = 10f64.sqrt();
+        let eq23 = |d: [f64; 3]| {
+            let inv = d.map(|d| 1.0 / d);
+            let sum: f64 = inv.iter().sum();
+            inv.map(|w| w / sum)
+        };
+        let check = |got: &[Vec<f64>], want: &[[f64; 3]]| {
+            for (g, w) in got.iter().zip(want) {
+                assert!(
+                    g.iter().zip(w).all(|(a, b)| (a - b).abs() < 1e-12),
+                    "{got:?} vs {want:?}"
+                );
+            }
+        };
+        let (d0, d1, d3) = (
+            eq23([1.0, s10, s10]),
+            eq23([5.0, 1.0, 1.0]),
+            eq23([1.0, 34f64.sqrt(), s10]),
+        );
+        for holes in [
+            near(&[((1.0, 5.0), "b"), ((9.0, 5.0), "c")]),
+            near(&[((9.0, 5.0), "c"), ((1.0, 5.0), "b")]),
+        ] {
+            let idw = Idw {
+                outer: "a".into(),
+                holes,
+                power: 1.0,
+            };
+            let got = grade_points(&idw, &points).expect("grades");
+            check(&got, &[d0, d1, [0.0, 1.0, 0.0], d3]);
+        }
+        // Every hole of one material: the two holes' weights add up.
+        let idw = Idw {
+            outer: "a".into(),
+            holes: Some(HolesSpec::All("c".into())),
+            power: 1.0,
+        };
+        let got = grade_points(&idw, &points).expect("grades");
+        let both = |d: [f64; 3]| [d[0], 0.0, d[1] + d[2]];
+        check(&got, &[both(d0), both(d1), [0.0, 0.0, 1.0], both(d3)]);
+        // Holes of the outer's material (unset): the whole family is that material.
+        let idw = Idw {
+            outer: "b".into(),
+            holes: None,
+            power: 1.0,
+        };
+        let got = grade_points(&idw, &points).expect("grades");
+        check(&got, &[[0.0, 1.0, 0.0]; 4]);
+        // A material the part lacks is named.
+        let idw = Idw {
+            outer: "gold".into(),
+            holes: None,
+            power: 1.0,
+        };
+        let err = grade_points(&idw, &points).expect_err("no gold").to_string();
+        assert!(err.contains("part `plate` has no material `gold`"), "{err}");
+    }
+
+    /// The exponent: with power 2, weights go as 1 / d^2.
+    #[test]
+    fn the_power_sharpens_the_weights() {
+        let w = weights(&[1.0, 2.0], 2.0);
+        assert!((w[0] - 0.8).abs() < 1e-12 && (w[1] - 0.2).abs() < 1e-12, "{w:?}");
+    }
 }
