@@ -56,12 +56,8 @@ impl Script {
         // Which family and region each call grades, for the message of one that fails.
         let mut whose = Vec::with_capacity(count);
         for (family, regions) in &sets {
-            let fctx = FamilyContext {
-                family: *family,
-                ..*ctx
-            };
             for region in regions.iter() {
-                calls.push(region_args(&fctx, region, region.level));
+                calls.push(region_args(ctx, region, region.level));
                 whose.push((*family, region.index, region.level));
             }
         }

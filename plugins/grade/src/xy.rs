@@ -332,8 +332,9 @@ mod tests {
     }
 
     /// Where the radial line misses the hole (a U-shaped hole whose centroid lies in
-    /// its opening), the shortest distances stand in: at (0, 10) in a 40 mm square, 10
-    /// mm from the outer contour and sqrt(32) from the U's nearest corner.
+    /// its opening), the shortest distances stand in, d_out / (d_out + d_in): at
+    /// (0, 10) in a 40 mm square, 10 mm from the outer contour and sqrt(32) from the
+    /// U's nearest corner.
     #[test]
     fn eq_18_falls_back_to_the_shortest_distances_where_the_radial_line_misses() {
         let pts = |v: &[(f64, f64)]| Contour::new(v.iter().map(|&(x, y)| Point2::new(x, y)).collect());
@@ -350,6 +351,11 @@ mod tests {
         let family = Polygon::new(rect_contour(40.0), vec![u]);
         let r = RadialLines::new(&family, None).level(Point2::new(0.0, 10.0));
         let want = 10.0 / (10.0 + 32f64.sqrt());
+        assert!((r - want).abs() < 1e-9, "{r} vs {want}");
+        // Nearer the outer contour than the hole: at (0, 18), 2 mm from the one and
+        // sqrt(160) from the U's corners.
+        let r = RadialLines::new(&family, None).level(Point2::new(0.0, 18.0));
+        let want = 2.0 / (2.0 + 160f64.sqrt());
         assert!((r - want).abs() < 1e-9, "{r} vs {want}");
     }
 
@@ -502,6 +508,67 @@ mod tests {
         let green = |r: &SubRegion| r.composition.as_ref().expect("graded").fractions[0];
         assert!((green(&rs[0]) - 5.0 / 9.0).abs() < 5e-3, "{}", green(&rs[0]));
         assert!(green(&rs[1]) > 0.98 && green(&rs[2]) < 0.02);
+    }
+
+    /// Without holes the radial lines run from the family's most inland point: in a
+    /// right triangle with legs of 30 mm, the incentre (8.79, 8.79), not the box's
+    /// centre (15, 15) on the hypotenuse. There r = 1, so with f = 1 - r the point of
+    /// the grid with the least of the first material lies next to it.
+    #[test]
+    fn points_without_holes_grade_from_the_most_inland_point() {
+        let info = info();
+        let triangle = Contour::new(vec![
+            Point2::new(0.0, 0.0),
+            Point2::new(30.0, 0.0),
+            Point2::new(0.0, 30.0),
+        ]);
+        let layer = Layer {
+            contours: vec![triangle.clone()],
+            ..Layer::default()
+        };
+        let tree = ContourTree {
+            nodes: Vec::new(),
+            families: vec![lamina_api::Family {
+                outer: 0,
+                holes: vec![],
+            }],
+        };
+        let ctx = FamilyContext {
+            info: &info,
+            layer: &layer,
+            tree: &tree,
+            polygons: &tree.family_polygons(&layer.contours),
+            mesh: None,
+            part: 0,
+            family: 0,
+        };
+        let grader = InPlane {
+            control: Control::Linear {
+                mu: -1.0,
+                lambda: 1.0,
+            },
+            source: LevelSource::Points,
+            grid: 0.5,
+        };
+        let mut rs = regions(1);
+        rs[0].polygon = Polygon::new(triangle, vec![]);
+        grader.grade(&ctx, &mut rs).expect("grades");
+        let darkest = rs[0]
+            .samples
+            .iter()
+            .min_by(|a, b| a.composition.fractions[0].total_cmp(&b.composition.fractions[0]))
+            .expect("samples");
+        let incentre = 30.0 - 450f64.sqrt();
+        assert!(
+            (darkest.at - Point2::new(incentre, incentre)).norm() < 1.0,
+            "{:?}",
+            darkest.at
+        );
+        assert!(
+            darkest.composition.fractions[0] < 0.05,
+            "{:?}",
+            darkest.composition
+        );
     }
 
     /// The points of `r = "points"` are the centres of a square grid over the
