@@ -144,6 +144,13 @@ fn blade_graded_along_z_and_across_at_once() {
         }
     }
     assert!(checked > 100, "{checked} regions");
+    // Across, `linear` without coefficients is Eq. 25's f = 1 - r: the same blade.
+    let text = std::fs::read_to_string(pipelines().join("blade-zxy.toml")).expect("pipeline");
+    let linear = text.replace("xy_f = \"1.0 - r\"", "xy_f = \"linear\"");
+    assert_ne!(linear, text);
+    let dir = tempfile::tempdir().expect("tempdir");
+    let by_default = crate::support::run_text(dir.path(), &linear, "blade-zxy.json");
+    assert_eq!(by_default["layers"], plan["layers"]);
 }
 
 type Ring = Vec<[f64; 2]>;
@@ -441,6 +448,16 @@ fn a_z_span_by_heights_matches_the_span_by_layers_and_bad_spans_are_refused() {
     }
     // Eq. 8's weights: none negative, not both zero.
     let zxy = std::fs::read_to_string(pipelines().join("blade-zxy.toml")).expect("pipeline");
+    // One weight of 0: that grading has no say, which is allowed.
+    let t = zxy.replace("weights = [1.0, 1.0]", "weights = [0.0, 1.0]");
+    let path = crate::support::write(dir.path(), "zero.toml", &t);
+    let out = crate::support::lamina_in(dir.path(), &["check", path.to_str().expect("path")]);
+    assert_eq!(
+        out.status.code(),
+        Some(0),
+        "{}",
+        crate::support::text(&out.stderr)
+    );
     for bad in ["weights = [0.0, 0.0]", "weights = [-1.0, 2.0]"] {
         let t = zxy.replace("weights = [1.0, 1.0]", bad);
         assert_ne!(t, zxy);
