@@ -383,6 +383,14 @@ fn a_power_law_past_one_is_refused_at_its_key() {
     assert!(out.status.success(), "{}", crate::support::text(&out.stderr));
 }
 
+/// `lamina check` of a pipeline written out from `text`: its exit code and what it
+/// printed on stderr.
+fn check(dir: &std::path::Path, text: &str) -> (Option<i32>, String) {
+    let path = crate::support::write(dir, "check.toml", text);
+    let out = crate::support::lamina_in(dir, &["check", path.to_str().expect("path")]);
+    (out.status.code(), crate::support::text(&out.stderr))
+}
+
 /// Eq. 9's span given as heights: the layers' own heights of layers 3 and 9 give the
 /// gear exactly the compositions `from_layer = 3`, `to_layer = 9` give. Spans and
 /// weights that mean nothing are refused at their keys.
@@ -424,10 +432,8 @@ fn a_z_span_by_heights_matches_the_span_by_layers_and_bad_spans_are_refused() {
         ("to_layer = 9".to_string(), "from_layer"),
     ] {
         let t = text.replace("from_layer = 3\nto_layer = 9", &bad);
-        let path = crate::support::write(dir.path(), "bad.toml", &t);
-        let out = crate::support::lamina_in(dir.path(), &["check", path.to_str().expect("path")]);
-        let err = crate::support::text(&out.stderr);
-        assert_eq!(out.status.code(), Some(2), "{bad}: {err}");
+        let (code, err) = check(dir.path(), &t);
+        assert_eq!(code, Some(2), "{bad}: {err}");
         assert!(err.contains(key), "{bad}: {err}");
     }
     // A start equal to its end is a step there (Eq. 9's r jumps from 0 to 1), by
@@ -437,42 +443,26 @@ fn a_z_span_by_heights_matches_the_span_by_layers_and_bad_spans_are_refused() {
         format!("from_z = {:?}\nto_z = {:?}", z_of(6), z_of(6)),
     ] {
         let t = text.replace("from_layer = 3\nto_layer = 9", &step);
-        let path = crate::support::write(dir.path(), "step.toml", &t);
-        let out = crate::support::lamina_in(dir.path(), &["check", path.to_str().expect("path")]);
-        assert_eq!(
-            out.status.code(),
-            Some(0),
-            "{step}: {}",
-            crate::support::text(&out.stderr)
-        );
+        let (code, err) = check(dir.path(), &t);
+        assert_eq!(code, Some(0), "{step}: {err}");
     }
     // Eq. 8's weights: none negative, not both zero.
     let zxy = std::fs::read_to_string(pipelines().join("blade-zxy.toml")).expect("pipeline");
     // One weight of 0: that grading has no say, which is allowed.
     let t = zxy.replace("weights = [1.0, 1.0]", "weights = [0.0, 1.0]");
-    let path = crate::support::write(dir.path(), "zero.toml", &t);
-    let out = crate::support::lamina_in(dir.path(), &["check", path.to_str().expect("path")]);
-    assert_eq!(
-        out.status.code(),
-        Some(0),
-        "{}",
-        crate::support::text(&out.stderr)
-    );
+    let (code, err) = check(dir.path(), &t);
+    assert_eq!(code, Some(0), "{err}");
     for bad in ["weights = [0.0, 0.0]", "weights = [-1.0, 2.0]"] {
         let t = zxy.replace("weights = [1.0, 1.0]", bad);
         assert_ne!(t, zxy);
-        let path = crate::support::write(dir.path(), "bad.toml", &t);
-        let out = crate::support::lamina_in(dir.path(), &["check", path.to_str().expect("path")]);
-        let err = crate::support::text(&out.stderr);
-        assert_eq!(out.status.code(), Some(2), "{bad}: {err}");
+        let (code, err) = check(dir.path(), &t);
+        assert_eq!(code, Some(2), "{bad}: {err}");
         assert!(err.contains("weights"), "{bad}: {err}");
     }
     // IDW's exponent: positive.
     let idw = std::fs::read_to_string(pipelines().join("blade-idw.toml")).expect("pipeline");
     let t = idw.replace("outer = \"m1\"", "outer = \"m1\"\npower = 0.0");
-    let path = crate::support::write(dir.path(), "bad.toml", &t);
-    let out = crate::support::lamina_in(dir.path(), &["check", path.to_str().expect("path")]);
-    let err = crate::support::text(&out.stderr);
-    assert_eq!(out.status.code(), Some(2), "{err}");
+    let (code, err) = check(dir.path(), &t);
+    assert_eq!(code, Some(2), "{err}");
     assert!(err.contains("power"), "{err}");
 }

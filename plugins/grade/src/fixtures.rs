@@ -1,7 +1,8 @@
-//! What the graders' unit tests share: a run of one part, and the sub-regions of a
-//! family.
+//! What the graders' unit tests share: a run of one part, the context of its first
+//! family, and the sub-regions of a family.
 
-use lamina_api::{Contour, Material, PartInfo, Point2, Polygon, RunInfo, SubRegion};
+use lamina_api::stage::FamilyContext;
+use lamina_api::{Contour, ContourTree, Layer, Material, PartInfo, Point2, Polygon, RunInfo, SubRegion};
 
 use crate::xy::index_level;
 
@@ -55,4 +56,23 @@ pub fn regions(n: usize) -> Vec<SubRegion> {
             samples: Vec::new(),
         })
         .collect()
+}
+
+/// Family 0 of part 0 on `layer`, whose families' polygons are `polygons` (empty for
+/// graders that read none).
+pub fn context<'a>(
+    info: &'a RunInfo,
+    layer: &'a Layer,
+    tree: &'a ContourTree,
+    polygons: &'a [Polygon],
+) -> FamilyContext<'a> {
+    FamilyContext {
+        info,
+        layer,
+        tree,
+        polygons,
+        mesh: None,
+        part: 0,
+        family: 0,
+    }
 }

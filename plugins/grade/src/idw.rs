@@ -163,6 +163,7 @@ lamina_api::register_stage!(StageFactory {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::fixtures;
 
     /// Eq. 23 written as the paper does: the product of the other distances over the
     /// sum of such products.
@@ -204,7 +205,7 @@ mod tests {
     /// Grades regions whose references are `points` in a 10 mm square with two 2 mm
     /// square holes, about (3, 5) and (7, 5), by `idw` over materials a, b, c.
     fn grade_points(idw: &Idw, points: &[(f64, f64)]) -> Result<Vec<Vec<f64>>> {
-        let info = crate::fixtures::info(&[("a", [255, 0, 0]), ("b", [0, 255, 0]), ("c", [0, 0, 255])]);
+        let info = fixtures::info(&[("a", [255, 0, 0]), ("b", [0, 255, 0]), ("c", [0, 0, 255])]);
         let square = |x0: f64, y0: f64, side: f64| {
             Contour::rectangle(Point2::new(x0, y0), Point2::new(x0 + side, y0 + side))
         };
@@ -223,16 +224,8 @@ mod tests {
                 holes: vec![1, 2],
             }],
         };
-        let ctx = FamilyContext {
-            info: &info,
-            layer: &layer,
-            tree: &tree,
-            polygons: &[],
-            mesh: None,
-            part: 0,
-            family: 0,
-        };
-        let mut regions = crate::fixtures::regions(points.len());
+        let ctx = fixtures::context(&info, &layer, &tree, &[]);
+        let mut regions = fixtures::regions(points.len());
         for (r, &(x, y)) in regions.iter_mut().zip(points) {
             r.reference = Point2::new(x, y);
         }

@@ -376,15 +376,7 @@ mod tests {
         let info = info();
         let layer = Layer::default();
         let tree = ContourTree::default();
-        let ctx = FamilyContext {
-            info: &info,
-            layer: &layer,
-            tree: &tree,
-            polygons: &[],
-            mesh: None,
-            part: 0,
-            family: 0,
-        };
+        let ctx = fixtures::context(&info, &layer, &tree, &[]);
         let grader = InPlane {
             control: Control::Linear {
                 mu: -1.0,
@@ -426,15 +418,7 @@ mod tests {
         info.parts[0].materials = vec![0, 1, 2];
         let layer = Layer::default();
         let tree = ContourTree::default();
-        let ctx = FamilyContext {
-            info: &info,
-            layer: &layer,
-            tree: &tree,
-            polygons: &[],
-            mesh: None,
-            part: 0,
-            family: 0,
-        };
+        let ctx = fixtures::context(&info, &layer, &tree, &[]);
         let grader = InPlane {
             control: Control::Wave {
                 mu: 1.0,
@@ -475,15 +459,8 @@ mod tests {
                 holes: vec![1],
             }],
         };
-        let ctx = FamilyContext {
-            info: &info,
-            layer: &layer,
-            tree: &tree,
-            polygons: &tree.family_polygons(&layer.contours),
-            mesh: None,
-            part: 0,
-            family: 0,
-        };
+        let polygons = tree.family_polygons(&layer.contours);
+        let ctx = fixtures::context(&info, &layer, &tree, &polygons);
         let grader = InPlane {
             control: Control::Linear {
                 mu: -1.0,
@@ -533,15 +510,8 @@ mod tests {
                 holes: vec![],
             }],
         };
-        let ctx = FamilyContext {
-            info: &info,
-            layer: &layer,
-            tree: &tree,
-            polygons: &tree.family_polygons(&layer.contours),
-            mesh: None,
-            part: 0,
-            family: 0,
-        };
+        let polygons = tree.family_polygons(&layer.contours);
+        let ctx = fixtures::context(&info, &layer, &tree, &polygons);
         let grader = InPlane {
             control: Control::Linear {
                 mu: -1.0,

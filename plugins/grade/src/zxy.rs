@@ -187,7 +187,7 @@ lamina_api::register_stage!(StageFactory {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::fixtures::{info, regions};
+    use crate::fixtures::{self, info, regions};
     use lamina_api::{ContourTree, Layer, RunInfo};
 
     /// The fractions `both` gives the `n` regions of a family on layer `index`.
@@ -197,15 +197,7 @@ mod tests {
             ..Layer::default()
         };
         let tree = ContourTree::default();
-        let ctx = FamilyContext {
-            info,
-            layer: &layer,
-            tree: &tree,
-            polygons: &[],
-            mesh: None,
-            part: 0,
-            family: 0,
-        };
+        let ctx = fixtures::context(info, &layer, &tree, &[]);
         let mut rs = regions(n);
         both.grade(&ctx, &mut rs)?;
         Ok(rs
