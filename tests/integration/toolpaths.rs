@@ -148,10 +148,12 @@ fn concurrent_tools_never_collide_on_the_assembly() {
         add_pauses(layer, &mut pauses);
     }
     assert!(checked > 0, "no layer had two tools");
-    // The default priority is the paper's: no pause decided by another rule, and
-    // some by speed along X.
+    // The default priority is the paper's: no pause decided by another rule. Every
+    // loop here runs counter-clockwise, the gear's centre loops too, so the tools go
+    // the same way round and the one behind pauses, which is forced; the choice by
+    // speed along X is made on 3DBenchy (below).
     let [by_speed, forced, other] = pauses;
-    assert!(by_speed > 0 && other == 0, "pauses {pauses:?}");
+    assert!(by_speed + forced > 0 && other == 0, "pauses {pauses:?}");
     println!(
         "{checked} tool pairs checked; closest approach {closest_seen:.3} mm; pauses: {by_speed} by speed along X, {forced} forced, {other} otherwise"
     );
