@@ -124,6 +124,12 @@ const REACH: f64 = 0.2 * TOLERANCE;
 /// for 0.3 % of the area).
 const HAIRLINE: f64 = 0.05;
 
+/// The narrowest end of a centre bead, as a share of the bead: a tip that tapers
+/// below it is laid by the segment next to it, at the same volume. A nozzle ten times
+/// wider lays nothing of it but a move; on 3DBenchy these tips were 4.6 m of the
+/// nozzle's path (2.6 minutes of the print) for 14 mm³.
+const TIP: f64 = 0.1;
+
 /// Twice the area over the perimeter of a shape (outer ring and holes).
 fn shape_mean_width(shape: &[Vec<[f64; 2]>]) -> f64 {
     let perimeter: f64 = shape.iter().map(|r| ring_perimeter(r)).sum();
@@ -219,7 +225,9 @@ impl Fill {
         // covers them where the residue widens or bends (splitting to three widths saves
         // a fifth of the plan's time and leaves 0.7 % of a layer uncovered on 3DBenchy's
         // cabin, against 0.2 %).
-        beads.extend(centre_beads(&residue, w, TOLERANCE));
+        // Their ends are laid by the segment next to them where they taper below a
+        // tenth of the bead.
+        beads.extend(centre_beads(&residue, w, TOLERANCE, TIP * w));
         beads
     }
 }
