@@ -103,7 +103,7 @@ impl RawOffset {
         let m = Move {
             delta,
             side: if inward { 1.0 } else { -1.0 },
-            eps: (self.tolerance * 0.2 * scale).max(2.0),
+            eps: self.eps(scale),
             step: crate::offset::join_step(distance, self.tolerance).min(std::f64::consts::FRAC_PI_2),
         };
         let mut any = false;
@@ -124,6 +124,13 @@ impl RawOffset {
             }
         }
         any
+    }
+
+    /// How far (grid units, on a grid of `scale` units per mm) a contour may be moved
+    /// by the simplification that comes before its loop: vertices closer than a fifth
+    /// of the tolerance to the chord that replaces them are dropped.
+    pub fn eps(&self, scale: f64) -> f64 {
+        (self.tolerance * 0.2 * scale).max(2.0)
     }
 
     /// The raw loop of one contour (material on its left) into `s.out`; `false` for a
