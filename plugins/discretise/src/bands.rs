@@ -2,7 +2,10 @@
 //! `S_k - S_{k+1}` where `S_0` is the shape and `S_{k+1}` is the k+1-th inner set
 //! intersected with `S_k`, both read from one overlay graph. The bands are therefore
 //! disjoint and their union is the shape, whatever the inner sets are (offsets that
-//! poke out by a grid unit, iso-contours that cross the boundary).
+//! poke out by a grid unit, iso-contours that cross the boundary). Where each inner set
+//! is an erosion of the one before by more than the offsetter's rounding (offsets from
+//! every boundary), no boolean is needed: the band is the outer set's contours with the
+//! inner set's reversed ([`band_between`]), and the bands tile the shape exactly.
 
 use i_overlay::core::extract::BooleanExtractionBuffer;
 use i_overlay::core::fill_rule::FillRule;
