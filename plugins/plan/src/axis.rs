@@ -172,7 +172,9 @@ fn ladder(outer: &[spade::Point2<f64>], hole: &[spade::Point2<f64>], max_edge: f
             .sum::<f64>()
     };
     let (so, sh) = (signed(outer), signed(hole));
-    if outer.len() < 3 || hole.len() < 3 || so.abs() <= sh.abs() || max_edge.is_nan() || max_edge <= 0.0 {
+    // A hole as large as its ring, or no rung length to allow, fails below at the
+    // first triangle or rung.
+    if outer.is_empty() {
         return None;
     }
     // Both rings counter-clockwise, the hole from its point nearest the outer's first.
@@ -685,9 +687,7 @@ fn trim_ends(points: &mut Vec<Point2>, widths: &mut Vec<f64>, floor: f64) {
     let head: f64 = (0..first).map(|k| area(k, points, widths)).sum();
     let tail: f64 = (last + 1..widths.len()).map(|k| area(k, points, widths)).sum();
     for (k, extra) in [(first, head), (last, tail)] {
-        if extra > 0.0 {
-            widths[k] += extra / (points[k + 1] - points[k]).norm();
-        }
+        widths[k] += extra / (points[k + 1] - points[k]).norm();
     }
     points.truncate(last + 2);
     widths.truncate(last + 1);
@@ -786,11 +786,13 @@ mod tests {
         assert!((b.area() - 0.015).abs() < 1e-12, "{}", b.area());
     }
 
+    /// A circle about (30, 20): off the origin, so that a ring's signed area is not
+    /// the sum of anything else.
     fn circle(r: f64, n: usize) -> Vec<[f64; 2]> {
         (0..n)
             .map(|i| {
                 let a = std::f64::consts::TAU * i as f64 / n as f64;
-                [r * a.cos(), r * a.sin()]
+                [30.0 + r * a.cos(), 20.0 + r * a.sin()]
             })
             .collect()
     }
@@ -822,7 +824,7 @@ mod tests {
             assert!(b.closed);
             assert!((b.area() - area).abs() < 1e-9 * area, "{} vs {area}", b.area());
             for p in &b.points {
-                assert!((p.coords.norm() - 9.8).abs() < 0.01, "{p:?}");
+                assert!(((p - Point2::new(30.0, 20.0)).norm() - 9.8).abs() < 0.01, "{p:?}");
             }
             for w in &b.widths {
                 assert!((w - 0.4).abs() < 0.01, "{w}");
@@ -842,7 +844,7 @@ mod tests {
         // The same band with a bulge 1.2 mm deep on one side: 3 edges across, past the
         // ladder's 2.5; the triangulation's beads still hold the area.
         let mut outer = circle(10.0, 96);
-        outer[0] = [11.2, 0.0];
+        outer[0] = [41.2, 20.0];
         let hole = circle(9.6, 61);
         let (o, h) = (split_ring(&outer, 0.4), split_ring(&hole, 0.4));
         assert!(ladder(&o, &h, 0.4).is_none());
@@ -861,6 +863,24 @@ mod tests {
         );
         assert!(ladder(&h, &o, 0.4).is_none());
         assert!(ladder(&o, &o, 0.4).is_none());
+    }
+
+    #[test]
+    fn a_ladder_closes_where_one_ring_is_walked_round_first() {
+        // A 4 mm square about a 3 mm one with a point more on its left side: the outer
+        // ring is done a step before the hole, whose last rung closes the band.
+        let outer = rect(0.0, 0.0, 4.0, 4.0);
+        let hole = vec![[0.5, 0.5], [3.5, 0.5], [3.5, 3.5], [0.5, 3.5], [0.5, 1.0]];
+        let (o, h) = (split_ring(&outer, 10.0), split_ring(&hole, 10.0));
+        let g = ladder(&o, &h, 10.0).expect("a ladder");
+        assert_eq!((g.nodes.len(), g.edges.len()), (9, 9));
+        let sum: f64 = g.edges.iter().map(|e| e.2).sum();
+        assert!((sum - 7.0).abs() < 1e-12, "{sum}");
+        let beads = centre_beads(&[vec![outer, hole]], 10.0, 0.005, 0.0);
+        assert_eq!(beads.len(), 1);
+        assert!(beads[0].closed && (beads[0].area() - 7.0).abs() < 1e-12);
+        // No outer ring, no ladder.
+        assert!(ladder(&[], &h, 10.0).is_none());
     }
 
     #[test]
