@@ -427,4 +427,42 @@ mod tests {
             assert!((sum - whole).abs() <= 1e-8 * whole, "{sum} vs {whole}");
         }
     }
+
+    #[test]
+    fn steps_within_the_offsetters_reach_are_cut_with_booleans() {
+        // The margin is twice the simplification plus 8 grid units: a step 4 units
+        // short of it is cut with booleans (the same bands as `nested_bands`, with the
+        // same steps), one 4 units past it is built from the contours.
+        let (grid, base) = star_family(7);
+        let inset = Inset {
+            from: From::All,
+            join: Join::Round,
+            tolerance: 0.01,
+        };
+        let scale = grid.scale();
+        let margin = 2.0 * (0.01 * 0.2 * scale).max(2.0) + 8.0;
+        for (units, boolean) in [(margin - 4.0, true), (margin + 4.0, false)] {
+            let spacing = units / scale;
+            let depth = |k: usize| k as f64 * spacing;
+            let bands = offset_bands(&base, scale, 3, &inset, depth).expect("bands");
+            let raw = inset.raw();
+            let mut scratch = Scratch::default();
+            let expected = if boolean {
+                nested_bands(&base, 3, FillRule::Positive, |k, current, overlay| {
+                    Ok(raw.add_loops(overlay, current, -(depth(k) - depth(k - 1)), scale, &mut scratch))
+                })
+                .expect("bands")
+            } else {
+                eroded_bands(
+                    &base,
+                    3,
+                    |_| spacing,
+                    units / scale * 0.5,
+                    |set, step, overlay| raw.add_loops(overlay, set, -step, scale, &mut scratch),
+                )
+                .expect("contours")
+            };
+            assert_eq!(bands, expected, "{units} units");
+        }
+    }
 }
