@@ -303,6 +303,19 @@ mod tests {
     /// the radial line leaves the hole at y = 8 and meets the outer contour at
     /// y = sqrt(400 - 25): D = 19.365 - 12, L = 19.365 - 8, r = 0.648, where the
     /// shortest distances (7 and 4) would give 0.636.
+    /// Eq. 25's f = 1 - r (mu = -1, lambda = 1) with levels from `source` on a grid
+    /// of `grid` mm.
+    fn linear(source: LevelSource, grid: f64) -> InPlane {
+        InPlane {
+            control: Control::Linear {
+                mu: -1.0,
+                lambda: 1.0,
+            },
+            source,
+            grid,
+        }
+    }
+
     #[test]
     fn eq_18_follows_the_radial_line_from_the_holes_centre() {
         // The hole's points start a third of the way round, not level with its
@@ -377,14 +390,7 @@ mod tests {
         let layer = Layer::default();
         let tree = ContourTree::default();
         let ctx = fixtures::context(&info, &layer, &tree, &[]);
-        let grader = InPlane {
-            control: Control::Linear {
-                mu: -1.0,
-                lambda: 1.0,
-            },
-            source: LevelSource::Index,
-            grid: DEFAULT_GRID,
-        };
+        let grader = linear(LevelSource::Index, DEFAULT_GRID);
         let mut rs = regions(10);
         grader.grade(&ctx, &mut rs).expect("grades");
         let colours: Vec<[u8; 3]> = rs
@@ -461,14 +467,7 @@ mod tests {
         };
         let polygons = tree.family_polygons(&layer.contours);
         let ctx = fixtures::context(&info, &layer, &tree, &polygons);
-        let grader = InPlane {
-            control: Control::Linear {
-                mu: -1.0,
-                lambda: 1.0,
-            },
-            source: LevelSource::Points,
-            grid: 0.1,
-        };
+        let grader = linear(LevelSource::Points, 0.1);
         let ring = |a: f64, b: f64, index: usize| SubRegion {
             family: 0,
             index,
@@ -512,14 +511,7 @@ mod tests {
         };
         let polygons = tree.family_polygons(&layer.contours);
         let ctx = fixtures::context(&info, &layer, &tree, &polygons);
-        let grader = InPlane {
-            control: Control::Linear {
-                mu: -1.0,
-                lambda: 1.0,
-            },
-            source: LevelSource::Points,
-            grid: 0.5,
-        };
+        let grader = linear(LevelSource::Points, 0.5);
         let mut rs = regions(1);
         rs[0].polygon = Polygon::new(triangle, vec![]);
         grader.grade(&ctx, &mut rs).expect("grades");

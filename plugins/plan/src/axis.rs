@@ -84,14 +84,10 @@ fn centre_beads_of(shape: &[Vec<[f64; 2]>], lay: Lay, out: &mut Vec<Bead>) {
         return;
     }
     if let [_, hole] = starts[..]
-        && let Some(mut graph) = ladder(&vertices[..hole], &vertices[hole..], max_edge)
+        && let Some(graph) = ladder(&vertices[..hole], &vertices[hole..], max_edge)
     {
-        graph.prune();
-        for (points, areas) in graph.chains() {
-            if let Some(b) = bead(points, areas, tol, floor) {
-                out.push(b);
-            }
-        }
+        // One cycle: no spurs to prune.
+        out.extend(graph.beads(tol, floor));
         return;
     }
     let count = vertices.len();
@@ -109,11 +105,7 @@ fn centre_beads_of(shape: &[Vec<[f64; 2]>], lay: Lay, out: &mut Vec<Bead>) {
     }
     let mut graph = axis_graph(&cdt, &inside);
     graph.prune();
-    for (points, areas) in graph.chains() {
-        if let Some(b) = bead(points, areas, tol, floor) {
-            out.push(b);
-        }
-    }
+    out.extend(graph.beads(tol, floor));
 }
 
 /// Pushes the points of `ring` with its edges split to at most `max_edge` (the
@@ -539,6 +531,13 @@ impl Graph {
             k += 1;
             alive[k - 1]
         });
+    }
+
+    /// The beads along the axis's chains ([`bead`]).
+    fn beads(&self, tol: f64, floor: f64) -> impl Iterator<Item = Bead> + '_ {
+        self.chains()
+            .into_iter()
+            .filter_map(move |(points, areas)| bead(points, areas, tol, floor))
     }
 
     /// The axis cut into chains between nodes where it branches or ends (a closed
