@@ -112,8 +112,12 @@ struct Square {
 
 impl Square {
     fn new(edges: &Edges, c: Point2, h: f64) -> Self {
-        let d = edges.distance(c);
-        let d = if edges.contains(c) { d } else { -d };
+        Self::at(edges, c, h, edges.distance(c))
+    }
+
+    /// The square about `c` whose centre lies `near` from the boundary.
+    fn at(edges: &Edges, c: Point2, h: f64, near: f64) -> Self {
+        let d = if edges.contains(c) { near } else { -near };
         Self {
             c,
             h,
@@ -177,11 +181,16 @@ pub fn pole(polygon: &Polygon, precision: f64) -> Option<(Point2, f64)> {
         budget -= 1;
         let h = square.h / 2.0;
         for (sx, sy) in [(-1.0, -1.0), (1.0, -1.0), (-1.0, 1.0), (1.0, 1.0)] {
-            heap.push(Square::new(
-                &edges,
-                Point2::new(square.c.x + sx * h, square.c.y + sy * h),
-                h,
-            ));
+            let c = Point2::new(square.c.x + sx * h, square.c.y + sy * h);
+            // Whichever side of the boundary it lies, a square whose centre is no
+            // farther from it than the best so far, and whose best point cannot beat
+            // that by the precision, would be popped only to be dropped: it is not
+            // made, which spares the containment test (most of the squares' cost).
+            let near = edges.distance(c);
+            if near <= best.d && near + h * std::f64::consts::SQRT_2 - best.d <= precision {
+                continue;
+            }
+            heap.push(Square::at(&edges, c, h, near));
         }
     }
     (best.d > 0.0).then_some((best.c, best.d))

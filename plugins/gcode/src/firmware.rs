@@ -122,6 +122,17 @@ struct RrfTemperatures {
     forced: Option<u8>,
 }
 
+/// The words of a linear move (`G0`, `G1`): the axes it names and its feed.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct Words {
+    pub x: Option<f64>,
+    pub y: Option<f64>,
+    pub z: Option<f64>,
+    pub e: Option<f64>,
+    /// mm/min
+    pub f: Option<f64>,
+}
+
 /// The firmware's state, fed line by line.
 #[derive(Debug, Clone)]
 pub struct Firmware {
@@ -211,7 +222,16 @@ impl Firmware {
             command
         };
         match command {
-            "G0" | "G1" => self.linear(&get, line),
+            "G0" | "G1" => self.linear(
+                Words {
+                    x: get('X'),
+                    y: get('Y'),
+                    z: get('Z'),
+                    e: get('E'),
+                    f: get('F'),
+                },
+                line,
+            ),
             "G4" => {
                 let seconds = get('S').unwrap_or(0.0) + get('P').unwrap_or(0.0) / 1000.0;
                 self.planner.dwell(seconds);
@@ -373,15 +393,23 @@ impl Firmware {
         }
     }
 
-    fn linear(&mut self, get: &dyn Fn(char) -> Option<f64>, line: &str) {
-        if let Some(f) = get('F')
+    /// Feeds a `G1` line whose words the caller has in hand as the values it wrote
+    /// them as (each the number a reader parses back from its text): the same as
+    /// [`Self::feed_line`] on `line`, without reading the text again. The writer's
+    /// moves are most of a file's lines.
+    pub fn feed_move(&mut self, words: Words, line: &str) {
+        self.linear(words, line);
+    }
+
+    fn linear(&mut self, words: Words, line: &str) {
+        if let Some(f) = words.f
             && f > 0.0
         {
             self.feed = f;
         }
         let mut target = self.position;
-        for (a, letter) in ['X', 'Y', 'Z', 'E'].into_iter().enumerate() {
-            if let Some(v) = get(letter) {
+        for (a, v) in [words.x, words.y, words.z, words.e].into_iter().enumerate() {
+            if let Some(v) = v {
                 let absolute = if a == 3 { self.absolute_e } else { self.absolute };
                 target[a] = if absolute { v } else { self.position[a] + v };
             }
@@ -650,6 +678,47 @@ impl Firmware {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A move fed as its words leaves the firmware where reading its line does: the
+    /// position (relative E too), the modal feed, the time, and the cold line.
+    #[test]
+    fn a_move_fed_as_words_is_read_as_its_line() {
+        let fresh = || {
+            Firmware::new(
+                Dialect::Marlin,
+                Flavor::ToolChange,
+                2,
+                Limits::default(),
+                Thermal::typical(Dialect::Marlin),
+            )
+        };
+        let (mut read, mut fed) = (fresh(), fresh());
+        for f in [&mut read, &mut fed] {
+            f.feed_text("G28\nM83\nG1 Z0.2 F600\n");
+        }
+        let moves = [
+            (
+                "G1 X10.5 Y2.25 E0.41230 F1800",
+                [Some(10.5), Some(2.25), None, Some(0.4123), Some(1800.0)],
+            ),
+            (
+                "G1 X12 Y-3.0001 E0.01000",
+                [Some(12.0), Some(-3.0001), None, Some(0.01), None],
+            ),
+            ("G1 X0 Y0", [Some(0.0), Some(0.0), None, None, None]),
+            ("G1 Z0.4 F300", [None, None, Some(0.4), None, Some(300.0)]),
+        ];
+        for (line, [x, y, z, e, f]) in moves {
+            read.feed_line(line);
+            fed.feed_move(Words { x, y, z, e, f }, line);
+            assert_eq!(read.position(), fed.position(), "{line}");
+            assert_eq!(read.feed(), fed.feed(), "{line}");
+            assert_eq!(read.time(), fed.time(), "{line}");
+        }
+        assert_eq!(fed.position()[3], 0.4223, "relative E adds up");
+        assert_eq!(read.cold_extrusion(), Some("G1 X10.5 Y2.25 E0.41230 F1800"));
+        assert_eq!(fed.cold_extrusion(), read.cold_extrusion());
+    }
 
     #[test]
     fn marlin_heats_per_tool_and_cools_on_standby() {

@@ -17,10 +17,10 @@ use lamina_api::{
     Composition, Error, LayerPlan, MachineFileReport, PathKind, Point2, Result, RunInfo, Toolpath,
 };
 
-use crate::firmware::{EXTRUDE_MIN_TEMPERATURE, Firmware};
+use crate::firmware::{EXTRUDE_MIN_TEMPERATURE, Firmware, Words};
 use crate::layout::Layout;
 use crate::setup::Setup;
-use crate::text::{clean, num, push_num};
+use crate::text::{clean, num, push_fixed, push_num};
 use crate::tower::{Feature, Stroke, Tower};
 use crate::transition::PurgeInto;
 
@@ -277,6 +277,18 @@ impl Writer {
             return;
         }
         self.fw.feed_line(text);
+        self.buf.push_str(text);
+        self.buf.push('\n');
+    }
+
+    /// Writes a linear move whose words the caller holds as written ([`Words`]), so
+    /// that the firmware model takes them without reading the text back.
+    fn move_line(&mut self, text: &str, words: Words) {
+        if self.multi.is_some() {
+            self.stream_line(text);
+            return;
+        }
+        self.fw.feed_move(words, text);
         self.buf.push_str(text);
         self.buf.push('\n');
     }
@@ -814,19 +826,18 @@ impl Writer {
     /// The E word for `de` mm of filament, absolute or relative.
     fn e_word(&self, de: f64) -> String {
         let mut out = String::with_capacity(16);
-        self.push_e_word(&mut out, de);
+        let _ = self.push_e_word(&mut out, de);
         out
     }
 
-    /// [`Writer::e_word`] appended to `out`.
-    fn push_e_word(&self, out: &mut String, de: f64) {
-        use std::fmt::Write;
-        // Writing into a `String` cannot fail.
-        let _ = if self.s.relative_e {
-            write!(out, "E{de:.5}")
+    /// [`Writer::e_word`] appended to `out`; returns E as a reader parses it back.
+    fn push_e_word(&self, out: &mut String, de: f64) -> f64 {
+        out.push('E');
+        if self.s.relative_e {
+            push_fixed(out, de, 5)
         } else {
-            write!(out, "E{:.5}", self.fw.position()[3] + de)
-        };
+            push_fixed(out, self.fw.position()[3] + de, 5)
+        }
     }
 
     fn z_feed(&self) -> f64 {
@@ -970,23 +981,24 @@ impl Writer {
             }
             from = w[1];
             text.clear();
+            let mut words = Words::default();
             text.push_str("G1 X");
-            push_num(&mut text, w[1].x, 4);
+            words.x = Some(push_num(&mut text, w[1].x, 4));
             text.push_str(" Y");
-            push_num(&mut text, w[1].y, 4);
+            words.y = Some(push_num(&mut text, w[1].y, 4));
             if feeds {
                 self.account(h, de);
                 self.deposited[feature as usize] += de * area;
                 self.extruded[h] = true;
                 text.push(' ');
-                self.push_e_word(&mut text, de);
+                words.e = Some(self.push_e_word(&mut text, de));
             }
             if with_feed {
                 with_feed = false;
                 text.push_str(" F");
-                push_num(&mut text, feed, 0);
+                words.f = Some(push_num(&mut text, feed, 0));
             }
-            self.line(&text);
+            self.move_line(&text, words);
         }
         self.text = text;
         Ok(())

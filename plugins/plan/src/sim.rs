@@ -770,9 +770,8 @@ impl<'a> Run<'a> {
         let (si, sj) = (still(a.pos), still(b.pos));
         let ti: &[(f64, Point2)] = if mi { &self.tracks[i] } else { &si };
         let tj: &[(f64, Point2)] = if mj { &self.tracks[j] } else { &sj };
-        self.settings
-            .separation
-            .apart(a.spec, b.spec, ti, tj, a.spec.envelope + b.spec.envelope)
+        let (separation, e) = (self.settings.separation, a.spec.envelope + b.spec.envelope);
+        separation.bound(a.spec, b.spec, ti, tj) >= e || separation.apart(a.spec, b.spec, ti, tj, e)
     }
 
     /// Holds the lower-priority tool of each predicted collision until none is left;
@@ -841,7 +840,16 @@ impl<'a> Run<'a> {
                     let e = agents[i].spec.envelope + agents[j].spec.envelope + room;
                     let still = [(0.0, agents[j].pos), (half, agents[j].pos)];
                     let other: &[(f64, Point2)] = if self.moving[j] { &self.ahead[j] } else { &still };
-                    !separation.apart_until(agents[i].spec, agents[j].spec, &self.ahead[i], other, half, e)
+                    // Boxes of the two motions that far apart settle it without the walk.
+                    separation.bound(agents[i].spec, agents[j].spec, &self.ahead[i], other) < e
+                        && !separation.apart_until(
+                            agents[i].spec,
+                            agents[j].spec,
+                            &self.ahead[i],
+                            other,
+                            half,
+                            e,
+                        )
                 }
             });
             let others_move = (0..n).any(|j| j != i && self.moving[j]);
