@@ -63,17 +63,27 @@ impl Edges {
 /// Shortest distance between two contours that do not cross: attained at a vertex of
 /// one of them, so vertex-to-segment distances both ways are exact.
 pub fn contour_distance(a: &Contour, b: &Contour) -> f64 {
-    edges_distance(a, &Edges::new([a]), b, &Edges::new([b]))
+    edges_distance(a, &Edges::new([a]), b, &Edges::new([b]), f64::INFINITY)
 }
 
-fn edges_distance(a: &Contour, ea: &Edges, b: &Contour, eb: &Edges) -> f64 {
-    let one_way = |a: &Contour, eb: &Edges| {
-        a.points
-            .iter()
-            .map(|&p| eb.distance(p))
-            .fold(f64::INFINITY, f64::min)
-    };
-    one_way(a, eb).min(one_way(b, ea))
+/// [`contour_distance`] of `a` and `b` with their edge trees, or any value not below
+/// `bound` when they are no closer than that: a vertex whose distance to the other
+/// contour's box reaches the least distance so far cannot lower it, and takes no
+/// query (an outer contour's vertices, most of them far from any one hole's box).
+fn edges_distance(a: &Contour, ea: &Edges, b: &Contour, eb: &Edges, bound: f64) -> f64 {
+    let mut best = bound;
+    for (a, b, eb) in [(a, b, eb), (b, a, ea)] {
+        let bb = b.bbox();
+        for &p in &a.points {
+            let dx = (bb.min.x - p.x).max(p.x - bb.max.x).max(0.0);
+            let dy = (bb.min.y - p.y).max(p.y - bb.max.y).max(0.0);
+            if dx * dx + dy * dy >= best * best {
+                continue;
+            }
+            best = best.min(eb.distance(p));
+        }
+    }
+    best
 }
 
 /// L_s: the minimum distance between any two contours of the family; `None` for a
@@ -95,7 +105,13 @@ pub fn min_contour_distance(polygon: &Polygon) -> Option<f64> {
             if dx.hypot(dy) >= best {
                 continue;
             }
-            best = best.min(edges_distance(contours[i], &edges[i], contours[j], &edges[j]));
+            best = best.min(edges_distance(
+                contours[i],
+                &edges[i],
+                contours[j],
+                &edges[j],
+                best,
+            ));
         }
     }
     (contours.len() > 1 && best.is_finite()).then_some(best)
