@@ -429,6 +429,11 @@ impl Separation {
         until: f64,
         e: f64,
     ) -> bool {
+        // Boxes of the two motions that far apart settle it without the walk: most
+        // pairs of tools work far from each other.
+        if self.bound(a, b, ta, tb) >= e {
+            return true;
+        }
         match self {
             Separation::Discs => keep_apart_until(ta, tb, until, e),
             Separation::OrderedY => {
@@ -770,8 +775,9 @@ impl<'a> Run<'a> {
         let (si, sj) = (still(a.pos), still(b.pos));
         let ti: &[(f64, Point2)] = if mi { &self.tracks[i] } else { &si };
         let tj: &[(f64, Point2)] = if mj { &self.tracks[j] } else { &sj };
-        let (separation, e) = (self.settings.separation, a.spec.envelope + b.spec.envelope);
-        separation.bound(a.spec, b.spec, ti, tj) >= e || separation.apart(a.spec, b.spec, ti, tj, e)
+        self.settings
+            .separation
+            .apart(a.spec, b.spec, ti, tj, a.spec.envelope + b.spec.envelope)
     }
 
     /// Holds the lower-priority tool of each predicted collision until none is left;
@@ -840,16 +846,7 @@ impl<'a> Run<'a> {
                     let e = agents[i].spec.envelope + agents[j].spec.envelope + room;
                     let still = [(0.0, agents[j].pos), (half, agents[j].pos)];
                     let other: &[(f64, Point2)] = if self.moving[j] { &self.ahead[j] } else { &still };
-                    // Boxes of the two motions that far apart settle it without the walk.
-                    separation.bound(agents[i].spec, agents[j].spec, &self.ahead[i], other) < e
-                        && !separation.apart_until(
-                            agents[i].spec,
-                            agents[j].spec,
-                            &self.ahead[i],
-                            other,
-                            half,
-                            e,
-                        )
+                    !separation.apart_until(agents[i].spec, agents[j].spec, &self.ahead[i], other, half, e)
                 }
             });
             let others_move = (0..n).any(|j| j != i && self.moving[j]);
@@ -1044,9 +1041,6 @@ fn anticipate_holds(
                 }
                 let (a, b) = (&agents[i], &agents[j]);
                 let e = a.spec.envelope + b.spec.envelope + settings.room;
-                if separation.bound(a.spec, b.spec, &ahead[i], &ahead[j]) >= e {
-                    continue;
-                }
                 let h = if waited[i] || waited[j] {
                     look_ahead
                 } else {
