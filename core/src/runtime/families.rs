@@ -9,19 +9,17 @@ use rayon::prelude::*;
 
 use super::engine::Engine;
 use super::layer::check_tree;
-use super::mend::slice_mended;
+use super::mend::LayerCuts;
 use super::report::Timings;
 use crate::error::{Error, Result};
-use crate::mesh::Mesh;
-use std::sync::Arc;
 use std::sync::Mutex;
 use std::sync::atomic::{AtomicUsize, Ordering};
 
 use lamina_geom::follow::{Area, LayerLinks, follow_links, holding};
 
 use crate::geom::{Point2, Polygon};
-use crate::model::{ContourTree, Layer, LayerSlot};
-use crate::stage::{MeshSlicer, StageKind};
+use crate::model::{ContourTree, Layer};
+use crate::stage::StageKind;
 
 /// Which families of each layer belong to parts that select theirs with `family_at`:
 /// per part, per layer, one sample point inside each selected family.
@@ -112,15 +110,14 @@ impl Engine {
     /// [`lamina_geom::follow`]).
     pub(super) fn select_families(
         &self,
-        slots: &[LayerSlot],
-        meshes: &[Arc<Mesh>],
-        prepared: &[Box<dyn MeshSlicer>],
+        mended: &LayerCuts<'_>,
         part_mesh: &[usize],
         pool: &rayon::ThreadPool,
         timings: &Timings,
     ) -> Result<Selections> {
         let mut samples: Vec<Option<Vec<Vec<Point2>>>> = vec![None; self.parts.len()];
-        let mut cuts: Vec<Option<Vec<Mutex<Option<Cut>>>>> = (0..prepared.len()).map(|_| None).collect();
+        let slots = mended.slots();
+        let mut cuts: Vec<Option<Vec<Mutex<Option<Cut>>>>> = (0..mended.meshes()).map(|_| None).collect();
         if self.parts.iter().all(|p| p.family_at.is_none()) || slots.is_empty() {
             return Ok(Selections { samples, cuts });
         }
@@ -128,9 +125,7 @@ impl Engine {
         // The solid areas of a layer of mesh `mi`, cut and sorted; the cut goes into
         // `keep` if the budget allows (and the slot's index is its place).
         let areas = |mi: usize, k: usize, keep: Option<&Mutex<Option<Cut>>>| -> Result<Vec<Area>> {
-            let layer = timings.time(StageKind::Slice, || {
-                slice_mended(&*prepared[mi], &meshes[mi], slots, k)
-            })?;
+            let layer = timings.time(StageKind::Slice, || mended.at(mi, k))?;
             let tree = timings.time(StageKind::Sort, || self.sorter.sort(&layer))?;
             check_tree(&layer, &tree)?;
             let areas = tree
@@ -149,7 +144,7 @@ impl Engine {
         };
         // How the areas of every layer of the meshes concerned overlap, a piece of
         // consecutive layers at a time.
-        let mut by_mesh: Vec<Option<Vec<LayerLinks>>> = (0..prepared.len()).map(|_| None).collect();
+        let mut by_mesh: Vec<Option<Vec<LayerLinks>>> = (0..mended.meshes()).map(|_| None).collect();
         for (pi, p) in self.parts.iter().enumerate() {
             let mi = part_mesh[pi];
             if p.family_at.is_none() || by_mesh[mi].is_some() {

@@ -14,6 +14,7 @@ use rayon::prelude::*;
 use super::engine::Engine;
 use super::families::Selections;
 use super::layer::LayerShared;
+use super::mend::LayerCuts;
 use super::report::Timings;
 use crate::error::Result;
 use crate::mesh::Mesh;
@@ -51,7 +52,7 @@ impl Engine {
             timings,
             surfaces: &[],
             layer_count: SAMPLES,
-            slots: &[],
+            cuts: &LayerCuts::new(prepared, meshes, &[]),
         };
         (0..self.parts.len())
             .map(|pi| {

@@ -5,7 +5,7 @@ use std::sync::Arc;
 
 use super::engine::Engine;
 use super::families::Selections;
-use super::mend::slice_mended;
+use super::mend::LayerCuts;
 use super::report::Timings;
 use crate::diagnostic::Diagnostic;
 use crate::error::{Error, Result};
@@ -45,8 +45,8 @@ impl Engine {
             copies,
             selections,
             timings,
-            meshes,
-            slots,
+            meshes: _,
+            cuts,
             surfaces: _,
             layer_count: _,
             bare_info: _,
@@ -97,12 +97,7 @@ impl Engine {
                     Some(made) => made,
                     None => {
                         let layer = timings
-                            .time(StageKind::Slice, || {
-                                match slots.iter().position(|s| s.index == slot.index) {
-                                    Some(at) => slice_mended(&*prepared[mi], &meshes[mi], slots, at),
-                                    None => prepared[mi].slice(slot),
-                                }
-                            })
+                            .time(StageKind::Slice, || cuts.of(mi, slot))
                             .map_err(|e| e.in_part(&p.name))?;
                         let tree = timings
                             .time(StageKind::Sort, || self.sorter.sort(&layer))
@@ -369,9 +364,9 @@ pub(super) struct LayerShared<'a> {
     pub(super) surfaces: &'a [Vec<Option<f64>>],
     /// Number of layers of the run: the last one takes what ends the job.
     pub(super) layer_count: usize,
-    /// The run's layers in build order, for a layer an open mesh leaves empty to take
-    /// the contours of its neighbours (none: such a layer stays empty).
-    pub(super) slots: &'a [LayerSlot],
+    /// The meshes' cuts of the run's layers, mended where an open mesh leaves a
+    /// layer empty.
+    pub(super) cuts: &'a LayerCuts<'a>,
 }
 
 /// What a stage of `kind` added to a plan that held `before`, one a machine can follow

@@ -6,6 +6,9 @@
 //! fails naming the layer. A layer that no triangle crosses (a gap between two bodies)
 //! stays empty.
 
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+
 use crate::diagnostic::Warning;
 use crate::error::{Error, Result};
 use crate::mesh::Mesh;
@@ -16,15 +19,91 @@ use crate::stage::MeshSlicer;
 /// from: a hole the height of a few layers is mended, a missing wall is not.
 pub(super) const MEND_REACH: usize = 32;
 
-/// The cut of `mesh` for `slots[at]` by `slicer`, mended as [`mend_empty`] says: how
-/// every pass of a run cuts a layer, so that a layer is the same whichever pass cut it.
-pub(super) fn slice_mended(
+/// The run's cuts of its layers, each mended as [`mend_empty`] says: how every pass of
+/// a run cuts a layer, so that a layer is the same whichever pass cut it.
+pub(super) struct LayerCuts<'a> {
+    slicers: &'a [Box<dyn MeshSlicer>],
+    meshes: &'a [Arc<Mesh>],
+    /// The run's layers in build order, for a layer an open mesh leaves empty to take
+    /// the contours of its neighbours (none: such a layer stays empty).
+    slots: &'a [LayerSlot],
+    /// Per mesh and slot, true once the cut was found to close no area. A layer left
+    /// empty looks for its nearest layer with contours; without this record every
+    /// empty layer of an open mesh would cut all its neighbours again, up to
+    /// 2 x [`MEND_REACH`] cuts each (a triangle soup of ten layers took ten times its
+    /// slicing to be refused). A layer known to be empty is passed over uncut, any
+    /// other is cut (again), as it would be without the record: the mended layer is
+    /// the same whatever the order the threads cut the layers in.
+    empty: Vec<Vec<AtomicBool>>,
+}
+
+impl<'a> LayerCuts<'a> {
+    /// The cuts of `meshes`, each prepared for slicing as `slicers` (one per mesh),
+    /// through the layers `slots`.
+    pub(super) fn new(
+        slicers: &'a [Box<dyn MeshSlicer>],
+        meshes: &'a [Arc<Mesh>],
+        slots: &'a [LayerSlot],
+    ) -> Self {
+        let empty = slicers
+            .iter()
+            .map(|_| slots.iter().map(|_| AtomicBool::new(false)).collect())
+            .collect();
+        Self {
+            slicers,
+            meshes,
+            slots,
+            empty,
+        }
+    }
+
+    /// How many meshes are cut.
+    pub(super) fn meshes(&self) -> usize {
+        self.slicers.len()
+    }
+
+    /// The run's layers.
+    pub(super) fn slots(&self) -> &'a [LayerSlot] {
+        self.slots
+    }
+
+    /// The cut of mesh `mi` for the run's layer `slots[at]`, mended.
+    pub(super) fn at(&self, mi: usize, at: usize) -> Result<Layer> {
+        let seen = self.empty.get(mi).map_or(&[][..], Vec::as_slice);
+        slice_mended(&*self.slicers[mi], &self.meshes[mi], self.slots, seen, at)
+    }
+
+    /// The cut of mesh `mi` for `slot`: mended if it is one of the run's layers, as
+    /// it is otherwise (a slot of a pass of its own).
+    pub(super) fn of(&self, mi: usize, slot: &LayerSlot) -> Result<Layer> {
+        match self.slots.iter().position(|s| s.index == slot.index) {
+            Some(at) => self.at(mi, at),
+            None => self.slicers[mi].slice(slot),
+        }
+    }
+}
+
+/// The cut of `mesh` for `slots[at]` by `slicer`, mended as [`mend_empty`] says.
+/// `seen` is the mesh's record of [`LayerCuts`]' empty cuts, one entry per slot
+/// (none: every cut is made).
+fn slice_mended(
     slicer: &dyn MeshSlicer,
     mesh: &Mesh,
     slots: &[LayerSlot],
+    seen: &[AtomicBool],
     at: usize,
 ) -> Result<Layer> {
-    mend_empty(slicer.slice(&slots[at])?, mesh, slicer, slots, at)
+    let layer = cut(slicer, slots, seen, at)?;
+    mend_empty(layer, mesh, slicer, slots, seen, at)
+}
+
+/// The cut for `slots[at]`, noted in `seen`.
+fn cut(slicer: &dyn MeshSlicer, slots: &[LayerSlot], seen: &[AtomicBool], at: usize) -> Result<Layer> {
+    let layer = slicer.slice(&slots[at])?;
+    if let Some(state) = seen.get(at) {
+        state.store(layer.contours.is_empty(), Ordering::Relaxed);
+    }
+    Ok(layer)
 }
 
 /// `layer`, the cut of `mesh` for `slots[at]`, with the contours of its nearest
@@ -34,6 +113,7 @@ fn mend_empty(
     mesh: &Mesh,
     slicer: &dyn MeshSlicer,
     slots: &[LayerSlot],
+    seen: &[AtomicBool],
     at: usize,
 ) -> Result<Layer> {
     let slot = &slots[at];
@@ -43,7 +123,10 @@ fn mend_empty(
     for d in 1..=MEND_REACH {
         let near = [at.checked_sub(d), Some(at + d).filter(|&k| k < slots.len())];
         for k in near.into_iter().flatten() {
-            let other = slicer.slice(&slots[k])?;
+            if seen.get(k).is_some_and(|s| s.load(Ordering::Relaxed)) {
+                continue;
+            }
+            let other = cut(slicer, slots, seen, k)?;
             if !other.contours.is_empty() {
                 layer.contours = other.contours;
                 layer.warnings.push(Warning::new(
@@ -83,10 +166,22 @@ mod tests {
     /// Cuts that are empty where `empty` says, a square elsewhere.
     struct Holed {
         empty: Vec<bool>,
+        /// How many cuts were made.
+        cuts: Arc<std::sync::atomic::AtomicUsize>,
+    }
+
+    impl Holed {
+        fn new(empty: &[usize], n: usize) -> Self {
+            Self {
+                empty: (0..n).map(|i| empty.contains(&i)).collect(),
+                cuts: Default::default(),
+            }
+        }
     }
 
     impl MeshSlicer for Holed {
         fn slice(&self, slot: &LayerSlot) -> Result<Layer> {
+            self.cuts.fetch_add(1, Ordering::Relaxed);
             let contours = if self.empty[slot.index] {
                 Vec::new()
             } else {
@@ -136,13 +231,11 @@ mod tests {
             .collect()
     }
 
+    /// Layer `at` of `n`, of which those in `empty` cut empty, mended, with no record
+    /// of the cuts.
     fn mended(empty: &[usize], n: usize, at: usize, top: f64) -> Result<Layer> {
-        let slicer = Holed {
-            empty: (0..n).map(|i| empty.contains(&i)).collect(),
-        };
-        let slots = slots(n);
-        let layer = slicer.slice(&slots[at])?;
-        mend_empty(layer, &spike(top), &slicer, &slots, at)
+        let slicer = Holed::new(empty, n);
+        slice_mended(&slicer, &spike(top), &slots(n), &[], at)
     }
 
     /// The width of the square a mended layer took says which layer it came from.
@@ -191,5 +284,45 @@ mod tests {
             text.contains(&format!("layer {MEND_REACH} ")) && text.contains("`spike`"),
             "{text}"
         );
+    }
+
+    #[test]
+    fn a_cut_found_empty_is_not_made_again() {
+        // Every layer empty: each is cut for itself, and once more by the first
+        // search; the other searches find them all known. Every layer is refused.
+        let n = 20;
+        let mesh = [Arc::new(spike(1000.0))];
+        let all: Vec<usize> = (0..n).collect();
+        let slicer = Holed::new(&all, n);
+        let made = slicer.cuts.clone();
+        let layers = slots(n);
+        let slicers: Vec<Box<dyn MeshSlicer>> = vec![Box::new(slicer)];
+        let cuts = LayerCuts::new(&slicers, &mesh, &layers);
+        for at in (0..n).rev() {
+            let e = cuts.at(0, at).expect_err("nothing near");
+            assert!(e.to_string().contains(&format!("layer {at} ")), "{e}");
+        }
+        assert_eq!(made.load(Ordering::Relaxed), 2 * n - 1);
+        // Without the record, each layer's search cuts all of them.
+        let bare = Holed::new(&all, n);
+        slice_mended(&bare, &mesh[0], &layers, &[], n - 1).expect_err("nothing near");
+        assert_eq!(bare.cuts.load(Ordering::Relaxed), n);
+
+        // With contours near, the layer mended is the one found without the record,
+        // whatever the record holds of the other layers.
+        let holes = [4, 5, 6, 7];
+        let slicer = Holed::new(&holes, 10);
+        let made = slicer.cuts.clone();
+        let layers = slots(10);
+        let slicers: Vec<Box<dyn MeshSlicer>> = vec![Box::new(slicer)];
+        let cuts = LayerCuts::new(&slicers, &mesh, &layers);
+        for at in [6, 4, 7, 5] {
+            let with = cuts.of(0, &layers[at]).expect("mended");
+            let without = mended(&holes, 10, at, 1000.0).expect("mended");
+            assert_eq!(source(&with), source(&without), "layer {at}");
+        }
+        // 4 own cuts; 6 then cuts 5, 7, 4 and 8; 4 cuts 3; 7 cuts 8 (6 is known);
+        // 5 cuts 3 (4 and 6 are known).
+        assert_eq!(made.load(Ordering::Relaxed), 4 + 4 + 1 + 1 + 1);
     }
 }

@@ -9,6 +9,7 @@ use rayon::prelude::*;
 
 use super::engine::Engine;
 use super::layer::LayerShared;
+use super::mend::LayerCuts;
 use super::meshes::{PartMeshes, short};
 use super::report::{Observer, RunReport, Timings};
 use crate::diagnostic::Diagnostic;
@@ -146,7 +147,8 @@ impl Engine {
             copies,
             ..
         } = &layout;
-        let selections = self.select_families(slots, meshes, prepared, part_mesh, &pool, &timings)?;
+        let cuts = LayerCuts::new(prepared, meshes, slots);
+        let selections = self.select_families(&cuts, part_mesh, &pool, &timings)?;
 
         let mut outputs = AtomicOutputs::new(out_dir);
         // Exporters run under the panic guard, as every other stage does: a panic in
@@ -176,7 +178,7 @@ impl Engine {
         let shared = LayerShared {
             surfaces: &surfaces,
             layer_count: slots.len(),
-            slots,
+            cuts: &cuts,
             info,
             bare_info: &bare_info,
             meshes,
