@@ -185,6 +185,13 @@ impl Scratch {
 
 /// The budgets every case keeps, and no panic or abort.
 fn within_budget(label: &str, o: &Outcome) {
+    // The margin left, in the log: a case that creeps up is seen before it fails.
+    eprintln!(
+        "{label}: {:.2} s of {SECONDS} s, {} MiB of {} MiB",
+        o.seconds,
+        o.peak_bytes >> 20,
+        PEAK_BYTES >> 20
+    );
     assert!(
         o.seconds <= SECONDS,
         "{label}: took {:.1} s\n{}",

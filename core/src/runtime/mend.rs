@@ -7,7 +7,7 @@
 //! stays empty.
 
 use std::sync::Arc;
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::{AtomicU8, Ordering};
 
 use crate::diagnostic::Warning;
 use crate::error::{Error, Result};
@@ -27,14 +27,13 @@ pub(super) struct LayerCuts<'a> {
     /// The run's layers in build order, for a layer an open mesh leaves empty to take
     /// the contours of its neighbours (none: such a layer stays empty).
     slots: &'a [LayerSlot],
-    /// Per mesh and slot, true once the cut was found to close no area. A layer left
-    /// empty looks for its nearest layer with contours; without this record every
-    /// empty layer of an open mesh would cut all its neighbours again, up to
+    /// Per mesh and slot, what is known of its cut ([`Seen`]). A layer left empty
+    /// looks for its nearest layer with contours; without this record every empty
+    /// layer of an open mesh would cut all its neighbours again, up to
     /// 2 x [`MEND_REACH`] cuts each (a triangle soup of ten layers took ten times its
-    /// slicing to be refused). A layer known to be empty is passed over uncut, any
-    /// other is cut (again), as it would be without the record: the mended layer is
-    /// the same whatever the order the threads cut the layers in.
-    empty: Vec<Vec<AtomicBool>>,
+    /// slicing to be refused), and two threads searching side by side would cut the
+    /// same layers at the same time.
+    seen: Vec<Vec<AtomicU8>>,
 }
 
 impl<'a> LayerCuts<'a> {
@@ -45,15 +44,15 @@ impl<'a> LayerCuts<'a> {
         meshes: &'a [Arc<Mesh>],
         slots: &'a [LayerSlot],
     ) -> Self {
-        let empty = slicers
+        let seen = slicers
             .iter()
-            .map(|_| slots.iter().map(|_| AtomicBool::new(false)).collect())
+            .map(|_| slots.iter().map(|_| AtomicU8::new(Seen::Unknown as u8)).collect())
             .collect();
         Self {
             slicers,
             meshes,
             slots,
-            empty,
+            seen,
         }
     }
 
@@ -69,7 +68,7 @@ impl<'a> LayerCuts<'a> {
 
     /// The cut of mesh `mi` for the run's layer `slots[at]`, mended.
     pub(super) fn at(&self, mi: usize, at: usize) -> Result<Layer> {
-        let seen = self.empty.get(mi).map_or(&[][..], Vec::as_slice);
+        let seen = self.seen.get(mi).map_or(&[][..], Vec::as_slice);
         slice_mended(&*self.slicers[mi], &self.meshes[mi], self.slots, seen, at)
     }
 
@@ -83,62 +82,126 @@ impl<'a> LayerCuts<'a> {
     }
 }
 
+/// What the run knows of a layer's cut, in [`LayerCuts`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[repr(u8)]
+enum Seen {
+    Unknown,
+    /// Being cut by some thread.
+    Cutting,
+    /// Cut, and it closes no area.
+    Empty,
+    /// Cut, and it has contours.
+    Full,
+}
+
+impl Seen {
+    fn of(state: &AtomicU8) -> Self {
+        match state.load(Ordering::Acquire) {
+            1 => Self::Cutting,
+            2 => Self::Empty,
+            3 => Self::Full,
+            _ => Self::Unknown,
+        }
+    }
+}
+
 /// The cut of `mesh` for `slots[at]` by `slicer`, mended as [`mend_empty`] says.
-/// `seen` is the mesh's record of [`LayerCuts`]' empty cuts, one entry per slot
-/// (none: every cut is made).
+/// `seen` is the mesh's record of [`LayerCuts`], one entry per slot (none: every
+/// cut is made).
 fn slice_mended(
     slicer: &dyn MeshSlicer,
     mesh: &Mesh,
     slots: &[LayerSlot],
-    seen: &[AtomicBool],
+    seen: &[AtomicU8],
     at: usize,
 ) -> Result<Layer> {
     let layer = cut(slicer, slots, seen, at)?;
     mend_empty(layer, mesh, slicer, slots, seen, at)
 }
 
-/// The cut for `slots[at]`, noted in `seen`.
-fn cut(slicer: &dyn MeshSlicer, slots: &[LayerSlot], seen: &[AtomicBool], at: usize) -> Result<Layer> {
-    let layer = slicer.slice(&slots[at])?;
-    if let Some(state) = seen.get(at) {
-        state.store(layer.contours.is_empty(), Ordering::Relaxed);
+/// The cut for `slots[at]`, noted in `seen`: as being cut while it is (unless known
+/// already), then as empty or full.
+fn cut(slicer: &dyn MeshSlicer, slots: &[LayerSlot], seen: &[AtomicU8], at: usize) -> Result<Layer> {
+    let state = seen.get(at);
+    if let Some(state) = state {
+        let _ = state.compare_exchange(
+            Seen::Unknown as u8,
+            Seen::Cutting as u8,
+            Ordering::AcqRel,
+            Ordering::Acquire,
+        );
     }
-    Ok(layer)
+    let layer = slicer.slice(&slots[at]);
+    if let (Some(state), Ok(layer)) = (state, &layer) {
+        let found = if layer.contours.is_empty() {
+            Seen::Empty
+        } else {
+            Seen::Full
+        };
+        state.store(found as u8, Ordering::Release);
+    }
+    layer
 }
 
 /// `layer`, the cut of `mesh` for `slots[at]`, with the contours of its nearest
-/// layer that has some if the mesh crosses it yet it holds none.
+/// layer that has some if the mesh crosses it yet it holds none: the nearest below
+/// first, then above, one layer farther each time, up to [`MEND_REACH`].
+///
+/// A layer known to be empty is passed over uncut, any other is cut (again: the
+/// record keeps no contours), and one another thread is cutting is put off until
+/// the layers after it in that order have been looked at; by then its cut is
+/// known, or is made here. Whichever thread cuts what, the layer chosen is the first
+/// in that order whose cut has contours.
 fn mend_empty(
     mut layer: Layer,
     mesh: &Mesh,
     slicer: &dyn MeshSlicer,
     slots: &[LayerSlot],
-    seen: &[AtomicBool],
+    seen: &[AtomicU8],
     at: usize,
 ) -> Result<Layer> {
     let slot = &slots[at];
     if !layer.contours.is_empty() || !crosses(mesh, slot.cut_z) {
         return Ok(layer);
     }
-    for d in 1..=MEND_REACH {
-        let near = [at.checked_sub(d), Some(at + d).filter(|&k| k < slots.len())];
-        for k in near.into_iter().flatten() {
-            if seen.get(k).is_some_and(|s| s.load(Ordering::Relaxed)) {
-                continue;
-            }
-            let other = cut(slicer, slots, seen, k)?;
-            if !other.contours.is_empty() {
-                layer.contours = other.contours;
-                layer.warnings.push(Warning::new(
-                    "empty-layer-filled",
-                    format!(
-                        "the mesh crosses this layer but its cut closes no area (an open mesh): filled with the contours of layer {} (z = {:.4} mm)",
-                        slots[k].index, slots[k].z
-                    ),
-                ));
-                return Ok(layer);
+    let known = |k: usize| seen.get(k).map_or(Seen::Unknown, Seen::of);
+    let order = (1..=MEND_REACH).flat_map(|d| [at.checked_sub(d), Some(at + d).filter(|&k| k < slots.len())]);
+    let mut put_off = Vec::new();
+    let mut found = None;
+    for k in order.flatten() {
+        match known(k) {
+            Seen::Empty => {}
+            Seen::Cutting => put_off.push(k),
+            Seen::Unknown | Seen::Full => {
+                let other = cut(slicer, slots, seen, k)?;
+                if !other.contours.is_empty() {
+                    found = Some((k, other));
+                    break;
+                }
             }
         }
+    }
+    // Every layer put off comes before the one found, in the order.
+    for k in put_off {
+        if known(k) != Seen::Empty {
+            let other = cut(slicer, slots, seen, k)?;
+            if !other.contours.is_empty() {
+                found = Some((k, other));
+                break;
+            }
+        }
+    }
+    if let Some((k, other)) = found {
+        layer.contours = other.contours;
+        layer.warnings.push(Warning::new(
+            "empty-layer-filled",
+            format!(
+                "the mesh crosses this layer but its cut closes no area (an open mesh): filled with the contours of layer {} (z = {:.4} mm)",
+                slots[k].index, slots[k].z
+            ),
+        ));
+        return Ok(layer);
     }
     Err(Error::stage(
         "slice",
@@ -182,6 +245,8 @@ mod tests {
     impl MeshSlicer for Holed {
         fn slice(&self, slot: &LayerSlot) -> Result<Layer> {
             self.cuts.fetch_add(1, Ordering::Relaxed);
+            // Other threads' cuts interleave with this one.
+            std::thread::yield_now();
             let contours = if self.empty[slot.index] {
                 Vec::new()
             } else {
@@ -324,5 +389,65 @@ mod tests {
         // 4 own cuts; 6 then cuts 5, 7, 4 and 8; 4 cuts 3; 7 cuts 8 (6 is known);
         // 5 cuts 3 (4 and 6 are known).
         assert_eq!(made.load(Ordering::Relaxed), 4 + 4 + 1 + 1 + 1);
+    }
+
+    #[test]
+    fn a_layer_another_thread_is_cutting_is_looked_at_last_and_still_chosen_if_nearest() {
+        let mesh = [Arc::new(spike(1000.0))];
+        let layers = slots(12);
+        // Layer 5 searches 4, 6, 3, 7, 2, ...; 3 is being cut elsewhere: put off, then
+        // cut here, as it is still being cut. It has contours (first case) and is
+        // chosen over 2, or it has none (second) and 2 is.
+        for (holes, from) in [(vec![4, 5, 6, 7], 3), (vec![3, 4, 5, 6, 7], 2)] {
+            let slicers: Vec<Box<dyn MeshSlicer>> = vec![Box::new(Holed::new(&holes, 12))];
+            let cuts = LayerCuts::new(&slicers, &mesh, &layers);
+            cuts.seen[0][3].store(Seen::Cutting as u8, Ordering::Release);
+            let layer = cuts.at(0, 5).expect("mended");
+            assert_eq!(source(&layer), from, "{holes:?}");
+            assert_eq!(source(&mended(&holes, 12, 5, 1000.0).expect("mended")), from);
+        }
+    }
+
+    #[test]
+    fn threads_mending_side_by_side_choose_as_one_thread_does() {
+        let n = 90;
+        let mesh = [Arc::new(spike(1000.0))];
+        let layers = slots(n);
+        // Runs of empty layers of many lengths, one too tall to mend in its middle.
+        let holes: Vec<usize> = (0..n)
+            .filter(|&i| (i * 7 + i / 11) % 10 < 7 || (10..80).contains(&i))
+            .collect();
+        let alone: Vec<Option<usize>> = (0..n)
+            .map(|at| mended(&holes, n, at, 1000.0).ok().map(|l| source(&l)))
+            .collect();
+        assert!(alone.iter().any(Option::is_none) && alone.iter().any(Option::is_some));
+        for _ in 0..20 {
+            let slicers: Vec<Box<dyn MeshSlicer>> = vec![Box::new(Holed::new(&holes, n))];
+            let cuts = LayerCuts::new(&slicers, &mesh, &layers);
+            let next = std::sync::atomic::AtomicUsize::new(0);
+            let found: Vec<(usize, Option<usize>)> = std::thread::scope(|scope| {
+                let workers: Vec<_> = (0..4)
+                    .map(|_| {
+                        scope.spawn(|| {
+                            let mut mine = Vec::new();
+                            loop {
+                                let at = next.fetch_add(1, Ordering::Relaxed);
+                                if at >= n {
+                                    return mine;
+                                }
+                                mine.push((at, cuts.at(0, at).ok().map(|l| source(&l))));
+                            }
+                        })
+                    })
+                    .collect();
+                workers
+                    .into_iter()
+                    .flat_map(|w| w.join().expect("worker"))
+                    .collect()
+            });
+            for (at, source) in found {
+                assert_eq!(source, alone[at], "layer {at}");
+            }
+        }
     }
 }

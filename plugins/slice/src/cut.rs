@@ -1013,41 +1013,80 @@ fn end_of(chain: &[Point2], rev: bool) -> Point2 {
 /// Most chain ends one rim may have in a layer for joins across it.
 const RIM_ENDS: usize = 64;
 
+/// Chain ends grouped by a key, in one list sorted by key: a soup's layer has tens of
+/// thousands of ends, one or two per key, and a list of its own per key made that many
+/// allocations, more time than the joins themselves.
+struct Grouped<K> {
+    /// Each key's run in `ends`: (first, past the last).
+    runs: FxHashMap<K, (u32, u32)>,
+    /// (chain, whether it is the chain's end), by key.
+    ends: Vec<(usize, bool)>,
+}
+
+impl<K: Copy + Ord + std::hash::Hash> Grouped<K> {
+    /// `keyed`'s ends grouped by their keys; within a key they keep their order.
+    fn new(mut keyed: Vec<(K, (usize, bool))>) -> Self {
+        keyed.sort_by_key(|&(k, _)| k);
+        let mut runs = FxHashMap::with_capacity_and_hasher(keyed.len(), Default::default());
+        let mut first = 0;
+        for (i, w) in keyed.iter().enumerate() {
+            if keyed.get(i + 1).is_none_or(|n| n.0 != w.0) {
+                runs.insert(w.0, (first as u32, i as u32 + 1));
+                first = i + 1;
+            }
+        }
+        Self {
+            runs,
+            ends: keyed.into_iter().map(|(_, e)| e).collect(),
+        }
+    }
+
+    fn get(&self, key: &K) -> &[(usize, bool)] {
+        self.runs
+            .get(key)
+            .map_or(&[], |&(a, b)| &self.ends[a as usize..b as usize])
+    }
+
+    /// Drops the keys holding more than `most` ends.
+    fn retain_at_most(&mut self, most: usize) {
+        self.runs.retain(|_, (a, b)| (*b - *a) as usize <= most);
+    }
+}
+
 /// The ends of open chains by the rim they lie on: (chain, whether it is the chain's
 /// end), for the rims with at most [`RIM_ENDS`] of them.
-struct RimEnds {
-    by_rim: FxHashMap<u32, Vec<(usize, bool)>>,
-}
+struct RimEnds(Grouped<u32>);
 
 impl RimEnds {
     fn new(open: &[Open], holes: &Holes) -> Self {
-        let mut by_rim: FxHashMap<u32, Vec<(usize, bool)>> = FxHashMap::default();
+        let mut keyed = Vec::new();
         if holes.count() > 0 {
             for (c, chain) in open.iter().enumerate() {
                 for (rev, key) in [(false, chain.keys[0]), (true, chain.keys[1])] {
                     if let Some(rim) = holes.rim(key) {
-                        by_rim.entry(rim).or_default().push((c, rev));
+                        keyed.push((rim, (c, rev)));
                     }
                 }
             }
-            by_rim.retain(|_, ends| ends.len() <= RIM_ENDS);
         }
-        Self { by_rim }
+        let mut by_rim = Grouped::new(keyed);
+        by_rim.retain_at_most(RIM_ENDS);
+        Self(by_rim)
     }
 
     fn has(&self, rim: u32) -> bool {
-        self.by_rim.contains_key(&rim)
+        self.0.runs.contains_key(&rim)
     }
 
     fn on(&self, rim: u32) -> &[(usize, bool)] {
-        self.by_rim.get(&rim).map_or(&[], Vec::as_slice)
+        self.0.get(&rim)
     }
 }
 
 /// The ends of open chains by grid bucket: (chain, whether it is the chain's end).
 struct EndGrid {
     bucket: f64,
-    buckets: FxHashMap<(i64, i64), Vec<(usize, bool)>>,
+    buckets: Grouped<(i64, i64)>,
 }
 
 impl EndGrid {
@@ -1059,36 +1098,30 @@ impl EndGrid {
         } else {
             1e-9
         };
-        let mut grid = Self {
+        let key = |p: Point2| Self::key_of(bucket, p);
+        let keyed = open
+            .iter()
+            .enumerate()
+            .flat_map(|(c, chain)| [false, true].map(|rev| (key(end_of(&chain.points, rev)), (c, rev))))
+            .collect();
+        Self {
             bucket,
-            buckets: FxHashMap::default(),
-        };
-        for (c, chain) in open.iter().enumerate() {
-            for rev in [false, true] {
-                let p = end_of(&chain.points, rev);
-                grid.buckets.entry(grid.key(p)).or_default().push((c, rev));
-            }
+            buckets: Grouped::new(keyed),
         }
-        grid
     }
 
-    fn key(&self, p: Point2) -> (i64, i64) {
-        (
-            (p.x / self.bucket).floor() as i64,
-            (p.y / self.bucket).floor() as i64,
-        )
+    fn key_of(bucket: f64, p: Point2) -> (i64, i64) {
+        ((p.x / bucket).floor() as i64, (p.y / bucket).floor() as i64)
     }
 
     /// The ends in the buckets around `p` into `found`: every end within one bucket's size
     /// of it, and some farther.
     fn near(&self, p: Point2, found: &mut Vec<(usize, bool)>) {
-        let (x, y) = self.key(p);
+        let (x, y) = Self::key_of(self.bucket, p);
         found.clear();
         for dx in -1..=1i64 {
             for dy in -1..=1i64 {
-                if let Some(list) = self.buckets.get(&(x.saturating_add(dx), y.saturating_add(dy))) {
-                    found.extend_from_slice(list);
-                }
+                found.extend_from_slice(self.buckets.get(&(x.saturating_add(dx), y.saturating_add(dy))));
             }
         }
     }
