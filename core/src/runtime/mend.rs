@@ -408,6 +408,49 @@ mod tests {
         }
     }
 
+    /// A slicer that notes what the record says of each layer while it cuts it.
+    struct Probe {
+        seen: Arc<Vec<AtomicU8>>,
+        during: std::sync::Mutex<Vec<Seen>>,
+    }
+
+    impl MeshSlicer for Probe {
+        fn slice(&self, slot: &LayerSlot) -> Result<Layer> {
+            let state = Seen::of(&self.seen[slot.index]);
+            self.during.lock().expect("probe").push(state);
+            let contours = if slot.index == 1 {
+                Holed::new(&[], 2).slice(slot)?.contours
+            } else {
+                Vec::new()
+            };
+            Ok(Layer {
+                contours,
+                ..Layer::from_slot(slot)
+            })
+        }
+    }
+
+    #[test]
+    fn a_layer_is_noted_as_being_cut_while_it_is_then_as_what_it_holds() {
+        let seen: Arc<Vec<AtomicU8>> = Arc::new((0..3).map(|_| AtomicU8::new(0)).collect());
+        let probe = Probe {
+            seen: seen.clone(),
+            during: Default::default(),
+        };
+        let layers = slots(3);
+        for at in 0..2 {
+            cut(&probe, &layers, &seen, at).expect("cut");
+        }
+        assert_eq!(
+            *probe.during.lock().expect("probe"),
+            [Seen::Cutting, Seen::Cutting]
+        );
+        assert_eq!(
+            [Seen::of(&seen[0]), Seen::of(&seen[1]), Seen::of(&seen[2])],
+            [Seen::Empty, Seen::Full, Seen::Unknown]
+        );
+    }
+
     #[test]
     fn threads_mending_side_by_side_choose_as_one_thread_does() {
         let n = 90;
