@@ -167,6 +167,11 @@ fn mend_empty(
     }
     let known = |k: usize| seen.get(k).map_or(Seen::Unknown, Seen::of);
     let order = (1..=MEND_REACH).flat_map(|d| [at.checked_sub(d), Some(at + d).filter(|&k| k < slots.len())]);
+    // The cut of layer `k` if it has contours.
+    let full = |k: usize| -> Result<Option<(usize, Layer)>> {
+        let other = cut(slicer, slots, seen, k)?;
+        Ok((!other.contours.is_empty()).then_some((k, other)))
+    };
     let mut put_off = Vec::new();
     let mut found = None;
     for k in order.flatten() {
@@ -174,9 +179,8 @@ fn mend_empty(
             Seen::Empty => {}
             Seen::Cutting => put_off.push(k),
             Seen::Unknown | Seen::Full => {
-                let other = cut(slicer, slots, seen, k)?;
-                if !other.contours.is_empty() {
-                    found = Some((k, other));
+                found = full(k)?;
+                if found.is_some() {
                     break;
                 }
             }
@@ -184,12 +188,11 @@ fn mend_empty(
     }
     // Every layer put off comes before the one found, in the order.
     for k in put_off {
-        if known(k) != Seen::Empty {
-            let other = cut(slicer, slots, seen, k)?;
-            if !other.contours.is_empty() {
-                found = Some((k, other));
-                break;
-            }
+        if known(k) != Seen::Empty
+            && let Some(nearer) = full(k)?
+        {
+            found = Some(nearer);
+            break;
         }
     }
     if let Some((k, other)) = found {
