@@ -7,55 +7,99 @@ use std::collections::BinaryHeap;
 
 use lamina_api::{Contour, Point2, Polygon};
 use lamina_geom::reference::interior_point;
-use rstar::primitives::Line;
-use rstar::{AABB, PointDistance, RTree};
+use static_aabb2d_index::{Control, StaticAABB2DIndex, StaticAABB2DIndexBuilder};
 
-/// The edges of one or more contours in an R-tree: a sliced wall has thousands of
-/// edges, and the measures below ask for the distance to them thousands of times.
+/// The edges of one or more contours in a packed, static R-tree (boxes sorted
+/// along a Hilbert curve): a sliced wall has thousands of edges, and the measures
+/// below ask for the distance to them thousands of times. The tree is built once
+/// per family and never changes, so a packed tree's flat arrays are cheaper to build
+/// than a dynamic tree's nodes (the build was a fifth of a large mesh's run).
 pub struct Edges {
-    tree: RTree<Line<[f64; 2]>>,
+    lines: Vec<[[f64; 2]; 2]>,
+    index: Option<StaticAABB2DIndex<f64>>,
     max_x: f64,
+}
+
+/// Squared distance from `q` to the segment `l`: the foot of the perpendicular
+/// where it falls inside the segment, else the nearer end. The same operations,
+/// in the same order, as the measure the discretiser used before (rstar's
+/// `Line::distance_2`), so its plans stay the same to the last bit.
+fn line_distance_2(l: &[[f64; 2]; 2], q: [f64; 2]) -> f64 {
+    let (p1, p2) = (l[0], l[1]);
+    let dir = [p2[0] - p1[0], p2[1] - p1[1]];
+    let s = ((q[0] - p1[0]) * dir[0] + (q[1] - p1[1]) * dir[1]) / (dir[0] * dir[0] + dir[1] * dir[1]);
+    let n = if 0.0 < s && s < 1.0 {
+        [p1[0] + dir[0] * s, p1[1] + dir[1] * s]
+    } else if s <= 0.0 {
+        p1
+    } else {
+        p2
+    };
+    let d = [n[0] - q[0], n[1] - q[1]];
+    d[0] * d[0] + d[1] * d[1]
 }
 
 impl Edges {
     pub fn new<'a>(contours: impl IntoIterator<Item = &'a Contour>) -> Self {
-        let lines: Vec<Line<[f64; 2]>> = contours
+        let lines: Vec<[[f64; 2]; 2]> = contours
             .into_iter()
             .flat_map(|c| c.edges())
-            .map(|(a, b)| Line::new([a.x, a.y], [b.x, b.y]))
+            .map(|(a, b)| [[a.x, a.y], [b.x, b.y]])
             .collect();
         let max_x = lines
             .iter()
-            .map(|l| l.from[0].max(l.to[0]))
+            .map(|l| l[0][0].max(l[1][0]))
             .fold(f64::NEG_INFINITY, f64::max);
-        Edges {
-            tree: RTree::bulk_load(lines),
-            max_x,
-        }
+        let index = (!lines.is_empty()).then(|| {
+            let mut b = StaticAABB2DIndexBuilder::new(lines.len());
+            for l in &lines {
+                b.add(
+                    l[0][0].min(l[1][0]),
+                    l[0][1].min(l[1][1]),
+                    l[0][0].max(l[1][0]),
+                    l[0][1].max(l[1][1]),
+                );
+            }
+            // Fails only with a count other than the one given, or none.
+            b.build().expect("as many boxes as lines")
+        });
+        Edges { lines, index, max_x }
     }
 
     /// Distance from `p` to the nearest edge (infinite without edges).
     pub fn distance(&self, p: Point2) -> f64 {
-        self.tree
-            .nearest_neighbor([p.x, p.y])
-            .map_or(f64::INFINITY, |l| l.distance_2(&[p.x, p.y]).sqrt())
+        let Some(index) = &self.index else {
+            return f64::INFINITY;
+        };
+        let q = [p.x, p.y];
+        let mut best = f64::INFINITY;
+        index.visit_neighbors(p.x, p.y, &mut |i: usize, box_d2: f64| {
+            if box_d2 > best {
+                return Control::Break(());
+            }
+            best = best.min(line_distance_2(&self.lines[i], q));
+            Control::Continue
+        });
+        best.sqrt()
     }
 
     /// Whether `p` is inside under the even-odd rule, which for a polygon's outer
     /// contour and holes is inside the outer and outside every hole: the edges
     /// crossed by the ray from `p` toward +x, counted.
     pub fn contains(&self, p: Point2) -> bool {
+        let Some(index) = &self.index else {
+            return false;
+        };
         if p.x > self.max_x {
             return false;
         }
-        let ray = AABB::from_corners([p.x, p.y], [self.max_x, p.y]);
         let mut inside = false;
-        for l in self.tree.locate_in_envelope_intersecting(ray) {
-            let (a, b) = (l.from, l.to);
+        index.visit_query(p.x, p.y, self.max_x, p.y, &mut |i: usize| {
+            let [a, b] = self.lines[i];
             if (a[1] > p.y) != (b[1] > p.y) && p.x < a[0] + (p.y - a[1]) / (b[1] - a[1]) * (b[0] - a[0]) {
                 inside = !inside;
             }
-        }
+        });
         inside
     }
 }
