@@ -299,6 +299,61 @@ mod tests {
         assert_eq!(Edges::new([]).distance(Point2::new(0.0, 0.0)), f64::INFINITY);
     }
 
+    /// The packed tree answers as a scan of every edge does: the nearest edge's
+    /// distance, to the last bit, and the crossings of the ray, on a wavy ring with a
+    /// hole (hundreds of edges, so that the tree has inner nodes) at points inside,
+    /// outside, beyond the box and on the far side of the ring.
+    #[test]
+    fn the_tree_finds_what_a_scan_of_every_edge_finds() {
+        let wavy = |r: f64, n: usize| {
+            let points: Vec<(f64, f64)> = (0..n)
+                .map(|k| {
+                    let a = std::f64::consts::TAU * k as f64 / n as f64;
+                    let r = r * (1.0 + 0.2 * (7.0 * a).sin());
+                    (30.0 + r * a.cos(), 20.0 + r * a.sin())
+                })
+                .collect();
+            pts(&points)
+        };
+        let contours = [wavy(10.0, 400), wavy(4.0, 150).oriented(false)];
+        let edges = Edges::new(contours.iter());
+        let lines: Vec<[[f64; 2]; 2]> = contours
+            .iter()
+            .flat_map(|c| c.edges())
+            .map(|(a, b)| [[a.x, a.y], [b.x, b.y]])
+            .collect();
+        let mut rng = fastrand::Rng::with_seed(7);
+        for _ in 0..2000 {
+            let p = Point2::new(rng.f64() * 40.0 + 10.0, rng.f64() * 40.0);
+            let scan = lines
+                .iter()
+                .map(|l| line_distance_2(l, [p.x, p.y]))
+                .fold(f64::INFINITY, f64::min)
+                .sqrt();
+            assert_eq!(edges.distance(p).to_bits(), scan.to_bits(), "{p:?}");
+            // And as the distance to a segment is measured elsewhere.
+            let other = lines
+                .iter()
+                .map(|[a, b]| lamina_geom::segment::segment_distance2([p.x, p.y], *a, *b))
+                .fold(f64::INFINITY, f64::min)
+                .sqrt();
+            assert!((edges.distance(p) - other).abs() < 1e-12, "{p:?}");
+            let crossings = lines
+                .iter()
+                .filter(|[a, b]| {
+                    (a[1] > p.y) != (b[1] > p.y) && p.x < a[0] + (p.y - a[1]) / (b[1] - a[1]) * (b[0] - a[0])
+                })
+                .count();
+            assert_eq!(edges.contains(p), crossings % 2 == 1, "{p:?}");
+        }
+        // The foot of the perpendicular inside a segment, and an end beyond it.
+        let square = [rect(0.0, 0.0, 2.0, 2.0)];
+        let edges = Edges::new(square.iter());
+        assert_eq!(edges.distance(Point2::new(1.0, 0.5)), 0.5);
+        assert_eq!(edges.distance(Point2::new(5.0, 6.0)), 5.0);
+        assert!(!Edges::new([]).contains(Point2::new(0.0, 0.0)));
+    }
+
     /// L_s is the least distance over every pair of contours: here between the two
     /// holes (1 mm), not from either hole to the outer contour (2 mm).
     #[test]
