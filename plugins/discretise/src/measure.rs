@@ -16,8 +16,8 @@ use static_aabb2d_index::{Control, StaticAABB2DIndex, StaticAABB2DIndexBuilder};
 /// than a dynamic tree's nodes (the build was a fifth of a large mesh's run).
 pub struct Edges {
     lines: Vec<[[f64; 2]; 2]>,
+    /// Boxes of `lines`, by their indices; none without lines.
     index: Option<StaticAABB2DIndex<f64>>,
-    max_x: f64,
 }
 
 /// Squared distance from `q` to the segment `l`: the foot of the perpendicular
@@ -39,6 +39,13 @@ fn line_distance_2(l: &[[f64; 2]; 2], q: [f64; 2]) -> f64 {
     d[0] * d[0] + d[1] * d[1]
 }
 
+/// Whether the segment `l` crosses the ray from `p` toward +x (half-open in y, so a
+/// vertex on the ray counts once).
+fn crosses_ray(l: &[[f64; 2]; 2], p: Point2) -> bool {
+    let [a, b] = *l;
+    (a[1] > p.y) != (b[1] > p.y) && p.x < a[0] + (p.y - a[1]) / (b[1] - a[1]) * (b[0] - a[0])
+}
+
 impl Edges {
     pub fn new<'a>(contours: impl IntoIterator<Item = &'a Contour>) -> Self {
         let lines: Vec<[[f64; 2]; 2]> = contours
@@ -46,10 +53,6 @@ impl Edges {
             .flat_map(|c| c.edges())
             .map(|(a, b)| [[a.x, a.y], [b.x, b.y]])
             .collect();
-        let max_x = lines
-            .iter()
-            .map(|l| l[0][0].max(l[1][0]))
-            .fold(f64::NEG_INFINITY, f64::max);
         let index = (!lines.is_empty()).then(|| {
             let mut b = StaticAABB2DIndexBuilder::new(lines.len());
             for l in &lines {
@@ -63,7 +66,7 @@ impl Edges {
             // Fails only with a count other than the one given, or none.
             b.build().expect("as many boxes as lines")
         });
-        Edges { lines, index, max_x }
+        Edges { lines, index }
     }
 
     /// Distance from `p` to the nearest edge (infinite without edges).
@@ -87,18 +90,15 @@ impl Edges {
     /// contour and holes is inside the outer and outside every hole: the edges
     /// crossed by the ray from `p` toward +x, counted.
     pub fn contains(&self, p: Point2) -> bool {
-        let Some(index) = &self.index else {
+        let Some((index, bounds)) = self.index.as_ref().and_then(|i| Some((i, i.bounds()?))) else {
             return false;
         };
-        if p.x > self.max_x {
+        if p.x > bounds.max_x {
             return false;
         }
         let mut inside = false;
-        index.visit_query(p.x, p.y, self.max_x, p.y, &mut |i: usize| {
-            let [a, b] = self.lines[i];
-            if (a[1] > p.y) != (b[1] > p.y) && p.x < a[0] + (p.y - a[1]) / (b[1] - a[1]) * (b[0] - a[0]) {
-                inside = !inside;
-            }
+        index.visit_query(p.x, p.y, bounds.max_x, p.y, &mut |i: usize| {
+            inside ^= crosses_ray(&self.lines[i], p);
         });
         inside
     }
@@ -317,11 +317,8 @@ mod tests {
         };
         let contours = [wavy(10.0, 400), wavy(4.0, 150).oriented(false)];
         let edges = Edges::new(contours.iter());
-        let lines: Vec<[[f64; 2]; 2]> = contours
-            .iter()
-            .flat_map(|c| c.edges())
-            .map(|(a, b)| [[a.x, a.y], [b.x, b.y]])
-            .collect();
+        let lines = &edges.lines;
+        assert_eq!(lines.len(), 550);
         let mut rng = fastrand::Rng::with_seed(7);
         for _ in 0..2000 {
             let p = Point2::new(rng.f64() * 40.0 + 10.0, rng.f64() * 40.0);
@@ -338,12 +335,7 @@ mod tests {
                 .fold(f64::INFINITY, f64::min)
                 .sqrt();
             assert!((edges.distance(p) - other).abs() < 1e-12, "{p:?}");
-            let crossings = lines
-                .iter()
-                .filter(|[a, b]| {
-                    (a[1] > p.y) != (b[1] > p.y) && p.x < a[0] + (p.y - a[1]) / (b[1] - a[1]) * (b[0] - a[0])
-                })
-                .count();
+            let crossings = lines.iter().filter(|l| crosses_ray(l, p)).count();
             assert_eq!(edges.contains(p), crossings % 2 == 1, "{p:?}");
         }
         // The foot of the perpendicular inside a segment, and an end beyond it.
