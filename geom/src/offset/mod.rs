@@ -167,6 +167,23 @@ pub fn tidy(shapes: Shapes, tolerance: f64) -> Shapes {
         .collect()
 }
 
+/// [`tidy`] with chords that straddle each ring ([`crate::simplify::simplify_straddling`]):
+/// for rings a nozzle follows, whose chords would otherwise leave a convex stretch
+/// short of material along its whole length.
+pub fn tidy_straddling(shapes: Shapes, tolerance: f64) -> Shapes {
+    shapes
+        .into_iter()
+        .map(|shape| {
+            shape
+                .into_iter()
+                .map(|c| crate::simplify::simplify_straddling(&c, tolerance))
+                .filter(|c| c.len() >= 3)
+                .collect::<Vec<_>>()
+        })
+        .filter(|s| !s.is_empty())
+        .collect()
+}
+
 #[cfg(test)]
 mod tests {
     use std::f64::consts::PI;
