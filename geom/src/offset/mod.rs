@@ -154,29 +154,33 @@ pub fn round_offset(shapes: &Shapes, d: f64, tolerance: f64) -> Shapes {
 /// Every ring simplified within `tolerance`; rings and shapes left with nothing
 /// dropped.
 pub fn tidy(shapes: Shapes, tolerance: f64) -> Shapes {
-    shapes
-        .into_iter()
-        .map(|shape| {
-            shape
-                .into_iter()
-                .map(|c| simplify_ring(&c, tolerance))
-                .filter(|c| c.len() >= 3)
-                .collect::<Vec<_>>()
-        })
-        .filter(|s| !s.is_empty())
-        .collect()
+    tidy_with(shapes, |c| simplify_ring(c, tolerance))
 }
 
 /// [`tidy`] with chords that straddle each ring ([`crate::simplify::simplify_straddling`]):
 /// for rings a nozzle follows, whose chords would otherwise leave a convex stretch
 /// short of material along its whole length.
 pub fn tidy_straddling(shapes: Shapes, tolerance: f64) -> Shapes {
+    tidy_with(shapes, |c| crate::simplify::simplify_straddling(c, tolerance))
+}
+
+/// [`round_outline`] tidied with straddling chords ([`tidy_straddling`]): the
+/// [`round_offset`] of paths a nozzle follows.
+pub fn round_offset_straddling(shapes: &Shapes, d: f64, tolerance: f64) -> Shapes {
+    if shapes.is_empty() || d == 0.0 {
+        return shapes.clone();
+    }
+    tidy_straddling(round_outline(shapes, d, tolerance), tolerance)
+}
+
+/// Every ring through `simplify`; rings and shapes left with nothing dropped.
+fn tidy_with(shapes: Shapes, simplify: impl Fn(&[[f64; 2]]) -> crate::Ring) -> Shapes {
     shapes
         .into_iter()
         .map(|shape| {
             shape
                 .into_iter()
-                .map(|c| crate::simplify::simplify_straddling(&c, tolerance))
+                .map(|c| simplify(&c))
                 .filter(|c| c.len() >= 3)
                 .collect::<Vec<_>>()
         })

@@ -21,7 +21,7 @@ use i_overlay::float::single::SingleFloatOverlay;
 use lamina_api::{Point2, Polygon};
 
 use lamina_geom::Shapes;
-use lamina_geom::offset::{round_outline, tidy_straddling as tidy};
+use lamina_geom::offset::{round_offset_straddling, round_outline, tidy_straddling as tidy};
 use lamina_geom::ring::{ring_area, ring_of, ring_perimeter};
 use lamina_geom::simplify::simplify_straddling;
 
@@ -114,10 +114,7 @@ fn shapes_of(p: &Polygon) -> Shapes {
 /// `shapes` offset by `d` (negative: inward) with round joins, simplified with chords
 /// that straddle the offset.
 fn offset(shapes: &Shapes, d: f64) -> Shapes {
-    if shapes.is_empty() || d == 0.0 {
-        return shapes.clone();
-    }
-    tidy(round_outline(shapes, d, TOLERANCE), TOLERANCE)
+    round_offset_straddling(shapes, d, TOLERANCE)
 }
 
 /// The area of a shape: its outer ring less its holes (the offsetter writes holes
