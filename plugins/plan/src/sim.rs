@@ -430,8 +430,10 @@ impl Separation {
         e: f64,
     ) -> bool {
         // Boxes of the two motions that far apart settle it without the walk: most
-        // pairs of tools work far from each other.
-        if self.bound(a, b, ta, tb) >= e {
+        // pairs of tools work far from each other. The boxes are of the motions up to
+        // `until` only: a track runs on to the look-ahead, and looking half as far
+        // (a pair that waited at no check) sweeps about half the box.
+        if self.bound_until(a, b, ta, tb, until) >= e {
             return true;
         }
         match self {
@@ -459,18 +461,31 @@ impl Separation {
     }
 
     /// A lower bound of the separation of two motions, from their bounding boxes.
+    #[cfg(test)]
     fn bound(self, a: &ToolSpec, b: &ToolSpec, ta: &[(f64, Point2)], tb: &[(f64, Point2)]) -> f64 {
+        self.bound_until(a, b, ta, tb, f64::INFINITY)
+    }
+
+    /// A lower bound of the separation of two motions over their first `until`
+    /// seconds, from the bounding boxes of those stretches.
+    fn bound_until(
+        self,
+        a: &ToolSpec,
+        b: &ToolSpec,
+        ta: &[(f64, Point2)],
+        tb: &[(f64, Point2)],
+        until: f64,
+    ) -> f64 {
         match self {
-            Separation::Discs => gap(ta, tb),
+            Separation::Discs => gap_until(ta, tb, until),
             Separation::OrderedY => {
-                let (front, rear) = if a.rear { (tb, ta) } else { (ta, tb) };
-                let max_front = front.iter().map(|q| q.1.y).fold(f64::NEG_INFINITY, f64::max);
-                let min_rear = rear.iter().map(|q| q.1.y).fold(f64::INFINITY, f64::min);
                 if a.rear == b.rear {
-                    f64::INFINITY
-                } else {
-                    min_rear - max_front
+                    return f64::INFINITY;
                 }
+                let (front, rear) = if a.rear { (tb, ta) } else { (ta, tb) };
+                let max_front = bounds_until(front, until)[3];
+                let min_rear = bounds_until(rear, until)[1];
+                min_rear - max_front
             }
         }
     }
@@ -972,15 +987,38 @@ fn ruled_loser(priority: Priority, agents: &[Agent<'_>], i: usize, j: usize, alo
     }
 }
 
-/// A lower bound of the distance between two motions: between their bounding boxes.
-fn gap(a: &[(f64, Point2)], b: &[(f64, Point2)]) -> f64 {
-    let bounds = |tr: &[(f64, Point2)]| {
-        tr.iter().fold(
-            (f64::INFINITY, f64::INFINITY, f64::NEG_INFINITY, f64::NEG_INFINITY),
-            |(x0, y0, x1, y1), q| (x0.min(q.1.x), y0.min(q.1.y), x1.max(q.1.x), y1.max(q.1.y)),
-        )
+/// The bounding box `[x0, y0, x1, y1]` of a motion over its first `until` seconds:
+/// its breakpoints up to then and where it is at `until` (straight at constant speed
+/// between breakpoints, so the box holds the whole stretch).
+fn bounds_until(tr: &[(f64, Point2)], until: f64) -> [f64; 4] {
+    let mut b = [f64::INFINITY, f64::INFINITY, f64::NEG_INFINITY, f64::NEG_INFINITY];
+    let mut add = |p: Point2| {
+        b = [b[0].min(p.x), b[1].min(p.y), b[2].max(p.x), b[3].max(p.y)];
     };
-    let ((ax0, ay0, ax1, ay1), (bx0, by0, bx1, by1)) = (bounds(a), bounds(b));
+    for (k, &(t, p)) in tr.iter().enumerate() {
+        if t <= until || k == 0 {
+            add(p);
+            continue;
+        }
+        let (t0, p0) = tr[k - 1];
+        if t > t0 && until > t0 {
+            add(p0 + (p - p0) * ((until - t0) / (t - t0)));
+        }
+        break;
+    }
+    b
+}
+
+/// A lower bound of the distance between two motions: between their bounding boxes.
+#[cfg(test)]
+fn gap(a: &[(f64, Point2)], b: &[(f64, Point2)]) -> f64 {
+    gap_until(a, b, f64::INFINITY)
+}
+
+/// A lower bound of the distance between two motions over their first `until`
+/// seconds: between the bounding boxes of those stretches.
+fn gap_until(a: &[(f64, Point2)], b: &[(f64, Point2)], until: f64) -> f64 {
+    let ([ax0, ay0, ax1, ay1], [bx0, by0, bx1, by1]) = (bounds_until(a, until), bounds_until(b, until));
     let dx = (bx0 - ax1).max(ax0 - bx1).max(0.0);
     let dy = (by0 - ay1).max(ay0 - by1).max(0.0);
     dx.hypot(dy)
@@ -1571,6 +1609,35 @@ mod tests {
         assert_eq!(gap(&c, &b), 1.0);
         let d = [(0.0, Point2::new(4.0, 4.0)), (1.0, Point2::new(7.0, 6.5))];
         assert_eq!(gap(&d, &b), 0.0);
+    }
+
+    /// Over a horizon, the box is that of the motion up to it: the breakpoints before
+    /// it and where the track is at it, not what comes after.
+    #[test]
+    fn the_box_gap_over_a_horizon_is_that_of_the_motion_up_to_it() {
+        let p = |x: f64, y: f64| Point2::new(x, y);
+        let a = [(0.0, p(0.0, 0.0)), (1.0, p(2.0, 0.0)), (3.0, p(10.0, 0.0))];
+        let b = [(0.0, p(10.0, 0.0)), (3.0, p(10.0, 3.0))];
+        // At 2 s, a is at x = 6: 4 mm short of b's box.
+        assert_eq!(gap_until(&a, &b, 2.0), 4.0);
+        assert_eq!(gap_until(&a, &b, 1.0), 8.0);
+        assert_eq!(gap_until(&a, &b, 0.0), 10.0);
+        assert_eq!(gap_until(&a, &b, 5.0), 0.0);
+        assert_eq!(bounds_until(&a, 2.0), [0.0, 0.0, 6.0, 0.0]);
+        // Gantries: the rear head's least Y and the front head's greatest, up to then.
+        let (front, rear) = (
+            ToolSpec {
+                rear: false,
+                ..tool()
+            },
+            ToolSpec { rear: true, ..tool() },
+        );
+        let f = [(0.0, p(0.0, 0.0)), (2.0, p(0.0, 4.0))];
+        let r = [(0.0, p(0.0, 10.0)), (2.0, p(0.0, 2.0))];
+        let y = Separation::OrderedY;
+        assert_eq!(y.bound_until(&front, &rear, &f, &r, 1.0), 4.0);
+        assert_eq!(y.bound_until(&rear, &front, &r, &f, 1.0), 4.0);
+        assert_eq!(y.bound_until(&front, &rear, &f, &r, 2.0), -2.0);
     }
 
     /// The first `h` seconds of a track end where the track is at `h`.
