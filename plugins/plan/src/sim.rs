@@ -170,6 +170,10 @@ struct Agent<'a> {
     /// The path being written: the current move's, or a pause.
     open: Option<Toolpath>,
     out: Vec<Toolpath>,
+    /// Whether the tool has moved on its route (or the route has changed) since its
+    /// motion ahead was last walked: a tool held at a check has the same motion ahead
+    /// at the next, and a third of the checks hold one tool or the other.
+    moved: bool,
 }
 
 impl<'a> Agent<'a> {
@@ -191,6 +195,7 @@ impl<'a> Agent<'a> {
             pos,
             open,
             out: Vec::new(),
+            moved: true,
         }
     }
 
@@ -322,6 +327,7 @@ impl<'a> Agent<'a> {
         let (c, p, done) = self.walk(dt, t, true, None);
         self.at = c;
         self.pos = p;
+        self.moved = true;
         // Between vertices the motion is straight at constant speed: the position is
         // written only when the tool stops (`hold`) or passes the next vertex.
         if done {
@@ -390,6 +396,7 @@ impl<'a> Agent<'a> {
             ],
         );
         self.at = Cursor { mv: c.mv, seg, along };
+        self.moved = true;
     }
 }
 
@@ -724,6 +731,11 @@ impl<'a> Run<'a> {
         let t = self.t;
         for (i, a) in self.agents.iter_mut().enumerate() {
             self.moving[i] = !a.done;
+            if !a.done && !a.moved {
+                // Held since the last check: the same motion ahead, already walked.
+                continue;
+            }
+            a.moved = false;
             self.along_x[i] = if a.done {
                 0.0
             } else if self.anticipate {
