@@ -9,15 +9,166 @@ use lamina_api::{Contour, Point2, Polygon};
 use lamina_geom::reference::interior_point;
 use static_aabb2d_index::{Control, StaticAABB2DIndex, StaticAABB2DIndexBuilder};
 
-/// The edges of one or more contours in a packed, static R-tree (boxes sorted
-/// along a Hilbert curve): a sliced wall has thousands of edges, and the measures
-/// below ask for the distance to them thousands of times. The tree is built once
-/// per family and never changes, so a packed tree's flat arrays are cheaper to build
-/// than a dynamic tree's nodes (the build was a fifth of a large mesh's run).
+/// The edges of one or more contours, binned on a grid for the distance to the
+/// nearest ([`Bins`]) and in a packed, static R-tree (boxes sorted along a Hilbert
+/// curve) for the crossings of a ray: a sliced wall has thousands of edges, and the
+/// measures below ask for the distance to them thousands of times. Both are built
+/// once per family and never change, so flat arrays are cheaper to build than a
+/// dynamic tree's nodes (the build was a fifth of a large mesh's run).
 pub struct Edges {
     lines: Vec<[[f64; 2]; 2]>,
     /// Boxes of `lines`, by their indices; none without lines.
     index: Option<StaticAABB2DIndex<f64>>,
+    /// The lines binned on a uniform grid, for the nearest-edge search.
+    bins: Option<Bins>,
+}
+
+/// Lines binned on a uniform grid of about two lines per cell: the nearest one to a
+/// point is found by visiting the cells in rings around the point's until the ring
+/// is farther than the nearest so far. The pole search asks this thousands of times
+/// of one family; each answer costs a handful of cells, where the tree's best-first
+/// search pushed and popped a heap of nodes (2 us a query, the pole's whole cost).
+struct Bins {
+    origin: [f64; 2],
+    cell: f64,
+    cols: usize,
+    rows: usize,
+    /// Compressed rows: the lines of cell `c` are `lines[start[c]..start[c + 1]]`.
+    start: Vec<u32>,
+    lines: Vec<u32>,
+}
+
+/// Most cells per line of the grid.
+const CELLS_PER_LINE: usize = 4;
+
+impl Bins {
+    fn new(lines: &[[[f64; 2]; 2]]) -> Option<Self> {
+        let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
+        for q in lines.iter().flatten() {
+            for a in 0..2 {
+                lo[a] = lo[a].min(q[a]);
+                hi[a] = hi[a].max(q[a]);
+            }
+        }
+        let (w, h) = (hi[0] - lo[0], hi[1] - lo[1]);
+        if !(w.is_finite() && h.is_finite()) || lines.len() >= u32::MAX as usize {
+            return None;
+        }
+        let n = lines.len() as f64;
+        // About two lines a cell over the box; a box with no area gets cells along
+        // its length.
+        let mut cell = (2.0 * w * h / n).sqrt().max(w.max(h) / n);
+        if cell.is_nan() || cell <= 0.0 {
+            cell = 1.0;
+        }
+        let dims = |cell: f64| ((w / cell) as usize + 1, (h / cell) as usize + 1);
+        let (mut cols, mut rows) = dims(cell);
+        while cols.saturating_mul(rows) > CELLS_PER_LINE * lines.len() + 16 {
+            cell *= 1.5;
+            (cols, rows) = dims(cell);
+        }
+        let at = |v: f64, a: usize, n: usize| (((v - lo[a]) / cell) as usize).min(n - 1);
+        let span = |l: &[[f64; 2]; 2]| {
+            (
+                at(l[0][0].min(l[1][0]), 0, cols)..=at(l[0][0].max(l[1][0]), 0, cols),
+                at(l[0][1].min(l[1][1]), 1, rows)..=at(l[0][1].max(l[1][1]), 1, rows),
+            )
+        };
+        let mut start = vec![0u32; cols * rows + 1];
+        for l in lines {
+            let (xs, ys) = span(l);
+            for y in ys {
+                for x in xs.clone() {
+                    start[y * cols + x + 1] += 1;
+                }
+            }
+        }
+        for c in 0..cols * rows {
+            start[c + 1] += start[c];
+        }
+        let mut fill = start.clone();
+        let mut binned = vec![0u32; start[cols * rows] as usize];
+        for (i, l) in lines.iter().enumerate() {
+            let (xs, ys) = span(l);
+            for y in ys {
+                for x in xs.clone() {
+                    let c = y * cols + x;
+                    binned[fill[c] as usize] = i as u32;
+                    fill[c] += 1;
+                }
+            }
+        }
+        Some(Bins {
+            origin: lo,
+            cell,
+            cols,
+            rows,
+            start,
+            lines: binned,
+        })
+    }
+
+    /// The least squared distance from `q` to `lines` (binned here).
+    fn nearest_2(&self, lines: &[[[f64; 2]; 2]], q: [f64; 2]) -> f64 {
+        let cell_of = |v: f64, a: usize, n: usize| {
+            let k = ((v - self.origin[a]) / self.cell).floor();
+            if k <= 0.0 { 0 } else { (k as usize).min(n - 1) }
+        };
+        let (cx, cy) = (cell_of(q[0], 0, self.cols), cell_of(q[1], 1, self.rows));
+        let mut best = f64::INFINITY;
+        let visit = |x: usize, y: usize, best: &mut f64| {
+            let c = y * self.cols + x;
+            for &i in &self.lines[self.start[c] as usize..self.start[c + 1] as usize] {
+                *best = best.min(line_distance_2(&lines[i as usize], q));
+            }
+        };
+        for r in 0.. {
+            // Ring r: the cells r steps from (cx, cy) in either axis, clipped to the grid.
+            let (x0, x1) = (cx.saturating_sub(r), (cx + r).min(self.cols - 1));
+            let (y0, y1) = (cy.saturating_sub(r), (cy + r).min(self.rows - 1));
+            for y in y0..=y1 {
+                if y + r == cy || y == cy + r {
+                    for x in x0..=x1 {
+                        visit(x, y, &mut best);
+                    }
+                } else {
+                    if x0 + r == cx {
+                        visit(x0, y, &mut best);
+                    }
+                    if x1 == cx + r {
+                        visit(x1, y, &mut best);
+                    }
+                }
+            }
+            // Every cell not visited lies beyond a side of the block visited that is
+            // not the grid's edge: at least that side's distance from `q`.
+            let side = |lo_edge: bool, hi_edge: bool, lo: f64, hi: f64, v: f64| {
+                let a = if lo_edge { f64::INFINITY } else { v - lo };
+                let b = if hi_edge { f64::INFINITY } else { hi - v };
+                a.min(b)
+            };
+            let bx = side(
+                x0 == 0,
+                x1 == self.cols - 1,
+                self.origin[0] + x0 as f64 * self.cell,
+                self.origin[0] + (x1 + 1) as f64 * self.cell,
+                q[0],
+            );
+            let by = side(
+                y0 == 0,
+                y1 == self.rows - 1,
+                self.origin[1] + y0 as f64 * self.cell,
+                self.origin[1] + (y1 + 1) as f64 * self.cell,
+                q[1],
+            );
+            // Less a hair for the rounding of cell edges against the binning.
+            let bound = bx.min(by) - 1e-9 * self.cell;
+            if bound == f64::INFINITY || (bound > 0.0 && bound * bound >= best) {
+                break;
+            }
+        }
+        best
+    }
 }
 
 /// Squared distance from `q` to the segment `l`: the foot of the perpendicular
@@ -66,11 +217,15 @@ impl Edges {
             // Fails only with a count other than the one given, or none.
             b.build().expect("as many boxes as lines")
         });
-        Edges { lines, index }
+        let bins = Bins::new(&lines);
+        Edges { lines, index, bins }
     }
 
     /// Distance from `p` to the nearest edge (infinite without edges).
     pub fn distance(&self, p: Point2) -> f64 {
+        if let Some(bins) = &self.bins {
+            return bins.nearest_2(&self.lines, [p.x, p.y]).sqrt();
+        }
         let Some(index) = &self.index else {
             return f64::INFINITY;
         };
@@ -299,12 +454,13 @@ mod tests {
         assert_eq!(Edges::new([]).distance(Point2::new(0.0, 0.0)), f64::INFINITY);
     }
 
-    /// The packed tree answers as a scan of every edge does: the nearest edge's
-    /// distance, to the last bit, and the crossings of the ray, on a wavy ring with a
-    /// hole (hundreds of edges, so that the tree has inner nodes) at points inside,
-    /// outside, beyond the box and on the far side of the ring.
+    /// The grid and the packed tree answer as a scan of every edge does: the nearest
+    /// edge's distance, to the last bit, and the crossings of the ray, on a wavy ring
+    /// with a hole (hundreds of edges, so that the tree has inner nodes and the grid
+    /// hundreds of cells) at points inside, outside, beyond the box and on the far
+    /// side of the ring; and on edges along one line (a grid of one row).
     #[test]
-    fn the_tree_finds_what_a_scan_of_every_edge_finds() {
+    fn the_edges_find_what_a_scan_of_every_edge_finds() {
         let wavy = |r: f64, n: usize| {
             let points: Vec<(f64, f64)> = (0..n)
                 .map(|k| {
@@ -344,6 +500,18 @@ mod tests {
         assert_eq!(edges.distance(Point2::new(1.0, 0.5)), 0.5);
         assert_eq!(edges.distance(Point2::new(5.0, 6.0)), 5.0);
         assert!(!Edges::new([]).contains(Point2::new(0.0, 0.0)));
+        let flat = Contour::new((0..50).map(|k| Point2::new(k as f64 * 0.3, 2.0)).collect());
+        let edges = Edges::new([&flat]);
+        for _ in 0..500 {
+            let p = Point2::new(rng.f64() * 30.0 - 8.0, rng.f64() * 10.0 - 3.0);
+            let scan = edges
+                .lines
+                .iter()
+                .map(|l| line_distance_2(l, [p.x, p.y]))
+                .fold(f64::INFINITY, f64::min)
+                .sqrt();
+            assert_eq!(edges.distance(p).to_bits(), scan.to_bits(), "{p:?}");
+        }
     }
 
     /// L_s is the least distance over every pair of contours: here between the two
