@@ -449,20 +449,7 @@ impl Separation {
         }
         match self {
             Separation::Discs => keep_apart_until(ta, tb, until, e),
-            Separation::OrderedY => {
-                behind_until(
-                    ta,
-                    tb,
-                    until,
-                    if a.rear == b.rear {
-                        0.0
-                    } else if a.rear {
-                        1.0
-                    } else {
-                        -1.0
-                    },
-                ) >= e
-            }
+            Separation::OrderedY => behind_until(ta, tb, until, y_order(a, b)) >= e,
         }
     }
 
@@ -490,7 +477,7 @@ impl Separation {
         match self {
             Separation::Discs => gap_until(ta, tb, until),
             Separation::OrderedY => {
-                if a.rear == b.rear {
+                if y_order(a, b) == 0.0 {
                     return f64::INFINITY;
                 }
                 let (front, rear) = if a.rear { (tb, ta) } else { (ta, tb) };
@@ -499,6 +486,19 @@ impl Separation {
                 min_rear - max_front
             }
         }
+    }
+}
+
+/// On gantries, the sign by which `a.y - b.y` must stay ahead: 1 when `a` is the rear
+/// head and `b` the front one, -1 the other way round, 0 for two heads on one side
+/// (nothing to keep).
+fn y_order(a: &ToolSpec, b: &ToolSpec) -> f64 {
+    if a.rear == b.rear {
+        0.0
+    } else if a.rear {
+        1.0
+    } else {
+        -1.0
     }
 }
 
@@ -689,11 +689,10 @@ impl Run<'_> {
                 let reach = (a.top_speed + b.top_speed) * horizon;
                 // A micrometre to spare for the checks' rounding.
                 let margin = 1e-3;
-                let apart = match separation {
-                    Separation::Discs => (a.pos - b.pos).norm(),
-                    Separation::OrderedY if a.spec.rear == b.spec.rear => f64::INFINITY,
-                    Separation::OrderedY if a.spec.rear => a.pos.y - b.pos.y,
-                    Separation::OrderedY => b.pos.y - a.pos.y,
+                let apart = match (separation, y_order(a.spec, b.spec)) {
+                    (Separation::Discs, _) => (a.pos - b.pos).norm(),
+                    (Separation::OrderedY, 0.0) => f64::INFINITY,
+                    (Separation::OrderedY, sign) => sign * (a.pos.y - b.pos.y),
                 };
                 apart - reach >= keep + margin
             })
