@@ -23,6 +23,7 @@ use lamina_api::{Point2, Polygon};
 use lamina_geom::Shapes;
 use lamina_geom::offset::{round_offset_straddling, round_outline, tidy_straddling as tidy};
 use lamina_geom::ring::{ring_area, ring_of, ring_perimeter};
+use lamina_geom::segment::segment_distance2;
 use lamina_geom::simplify::simplify_straddling;
 
 use crate::axis::centre_beads;
@@ -251,13 +252,18 @@ fn slack(w: f64) -> f64 {
 }
 
 /// `level` eroded by a width `w` less the slack: empty when the level is surely
-/// thinner than that.
+/// thinner than that. A shape whose mean width reaches twice the depth (a band as wide
+/// as two depths, a disc as wide as one) is offset without the thinness test, which
+/// would sample all of it only to find one deep point.
 fn deep(level: &Shapes, w: f64) -> Shapes {
-    let slack = slack(w);
-    if level.iter().all(|shape| surely_thin(shape, w - slack)) {
+    let d = w - slack(w);
+    if level
+        .iter()
+        .all(|shape| shape_mean_width(shape) < 2.0 * d && surely_thin(shape, d))
+    {
         Vec::new()
     } else {
-        offset(level, -(w - slack))
+        offset(level, -d)
     }
 }
 
@@ -365,15 +371,14 @@ fn surely_thin(shape: &[Vec<[f64; 2]>], d: f64) -> bool {
         }
     }
     crossings.sort_by(|a, b| a.0.cmp(&b.0).then(a.1.total_cmp(&b.1)));
+    let reach2 = reach * reach;
     let near = |x: f64, y: f64| {
         let (cx, cy) = (cell_of(x, 0, gw), cell_of(y, 1, gh));
-        let p = Point2::new(x, y);
         (cy.saturating_sub(1)..=(cy + 1).min(gh - 1)).any(|gy| {
             (cx.saturating_sub(1)..=(cx + 1).min(gw - 1)).any(|gx| {
                 bins(gy * gw + gx).iter().any(|&e| {
                     let (a, b) = edges[e as usize];
-                    lamina_api::geom::segment_distance(p, Point2::new(a[0], a[1]), Point2::new(b[0], b[1]))
-                        < reach
+                    segment_distance2([x, y], a, b) < reach2
                 })
             })
         })

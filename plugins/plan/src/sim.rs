@@ -27,8 +27,8 @@
 //! should not wait. If side-steps do not resolve the layer, the caller falls back to
 //! sequential deposition.
 
-use lamina_api::geom::segment_distance;
 use lamina_api::{BBox2, PathKind, Pauses, Point2, TimedPoint, Toolpath, Vector2};
+use lamina_geom::segment::segment_distance2;
 
 use crate::route::{Move, ToolSpec, pause, toolpath};
 
@@ -553,6 +553,8 @@ fn closest_below(a: &[(f64, Point2)], b: &[(f64, Point2)], until: f64, stop: f64
         }
     };
     let origin = Point2::origin();
+    // The closest approach is sought squared: the root is taken of a new closest only.
+    let mut best2 = f64::INFINITY;
     let mut best = f64::INFINITY;
     let mut prev: Option<Point2> = None;
     let (mut ia, mut ib) = (0, 0);
@@ -565,12 +567,16 @@ fn closest_below(a: &[(f64, Point2)], b: &[(f64, Point2)], until: f64, stop: f64
             ib += 1;
         }
         let d = origin + (at(a, ia, t) - at(b, ib, t));
-        best = best.min(match prev {
-            Some(q) => segment_distance(origin, q, d),
-            None => (d - origin).norm(),
-        });
-        if best < stop {
-            return best;
+        let d2 = match prev {
+            Some(q) => segment_distance2([0.0, 0.0], [q.x, q.y], [d.x, d.y]),
+            None => (d - origin).norm_squared(),
+        };
+        if d2 < best2 {
+            best2 = d2;
+            best = d2.sqrt();
+            if best < stop {
+                return best;
+            }
         }
         prev = Some(d);
         if t >= until {
