@@ -416,7 +416,8 @@ fn push_travel(moves: &mut Vec<Move>, mut points: Vec<Point2>, speed: f64) {
 fn box_distance(b: &BBox2, p: Point2) -> f64 {
     let dx = (b.min.x - p.x).max(p.x - b.max.x).max(0.0);
     let dy = (b.min.y - p.y).max(p.y - b.max.y).max(0.0);
-    dx.hypot(dy)
+    // Millimetres on a bed: no overflow for `hypot` to guard against, at a fifth of its cost.
+    (dx * dx + dy * dy).sqrt()
 }
 
 /// The route timed on its own, from `t0`: toolpaths and the time it ends.

@@ -1100,7 +1100,8 @@ fn gap_until(a: &[(f64, Point2)], b: &[(f64, Point2)], until: f64) -> f64 {
     let ([ax0, ay0, ax1, ay1], [bx0, by0, bx1, by1]) = (bounds_until(a, until), bounds_until(b, until));
     let dx = (bx0 - ax1).max(ax0 - bx1).max(0.0);
     let dy = (by0 - ay1).max(ay0 - by1).max(0.0);
-    dx.hypot(dy)
+    // Millimetres on a bed: no overflow for `hypot` to guard against, at a fifth of its cost.
+    (dx * dx + dy * dy).sqrt()
 }
 
 /// The first `h` seconds of `track` into `out`.
