@@ -25,11 +25,27 @@ thread_local! {
 
 /// A global allocator that counts the bytes each thread holds, so that a script call
 /// is stopped when it holds more than [`ScriptLimits::max_memory`]. A program opts in
-/// with `#[global_allocator] static A: CountingAllocator = CountingAllocator;`;
-/// without it no memory limit applies. The count is a thread-local addition per
-/// allocation.
+/// with `#[global_allocator] static A: CountingAllocator = CountingAllocator::SYSTEM;`
+/// (or [`CountingAllocator::new`] around another allocator); without it no memory
+/// limit applies. The count is a thread-local addition per allocation.
 #[derive(Debug, Default, Clone, Copy)]
-pub struct CountingAllocator;
+pub struct CountingAllocator<A = std::alloc::System> {
+    inner: A,
+}
+
+impl CountingAllocator {
+    /// Counting around the system allocator.
+    pub const SYSTEM: Self = Self {
+        inner: std::alloc::System,
+    };
+}
+
+impl<A> CountingAllocator<A> {
+    /// Counting around `inner`, which serves every allocation.
+    pub const fn new(inner: A) -> Self {
+        Self { inner }
+    }
+}
 
 fn count_held(bytes: isize) {
     // The counter is a const-initialised `Cell` without destructor: using it allocates
@@ -37,31 +53,31 @@ fn count_held(bytes: isize) {
     let _ = HELD.try_with(|h| h.set(h.get().wrapping_add(bytes)));
 }
 
-// SAFETY: every call is passed unchanged to the system allocator, which upholds the
+// SAFETY: every call is passed unchanged to the inner allocator, which upholds the
 // `GlobalAlloc` contract; the counting touches no allocation.
-unsafe impl std::alloc::GlobalAlloc for CountingAllocator {
+unsafe impl<A: std::alloc::GlobalAlloc> std::alloc::GlobalAlloc for CountingAllocator<A> {
     unsafe fn alloc(&self, layout: std::alloc::Layout) -> *mut u8 {
         count_held(layout.size() as isize);
-        // SAFETY: the caller keeps `alloc`'s contract, which `System` shares.
-        unsafe { std::alloc::System.alloc(layout) }
+        // SAFETY: the caller keeps `alloc`'s contract, which the inner allocator shares.
+        unsafe { self.inner.alloc(layout) }
     }
 
     unsafe fn alloc_zeroed(&self, layout: std::alloc::Layout) -> *mut u8 {
         count_held(layout.size() as isize);
         // SAFETY: as for `alloc`.
-        unsafe { std::alloc::System.alloc_zeroed(layout) }
+        unsafe { self.inner.alloc_zeroed(layout) }
     }
 
     unsafe fn dealloc(&self, ptr: *mut u8, layout: std::alloc::Layout) {
         count_held(-(layout.size() as isize));
-        // SAFETY: `ptr` came from `System` through this allocator with `layout`.
-        unsafe { std::alloc::System.dealloc(ptr, layout) }
+        // SAFETY: `ptr` came from the inner allocator through this one with `layout`.
+        unsafe { self.inner.dealloc(ptr, layout) }
     }
 
     unsafe fn realloc(&self, ptr: *mut u8, layout: std::alloc::Layout, new_size: usize) -> *mut u8 {
         count_held(new_size as isize - layout.size() as isize);
         // SAFETY: as for `dealloc`, with the caller's valid `new_size`.
-        unsafe { std::alloc::System.realloc(ptr, layout, new_size) }
+        unsafe { self.inner.realloc(ptr, layout, new_size) }
     }
 }
 
