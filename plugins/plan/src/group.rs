@@ -128,7 +128,7 @@ impl Grouper<'_> {
     /// regions as cut: a union's output is rounded to its own grid, and a second union
     /// against it would find the shared edges a rounding apart.
     fn fill_union(&self, members: &[usize]) -> Vec<Bead> {
-        union(members.iter().map(|&m| &self.regions[m].polygon))
+        ring_union(&self.polygons(members))
             .iter()
             .flat_map(|q| fill(q, self.widths))
             .collect()
@@ -137,7 +137,7 @@ impl Grouper<'_> {
     /// The fills of the union of `members` when every piece of it takes a bead (merged
     /// levels of a cell that do not touch stay as thin as they were) and it lays any.
     fn fills_if_wide(&self, members: &[usize]) -> Option<Fills> {
-        let pieces = union(members.iter().map(|&m| &self.regions[m].polygon));
+        let pieces = ring_union(&self.polygons(members));
         if pieces.iter().all(|q| mean_width(q) >= self.width) {
             Fills::of(
                 pieces
@@ -148,6 +148,11 @@ impl Grouper<'_> {
         } else {
             None
         }
+    }
+
+    /// The polygons of `members`.
+    fn polygons(&self, members: &[usize]) -> Vec<&Polygon> {
+        members.iter().map(|&m| &self.regions[m].polygon).collect()
     }
 
     /// Half the perimeter of a level: the length of a band along its family, so that
@@ -396,6 +401,111 @@ fn mean_composition(regions: &[SubRegion], members: &[usize]) -> Option<Composit
         .or_else(|| regions[members[0]].composition.clone())
 }
 
+/// The union of sub-regions of one family and cell: nested rings of a family share
+/// whole contours (a ring's hole is the next ring's outer contour, point for point, the
+/// other way round), so their union is the contours that are not shared
+/// ([`seamless_union`]), without a boolean; anything else goes through [`union`].
+fn ring_union(pieces: &[&Polygon]) -> Vec<Polygon> {
+    seamless_union(pieces).unwrap_or_else(|| union(pieces.iter().copied()))
+}
+
+/// A contour's points, for matching: exact coordinates.
+fn bits(p: Point2) -> (u64, u64) {
+    (p.x.to_bits(), p.y.to_bits())
+}
+
+/// The union of `pieces` (disjoint, tiling their union) when every piece shares a
+/// whole contour with another, traversed the other way: the contours left once each
+/// such pair is dropped, each hole in the smallest outer contour around it. `None`
+/// (take the boolean union) when a piece shares no whole contour, or when two of the
+/// contours left, of different pieces, meet at a point: where pieces share only part
+/// of a contour (cut across, or split at different points), the seams would stay.
+fn seamless_union(pieces: &[&Polygon]) -> Option<Vec<Polygon>> {
+    if pieces.len() < 2 {
+        return None;
+    }
+    // (piece, contour), with the index of its least point and its length as the key.
+    let contours: Vec<(usize, &Contour)> = pieces
+        .iter()
+        .enumerate()
+        .flat_map(|(i, p)| p.contours().map(move |c| (i, c)))
+        .filter(|(_, c)| c.points.len() >= 3)
+        .collect();
+    let least = |c: &Contour| {
+        (0..c.points.len())
+            .min_by_key(|&k| bits(c.points[k]))
+            .unwrap_or(0)
+    };
+    let keys: Vec<(usize, usize, (u64, u64))> = contours
+        .iter()
+        .map(|(_, c)| {
+            let k = least(c);
+            (k, c.points.len(), bits(c.points[k]))
+        })
+        .collect();
+    let mut by_key: std::collections::HashMap<(usize, (u64, u64)), Vec<usize>> =
+        std::collections::HashMap::new();
+    for (i, &(_, n, p)) in keys.iter().enumerate() {
+        by_key.entry((n, p)).or_default().push(i);
+    }
+    // Whether contour `b` is contour `a` run backwards.
+    let reversed = |a: usize, b: usize| {
+        let (ca, cb) = (&contours[a].1.points, &contours[b].1.points);
+        let (ka, kb, n) = (keys[a].0, keys[b].0, ca.len());
+        (0..n).all(|k| bits(ca[(ka + k) % n]) == bits(cb[(kb + n - k) % n]))
+    };
+    let mut shared = vec![false; contours.len()];
+    let mut joined = vec![false; pieces.len()];
+    for a in 0..contours.len() {
+        if shared[a] {
+            continue;
+        }
+        let key = (keys[a].1, keys[a].2);
+        let partner = by_key[&key]
+            .iter()
+            .copied()
+            .find(|&b| b != a && !shared[b] && contours[b].0 != contours[a].0 && reversed(a, b));
+        if let Some(b) = partner {
+            shared[a] = true;
+            shared[b] = true;
+            joined[contours[a].0] = true;
+            joined[contours[b].0] = true;
+        }
+    }
+    if !joined.iter().all(|&j| j) {
+        return None;
+    }
+    let kept: Vec<&(usize, &Contour)> = contours
+        .iter()
+        .zip(&shared)
+        .filter(|(_, s)| !**s)
+        .map(|(c, _)| c)
+        .collect();
+    let mut owner: std::collections::HashMap<(u64, u64), usize> = std::collections::HashMap::new();
+    for (piece, c) in &kept {
+        for &q in &c.points {
+            if *owner.entry(bits(q)).or_insert(*piece) != *piece {
+                return None;
+            }
+        }
+    }
+    let (outers, holes): (Vec<&Contour>, Vec<&Contour>) =
+        kept.iter().map(|(_, c)| *c).partition(|c| c.signed_area() > 0.0);
+    let areas: Vec<f64> = outers.iter().map(|c| c.area()).collect();
+    let mut polygons: Vec<Polygon> = outers
+        .iter()
+        .map(|c| Polygon::new((*c).clone().oriented(true), Vec::new()))
+        .collect();
+    for hole in holes {
+        let p = hole.points[0];
+        let home = (0..outers.len())
+            .filter(|&i| outers[i].contains(p))
+            .min_by(|&i, &j| areas[i].total_cmp(&areas[j]))?;
+        polygons[home].holes.push(hole.clone().oriented(false));
+    }
+    Some(polygons)
+}
+
 /// The union of sub-regions of one family: they tile it without overlap and their
 /// shared edges come from one integer grid, so the non-zero union closes the seams.
 fn union<'a>(pieces: impl Iterator<Item = &'a Polygon>) -> Vec<Polygon> {
@@ -423,6 +533,7 @@ fn union<'a>(pieces: impl Iterator<Item = &'a Polygon>) -> Vec<Polygon> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use lamina_api::Vector2;
 
     /// Beads of 0.4 mm, none narrower.
     const W: Widths = Widths {
@@ -455,6 +566,71 @@ mod tests {
                 }
             })
             .collect()
+    }
+
+    /// The square ring between half sides `outer` and `inner` about the origin, the
+    /// hole's points starting `turn` corners on.
+    fn ring(outer: f64, inner: f64, turn: usize) -> Polygon {
+        let mut hole = Contour::square(Point2::origin(), inner).oriented(false);
+        hole.points.rotate_left(turn);
+        Polygon::new(Contour::square(Point2::origin(), outer), vec![hole])
+    }
+
+    #[test]
+    fn nested_rings_are_joined_along_the_contours_they_share() {
+        // Three rings, each hole the next ring's outer contour backwards, from
+        // another point: one ring from the outermost contour to the innermost hole.
+        let rings = [ring(5.0, 4.0, 1), ring(4.0, 3.0, 3), ring(3.0, 2.0, 2)];
+        let pieces: Vec<&Polygon> = rings.iter().collect();
+        let joined = seamless_union(&pieces).expect("whole contours shared");
+        assert_eq!(joined.len(), 1);
+        assert_eq!(joined[0].outer, Contour::square(Point2::origin(), 5.0));
+        assert_eq!(joined[0].holes.len(), 1);
+        assert_eq!(joined[0].holes[0], rings[2].holes[0]);
+        assert!((joined[0].area() - (100.0 - 16.0)).abs() < 1e-12);
+        // The same as the boolean union, to its grid.
+        let boolean = union(pieces.iter().copied());
+        assert_eq!(boolean.len(), 1);
+        assert!((boolean[0].area() - joined[0].area()).abs() < 1e-9);
+        // The core inside the last ring closes the hole.
+        let core = Polygon::new(Contour::square(Point2::origin(), 2.0), vec![]);
+        let all: Vec<&Polygon> = rings.iter().chain([&core]).collect();
+        let joined = seamless_union(&all).expect("whole contours shared");
+        assert_eq!(joined.len(), 1);
+        assert!(joined[0].holes.is_empty());
+    }
+
+    #[test]
+    fn pieces_that_share_part_of_a_contour_or_none_go_to_the_boolean_union() {
+        // Bands of a strip share part of their rectangles' sides.
+        let bands = strip(3);
+        let pieces: Vec<&Polygon> = bands.iter().map(|r| &r.polygon).collect();
+        assert!(seamless_union(&pieces).is_none());
+        assert_eq!(ring_union(&pieces).len(), 1);
+        // A ring and a square apart from it share nothing.
+        let (r, apart) = (
+            ring(5.0, 4.0, 0),
+            Polygon::new(rect(20.0, 0.0, 21.0, 1.0), vec![]),
+        );
+        assert!(seamless_union(&[&r, &apart]).is_none());
+        assert_eq!(ring_union(&[&r, &apart]).len(), 2);
+        // Two rings joined along a whole contour, and a ring and its core beside them
+        // joined too, whose outer contours touch at a corner: left to the boolean.
+        let (a, b) = (ring(5.0, 4.0, 0), ring(4.0, 3.0, 0));
+        let beside = |p: &Polygon| {
+            let moved =
+                |c: &Contour| Contour::new(c.points.iter().map(|q| q + Vector2::new(7.0, 7.0)).collect());
+            Polygon::new(moved(&p.outer), p.holes.iter().map(moved).collect())
+        };
+        let (c, core) = (
+            beside(&ring(2.0, 1.0, 0)),
+            beside(&Polygon::new(Contour::square(Point2::origin(), 1.0), vec![])),
+        );
+        assert!(seamless_union(&[&a, &b]).is_some());
+        assert!(seamless_union(&[&c, &core]).is_some());
+        assert!(seamless_union(&[&a, &b, &c, &core]).is_none());
+        // The boolean's valid shapes meet at a point at most: two of them.
+        assert_eq!(ring_union(&[&a, &b, &c, &core]).len(), 2);
     }
 
     #[test]
