@@ -108,14 +108,15 @@ impl Bins {
         })
     }
 
-    /// The least squared distance from `q` to `lines` (binned here).
-    fn nearest_2(&self, lines: &[[[f64; 2]; 2]], q: [f64; 2]) -> f64 {
+    /// The least squared distance from `q` to `lines` (binned here), or `limit` when
+    /// none is nearer: the search stops once the cells left are all beyond it.
+    fn nearest_2(&self, lines: &[[[f64; 2]; 2]], q: [f64; 2], limit: f64) -> f64 {
         let cell_of = |v: f64, a: usize, n: usize| {
             let k = ((v - self.origin[a]) / self.cell).floor();
             if k <= 0.0 { 0 } else { (k as usize).min(n - 1) }
         };
         let (cx, cy) = (cell_of(q[0], 0, self.cols), cell_of(q[1], 1, self.rows));
-        let mut best = f64::INFINITY;
+        let mut best = limit;
         let visit = |x: usize, y: usize, best: &mut f64| {
             let c = y * self.cols + x;
             for &i in &self.lines[self.start[c] as usize..self.start[c + 1] as usize] {
@@ -223,14 +224,29 @@ impl Edges {
 
     /// Distance from `p` to the nearest edge (infinite without edges).
     pub fn distance(&self, p: Point2) -> f64 {
+        self.distance_2_below(p, f64::INFINITY).sqrt()
+    }
+
+    /// The distance from `p` to the nearest edge when its square is less than
+    /// `bound²` (the distance is then at most `bound`); `None` when the distance is
+    /// `bound` or more. The distance found is [`Edges::distance`]'s, and the root of a
+    /// number squared is the number, so a minimum taken with it is the same.
+    pub fn distance_below(&self, p: Point2, bound: f64) -> Option<f64> {
+        let limit = bound * bound;
+        let d2 = self.distance_2_below(p, limit);
+        (d2 < limit).then(|| d2.sqrt())
+    }
+
+    /// The least squared distance from `p` to an edge, or `limit` when none is nearer.
+    fn distance_2_below(&self, p: Point2, limit: f64) -> f64 {
         if let Some(bins) = &self.bins {
-            return bins.nearest_2(&self.lines, [p.x, p.y]).sqrt();
+            return bins.nearest_2(&self.lines, [p.x, p.y], limit);
         }
         let Some(index) = &self.index else {
-            return f64::INFINITY;
+            return limit;
         };
         let q = [p.x, p.y];
-        let mut best = f64::INFINITY;
+        let mut best = limit;
         index.visit_neighbors(p.x, p.y, &mut |i: usize, box_d2: f64| {
             if box_d2 > best {
                 return Control::Break(());
@@ -238,7 +254,7 @@ impl Edges {
             best = best.min(line_distance_2(&self.lines[i], q));
             Control::Continue
         });
-        best.sqrt()
+        best
     }
 
     /// Whether `p` is inside under the even-odd rule, which for a polygon's outer
@@ -279,7 +295,9 @@ fn edges_distance(a: &Contour, ea: &Edges, b: &Contour, eb: &Edges, bound: f64) 
             if dx * dx + dy * dy >= best * best {
                 continue;
             }
-            best = best.min(eb.distance(p));
+            if let Some(d) = eb.distance_below(p, best) {
+                best = best.min(d);
+            }
         }
     }
     best
@@ -484,6 +502,18 @@ mod tests {
                 .fold(f64::INFINITY, f64::min)
                 .sqrt();
             assert_eq!(edges.distance(p).to_bits(), scan.to_bits(), "{p:?}");
+            // Below a bound: the same distance when it is less, none when it is more
+            // (at the bound itself, either).
+            for bound in [0.05, 0.5, 2.0, scan, f64::INFINITY] {
+                let below = edges.distance_below(p, bound);
+                assert!(
+                    below.is_none_or(|d| d.to_bits() == scan.to_bits()),
+                    "{p:?} {bound}"
+                );
+                if scan != bound {
+                    assert_eq!(below.is_some(), scan < bound, "{p:?} {bound}");
+                }
+            }
             // And as the distance to a segment is measured elsewhere.
             let other = lines
                 .iter()
