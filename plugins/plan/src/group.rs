@@ -8,7 +8,7 @@
 //! pass even with all its neighbours (a fin narrower than the bead) is left out, and
 //! reported.
 
-use std::collections::BTreeMap;
+use std::collections::{BTreeMap, HashMap};
 
 use i_overlay::core::fill_rule::FillRule;
 use i_overlay::float::simplify::SimplifyShape;
@@ -443,8 +443,7 @@ fn seamless_union(pieces: &[&Polygon]) -> Option<Vec<Polygon>> {
             (k, c.points.len(), bits(c.points[k]))
         })
         .collect();
-    let mut by_key: std::collections::HashMap<(usize, (u64, u64)), Vec<usize>> =
-        std::collections::HashMap::new();
+    let mut by_key: HashMap<(usize, (u64, u64)), Vec<usize>> = HashMap::new();
     for (i, &(_, n, p)) in keys.iter().enumerate() {
         by_key.entry((n, p)).or_default().push(i);
     }
@@ -481,7 +480,7 @@ fn seamless_union(pieces: &[&Polygon]) -> Option<Vec<Polygon>> {
         .filter(|(_, s)| !**s)
         .map(|(c, _)| c)
         .collect();
-    let mut owner: std::collections::HashMap<(u64, u64), usize> = std::collections::HashMap::new();
+    let mut owner: HashMap<(u64, u64), usize> = HashMap::new();
     for (piece, c) in &kept {
         for &q in &c.points {
             if *owner.entry(bits(q)).or_insert(*piece) != *piece {

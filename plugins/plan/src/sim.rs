@@ -555,7 +555,6 @@ fn closest_below(a: &[(f64, Point2)], b: &[(f64, Point2)], until: f64, stop: f64
     let origin = Point2::origin();
     // The closest approach is sought squared: the root is taken of a new closest only.
     let mut best2 = f64::INFINITY;
-    let mut best = f64::INFINITY;
     let mut prev: Option<Point2> = None;
     let (mut ia, mut ib) = (0, 0);
     let mut t = a[0].0.min(b[0].0).min(until);
@@ -573,9 +572,8 @@ fn closest_below(a: &[(f64, Point2)], b: &[(f64, Point2)], until: f64, stop: f64
         };
         if d2 < best2 {
             best2 = d2;
-            best = d2.sqrt();
-            if best < stop {
-                return best;
+            if d2.sqrt() < stop {
+                return d2.sqrt();
             }
         }
         prev = Some(d);
@@ -590,7 +588,7 @@ fn closest_below(a: &[(f64, Point2)], b: &[(f64, Point2)], until: f64, stop: f64
         };
         t = next.min(until);
     }
-    best
+    best2.sqrt()
 }
 
 /// The speed along X (mm/s) at the start of a tool's motion over a step: the X
