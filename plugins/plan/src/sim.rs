@@ -572,8 +572,9 @@ fn closest_below(a: &[(f64, Point2)], b: &[(f64, Point2)], until: f64, stop: f64
         };
         if d2 < best2 {
             best2 = d2;
-            if d2.sqrt() < stop {
-                return d2.sqrt();
+            let best = d2.sqrt();
+            if best < stop {
+                return best;
             }
         }
         prev = Some(d);
